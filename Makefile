@@ -1,0 +1,30 @@
+# Two commands on a fresh machine: `make study` and `make test`.
+# Both create a virtual environment in .venv (if missing) and install the
+# workbench into it in editable mode; the stamp file re-runs the install only
+# when pyproject.toml changes.
+
+PYTHON ?= python3
+VENV ?= .venv
+VPY := $(VENV)/bin/python
+STAMP := $(VENV)/.vehid-installed
+
+.PHONY: study test bench clean-cache setup
+
+setup: $(STAMP)
+
+$(STAMP): pyproject.toml
+	test -x $(VPY) || $(PYTHON) -m venv $(VENV)
+	$(VPY) -m pip install --quiet --disable-pip-version-check -e '.[test]'
+	touch $(STAMP)
+
+study: $(STAMP)
+	$(VENV)/bin/vehid study linear-example --case single-output
+
+test: $(STAMP)
+	$(VPY) -m pytest
+
+bench: $(STAMP)
+	$(VPY) benchmarks/run_all.py
+
+clean-cache:
+	rm -rf $${VEHID_CACHE_DIR:-$$HOME/.cache/vehid}

@@ -1,0 +1,21 @@
+"""Model structures, estimators and fit metrics. Knows nothing of vehicles."""
+
+from .data import IOData, read_csv, read_hdf5
+from .errors import ArchiveError, DivergenceError, ExcitationError, InputError, WorkbenchError
+from .metrics import FitMetrics, fit_metrics, nrmse_fit, percentage_explanation, r_squared
+
+__all__ = [
+    "IOData",
+    "read_csv",
+    "read_hdf5",
+    "ArchiveError",
+    "DivergenceError",
+    "ExcitationError",
+    "InputError",
+    "WorkbenchError",
+    "FitMetrics",
+    "fit_metrics",
+    "nrmse_fit",
+    "percentage_explanation",
+    "r_squared",
+]

@@ -1,0 +1,1 @@
+"""Studies that wire the vehicle model and the identification methods together, and the ``vehid`` CLI."""

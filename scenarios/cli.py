@@ -1,0 +1,160 @@
+"""The ``vehid`` command line.
+
+Subcommands live one per module in :mod:`scenarios.commands`; each module
+defines ``NAME``, ``GROUP`` (``None`` for a top-level command, or ``"study"``
+or ``"bench"``), ``HELP`` and ``register(parser)``, which adds its arguments
+and sets ``handler``: a function ``(args) -> (summary: dict, text: str)``.
+
+Every subcommand accepts ``--json`` (exactly one JSON object on standard
+output: the summary), ``--quiet`` (no progress, warnings only) and
+``--verbose``. Progress and logs go to standard error. Exit status: 0 on
+success, 2 on bad input, 1 on any other failure, with one clear line on
+standard error and no traceback for expected errors.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import logging
+import math
+import pkgutil
+import sys
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from identification.errors import DivergenceError, InputError, WorkbenchError
+
+__all__ = ["main", "build_parser", "to_jsonable"]
+
+log = logging.getLogger("vehid")
+
+GROUPS = {
+    "study": "reproduce a study of the paper or the textbook appendix",
+    "bench": "measure speed against a baseline in the same run",
+}
+
+
+def to_jsonable(value: Any) -> Any:
+    """Convert numpy arrays and scalars, complex numbers and non-finite floats for JSON.
+
+    Complex numbers become ``[re, im]``; NaN and inf become ``null``.
+    """
+    if isinstance(value, dict):
+        return {str(k): to_jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [to_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return to_jsonable(value.tolist())
+    if isinstance(value, (complex, np.complexfloating)):
+        return [to_jsonable(float(value.real)), to_jsonable(float(value.imag))]
+    if isinstance(value, (np.integer,)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        value = float(value)
+        return value if math.isfinite(value) else None
+    if isinstance(value, np.bool_):
+        return bool(value)
+    return value
+
+
+def _common_options() -> argparse.ArgumentParser:
+    common = argparse.ArgumentParser(add_help=False)
+    output = common.add_argument_group("output")
+    output.add_argument("--json", action="store_true", help="print one JSON summary object on stdout")
+    output.add_argument("--quiet", action="store_true", help="no progress display; warnings and errors only")
+    output.add_argument("--verbose", action="store_true", help="log progress details (and tracebacks of internal errors)")
+    return common
+
+
+def _command_modules() -> list[Any]:
+    import scenarios.commands as package
+
+    modules = []
+    for info in sorted(pkgutil.iter_modules(package.__path__), key=lambda m: m.name):
+        if info.name.startswith("_"):
+            continue
+        module = importlib.import_module(f"{package.__name__}.{info.name}")
+        if hasattr(module, "register"):
+            modules.append(module)
+    return modules
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser with every subcommand registered."""
+    common = _common_options()
+    parser = argparse.ArgumentParser(
+        prog="vehid",
+        description="Vehicle-dynamics identification workbench: simulate a full-vehicle model, "
+        "identify small modal models with the Identifying Extended Kalman Filter, report.",
+    )
+    top = parser.add_subparsers(dest="command", metavar="COMMAND")
+    top.required = True
+    group_parsers: dict[str, Any] = {}
+    for group, help_text in GROUPS.items():
+        group_parser = top.add_parser(group, help=help_text, description=help_text)
+        sub = group_parser.add_subparsers(dest="subcommand", metavar="NAME")
+        sub.required = True
+        group_parsers[group] = sub
+    for module in _command_modules():
+        target = top if module.GROUP is None else group_parsers[module.GROUP]
+        command = target.add_parser(
+            module.NAME,
+            help=module.HELP,
+            description=(module.__doc__ or module.HELP).strip(),
+            parents=[common],
+            formatter_class=argparse.RawDescriptionHelpFormatter,
+        )
+        module.register(command)
+    return parser
+
+
+def _configure_logging(args: argparse.Namespace) -> None:
+    level = logging.INFO if args.verbose else (logging.ERROR if args.quiet else logging.WARNING)
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("vehid: %(levelname)s: %(message)s"))
+    root = logging.getLogger()
+    root.handlers[:] = [handler]
+    root.setLevel(level)
+    logging.captureWarnings(True)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; returns the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    _configure_logging(args)
+    handler: Callable[[argparse.Namespace], tuple[dict, str]] = args.handler
+    try:
+        summary, text = handler(args)
+    except InputError as exc:
+        print(f"vehid: error: {exc}", file=sys.stderr)
+        return 2
+    except DivergenceError as exc:
+        print(f"vehid: diverged: {exc}", file=sys.stderr)
+        return 1
+    except WorkbenchError as exc:
+        print(f"vehid: error: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("vehid: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # an unexpected failure: one line, traceback on request
+        if args.verbose:
+            log.exception("internal error")
+        print(
+            f"vehid: internal error: {type(exc).__name__}: {exc} (rerun with --verbose for the traceback)",
+            file=sys.stderr,
+        )
+        return 1
+    if args.json:
+        sys.stdout.write(json.dumps(to_jsonable(summary), allow_nan=False) + "\n")
+    elif text:
+        sys.stdout.write(text.rstrip("\n") + "\n")
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""One module per ``vehid`` subcommand, discovered by :mod:`scenarios.cli`."""

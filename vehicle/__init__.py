@@ -1,0 +1,1 @@
+"""The full-vehicle source model: parameters, symbolic CasADi model, compiled simulator, manoeuvres."""
