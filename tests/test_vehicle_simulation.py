@@ -9,7 +9,7 @@ from identification.data import IOData
 from identification.errors import InputError
 from vehicle import baseline, simulate
 from vehicle.manoeuvres import identification, ramp
-from vehicle.simulate import rk4_simulator
+from vehicle.simulation import rk4_simulator
 
 
 @pytest.fixture(scope="module")

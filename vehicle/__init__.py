@@ -21,7 +21,7 @@ from .parameters import (
     named_vehicle,
     understeer,
 )
-from .simulate import DEFAULT_DT, rk4_simulator, simulate
+from .simulation import DEFAULT_DT, rk4_simulator, simulate
 
 __all__ = [
     "MANOEUVRES",

@@ -18,7 +18,7 @@ import numpy as np
 
 from identification.errors import InputError
 
-from .simulate import DEFAULT_DT, check_steer
+from .simulation import DEFAULT_DT, check_steer
 
 __all__ = [
     "Manoeuvre",

@@ -35,6 +35,8 @@ from .parameters import VehicleParameters, named_vehicle
 __all__ = [
     "simulate",
     "rk4_simulator",
+    "build_rk4_block",
+    "COMPILE_FLAGS",
     "DEFAULT_DT",
     "BLOCK_SAMPLES",
     "check_steer",
@@ -42,7 +44,7 @@ __all__ = [
 
 DEFAULT_DT = 1.0 / 500.0  # [s] the paper's output rate
 BLOCK_SAMPLES = 1000  # samples per compiled call; any record length runs as whole blocks plus padding
-_COMPILE_FLAGS = "-O1"  # the generated step is large; -O1 compiles much faster than -O2 at similar speed
+COMPILE_FLAGS = "-O1"  # the generated step is large; -O1 compiles much faster than -O2 at similar speed
 
 
 def check_steer(steer: Any) -> np.ndarray:
@@ -60,8 +62,8 @@ def check_steer(steer: Any) -> np.ndarray:
     worst = int(np.argmax(np.abs(values)))
     if abs(values[worst]) > MAX_STEER:
         raise InputError(
-            f"steer of {np.rad2deg(values[worst]):.4g} deg at sample {worst} is beyond +/-30 deg "
-            "(road-wheel angle in rad expected)"
+            f"steer of {np.rad2deg(values[worst]):.4g} deg at sample {worst} is beyond the "
+            "+/-30 deg road-wheel limit (steer is given in rad)"
         )
     return values
 
@@ -94,21 +96,21 @@ def _rk4_step(model: VehicleModel, dt: float) -> ca.Function:
     )
 
 
+def build_rk4_block(params: VehicleParameters, dt: float = DEFAULT_DT) -> ca.Function:
+    """The (uncompiled) block simulator: the RK4 step lifted over ``BLOCK_SAMPLES`` with mapaccum.
+
+    ``vehicle_rk4_block(x0 (23,), u_now (1, B), u_next (1, B), p (1, B)) -> (x (23, B), y (10, B))``
+    with ``B = BLOCK_SAMPLES``: ``x[:, k]`` is the state after step k, ``y[:, k]``
+    the output before it.
+    """
+    step = _rk4_step(build_vehicle_model(params), dt)
+    return step.mapaccum("vehicle_rk4_block", BLOCK_SAMPLES)
+
+
 @functools.lru_cache(maxsize=16)
 def rk4_simulator(params: VehicleParameters, dt: float = DEFAULT_DT) -> ca.Function:
-    """The compiled block simulator of ``params`` at step ``dt`` (built once, cached in memory and on disk).
-
-    Returns
-    -------
-    casadi.Function
-        ``vehicle_rk4_block(x0 (23,), u_now (1, B), u_next (1, B), p (1, B)) -> (x (23, B), y (10, B))``
-        with ``B = BLOCK_SAMPLES``: ``x[:, k]`` is the state after step k and
-        ``y[:, k]`` the output before it.
-    """
-    model = build_vehicle_model(params)
-    step = _rk4_step(model, dt)
-    block = step.mapaccum("vehicle_rk4_block", BLOCK_SAMPLES)
-    return compile_function(block, optimisation=_COMPILE_FLAGS)
+    """:func:`build_rk4_block` compiled to native code (built once, cached in memory and on disk)."""
+    return compile_function(build_rk4_block(params, dt), optimisation=COMPILE_FLAGS)
 
 
 def _run_rk4(params: VehicleParameters, dt: float, x0: np.ndarray, steer: np.ndarray, speed: float):
