@@ -9,7 +9,8 @@ from identification.data import IOData
 from identification.errors import InputError
 from vehicle import baseline, simulate
 from vehicle.manoeuvres import identification, ramp
-from vehicle.simulation import rk4_simulator
+from vehicle import build_vehicle_model
+from vehicle.simulation import BLOCK_SAMPLES, build_rk4_block, rk4_simulator
 
 
 @pytest.fixture(scope="module")
@@ -51,6 +52,18 @@ def test_iodata_and_array_inputs_agree(identification_run):
     steer = identification_run.u[:500, 0]
     record = IOData(t=0.002 * np.arange(500), u=steer, y=np.zeros(500), input_names=["steer"])
     np.testing.assert_array_equal(simulate(baseline(), record).y, simulate(baseline(), steer).y)
+
+
+def test_compiled_block_equals_the_virtual_machine(identification_run):
+    """The generated C computes what CasADi's virtual machine does, to round-off (1e-12 relative)."""
+    params = baseline()
+    steer = identification_run.u[: BLOCK_SAMPLES + 1, 0]
+    arguments = (build_vehicle_model(params).trim(20.0), steer[None, :-1], steer[None, 1:],
+                 np.full((1, BLOCK_SAMPLES), 20.0))
+    for compiled, interpreted in zip(rk4_simulator(params)(*arguments), build_rk4_block(params)(*arguments)):
+        compiled, interpreted = np.asarray(compiled), np.asarray(interpreted)
+        scale = np.max(np.abs(interpreted), axis=1, keepdims=True) + 1e-300
+        assert np.max(np.abs(compiled - interpreted) / scale) < 1e-12
 
 
 def test_simulator_built_once_per_vehicle_and_step():

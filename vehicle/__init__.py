@@ -1,5 +1,6 @@
 """The full-vehicle source model: parameters, symbolic CasADi model, compiled simulator, manoeuvres."""
 
+from .linearize import Linearization, Mode, linearize
 from .manoeuvres import MANOEUVRES, Manoeuvre, make_manoeuvre
 from .model import (
     CORNERS,
@@ -24,6 +25,9 @@ from .parameters import (
 from .simulation import DEFAULT_DT, rk4_simulator, simulate
 
 __all__ = [
+    "Linearization",
+    "Mode",
+    "linearize",
     "MANOEUVRES",
     "Manoeuvre",
     "make_manoeuvre",
