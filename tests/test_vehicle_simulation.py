@@ -7,7 +7,7 @@ import pytest
 
 from identification.data import IOData
 from identification.errors import InputError
-from vehicle import baseline, simulate
+from vehicle import baseline, linearize, simulate
 from vehicle.manoeuvres import identification, ramp
 from vehicle import build_vehicle_model
 from vehicle.simulation import BLOCK_SAMPLES, build_rk4_block, rk4_simulator
@@ -30,8 +30,29 @@ def test_identification_manoeuvre_peak_and_speed(identification_run):
 def test_slow_ramp_reaches_the_grip_limit():
     """Lateral grip runs out near 0.8 g with this tyre: the slow ramp peaks between 0.7 g and 0.9 g."""
     data = simulate(baseline(), ramp())
-    peak = np.max(data.output("lateral_acceleration")) / 9.81
-    assert 0.7 <= peak <= 0.9
+    assert 0.7 <= np.max(data.output("lateral_acceleration")) / 9.81 <= 0.9
+
+
+def test_ramp_passes_through_the_steady_states_with_the_linear_lag():
+    """A slow ramp follows the trim solutions, delayed by the linear ramp lag
+    tau = -G'(0)/G(0) = C A^-2 B / (D - C A^-1 B) of a_y (0.17 s, from the linearisation).
+
+    1 % covers the change of the lag with lateral acceleration up to 4 deg of steer."""
+    manoeuvre = ramp(amplitude=math.radians(5.0), duration=15.0)
+    a_y = simulate(baseline(), manoeuvre).output("lateral_acceleration")
+    lin = linearize(baseline(), speed=20.0)
+    keep = [i for i, name in enumerate(lin.state_names) if name != "psi"]  # psi's zero eigenvalue
+    inverse = np.linalg.inv(lin.A[np.ix_(keep, keep)])
+    c, b = lin.C[lin.output_names.index("lateral_acceleration"), keep], lin.B[keep, 0]
+    lag = (c @ inverse @ inverse @ b) / (lin.D[lin.output_names.index("lateral_acceleration"), 0] - c @ inverse @ b)
+    assert 0.1 < lag < 0.3
+    model = build_vehicle_model(baseline())
+    for degrees in (1.0, 2.0, 4.0):
+        k = int(np.searchsorted(manoeuvre.steer, math.radians(degrees)))
+        steer = float(np.interp(manoeuvre.t[k] - lag, manoeuvre.t, manoeuvre.steer))
+        steady = model.trim(20.0, steer)
+        expected = float(model.outputs(steady, steer, 20.0)[model.output_index("lateral_acceleration")])
+        assert a_y[k] == pytest.approx(expected, rel=0.01)
 
 
 def test_rk4_agrees_with_cvodes(identification_run):

@@ -1,4 +1,14 @@
-"""The full-vehicle source model: parameters, symbolic CasADi model, compiled simulator, manoeuvres."""
+"""The full-vehicle source model: parameters, symbolic CasADi model, compiled simulator, manoeuvres.
+
+Typical use::
+
+    from vehicle import baseline, simulate, linearize
+    from vehicle.manoeuvres import identification
+
+    record = simulate(baseline(), identification(seed=0))   # IOData, 30 s at 500 Hz
+    handling = record.select_outputs(["lateral_acceleration", "yaw_rate", "roll_angle"])
+    modes = linearize(baseline(), speed=20.0).modes
+"""
 
 from .linearize import Linearization, Mode, linearize
 from .manoeuvres import MANOEUVRES, Manoeuvre, make_manoeuvre

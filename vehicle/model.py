@@ -174,44 +174,61 @@ class VehicleModel:
 
         All derivatives except d(psi)/dt (psi is ignorable) are driven to zero by
         Newton's method with a backtracking line search, starting from straight
-        running. Returns the 23 states (psi = 0).
+        running; where that fails (large steer), the steer is raised in eight
+        stages, each solve starting from the last. Returns the 23 states (psi = 0).
 
         Raises
         ------
         InputError
             On a non-positive speed or a steer beyond +/-30 deg.
         DivergenceError
-            When Newton's method fails (no steady state, e.g. beyond the grip limit).
+            When no steady state is found (e.g. beyond the grip limit).
         """
         check_speed(speed)
         steer = float(steer)
         if not np.isfinite(steer) or abs(steer) > MAX_STEER:
             raise InputError(f"trim steer must be finite and within +/-30 deg; got {np.rad2deg(steer):.3g} deg")
-        residual, jacobian = _trim_functions(self)
         keep = [i for i, name in enumerate(self.state_names) if name != "psi"]
         x = self.straight_running_guess(speed)
-        z = x[keep]
-        # Scale the residual test to the force level so that it is unit-consistent.
-        for _ in range(60):
-            g = np.asarray(residual(z, steer, speed)).ravel()
-            norm = np.linalg.norm(g)
-            if norm < tolerance:
-                break
-            step = np.linalg.solve(np.asarray(jacobian(z, steer, speed)), -g)
-            scale = 1.0
-            while scale > 1e-4:
-                trial = z + scale * step
-                if np.linalg.norm(np.asarray(residual(trial, steer, speed)).ravel()) < norm:
-                    break
-                scale *= 0.5
-            z = trial
-        else:
+        z, norm = _newton(self, x[keep], steer, speed, tolerance)
+        if norm >= tolerance:
+            z = x[keep]
+            for fraction in np.linspace(0.125, 1.0, 8):
+                z, norm = _newton(self, z, fraction * steer, speed, tolerance)
+        if norm >= tolerance:
             raise DivergenceError(
                 f"no steady state found at {speed} m/s and {np.rad2deg(steer):.3g} deg steer "
-                f"(residual {norm:.3g})"
+                f"(residual {norm:.3g}): beyond the grip limit?"
             )
         x[keep] = z
         return x
+
+
+def _newton(model: VehicleModel, z: np.ndarray, steer: float, speed: float, tolerance: float):
+    """Damped Newton iterations on the trim residual; returns (solution, residual norm)."""
+    residual, jacobian = _trim_functions(model)
+
+    def size(candidate: np.ndarray) -> tuple[np.ndarray, float]:
+        value = np.asarray(residual(candidate, steer, speed)).ravel()
+        return value, float(np.linalg.norm(value))
+
+    value, norm = size(z)
+    for _ in range(60):
+        if norm < tolerance or not np.isfinite(norm):
+            break
+        try:
+            step = np.linalg.solve(np.asarray(jacobian(z, steer, speed)), -value)
+        except np.linalg.LinAlgError:
+            break
+        scale = 1.0
+        while True:  # backtrack until the residual falls (or the step is negligible)
+            trial = z + scale * step
+            trial_value, trial_norm = size(trial)
+            if trial_norm < norm or scale < 1e-4:
+                break
+            scale *= 0.5
+        z, value, norm = trial, trial_value, trial_norm
+    return z, norm
 
 
 def _index(names: Sequence[str], name: str, kind: str) -> int:
