@@ -24,6 +24,9 @@ Modelling choices (documented here once):
 * Slip lags without division by speed (Pacejka 2012, section 7.2):
   ``sigma_a d(alpha')/dt = V_cy - |V_cx| alpha'`` and
   ``sigma_k d(kappa')/dt = R_e omega - V_cx - |V_cx| kappa'``.
+* Wheel spin ``I_w d(omega)/dt = T - R_e F_x``. The wheels' spin angular
+  momentum is not fed back to the body: no gyroscopic moment (about 1 % of the
+  roll moment at 7 m/s^2) and no reaction to the wheels' spin acceleration.
 * Smooth, branch-free: ``|x| ~ sqrt(x^2 + eps^2)``, ``max(x, 0) ~ (x + |x|_eps)/2``.
 
 States (in this order): u, v, w (m/s); p, q, r (rad/s); z (heave of the CG
