@@ -1,1 +1,63 @@
-"""The full-vehicle source model: parameters, symbolic CasADi model, compiled simulator, manoeuvres."""
+"""The full-vehicle source model: parameters, symbolic CasADi model, compiled simulator, manoeuvres.
+
+Typical use::
+
+    from vehicle import baseline, simulate, linearize
+    from vehicle.manoeuvres import identification
+
+    record = simulate(baseline(), identification(seed=0))   # IOData, 30 s at 500 Hz
+    handling = record.select_outputs(["lateral_acceleration", "yaw_rate", "roll_angle"])
+    modes = linearize(baseline(), speed=20.0).modes
+"""
+
+from .linearize import Linearization, Mode, linearize
+from .manoeuvres import MANOEUVRES, Manoeuvre, make_manoeuvre
+from .model import (
+    CORNERS,
+    DEFAULT_SPEED,
+    INPUT_NAMES,
+    OUTPUT_NAMES,
+    STATE_NAMES,
+    VehicleModel,
+    build_vehicle_model,
+)
+from .parameters import (
+    ChassisParameters,
+    DriveParameters,
+    SuspensionParameters,
+    TyreParameters,
+    VehicleParameters,
+    baseline,
+    load_vehicle,
+    named_vehicle,
+    understeer,
+)
+from .simulation import DEFAULT_DT, rk4_simulator, simulate
+
+__all__ = [
+    "Linearization",
+    "Mode",
+    "linearize",
+    "MANOEUVRES",
+    "Manoeuvre",
+    "make_manoeuvre",
+    "CORNERS",
+    "DEFAULT_SPEED",
+    "DEFAULT_DT",
+    "INPUT_NAMES",
+    "OUTPUT_NAMES",
+    "STATE_NAMES",
+    "VehicleModel",
+    "build_vehicle_model",
+    "ChassisParameters",
+    "DriveParameters",
+    "SuspensionParameters",
+    "TyreParameters",
+    "VehicleParameters",
+    "baseline",
+    "understeer",
+    "load_vehicle",
+    "named_vehicle",
+    "simulate",
+    "rk4_simulator",
+]

@@ -1,0 +1,83 @@
+"""`vehid simulate` and `vehid linearize`: the JSON keys other tools read, and bad input (exit 2)."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from identification.data import read_hdf5
+from scenarios.cli import main
+
+
+def _run_json(capsys, argv):
+    status = main([*argv, "--json"])
+    captured = capsys.readouterr()
+    assert status == 0, captured.err
+    return json.loads(captured.out)
+
+
+def test_simulate_step_summary_keys(capsys, tmp_path, monkeypatch):
+    monkeypatch.setenv("VEHID_RESULTS_DIR", str(tmp_path))
+    summary = _run_json(capsys, ["simulate", "--manoeuvre", "step", "--amplitude-deg", "0.3",
+                                 "--duration", "6", "--out", "step.h5"])
+    for key in ("peak_lateral_acceleration", "min_speed", "max_speed", "seconds",
+                "yaw_rate_gain", "lateral_acceleration_gain", "roll_gain"):
+        assert isinstance(summary[key], float), key
+    # Baseline closed forms at 20 m/s: r/delta = 6.27 1/s, a_y/delta = 2.19 m/s^2/deg (3 %).
+    assert summary["yaw_rate_gain"] == pytest.approx(6.27, rel=0.03)
+    assert summary["lateral_acceleration_gain"] == pytest.approx(2.19, rel=0.03)
+    record = read_hdf5(tmp_path / "step.h5")
+    assert record.n_samples == 3001 and record.x.shape == (3001, 23)
+    assert record.output_names[:3] == ("lateral_acceleration", "yaw_rate", "roll_angle")
+
+
+def test_simulate_identification_summary(capsys):
+    summary = _run_json(capsys, ["simulate", "--manoeuvre", "identification", "--duration", "4"])
+    assert "yaw_rate_gain" not in summary
+    assert 19.5 < summary["min_speed"] <= summary["max_speed"] < 20.5
+
+
+def test_linearize_modes(capsys):
+    summary = _run_json(capsys, ["linearize", "--vehicle", "understeer", "--speed", "25"])
+    labels = [mode["label"] for mode in summary["modes"]]
+    for label in ("roll", "yaw-sideslip", "heave", "pitch", "wheel"):
+        assert label in labels
+    for mode in summary["modes"]:
+        assert set(mode) >= {"frequency_hz", "damping", "label"}
+
+
+def _bad_vehicle(tmp_path, text):
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    return str(path)
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["simulate", "--speed", "0"], "speed must be positive"),
+        (["simulate", "--manoeuvre", "step", "--amplitude-deg", "35"], "30 deg"),
+        (["simulate", "--amplitude-deg", "nan"], "finite"),
+        (["simulate", "--duration", "-1"], "duration"),
+        (["linearize", "--speed", "-3"], "speed must be positive"),
+        (["simulate", "--vehicle", "VEHICLE:base = \"baseline\"\n[chassis]\nmass = 0.0\n"], "mass must be positive"),
+        (["linearize", "--vehicle", "VEHICLE:base = \"baseline\"\n[chassis]\nwings = 2\n"], "unknown field"),
+        (["simulate", "--vehicle", "VEHICLE:base = \"baseline\"\n[tyre]\nwheel_inertia = -1.0\n"], "wheel_inertia"),
+    ],
+)
+def test_bad_input_exits_2_with_one_line(capsys, tmp_path, argv, message):
+    argv = [_bad_vehicle(tmp_path, a[8:]) if a.startswith("VEHICLE:") else a for a in argv]
+    status = main(argv)
+    err = capsys.readouterr().err
+    assert status == 2
+    assert len(err.strip().splitlines()) == 1 and message in err and "Traceback" not in err
+
+
+def test_bad_input_from_a_real_process(tmp_path):
+    completed = subprocess.run(
+        [sys.executable, "-m", "scenarios.cli", "simulate", "--speed", "-2", "--json"],
+        capture_output=True, text=True, check=False,
+    )
+    assert completed.returncode == 2 and completed.stdout == ""
+    assert completed.stderr.count("\n") == 1 and "Traceback" not in completed.stderr

@@ -1,0 +1,253 @@
+"""Steer inputs: seeded road-wheel steer series for identification, validation and handling tests.
+
+Every manoeuvre is a function with the same keyword-only signature
+``(amplitude=None, duration=None, dt=1/500, seed=0)`` returning a frozen
+:class:`Manoeuvre` whose ``steer`` (rad, shape (N,)) starts at zero, so that a
+simulation starts at the straight-running trim. Amplitudes are road-wheel
+angles in radians; the defaults are sized for the baseline saloon at 20 m/s.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any, Callable, Mapping
+
+import numpy as np
+
+from identification.errors import InputError
+
+from .simulation import DEFAULT_DT, check_steer
+
+__all__ = [
+    "Manoeuvre",
+    "identification",
+    "validation",
+    "step",
+    "sweep",
+    "ramp",
+    "MANOEUVRES",
+    "make_manoeuvre",
+    "band_limited_noise",
+]
+
+_DEG = math.pi / 180.0
+
+
+@dataclass(frozen=True, eq=False)
+class Manoeuvre:
+    """A named steer series.
+
+    Attributes
+    ----------
+    name : str
+    steer : numpy.ndarray, shape (N,)
+        Road-wheel steer angle (rad), positive left; ``steer[0] == 0``.
+    dt : float
+        Sample interval (s).
+    meta : mapping
+        How it was made: amplitude (rad), duration (s), seed, and shape details.
+    """
+
+    name: str
+    steer: np.ndarray
+    dt: float
+    meta: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        steer = check_steer(self.steer).copy()
+        steer.setflags(write=False)
+        object.__setattr__(self, "steer", steer)
+        object.__setattr__(self, "meta", MappingProxyType({"manoeuvre": self.name, **dict(self.meta)}))
+
+    @property
+    def t(self) -> np.ndarray:
+        """Sample times (s), shape (N,)."""
+        return self.dt * np.arange(self.steer.size)
+
+    @property
+    def n_samples(self) -> int:
+        return int(self.steer.size)
+
+    def __array__(self, dtype=None, copy=None):
+        return np.array(self.steer, dtype=dtype)
+
+
+def _samples(duration: float, dt: float) -> int:
+    for name, value in (("duration", duration), ("dt", dt)):
+        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+            raise InputError(f"manoeuvre {name} must be a positive number of seconds; got {value!r}")
+    n = int(round(duration / dt)) + 1
+    if n < 2:
+        raise InputError(f"duration {duration} s holds fewer than 2 samples at dt = {dt} s")
+    return n
+
+
+def _check_amplitude(amplitude: float) -> float:
+    if not (isinstance(amplitude, (int, float)) and math.isfinite(amplitude)):
+        raise InputError(f"manoeuvre amplitude must be a finite angle (rad); got {amplitude!r}")
+    return float(amplitude)
+
+
+def _fade(t: np.ndarray, rise: float) -> np.ndarray:
+    """Raised-cosine fade-in over ``rise`` seconds: 0 at t = 0, 1 after."""
+    x = np.clip(t / rise, 0.0, 1.0)
+    return 0.5 - 0.5 * np.cos(np.pi * x)
+
+
+def _chirp(t: np.ndarray, f0: float, f1: float, duration: float) -> np.ndarray:
+    """Linear sine sweep from f0 to f1 Hz over ``duration`` s."""
+    return np.sin(2 * np.pi * (f0 * t + 0.5 * (f1 - f0) / duration * t**2))
+
+
+def _smoothed_step(t: np.ndarray, start: float, ramp_time: float) -> np.ndarray:
+    """0 before ``start``, a linear ramp over ``ramp_time`` s, 1 after."""
+    return np.clip((t - start) / ramp_time, 0.0, 1.0)
+
+
+def band_limited_noise(n: int, dt: float, bandwidth: float, rng: np.random.Generator) -> np.ndarray:
+    """Gaussian white noise limited to ``0..bandwidth`` Hz (ideal FFT filter), unit RMS, shape (n,)."""
+    white = rng.standard_normal(n)
+    spectrum = np.fft.rfft(white)
+    spectrum[np.fft.rfftfreq(n, dt) > bandwidth] = 0.0
+    noise = np.fft.irfft(spectrum, n)
+    noise -= noise.mean()
+    return noise / np.sqrt(np.mean(noise**2))
+
+
+def identification(
+    *, amplitude: float | None = None, duration: float | None = None, dt: float = DEFAULT_DT, seed: int = 0
+) -> Manoeuvre:
+    """The paper's identification input: band-limited noise plus a sinusoidal sweep.
+
+    Band-limited white noise (0-25 Hz, RMS ``0.15 * amplitude``) plus a linear
+    sine sweep of ``amplitude`` from 0.1 to 2 Hz over the record, both faded in
+    over the first second (Best & Bogdanski, section 6). The default amplitude
+    (4 deg road-wheel) takes the baseline saloon at 20 m/s to about
+    +/-7 m/s^2 lateral acceleration, some 90 % of its grip limit (0.79 g); the
+    peak comes early in the sweep, where the frequency is lowest.
+    """
+    amplitude = _check_amplitude(4.0 * _DEG if amplitude is None else amplitude)
+    duration = 30.0 if duration is None else duration
+    n = _samples(duration, dt)
+    t = dt * np.arange(n)
+    rng = np.random.default_rng(seed)
+    noise = band_limited_noise(n, dt, 25.0, rng)
+    steer = amplitude * _fade(t, 1.0) * (_chirp(t, 0.1, 2.0, duration) + 0.15 * noise)
+    return Manoeuvre(
+        "identification", steer, dt,
+        {"amplitude": amplitude, "duration": duration, "seed": seed,
+         "sweep_hz": [0.1, 2.0], "noise_band_hz": [0.0, 25.0], "noise_rms_fraction": 0.15},
+    )
+
+
+def validation(
+    *, amplitude: float | None = None, duration: float | None = None, dt: float = DEFAULT_DT, seed: int = 0
+) -> Manoeuvre:
+    """The paper's validation input: steps added to a sweep, then a range of larger steps.
+
+    First half: a slow sweep (0.1-0.6 Hz) of ``0.6 * amplitude`` with steps of
+    ``+/-0.4 * amplitude`` added every 1.5 s, together spanning the nonlinear
+    range. Second half: steps of 0.5, 0.7, 0.9, 1.1 and 1.3 times
+    ``amplitude``, alternating in sign, each held then released. Step edges
+    ramp over 0.1 s. The step order is drawn from ``seed``. The default
+    amplitude is 3.5 deg, so the largest steps go past the grip limit.
+    """
+    amplitude = _check_amplitude(3.5 * _DEG if amplitude is None else amplitude)
+    duration = 30.0 if duration is None else duration
+    n = _samples(duration, dt)
+    t = dt * np.arange(n)
+    half = duration / 2
+    rng = np.random.default_rng(seed)
+    first = t < half
+    sweep_part = 0.6 * _chirp(t, 0.1, 0.6, half) * _fade(t, 1.0)
+    steps = np.zeros(n)
+    edges = np.arange(1.5, half - 1.0, 1.5)
+    levels = rng.choice([-0.4, 0.4], size=edges.size)
+    previous = 0.0
+    for edge, level in zip(edges, levels):
+        steps += (level - previous) * _smoothed_step(t, edge, 0.1)
+        previous = level
+    steps -= previous * _smoothed_step(t, half - 1.0, 0.1)
+    signal = np.where(first, sweep_part * _fade(half - t, 1.0) + steps, 0.0)
+    magnitudes = np.array([0.5, 0.7, 0.9, 1.1, 1.3])
+    signs = np.resize([1.0, -1.0], magnitudes.size) * rng.choice([-1.0, 1.0])
+    slot = (duration - half) / magnitudes.size
+    for i, (magnitude, sign) in enumerate(zip(magnitudes, signs)):
+        on = half + i * slot + 0.2 * slot
+        off = on + 0.5 * slot
+        signal += sign * magnitude * (_smoothed_step(t, on, 0.1) - _smoothed_step(t, off, 0.1))
+    return Manoeuvre(
+        "validation", amplitude * signal, dt,
+        {"amplitude": amplitude, "duration": duration, "seed": seed,
+         "step_magnitudes": magnitudes.tolist()},
+    )
+
+
+def step(
+    *, amplitude: float | None = None, duration: float | None = None, dt: float = DEFAULT_DT, seed: int = 0
+) -> Manoeuvre:
+    """ISO 7401-style step steer: zero for 0.5 s, a 0.1 s ramp to ``amplitude``, then held.
+
+    Default 1 deg road-wheel over 5 s (long enough for the PI speed hold to
+    settle, so the end of the record is the steady state).
+    """
+    amplitude = _check_amplitude(1.0 * _DEG if amplitude is None else amplitude)
+    duration = 5.0 if duration is None else duration
+    n = _samples(duration, dt)
+    t = dt * np.arange(n)
+    start, ramp_time = 0.5, 0.1
+    steer = amplitude * _smoothed_step(t, min(start, duration / 4), ramp_time)
+    return Manoeuvre(
+        "step", steer, dt,
+        {"amplitude": amplitude, "duration": duration, "seed": seed, "start": start, "ramp_time": ramp_time},
+    )
+
+
+def sweep(
+    *, amplitude: float | None = None, duration: float | None = None, dt: float = DEFAULT_DT, seed: int = 0
+) -> Manoeuvre:
+    """Sine sweep (chirp) from 0.1 to 3 Hz at ``amplitude`` (default 1 deg), faded in over 1 s."""
+    amplitude = _check_amplitude(1.0 * _DEG if amplitude is None else amplitude)
+    duration = 30.0 if duration is None else duration
+    n = _samples(duration, dt)
+    t = dt * np.arange(n)
+    steer = amplitude * _fade(t, 1.0) * _chirp(t, 0.1, 3.0, duration)
+    return Manoeuvre("sweep", steer, dt, {"amplitude": amplitude, "duration": duration, "seed": seed,
+                                          "sweep_hz": [0.1, 3.0]})
+
+
+def ramp(
+    *, amplitude: float | None = None, duration: float | None = None, dt: float = DEFAULT_DT, seed: int = 0
+) -> Manoeuvre:
+    """Slow ramp steer for the handling curve: 0 to ``amplitude`` (default 10 deg) over the record (default 30 s).
+
+    Slow enough (1/3 deg/s by default) that the car passes through near-steady
+    states, so lateral acceleration against steer traces the handling curve up
+    to the grip limit (0.79 g for the baseline, reached near 8 deg).
+    """
+    amplitude = _check_amplitude(10.0 * _DEG if amplitude is None else amplitude)
+    duration = 30.0 if duration is None else duration
+    n = _samples(duration, dt)
+    t = dt * np.arange(n)
+    return Manoeuvre("ramp", amplitude * t / t[-1], dt,
+                     {"amplitude": amplitude, "duration": duration, "seed": seed})
+
+
+MANOEUVRES: dict[str, Callable[..., Manoeuvre]] = {
+    "identification": identification,
+    "validation": validation,
+    "step": step,
+    "sweep": sweep,
+    "ramp": ramp,
+}
+
+
+def make_manoeuvre(name: str, **options: Any) -> Manoeuvre:
+    """The manoeuvre called ``name`` with keyword ``options`` (amplitude, duration, dt, seed)."""
+    try:
+        factory = MANOEUVRES[name]
+    except KeyError:
+        raise InputError(f"unknown manoeuvre {name!r}; choose from {', '.join(MANOEUVRES)}") from None
+    return factory(**options)

@@ -1,0 +1,407 @@
+"""The 23-state full-vehicle handling model as named CasADi SX expressions.
+
+A rigid body free in six degrees of freedom rides on four massless tyre nodes
+through quarter-car struts (Best & Bogdanski, section 6). Lateral and
+longitudinal tyre forces come from the combined-slip, load-dependent Magic
+Formula (:mod:`vehicle.tyre`) evaluated on first-order relaxation-lagged slips;
+each wheel spins; a PI controller holds the forward speed with the drive torque
+split equally between the front wheels.
+
+Modelling choices (documented here once):
+
+* Axes ISO 8855 (x forward, y left, z up), body axes at the CG; Euler angles
+  ZYX (yaw psi, pitch theta, roll phi). A left turn gives r > 0, a_y > 0 and
+  phi > 0 (the body leans outward: left side up).
+* The tyre nodes are massless, so corner deflections are algebraic in the body
+  pose and velocity and there are no unsprung states. Each tyre's force acts on
+  the body at its contact point, fixed in body axes at ``(x_i, y_i, -h)``: the
+  roll and pitch axes sit at the ground, as in the closed-form roll gradient.
+* Suspension force = static corner load + k * compression + c * compression
+  rate + anti-roll-bar term; the tyre load is a smooth ``max(force, 0)``, so a
+  wheel may lift off.
+* X and Y positions are dropped (nothing depends on them on a flat road); psi
+  is kept, ignorable, and adds one zero eigenvalue to every linearisation.
+* Slip lags without division by speed (Pacejka 2012, section 7.2):
+  ``sigma_a d(alpha')/dt = V_cy - |V_cx| alpha'`` and
+  ``sigma_k d(kappa')/dt = R_e omega - V_cx - |V_cx| kappa'``.
+* Wheel spin ``I_w d(omega)/dt = T - R_e F_x``. The wheels' spin angular
+  momentum is not fed back to the body: no gyroscopic moment (about 1 % of the
+  roll moment at 7 m/s^2) and no reaction to the wheels' spin acceleration.
+* Smooth, branch-free: ``|x| ~ sqrt(x^2 + eps^2)``, ``max(x, 0) ~ (x + |x|_eps)/2``.
+
+States (in this order): u, v, w (m/s); p, q, r (rad/s); z (heave of the CG
+from its static height, m); phi, theta, psi (rad); omega_fl, omega_fr,
+omega_rl, omega_rr (rad/s); alpha_fl ... alpha_rr (lagged lateral slip, -);
+kappa_fl ... kappa_rr (lagged slip ratio, -); speed_error_integral (m).
+Input: steer (road-wheel angle, rad). Parameter: reference_speed (m/s).
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+from typing import Sequence
+
+import casadi as ca
+import numpy as np
+
+from identification.errors import DivergenceError, InputError
+
+from .parameters import GRAVITY, VehicleParameters, static_axle_loads
+from .tyre import combined_forces
+
+__all__ = [
+    "VehicleModel",
+    "build_vehicle_model",
+    "STATE_NAMES",
+    "STATE_UNITS",
+    "OUTPUT_NAMES",
+    "OUTPUT_UNITS",
+    "INPUT_NAMES",
+    "INPUT_UNITS",
+    "CORNERS",
+    "DEFAULT_SPEED",
+    "MAX_STEER",
+    "check_speed",
+    "positive_number",
+]
+
+CORNERS = ("fl", "fr", "rl", "rr")
+DEFAULT_SPEED = 20.0  # [m/s] the handling study's trim speed (Best & Bogdanski, section 6)
+MAX_STEER = np.deg2rad(30.0)  # [rad] road-wheel steer beyond this is rejected as bad input
+
+STATE_NAMES = (
+    "u", "v", "w", "p", "q", "r", "z", "phi", "theta", "psi",
+    *(f"omega_{c}" for c in CORNERS),
+    *(f"alpha_{c}" for c in CORNERS),
+    *(f"kappa_{c}" for c in CORNERS),
+    "speed_error_integral",
+)
+STATE_UNITS = (
+    "m/s", "m/s", "m/s", "rad/s", "rad/s", "rad/s", "m", "rad", "rad", "rad",
+    *("rad/s",) * 4, *("-",) * 4, *("-",) * 4, "m",
+)
+INPUT_NAMES = ("steer",)
+INPUT_UNITS = ("rad",)
+OUTPUT_NAMES = (
+    "lateral_acceleration",
+    "yaw_rate",
+    "roll_angle",
+    "sideslip",
+    "speed",
+    *(f"tyre_load_{c}" for c in CORNERS),
+    "lateral_acceleration_accelerometer",
+)
+OUTPUT_UNITS = ("m/s^2", "rad/s", "rad", "rad", "m/s", *("N",) * 4, "m/s^2")
+
+_EPS_SPEED = 0.1  # [m/s] smoothing of |V_cx|: 2.5e-4 relative error at 20 m/s
+_EPS_LOAD = 1.0  # [N] smoothing of max(F_z, 0): 6e-5 N bias at a static corner load of ~3-4 kN
+
+
+def _smooth_abs(x, eps):
+    return ca.sqrt(x * x + eps * eps)
+
+
+def _rotation_pitch_roll(phi, theta):
+    """Body axes to the yaw-aligned road frame: R_y(theta) R_x(phi)."""
+    cf, sf, ct, st = ca.cos(phi), ca.sin(phi), ca.cos(theta), ca.sin(theta)
+    roll = ca.vertcat(ca.horzcat(1, 0, 0), ca.horzcat(0, cf, -sf), ca.horzcat(0, sf, cf))
+    pitch = ca.vertcat(ca.horzcat(ct, 0, st), ca.horzcat(0, 1, 0), ca.horzcat(-st, 0, ct))
+    return ca.mtimes(pitch, roll)
+
+
+@dataclass(frozen=True, eq=False)
+class VehicleModel:
+    """The symbolic model and its CasADi functions ``f(x, u, p)`` and ``h(x, u, p)``.
+
+    Attributes
+    ----------
+    params : VehicleParameters
+        What it was built from.
+    x, u, p : casadi.SX
+        Symbols: states (23,), input steer (1,), parameter reference speed (1,).
+    xdot, y : casadi.SX
+        State derivative (23,) and outputs (10,).
+    dynamics : casadi.Function
+        ``dynamics(x, u, p) -> xdot``.
+    outputs : casadi.Function
+        ``outputs(x, u, p) -> y``.
+    state_names, state_units, input_names, input_units, output_names, output_units : tuple of str
+    """
+
+    params: VehicleParameters
+    x: ca.SX
+    u: ca.SX
+    p: ca.SX
+    xdot: ca.SX
+    y: ca.SX
+    dynamics: ca.Function
+    outputs: ca.Function
+    state_names: tuple[str, ...] = STATE_NAMES
+    state_units: tuple[str, ...] = STATE_UNITS
+    input_names: tuple[str, ...] = INPUT_NAMES
+    input_units: tuple[str, ...] = INPUT_UNITS
+    output_names: tuple[str, ...] = OUTPUT_NAMES
+    output_units: tuple[str, ...] = OUTPUT_UNITS
+
+    @property
+    def n_x(self) -> int:
+        return len(self.state_names)
+
+    @property
+    def n_u(self) -> int:
+        return len(self.input_names)
+
+    @property
+    def n_y(self) -> int:
+        return len(self.output_names)
+
+    def state_index(self, name: str) -> int:
+        """Column of a named state."""
+        return _index(self.state_names, name, "state")
+
+    def output_index(self, name: str) -> int:
+        """Row of a named output."""
+        return _index(self.output_names, name, "output")
+
+    def straight_running_guess(self, speed: float) -> np.ndarray:
+        """States of straight running at ``speed`` on static suspension: trim at zero steer."""
+        x = np.zeros(self.n_x)
+        x[self.state_index("u")] = speed
+        for corner in CORNERS:
+            x[self.state_index(f"omega_{corner}")] = speed / self.params.tyre.rolling_radius
+        return x
+
+    def trim(self, speed: float = DEFAULT_SPEED, steer: float = 0.0, *, tolerance: float = 1e-11) -> np.ndarray:
+        """Solve for the steady state at ``speed`` (m/s) and constant ``steer`` (rad).
+
+        All derivatives except d(psi)/dt (psi is ignorable) are driven to zero by
+        Newton's method with a backtracking line search, starting from straight
+        running; where that fails (large steer), the steer is raised in eight
+        stages, each solve starting from the last. Returns the 23 states (psi = 0).
+
+        Raises
+        ------
+        InputError
+            On a non-positive speed or a steer beyond +/-30 deg.
+        DivergenceError
+            When no steady state is found (e.g. beyond the grip limit).
+        """
+        check_speed(speed)
+        steer = float(steer)
+        if not np.isfinite(steer) or abs(steer) > MAX_STEER:
+            raise InputError(f"trim steer must be finite and within +/-30 deg; got {np.rad2deg(steer):.3g} deg")
+        keep = [i for i, name in enumerate(self.state_names) if name != "psi"]
+        x = self.straight_running_guess(speed)
+        z, norm = _newton(self, x[keep], steer, speed, tolerance)
+        if norm >= tolerance:
+            z = x[keep]
+            for fraction in np.linspace(0.125, 1.0, 8):
+                z, norm = _newton(self, z, fraction * steer, speed, tolerance)
+        if norm >= tolerance:
+            raise DivergenceError(
+                f"no steady state found at {speed} m/s and {np.rad2deg(steer):.3g} deg steer "
+                f"(residual {norm:.3g}): beyond the grip limit?"
+            )
+        x[keep] = z
+        return x
+
+
+def _newton(model: VehicleModel, z: np.ndarray, steer: float, speed: float, tolerance: float):
+    """Damped Newton iterations on the trim residual; returns (solution, residual norm)."""
+    residual, jacobian = _trim_functions(model)
+
+    def size(candidate: np.ndarray) -> tuple[np.ndarray, float]:
+        value = np.asarray(residual(candidate, steer, speed)).ravel()
+        return value, float(np.linalg.norm(value))
+
+    value, norm = size(z)
+    for _ in range(60):
+        if norm < tolerance or not np.isfinite(norm):
+            break
+        try:
+            step = np.linalg.solve(np.asarray(jacobian(z, steer, speed)), -value)
+        except np.linalg.LinAlgError:
+            break
+        scale = 1.0
+        while True:  # backtrack until the residual falls (or the step is negligible)
+            trial = z + scale * step
+            trial_value, trial_norm = size(trial)
+            if trial_norm < norm or scale < 1e-4:
+                break
+            scale *= 0.5
+        z, value, norm = trial, trial_value, trial_norm
+    return z, norm
+
+
+def _index(names: Sequence[str], name: str, kind: str) -> int:
+    try:
+        return list(names).index(name)
+    except ValueError:
+        raise InputError(f"unknown {kind} {name!r}; available: {', '.join(names)}") from None
+
+
+def positive_number(value: float, name: str, unit: str) -> float:
+    """Return ``value`` as a float, or raise InputError if it is not a positive finite number."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{name} must be a number ({unit}); got {value!r}") from None
+    if not np.isfinite(number) or number <= 0:
+        raise InputError(f"{name} must be positive and finite ({unit}); got {value}")
+    return number
+
+
+def check_speed(speed: float) -> float:
+    """Return ``speed`` (m/s) as a float, or raise InputError if it is not positive and finite."""
+    return positive_number(speed, "speed", "m/s")
+
+
+@functools.lru_cache(maxsize=8)
+def _trim_functions(model: VehicleModel) -> tuple[ca.Function, ca.Function]:
+    keep = [i for i, name in enumerate(model.state_names) if name != "psi"]
+    reduced = ca.SX.sym("x_trim", len(keep))
+    full = ca.SX.zeros(model.n_x)
+    for j, i in enumerate(keep):
+        full[i] = reduced[j]
+    derivative = model.dynamics(full, model.u, model.p)[keep]
+    residual = ca.Function("trim_residual", [reduced, model.u, model.p], [derivative])
+    jacobian = ca.Function("trim_jacobian", [reduced, model.u, model.p], [ca.jacobian(derivative, reduced)])
+    return residual, jacobian
+
+
+@functools.lru_cache(maxsize=16)
+def build_vehicle_model(params: VehicleParameters) -> VehicleModel:
+    """Build the symbolic 23-state model of ``params`` (cached per parameter set).
+
+    Parameters
+    ----------
+    params : VehicleParameters
+        The vehicle.
+
+    Returns
+    -------
+    VehicleModel
+        Named symbols, ``dynamics(x, u, p)`` and ``outputs(x, u, p)``, where
+        ``u`` is the road-wheel steer (rad) and ``p`` the reference speed (m/s).
+    """
+    chassis, suspension, tyre, drive = params.chassis, params.suspension, params.tyre, params.drive
+    x = ca.SX.sym("x", len(STATE_NAMES))
+    steer = ca.SX.sym("steer")
+    reference_speed = ca.SX.sym("reference_speed")
+    s = {name: x[i] for i, name in enumerate(STATE_NAMES)}
+
+    m, g, h = chassis.mass, GRAVITY, chassis.cg_height
+    a, b = chassis.cg_to_front_axle, chassis.cg_to_rear_axle
+    tf, tr = chassis.front_track, chassis.rear_track
+    velocity = ca.vertcat(s["u"], s["v"], s["w"])
+    rates = ca.vertcat(s["p"], s["q"], s["r"])
+    phi, theta = s["phi"], s["theta"]
+    to_road = _rotation_pitch_roll(phi, theta)
+
+    front_static, rear_static = static_axle_loads(params)
+    corner_x = (a, a, -b, -b)
+    corner_y = (tf / 2, -tf / 2, tr / 2, -tr / 2)
+    static_load = (front_static / 2, front_static / 2, rear_static / 2, rear_static / 2)
+    wheel_rate = (suspension.front_wheel_rate,) * 2 + (suspension.rear_wheel_rate,) * 2
+    damping = (suspension.front_damping,) * 2 + (suspension.rear_damping,) * 2
+    steered = (True, True, False, False)
+    lateral_relaxation = (tyre.front_lateral_relaxation,) * 2 + (tyre.rear_lateral_relaxation,) * 2
+    longitudinal_relaxation = (tyre.front_longitudinal_relaxation,) * 2 + (tyre.rear_longitudinal_relaxation,) * 2
+    cornering_scale = (tyre.front_cornering_scale,) * 2 + (1.0,) * 2
+
+    # Corner compression (positive in bump) and its rate, from the body pose and velocity.
+    compression, compression_rate = [], []
+    for i in range(4):
+        strut_top = ca.vertcat(corner_x[i], corner_y[i], 0)
+        compression.append(-s["z"] - ca.mtimes(to_road[2, :], strut_top))
+        strut_velocity = velocity + ca.cross(rates, strut_top)
+        compression_rate.append(-ca.mtimes(to_road[2, :], strut_velocity))
+    strut_force = [
+        static_load[i] + wheel_rate[i] * compression[i] + damping[i] * compression_rate[i] for i in range(4)
+    ]
+    for left, right, track, bar in ((0, 1, tf, suspension.front_anti_roll_bar), (2, 3, tr, suspension.rear_anti_roll_bar)):
+        # Bar moment bar * (axle roll) with axle roll = (compression_L - compression_R) / track.
+        bar_force = bar * (compression[left] - compression[right]) / track**2
+        strut_force[left] = strut_force[left] + bar_force
+        strut_force[right] = strut_force[right] - bar_force
+    load = [(f + _smooth_abs(f, _EPS_LOAD)) / 2 for f in strut_force]
+
+    speed_error = reference_speed - s["u"]
+    drive_torque_front = 0.5 * m * tyre.rolling_radius * (
+        drive.speed_gain * speed_error + drive.speed_integral_gain * s["speed_error_integral"]
+    )
+    drive_torque = (drive_torque_front, drive_torque_front, 0, 0)
+
+    force_body = ca.SX.zeros(3)
+    moment_body = ca.SX.zeros(3)
+    lateral_force_road = 0
+    slip_lateral_rate, slip_longitudinal_rate, wheel_acceleration = [], [], []
+    cos_steer, sin_steer = ca.cos(steer), ca.sin(steer)
+    for i, corner in enumerate(CORNERS):
+        contact = ca.vertcat(corner_x[i], corner_y[i], -h)
+        contact_velocity = ca.mtimes(to_road, velocity + ca.cross(rates, contact))
+        cd, sd = (cos_steer, sin_steer) if steered[i] else (1, 0)
+        v_cx = cd * contact_velocity[0] + sd * contact_velocity[1]
+        v_cy = -sd * contact_velocity[0] + cd * contact_velocity[1]
+        abs_v_cx = _smooth_abs(v_cx, _EPS_SPEED)
+        alpha, kappa, omega = s[f"alpha_{corner}"], s[f"kappa_{corner}"], s[f"omega_{corner}"]
+        slip_lateral_rate.append((v_cy - abs_v_cx * alpha) / lateral_relaxation[i])
+        slip_longitudinal_rate.append(
+            (tyre.rolling_radius * omega - v_cx - abs_v_cx * kappa) / longitudinal_relaxation[i]
+        )
+        fx, fy = combined_forces(
+            kappa, alpha, load[i], tyre, scale=cornering_scale[i], mirrored=corner_y[i] < 0
+        )
+        wheel_acceleration.append((drive_torque[i] - tyre.rolling_radius * fx) / tyre.wheel_inertia)
+        force_road = ca.vertcat(cd * fx - sd * fy, sd * fx + cd * fy, load[i])
+        lateral_force_road = lateral_force_road + force_road[1]
+        force = ca.mtimes(to_road.T, force_road)
+        force_body = force_body + force
+        moment_body = moment_body + ca.cross(contact, force)
+
+    gravity_body = ca.mtimes(to_road.T, ca.vertcat(0, 0, -g))
+    acceleration = force_body / m + gravity_body  # inertial acceleration of the CG in body axes
+    velocity_rate = acceleration - ca.cross(rates, velocity)
+    inertia = ca.SX(np.array([
+        [chassis.roll_inertia, 0, -chassis.roll_yaw_product],
+        [0, chassis.pitch_inertia, 0],
+        [-chassis.roll_yaw_product, 0, chassis.yaw_inertia],
+    ]))
+    rate_rate = ca.solve(inertia, moment_body - ca.cross(rates, ca.mtimes(inertia, rates)))
+    p_, q_, r_ = s["p"], s["q"], s["r"]
+    sin_phi, cos_phi = ca.sin(phi), ca.cos(phi)
+    euler_rate = ca.vertcat(
+        p_ + (q_ * sin_phi + r_ * cos_phi) * ca.tan(theta),
+        q_ * cos_phi - r_ * sin_phi,
+        (q_ * sin_phi + r_ * cos_phi) / ca.cos(theta),
+    )
+    heave_rate = ca.mtimes(to_road[2, :], velocity)
+
+    xdot = ca.vertcat(
+        velocity_rate,
+        rate_rate,
+        heave_rate,
+        euler_rate,
+        *wheel_acceleration,
+        *slip_lateral_rate,
+        *slip_longitudinal_rate,
+        speed_error,
+    )
+    velocity_road = ca.mtimes(to_road, velocity)
+    y = ca.vertcat(
+        lateral_force_road / m,  # road-plane a_y of the CG: gravity has no road-plane component
+        s["r"],
+        phi,
+        ca.atan(velocity_road[1] / velocity_road[0]),
+        ca.norm_2(velocity),
+        *load,
+        force_body[1] / m,  # specific force along body y: what a body-fixed accelerometer reads
+    )
+    dynamics = ca.Function(
+        "vehicle_dynamics", [x, steer, reference_speed], [xdot], ["x", "u", "p"], ["xdot"]
+    )
+    outputs = ca.Function("vehicle_outputs", [x, steer, reference_speed], [y], ["x", "u", "p"], ["y"])
+    return VehicleModel(
+        params=params, x=x, u=steer, p=reference_speed, xdot=xdot, y=y, dynamics=dynamics, outputs=outputs
+    )

@@ -1,0 +1,331 @@
+"""Parameters of the full-vehicle source model: frozen dataclasses, one per subsystem.
+
+Every field carries its unit and source in the dataclass field metadata
+(``unit``, ``source``); :func:`describe` lists them. Named vehicles are
+constructors (:func:`baseline`, :func:`understeer`) or data files
+(:func:`load_vehicle`); change one value with :func:`dataclasses.replace`.
+
+The baseline is a generic mid-size front-drive saloon; the tyre is the TNO
+205/60R15 MF-Tyre 6.2 sample data reduced to zero camber, nominal pressure, no
+turn slip, unit scaling factors and zero shift terms (so that the car is
+left/right symmetric). Equations: Pacejka, Tire and Vehicle Dynamics, 3rd ed.
+(2012), section 4.3.2.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+from identification.errors import InputError
+
+__all__ = [
+    "ChassisParameters",
+    "SuspensionParameters",
+    "TyreParameters",
+    "DriveParameters",
+    "VehicleParameters",
+    "GRAVITY",
+    "baseline",
+    "understeer",
+    "named_vehicle",
+    "load_vehicle",
+    "vehicle_from_mapping",
+    "describe",
+    "static_axle_loads",
+    "NAMED_VEHICLES",
+]
+
+GRAVITY = 9.81  # [m/s^2] standard gravity, rounded as in vehicle-dynamics texts
+
+_TNO = "TNO MF-Tyre 6.2 sample 205/60R15"
+_SALOON = "generic mid-size front-drive saloon (workbench vehicle spec)"
+
+
+def _p(value: float, unit: str, source: str) -> Any:
+    return field(default=value, metadata={"unit": unit, "source": source})
+
+
+@dataclass(frozen=True)
+class ChassisParameters:
+    """Rigid body: mass, inertia and geometry (CG at the origin of the body axes)."""
+
+    mass: float = _p(1450.0, "kg", f"{_SALOON}; CommonRoad vehicle 3: 1479 kg")
+    roll_inertia: float = _p(550.0, "kg m^2", f"I_xx about the CG; CommonRoad vehicle 3: 480")
+    pitch_inertia: float = _p(2300.0, "kg m^2", "I_yy about the CG; CommonRoad vehicle 3: 2204")
+    yaw_inertia: float = _p(2500.0, "kg m^2", "I_zz about the CG; CommonRoad vehicle 3: 2473")
+    roll_yaw_product: float = _p(0.0, "kg m^2", "I_xz; zero for a symmetric saloon")
+    cg_to_front_axle: float = _p(1.08, "m", "a; 60 % front load on a 2.70 m wheelbase")
+    cg_to_rear_axle: float = _p(1.62, "m", "b; CommonRoad vehicle 1 (Ford Escort): 63 % front")
+    front_track: float = _p(1.55, "m", _SALOON)
+    rear_track: float = _p(1.52, "m", _SALOON)
+    cg_height: float = _p(0.55, "m", "h above the ground; CommonRoad vehicle 1: 0.558 m")
+
+    @property
+    def wheelbase(self) -> float:
+        """L = a + b (m)."""
+        return self.cg_to_front_axle + self.cg_to_rear_axle
+
+
+@dataclass(frozen=True)
+class SuspensionParameters:
+    """Quarter-car struts at the four corners (rates at the wheel) and anti-roll bars."""
+
+    front_wheel_rate: float = _p(27000.0, "N/m", "per corner; ride about 1.25 Hz")
+    rear_wheel_rate: float = _p(24000.0, "N/m", "per corner; ride about 1.45 Hz")
+    front_damping: float = _p(2600.0, "N s/m", "damper rate at the wheel; ride damping about 0.4")
+    rear_damping: float = _p(2100.0, "N s/m", "damper rate at the wheel; ride damping about 0.4")
+    front_anti_roll_bar: float = _p(28000.0, "N m/rad", "about 5 deg/g roll gradient, roll axis at the ground")
+    rear_anti_roll_bar: float = _p(9000.0, "N m/rad", "about 5 deg/g roll gradient, roll axis at the ground")
+
+
+@dataclass(frozen=True)
+class TyreParameters:
+    """Magic Formula 6.2 coefficients (camber 0, nominal pressure), relaxation lengths, wheel.
+
+    Coefficient names follow Pacejka (2012), section 4.3.2, and the TNO ``.tir``
+    file; shift terms are zero and therefore absent.
+    """
+
+    nominal_load: float = _p(4000.0, "N", f"FNOMIN, {_TNO}")
+    rolling_radius: float = _p(0.304, "m", f"effective rolling radius R_e; R0 = 0.3135 m in {_TNO}")
+    wheel_inertia: float = _p(1.0, "kg m^2", "wheel and driveline spin inertia per wheel")
+    # Pure longitudinal slip
+    PCX1: float = _p(1.579, "-", _TNO)
+    PDX1: float = _p(1.0422, "-", _TNO)
+    PDX2: float = _p(-0.0827, "-", _TNO)
+    PEX1: float = _p(0.11185, "-", _TNO)
+    PEX2: float = _p(0.3127, "-", _TNO)
+    PEX3: float = _p(0.0, "-", _TNO)
+    PEX4: float = _p(0.001603, "-", _TNO)
+    PKX1: float = _p(21.69, "-", _TNO)
+    PKX2: float = _p(13.774, "-", _TNO)
+    PKX3: float = _p(-0.4119, "-", _TNO)
+    # Longitudinal force in combined slip
+    RBX1: float = _p(12.531, "-", _TNO)
+    RBX2: float = _p(9.532, "-", _TNO)
+    RCX1: float = _p(1.019, "-", _TNO)
+    REX1: float = _p(-0.4487, "-", _TNO)
+    REX2: float = _p(-0.4726, "-", _TNO)
+    # Pure lateral slip
+    PCY1: float = _p(1.3332, "-", _TNO)
+    PDY1: float = _p(0.8784, "-", _TNO)
+    PDY2: float = _p(-0.06445, "-", _TNO)
+    PEY1: float = _p(-0.8227, "-", _TNO)
+    PEY2: float = _p(-0.6062, "-", _TNO)
+    PEY3: float = _p(0.09825, "-", _TNO)
+    PKY1: float = _p(-15.314, "-", _TNO)
+    PKY2: float = _p(1.7044, "-", _TNO)
+    PKY4: float = _p(1.9896, "-", _TNO)
+    # Lateral force in combined slip
+    RBY1: float = _p(10.615, "-", _TNO)
+    RBY2: float = _p(7.705, "-", _TNO)
+    RBY3: float = _p(0.0, "-", _TNO)
+    RCY1: float = _p(1.0585, "-", _TNO)
+    REY1: float = _p(0.3132, "-", _TNO)
+    REY2: float = _p(0.0, "-", _TNO)
+    # First-order relaxation (transient slip)
+    front_lateral_relaxation: float = _p(0.345, "m", "|K_ya| / lateral stiffness at static front load (MF 6.2, PCFY1)")
+    rear_lateral_relaxation: float = _p(0.289, "m", "|K_ya| / lateral stiffness at static rear load (MF 6.2, PCFY1)")
+    front_longitudinal_relaxation: float = _p(0.243, "m", "K_xk / longitudinal stiffness at static front load (PCFX1)")
+    rear_longitudinal_relaxation: float = _p(0.157, "m", "K_xk / longitudinal stiffness at static rear load (PCFX1)")
+    # Scale of the front cornering stiffness: a stand-in for steering compliance.
+    front_cornering_scale: float = _p(1.0, "-", "LKY on the front tyres; 0.75 in the 'understeer' variant")
+
+
+@dataclass(frozen=True)
+class DriveParameters:
+    """PI speed hold; the drive torque is split equally between the front wheels."""
+
+    speed_gain: float = _p(2.0, "1/s", "k_p: torque = m R_e (k_p e + k_i e_I); holds 20 m/s within about 0.1 m/s")
+    speed_integral_gain: float = _p(1.0, "1/s^2", "k_i of the PI speed hold")
+
+
+@dataclass(frozen=True)
+class VehicleParameters:
+    """A whole vehicle: chassis, suspension, tyre and drive, plus a name for reports."""
+
+    chassis: ChassisParameters = field(default_factory=ChassisParameters)
+    suspension: SuspensionParameters = field(default_factory=SuspensionParameters)
+    tyre: TyreParameters = field(default_factory=TyreParameters)
+    drive: DriveParameters = field(default_factory=DriveParameters)
+    name: str = "baseline"
+
+    def __post_init__(self) -> None:
+        _validate(self)
+
+
+_SECTIONS = {
+    "chassis": ChassisParameters,
+    "suspension": SuspensionParameters,
+    "tyre": TyreParameters,
+    "drive": DriveParameters,
+}
+
+# Fields that must be strictly positive (masses, inertias, lengths, stiffnesses) ...
+_POSITIVE = {
+    "chassis": ("mass", "roll_inertia", "pitch_inertia", "yaw_inertia", "cg_to_front_axle",
+                "cg_to_rear_axle", "front_track", "rear_track", "cg_height"),
+    "suspension": ("front_wheel_rate", "rear_wheel_rate"),
+    "tyre": ("nominal_load", "rolling_radius", "wheel_inertia", "front_lateral_relaxation",
+             "rear_lateral_relaxation", "front_longitudinal_relaxation",
+             "rear_longitudinal_relaxation", "front_cornering_scale", "PCX1", "PDX1", "PKX1",
+             "PCY1", "PDY1", "PKY2", "PKY4"),
+    "drive": (),
+}
+# ... and those that may be zero (a car without a rear bar, a frictionless damper, no speed hold).
+_NON_NEGATIVE = {
+    "suspension": ("front_damping", "rear_damping", "front_anti_roll_bar", "rear_anti_roll_bar"),
+    "drive": ("speed_gain", "speed_integral_gain"),
+}
+
+
+def _validate(params: VehicleParameters) -> None:
+    for section, cls in _SECTIONS.items():
+        group = getattr(params, section)
+        if not isinstance(group, cls):
+            raise InputError(f"vehicle {section} must be {cls.__name__}; got {type(group).__name__}")
+        for item in dataclasses.fields(group):
+            value = getattr(group, item.name)
+            unit = item.metadata.get("unit", "-")
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise InputError(f"vehicle parameter {section}.{item.name} must be a number; got {value!r}")
+            if not math.isfinite(value):
+                raise InputError(f"vehicle parameter {section}.{item.name} is not finite ({value})")
+            if item.name in _POSITIVE[section] and value <= 0:
+                raise InputError(
+                    f"vehicle parameter {section}.{item.name} must be positive; got {value} {unit}"
+                )
+            if item.name in _NON_NEGATIVE.get(section, ()) and value < 0:
+                raise InputError(
+                    f"vehicle parameter {section}.{item.name} must not be negative; got {value} {unit}"
+                )
+    if params.tyre.PKY1 >= 0:
+        raise InputError("vehicle parameter tyre.PKY1 must be negative (ISO sign: F_y opposes slip)")
+    chassis = params.chassis
+    inertia_det = chassis.roll_inertia * chassis.yaw_inertia - chassis.roll_yaw_product**2
+    if inertia_det <= 0:
+        raise InputError("vehicle inertia is not positive definite: I_xx I_zz must exceed I_xz^2")
+
+
+def baseline() -> VehicleParameters:
+    """The baseline saloon: 1450 kg, 60 % front load, near-neutral handling (< 1 deg/g)."""
+    return VehicleParameters()
+
+
+def understeer() -> VehicleParameters:
+    """The baseline with the front cornering stiffness scaled by 0.75.
+
+    With road-wheel steer as input and no compliance, tyre load sensitivity is the
+    only understeer source; the scale stands in for steering compliance and
+    brings the understeer gradient into the 2-4 deg/g range of real saloons.
+    """
+    base = baseline()
+    return dataclasses.replace(
+        base, tyre=dataclasses.replace(base.tyre, front_cornering_scale=0.75), name="understeer"
+    )
+
+
+NAMED_VEHICLES = {"baseline": baseline, "understeer": understeer}
+
+
+def named_vehicle(spec: str | Path | VehicleParameters) -> VehicleParameters:
+    """A vehicle from a name (``baseline``, ``understeer``), a TOML/JSON file path, or itself."""
+    if isinstance(spec, VehicleParameters):
+        return spec
+    text = str(spec)
+    if text in NAMED_VEHICLES:
+        return NAMED_VEHICLES[text]()
+    path = Path(text)
+    if path.suffix.lower() in (".toml", ".json") or path.exists():
+        return load_vehicle(path)
+    raise InputError(
+        f"unknown vehicle {text!r}: give {', '.join(NAMED_VEHICLES)} or a .toml/.json file"
+    )
+
+
+def vehicle_from_mapping(data: Mapping[str, Any], *, origin: str = "vehicle data") -> VehicleParameters:
+    """Build a vehicle from a nested mapping ``{section: {field: value}}``.
+
+    Sections are ``chassis``, ``suspension``, ``tyre`` and ``drive``; top-level
+    ``name`` is optional. Every field of every section must be given unless a
+    top-level ``base`` names a vehicle (``baseline`` or ``understeer``) whose
+    values fill the gaps. Unknown sections or fields are an error.
+    """
+    if not isinstance(data, Mapping):
+        raise InputError(f"{origin}: expected a table of sections")
+    unknown = set(data) - set(_SECTIONS) - {"name", "base"}
+    if unknown:
+        raise InputError(
+            f"{origin}: unknown section(s) {', '.join(sorted(unknown))}; "
+            f"allowed: {', '.join(_SECTIONS)}, name, base"
+        )
+    base_name = data.get("base")
+    if base_name is not None and base_name not in NAMED_VEHICLES:
+        raise InputError(f"{origin}: unknown base vehicle {base_name!r}")
+    base = NAMED_VEHICLES[base_name]() if base_name else None
+    groups: dict[str, Any] = {}
+    for section, cls in _SECTIONS.items():
+        values = data.get(section, {})
+        if not isinstance(values, Mapping):
+            raise InputError(f"{origin}: section {section!r} must be a table of fields")
+        names = {item.name for item in dataclasses.fields(cls)}
+        extra = set(values) - names
+        if extra:
+            raise InputError(
+                f"{origin}: unknown field(s) in [{section}]: {', '.join(sorted(extra))}"
+            )
+        if base is None:
+            missing = names - set(values)
+            if missing:
+                raise InputError(
+                    f"{origin}: missing field(s) in [{section}]: {', '.join(sorted(missing))} "
+                    "(or set base = \"baseline\" to take defaults)"
+                )
+            groups[section] = cls(**values)
+        else:
+            groups[section] = dataclasses.replace(getattr(base, section), **values)
+    name = data.get("name", origin)
+    return VehicleParameters(**groups, name=str(name))
+
+
+def load_vehicle(path: str | Path) -> VehicleParameters:
+    """Read a vehicle from a TOML or JSON file (see :func:`vehicle_from_mapping` for the layout)."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"no such vehicle file: {path}")
+    try:
+        if path.suffix.lower() == ".json":
+            data = json.loads(path.read_text())
+        else:
+            data = tomllib.loads(path.read_text())
+    except (json.JSONDecodeError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path} is not a readable vehicle file ({exc})") from None
+    data = dict(data)
+    data.setdefault("name", path.stem)
+    return vehicle_from_mapping(data, origin=path.name)
+
+
+def describe(params: VehicleParameters) -> list[tuple[str, float, str, str]]:
+    """Every parameter as ``(section.field, value, unit, source)``."""
+    rows = []
+    for section in _SECTIONS:
+        group = getattr(params, section)
+        for item in dataclasses.fields(group):
+            rows.append(
+                (f"{section}.{item.name}", getattr(group, item.name),
+                 item.metadata.get("unit", "-"), item.metadata.get("source", ""))
+            )
+    return rows
+
+
+def static_axle_loads(params: VehicleParameters) -> tuple[float, float]:
+    """Static front and rear axle loads (N): ``m g b / L`` and ``m g a / L``."""
+    c = params.chassis
+    weight = c.mass * GRAVITY
+    return weight * c.cg_to_rear_axle / c.wheelbase, weight * c.cg_to_front_axle / c.wheelbase
