@@ -1,0 +1,568 @@
+"""Modal canonical state-space models: their structure, parameters and simulation.
+
+The model (Best & Bogdanski 2017, eq. 5-6) is ``xdot = A x + B u``,
+``y = C x + D u`` with ``A`` real block-diagonal: a complex pair
+``sigma +/- j omega`` is the block ``[[sigma, omega], [-omega, sigma]]``, a
+real pole the block ``[sigma]``. Pairs come first, then real poles. ``B`` and
+``D`` are free. In ``C`` exactly one entry per state column is fixed to 1,
+which ties each mode to an output and removes the scaling freedom of the
+state basis; the other entries of ``C`` are free.
+
+Three things are kept apart, as in the rest of the workbench: the structure
+(:class:`ModalStructure`), a parameter vector laid out by it, and the model
+(:class:`ModalModel`, matrices built from the structure and parameters).
+
+Parameter vector layout (``theta``), in this order:
+
+1. per complex pair ``sigma_i, omega_i``; per real pole ``sigma_i``;
+2. ``B`` row-major;
+3. the free entries of ``C``, row-major, skipping the fixed ones;
+4. ``D`` row-major.
+
+A complex pair written with ``state a + j state b`` evolves as
+``(sigma - j omega)``, so the pair's eigenvalues are ``sigma +/- j omega``
+whichever sign omega takes; the workbench keeps omega positive when it
+reports a model.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+from scipy.signal import lfilter
+
+from .errors import InputError
+
+__all__ = [
+    "ModalStructure",
+    "ModalModel",
+    "C_PATTERNS",
+    "phi_functions",
+]
+
+#: The C patterns of the paper, by name (Best & Bogdanski 2017): ``all-ones``
+#: ties every state to output 1 (Table 1, and Table 2's "first row fixed");
+#: ``eq18`` is the three-output, n = 5 pattern of eq. 18; ``eq19`` the
+#: order-study patterns of eq. 19 (n = 3..7, three outputs); ``default`` the
+#: workbench's generalisation (pairs first, outputs assigned in turn).
+C_PATTERNS = ("default", "all-ones", "eq18", "eq19")
+
+# Which output each mode (pairs first, then real poles) is tied to in eq. 19,
+# for three outputs; n = 5 is eq. 18. The paper ties n = 7's real pole to the
+# third output, beside the third pair, where plain round-robin would wrap.
+_EQ19_MODE_OUTPUTS = {
+    3: (0, 1),
+    4: (0, 1),
+    5: (0, 1, 2),
+    6: (0, 1, 2),
+    7: (0, 1, 2, 2),
+}
+
+
+def _positive_int(value: Any, name: str, minimum: int = 1) -> int:
+    if isinstance(value, bool) or int(value) != value or int(value) < minimum:
+        raise InputError(f"{name} must be an integer >= {minimum}; got {value!r}")
+    return int(value)
+
+
+@dataclass(frozen=True)
+class ModalStructure:
+    """The shape of a modal model: its modes and which C entries are fixed to 1.
+
+    Parameters
+    ----------
+    n_complex_pairs, n_real : int
+        Number of complex-pair blocks (2 states each) and real poles.
+    n_u, n_y : int
+        Numbers of inputs and outputs.
+    fixed_c : tuple of (output, state) pairs
+        The C entries fixed to 1, exactly one per state column.
+
+    Use :meth:`default` or :meth:`from_pattern` rather than listing ``fixed_c``.
+    """
+
+    n_complex_pairs: int
+    n_real: int
+    n_u: int
+    n_y: int
+    fixed_c: tuple[tuple[int, int], ...]
+
+    def __post_init__(self) -> None:
+        _positive_int(self.n_complex_pairs, "n_complex_pairs", 0)
+        _positive_int(self.n_real, "n_real", 0)
+        _positive_int(self.n_u, "n_u")
+        _positive_int(self.n_y, "n_y")
+        if self.n < 1:
+            raise InputError("a modal structure needs at least one state")
+        fixed = tuple(sorted((int(i), int(j)) for i, j in self.fixed_c))
+        object.__setattr__(self, "fixed_c", fixed)
+        columns = [j for _, j in fixed]
+        if sorted(columns) != list(range(self.n)):
+            raise InputError(
+                f"fixed_c must fix exactly one C entry per state column 0..{self.n - 1}; got {fixed}"
+            )
+        for i, j in fixed:
+            if not 0 <= i < self.n_y:
+                raise InputError(f"fixed C entry ({i}, {j}) names output {i} of {self.n_y}")
+        for pair in range(self.n_complex_pairs):
+            a, b = self.output_of_state(2 * pair), self.output_of_state(2 * pair + 1)
+            if a != b:
+                raise InputError(
+                    f"complex pair {pair + 1} must be tied to one output by both its fixed C entries"
+                )
+
+    # ------------------------------------------------------------ builders
+    @classmethod
+    def default(cls, n: int, n_u: int, n_y: int) -> "ModalStructure":
+        """Pairs first as far as possible, each mode tied to the next output in turn.
+
+        This generalises eq. 18/19: a complex pair is tied to one output by two
+        fixed 1s, a real pole by one, outputs assigned round-robin.
+        With one output every C entry is fixed (``C = [1 1 ... 1]``).
+        """
+        n = _positive_int(n, "order n")
+        pairs, real = divmod(n, 2)
+        modes = range(pairs + real)
+        return cls._tied(pairs, real, n_u, n_y, [mode % n_y for mode in modes])
+
+    @classmethod
+    def from_pattern(cls, pattern: str, n: int, n_u: int, n_y: int) -> "ModalStructure":
+        """A structure with one of the named C patterns of :data:`C_PATTERNS`."""
+        n = _positive_int(n, "order n")
+        pairs, real = divmod(n, 2)
+        if pattern == "default":
+            return cls.default(n, n_u, n_y)
+        if pattern == "all-ones":
+            return cls._tied(pairs, real, n_u, n_y, [0] * (pairs + real))
+        if pattern in ("eq18", "eq19"):
+            if n_y != 3:
+                raise InputError(f"the {pattern} pattern is defined for three outputs; got {n_y}")
+            if pattern == "eq18" and n != 5:
+                raise InputError(f"the eq18 pattern is defined for n = 5; got n = {n}")
+            if n not in _EQ19_MODE_OUTPUTS:
+                raise InputError(f"the eq19 patterns are defined for n = 3..7; got n = {n}")
+            return cls._tied(pairs, real, n_u, n_y, list(_EQ19_MODE_OUTPUTS[n]))
+        raise InputError(f"unknown C pattern {pattern!r}; use one of {', '.join(C_PATTERNS)}")
+
+    @classmethod
+    def _tied(cls, pairs: int, real: int, n_u: int, n_y: int, mode_outputs: Sequence[int]) -> "ModalStructure":
+        fixed = []
+        for mode, output in enumerate(mode_outputs):
+            states = (2 * mode, 2 * mode + 1) if mode < pairs else (2 * pairs + mode - pairs,)
+            fixed.extend((output, state) for state in states)
+        return cls(pairs, real, n_u, n_y, tuple(fixed))
+
+    # --------------------------------------------------------------- sizes
+    @property
+    def n(self) -> int:
+        """Model order (number of states)."""
+        return 2 * self.n_complex_pairs + self.n_real
+
+    @property
+    def n_modal(self) -> int:
+        """Number of sigma/omega parameters (equals n)."""
+        return self.n
+
+    @property
+    def n_free_c(self) -> int:
+        """Number of free C entries."""
+        return self.n_y * self.n - self.n
+
+    @property
+    def n_parameters(self) -> int:
+        """Length of the parameter vector theta."""
+        return self.n_modal + self.n * self.n_u + self.n_free_c + self.n_y * self.n_u
+
+    def output_of_state(self, state: int) -> int:
+        """The output a state is tied to by its fixed C entry."""
+        for i, j in self.fixed_c:
+            if j == state:
+                return i
+        raise InputError(f"state {state} out of range 0..{self.n - 1}")
+
+    @property
+    def free_c(self) -> tuple[tuple[int, int], ...]:
+        """The free C entries (output, state), row-major."""
+        fixed = set(self.fixed_c)
+        return tuple((i, j) for i in range(self.n_y) for j in range(self.n) if (i, j) not in fixed)
+
+    def c_pattern(self) -> np.ndarray:
+        """The C pattern as an (n_y, n) array of strings: '1' fixed, 'c' free (for display)."""
+        pattern = np.full((self.n_y, self.n), "c", dtype=object)
+        for i, j in self.fixed_c:
+            pattern[i, j] = "1"
+        return pattern
+
+    def parameter_names(self) -> tuple[str, ...]:
+        """Names of theta's entries: ``sigma1, omega1, ..., b11, ..., c21, ..., d11, ...`` (1-based)."""
+        names = []
+        for pair in range(self.n_complex_pairs):
+            names += [f"sigma{pair + 1}", f"omega{pair + 1}"]
+        for pole in range(self.n_real):
+            names.append(f"sigma{self.n_complex_pairs + pole + 1}")
+        names += [f"b{i + 1}{j + 1}" for i in range(self.n) for j in range(self.n_u)]
+        names += [f"c{i + 1}{j + 1}" for i, j in self.free_c]
+        names += [f"d{i + 1}{j + 1}" for i in range(self.n_y) for j in range(self.n_u)]
+        return tuple(names)
+
+    def slices(self) -> dict[str, slice]:
+        """Where each group lies in theta: ``modal``, ``B``, ``C``, ``D``."""
+        a = self.n_modal
+        b = a + self.n * self.n_u
+        c = b + self.n_free_c
+        return {"modal": slice(0, a), "B": slice(a, b), "C": slice(b, c), "D": slice(c, c + self.n_y * self.n_u)}
+
+    def mode_states(self) -> list[tuple[int, ...]]:
+        """The states of each mode: ``(2i, 2i+1)`` for pairs, ``(j,)`` for real poles."""
+        modes: list[tuple[int, ...]] = [(2 * p, 2 * p + 1) for p in range(self.n_complex_pairs)]
+        modes += [(2 * self.n_complex_pairs + r,) for r in range(self.n_real)]
+        return modes
+
+    # ----------------------------------------------------- pack and unpack
+    def matrices(self, theta: Any, backend: Any = np) -> tuple[Any, Any, Any, Any]:
+        """A, B, C, D from theta, as NumPy arrays or (``backend=casadi.SX``) symbolic matrices.
+
+        With CasADi, ``theta`` is an SX column and the result is built from its
+        elements, so that Jacobians with respect to theta are exact.
+        """
+        n, n_u, n_y = self.n, self.n_u, self.n_y
+        s = self.slices()
+        if backend is np:
+            theta = np.asarray(theta, dtype=float).ravel()
+            if theta.size != self.n_parameters:
+                raise InputError(f"theta must have {self.n_parameters} entries for this structure; got {theta.size}")
+            A = np.zeros((n, n))
+            C = np.zeros((n_y, n))
+        else:
+            A = backend.zeros(n, n)
+            C = backend.zeros(n_y, n)
+        modal = theta[s["modal"]]
+        for pair in range(self.n_complex_pairs):
+            sigma, omega = modal[2 * pair], modal[2 * pair + 1]
+            a, b = 2 * pair, 2 * pair + 1
+            A[a, a] = sigma
+            A[a, b] = omega
+            A[b, a] = -omega
+            A[b, b] = sigma
+        for pole in range(self.n_real):
+            state = 2 * self.n_complex_pairs + pole
+            A[state, state] = modal[state]
+        if backend is np:
+            B = theta[s["B"]].reshape(n, n_u)
+            D = theta[s["D"]].reshape(n_y, n_u)
+        else:
+            B = backend.zeros(n, n_u)
+            D = backend.zeros(n_y, n_u)
+            for k in range(n * n_u):
+                B[k // n_u, k % n_u] = theta[s["B"].start + k]
+            for k in range(n_y * n_u):
+                D[k // n_u, k % n_u] = theta[s["D"].start + k]
+        for (i, j) in self.fixed_c:
+            C[i, j] = 1.0
+        for k, (i, j) in enumerate(self.free_c):
+            C[i, j] = theta[s["C"].start + k]
+        return A, B, C, D
+
+    def pack(self, A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray) -> np.ndarray:
+        """theta from matrices of this structure (checked: A modal, fixed C entries equal to 1)."""
+        A, B, C, D = (np.asarray(m, dtype=float) for m in (A, B, C, D))
+        _check_shape("A", A, (self.n, self.n))
+        _check_shape("B", B, (self.n, self.n_u))
+        _check_shape("C", C, (self.n_y, self.n))
+        _check_shape("D", D, (self.n_y, self.n_u))
+        modal = []
+        for pair in range(self.n_complex_pairs):
+            a = 2 * pair
+            modal += [A[a, a], A[a, a + 1]]
+        for pole in range(self.n_real):
+            state = 2 * self.n_complex_pairs + pole
+            modal.append(A[state, state])
+        theta = np.concatenate([modal, B.ravel(), [C[i, j] for i, j in self.free_c], D.ravel()])
+        rebuilt = self.matrices(theta)
+        if not np.allclose(rebuilt[0], A, rtol=0, atol=1e-12 * max(1.0, np.abs(A).max())):
+            raise InputError("A is not in the modal block form of this structure")
+        if not np.allclose(rebuilt[2], C, rtol=0, atol=1e-12 * max(1.0, np.abs(C).max())):
+            raise InputError("C's fixed entries are not 1 for this structure")
+        return theta
+
+    def initial_parameters(self, *, sigma: float = -1.0, omega: float = 1.0, omega_spread: float = 0.0) -> np.ndarray:
+        """The filter's start: every sigma given, omegas ``omega * (1 + omega_spread * i)``, B, free C, D zero.
+
+        A spread of the omegas keeps the pairs apart, so that the filter does
+        not start symmetric in them (identical pairs get identical updates).
+        """
+        theta = np.zeros(self.n_parameters)
+        for pair in range(self.n_complex_pairs):
+            theta[2 * pair] = sigma
+            theta[2 * pair + 1] = omega * (1.0 + omega_spread * pair)
+        for pole in range(self.n_real):
+            theta[2 * self.n_complex_pairs + pole] = sigma
+        return theta
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready description."""
+        return {
+            "n": self.n,
+            "n_complex_pairs": self.n_complex_pairs,
+            "n_real": self.n_real,
+            "n_u": self.n_u,
+            "n_y": self.n_y,
+            "fixed_c": [list(entry) for entry in self.fixed_c],
+        }
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any]) -> "ModalStructure":
+        """Inverse of :meth:`to_dict`."""
+        return cls(
+            int(values["n_complex_pairs"]),
+            int(values["n_real"]),
+            int(values["n_u"]),
+            int(values["n_y"]),
+            tuple((int(i), int(j)) for i, j in values["fixed_c"]),
+        )
+
+
+def _check_shape(name: str, array: np.ndarray, expected: tuple[int, int]) -> None:
+    if array.shape != expected:
+        raise InputError(f"{name} has shape {array.shape}; this structure needs {expected}")
+
+
+def phi_functions(z: np.ndarray | complex) -> tuple[np.ndarray, np.ndarray]:
+    """``phi1(z) = (e^z - 1)/z`` and ``phi2(z) = (e^z - 1 - z)/z^2``, accurate near z = 0.
+
+    They give the exact hold-equivalent input gains of a mode with eigenvalue
+    lambda over one sample T (``z = lambda T``): zero-order hold
+    ``T phi1(z)``; first-order hold ``T (phi1 - phi2)`` on ``u_k`` and
+    ``T phi2`` on ``u_{k+1}``.
+    """
+    z = np.asarray(z, dtype=complex)
+    small = np.abs(z) < 1e-3
+    safe = np.where(small, 1.0, z)
+    exp = np.exp(safe)
+    phi1 = np.where(small, 1 + z / 2 + z**2 / 6 + z**3 / 24, (exp - 1) / safe)
+    phi2 = np.where(small, 0.5 + z / 6 + z**2 / 24 + z**3 / 120, (exp - 1 - safe) / safe**2)
+    return phi1, phi2
+
+
+SIMULATION_METHODS = ("foh", "zoh", "euler")
+
+
+@dataclass(frozen=True, eq=False)
+class ModalModel:
+    """An identified modal state-space model: a frozen value.
+
+    Parameters
+    ----------
+    structure : ModalStructure
+    A, B, C, D : ndarray
+        Continuous-time matrices, shapes (n, n), (n, n_u), (n_y, n), (n_y, n_u).
+    input_names, output_names : tuple of str, optional
+    meta : dict, optional
+        Provenance (estimator, discretisation, passes, ...).
+    """
+
+    structure: ModalStructure
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    input_names: tuple[str, ...] | None = None
+    output_names: tuple[str, ...] | None = None
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        s = self.structure
+        for name, expected in (("A", (s.n, s.n)), ("B", (s.n, s.n_u)), ("C", (s.n_y, s.n)), ("D", (s.n_y, s.n_u))):
+            array = np.array(getattr(self, name), dtype=float)
+            _check_shape(name, array, expected)
+            if not np.all(np.isfinite(array)):
+                raise InputError(f"{name} holds a non-finite value")
+            array.setflags(write=False)
+            object.__setattr__(self, name, array)
+        s.pack(self.A, self.B, self.C, self.D)  # checks the modal form
+        object.__setattr__(self, "input_names", tuple(self.input_names) if self.input_names else tuple(f"u{i + 1}" for i in range(s.n_u)))
+        object.__setattr__(self, "output_names", tuple(self.output_names) if self.output_names else tuple(f"y{i + 1}" for i in range(s.n_y)))
+        object.__setattr__(self, "meta", dict(self.meta))
+
+    @classmethod
+    def from_parameters(cls, structure: ModalStructure, theta: Any, **kwargs: Any) -> "ModalModel":
+        """The model of ``structure`` with parameter vector ``theta``."""
+        return cls(structure, *structure.matrices(theta), **kwargs)
+
+    @property
+    def parameters(self) -> np.ndarray:
+        """theta, laid out as :class:`ModalStructure` describes."""
+        return self.structure.pack(self.A, self.B, self.C, self.D)
+
+    # --------------------------------------------------------------- modes
+    def mode_eigenvalues(self) -> np.ndarray:
+        """One eigenvalue per mode, ``sigma + j|omega|`` for pairs, real for poles (pairs first)."""
+        theta = self.parameters
+        values = []
+        for pair in range(self.structure.n_complex_pairs):
+            values.append(complex(theta[2 * pair], abs(theta[2 * pair + 1])))
+        for pole in range(self.structure.n_real):
+            values.append(complex(theta[2 * self.structure.n_complex_pairs + pole], 0.0))
+        return np.array(values)
+
+    def eigenvalues(self) -> np.ndarray:
+        """All n eigenvalues: each pair as ``sigma + j|omega|, sigma - j|omega|``, then the real poles."""
+        values: list[complex] = []
+        for value in self.mode_eigenvalues()[: self.structure.n_complex_pairs]:
+            values += [value, value.conjugate()]
+        values += list(self.mode_eigenvalues()[self.structure.n_complex_pairs:])
+        return np.array(values)
+
+    def frequencies_damping(self) -> tuple[np.ndarray, np.ndarray]:
+        """Natural frequency (rad/s) and damping ratio of each mode (real poles: |sigma| and 1, or -1 if unstable)."""
+        modes = self.mode_eigenvalues()
+        natural = np.abs(modes)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            damping = np.where(natural > 0, -modes.real / np.where(natural > 0, natural, 1.0), 1.0)
+        return natural, damping
+
+    def is_stable(self) -> bool:
+        """Every eigenvalue in the open left half-plane."""
+        return bool(np.all(self.mode_eigenvalues().real < 0))
+
+    # ---------------------------------------------------------- simulation
+    def simulate(self, u: Any, dt: float, *, method: str = "foh", x0: Any = None, return_states: bool = False) -> Any:
+        """Output of the model driven by ``u`` from state ``x0`` (default zero).
+
+        Parameters
+        ----------
+        u : array_like, shape (N, n_u)
+        dt : float
+            Sample interval (s).
+        method : {"foh", "zoh", "euler"}
+            ``foh``: exact, inputs linear between samples (the continuous model
+            simulated exactly for such inputs); ``zoh``: exact, inputs held;
+            ``euler``: ``x_{k+1} = x_k + dt (A x_k + B u_k)``, the paper's
+            filter discretisation.
+        return_states : bool
+            Also return the states, shape (N, n).
+
+        Returns
+        -------
+        y : ndarray, shape (N, n_y)  (and x, shape (N, n), if asked)
+
+        Notes
+        -----
+        Each mode is advanced as one complex (or real) first-order recursion
+        by ``scipy.signal.lfilter``: exact and vectorised.
+        """
+        u = np.asarray(u, dtype=float)
+        if u.ndim == 1:
+            u = u[:, None]
+        s = self.structure
+        if u.ndim != 2 or u.shape[1] != s.n_u:
+            raise InputError(f"u must have shape (N, {s.n_u}); got {u.shape}")
+        if not np.all(np.isfinite(u)):
+            raise InputError("u contains a non-finite value (NaN or inf)")
+        if not (dt > 0 and np.isfinite(dt)):
+            raise InputError(f"dt must be positive; got {dt}")
+        if method not in SIMULATION_METHODS:
+            raise InputError(f"unknown simulation method {method!r}; use one of {', '.join(SIMULATION_METHODS)}")
+        x0 = np.zeros(s.n) if x0 is None else np.asarray(x0, dtype=float).ravel()
+        if x0.shape != (s.n,):
+            raise InputError(f"x0 must have {s.n} entries; got {x0.shape}")
+        x = np.empty((u.shape[0], s.n))
+        theta = self.parameters
+        for states in s.mode_states():
+            if len(states) == 2:
+                a, b = states
+                lam = complex(theta[a], -theta[a + 1])  # state a + j state b evolves by sigma - j omega
+                drive = u @ (self.B[a] + 1j * self.B[b])
+                start = complex(x0[a], x0[b])
+            else:
+                (a,) = states
+                lam = complex(theta[a], 0.0)
+                drive = (u @ self.B[a]).astype(complex)
+                start = complex(x0[a], 0.0)
+            xi = _first_order_recursion(lam, drive, dt, method, start)
+            x[:, a] = xi.real
+            if len(states) == 2:
+                x[:, states[1]] = xi.imag
+        y = x @ self.C.T + u @ self.D.T
+        return (y, x) if return_states else y
+
+    # -------------------------------------------------------------- export
+    def to_control(self) -> Any:
+        """A ``control.StateSpace`` (python-control, imported only here)."""
+        try:
+            import control
+        except ImportError:  # pragma: no cover - optional dependency
+            raise ImportError("python-control is not installed: pip install control") from None
+        return control.ss(self.A, self.B, self.C, self.D)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form: structure, matrices, names, eigenvalues as [re, im], meta."""
+        return {
+            "structure": self.structure.to_dict(),
+            "A": self.A.tolist(),
+            "B": self.B.tolist(),
+            "C": self.C.tolist(),
+            "D": self.D.tolist(),
+            "eigenvalues": [[float(v.real), float(v.imag)] for v in self.eigenvalues()],
+            "input_names": list(self.input_names),
+            "output_names": list(self.output_names),
+            "meta": self.meta,
+        }
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any]) -> "ModalModel":
+        """Inverse of :meth:`to_dict`."""
+        return cls(
+            ModalStructure.from_dict(values["structure"]),
+            np.array(values["A"]),
+            np.array(values["B"]),
+            np.array(values["C"]),
+            np.array(values["D"]),
+            input_names=tuple(values.get("input_names") or ()),
+            output_names=tuple(values.get("output_names") or ()),
+            meta=dict(values.get("meta") or {}),
+        )
+
+    def save_json(self, path: str | Path) -> Path:
+        """Write :meth:`to_dict` as JSON."""
+        path = Path(path)
+        path.write_text(json.dumps(self.to_dict(), indent=2, default=str) + "\n")
+        return path
+
+    def save_mat(self, path: str | Path) -> Path:
+        """Write A, B, C, D (and the fixed-C mask) to a MATLAB ``.mat`` file."""
+        from scipy.io import savemat
+
+        mask = np.zeros((self.structure.n_y, self.structure.n))
+        for i, j in self.structure.fixed_c:
+            mask[i, j] = 1
+        path = Path(path)
+        savemat(path, {"A": self.A, "B": self.B, "C": self.C, "D": self.D, "C_fixed": mask})
+        return path
+
+
+def _first_order_recursion(lam: complex, drive: np.ndarray, dt: float, method: str, start: complex) -> np.ndarray:
+    """xi_{k+1} = g xi_k + w_k with the hold-equivalent input w_k; returns xi_0..xi_{N-1}."""
+    n = drive.size
+    z = lam * dt
+    if method == "euler":
+        gain = 1.0 + z
+        w = dt * drive[:-1]
+    else:
+        gain = np.exp(z)
+        phi1, phi2 = phi_functions(z)
+        phi1, phi2 = complex(phi1), complex(phi2)
+        if method == "zoh":
+            w = dt * phi1 * drive[:-1]
+        else:
+            w = dt * ((phi1 - phi2) * drive[:-1] + phi2 * drive[1:])
+    xi = np.empty(n, dtype=complex)
+    xi[0] = start
+    if n > 1:
+        # lfilter with initial condition: y_k = g y_{k-1} + w_k, y_{-1} = start
+        xi[1:], _ = lfilter([1.0], [1.0, -gain], w, zi=[gain * start])
+    return xi
