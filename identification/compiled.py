@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import platform
 import shutil
 import subprocess
 import tempfile
@@ -24,9 +25,16 @@ from pathlib import Path
 
 import casadi as ca
 
-__all__ = ["cache_directory", "compile_function", "find_c_compiler", "NoCompilerWarning"]
+__all__ = [
+    "cache_directory",
+    "compile_function",
+    "build_shared_library",
+    "generate_c",
+    "find_c_compiler",
+    "NoCompilerWarning",
+]
 
-_LOCK = threading.Lock()
+_LOCK = threading.RLock()
 _LOADED: dict[str, ca.Function] = {}
 
 
@@ -90,8 +98,24 @@ def compile_function(
         return function
 
     name = function.name()
+    library = build_shared_library(name, generate_c(function), optimisation=optimisation, compiler=compiler)
+    with _LOCK:
+        key = str(library)
+        if key not in _LOADED:
+            _LOADED[key] = ca.external(name, key)
+        return _LOADED[key]
+
+
+def generate_c(function: ca.Function) -> str:
+    """The C source CasADi generates for ``function`` (no header, no main).
+
+    It defines ``int NAME(const casadi_real** arg, casadi_real** res,
+    casadi_int* iw, casadi_real* w, int mem)`` and ``NAME_work(...)``, with
+    ``casadi_real`` double and ``casadi_int`` long long int, so that a
+    hand-written driver appended to it can call the function in a loop.
+    """
     with tempfile.TemporaryDirectory(prefix="vehid-gen-") as scratch:
-        source_name = f"{name}.c"
+        source_name = f"{function.name()}.c"
         generator = ca.CodeGenerator(source_name, {"with_header": False})
         generator.add(function)
         previous = os.getcwd()
@@ -100,34 +124,65 @@ def compile_function(
             generator.generate()
         finally:
             os.chdir(previous)
-        source = Path(scratch, source_name).read_text()
+        return Path(scratch, source_name).read_text()
 
-        digest = hashlib.sha256()
-        for part in (source, compiler, optimisation, ca.__version__):
-            digest.update(part.encode())
-            digest.update(b"\0")
-        key = digest.hexdigest()[:20]
 
-        with _LOCK:
-            if key in _LOADED:
-                return _LOADED[key]
-            directory = cache_directory()
-            directory.mkdir(parents=True, exist_ok=True)
-            library = directory / f"{name}_{key}.so"
-            if not library.exists():
-                staged = Path(scratch, f"{name}.so")
-                command = [compiler, "-shared", "-fPIC", optimisation, "-o", str(staged), source_name]
-                completed = subprocess.run(
-                    command, cwd=scratch, capture_output=True, text=True, check=False
-                )
-                if completed.returncode != 0:
-                    raise RuntimeError(
-                        f"compiling {name} failed:\n{completed.stderr.strip()[-2000:]}"
-                    )
-                # Copy then rename so that a concurrent process never loads a half-written library.
-                partial = directory / f".{name}_{key}.{os.getpid()}.tmp"
-                shutil.copyfile(staged, partial)
-                os.replace(partial, library)
-            compiled = ca.external(name, str(library))
-            _LOADED[key] = compiled
-            return compiled
+def _cpu_identity() -> str:
+    """The machine type and CPU model and flags, as far as the system tells."""
+    identity = platform.machine()
+    try:
+        with open("/proc/cpuinfo") as handle:
+            for line in handle:
+                if line.startswith(("model name", "flags")):
+                    identity += line
+                if line.strip() == "":
+                    break
+    except OSError:
+        identity += platform.processor()
+    return identity
+
+
+def build_shared_library(
+    name: str,
+    source: str,
+    *,
+    optimisation: str = "-O2",
+    compiler: str | None = None,
+) -> Path:
+    """Compile C ``source`` into a shared library under the cache, once; return its path.
+
+    The library's file name carries a hash of the source, compiler, flags and
+    CasADi version, so a changed model or option compiles anew and an
+    unchanged one is found on disk. Raises ``RuntimeError`` when no compiler
+    is available or compilation fails.
+    """
+    compiler = compiler or find_c_compiler()
+    if compiler is None:
+        raise RuntimeError("no C compiler found (set CC or install gcc)")
+    digest = hashlib.sha256()
+    parts = [source, compiler, optimisation, ca.__version__]
+    if "-march=native" in optimisation:
+        parts.append(_cpu_identity())  # native code must not be loaded on another CPU sharing the cache
+    for part in parts:
+        digest.update(part.encode())
+        digest.update(b"\0")
+    key = digest.hexdigest()[:20]
+    directory = cache_directory()
+    directory.mkdir(parents=True, exist_ok=True)
+    library = directory / f"{name}_{key}.so"
+    with _LOCK:
+        if library.exists():
+            return library
+        with tempfile.TemporaryDirectory(prefix="vehid-cc-") as scratch:
+            source_path = Path(scratch, f"{name}.c")
+            source_path.write_text(source)
+            staged = Path(scratch, f"{name}.so")
+            command = [compiler, "-shared", "-fPIC", *optimisation.split(), "-o", str(staged), source_path.name, "-lm"]
+            completed = subprocess.run(command, cwd=scratch, capture_output=True, text=True, check=False)
+            if completed.returncode != 0:
+                raise RuntimeError(f"compiling {name} failed:\n{completed.stderr.strip()[-2000:]}")
+            # Copy then rename so that a concurrent process never loads a half-written library.
+            partial = directory / f".{name}_{key}.{os.getpid()}.tmp"
+            shutil.copyfile(staged, partial)
+            os.replace(partial, library)
+    return library
