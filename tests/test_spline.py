@@ -15,7 +15,7 @@ import pytest
 from scipy.interpolate import CubicSpline
 
 import identification.spline
-from identification import InputError, SplineBasis
+from identification import InputError, SplineBasis, covering_basis, resample
 
 # Uniform sets exercise the symbolic fast path (one width), uneven ones the
 # general selection; p = 3 has no interior comparison at all, p = 9 the most.
@@ -177,6 +177,91 @@ def test_expression_stays_lean():
     x = ca.SX.sym("x")
     gamma = ca.SX.sym("gamma", 5)
     assert ca.Function("value", [x, gamma], [basis.symbolic_value(x, gamma)]).n_instructions() <= 130
+
+
+# ------------------------------------------------------------- resampling
+def test_resample_keeps_a_line_exactly():
+    old = SplineBasis.uniform(-1.0, 1.0, 5)
+    new = SplineBasis(np.array([-2.3, -0.2, 0.5, 0.9, 1.4, 4.0]))
+    gamma = 0.4 - 1.7 * old.nodes
+    moved = resample(old, gamma, new)
+    x = _points(new)
+    np.testing.assert_allclose(new.evaluate(x) @ moved, 0.4 - 1.7 * x, rtol=0, atol=ALGEBRA * 10.0)
+
+
+def test_resample_onto_finer_nodes_with_the_same_ends_is_exact():
+    # The old spline is itself the natural spline on any superset of its nodes.
+    old = SplineBasis.uniform(-1.0, 1.0, 5)
+    new = SplineBasis.uniform(-1.0, 1.0, 9)
+    gamma = np.tanh(2.0 * old.nodes)
+    x = _points(old)
+    np.testing.assert_allclose(
+        new.evaluate(x) @ resample(old, gamma, new), old.evaluate(x) @ gamma, rtol=0, atol=ALGEBRA
+    )
+
+
+@pytest.mark.parametrize(
+    "lower, upper, count, documented",
+    [(-1.5, 1.5, 5, 0.085), (-1.2, 1.2, 5, 0.031), (-1.0, 1.0, 7, 0.0057)],
+)
+def test_resample_error_on_a_curved_function_is_as_documented(lower, upper, count, documented):
+    # The numbers quoted in resample's docstring, to their two printed digits.
+    old = SplineBasis.uniform(-1.0, 1.0, 5)
+    new = SplineBasis.uniform(lower, upper, count)
+    gamma = np.tanh(2.0 * old.nodes)
+    x = np.linspace(-1.0, 1.0, 4001)
+    change = np.abs(new.evaluate(x) @ resample(old, gamma, new) - old.evaluate(x) @ gamma).max()
+    assert change == pytest.approx(documented, rel=0.02)
+
+
+def test_resample_handles_several_splines_and_rejects_bad_gamma():
+    old = SplineBasis.uniform(0.0, 1.0, 4)
+    new = SplineBasis.uniform(0.0, 2.0, 6)
+    gammas = np.column_stack([old.nodes, np.ones(4)])
+    moved = resample(old, gammas, new)
+    assert moved.shape == (6, 2)
+    np.testing.assert_allclose(moved, np.column_stack([new.nodes, np.ones(6)]), rtol=0, atol=ALGEBRA)
+    with pytest.raises(InputError, match=r"shape \(4,\)"):
+        resample(old, np.ones(5), new)
+    with pytest.raises(InputError, match="non-finite"):
+        resample(old, [0.0, np.nan, 0.0, 0.0], new)
+
+
+# ------------------------------------------------------------ covering range
+def test_covering_basis_uses_percentiles_and_ignores_a_spike():
+    samples = np.r_[np.linspace(-2.0, 2.0, 10001), 100.0]
+    basis = covering_basis(samples, 5)
+    lower, upper = np.percentile(samples, [0.5, 99.5])
+    assert upper < 2.0  # the spike did not move the last node
+    np.testing.assert_allclose(basis.nodes, np.linspace(lower, upper, 5), rtol=0, atol=1e-15)
+    full = covering_basis(samples, 3, percentiles=(0.0, 100.0))
+    np.testing.assert_array_equal(full.nodes, [-2.0, 49.0, 100.0])
+
+
+def test_covering_basis_margin_widens_both_ends():
+    basis = covering_basis(np.linspace(1.0, 3.0, 11), 5, percentiles=(0.0, 100.0), margin=0.25)
+    np.testing.assert_allclose(basis.nodes, np.linspace(0.5, 3.5, 5), rtol=0, atol=1e-15)
+
+
+@pytest.mark.parametrize(
+    "samples, options, message",
+    [
+        (np.full(100, 3.0), {}, "degenerate"),
+        (np.zeros(100), {}, "degenerate"),
+        (1e6 + 1e-5 * np.linspace(0.0, 1.0, 100), {}, "degenerate"),  # span 1e-11 of the level
+        (np.r_[np.zeros(999), 1.0], {}, "degenerate"),  # moved only beyond the 99.5th percentile
+        (np.r_[0.0, np.nan, 1.0], {}, "non-finite"),
+        (np.array([1.0]), {}, "at least 2"),
+        (np.ones((5, 2)), {}, "1-D"),
+        (np.linspace(0, 1, 9), {"percentiles": (50.0, 50.0)}, "percentiles"),
+        (np.linspace(0, 1, 9), {"percentiles": (-1.0, 50.0)}, "percentiles"),
+        (np.linspace(0, 1, 9), {"margin": -0.1}, "margin"),
+        (np.linspace(0, 1, 9), {"margin": np.inf}, "margin"),
+    ],
+)
+def test_covering_basis_refuses_bad_input(samples, options, message):
+    with pytest.raises(InputError, match=message):
+        covering_basis(samples, 5, **options)
 
 
 # -------------------------------------------------------------- bad input
