@@ -3,6 +3,7 @@
 from .data import IOData, read_csv, read_hdf5
 from .errors import ArchiveError, DivergenceError, ExcitationError, InputError, WorkbenchError
 from .metrics import FitMetrics, fit_metrics, nrmse_fit, percentage_explanation, r_squared
+from .spline import SplineBasis, covering_basis, resample
 
 __all__ = [
     "IOData",
@@ -18,4 +19,7 @@ __all__ = [
     "nrmse_fit",
     "percentage_explanation",
     "r_squared",
+    "SplineBasis",
+    "covering_basis",
+    "resample",
 ]
