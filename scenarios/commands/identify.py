@@ -1,0 +1,164 @@
+"""Identify a modal state-space model from an input/output record.
+
+DATA is a workbench HDF5 file (as written by `vehid simulate --out`) or a CSV
+file with a header row. Name the columns with --inputs and --outputs (for an
+HDF5 record they select among its inputs and outputs; for a CSV they are
+required); time comes from a column `t` or from --dt.
+
+The default method is the Identifying EKF (Best & Bogdanski 2017) with the
+exact first-order-hold discretisation, so the identified parameters are those
+of the continuous-time model; --discretization euler reproduces the paper's
+filter. The summary gives the eigenvalues, the fit R (eq. 17) per output of
+the continuous model simulated exactly, the matrices and the run time.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from identification import read_csv, read_hdf5
+from identification.errors import InputError
+from identification.filter_models import DISCRETIZATIONS
+from identification.iekf import START_VALUES, IEKFOptions, identify_iekf
+from identification.iekf_pass import COVARIANCE_FORMS
+from identification.modal import C_PATTERNS, ModalStructure
+from scenarios.progress import Progress
+
+NAME = "identify"
+GROUP = None
+HELP = "identify a modal state-space model from a data file (IEKF by default)"
+
+
+def _names(text: str | None) -> list[str] | None:
+    if text is None:
+        return None
+    names = [name.strip() for name in text.split(",") if name.strip()]
+    if not names:
+        raise InputError("an empty column list was given")
+    return names
+
+
+def register(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("data", help="workbench HDF5 file or CSV file with a header row")
+    parser.add_argument("--inputs", help="comma-separated input column names")
+    parser.add_argument("--outputs", help="comma-separated output column names")
+    parser.add_argument("--dt", type=float, help="sample interval in s (CSV without a time column)")
+    parser.add_argument("--order", type=int, default=4, help="model order n (default 4)")
+    parser.add_argument("--pattern", default="default", choices=C_PATTERNS, help="C pattern (default: pairs tied to outputs in turn)")
+    parser.add_argument("--method", default="iekf", help="estimator: iekf (default), or a comparator where installed")
+    parser.add_argument("--passes", type=int, default=50, help="largest number of passes (default 50)")
+    parser.add_argument("--p", type=float, default=1.0, help="tuning parameter p: Q = p I' (default 1)")
+    parser.add_argument("--discretization", default="exact", choices=DISCRETIZATIONS, help="filter discretisation (default exact)")
+    parser.add_argument("--covariance", default="joseph", choices=COVARIANCE_FORMS, help="covariance numerics (default joseph)")
+    parser.add_argument("--start", default="default", choices=sorted(START_VALUES), help="start values of sigma/omega")
+    parser.add_argument("--normalize", action="store_true", help="scale inputs and outputs by their RMS while filtering")
+    parser.add_argument("--save-model", help="write the model to this .json or .mat file")
+    parser.set_defaults(handler=run)
+
+
+def load_record(path: str, inputs: list[str] | None, outputs: list[str] | None, dt: float | None):
+    """Read DATA as the identify command does: HDF5 or CSV, columns selected by name."""
+    suffix = Path(path).suffix.lower()
+    if suffix in (".h5", ".hdf5", ".hdf"):
+        if dt is not None:
+            raise InputError("--dt applies to CSV files; an HDF5 record carries its own time base")
+        data = read_hdf5(path)
+        if inputs:
+            data = data.select_inputs(inputs)
+        if outputs:
+            data = data.select_outputs(outputs)
+        return data
+    if suffix == ".csv":
+        if not inputs or not outputs:
+            raise InputError("a CSV file needs --inputs and --outputs naming its columns")
+        return read_csv(path, inputs=inputs, outputs=outputs, dt=dt)
+    raise InputError(f"unknown data file type {suffix or '(none)'!r}: give a .h5 or .csv file")
+
+
+def run(args: argparse.Namespace) -> tuple[dict, str]:
+    data = load_record(args.data, _names(args.inputs), _names(args.outputs), args.dt)
+    structure = ModalStructure.from_pattern(args.pattern, args.order, data.n_u, data.n_y)
+    if args.method != "iekf":
+        return _run_comparator(args, data, structure)
+    options = IEKFOptions(
+        p=args.p, passes=args.passes, discretization=args.discretization, covariance=args.covariance,
+        start=args.start, normalize=args.normalize,
+    )
+    with Progress(options.passes, "IEKF passes", enabled=None if not args.quiet else False) as progress:
+        result = identify_iekf(
+            data, structure, options=options,
+            on_pass=lambda record, _: progress.advance(note=f"R {record.mean_fit_filter:.4f} %"),
+        )
+    model = result.model
+    summary = {
+        "method": "iekf",
+        "order": structure.n,
+        "eigenvalues": model.eigenvalues(),
+        "fit_percent": result.fit_percent,
+        "fit_percent_filter": result.history[-1].fit_filter,
+        "passes_run": result.passes_run,
+        "stop_reason": result.stop_reason,
+        "discretization": options.discretization,
+        "A": model.A,
+        "B": model.B,
+        "C": model.C,
+        "D": model.D,
+        "seconds": result.seconds,
+    }
+    if args.save_model:
+        summary["model_file"] = str(_save_model(model, args.save_model))
+    return summary, _text(summary, data)
+
+
+def _save_model(model, target: str) -> Path:
+    path = Path(target)
+    if path.suffix.lower() == ".mat":
+        return model.save_mat(path)
+    if path.suffix.lower() == ".json":
+        return model.save_json(path)
+    raise InputError(f"--save-model takes a .json or .mat file; got {target!r}")
+
+
+def _run_comparator(args: argparse.Namespace, data, structure) -> tuple[dict, str]:
+    try:
+        from identification.comparators import COMPARATORS
+    except ImportError:
+        COMPARATORS = {}
+    if args.method not in COMPARATORS:
+        known = ", ".join(["iekf", *sorted(COMPARATORS)])
+        raise InputError(f"unknown method {args.method!r}; use one of {known}")
+    outcome = COMPARATORS[args.method](data, order=structure.n)
+    model = outcome.model
+    summary = {
+        "method": args.method,
+        "order": structure.n,
+        "eigenvalues": model.eigenvalues(),
+        "fit_percent": outcome.metrics.percentage_explanation,
+        "passes_run": 0,
+        "discretization": "exact",
+        "A": model.A,
+        "B": model.B,
+        "C": model.C,
+        "D": model.D,
+        "seconds": outcome.seconds,
+    }
+    if args.save_model:
+        summary["model_file"] = str(_save_model(model, args.save_model))
+    return summary, _text(summary, data)
+
+
+def _text(summary: dict, data) -> str:
+    eigen = ", ".join(
+        f"{v.real:.4g}{v.imag:+.4g}j" if v.imag else f"{v.real:.4g}" for v in summary["eigenvalues"]
+    )
+    fits = ", ".join(f"{name} {value:.3f} %" for name, value in zip(data.output_names, summary["fit_percent"]))
+    lines = [
+        f"{summary['method']}: order {summary['order']}, {summary['passes_run']} passes, "
+        f"{summary['discretization']} discretisation, {summary['seconds']:.2f} s",
+        f"eigenvalues: {eigen}",
+        f"fit R (continuous model simulated exactly): {fits}",
+    ]
+    if "model_file" in summary:
+        lines.append(f"wrote {summary['model_file']}")
+    return "\n".join(lines)

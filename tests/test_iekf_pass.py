@@ -1,0 +1,136 @@
+"""The filter step and its compiled pass, against independent references.
+
+References: the NumPy pass (textbook forms, full matrices), SciPy's matrix
+exponential for the exact first-order-hold discretisation, central finite
+differences for the Jacobians, and a plain linear Kalman filter for the
+degenerate case with the parameters frozen.
+"""
+
+import numpy as np
+import pytest
+from scipy.linalg import expm
+
+from identification.filter_models import LinearModalFilterModel
+from identification.iekf_pass import compiled_pass, numpy_reference_pass, pack_covariance, unpack_covariance
+from identification.modal import ModalStructure
+from scenarios.linear_example import make_data, true_model
+
+DT = 0.002
+
+
+def _foh_matrices(A, B, dt):
+    """Phi, Gamma0 (on u_k), Gamma1 (on u_k+1) of the exact first-order hold, by one matrix exponential."""
+    n, n_u = B.shape
+    big = np.zeros((n + 2 * n_u, n + 2 * n_u))
+    big[:n, :n] = A * dt
+    big[:n, n:n + n_u] = B * dt
+    big[n:n + n_u, n + n_u:] = np.eye(n_u)
+    block = expm(big)
+    phi, m0, m1 = block[:n, :n], block[:n, n:n + n_u], block[:n, n + n_u:]
+    return phi, m0 - m1, m1
+
+
+def _start_state(structure, theta, q):
+    return np.concatenate([np.zeros(structure.n), theta, pack_covariance(np.diag(q))])
+
+
+@pytest.mark.parametrize(
+    "pattern, outputs, discretization, covariance",
+    [
+        ("all-ones", (0,), "euler", "paper"),
+        ("all-ones", (0,), "exact", "joseph"),
+        ("all-ones", (0,), "exact-zoh", "paper"),
+        ("eq18", (0, 1, 2), "exact", "joseph"),
+    ],
+)
+def test_compiled_pass_equals_numpy_reference(pattern, outputs, discretization, covariance):
+    # 1,000 steps of the same arithmetic in another order: agreement to 1e-10 (rounding grows slowly over the steps)
+    data, _ = make_data(1, outputs=outputs, duration=2.2)
+    structure = ModalStructure.from_pattern(pattern, 5, 2, len(outputs))
+    run = compiled_pass(LinearModalFilterModel(structure), DT, discretization, covariance)
+    q = np.concatenate([np.zeros(5), np.ones(structure.n_parameters)])
+    state = _start_state(structure, structure.initial_parameters(sigma=-10, omega=10, omega_spread=0.5), q)
+    u, y = data.u[:1000], data.y[:1000]
+    compiled_state, compiled_innovations = run(state, u, y, q, np.eye(len(outputs)))
+    reference_state, reference_innovations = numpy_reference_pass(run.filter_step, state, u, y, q, np.eye(len(outputs)))
+    scale = np.max(np.abs(reference_state))
+    assert np.max(np.abs(compiled_state - reference_state)) < 1e-10 * scale
+    assert np.max(np.abs(compiled_innovations - reference_innovations)) < 1e-10 * np.max(np.abs(y))
+    assert not np.allclose(compiled_state, state)  # the pass did move the parameters
+
+
+def test_exact_transition_equals_matrix_exponential_foh():
+    # closed-form modal gains vs SciPy's expm of the augmented matrix: rounding level (1e-12)
+    model = true_model()
+    structure = ModalStructure.from_pattern("all-ones", 5, 2, 1)
+    filter_model = LinearModalFilterModel(structure)
+    run = compiled_pass(filter_model, DT, "exact", "joseph")
+    theta = structure.pack(model.A, model.B, model.C[:1], model.D[:1])
+    rng = np.random.default_rng(5)
+    x, u0, u1 = rng.standard_normal(5), rng.standard_normal(2), rng.standard_normal(2)
+    z_next = np.asarray(run.filter_step.model(np.concatenate([x, theta]), u0, u1)[0]).ravel()
+    phi, gamma0, gamma1 = _foh_matrices(model.A, model.B, DT)
+    assert np.allclose(z_next[:5], phi @ x + gamma0 @ u0 + gamma1 @ u1, rtol=0, atol=1e-12)
+    assert np.array_equal(z_next[5:], theta)
+
+
+@pytest.mark.parametrize("discretization", ["exact", "exact-zoh", "euler"])
+def test_jacobians_equal_finite_differences(discretization):
+    # central differences with step 1e-6: truncation ~1e-12 x curvature, rounding ~1e-10; tolerance 1e-7
+    structure = ModalStructure.from_pattern("eq18", 5, 2, 3)
+    run = compiled_pass(LinearModalFilterModel(structure), DT, discretization, "joseph")
+    rng = np.random.default_rng(6)
+    theta = structure.initial_parameters(sigma=-3, omega=20, omega_spread=0.5) + 0.3 * rng.standard_normal(structure.n_parameters)
+    z = np.concatenate([rng.standard_normal(5), theta])
+    u0, u1 = rng.standard_normal(2), rng.standard_normal(2)
+    model = run.filter_step.model
+    _, Phi, _, H = (np.asarray(v) for v in model(z, u0, u1))
+    step = 1e-6
+    for j in range(z.size):
+        dz = np.zeros(z.size)
+        dz[j] = step
+        plus, minus = model(z + dz, u0, u1), model(z - dz, u0, u1)
+        column_phi = (np.asarray(plus[0]) - np.asarray(minus[0])).ravel() / (2 * step)
+        column_h = (np.asarray(plus[2]) - np.asarray(minus[2])).ravel() / (2 * step)
+        assert np.allclose(Phi[:, j], column_phi, rtol=1e-7, atol=1e-7)
+        assert np.allclose(H[:, j], column_h, rtol=1e-7, atol=1e-7)
+
+
+def test_with_parameters_frozen_the_iekf_is_a_linear_kalman_filter():
+    # zero Q and P0 on the parameters: the filter must equal a plain KF on the same discrete model (1e-10)
+    structure = ModalStructure.from_pattern("eq18", 5, 2, 3)
+    rng = np.random.default_rng(9)
+    theta = structure.initial_parameters(sigma=-5, omega=12, omega_spread=0.5) + 0.5 * rng.standard_normal(structure.n_parameters)
+    theta[:5] = [-6.0, 11.0, -9.0, 30.0, -3.0]  # a stable model
+    A_, B_, C_, D_ = structure.matrices(theta)
+    data, _ = make_data(2, duration=4.0)
+    u, y = data.u, data.y + 0.05 * np.random.default_rng(7).standard_normal(data.y.shape)
+    q = np.concatenate([np.full(5, 0.5), np.zeros(structure.n_parameters)])
+    R = np.diag([0.2, 0.3, 0.4])
+    run = compiled_pass(LinearModalFilterModel(structure), DT, "exact", "joseph")
+    state = _start_state(structure, theta, q)
+    final, innovations = run(state, u, y, q, R)
+
+    phi, gamma0, gamma1 = _foh_matrices(A_, B_, DT)
+    x, P = np.zeros(5), np.diag(q[:5])
+    expected = np.empty_like(y)
+    for k in range(y.shape[0]):
+        e = y[k] - C_ @ x - D_ @ u[k]
+        expected[k] = e
+        S = C_ @ P @ C_.T + R
+        K = P @ C_.T @ np.linalg.inv(S)
+        x = x + K @ e
+        P = (np.eye(5) - K @ C_) @ P
+        u_next = u[k + 1] if k + 1 < y.shape[0] else u[k]
+        x = phi @ x + gamma0 @ u[k] + gamma1 @ u_next
+        P = phi @ P @ phi.T + DT * np.diag(q[:5])
+    assert np.allclose(innovations, expected, rtol=0, atol=1e-10)
+    assert np.array_equal(final[5:5 + structure.n_parameters], theta)
+    assert np.allclose(unpack_covariance(final[5 + structure.n_parameters:], 5 + structure.n_parameters)[:5, :5], P, atol=1e-10)
+
+
+def test_covariance_packing_round_trip():
+    rng = np.random.default_rng(8)
+    M = rng.standard_normal((6, 6))
+    P = M @ M.T
+    assert np.array_equal(unpack_covariance(pack_covariance(P), 6), P)
