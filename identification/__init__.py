@@ -1,8 +1,25 @@
 """Model structures, estimators and fit metrics. Knows nothing of vehicles."""
 
+from .archive import (
+    SCHEMA_VERSION,
+    Archive,
+    RunRecord,
+    append_history,
+    open_archive,
+    read_archive,
+    read_history,
+    read_records,
+    read_run,
+    run_group,
+    update_archive,
+    write_archive,
+    write_record,
+    write_run,
+)
 from .data import IOData, read_csv, read_hdf5
 from .errors import ArchiveError, DivergenceError, ExcitationError, InputError, WorkbenchError
 from .metrics import FitMetrics, fit_metrics, nrmse_fit, percentage_explanation, r_squared
+from .storage import TRUSTED_PACKAGES, read_group, read_value, write_group, write_value
 
 __all__ = [
     "IOData",
@@ -18,4 +35,23 @@ __all__ = [
     "nrmse_fit",
     "percentage_explanation",
     "r_squared",
+    "SCHEMA_VERSION",
+    "Archive",
+    "RunRecord",
+    "write_archive",
+    "update_archive",
+    "open_archive",
+    "read_archive",
+    "write_record",
+    "read_records",
+    "run_group",
+    "write_run",
+    "read_run",
+    "append_history",
+    "read_history",
+    "TRUSTED_PACKAGES",
+    "write_value",
+    "read_value",
+    "write_group",
+    "read_group",
 ]
