@@ -1,0 +1,716 @@
+"""Report figures: side-effect free functions from plain results to a matplotlib Figure.
+
+Every function takes arrays, :class:`~identification.modal.ModalModel` or
+:class:`~identification.data.IOData` values and an optional ``fig`` (or
+``ax``), and returns the :class:`matplotlib.figure.Figure`. Figures are built
+with the object-oriented API and an Agg canvas: nothing here imports
+``matplotlib.pyplot``, changes global state or opens a window, so the
+functions are safe in scripts, tests and servers alike. Save a figure with
+``fig.savefig(path)`` or :func:`scenarios.report.write_report`.
+
+The figures follow Best & Bogdanski (2017): parameter development over the
+passes (Figure 1), fit R and trace(P) per pass (Figures 2-4), the order study
+(Figure 5), time-history fits of linear and nonlinear models (Figures 7 and
+9) and splined coefficients (Figure 8); plus an eigenvalue map, Bode plots
+and residual autocorrelation for checking identified models.
+"""
+
+from __future__ import annotations
+
+import re
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from identification.errors import InputError
+from identification.metrics import percentage_explanation
+
+__all__ = [
+    "REPORT_SIZE",
+    "new_figure",
+    "parameter_groups",
+    "plot_parameter_history",
+    "plot_convergence",
+    "plot_order_study",
+    "plot_time_fits",
+    "plot_splines",
+    "plot_eigenvalue_map",
+    "frequency_response",
+    "plot_bode",
+    "autocorrelation",
+    "plot_residual_autocorrelation",
+]
+
+#: Default figure size in inches: legible on an A4 page at 100 % with 9-10 pt text.
+REPORT_SIZE = (7.0, 4.5)
+
+_LEGEND_SIZE = 9  # [pt]
+_TICK_SIZE = 9  # [pt]
+_MAX_LEGEND_ENTRIES = 12  # more lines than this get no legend (it would hide the data)
+
+# Axis labels of the parameter groups of a modal model (ModalStructure.parameter_names).
+_GROUP_LABELS = {
+    "modal": "sigma, omega (rad/s)",
+    "B": "b_ij (state/(s input))",
+    "C": "c_ij (output/state)",
+    "D": "d_ij (output/input)",
+}
+_GROUP_PATTERNS = (("modal", r"(sigma|omega)\d+"), ("B", r"b\d+"), ("C", r"c\d+"), ("D", r"d\d+"))
+
+
+# ------------------------------------------------------------------ helpers
+def new_figure(size: tuple[float, float] = REPORT_SIZE) -> Figure:
+    """An empty figure with an Agg canvas and constrained layout (no pyplot)."""
+    fig = Figure(figsize=size, layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _figure(fig: Figure | None, size: tuple[float, float]) -> Figure:
+    if fig is None:
+        return new_figure(size)
+    if fig.axes:
+        raise InputError("pass an empty figure (fig.clear() first): this plot lays out its own axes")
+    return fig
+
+
+def _style(ax: Axes) -> Axes:
+    ax.grid(True, alpha=0.3)
+    ax.tick_params(labelsize=_TICK_SIZE)
+    return ax
+
+
+def _legend(ax: Axes, **options: Any) -> None:
+    handles, labels = ax.get_legend_handles_labels()
+    if 0 < len(handles) <= _MAX_LEGEND_ENTRIES:
+        ax.legend(fontsize=_LEGEND_SIZE, **options)
+
+
+def _matrix(name: str, value: Any, columns: int | None = None) -> np.ndarray:
+    array = np.asarray(value, dtype=float)
+    if array.ndim == 1:
+        array = array[:, None]
+    if array.ndim != 2:
+        raise InputError(f"{name} must be 2-D (n_pass or N, columns); got shape {array.shape}")
+    if columns is not None and array.shape[1] != columns:
+        raise InputError(f"{name} has {array.shape[1]} columns; expected {columns}")
+    return array
+
+
+def _names(given: Sequence[str] | None, count: int, stem: str) -> list[str]:
+    if given is None:
+        return [f"{stem}{i + 1}" for i in range(count)]
+    names = [str(name) for name in given]
+    if len(names) != count:
+        raise InputError(f"{len(names)} names given for {count} {stem} columns")
+    return names
+
+
+def _pass_axis(passes: Any, count: int) -> np.ndarray:
+    if passes is None:
+        return np.arange(1, count + 1)
+    passes = np.asarray(passes, dtype=float).ravel()
+    if passes.size != count:
+        raise InputError(f"passes has {passes.size} entries for {count} rows")
+    return passes
+
+
+# ------------------------------------------------------- Figure 1: parameters
+def parameter_groups(names: Sequence[str]) -> dict[str, list[int]]:
+    """Indices of theta by group (``modal``, ``B``, ``C``, ``D``, ``other``) from parameter names.
+
+    Names as :meth:`ModalStructure.parameter_names` gives them (``sigma1``,
+    ``omega1``, ``b11``, ``c21``, ``d11``); groups that would be empty are left out.
+    """
+    groups: dict[str, list[int]] = {}
+    for index, name in enumerate(names):
+        group = next((g for g, pattern in _GROUP_PATTERNS if re.fullmatch(pattern, name)), "other")
+        groups.setdefault(group, []).append(index)
+    order = [g for g, _ in _GROUP_PATTERNS] + ["other"]
+    return {g: groups[g] for g in order if g in groups}
+
+
+def plot_parameter_history(
+    parameters: Any,
+    names: Sequence[str] | None = None,
+    *,
+    groups: Mapping[str, Sequence[int]] | None = None,
+    passes: Any = None,
+    x_label: str = "pass",
+    title: str = "Parameter development over the passes",
+    fig: Figure | None = None,
+) -> Figure:
+    """Each parameter against the pass (Best & Bogdanski 2017, Figure 1).
+
+    Parameters
+    ----------
+    parameters : array_like, shape (n_pass, n_theta)
+        The parameter vector at the end of each pass (or at each sample, with
+        ``passes`` the times in seconds and ``x_label="time (s)"``).
+    names : sequence of str, optional
+        Parameter names; with a modal model's names (``sigma1``, ``b11``, ...)
+        the parameters are grouped into subplots: modal, B, C, D.
+    groups : mapping of str to index sequence, optional
+        Explicit groups (subplot title -> indices into theta); overrides the
+        grouping by name.
+    passes : array_like, shape (n_pass,), optional
+        x values; default 1..n_pass.
+    x_label, title : str
+    fig : Figure, optional
+        An empty figure to draw into.
+
+    Returns
+    -------
+    Figure
+        One axis per group, one line per parameter; a legend where a group
+        has at most 12 parameters.
+    """
+    values = _matrix("parameters", parameters)
+    n_theta = values.shape[1]
+    names = _names(names, n_theta, "theta")
+    if groups is None:
+        groups = parameter_groups(names) if len(names) > 1 else {"parameters": [0]}
+    groups = {label: list(indices) for label, indices in groups.items() if len(indices)}
+    for label, indices in groups.items():
+        if min(indices) < 0 or max(indices) >= n_theta:
+            raise InputError(f"group {label!r} indexes beyond the {n_theta} parameters")
+    x = _pass_axis(passes, values.shape[0])
+    count = len(groups)
+    fig = _figure(fig, (REPORT_SIZE[0], max(REPORT_SIZE[1], 1.0 + 1.9 * count)))
+    axes = fig.subplots(count, 1, sharex=True, squeeze=False)[:, 0]
+    for ax, (label, indices) in zip(axes, groups.items()):
+        _style(ax)
+        for index in indices:
+            ax.plot(x, values[:, index], label=names[index], linewidth=1.2)
+        ax.set_ylabel(_GROUP_LABELS.get(label, "value"), fontsize=10)
+        ax.set_title(f"{label} ({len(indices)} parameters)" if label in _GROUP_LABELS else label, fontsize=10)
+        _legend(ax, loc="center left", bbox_to_anchor=(1.0, 0.5), ncols=1 + len(indices) // 7)
+    axes[-1].set_xlabel(x_label)
+    fig.suptitle(title)
+    return fig
+
+
+# --------------------------------------------------- Figures 2-4: convergence
+def plot_convergence(
+    fit_filter: Any,
+    trace_p: Any,
+    *,
+    fit_continuous: Any = None,
+    min_eig_p: Any = None,
+    passes: Any = None,
+    output_names: Sequence[str] | None = None,
+    title: str = "Explanation and convergence per pass",
+    fig: Figure | None = None,
+) -> Figure:
+    """R and trace(P) per pass (Best & Bogdanski 2017, Figures 2-4).
+
+    Parameters
+    ----------
+    fit_filter : array_like, shape (n_pass, n_y) or (n_pass,)
+        R (eq. 17, percent) of the filter's predictions in each pass, per
+        output or already averaged. With several outputs each is drawn thin
+        and their mean thick.
+    trace_p : array_like, shape (n_pass,)
+        Trace of the parameter covariance after each pass; log scale.
+    fit_continuous : array_like, shape (n_pass, n_y) or (n_pass,), optional
+        R of each pass's final model simulated over the record (mean drawn dashed).
+    min_eig_p : array_like, shape (n_pass,), optional
+        Smallest eigenvalue of P, drawn on the trace axis.
+    passes : array_like, optional
+        x values; default 1..n_pass.
+    output_names : sequence of str, optional
+    title : str
+    fig : Figure, optional
+
+    Returns
+    -------
+    Figure
+        Two axes: R (%) and trace(P) (log).
+    """
+    fit = _matrix("fit_filter", fit_filter)
+    trace = np.asarray(trace_p, dtype=float).ravel()
+    if trace.size != fit.shape[0]:
+        raise InputError(f"trace_p has {trace.size} passes but fit_filter {fit.shape[0]}")
+    x = _pass_axis(passes, fit.shape[0])
+    fig = _figure(fig, REPORT_SIZE)
+    ax_fit, ax_trace = (_style(ax) for ax in fig.subplots(2, 1, sharex=True))
+    if fit.shape[1] > 1:
+        for name, column in zip(_names(output_names, fit.shape[1], "y"), fit.T):
+            ax_fit.plot(x, column, linewidth=0.8, alpha=0.7, label=f"filter, {name}")
+    ax_fit.plot(x, fit.mean(axis=1), color="k", linewidth=1.8,
+                label="filter" + (" (mean)" if fit.shape[1] > 1 else ""))
+    if fit_continuous is not None:
+        continuous = _matrix("fit_continuous", fit_continuous)
+        if continuous.shape[0] != fit.shape[0]:
+            raise InputError(f"fit_continuous has {continuous.shape[0]} passes but fit_filter {fit.shape[0]}")
+        ax_fit.plot(x, continuous.mean(axis=1), color="tab:red", linestyle="--", linewidth=1.8,
+                    label="simulated model" + (" (mean)" if continuous.shape[1] > 1 else ""))
+    ax_fit.set_ylabel("R (%)")
+    ax_fit.set_title("(a) percentage explanation R (eq. 17)", fontsize=10)
+    _legend(ax_fit, loc="lower right")
+    ax_trace.semilogy(x, trace, color="tab:blue", linewidth=1.8, label="trace(P)")
+    if min_eig_p is not None:
+        smallest = np.asarray(min_eig_p, dtype=float).ravel()
+        if smallest.size != trace.size:
+            raise InputError(f"min_eig_p has {smallest.size} passes but trace_p {trace.size}")
+        ax_trace.semilogy(x, smallest, color="tab:orange", linestyle="--", linewidth=1.5,
+                          label="smallest eigenvalue of P")
+    ax_trace.set_ylabel("parameter covariance (-)")
+    ax_trace.set_xlabel("pass")
+    ax_trace.set_title("(b) trace of the parameter covariance P", fontsize=10)
+    _legend(ax_trace, loc="upper right")
+    fig.suptitle(title)
+    return fig
+
+
+# --------------------------------------------------------- Figure 5: orders
+def plot_order_study(
+    orders: Sequence[int],
+    mean_r: Sequence[Any],
+    trace_p: Sequence[Any],
+    *,
+    drift: Sequence[Any] | None = None,
+    title: str = "Model-order study",
+    fig: Figure | None = None,
+) -> Figure:
+    """Explanation and convergence for each model order (Best & Bogdanski 2017, Figure 5).
+
+    Parameters
+    ----------
+    orders : sequence of int
+        The model orders n.
+    mean_r : sequence of float or of arrays (n_pass,)
+        Mean R (percent) per order: final values, or the per-pass history.
+    trace_p : sequence of float or of arrays (n_pass,)
+        trace(P) per order, final or per pass (log scale).
+    drift : sequence of float or of arrays, optional
+        The most divergent parameter per order (Figure 5b), final or per pass.
+    title : str
+    fig : Figure, optional
+
+    Returns
+    -------
+    Figure
+        With histories: one line per order on each axis against the pass.
+        With final values: one marker line on each axis against n.
+    """
+    orders = [int(n) for n in orders]
+    panels = [("(a) mean percentage explanation", "mean R (%)", mean_r, False),
+              ("(b) most divergent parameter", "parameter value", drift, False),
+              ("(c) trace of P", "trace(P) (-)", trace_p, True)]
+    panels = [panel for panel in panels if panel[2] is not None]
+    for label, _, series, _ in panels:
+        if len(series) != len(orders):
+            raise InputError(f"{label.split(') ')[1]}: {len(series)} entries for {len(orders)} orders")
+    histories = np.ndim(mean_r[0]) > 0 if len(mean_r) else False
+    fig = _figure(fig, (REPORT_SIZE[0], max(REPORT_SIZE[1], 1.5 + 1.8 * len(panels))))
+    axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0]
+    for ax, (label, y_label, series, log) in zip(axes, panels):
+        _style(ax)
+        if histories:
+            for n, values in zip(orders, series):
+                values = np.asarray(values, dtype=float).ravel()
+                ax.plot(np.arange(1, values.size + 1), values, linewidth=1.4, label=f"n = {n}")
+            _legend(ax, loc="center left", bbox_to_anchor=(1.0, 0.5))
+        else:
+            ax.plot(orders, np.asarray(series, dtype=float), marker="o", linewidth=1.4)
+            ax.set_xticks(orders)
+        if log:
+            ax.set_yscale("log")
+        ax.set_ylabel(y_label)
+        ax.set_title(label, fontsize=10)
+    axes[-1].set_xlabel("pass" if histories else "model order n")
+    fig.suptitle(title)
+    return fig
+
+
+# --------------------------------------------------- Figures 7, 9: time fits
+def plot_time_fits(
+    t: Any,
+    y_measured: Any,
+    predictions: Mapping[str, Any],
+    output_names: Sequence[str] | None = None,
+    units: Sequence[str] | None = None,
+    *,
+    window: tuple[float, float] | None = None,
+    title: str = "Model fits to the data",
+    fig: Figure | None = None,
+) -> Figure:
+    """Measured outputs against model predictions (Best & Bogdanski 2017, Figures 7 and 9).
+
+    Parameters
+    ----------
+    t : array_like, shape (N,)
+        Time (s).
+    y_measured : array_like, shape (N, n_y)
+    predictions : mapping of str to array_like (N, n_y)
+        Label (e.g. ``"linear n=4"``, ``"nonlinear n=4"``) to predicted outputs.
+    output_names, units : sequence of str, optional
+        One per output, for the axis labels.
+    window : (float, float), optional
+        Show only this time range (s), e.g. a stretch at high lateral
+        acceleration; only its samples are drawn, but R in the legend is
+        always over the whole record given.
+    title : str
+    fig : Figure, optional
+
+    Returns
+    -------
+    Figure
+        One axis per output holding the measurement (black) and one line per
+        prediction, labelled with its R (eq. 17) for that output.
+    """
+    t = np.asarray(t, dtype=float).ravel()
+    y = _matrix("y_measured", y_measured)
+    if y.shape[0] != t.size:
+        raise InputError(f"y_measured has {y.shape[0]} samples but t has {t.size}")
+    n_y = y.shape[1]
+    names = _names(output_names, n_y, "y")
+    units = _names(units, n_y, "unit") if units is not None else ["-"] * n_y
+    predicted = {label: _matrix(f"prediction {label!r}", value, n_y) for label, value in predictions.items()}
+    for label, value in predicted.items():
+        if value.shape[0] != t.size:
+            raise InputError(f"prediction {label!r} has {value.shape[0]} samples but t has {t.size}")
+    fits = {label: percentage_explanation(y, value) for label, value in predicted.items()}
+    shown = np.ones(t.size, dtype=bool) if window is None else (t >= window[0]) & (t <= window[1])
+    if not np.any(shown):
+        raise InputError(f"window {window} holds no samples of t ({t[0]:g}..{t[-1]:g} s)")
+    fig = _figure(fig, (REPORT_SIZE[0], max(REPORT_SIZE[1], 1.0 + 1.7 * n_y)))
+    axes = fig.subplots(n_y, 1, sharex=True, squeeze=False)[:, 0]
+    for i, ax in enumerate(axes):
+        _style(ax)
+        ax.plot(t[shown], y[shown, i], color="k", linewidth=1.6, label="measured")
+        for label, value in predicted.items():
+            ax.plot(t[shown], value[shown, i], linewidth=1.2, label=f"{label} (R = {fits[label][i]:.2f} %)")
+        ax.set_ylabel(f"{names[i]} ({units[i]})")
+        _legend(ax, loc="upper right")
+    axes[-1].set_xlabel("time (s)")
+    fig.suptitle(title)
+    return fig
+
+
+# ------------------------------------------------------- Figure 8: splines
+def plot_splines(
+    x: Any,
+    values: Any,
+    node_x: Any,
+    node_y: Any,
+    labels: Sequence[str] | str,
+    *,
+    x_labels: Sequence[str] | str | None = None,
+    title: str = "Splined coefficients",
+    fig: Figure | None = None,
+) -> Figure:
+    """Coefficients against the variable they depend on, nodes marked (Best & Bogdanski 2017, Figure 8).
+
+    Parameters
+    ----------
+    x, values : array_like (n_grid,) or sequence of them
+        The evaluation grid of each spline and the coefficient's value on it.
+    node_x, node_y : array_like (p,) or sequence of them
+        Node positions and ordinates of each spline.
+    labels : str or sequence of str
+        Name of each coefficient (e.g. ``"sigma1"``), the y-axis label.
+    x_labels : str or sequence of str, optional
+        Name of the variable each depends on (e.g. ``"x1 (-)"``); default ``"x (-)"``.
+    title : str
+    fig : Figure, optional
+
+    Returns
+    -------
+    Figure
+        One axis per spline: solid between the outer nodes, dashed where it
+        extrapolates linearly beyond them, nodes as markers.
+    """
+    single = np.ndim(values) == 1 and np.ndim(np.asarray(values, dtype=object)[0]) == 0
+    if single:
+        x, values, node_x, node_y = [x], [values], [node_x], [node_y]
+    labels = [labels] if isinstance(labels, str) else list(labels)
+    count = len(values)
+    if not (len(x) == len(node_x) == len(node_y) == len(labels) == count):
+        raise InputError("x, values, node_x, node_y and labels need one entry per spline")
+    if x_labels is None or isinstance(x_labels, str):
+        x_labels = [x_labels or "x (-)"] * count
+    columns = 1 if count == 1 else 2 if count <= 4 else 3
+    rows = -(-count // columns)
+    fig = _figure(fig, (REPORT_SIZE[0], max(REPORT_SIZE[1], 2.2 * rows)))
+    axes = fig.subplots(rows, columns, squeeze=False).ravel()
+    for i, ax in enumerate(axes):
+        if i >= count:
+            ax.set_visible(False)
+            continue
+        _style(ax)
+        grid = np.asarray(x[i], dtype=float).ravel()
+        curve = np.asarray(values[i], dtype=float).ravel()
+        nodes_x = np.asarray(node_x[i], dtype=float).ravel()
+        nodes_y = np.asarray(node_y[i], dtype=float).ravel()
+        if grid.size != curve.size or nodes_x.size != nodes_y.size:
+            raise InputError(f"spline {labels[i]!r}: x and values, node_x and node_y must match in length")
+        inner = (grid >= nodes_x.min()) & (grid <= nodes_x.max())
+        ax.plot(grid[inner], curve[inner], color="tab:blue", linewidth=1.6, label="spline")
+        for side in (grid <= nodes_x.min(), grid >= nodes_x.max()):
+            if np.count_nonzero(side) > 1:
+                ax.plot(grid[side], curve[side], color="tab:blue", linestyle="--", linewidth=1.4)
+        ax.plot(nodes_x, nodes_y, linestyle="none", marker="o", color="tab:red", markersize=5, label="nodes")
+        ax.set_xlabel(x_labels[i])
+        ax.set_ylabel(labels[i])
+        ax.set_title(labels[i], fontsize=10)
+    _legend(axes[0], loc="best")
+    fig.suptitle(title)
+    return fig
+
+
+# ------------------------------------------------------ eigenvalues and Bode
+def _eigenvalues(model: Any) -> np.ndarray:
+    if hasattr(model, "eigenvalues"):
+        return np.asarray(model.eigenvalues(), dtype=complex)
+    if hasattr(model, "A"):
+        return np.linalg.eigvals(np.asarray(model.A, dtype=float))
+    return np.asarray(model, dtype=complex).ravel()
+
+
+def plot_eigenvalue_map(
+    models: Mapping[str, Any],
+    reference_eigenvalues: Any = None,
+    *,
+    annotate: bool = True,
+    title: str = "Eigenvalues of the identified models",
+    ax: Axes | None = None,
+) -> Figure:
+    """Eigenvalues in the complex plane, each oscillatory mode annotated with frequency and damping.
+
+    Parameters
+    ----------
+    models : mapping of str to ModalModel, (A, B, C, D)-like or eigenvalue array
+        Anything with ``eigenvalues()``, an ``A`` attribute, or the eigenvalues.
+    reference_eigenvalues : array_like of complex, optional
+        The source model's eigenvalues, drawn as open black circles.
+    annotate : bool
+        Label each eigenvalue with non-negative imaginary part by its natural
+        frequency ``|lambda| / 2 pi`` (Hz) and damping ratio ``-Re(lambda)/|lambda|``.
+    title : str
+    ax : Axes, optional
+
+    Returns
+    -------
+    Figure
+    """
+    fig = new_figure(REPORT_SIZE) if ax is None else ax.figure
+    ax = _style(fig.subplots() if ax is None else ax)
+    markers = "xs^Dv<>p"
+    for k, (label, model) in enumerate(models.items()):
+        values = _eigenvalues(model)
+        ax.plot(values.real, values.imag, linestyle="none", marker=markers[k % len(markers)],
+                markersize=7, markeredgewidth=1.6, label=label)
+        if annotate:
+            for value in values[values.imag >= 0]:
+                magnitude = abs(value)
+                damping = -value.real / magnitude if magnitude > 0 else float("nan")
+                ax.annotate(f"{magnitude / (2 * np.pi):.2f} Hz, \u03b6 = {damping:.2f}", (value.real, value.imag),
+                            textcoords="offset points", xytext=(6, 4 + 10 * k), fontsize=9)
+    if reference_eigenvalues is not None:
+        reference = np.asarray(reference_eigenvalues, dtype=complex).ravel()
+        ax.plot(reference.real, reference.imag, linestyle="none", marker="o", markersize=10,
+                markerfacecolor="none", markeredgecolor="k", label="reference")
+    ax.axvline(0.0, color="k", linewidth=0.8)
+    ax.axhline(0.0, color="k", linewidth=0.8)
+    ax.set_xlabel("real part (1/s)")
+    ax.set_ylabel("imaginary part (rad/s)")
+    ax.set_title(title)
+    _legend(ax, loc="best")
+    return fig
+
+
+def _state_space(model: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    if all(hasattr(model, name) for name in "ABCD"):
+        matrices = (model.A, model.B, model.C, model.D)
+    else:
+        matrices = tuple(model)
+        if len(matrices) != 4:
+            raise InputError("a model must be a ModalModel or an (A, B, C, D) tuple")
+    A, B, C, D = (np.atleast_2d(np.asarray(m, dtype=float)) for m in matrices)
+    n = A.shape[0]
+    if A.shape != (n, n) or B.shape[0] != n or C.shape[1] != n or D.shape != (C.shape[0], B.shape[1]):
+        raise InputError(f"inconsistent state-space shapes A {A.shape}, B {B.shape}, C {C.shape}, D {D.shape}")
+    return A, B, C, D
+
+
+def frequency_response(model: Any, frequencies_hz: Any, input_index: int = 0) -> np.ndarray:
+    """``G(j w) = C (j w I - A)^-1 B + D`` for one input column.
+
+    Parameters
+    ----------
+    model : ModalModel or (A, B, C, D)
+        A continuous-time state-space model.
+    frequencies_hz : array_like, shape (n_f,)
+        Frequencies in Hz (``w = 2 pi f``).
+    input_index : int
+        The column of B and D.
+
+    Returns
+    -------
+    ndarray of complex, shape (n_f, n_y)
+
+    Examples
+    --------
+    >>> g = frequency_response(([[-1.0]], [[1.0]], [[1.0]], [[0.0]]), [1 / (2 * np.pi)])
+    >>> np.round(g, 6)
+    array([[0.5-0.5j]])
+    """
+    A, B, C, D = _state_space(model)
+    if not 0 <= input_index < B.shape[1]:
+        raise InputError(f"input_index {input_index} out of range for {B.shape[1]} inputs")
+    omega = 2 * np.pi * np.asarray(frequencies_hz, dtype=float).ravel()
+    n = A.shape[0]
+    resolvent = 1j * omega[:, None, None] * np.eye(n) - A
+    column = np.broadcast_to(B[:, [input_index]].astype(complex), (omega.size, n, 1))
+    states = np.linalg.solve(resolvent, column)[..., 0]  # (n_f, n)
+    return states @ C.T + D[:, input_index]
+
+
+def plot_bode(
+    models: Mapping[str, Any],
+    *,
+    reference: Any = None,
+    input_index: int = 0,
+    output_names: Sequence[str] | None = None,
+    output_units: Sequence[str] | None = None,
+    input_name: str = "u",
+    input_unit: str = "-",
+    frequencies: Any = None,
+    title: str | None = None,
+    fig: Figure | None = None,
+) -> Figure:
+    """Magnitude and phase from one input to every output, for several models.
+
+    Parameters
+    ----------
+    models : mapping of str to ModalModel or (A, B, C, D)
+    reference : ModalModel or (A, B, C, D), optional
+        E.g. the linearised source model; drawn black dashed.
+    input_index : int
+    output_names, output_units : sequence of str, optional
+        Default: the first model's output names, units ``-``.
+    input_name, input_unit : str
+        For the title and the magnitude's unit.
+    frequencies : array_like, optional
+        In Hz; default 200 points from 0.05 to 25 Hz, log-spaced.
+    title : str, optional
+    fig : Figure, optional
+
+    Returns
+    -------
+    Figure
+        Two rows (magnitude, log-log; phase in degrees, unwrapped), one column per output.
+    """
+    frequencies = np.logspace(np.log10(0.05), np.log10(25.0), 200) if frequencies is None else \
+        np.asarray(frequencies, dtype=float).ravel()
+    if frequencies.size < 2 or np.any(frequencies <= 0):
+        raise InputError("frequencies must hold at least two positive values (Hz)")
+    curves = {label: frequency_response(model, frequencies, input_index) for label, model in models.items()}
+    if reference is not None:
+        curves["reference"] = frequency_response(reference, frequencies, input_index)
+    if not curves:
+        raise InputError("give at least one model to plot")
+    n_y = next(iter(curves.values())).shape[1]
+    if any(g.shape[1] != n_y for g in curves.values()):
+        raise InputError("all models must have the same number of outputs")
+    if output_names is None:
+        first = next(iter(models.values()), None)
+        output_names = getattr(first, "output_names", None)
+    names = _names(output_names, n_y, "y")
+    units = _names(output_units, n_y, "unit") if output_units is not None else ["-"] * n_y
+    fig = _figure(fig, (max(REPORT_SIZE[0], 2.6 * n_y), REPORT_SIZE[1]))
+    axes = fig.subplots(2, n_y, sharex=True, squeeze=False)
+    for i in range(n_y):
+        ax_mag, ax_phase = _style(axes[0, i]), _style(axes[1, i])
+        for label, g in curves.items():
+            style = {"color": "k", "linestyle": "--"} if label == "reference" else {}
+            ax_mag.loglog(frequencies, np.abs(g[:, i]), linewidth=1.4, label=label, **style)
+            ax_phase.semilogx(frequencies, np.degrees(np.unwrap(np.angle(g[:, i]))), linewidth=1.4, **style)
+        ax_mag.set_title(names[i], fontsize=10)
+        ax_mag.set_ylabel(f"|G| ({units[i]}/{input_unit})")
+        ax_phase.set_ylabel("phase (deg)")
+        ax_phase.set_xlabel("frequency (Hz)")
+    _legend(axes[0, 0], loc="best")
+    fig.suptitle(title or f"Frequency response from {input_name}")
+    return fig
+
+
+# --------------------------------------------------- residual whiteness
+def autocorrelation(residuals: Any, max_lag: int) -> np.ndarray:
+    """Normalised autocorrelation of each residual column at lags 0..max_lag.
+
+    Parameters
+    ----------
+    residuals : array_like, shape (N, n_y)
+    max_lag : int
+        Largest lag in samples, below N.
+
+    Returns
+    -------
+    ndarray, shape (max_lag + 1, n_y)
+        ``r(k) / r(0)`` of the mean-removed residuals (1 at lag 0).
+    """
+    e = _matrix("residuals", residuals)
+    e = e - e.mean(axis=0)
+    n = e.shape[0]
+    if not (isinstance(max_lag, (int, np.integer)) and 0 < max_lag < n):
+        raise InputError(f"max_lag must be an integer in 1..{n - 1}; got {max_lag!r}")
+    energy = np.sum(e**2, axis=0)
+    if np.any(energy == 0):
+        raise InputError("a residual is constant: its autocorrelation is undefined")
+    lags = np.array([np.sum(e[: n - k] * e[k:], axis=0) for k in range(max_lag + 1)])
+    return lags / energy
+
+
+def plot_residual_autocorrelation(
+    residuals: Any,
+    max_lag: int = 50,
+    output_names: Sequence[str] | None = None,
+    *,
+    dt: float | None = None,
+    title: str = "Residual autocorrelation",
+    fig: Figure | None = None,
+) -> Figure:
+    """Autocorrelation of each output's residual with the 95 % band of white noise, +-1.96/sqrt(N).
+
+    Parameters
+    ----------
+    residuals : array_like, shape (N, n_y)
+        Measured minus predicted outputs.
+    max_lag : int
+        Largest lag in samples.
+    output_names : sequence of str, optional
+    dt : float, optional
+        Sample interval (s); the lag axis is then in seconds.
+    title : str
+    fig : Figure, optional
+
+    Returns
+    -------
+    Figure
+        One axis per output: the autocorrelation as stems and the band shaded.
+    """
+    r = autocorrelation(residuals, max_lag)
+    n_samples, n_y = _matrix("residuals", residuals).shape
+    names = _names(output_names, n_y, "y")
+    band = 1.96 / np.sqrt(n_samples)
+    lags = np.arange(max_lag + 1) * (dt if dt else 1.0)
+    fig = _figure(fig, (REPORT_SIZE[0], max(REPORT_SIZE[1], 1.0 + 1.6 * n_y)))
+    axes = fig.subplots(n_y, 1, sharex=True, squeeze=False)[:, 0]
+    for i, ax in enumerate(axes):
+        _style(ax)
+        ax.axhspan(-band, band, color="tab:blue", alpha=0.15, label=f"95 % band (\u00b1{band:.3f})")
+        ax.vlines(lags, 0.0, r[:, i], color="k", linewidth=1.2)
+        ax.plot(lags, r[:, i], linestyle="none", marker="o", markersize=3, color="k", label="autocorrelation")
+        outside = np.count_nonzero(np.abs(r[1:, i]) > band)
+        ax.set_ylabel(f"{names[i]} (-)")
+        ax.set_title(f"{names[i]}: {outside} of {max_lag} lags outside the band", fontsize=10)
+        _legend(ax, loc="upper right")
+    axes[-1].set_xlabel("lag (s)" if dt else "lag (samples)")
+    fig.suptitle(title)
+    return fig
