@@ -31,6 +31,7 @@ The paper's cases run the Euler filter by default, as the paper does.
 
 from __future__ import annotations
 
+import json
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,12 +39,16 @@ from typing import Any, Callable
 
 import numpy as np
 
+from identification.archive import write_archive, write_record
 from identification.data import IOData
 from identification.errors import InputError
 from identification.iekf import IEKFOptions, IEKFResult, identify_iekf
+from identification.iekf_archive import write_iekf_run
 from identification.metrics import percentage_explanation
 from identification.modal import ModalModel, ModalStructure
 from identification.order import OrderAssessment, assess_orders
+
+from .paths import results_directory
 
 __all__ = [
     "CASES",
@@ -54,6 +59,8 @@ __all__ = [
     "euler_equivalent",
     "CaseResult",
     "run_case",
+    "planned_passes",
+    "write_archive_for",
 ]
 
 DT = 0.002  # [s] 500 Hz (eq. 16)
@@ -342,3 +349,32 @@ def _table_text(title: str, rows: list[dict[str, Any]]) -> str:
         if row.get("reference", "-") != "-":
             lines.append(f"    reference: {row['reference']}")
     return "\n".join(lines)
+
+
+def planned_passes(case: str, passes: int | None = None) -> int:
+    """The most passes a case can run in all (for progress displays)."""
+    if case not in CASES:
+        raise InputError(f"unknown case {case!r}; use one of {', '.join(CASES)}")
+    per_run = passes if passes is not None else _CASE_SETTINGS[case]["passes"]
+    runs = len(NOISE_RATIOS) if case == "noise" else len(ORDERS) if case == "orders" else 1
+    return per_run * runs
+
+
+def write_archive_for(result: CaseResult, out: str | Path | None = None) -> Path:
+    """Write a case's archive (kind ``linear-example``): its data, every run and the summary.
+
+    The default file is ``linear_example_<case>.h5`` under the results folder.
+    """
+    from .cli import to_jsonable
+
+    path = Path(out) if out else results_directory() / f"linear_example_{result.case}.h5"
+    if not path.is_absolute() and out:
+        path = results_directory() / path
+    settings = to_jsonable(result.settings)
+    with write_archive(path, kind="linear-example", config=settings, seeds=[result.settings["seed"]]) as archive:
+        for name, data in result.data.items():
+            write_record(archive, name, data)
+        for name, run in result.runs.items():
+            write_iekf_run(archive, name, run)
+        archive.attrs["summary_json"] = json.dumps(to_jsonable(result.summary))
+    return path

@@ -14,7 +14,7 @@ import argparse
 
 from identification.filter_models import DISCRETIZATIONS
 from identification.iekf_pass import COVARIANCE_FORMS
-from scenarios.linear_example import CASES, run_case, write_archive_for
+from scenarios.linear_example import CASES, planned_passes, run_case, write_archive_for
 from scenarios.progress import Progress
 
 NAME = "linear-example"
@@ -35,12 +35,7 @@ def register(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> tuple[dict, str]:
-    from scenarios.linear_example import _CASE_SETTINGS, NOISE_RATIOS, ORDERS
-
-    settings = _CASE_SETTINGS[args.case]
-    passes = args.passes if args.passes is not None else settings["passes"]
-    runs = len(NOISE_RATIOS) if args.case == "noise" else len(ORDERS) if args.case == "orders" else 1
-    with Progress(passes * runs, f"{args.case} passes", enabled=None if not args.quiet else False) as progress:
+    with Progress(planned_passes(args.case, args.passes), f"{args.case} passes", enabled=None if not args.quiet else False) as progress:
         result = run_case(
             args.case, seed=args.seed, passes=args.passes, discretization=args.discretization,
             covariance=args.covariance, p=args.p,

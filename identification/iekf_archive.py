@@ -1,0 +1,141 @@
+"""IEKF runs in results archives: per-pass history, final model, resume state, checkpoints.
+
+A run ``runs/<name>`` holds (see ``results/RESULTS_LAYOUT.md``):
+
+* ``history/``: ``index``, ``parameters (n_pass, n_theta)``,
+  ``fit_filter`` and ``fit_continuous (n_pass, n_y)`` in percent,
+  ``trace_p``, ``min_eig_p``, ``seconds``;
+* ``model``: the model after the last recorded pass;
+* ``state``: the filter state (parameters and P in normalised units, the
+  scales) that a resume continues from;
+* ``options``: the :class:`~identification.iekf.IEKFOptions`;
+* attributes ``dt``, ``stop_reason``, ``seconds``.
+
+Because a pass depends only on the parameters and P it starts from and on
+the data, a run resumed from its checkpoint reaches the same parameters as
+one that was never interrupted.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+from .archive import append_history, read_history, run_group, update_archive, write_run
+from .errors import ArchiveError
+from .iekf import FilterState, IEKFOptions, IEKFResult, PassRecord
+from .modal import ModalModel
+from .storage import read_group, read_value, write_value
+
+__all__ = ["HISTORY_UNITS", "write_iekf_run", "append_iekf_pass", "read_iekf_run", "Checkpointer"]
+
+HISTORY_UNITS = {
+    "index": "-",
+    "parameters": "model units",
+    "fit_filter": "%",
+    "fit_continuous": "%",
+    "trace_p": "normalised units",
+    "min_eig_p": "normalised units",
+    "seconds": "s",
+}
+
+
+def _history_row(record: PassRecord) -> dict[str, Any]:
+    return {
+        "index": np.int64(record.index),
+        "parameters": record.parameters,
+        "fit_filter": record.fit_filter,
+        "fit_continuous": record.fit_continuous,
+        "trace_p": record.trace_p,
+        "min_eig_p": record.min_eig_p,
+        "seconds": record.seconds,
+    }
+
+
+def _write_summary(run: h5py.Group, result: IEKFResult) -> None:
+    write_run(run.file, run.name.rsplit("/", 1)[-1], model=result.model, state=result.state)
+    write_value(run, "options", result.options)
+    run.attrs["dt"] = result.dt
+    run.attrs["stop_reason"] = result.stop_reason
+    run.attrs["seconds"] = result.seconds
+
+
+def write_iekf_run(archive: h5py.File, name: str, result: IEKFResult) -> h5py.Group:
+    """Store a finished (or diverged) IEKF result as ``runs/<name>`` (replacing one of that name)."""
+    runs = archive.require_group("runs")
+    if name in runs:
+        del runs[name]
+    run = run_group(archive, name)
+    for record in result.history:
+        append_history(run, _history_row(record), units=HISTORY_UNITS)
+    _write_summary(run, result)
+    return run
+
+
+def append_iekf_pass(archive: h5py.File, name: str, record: PassRecord, result: IEKFResult) -> None:
+    """Add one pass to ``runs/<name>`` and replace its model and resume state (a checkpoint)."""
+    run = run_group(archive, name)
+    recorded = int(run["history"].attrs.get("n_pass", 0)) if "history" in run else 0
+    if record.index != recorded + 1:
+        raise ArchiveError(f"run {name!r} holds {recorded} passes; pass {record.index} cannot follow")
+    append_history(run, _history_row(record), units=HISTORY_UNITS)
+    _write_summary(run, result)
+
+
+def read_iekf_run(archive: h5py.File, name: str) -> IEKFResult:
+    """Rebuild the :class:`IEKFResult` of ``runs/<name>`` (for reports and ``--resume``)."""
+    runs = archive.get("runs")
+    if runs is None or name not in runs:
+        raise ArchiveError(f"the archive has no run {name!r}")
+    run = runs[name]
+    try:
+        history = read_history(run)
+        model = read_group(run["model"])
+        state = read_group(run["state"])
+        options = read_value(run, "options")
+        dt = float(run.attrs["dt"])
+        stop_reason = str(run.attrs["stop_reason"])
+        seconds = float(run.attrs["seconds"])
+    except KeyError as missing:
+        raise ArchiveError(f"run {name!r} is incomplete: missing {missing}") from None
+    if not isinstance(model, ModalModel) or not isinstance(state, FilterState) or not isinstance(options, IEKFOptions):
+        raise ArchiveError(f"run {name!r} does not hold an IEKF model, state and options")
+    records = tuple(
+        PassRecord(
+            index=int(history["index"][k]),
+            parameters=history["parameters"][k],
+            fit_filter=history["fit_filter"][k],
+            fit_continuous=history["fit_continuous"][k],
+            trace_p=float(history["trace_p"][k]),
+            min_eig_p=float(history["min_eig_p"][k]),
+            seconds=float(history["seconds"][k]),
+        )
+        for k in range(len(history.get("index", ())))
+    )
+    return IEKFResult(
+        model=model, structure=model.structure, options=options, history=records, state=state,
+        dt=dt, stop_reason=stop_reason, seconds=seconds,
+    )
+
+
+class Checkpointer:
+    """An ``on_pass`` callback that records every finished pass in an archive, atomically.
+
+    Parameters
+    ----------
+    path : str or Path
+        An archive that exists (written by :func:`identification.archive.write_archive`).
+    name : str
+        The run's name.
+    """
+
+    def __init__(self, path: str | Path, name: str):
+        self.path = Path(path)
+        self.name = name
+
+    def __call__(self, record: PassRecord, result: IEKFResult) -> None:
+        with update_archive(self.path) as archive:
+            append_iekf_pass(archive, self.name, record, result)
