@@ -60,6 +60,7 @@ def _bad_vehicle(tmp_path, text):
         (["simulate", "--manoeuvre", "step", "--amplitude-deg", "35"], "30 deg"),
         (["simulate", "--amplitude-deg", "nan"], "finite"),
         (["simulate", "--duration", "-1"], "duration"),
+        (["simulate", "--seed", "-1"], "seed must be a non-negative integer"),
         (["linearize", "--speed", "-3"], "speed must be positive"),
         (["simulate", "--vehicle", "VEHICLE:base = \"baseline\"\n[chassis]\nmass = 0.0\n"], "mass must be positive"),
         (["linearize", "--vehicle", "VEHICLE:base = \"baseline\"\n[chassis]\nwings = 2\n"], "unknown field"),
