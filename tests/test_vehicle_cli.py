@@ -75,6 +75,24 @@ def test_bad_input_exits_2_with_one_line(capsys, tmp_path, argv, message):
     assert len(err.strip().splitlines()) == 1 and message in err and "Traceback" not in err
 
 
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["simulate", "--amplitude-deg", "abc"], "invalid float value"),
+        (["simulate", "--manoeuvre", "slalom"], "invalid choice"),
+        (["linearize", "--speed"], "expected one argument"),
+        (["simulate", "--wings"], "unrecognized arguments"),
+    ],
+)
+def test_malformed_arguments_exit_2_with_one_line(capsys, argv, message):
+    """argparse's own errors keep the CLI's contract too: exit 2, one line, no usage block."""
+    with pytest.raises(SystemExit) as stop:
+        main(argv)
+    err = capsys.readouterr().err
+    assert stop.value.code == 2
+    assert len(err.strip().splitlines()) == 1 and message in err and "usage:" not in err
+
+
 def test_bad_input_from_a_real_process(tmp_path):
     completed = subprocess.run(
         [sys.executable, "-m", "scenarios.cli", "simulate", "--speed", "-2", "--json"],
