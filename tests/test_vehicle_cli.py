@@ -24,9 +24,12 @@ def test_simulate_step_summary_keys(capsys, tmp_path, monkeypatch):
     for key in ("peak_lateral_acceleration", "min_speed", "max_speed", "seconds",
                 "yaw_rate_gain", "lateral_acceleration_gain", "roll_gain"):
         assert isinstance(summary[key], float), key
-    # Baseline closed forms at 20 m/s: r/delta = 6.27 1/s, a_y/delta = 2.19 m/s^2/deg (3 %).
+    # Baseline closed forms at 20 m/s: r/delta = 6.27 1/s, a_y/delta = 2.19 m/s^2/deg (3 %),
+    # roll/delta = (dphi/da_y)(a_y/delta) = 0.512 deg/(m/s^2) * 2.19 m/s^2/deg = 1.12 deg/deg:
+    # a degree/radian slip in any of the three would be off by a factor of 57.
     assert summary["yaw_rate_gain"] == pytest.approx(6.27, rel=0.03)
     assert summary["lateral_acceleration_gain"] == pytest.approx(2.19, rel=0.03)
+    assert summary["roll_gain"] == pytest.approx(1.12, rel=0.03)
     record = read_hdf5(tmp_path / "step.h5")
     assert record.n_samples == 3001 and record.x.shape == (3001, 23)
     assert record.output_names[:3] == ("lateral_acceleration", "yaw_rate", "roll_angle")
