@@ -21,7 +21,7 @@ import logging
 import math
 import pkgutil
 import sys
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, NoReturn, Sequence
 
 import numpy as np
 
@@ -60,6 +60,17 @@ def to_jsonable(value: Any) -> Any:
     return value
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with the workbench's error contract: one line on standard error, exit status 2.
+
+    argparse's own ``error`` prints the whole usage block before the message;
+    the usage stays one ``--help`` away.
+    """
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def _common_options() -> argparse.ArgumentParser:
     common = argparse.ArgumentParser(add_help=False)
     output = common.add_argument_group("output")
@@ -85,7 +96,7 @@ def _command_modules() -> list[Any]:
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every subcommand registered."""
     common = _common_options()
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="vehid",
         description="Vehicle-dynamics identification workbench: simulate a full-vehicle model, "
         "identify small modal models with the Identifying Extended Kalman Filter, report.",

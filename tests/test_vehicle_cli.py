@@ -24,9 +24,12 @@ def test_simulate_step_summary_keys(capsys, tmp_path, monkeypatch):
     for key in ("peak_lateral_acceleration", "min_speed", "max_speed", "seconds",
                 "yaw_rate_gain", "lateral_acceleration_gain", "roll_gain"):
         assert isinstance(summary[key], float), key
-    # Baseline closed forms at 20 m/s: r/delta = 6.27 1/s, a_y/delta = 2.19 m/s^2/deg (3 %).
+    # Baseline closed forms at 20 m/s: r/delta = 6.27 1/s, a_y/delta = 2.19 m/s^2/deg (3 %),
+    # roll/delta = (dphi/da_y)(a_y/delta) = 0.512 deg/(m/s^2) * 2.19 m/s^2/deg = 1.12 deg/deg:
+    # a degree/radian slip in any of the three would be off by a factor of 57.
     assert summary["yaw_rate_gain"] == pytest.approx(6.27, rel=0.03)
     assert summary["lateral_acceleration_gain"] == pytest.approx(2.19, rel=0.03)
+    assert summary["roll_gain"] == pytest.approx(1.12, rel=0.03)
     record = read_hdf5(tmp_path / "step.h5")
     assert record.n_samples == 3001 and record.x.shape == (3001, 23)
     assert record.output_names[:3] == ("lateral_acceleration", "yaw_rate", "roll_angle")
@@ -60,6 +63,7 @@ def _bad_vehicle(tmp_path, text):
         (["simulate", "--manoeuvre", "step", "--amplitude-deg", "35"], "30 deg"),
         (["simulate", "--amplitude-deg", "nan"], "finite"),
         (["simulate", "--duration", "-1"], "duration"),
+        (["simulate", "--seed", "-1"], "seed must be a non-negative integer"),
         (["linearize", "--speed", "-3"], "speed must be positive"),
         (["simulate", "--vehicle", "VEHICLE:base = \"baseline\"\n[chassis]\nmass = 0.0\n"], "mass must be positive"),
         (["linearize", "--vehicle", "VEHICLE:base = \"baseline\"\n[chassis]\nwings = 2\n"], "unknown field"),
@@ -72,6 +76,24 @@ def test_bad_input_exits_2_with_one_line(capsys, tmp_path, argv, message):
     err = capsys.readouterr().err
     assert status == 2
     assert len(err.strip().splitlines()) == 1 and message in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["simulate", "--amplitude-deg", "abc"], "invalid float value"),
+        (["simulate", "--manoeuvre", "slalom"], "invalid choice"),
+        (["linearize", "--speed"], "expected one argument"),
+        (["simulate", "--wings"], "unrecognized arguments"),
+    ],
+)
+def test_malformed_arguments_exit_2_with_one_line(capsys, argv, message):
+    """argparse's own errors keep the CLI's contract too: exit 2, one line, no usage block."""
+    with pytest.raises(SystemExit) as stop:
+        main(argv)
+    err = capsys.readouterr().err
+    assert stop.value.code == 2
+    assert len(err.strip().splitlines()) == 1 and message in err and "usage:" not in err
 
 
 def test_bad_input_from_a_real_process(tmp_path):

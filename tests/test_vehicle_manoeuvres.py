@@ -53,6 +53,14 @@ def test_bad_manoeuvre_options(options):
         make_manoeuvre("step", **options)
 
 
+@pytest.mark.parametrize("name", sorted(MANOEUVRES))
+@pytest.mark.parametrize("seed", [-1, 1.5, "7", True])
+def test_bad_seed_is_named(name, seed):
+    """NumPy's generators take non-negative integers only; anything else is bad input, not a crash."""
+    with pytest.raises(InputError, match="seed must be a non-negative integer"):
+        make_manoeuvre(name, seed=seed)
+
+
 def test_unknown_manoeuvre():
     with pytest.raises(InputError, match="unknown manoeuvre"):
         make_manoeuvre("slalom")

@@ -102,6 +102,18 @@ def test_non_positive_mass_inertia_stiffness_rejected(section, field, value):
         dataclasses.replace(params, **{section: dataclasses.replace(getattr(params, section), **{field: value})})
 
 
+@pytest.mark.parametrize(
+    "data, message",
+    [([1, 2], "expected a table of sections"), ("baseline", "expected a table of sections"),
+     ({"base": ["baseline"]}, "unknown base vehicle"), ({"base": "sports"}, "unknown base vehicle")],
+)
+def test_malformed_json_vehicle_files_are_named(tmp_path, data, message):
+    path = tmp_path / "odd.json"
+    path.write_text(json.dumps(data))
+    with pytest.raises(InputError, match=message):
+        load_vehicle(path)
+
+
 def test_unknown_vehicle_name():
     with pytest.raises(InputError, match="unknown vehicle"):
         named_vehicle("sports")

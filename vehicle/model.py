@@ -177,7 +177,7 @@ class VehicleModel:
 
         All derivatives except d(psi)/dt (psi is ignorable) are driven to zero by
         Newton's method with a backtracking line search, starting from straight
-        running; where that fails (large steer), the steer is raised in eight
+        running, and polished by one more step once below ``tolerance``; where that fails (large steer), the steer is raised in eight
         stages, each solve starting from the last. Returns the 23 states (psi = 0).
 
         Raises
@@ -231,6 +231,16 @@ def _newton(model: VehicleModel, z: np.ndarray, steer: float, speed: float, tole
                 break
             scale *= 0.5
         z, value, norm = trial, trial_value, trial_norm
+    if norm < tolerance:
+        # One more full step: Newton converges quadratically, so this takes a residual
+        # that has just passed the tolerance down to round-off (about 1e-14).
+        try:
+            trial = z + np.linalg.solve(np.asarray(jacobian(z, steer, speed)), -value)
+        except np.linalg.LinAlgError:
+            return z, norm
+        trial_value, trial_norm = size(trial)
+        if trial_norm <= norm:
+            z, norm = trial, trial_norm
     return z, norm
 
 

@@ -266,8 +266,10 @@ def vehicle_from_mapping(data: Mapping[str, Any], *, origin: str = "vehicle data
             f"allowed: {', '.join(_SECTIONS)}, name, base"
         )
     base_name = data.get("base")
-    if base_name is not None and base_name not in NAMED_VEHICLES:
-        raise InputError(f"{origin}: unknown base vehicle {base_name!r}")
+    if base_name is not None and (not isinstance(base_name, str) or base_name not in NAMED_VEHICLES):
+        raise InputError(
+            f"{origin}: unknown base vehicle {base_name!r}; allowed: {', '.join(NAMED_VEHICLES)}"
+        )
     base = NAMED_VEHICLES[base_name]() if base_name else None
     groups: dict[str, Any] = {}
     for section, cls in _SECTIONS.items():
@@ -306,6 +308,8 @@ def load_vehicle(path: str | Path) -> VehicleParameters:
             data = tomllib.loads(path.read_text())
     except (json.JSONDecodeError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise InputError(f"{path} is not a readable vehicle file ({exc})") from None
+    if not isinstance(data, Mapping):
+        raise InputError(f"{path.name}: expected a table of sections, got a JSON {type(data).__name__}")
     data = dict(data)
     data.setdefault("name", path.stem)
     return vehicle_from_mapping(data, origin=path.name)
