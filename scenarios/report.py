@@ -3,6 +3,8 @@
 :func:`write_report` saves each figure as a PNG and all of them, one per
 page, in a single PDF. :func:`markdown_table` turns rows of results (a list
 of dicts, as in the paper's Table 5) into a markdown table.
+:func:`archive_figures` and :func:`archive_table` draw and tabulate whatever
+a results archive holds (records, run histories, models), for ``vehid report``.
 """
 
 from __future__ import annotations
@@ -17,8 +19,18 @@ from matplotlib.backends.backend_pdf import PdfPages
 from matplotlib.figure import Figure
 
 from identification.errors import InputError
+from identification.metrics import percentage_explanation
 
-__all__ = ["write_report", "markdown_table", "format_cell", "format_eigenvalues"]
+from . import plots
+
+__all__ = [
+    "write_report",
+    "markdown_table",
+    "format_cell",
+    "format_eigenvalues",
+    "archive_figures",
+    "archive_table",
+]
 
 _SAFE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
 
@@ -170,3 +182,144 @@ def markdown_table(
     for row in rows:
         lines.append("| " + " | ".join(format_cell(row.get(key), places(key)) for key in columns) + " |")
     return "\n".join(lines) + "\n"
+
+
+# ---------------------------------------------------------- from an archive
+def _stem(*parts: str) -> str:
+    return "_".join(re.sub(r"[^A-Za-z0-9_.-]", "_", part) for part in parts)
+
+
+def _mean_last(history: Mapping[str, np.ndarray], key: str) -> float | None:
+    values = history.get(key)
+    if values is None or len(values) == 0:
+        return None
+    return float(np.mean(values[-1]))
+
+
+def _parameter_names(model: Any, n_theta: int) -> Sequence[str] | None:
+    structure = getattr(model, "structure", None)
+    if structure is not None and getattr(structure, "n_parameters", None) == n_theta:
+        return structure.parameter_names()
+    return None
+
+
+def _model_prediction(model: Any, record: Any) -> tuple[Any, np.ndarray] | None:
+    """The record restricted to the model's inputs and outputs, and the model's simulated outputs."""
+    if not hasattr(model, "simulate"):
+        return None
+    inputs = tuple(getattr(model, "input_names", ()) or ())
+    outputs = tuple(getattr(model, "output_names", ()) or ())
+    if set(inputs) <= set(record.input_names) and set(outputs) <= set(record.output_names) and outputs:
+        record = record.select_inputs(inputs).select_outputs(outputs)
+    structure = getattr(model, "structure", None)
+    if structure is None or (record.n_u, record.n_y) != (structure.n_u, structure.n_y):
+        return None
+    predicted = np.asarray(model.simulate(record.u, record.dt), dtype=float)
+    if not np.all(np.isfinite(predicted)):
+        return None
+    return record, predicted
+
+
+def _most_divergent(parameters: np.ndarray) -> np.ndarray:
+    """The history of the parameter that moved most, relative to its size, over the last half of the passes."""
+    half = parameters.shape[0] // 2
+    change = np.abs(parameters[-1] - parameters[half]) / np.maximum(np.abs(parameters[-1]), 1e-12)
+    return parameters[:, int(np.argmax(change))]
+
+
+def archive_figures(archive: Any, *, window: tuple[float, float] | None = None, max_lag: int = 50) -> dict[str, Figure]:
+    """Every figure the contents of an archive allow, by file stem.
+
+    Parameters
+    ----------
+    archive : identification.archive.Archive
+        As :func:`identification.archive.read_archive` returns it.
+    window : (float, float), optional
+        Time range (s) of the time-fit figures.
+    max_lag : int
+        Largest lag of the residual autocorrelation, in samples.
+
+    Returns
+    -------
+    dict of str to Figure
+        Per run: ``parameters_<run>`` (a ``parameters`` history),
+        ``convergence_<run>`` (``fit_filter`` and ``trace_p``); across runs:
+        ``orders`` (two or more runs with histories and models of different
+        order), ``eigenvalues`` and ``bode`` (models with A, B, C, D); per
+        record: ``fits_<record>`` (models that can simulate it) and
+        ``residuals_<record>_<run>``.
+    """
+    figures: dict[str, Figure] = {}
+    runs = archive.runs
+    for name, run in runs.items():
+        history = run.history
+        if "parameters" in history and len(history["parameters"]):
+            names = _parameter_names(run.model, history["parameters"].shape[1])
+            figures[_stem("parameters", name)] = plots.plot_parameter_history(
+                history["parameters"], names, title=f"Parameter development over the passes: {name}")
+        if "fit_filter" in history and "trace_p" in history and len(history["trace_p"]):
+            outputs = getattr(run.model, "output_names", None)
+            fit = np.atleast_2d(history["fit_filter"].T).T
+            figures[_stem("convergence", name)] = plots.plot_convergence(
+                fit, history["trace_p"], fit_continuous=history.get("fit_continuous"),
+                min_eig_p=history.get("min_eig_p"),
+                output_names=outputs if outputs is not None and len(outputs) == fit.shape[1] else None,
+                title=f"Explanation and convergence per pass: {name}")
+    studied = [run for run in runs.values()
+               if {"fit_filter", "trace_p", "parameters"} <= set(run.history) and run.n_pass > 1
+               and getattr(getattr(run.model, "structure", None), "n", None) is not None]
+    orders = [run.model.structure.n for run in studied]
+    if len(studied) > 1 and len(set(orders)) == len(orders):
+        studied = [run for _, run in sorted(zip(orders, studied), key=lambda pair: pair[0])]
+        figures["orders"] = plots.plot_order_study(
+            sorted(orders), [run.history["fit_filter"].mean(axis=1) for run in studied],
+            [run.history["trace_p"] for run in studied],
+            drift=[_most_divergent(run.history["parameters"]) for run in studied])
+    models = {name: run.model for name, run in runs.items() if all(hasattr(run.model, m) for m in "ABCD")}
+    if models:
+        figures["eigenvalues"] = plots.plot_eigenvalue_map(models)
+        n_y = np.shape(next(iter(models.values())).C)[0]
+        figures["bode"] = plots.plot_bode({k: m for k, m in models.items() if np.shape(m.C)[0] == n_y})
+    for record_name, record in archive.records.items():
+        predictions: dict[str, np.ndarray] = {}
+        shown = None
+        for name, run in runs.items():
+            result = _model_prediction(run.model, record)
+            if result is None or (shown is not None and result[0].output_names != shown.output_names):
+                continue
+            shown, predictions[name] = result
+            figures[_stem("residuals", record_name, name)] = plots.plot_residual_autocorrelation(
+                shown.y - result[1], min(max_lag, shown.n_samples - 1), shown.output_names, dt=shown.dt,
+                title=f"Residual autocorrelation: {name} on {record_name}")
+        if shown is not None:
+            figures[_stem("fits", record_name)] = plots.plot_time_fits(
+                shown.t, shown.y, predictions, shown.output_names, shown.output_units, window=window,
+                title=f"Model fits to {record_name}")
+    return figures
+
+
+def archive_table(archive: Any) -> list[dict[str, Any]]:
+    """One row per run: order, passes, eigenvalues, final fits and trace(P), mean R on each record.
+
+    Columns that no run fills are left out.
+    """
+    rows = []
+    for name, run in archive.runs.items():
+        model = run.model
+        row: dict[str, Any] = {
+            "run": name,
+            "n": getattr(getattr(model, "structure", None), "n", None),
+            "passes": run.n_pass,
+            "eigenvalues": list(model.eigenvalues()) if hasattr(model, "eigenvalues") else None,
+            "R filter (%)": _mean_last(run.history, "fit_filter"),
+            "R simulated (%)": _mean_last(run.history, "fit_continuous"),
+            "trace(P)": _mean_last(run.history, "trace_p"),
+        }
+        for record_name, record in archive.records.items():
+            result = _model_prediction(model, record)
+            if result is not None:
+                row[f"R {record_name} (%)"] = float(np.mean(percentage_explanation(result[0].y, result[1])))
+        rows.append(row)
+    empty = {key for key in (rows[0] if rows else {}) if all(row.get(key) is None for row in rows)}
+    return [{key: value for key, value in row.items() if key not in empty} for row in rows]
+

@@ -365,3 +365,14 @@ def test_rejects_empty_kind(tmp_path):
     with pytest.raises(ArchiveError, match="kind"):
         with write_archive(tmp_path / "a.h5", kind=""):
             pass  # pragma: no cover
+
+
+def test_write_value_replaces_a_member_of_another_kind(tmp_path):
+    with h5py.File(tmp_path / "replace.h5", "w") as handle:
+        write_value(handle, "x", 1)
+        write_value(handle, "x", np.arange(3.0))
+        assert "x" not in handle.attrs and _same_array(read_value(handle, "x"), np.arange(3.0))
+        write_value(handle, "x", None)
+        assert "x" not in handle and read_value(handle, "x") is None
+        with pytest.raises(ArchiveError, match="no member 'y'"):
+            read_value(handle, "y")

@@ -1,0 +1,81 @@
+"""Draw the figures and the summary table of a results archive.
+
+Opens an HDF5 archive written by the workbench (its layout is in
+results/RESULTS_LAYOUT.md), finds its records (data/*) and runs (runs/*:
+per-pass history, final model) and draws what is present: parameter
+development and convergence per run, the order study across runs, an
+eigenvalue map and Bode plots of the models, time fits and residual
+autocorrelation on each record. Writes one PNG per figure, a PDF of them all
+and summary.md (one table row per run) to the output folder.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+from identification.archive import read_archive
+from identification.errors import InputError
+from scenarios.paths import results_directory
+from scenarios.report import archive_figures, archive_table, markdown_table, write_report
+
+NAME = "report"
+GROUP = None
+HELP = "draw the figures and summary table of a results archive"
+
+
+def register(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("archive", help="an HDF5 results archive")
+    parser.add_argument("--out", default=None,
+                        help="output folder (default: <archive name>-report under the results folder)")
+    parser.add_argument("--window", type=float, nargs=2, metavar=("T0", "T1"), default=None,
+                        help="time range in seconds shown in the time-fit figures (default: all)")
+    parser.add_argument("--max-lag", type=int, default=50,
+                        help="largest lag of the residual autocorrelation, in samples (default 50)")
+    parser.add_argument("--dpi", type=int, default=120, help="resolution of the PNGs (default 120)")
+    parser.set_defaults(handler=run)
+
+
+def _output_folder(archive: Path, out: str | None) -> Path:
+    if out is None:
+        return results_directory() / f"{archive.stem}-report"
+    path = Path(out)
+    return path if path.is_absolute() else results_directory() / path
+
+
+def run(args: argparse.Namespace) -> tuple[dict, str]:
+    if args.max_lag < 1:
+        raise InputError(f"--max-lag must be at least 1; got {args.max_lag}")
+    if not 20 <= args.dpi <= 600:
+        raise InputError(f"--dpi must lie in 20..600; got {args.dpi}")
+    if args.window is not None and not (all(map(math.isfinite, args.window)) and args.window[0] < args.window[1]):
+        raise InputError(f"--window needs two finite times T0 < T1; got {args.window}")
+    path = Path(args.archive)
+    archive = read_archive(path)
+    figures = archive_figures(archive, window=tuple(args.window) if args.window else None, max_lag=args.max_lag)
+    if not figures:
+        raise InputError(f"nothing to draw in {path}: it holds no records and no runs with histories or models")
+    folder = _output_folder(path, args.out)
+    files = write_report(figures, folder, dpi=args.dpi, title=f"vehid report: {path.name}")
+    rows = archive_table(archive)
+    if rows:
+        table = folder / "summary.md"
+        table.write_text(f"# {path.name}: {archive.kind}\n\n" + markdown_table(rows))
+        files.append(table)
+    summary = {
+        "archive": str(path),
+        "kind": archive.kind,
+        "schema_version": archive.schema_version,
+        "records": sorted(archive.records),
+        "runs": sorted(archive.runs),
+        "figures": list(figures),
+        "files": [str(file) for file in files],
+    }
+    lines = [
+        f"{path.name} ({archive.kind}): {len(archive.records)} record(s), {len(archive.runs)} run(s)",
+        f"wrote {len(figures)} figures ({', '.join(figures)}) to {folder}",
+    ]
+    if rows:
+        lines.append(markdown_table(rows).rstrip("\n"))
+    return summary, "\n".join(lines)
