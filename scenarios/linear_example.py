@@ -4,7 +4,8 @@ The source system is eq. 15 (five states: a real pole at -4, pairs at
 -15 +/- 10j and -8 +/- 40j; two inputs, three outputs). The data follow
 eq. 16: per input 5,000 N(0, 1) samples taken as 50 Hz points over 100 s,
 interpolated linearly to 500 Hz, plus offsets +0.1 and -0.1; the outputs are
-the system's exact response to these piecewise-linear inputs.
+the system's exact response to these piecewise-linear inputs (50,000
+samples; the last nine, past the final 50 Hz point, hold its value).
 
 Cases and what to expect:
 
@@ -148,8 +149,8 @@ def make_data(
     n_coarse = int(round(duration / coarse_dt))
     coarse = rng.standard_normal((n_coarse, 2))
     t_coarse = np.arange(n_coarse) * coarse_dt
-    n = int(round(t_coarse[-1] / DT)) + 1
-    t = np.arange(n) * DT
+    n = int(round(duration / DT))
+    t = np.arange(n) * DT  # the last 9 samples lie past the final knot and hold its value
     u = np.column_stack([np.interp(t, t_coarse, coarse[:, i]) for i in range(2)]) + np.array([0.1, -0.1])
     clean = true_model().simulate(u, DT)[:, list(outputs)]
     y = clean
