@@ -3,8 +3,11 @@
 A filter model gives, for states ``x`` (n_x), parameters ``theta`` (n_theta)
 and inputs at the two ends of a sample ``u0, u1`` (n_u each):
 
-* ``transition(x, theta, u0, u1, dt, discretization) -> x_next`` and
-* ``output(x, theta, u0) -> y``,
+* ``transition(x, theta, u0, u1, dt, discretization, constants) -> x_next`` and
+* ``output(x, theta, u0, constants) -> y``,
+
+where ``constants`` (``n_constants`` of them) are numbers that may change
+between passes without rebuilding the compiled filter,
 
 as SX expressions, so that the filter's Jacobians are exact
 (Best & Bogdanski 2017, eq. 7-10: the parameters join the state and have no
@@ -170,7 +173,9 @@ class LinearModalFilterModel:
     def n_y(self) -> int:
         return self.structure.n_y
 
-    def transition(self, x: Any, theta: Any, u0: Any, u1: Any, dt: float, discretization: str) -> Any:
+    n_constants = 0
+
+    def transition(self, x: Any, theta: Any, u0: Any, u1: Any, dt: float, discretization: str, constants: Any = None) -> Any:
         """``x_next`` (SX, n_x) under the given discretisation."""
         check_discretization(discretization)
         s = self.structure
@@ -192,7 +197,7 @@ class LinearModalFilterModel:
                 rows[state] = value
         return ca.vertcat(*rows)
 
-    def output(self, x: Any, theta: Any, u: Any) -> Any:
+    def output(self, x: Any, theta: Any, u: Any, constants: Any = None) -> Any:
         """``y = C x + D u`` (SX, n_y)."""
         _, _, C, D = self.structure.matrices(theta, backend=ca.SX)
         return ca.mtimes(C, x) + ca.mtimes(D, u)

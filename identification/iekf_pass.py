@@ -81,9 +81,11 @@ def unpack_covariance(values: np.ndarray, m: int) -> np.ndarray:
 class FilterStep:
     """The symbolic filter step and the pieces the NumPy reference needs.
 
-    ``step(s, u0, u1, y, q, r) -> (s_next, innovation)`` where
-    ``s = [z; vech_upper(P)]``; ``model(z, u0, u1) -> (z_next, Phi, h, H)``
-    evaluates the model and its exact Jacobians alone.
+    ``step(s, u0, u1, y, q, r, c) -> (s_next, innovation)`` where
+    ``s = [z; vech_upper(P)]`` and ``c`` the model's constants (for example
+    spline node ranges, which change between passes without recompiling);
+    ``model(z, u0, u1, c) -> (z_next, Phi, h, H)`` evaluates the model and
+    its exact Jacobians alone.
     """
 
     step: ca.Function
@@ -92,6 +94,7 @@ class FilterStep:
     n_x: int
     n_u: int
     n_y: int
+    n_c: int
     dt: float
     discretization: str
     covariance: str
@@ -108,21 +111,23 @@ def build_filter_step(filter_model: Any, dt: float, discretization: str, covaria
     if covariance not in COVARIANCE_FORMS:
         raise ValueError(f"unknown covariance form {covariance!r}; use one of {', '.join(COVARIANCE_FORMS)}")
     n_x, n_theta, n_u, n_y = filter_model.n_x, filter_model.n_theta, filter_model.n_u, filter_model.n_y
+    n_c = getattr(filter_model, "n_constants", 0)
     m = n_x + n_theta
 
     # The model and its Jacobians, as a function of a free augmented state.
     z = ca.SX.sym("z", m)
     u0 = ca.SX.sym("u0", n_u)
     u1 = ca.SX.sym("u1", n_u)
+    c = ca.SX.sym("c", n_c)
     x, theta = z[:n_x], z[n_x:]
-    x_next = filter_model.transition(x, theta, u0, u1, dt, discretization)
+    x_next = filter_model.transition(x, theta, u0, u1, dt, discretization, c)
     z_next = ca.vertcat(x_next, theta)
-    h = filter_model.output(x, theta, u0)
+    h = filter_model.output(x, theta, u0, c)
     model = ca.Function(
         "iekf_model",
-        [z, u0, u1],
+        [z, u0, u1, c],
         [z_next, ca.jacobian(z_next, z), h, ca.jacobian(h, z)],
-        ["z", "u0", "u1"],
+        ["z", "u0", "u1", "c"],
         ["z_next", "Phi", "h", "H"],
     )
 
@@ -133,13 +138,13 @@ def build_filter_step(filter_model: Any, dt: float, discretization: str, covaria
     r = ca.SX.sym("r", n_y, n_y)
     zk = s[:m]
     P = ca.triu2symm(ca.SX(upper, s[m:]))
-    _, _, h_k, H = model(zk, u0, u1)
+    _, _, h_k, H = model(zk, u0, u1, c)
     innovation = y - h_k
     W = ca.mtimes(P, H.T)
     S = ca.mtimes(H, W) + r
     K = ca.mtimes(W, ca.inv(S)) if n_y > 1 else W / S
     if covariance == "paper":
-        z_pred, Phi, _, _ = model(zk, u0, u1)
+        z_pred, Phi, _, _ = model(zk, u0, u1, c)
         P_updated = P - ca.mtimes(K, W.T)
         F_dt = Phi - ca.SX.eye(m)  # T F of eq. 13
         P_next = P_updated + ca.mtimes(F_dt, P_updated) + ca.mtimes(P_updated, F_dt.T) + dt * ca.diag(q)
@@ -148,18 +153,18 @@ def build_filter_step(filter_model: Any, dt: float, discretization: str, covaria
         V = W - 0.5 * ca.mtimes(K, S)
         P_updated = P - ca.mtimes(K, V.T) - ca.mtimes(V, K.T)
         z_post = zk + ca.mtimes(K, innovation)
-        z_out, Phi, _, _ = model(z_post, u0, u1)
+        z_out, Phi, _, _ = model(z_post, u0, u1, c)
         P_next = ca.mtimes(ca.mtimes(Phi, P_updated), Phi.T) + dt * ca.diag(q)
     P_next_upper = ca.vertcat(*[P_next[i, j] for j in range(m) for i in range(j + 1)])
     step = ca.Function(
         "iekf_step",
-        [s, u0, u1, y, q, r],
+        [s, u0, u1, y, q, r, c],
         [ca.vertcat(z_out, P_next_upper), innovation],
-        ["s", "u0", "u1", "y", "q", "r"],
+        ["s", "u0", "u1", "y", "q", "r", "c"],
         ["s_next", "innovation"],
         {"cse": True},
     )
-    return FilterStep(step, model, m, n_x, n_u, n_y, float(dt), discretization, covariance)
+    return FilterStep(step, model, m, n_x, n_u, n_y, n_c, float(dt), discretization, covariance)
 
 
 _DRIVER = r"""
@@ -170,10 +175,11 @@ _DRIVER = r"""
 #include <string.h>
 int vehid_iekf_pass(long long int n_samples, long long int n_u, long long int n_y,
                     long long int n_state, const double* u, const double* y,
-                    const double* q, const double* r, double* state, double* innovations) {
+                    const double* q, const double* r, const double* c,
+                    double* state, double* innovations) {
   casadi_int sz_arg, sz_res, sz_iw, sz_w;
   STEP_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
-  const casadi_real** arg = malloc(sizeof(casadi_real*) * (sz_arg > 6 ? sz_arg : 6));
+  const casadi_real** arg = malloc(sizeof(casadi_real*) * (sz_arg > 7 ? sz_arg : 7));
   casadi_real** res = malloc(sizeof(casadi_real*) * (sz_res > 2 ? sz_res : 2));
   casadi_int* iw = malloc(sizeof(casadi_int) * (sz_iw > 0 ? sz_iw : 1));
   casadi_real* w = malloc(sizeof(casadi_real) * (sz_w > 0 ? sz_w : 1));
@@ -190,6 +196,7 @@ int vehid_iekf_pass(long long int n_samples, long long int n_u, long long int n_
     arg[3] = y + k * n_y;
     arg[4] = q;
     arg[5] = r;
+    arg[6] = c;
     res[0] = next;
     res[1] = innovations + k * n_y;
     if (STEP(arg, res, iw, w, 0)) { status = 1; break; }
@@ -202,19 +209,27 @@ int vehid_iekf_pass(long long int n_samples, long long int n_u, long long int n_
 """
 
 
+def _constants(filter_step: FilterStep, c: np.ndarray | None) -> np.ndarray:
+    c = np.zeros(0) if c is None else np.ascontiguousarray(c, dtype=float).ravel()
+    if c.size != filter_step.n_c:
+        raise ValueError(f"the model takes {filter_step.n_c} constants; got {c.size}")
+    return c
+
+
 class _CompiledPass:
-    """A loaded pass library: ``run(state, u, y, q, r) -> (state, innovations)``."""
+    """A loaded pass library: ``run(state, u, y, q, r, c=None) -> (state, innovations)``."""
 
     def __init__(self, library_path: str, filter_step: FilterStep):
         self._library = ctypes.CDLL(library_path)
         self._function = self._library.vehid_iekf_pass
         double_p = ctypes.POINTER(ctypes.c_double)
-        self._function.argtypes = [ctypes.c_longlong] * 4 + [double_p] * 6
+        self._function.argtypes = [ctypes.c_longlong] * 4 + [double_p] * 7
         self._function.restype = ctypes.c_int
         self.filter_step = filter_step
 
-    def __call__(self, state: np.ndarray, u: np.ndarray, y: np.ndarray, q: np.ndarray, r: np.ndarray):
+    def __call__(self, state: np.ndarray, u: np.ndarray, y: np.ndarray, q: np.ndarray, r: np.ndarray, c: np.ndarray | None = None):
         fs = self.filter_step
+        c = _constants(fs, c)
         state = np.ascontiguousarray(state, dtype=float).copy()
         u = np.ascontiguousarray(u, dtype=float)
         y = np.ascontiguousarray(y, dtype=float)
@@ -223,7 +238,11 @@ class _CompiledPass:
         n = y.shape[0]
         innovations = np.empty((n, fs.n_y))
         as_p = lambda a: a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))  # noqa: E731
-        status = self._function(n, fs.n_u, fs.n_y, state.size, as_p(u), as_p(y), as_p(q), as_p(r), as_p(state), as_p(innovations))
+        status = self._function(
+            n, fs.n_u, fs.n_y, state.size, as_p(u), as_p(y), as_p(q), as_p(r),
+            as_p(c if c.size else np.zeros(1)),  # a valid pointer even where the model has no constants
+            as_p(state), as_p(innovations),
+        )
         if status < 0:
             raise MemoryError("the compiled IEKF pass could not allocate its work arrays")
         return state, innovations
@@ -235,11 +254,12 @@ class _VirtualMachinePass:
     def __init__(self, filter_step: FilterStep):
         self.filter_step = filter_step
 
-    def __call__(self, state, u, y, q, r):
+    def __call__(self, state, u, y, q, r, c=None):
         n = y.shape[0]
+        c = _constants(self.filter_step, c)
         lifted = self.filter_step.step.mapaccum("iekf_pass_vm", n)
         u_next = np.vstack([u[1:], u[-1:]])
-        s_all, innovations = lifted(state, u.T, u_next.T, y.T, q, np.asarray(r, dtype=float))
+        s_all, innovations = lifted(state, u.T, u_next.T, y.T, q, np.asarray(r, dtype=float), c)
         return np.asarray(s_all)[:, -1].copy(), np.asarray(innovations).T
 
 
@@ -265,15 +285,24 @@ def _pass_for(filter_model: Any, dt: float, discretization: str, covariance: str
 def compiled_pass(filter_model: Any, dt: float, discretization: str, covariance: str):
     """The pass function for a filter model, built and compiled once (cached in memory and on disk).
 
-    Returns a callable ``run(state, u, y, q, r) -> (state, innovations)`` with
+    Returns a callable ``run(state, u, y, q, r, c=None) -> (state, innovations)`` with
     ``state = [z; upper(P)]`` (see :func:`pack_covariance`), ``u`` (N, n_u),
-    ``y`` (N, n_y), ``q`` (m,) the diagonal of Q, ``r`` (n_y, n_y).
+    ``y`` (N, n_y), ``q`` (m,) the diagonal of Q, ``r`` (n_y, n_y), ``c`` the
+    model's constants (none for a linear model).
     Its attribute ``filter_step`` is the :class:`FilterStep`.
     """
     return _pass_for(filter_model, float(dt), discretization, covariance)
 
 
-def numpy_reference_pass(filter_step: FilterStep, state: np.ndarray, u: np.ndarray, y: np.ndarray, q: np.ndarray, r: np.ndarray):
+def numpy_reference_pass(
+    filter_step: FilterStep,
+    state: np.ndarray,
+    u: np.ndarray,
+    y: np.ndarray,
+    q: np.ndarray,
+    r: np.ndarray,
+    c: np.ndarray | None = None,
+):
     """The same pass written plainly: a Python loop, full matrices, textbook forms.
 
     The model and its Jacobians come from ``filter_step.model`` (CasADi's
@@ -282,6 +311,7 @@ def numpy_reference_pass(filter_step: FilterStep, state: np.ndarray, u: np.ndarr
     ``Phi P Phi' + T Q``. The reference for tests and the benchmark's baseline.
     """
     fs = filter_step
+    c = _constants(fs, c)
     m = fs.n_z
     z = np.array(state[:m], dtype=float)
     P = unpack_covariance(np.asarray(state[m:], dtype=float), m)
@@ -294,7 +324,7 @@ def numpy_reference_pass(filter_step: FilterStep, state: np.ndarray, u: np.ndarr
     for k in range(n):
         u0 = u[k]
         u1 = u[k + 1] if k + 1 < n else u[k]
-        z_pred, Phi, h, H = (np.asarray(v) for v in model(z, u0, u1))
+        z_pred, Phi, h, H = (np.asarray(v) for v in model(z, u0, u1, c))
         h = h.ravel()
         e = y[k] - h
         innovations[k] = e
@@ -309,7 +339,7 @@ def numpy_reference_pass(filter_step: FilterStep, state: np.ndarray, u: np.ndarr
             J = identity - K @ H
             P = J @ P @ J.T + K @ R @ K.T
             z_post = z + K @ e
-            z_next, Phi, _, _ = (np.asarray(v) for v in model(z_post, u0, u1))
+            z_next, Phi, _, _ = (np.asarray(v) for v in model(z_post, u0, u1, c))
             P = Phi @ P @ Phi.T + fs.dt * Q
             z = z_next.ravel()
         P = 0.5 * (P + P.T)

@@ -68,7 +68,7 @@ def test_exact_transition_equals_matrix_exponential_foh():
     theta = structure.pack(model.A, model.B, model.C[:1], model.D[:1])
     rng = np.random.default_rng(5)
     x, u0, u1 = rng.standard_normal(5), rng.standard_normal(2), rng.standard_normal(2)
-    z_next = np.asarray(run.filter_step.model(np.concatenate([x, theta]), u0, u1)[0]).ravel()
+    z_next = np.asarray(run.filter_step.model(np.concatenate([x, theta]), u0, u1, np.zeros(0))[0]).ravel()
     phi, gamma0, gamma1 = _foh_matrices(model.A, model.B, DT)
     assert np.allclose(z_next[:5], phi @ x + gamma0 @ u0 + gamma1 @ u1, rtol=0, atol=1e-12)
     assert np.array_equal(z_next[5:], theta)
@@ -84,12 +84,12 @@ def test_jacobians_equal_finite_differences(discretization):
     z = np.concatenate([rng.standard_normal(5), theta])
     u0, u1 = rng.standard_normal(2), rng.standard_normal(2)
     model = run.filter_step.model
-    _, Phi, _, H = (np.asarray(v) for v in model(z, u0, u1))
+    _, Phi, _, H = (np.asarray(v) for v in model(z, u0, u1, np.zeros(0)))
     step = 1e-6
     for j in range(z.size):
         dz = np.zeros(z.size)
         dz[j] = step
-        plus, minus = model(z + dz, u0, u1), model(z - dz, u0, u1)
+        plus, minus = model(z + dz, u0, u1, np.zeros(0)), model(z - dz, u0, u1, np.zeros(0))
         column_phi = (np.asarray(plus[0]) - np.asarray(minus[0])).ravel() / (2 * step)
         column_h = (np.asarray(plus[2]) - np.asarray(minus[2])).ravel() / (2 * step)
         assert np.allclose(Phi[:, j], column_phi, rtol=1e-7, atol=1e-7)
