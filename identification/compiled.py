@@ -24,6 +24,7 @@ import warnings
 from pathlib import Path
 
 import casadi as ca
+import numpy as np
 
 __all__ = [
     "cache_directory",
@@ -32,6 +33,7 @@ __all__ = [
     "generate_c",
     "find_c_compiler",
     "NoCompilerWarning",
+    "CompiledRecursion",
 ]
 
 _LOCK = threading.RLock()
@@ -186,3 +188,98 @@ def build_shared_library(
             shutil.copyfile(staged, partial)
             os.replace(partial, library)
     return library
+
+
+_RECURSION_DRIVER = r"""
+/* Simulation driver: x <- f(x, u_k, u_k+1, p) over the record, writing each
+   step's output and the state before it. u, outputs and states are time-major. */
+#include <stdlib.h>
+#include <string.h>
+int vehid_recursion(long long int n_samples, long long int n_x, long long int n_u, long long int n_out,
+                    const double* u, const double* params, double* x, double* outputs, double* states) {
+  casadi_int sz_arg, sz_res, sz_iw, sz_w;
+  STEP_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
+  const casadi_real** arg = malloc(sizeof(casadi_real*) * (sz_arg > 4 ? sz_arg : 4));
+  casadi_real** res = malloc(sizeof(casadi_real*) * (sz_res > 2 ? sz_res : 2));
+  casadi_int* iw = malloc(sizeof(casadi_int) * (sz_iw > 0 ? sz_iw : 1));
+  casadi_real* w = malloc(sizeof(casadi_real) * (sz_w > 0 ? sz_w : 1));
+  double* next = malloc(sizeof(double) * (n_x > 0 ? n_x : 1));
+  if (!arg || !res || !iw || !w || !next) return -1;
+  int status = 0;
+  long long int k;
+  for (k = 0; k < n_samples; ++k) {
+    memcpy(states + k * n_x, x, sizeof(double) * n_x);
+    arg[0] = x;
+    arg[1] = u + k * n_u;
+    arg[2] = u + (k + 1 < n_samples ? k + 1 : k) * n_u;
+    arg[3] = params;
+    res[0] = next;
+    res[1] = outputs + k * n_out;
+    if (STEP(arg, res, iw, w, 0)) { status = 1; break; }
+    memcpy(x, next, sizeof(double) * n_x);
+  }
+  free(arg); free(res); free(iw); free(w); free(next);
+  return status;
+}
+"""
+
+
+class CompiledRecursion:
+    """Run ``x_next, out = step(x, u_k, u_next, params)`` over a record in compiled code.
+
+    Call with ``(x0 (n_x,), u (N, n_u), params (n_p,))``; returns
+    ``(outputs (N, n_out), states (N, n_x))`` where ``states[k]`` is the
+    state before step k and ``outputs[k]`` the step's second output.
+    Without a C compiler the step is lifted with ``mapaccum`` in CasADi's
+    virtual machine instead (with a :class:`NoCompilerWarning`).
+    """
+
+    def __init__(self, step: ca.Function, *, optimisation: str = "-O2"):
+        import ctypes
+
+        self.step = step
+        self.n_x = step.size1_in(0)
+        self.n_u = step.size1_in(1)
+        self.n_p = step.size1_in(3)
+        self.n_out = step.size1_out(1)
+        self._function = None
+        if find_c_compiler() is None:
+            warnings.warn(
+                f"no C compiler found: {step.name()} runs in CasADi's virtual machine "
+                "(install gcc or set CC for compiled speed)",
+                NoCompilerWarning,
+                stacklevel=2,
+            )
+            return
+        name = step.name()
+        driver = _RECURSION_DRIVER.replace("STEP_work", f"{name}_work").replace("STEP(", f"{name}(")
+        library = build_shared_library(f"{name}_recursion", generate_c(step) + driver, optimisation=optimisation)
+        self._library = ctypes.CDLL(str(library))
+        self._function = self._library.vehid_recursion
+        double_p = ctypes.POINTER(ctypes.c_double)
+        self._function.argtypes = [ctypes.c_longlong] * 4 + [double_p] * 5
+        self._function.restype = ctypes.c_int
+
+    def __call__(self, x0, u, params):
+        import ctypes
+
+        x = np.array(x0, dtype=float).ravel().copy()
+        u = np.ascontiguousarray(u, dtype=float)
+        params = np.ascontiguousarray(params, dtype=float).ravel()
+        n = u.shape[0]
+        if self._function is None:
+            lifted = self.step.mapaccum(f"{self.step.name()}_vm", n)
+            u_next = np.vstack([u[1:], u[-1:]])
+            xs, outs = lifted(x, u.T, u_next.T, np.tile(params[:, None], (1, n)))
+            states = np.hstack([x[:, None], np.asarray(xs)[:, :-1]]).T
+            return np.asarray(outs).T, states
+        outputs = np.empty((n, self.n_out))
+        states = np.empty((n, self.n_x))
+        as_p = lambda a: a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))  # noqa: E731
+        status = self._function(
+            n, self.n_x, self.n_u, self.n_out, as_p(u), as_p(params if params.size else np.zeros(1)),
+            as_p(x), as_p(outputs), as_p(states),
+        )
+        if status:
+            raise RuntimeError(f"the compiled recursion {self.step.name()} failed (status {status})")
+        return outputs, states

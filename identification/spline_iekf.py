@@ -1,0 +1,265 @@
+"""The spline-nonlinear IEKF (Best & Bogdanski 2017, section 5).
+
+The filter machinery and compiled pass of the linear IEKF run on the
+spline-modal model of :mod:`identification.spline_modal`, with the
+differences the paper gives:
+
+* the start is the linear model identified on the same data, every node at
+  its linear value, so the first nonlinear model equals the linear one;
+* ``R`` is the residual covariance of the frozen model simulated over the
+  record, recomputed after every pass (normalised units);
+* ``p`` is much lower, so that ``P`` and ``K`` adapt slowly over the record;
+* inputs and outputs are normalised by their largest magnitude;
+* after each pass the node ranges of the A and C splines move to cover the
+  range their variable reached (0.5 to 99.5 percentiles of the frozen
+  model's states; amplitudes from zero), the splines re-sampled so that
+  their values at the new nodes are kept and ``P`` mapped by the same linear
+  map; B and D nodes stay evenly over -1..1.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+from .data import IOData
+from .errors import DivergenceError, InputError
+from .filter_models import check_discretization
+from .iekf_pass import COVARIANCE_FORMS, compiled_pass, pack_covariance, unpack_covariance
+from .metrics import percentage_explanation
+from .modal import ModalModel
+from .spline import MAX_NODES, MIN_NODES
+from .spline_modal import SplineModalFilterModel, SplineModalModel, SplineModalStructure
+
+__all__ = ["SplineIEKFOptions", "SplinePassRecord", "SplineIEKFResult", "identify_spline_iekf", "covering_ranges"]
+
+_RANGE_PERCENTILES = (0.5, 99.5)
+_RANGE_MARGIN = 0.1  # widen each moving range by this fraction of its span at each end
+_R_FLOOR = 1e-9  # relative floor on R's diagonal (a perfect fit must not make R singular)
+
+
+@dataclass(frozen=True)
+class SplineIEKFOptions:
+    """Settings of the spline-nonlinear IEKF.
+
+    Parameters
+    ----------
+    nodes : int
+        Nodes per spline, 3..9 (paper: 5).
+    p : float
+        Tuning parameter: ``Q = p I'`` on the node ordinates, ``P0 = Q``.
+    passes : int
+        Largest number of passes.
+    discretization, covariance : str
+        As for the linear filter.
+    redistribute : bool
+        Move the A and C node ranges between passes.
+    fit_tolerance : float
+        Stop when the mean R (percent) changes by less than this from one pass to the next.
+    min_passes : int
+        Never stop earlier than this.
+    """
+
+    nodes: int = 5
+    p: float = 1e-4
+    passes: int = 20
+    discretization: str = "exact"
+    covariance: str = "joseph"
+    redistribute: bool = True
+    fit_tolerance: float = 1e-4
+    min_passes: int = 3
+
+    def __post_init__(self) -> None:
+        if isinstance(self.nodes, bool) or int(self.nodes) != self.nodes or not MIN_NODES <= self.nodes <= MAX_NODES:
+            raise InputError(f"nodes must be a whole number from {MIN_NODES} to {MAX_NODES}; got {self.nodes!r}")
+        if not (isinstance(self.p, (int, float)) and math.isfinite(self.p) and self.p > 0):
+            raise InputError(f"the tuning parameter p must be a positive number; got {self.p!r}")
+        if isinstance(self.passes, bool) or int(self.passes) != self.passes or self.passes < 1:
+            raise InputError(f"passes must be a whole number >= 1; got {self.passes!r}")
+        check_discretization(self.discretization)
+        if self.covariance not in COVARIANCE_FORMS:
+            raise InputError(f"unknown covariance form {self.covariance!r}; use one of {', '.join(COVARIANCE_FORMS)}")
+
+
+@dataclass(frozen=True, eq=False)
+class SplinePassRecord:
+    """What one pass left: R per output of the frozen model, trace and smallest eigenvalue of P, ranges."""
+
+    index: int
+    fit_filter: np.ndarray
+    trace_p: float
+    min_eig_p: float
+    seconds: float
+    ranges: np.ndarray
+
+    @property
+    def mean_fit_filter(self) -> float:
+        return float(np.mean(self.fit_filter))
+
+
+@dataclass(frozen=True, eq=False)
+class SplineIEKFResult:
+    """The identified nonlinear model, one record per pass, the filter state and the start."""
+
+    model: SplineModalModel
+    start: SplineModalModel
+    options: SplineIEKFOptions
+    history: tuple[SplinePassRecord, ...]
+    P: np.ndarray
+    R: np.ndarray
+    start_fit: np.ndarray
+    stop_reason: str
+    seconds: float
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def passes_run(self) -> int:
+        return len(self.history)
+
+    @property
+    def fit_percent(self) -> np.ndarray:
+        """R per output of the final model (percent)."""
+        return self.history[-1].fit_filter if self.history else self.start_fit
+
+
+def covering_ranges(structure: SplineModalStructure, states: np.ndarray, previous: np.ndarray) -> np.ndarray:
+    """Node ranges covering what the states (normalised, (N, n)) reached; inputs keep ``previous``."""
+    linear = structure.linear
+    ranges = np.array(previous, dtype=float)
+    low, high = _RANGE_PERCENTILES
+    for pair in range(linear.n_complex_pairs):
+        amplitude = np.hypot(states[:, 2 * pair], states[:, 2 * pair + 1])
+        top = float(np.percentile(amplitude, high))
+        ranges[structure.amplitude_variable(pair)] = [0.0, max(top * (1 + _RANGE_MARGIN), 1e-6)]
+    for state in range(linear.n):
+        lower, upper = np.percentile(states[:, state], [low, high])
+        span = max(upper - lower, 1e-6)
+        ranges[structure.state_variable(state)] = [lower - _RANGE_MARGIN * span, upper + _RANGE_MARGIN * span]
+    return ranges
+
+
+def _residual_covariance(y: np.ndarray, y_hat: np.ndarray) -> np.ndarray:
+    residual = y - y_hat
+    R = residual.T @ residual / residual.shape[0]
+    floor = _R_FLOOR * np.mean(y**2, axis=0)
+    return R + np.diag(floor)
+
+
+def identify_spline_iekf(
+    data: IOData,
+    linear: ModalModel,
+    *,
+    options: SplineIEKFOptions | None = None,
+    on_pass: Callable[[SplinePassRecord, SplineIEKFResult], None] | None = None,
+) -> SplineIEKFResult:
+    """Identify a spline-nonlinear modal model, starting from a linear one identified on the same data.
+
+    Parameters
+    ----------
+    data : IOData
+        The identification record (original units).
+    linear : ModalModel
+        The linear model to start from (its structure fixes the modes and C pattern).
+    options : SplineIEKFOptions, optional
+    on_pass : callable, optional
+        Called after every pass with the new record and the result so far.
+
+    Returns
+    -------
+    SplineIEKFResult
+
+    Raises
+    ------
+    InputError
+        On data that do not match the linear model's inputs and outputs.
+    DivergenceError
+        On non-finite values or a model whose simulation blows up; ``last_good``
+        holds the result up to the last good pass.
+    """
+    options = options or SplineIEKFOptions()
+    structure = SplineModalStructure(linear.structure, options.nodes)
+    if data.n_u != linear.structure.n_u or data.n_y != linear.structure.n_y:
+        raise InputError(
+            f"the linear model has {linear.structure.n_u} inputs and {linear.structure.n_y} outputs; "
+            f"the data have {data.n_u} and {data.n_y}"
+        )
+    if data.n_samples <= structure.n_parameters:
+        raise InputError(f"{data.n_samples} samples cannot identify {structure.n_parameters} spline ordinates")
+    started = time.perf_counter()
+    input_scale = np.abs(data.u).max(axis=0)
+    output_scale = np.abs(data.y).max(axis=0)
+    if np.any(input_scale == 0) or np.any(output_scale == 0):
+        raise InputError("an input or output is identically zero: nothing to identify")
+    u_n = data.u / input_scale
+    y_n = data.y / output_scale
+
+    model = SplineModalModel.from_linear(linear, options.nodes, input_scale, output_scale, data.dt, options.discretization)
+    y_hat, states = model.simulate_normalised(u_n)
+    if not np.all(np.isfinite(y_hat)):
+        raise DivergenceError("the linear start model's simulation is not finite")
+    model, _ = model.resampled(covering_ranges(structure, states, model.ranges))  # constant splines: exact
+    start = model
+    start_fit = percentage_explanation(y_n, y_hat)
+    R = _residual_covariance(y_n, y_hat)
+
+    n = structure.linear.n
+    m = n + structure.n_parameters
+    q = np.concatenate([np.zeros(n), np.full(structure.n_parameters, options.p)])
+    P = np.diag(q)
+    run_pass = compiled_pass(SplineModalFilterModel(structure), data.dt, options.discretization, options.covariance)
+    history: list[SplinePassRecord] = []
+
+    def result(stop_reason: str) -> SplineIEKFResult:
+        return SplineIEKFResult(
+            model=model, start=start, options=options, history=tuple(history), P=P.copy(), R=R.copy(),
+            start_fit=start_fit, stop_reason=stop_reason, seconds=time.perf_counter() - started,
+        )
+
+    stop_reason = "passes"
+    while len(history) < options.passes:
+        index = len(history) + 1
+        pass_start = time.perf_counter()
+        state = np.concatenate([np.zeros(n), model.theta, pack_covariance(P)])
+        state, innovations = run_pass(state, u_n, y_n, q, R, model.constants)
+        if not (np.all(np.isfinite(state)) and np.all(np.isfinite(innovations))):
+            raise DivergenceError(
+                f"nonlinear pass {index}: the filter produced non-finite values (try a lower p)",
+                last_good=result(f"diverged at pass {index}"),
+            )
+        candidate = model.with_parameters(state[n:m])
+        new_P = unpack_covariance(state[m:], m)
+        y_hat, states = candidate.simulate_normalised(u_n)
+        if not (np.all(np.isfinite(y_hat)) and np.max(np.abs(y_hat)) < 1e6):
+            raise DivergenceError(
+                f"nonlinear pass {index}: the identified model's simulation blows up (try a lower p)",
+                last_good=result(f"diverged at pass {index}"),
+            )
+        fit = percentage_explanation(y_n, y_hat)
+        R = _residual_covariance(y_n, y_hat)
+        model, P = candidate, new_P
+        if options.redistribute:
+            model, transform = model.resampled(covering_ranges(structure, states, model.ranges))
+            full = np.eye(m)
+            full[n:, n:] = transform
+            P = full @ P @ full.T
+        eigenvalues = np.linalg.eigvalsh(P)
+        previous = history[-1] if history else None
+        record = SplinePassRecord(
+            index=index, fit_filter=fit, trace_p=float(np.trace(P)), min_eig_p=float(eigenvalues[0]),
+            seconds=time.perf_counter() - pass_start, ranges=model.ranges.copy(),
+        )
+        history.append(record)
+        if on_pass is not None:
+            on_pass(record, result("running"))
+        if (
+            previous is not None
+            and len(history) >= options.min_passes
+            and abs(record.mean_fit_filter - previous.mean_fit_filter) < options.fit_tolerance
+        ):
+            stop_reason = "converged"
+            break
+    return result(stop_reason)
