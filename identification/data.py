@@ -351,12 +351,15 @@ def read_csv(
     for name in (*inputs, *outputs):
         if name not in header:
             raise InputError(f"unknown column {name!r} in {path}; columns: {', '.join(header)}")
+    for number, row in enumerate(rows, start=2):
+        if len(row) != len(header):
+            raise InputError(f"{path}: line {number} has {len(row)} values; every row must have {len(header)}")
     try:
         table = np.array([[float(cell) for cell in row] for row in rows], dtype=float)
     except ValueError as exc:
         raise InputError(f"{path} holds a value that is not a number ({exc})") from None
-    if table.ndim != 2 or table.shape[1] != len(header):
-        raise InputError(f"{path}: every row must have {len(header)} values")
+    if table.ndim != 2 or table.shape[0] == 0:
+        raise InputError(f"{path} holds no data rows")
     column = {name: i for i, name in enumerate(header)}
     if dt is not None:
         if not (dt > 0 and math.isfinite(dt)):

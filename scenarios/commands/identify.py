@@ -10,17 +10,26 @@ exact first-order-hold discretisation, so the identified parameters are those
 of the continuous-time model; --discretization euler reproduces the paper's
 filter. The summary gives the eigenvalues, the fit R (eq. 17) per output of
 the continuous model simulated exactly, the matrices and the run time.
+
+With --out ARCHIVE the record and every finished pass are written to an HDF5
+archive as the run goes (atomically, so a killed run leaves the archive of
+its last finished pass); --resume ARCHIVE continues such a run from there
+with the same data and settings, and reaches the same parameters as a run
+that was never interrupted.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from pathlib import Path
 
 from identification import read_csv, read_hdf5
 from identification.errors import InputError
 from identification.filter_models import DISCRETIZATIONS
 from identification.iekf import START_VALUES, IEKFOptions, identify_iekf
+from identification.archive import open_archive, read_records, write_archive, write_record
+from identification.iekf_archive import Checkpointer, read_iekf_run
 from identification.iekf_pass import COVARIANCE_FORMS
 from identification.modal import C_PATTERNS, ModalStructure
 from scenarios.progress import Progress
@@ -40,7 +49,7 @@ def _names(text: str | None) -> list[str] | None:
 
 
 def register(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("data", help="workbench HDF5 file or CSV file with a header row")
+    parser.add_argument("data", nargs="?", help="workbench HDF5 file or CSV file with a header row")
     parser.add_argument("--inputs", help="comma-separated input column names")
     parser.add_argument("--outputs", help="comma-separated output column names")
     parser.add_argument("--dt", type=float, help="sample interval in s (CSV without a time column)")
@@ -54,6 +63,9 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--start", default="default", choices=sorted(START_VALUES), help="start values of sigma/omega")
     parser.add_argument("--normalize", action="store_true", help="scale inputs and outputs by their RMS while filtering")
     parser.add_argument("--save-model", help="write the model to this .json or .mat file")
+    parser.add_argument("--out", help="HDF5 archive of the run, checkpointed after every pass")
+    parser.add_argument("--resume", metavar="ARCHIVE",
+                        help="continue the run checkpointed in ARCHIVE (its data and settings; --passes counts all passes)")
     parser.set_defaults(handler=run)
 
 
@@ -76,20 +88,53 @@ def load_record(path: str, inputs: list[str] | None, outputs: list[str] | None, 
     raise InputError(f"unknown data file type {suffix or '(none)'!r}: give a .h5 or .csv file")
 
 
+RUN_NAME = "iekf"
+
+
+def _resume(args: argparse.Namespace):
+    """Data, structure, options and the finished passes of a checkpointed run."""
+    if args.data is not None:
+        raise InputError("--resume takes its data from the archive: give no DATA file")
+    with open_archive(args.resume, kinds=["identification"]) as archive:
+        previous = read_iekf_run(archive, RUN_NAME)
+        records = read_records(archive)
+    if "identification" not in records:
+        raise InputError(f"{args.resume} holds no identification record to resume on")
+    options = dataclasses.replace(previous.options, passes=max(args.passes, previous.passes_run))
+    return records["identification"], previous.structure, options, previous
+
+
 def run(args: argparse.Namespace) -> tuple[dict, str]:
-    data = load_record(args.data, _names(args.inputs), _names(args.outputs), args.dt)
-    structure = ModalStructure.from_pattern(args.pattern, args.order, data.n_u, data.n_y)
-    if args.method != "iekf":
-        return _run_comparator(args, data, structure)
-    options = IEKFOptions(
-        p=args.p, passes=args.passes, discretization=args.discretization, covariance=args.covariance,
-        start=args.start, normalize=args.normalize,
-    )
-    with Progress(options.passes, "IEKF passes", enabled=None if not args.quiet else False) as progress:
-        result = identify_iekf(
-            data, structure, options=options,
-            on_pass=lambda record, _: progress.advance(note=f"R {record.mean_fit_filter:.4f} %"),
+    previous = None
+    if args.resume:
+        data, structure, options, previous = _resume(args)
+        archive_path = Path(args.resume)
+    else:
+        if args.data is None:
+            raise InputError("give a DATA file (or --resume ARCHIVE)")
+        data = load_record(args.data, _names(args.inputs), _names(args.outputs), args.dt)
+        structure = ModalStructure.from_pattern(args.pattern, args.order, data.n_u, data.n_y)
+        if args.method != "iekf":
+            return _run_comparator(args, data, structure)
+        options = IEKFOptions(
+            p=args.p, passes=args.passes, discretization=args.discretization, covariance=args.covariance,
+            start=args.start, normalize=args.normalize,
         )
+        archive_path = Path(args.out) if args.out else None
+        if archive_path is not None:
+            with write_archive(archive_path, kind="identification", config=options, seeds=[]) as archive:
+                write_record(archive, "identification", data)
+    checkpoint = Checkpointer(archive_path, RUN_NAME) if archive_path is not None else None
+    done = previous.passes_run if previous is not None else 0
+    with Progress(options.passes, "IEKF passes", enabled=None if not args.quiet else False) as progress:
+        progress.advance(done)
+
+        def on_pass(record, so_far):
+            if checkpoint is not None:
+                checkpoint(record, so_far)
+            progress.advance(note=f"R {record.mean_fit_filter:.4f} %")
+
+        result = identify_iekf(data, structure, options=options, resume=previous, on_pass=on_pass)
     model = result.model
     summary = {
         "method": "iekf",
@@ -106,6 +151,8 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
         "D": model.D,
         "seconds": result.seconds,
     }
+    if archive_path is not None:
+        summary["archive"] = str(archive_path)
     if args.save_model:
         summary["model_file"] = str(_save_model(model, args.save_model))
     return summary, _text(summary, data)
