@@ -35,7 +35,14 @@ from .modal import ModalModel
 from .spline import MAX_NODES, MIN_NODES
 from .spline_modal import SplineModalFilterModel, SplineModalModel, SplineModalStructure
 
-__all__ = ["SplineIEKFOptions", "SplinePassRecord", "SplineIEKFResult", "identify_spline_iekf", "covering_ranges"]
+__all__ = [
+    "SplineIEKFOptions",
+    "SplinePassRecord",
+    "SplineIEKFResult",
+    "identify_spline_iekf",
+    "covering_ranges",
+    "residual_covariance",
+]
 
 _RANGE_PERCENTILES = (0.5, 99.5)
 _RANGE_MARGIN = 0.1  # widen each moving range by this fraction of its span at each end
@@ -142,7 +149,8 @@ def covering_ranges(structure: SplineModalStructure, states: np.ndarray, previou
     return ranges
 
 
-def _residual_covariance(y: np.ndarray, y_hat: np.ndarray) -> np.ndarray:
+def residual_covariance(y: np.ndarray, y_hat: np.ndarray) -> np.ndarray:
+    """``1/N sum (y - y_hat)(y - y_hat)'`` with a tiny floor on the diagonal, so that a perfect fit stays invertible."""
     residual = y - y_hat
     R = residual.T @ residual / residual.shape[0]
     floor = _R_FLOOR * np.mean(y**2, axis=0)
@@ -204,7 +212,7 @@ def identify_spline_iekf(
     model, _ = model.resampled(covering_ranges(structure, states, model.ranges))  # constant splines: exact
     start = model
     start_fit = percentage_explanation(y_n, y_hat)
-    R = _residual_covariance(y_n, y_hat)
+    R = residual_covariance(y_n, y_hat)
 
     n = structure.linear.n
     m = n + structure.n_parameters
@@ -239,7 +247,7 @@ def identify_spline_iekf(
                 last_good=result(f"diverged at pass {index}"),
             )
         fit = percentage_explanation(y_n, y_hat)
-        R = _residual_covariance(y_n, y_hat)
+        R = residual_covariance(y_n, y_hat)
         model, P = candidate, new_P
         if options.redistribute:
             model, transform = model.resampled(covering_ranges(structure, states, model.ranges))
