@@ -37,6 +37,7 @@ __all__ = ["FORMS", "RecursiveResult", "rls_step", "recursive_least_squares", "e
 
 FORMS = ("plain", "sqrt", "ud")
 DEFAULT_P0 = 1e6  # appendix Remark 2: P0 = rho^2 I with rho large
+_SYMMETRISE_EVERY = 64  # the plain update is symmetric up to rounding; re-symmetrise now and then
 
 
 @dataclass(frozen=True, eq=False)
@@ -166,16 +167,27 @@ def recursive_least_squares(phi: Any, y: Any, *, forgetting: float = 1.0, window
     history = np.zeros((n, n_p, n_y)) if keep_history else np.zeros((0, n_p, n_y))
     errors = np.zeros((n, n_y))
     trace = np.zeros(n)
+    dot, outer = np.dot, np.outer
     if form == "sqrt":
         factor = np.linalg.cholesky(P)
     elif form == "ud":
         U, d = ud_factor(P)
     for k in range(start, n):
         if form == "plain":
-            theta, P, _, errors[k] = rls_step(theta, P, phi[k], y[k], lam)
+            # rls_step inlined, updating in place: the per-call overhead dominates at these sizes
+            f = phi[k]
+            p_phi = dot(P, f)
+            gain = p_phi / (lam + dot(f, p_phi))
+            errors[k] = y[k] - dot(f, theta)
+            theta += outer(gain, errors[k])
+            P -= outer(gain, p_phi)
+            if lam != 1.0:
+                P /= lam
+            if k % _SYMMETRISE_EVERY == 0:
+                P = 0.5 * (P + P.T)
             if window is not None:
                 theta, P = _downdate(theta, P, phi[k - window], y[k - window])
-            trace[k] = np.trace(P)
+            trace[k] = P.trace()
         elif form == "sqrt":
             theta, factor, _, errors[k] = sqrt_step(theta, factor, phi[k], y[k], lam)
             trace[k] = np.sum(factor**2)
@@ -186,7 +198,9 @@ def recursive_least_squares(phi: Any, y: Any, *, forgetting: float = 1.0, window
             history[k] = theta
     if keep_history and start:
         history[:start] = theta if window is None else first.theta
-    if form == "sqrt":
+    if form == "plain":
+        P = 0.5 * (P + P.T)
+    elif form == "sqrt":
         P = factor @ factor.T
     elif form == "ud":
         P = ud_covariance(U, d)
