@@ -2,23 +2,15 @@
 
 import numpy as np
 import pytest
-from scipy.signal import lfilter
 
 from identification import InputError
 from identification.gls import estimate_gls
 from identification.least_squares import estimate_arx
+from scenarios.textbook import GLS_TRUE, coloured_noise_record
 
-TRUE = np.array([-0.8, 0.5])  # y(k) = 0.8 y(k-1) + 0.5 u(k-1) + xi(k): theta = [a1, b1]
+TRUE = np.array(GLS_TRUE)  # y(k) = 0.8 y(k-1) + 0.5 u(k-1) + xi(k): theta = [a1, b1]
 RUNS = 40
-
-
-def _record(seed, n=1000):
-    """ARX system with equation error xi = w / (1 - 0.9 q^-1): strongly coloured (appendix eq. A.79)."""
-    rng = np.random.default_rng(seed)
-    u = rng.standard_normal(n)
-    xi = lfilter([1.0], [1.0, -0.9], 0.5 * rng.standard_normal(n))
-    y = lfilter([0.0, 0.5], [1.0, -0.8], u) + lfilter([1.0], [1.0, -0.8], xi)
-    return u[:, None], y[:, None]
+_record = coloured_noise_record  # equation error xi = w / (1 - 0.9 q^-1): strongly coloured (eq. A.79)
 
 
 def test_gls_removes_the_least_squares_bias():
