@@ -31,7 +31,11 @@ Methods (:data:`COMPARATORS`, a registry ``name -> function``):
     The modal model's parameters fitted by nonlinear least squares on the
     simulation error (``scipy.optimize.least_squares``, trust-region
     reflective, finite-difference Jacobian), each output's error scaled by
-    its RMS, started from the ``arx`` (default) or ``n4sid`` model.
+    its RMS, started from the ``arx`` model (one output) or the ``n4sid``
+    model (several outputs, where the per-output ARX realisations reduced
+    by balanced truncation are only approximate: from that start the
+    three-output linear example was still at R = 99.997 % after 50
+    iterations and 210 s, from the N4SID start exact after 2).
 
 Other methods join with :func:`register_comparator` (the IEKF, for one):
 a function ``(data: IOData, *, order: int, **options) -> ModalModel``.
@@ -211,7 +215,8 @@ def n4sid_comparator(data: IOData, *, order: int, **options: Any) -> ModalModel:
 def output_error_comparator(data: IOData, *, order: int, **options: Any) -> ModalModel:
     """The modal model fitted by nonlinear least squares on the simulation error.
 
-    Options: ``start`` (``"arx"``, ``"n4sid"`` or a ModalModel of this order),
+    Options: ``start`` (``"auto"``: ``"arx"`` for one output, ``"n4sid"`` for
+    several; ``"arx"``, ``"n4sid"`` or a ModalModel of this order),
     ``max_evaluations`` (most evaluations of the error, not counting the
     finite-difference Jacobian's, default 50: each iteration also costs
     one simulation per parameter),
@@ -219,7 +224,9 @@ def output_error_comparator(data: IOData, *, order: int, **options: Any) -> Moda
     """
     data = _check_data(data)
     order = positive_int(order, "order")
-    start = options.pop("start", "arx")
+    start = options.pop("start", "auto")
+    if isinstance(start, str) and start == "auto":
+        start = "arx" if data.n_y == 1 else "n4sid"
     tolerance = float(options.pop("tolerance", 1e-10))
     max_evaluations = options.pop("max_evaluations", None)
     _reject_unknown(options, "output-error")
