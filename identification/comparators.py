@@ -133,7 +133,7 @@ def _stack_and_reduce(realisations: list[tuple[np.ndarray, ...]], order: int) ->
     return balanced_truncation(Ad, Bd, Cd, Dd, order)[:4]
 
 
-def _arx_orders(data: IOData, order: int, options: dict[str, Any]) -> tuple[int, Any, Any]:
+def _arx_orders(order: int, options: dict[str, Any]) -> tuple[int, Any, Any]:
     na = options.pop("na", order)
     nb = options.pop("nb", na + 1)
     nk = options.pop("nk", 0)
@@ -149,7 +149,7 @@ def arx_comparator(data: IOData, *, order: int, **options: Any) -> ModalModel:
     """ARX by batch least squares, to modal form (module docstring). Options: ``na``, ``nb``, ``nk``."""
     data = _check_data(data)
     order = positive_int(order, "order")
-    na, nb, nk = _arx_orders(data, order, options)
+    na, nb, nk = _arx_orders(order, options)
     _reject_unknown(options, "arx")
     realisations = []
     for output in range(data.n_y):
@@ -172,7 +172,7 @@ def rls_comparator(data: IOData, *, order: int, **options: Any) -> ModalModel:
     """ARX by recursive least squares, to modal form. Options: ``na``, ``nb``, ``nk``, ``forgetting``."""
     data = _check_data(data)
     order = positive_int(order, "order")
-    na, nb, nk = _arx_orders(data, order, options)
+    na, nb, nk = _arx_orders(order, options)
     forgetting = options.pop("forgetting", 1.0)
     _reject_unknown(options, "rls")
     realisations = []
@@ -186,11 +186,7 @@ def rls_comparator(data: IOData, *, order: int, **options: Any) -> ModalModel:
         scaled /= scale
         start = min(10 * scaled.shape[1], scaled.shape[0])
         first = least_squares(scaled[:start], target[:start])
-        P0 = first.covariance[0] / max(first.noise_variance[0], 1e-300)
-        if not np.all(np.isfinite(P0)) or first.noise_variance[0] == 0:
-            r_inverse = np.linalg.pinv(scaled[:start])
-            P0 = r_inverse @ r_inverse.T
-        run = recursive_least_squares(scaled[start:], target[start:], forgetting=forgetting, P0=P0,
+        run = recursive_least_squares(scaled[start:], target[start:], forgetting=forgetting, P0=first.gram_inverse,
                                       theta0=first.theta, keep_history=False)
         theta = transform.T @ (run.theta / scale[:, None])
         nb_t = (nb,) * data.n_u if np.isscalar(nb) else tuple(nb)

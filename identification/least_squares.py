@@ -68,6 +68,8 @@ class LeastSquaresResult:
         ``Y - Phi Theta``.
     condition_number : float
         Of the column-scaled ``Phi'Phi`` (the square of Phi's).
+    gram_inverse : ndarray, shape (n_p, n_p)
+        ``(Phi'Phi)^-1``, from the QR factor (the starting P of RLS, appendix Remark 2).
     """
 
     theta: np.ndarray
@@ -75,6 +77,7 @@ class LeastSquaresResult:
     noise_variance: np.ndarray
     residuals: np.ndarray
     condition_number: float
+    gram_inverse: np.ndarray
 
     @property
     def standard_errors(self) -> np.ndarray:
@@ -147,7 +150,7 @@ def least_squares(phi: Any, y: Any, *, names: tuple[str, ...] | None = None,
     r_inverse = np.linalg.inv(r) / norms[:, None]
     unscaled = r_inverse @ r_inverse.T  # (Phi'Phi)^-1
     covariance = variance[:, None, None] * unscaled[None]
-    return LeastSquaresResult(theta, covariance, variance, residuals, condition**2)
+    return LeastSquaresResult(theta, covariance, variance, residuals, condition**2, unscaled)
 
 
 def observer_form(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

@@ -162,7 +162,7 @@ def recursive_least_squares(phi: Any, y: Any, *, forgetting: float = 1.0, window
             raise InputError(f"the window must hold between {n_p} (the parameters) and {n} (the record) samples; got {window}")
         first = least_squares(phi[:window], y[:window])
         theta = first.theta.copy()
-        P = first.covariance[0] / max(first.noise_variance[0], 1e-300)  # (Phi0'Phi0)^-1
+        P = first.gram_inverse.copy()
         start = window
     history = np.zeros((n, n_p, n_y)) if keep_history else np.zeros((0, n_p, n_y))
     errors = np.zeros((n, n_y))

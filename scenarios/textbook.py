@@ -266,7 +266,7 @@ def rls_example(*, seed: int = 0) -> dict[str, Any]:
     phi, target, _, _ = arx_regressors(u, y, na=2, nb=2, nk=1)
     batch = least_squares(phi, target)
     start = least_squares(phi[:20], target[:20])
-    P0 = start.covariance[0] / start.noise_variance[0]
+    P0 = start.gram_inverse
     differences = {}
     for form in ("plain", "sqrt", "ud"):
         run = recursive_least_squares(phi[20:], target[20:], P0=P0, theta0=start.theta, form=form)

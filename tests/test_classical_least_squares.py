@@ -89,11 +89,11 @@ def test_rls_equals_batch_least_squares():
     phi, target, _, _ = arx_regressors(u, y, na=2, nb=2, nk=1)
     batch = least_squares(phi, target)
     start = least_squares(phi[:20], target[:20])
-    p0 = start.covariance[0] / start.noise_variance[0]
+    p0 = start.gram_inverse
     for form in ("plain", "sqrt", "ud"):
         run = recursive_least_squares(phi[20:], target[20:], P0=p0, theta0=start.theta, form=form)
         np.testing.assert_allclose(run.theta, batch.theta, atol=ALGEBRA, err_msg=form)
-        np.testing.assert_allclose(run.covariance, batch.covariance[0] / batch.noise_variance[0], atol=ALGEBRA)
+        np.testing.assert_allclose(run.covariance, batch.gram_inverse, atol=ALGEBRA)
 
 
 def test_factorised_forms_equal_plain_with_forgetting():
