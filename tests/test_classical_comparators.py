@@ -7,7 +7,7 @@ outputs by exact simulation of the pairs-first modal form (ModalModel.simulate, 
 import numpy as np
 import pytest
 
-from identification import InputError, fit_metrics
+from identification import ExcitationError, InputError, fit_metrics
 from identification.comparators import COMPARATORS, identify_with, register_comparator
 from identification.modal import ModalModel, ModalStructure
 from scenarios.linear_system import linear_example_data, true_model
@@ -58,3 +58,13 @@ def test_registry_dispatches_and_rejects(data, monkeypatch):
     monkeypatch.setitem(COMPARATORS, "truth", lambda d, *, order: true_model())
     result = identify_with(data[:2000], method="truth", order=5)
     assert result.metrics.percentage_explanation[0] == pytest.approx(100.0, abs=1e-9)
+
+
+def test_comparators_name_bad_requests(data):
+    with pytest.raises(InputError, match="order must be an integer >= 1"):
+        identify_with(data, method="arx", order=0)
+    still = data.replace(u=np.zeros_like(data.u))  # no excitation at all
+    with pytest.raises(ExcitationError, match="identically zero"):
+        identify_with(still[:3000], method="arx", order=5)
+    with pytest.raises(InputError, match="start must be"):
+        identify_with(data[:3000], method="output-error", order=5, start="iekf")
