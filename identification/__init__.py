@@ -24,6 +24,17 @@ from .modal import C_PATTERNS, ModalModel, ModalStructure
 from .order import OrderAssessment, assess_orders
 from .spline import SplineBasis, covering_basis, resample
 from .storage import TRUSTED_PACKAGES, read_group, read_value, write_group, write_value
+from .comparators import (COMPARATORS, ComparatorResult, identify_with, register_comparator)
+from .ekf import EkfResult, NonlinearModel, ekf_joint
+from .gls import GlsResult, estimate_gls
+from .kalman import KalmanResult, SmootherResult, kalman_filter, kalman_predict, kalman_update, rts_smoother
+from .least_squares import ArxModel, ArxResult, LeastSquaresResult, arx_regressors, estimate_arx, least_squares
+from .pencil import PencilEstimate, PencilModel, estimate_pencil
+from .recursive import RecursiveResult, estimate_arx_recursive, recursive_least_squares, rls_step
+from .factorised import sqrt_step, ud_step
+from .statespace import (balanced_truncation, continuous_to_discrete, discrete_to_continuous,
+                         modal_structure_for, to_modal)
+from .subspace import SubspaceResult, estimate_subspace
 
 __all__ = [
     "IOData",
@@ -72,4 +83,41 @@ __all__ = [
     "read_value",
     "write_group",
     "read_group",
+    "LeastSquaresResult",
+    "least_squares",
+    "ArxModel",
+    "ArxResult",
+    "arx_regressors",
+    "estimate_arx",
+    "RecursiveResult",
+    "rls_step",
+    "recursive_least_squares",
+    "estimate_arx_recursive",
+    "sqrt_step",
+    "ud_step",
+    "GlsResult",
+    "estimate_gls",
+    "KalmanResult",
+    "SmootherResult",
+    "kalman_predict",
+    "kalman_update",
+    "kalman_filter",
+    "rts_smoother",
+    "NonlinearModel",
+    "EkfResult",
+    "ekf_joint",
+    "PencilModel",
+    "PencilEstimate",
+    "estimate_pencil",
+    "continuous_to_discrete",
+    "discrete_to_continuous",
+    "modal_structure_for",
+    "to_modal",
+    "balanced_truncation",
+    "SubspaceResult",
+    "estimate_subspace",
+    "COMPARATORS",
+    "ComparatorResult",
+    "identify_with",
+    "register_comparator",
 ]

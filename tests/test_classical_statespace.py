@@ -1,0 +1,115 @@
+"""State-space conversions: hold equivalents, modal form, balanced truncation, subspace identification."""
+
+import numpy as np
+import pytest
+
+from identification import ExcitationError, InputError
+from identification.modal import ModalStructure
+from identification.statespace import (balanced_truncation, continuous_to_discrete, discrete_to_continuous,
+                                       modal_structure_for, to_modal)
+from identification.subspace import estimate_subspace
+from scenarios.linear_system import identification_input, true_model
+
+ALGEBRA = 1e-9  # matrix exponentials and eigen-decompositions of 5-state models
+
+
+def _frequency_response(A, B, C, D, frequencies=(0.1, 3.0, 40.0)):
+    return np.array([C @ np.linalg.solve(1j * w * np.eye(A.shape[0]) - A, B) + D for w in frequencies])
+
+
+@pytest.mark.parametrize("hold", ["foh", "zoh"])
+def test_hold_equivalent_round_trip(hold):
+    model = true_model(3)
+    discrete = continuous_to_discrete(model.A, model.B, model.C, model.D, 0.002, hold=hold)
+    back = discrete_to_continuous(*discrete, 0.002, hold=hold)
+    np.testing.assert_allclose(_frequency_response(*back), _frequency_response(model.A, model.B, model.C, model.D),
+                               atol=ALGEBRA)
+
+
+def test_first_order_hold_equivalent_equals_the_exact_simulation():
+    """The discrete FOH model reproduces ModalModel.simulate(method='foh') sample by sample.
+
+    Its state is xi = x - G2 u, so from rest it starts at -G2 u(0): the input starts at 0 here.
+    """
+    model = true_model(3)
+    _, u = identification_input(1, duration=2.0)
+    u[0] = 0.0
+    Ad, Bd, Cd, Dd = continuous_to_discrete(model.A, model.B, model.C, model.D, 0.002)
+    x = np.zeros(5)
+    y = np.zeros((u.shape[0], 3))
+    for k in range(u.shape[0]):
+        y[k] = Cd @ x + Dd @ u[k]
+        x = Ad @ x + Bd @ u[k]
+    np.testing.assert_allclose(y, model.simulate(u, 0.002, method="foh"), atol=ALGEBRA)
+
+
+def _random_continuous(seed, n_y=3):
+    rng = np.random.default_rng(seed)
+    blocks = np.diag([-4.0, -2.0, -1.0, -7.0, -0.5])
+    blocks[0, 1], blocks[1, 0] = 9.0, -9.0
+    blocks[2, 3], blocks[3, 2] = 3.0, -3.0  # pairs -3 +/- 9j and -4 +/- 3j (diagonals fixed below)
+    blocks[2, 2] = blocks[3, 3] = -4.0
+    blocks[0, 0] = blocks[1, 1] = -3.0
+    basis = rng.standard_normal((5, 5)) + 2 * np.eye(5)
+    A = basis @ blocks @ np.linalg.inv(basis)
+    return A, rng.standard_normal((5, 2)), rng.standard_normal((n_y, 5)), rng.standard_normal((n_y, 2))
+
+
+@pytest.mark.parametrize("n_y", [1, 3])
+def test_to_modal_keeps_the_transfer_function_and_fixes_c(n_y):
+    system = _random_continuous(0, n_y)
+    model = to_modal(*system)
+    assert model.structure == ModalStructure.default(5, 2, n_y)
+    for i, j in model.structure.fixed_c:
+        assert model.C[i, j] == 1.0
+    np.testing.assert_allclose(_frequency_response(model.A, model.B, model.C, model.D),
+                               _frequency_response(*system), atol=ALGEBRA)
+    np.testing.assert_allclose(np.sort_complex(model.eigenvalues()), np.sort_complex(np.linalg.eigvals(system[0])),
+                               atol=ALGEBRA)
+
+
+def test_to_modal_explains_what_it_cannot_do():
+    A, B, C, D = _random_continuous(1, 1)
+    model = to_modal(A, B, C, D)
+    hidden = model.C.copy()
+    hidden[0, 4] = 0.0  # the real mode no longer reaches output 1, to which it is tied
+    with pytest.raises(InputError, match="unobservable from output 1"):
+        to_modal(model.A, model.B, hidden, model.D)
+    with pytest.raises(InputError, match="2 complex pairs and 1 real poles but the structure 1 and 3"):
+        to_modal(A, B, C, D, ModalStructure(1, 3, 2, 1, tuple((0, j) for j in range(5))))
+    jordan = np.array([[-1.0, 1.0], [0.0, -1.0]])
+    with pytest.raises(InputError, match="not diagonalisable"):
+        to_modal(jordan, np.ones((2, 1)), np.ones((1, 2)), np.zeros((1, 1)))
+    with pytest.raises(InputError, match="negative real axis"):
+        discrete_to_continuous([[-0.5]], [[1.0]], [[1.0]], [[0.0]], 0.01)
+
+
+def test_structure_follows_the_eigenvalues():
+    four_real = np.diag([-1.0, -2.0, -3.0, -4.0, -5.0])
+    structure = modal_structure_for(four_real, 1, 2)
+    assert (structure.n_complex_pairs, structure.n_real) == (0, 5)
+    assert structure.fixed_c[:2] == ((0, 0), (0, 2))  # modes tied to outputs in turn
+
+
+def test_balanced_truncation_removes_duplicated_states():
+    model = true_model(1)
+    Ad, Bd, Cd, Dd = continuous_to_discrete(model.A, model.B, model.C, model.D, 0.01)
+    doubled = (np.kron(np.eye(2), Ad), np.vstack([Bd, Bd]), np.hstack([Cd, Cd]) / 2, Dd)
+    reduced = balanced_truncation(*doubled, 5)
+    np.testing.assert_allclose(np.sort_complex(np.linalg.eigvals(reduced[0])), np.sort_complex(np.linalg.eigvals(Ad)),
+                               atol=1e-8)  # Lyapunov solutions at 1e-12, amplified by the pole spread
+    assert reduced[4][5] < 1e-10 * reduced[4][0]
+    with pytest.raises(InputError, match="fewer than 6"):
+        balanced_truncation(*doubled, 6)
+
+
+def test_subspace_rejects_too_high_an_order_and_too_short_records():
+    model = true_model(1)
+    _, u = identification_input(2, duration=4.0)
+    y = model.simulate(u, 0.002)
+    fit = estimate_subspace((u, y), order=5)
+    assert fit.singular_values[5] < 1e-9 * fit.singular_values[0]  # five states, no more
+    with pytest.raises(ExcitationError, match="fewer than 7 states"):
+        estimate_subspace((u, y), order=7)
+    with pytest.raises(InputError, match="too few"):
+        estimate_subspace((u[:30], y[:30]), order=5)
