@@ -258,8 +258,24 @@ def output_error_comparator(data: IOData, *, order: int, **options: Any) -> Moda
     return ModalModel.from_parameters(structure, solution.x, meta=meta)
 
 
+def iekf_comparator(data: IOData, *, order: int, **options: Any) -> ModalModel:
+    """The IEKF with the workbench's default settings (exact discretisation), C pattern ``default``.
+
+    Options are those of :class:`identification.iekf.IEKFOptions` (``p``, ``passes``, ...).
+    """
+    from .iekf import IEKFOptions, identify_iekf
+
+    try:
+        settings = IEKFOptions(**options)
+    except TypeError as exc:
+        raise InputError(f"unknown option for the iekf method: {exc}") from None
+    structure = ModalStructure.default(order, data.n_u, data.n_y)
+    return identify_iekf(data, structure, options=settings).model
+
+
 #: The comparators by name; ``identify_with(data, method=name, order=n)`` dispatches here.
 COMPARATORS: dict[str, Comparator] = {
+    "iekf": iekf_comparator,
     "arx": arx_comparator,
     "rls": rls_comparator,
     "n4sid": n4sid_comparator,
@@ -283,8 +299,8 @@ def identify_with(data: IOData, *, method: str, order: int, **options: Any) -> C
     ----------
     data : IOData
     method : str
-        A key of :data:`COMPARATORS`: ``arx``, ``rls``, ``n4sid``, ``output-error``
-        (and whatever :func:`register_comparator` added, e.g. ``iekf``).
+        A key of :data:`COMPARATORS`: ``iekf``, ``arx``, ``rls``, ``n4sid``,
+        ``output-error`` (and whatever :func:`register_comparator` added).
     order : int
         Model order n.
     **options

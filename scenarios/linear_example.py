@@ -56,6 +56,7 @@ __all__ = [
     "PAPER",
     "DT",
     "true_model",
+    "identification_input",
     "make_data",
     "euler_equivalent",
     "CaseResult",
@@ -103,24 +104,27 @@ _CASE_SETTINGS: dict[str, dict[str, Any]] = {
 }
 
 
-def true_model() -> ModalModel:
-    """The source system of eq. 15, in the workbench's pairs-first modal order.
+def true_model(n_outputs: int = 3) -> ModalModel:
+    """The source system of eq. 15 with its first ``n_outputs`` outputs (1 or 3), in pairs-first modal order.
 
     Eq. 15 lists the real pole first; here the pairs come first (states 1-2:
     -15 +/- 10j, states 3-4: -8 +/- 40j, state 5: -4), rows of B and columns
-    of C permuted alike.
+    of C permuted alike. The first row of C stays all ones (the ``all-ones``
+    pattern).
     """
+    if n_outputs not in (1, 3):
+        raise InputError(f"the linear example has 1 or 3 outputs; got {n_outputs}")
     order = [1, 2, 3, 4, 0]
     A = np.array(
         [[-4, 0, 0, 0, 0], [0, -15, 10, 0, 0], [0, -10, -15, 0, 0], [0, 0, 0, -8, 40], [0, 0, 0, -40, -8]],
         dtype=float,
     )[np.ix_(order, order)]
     B = np.array([[0.1, 0.1], [0.3, -3], [1.5, 0], [10, -0.5], [0.7, 1]])[order]
-    C = np.array([[1, 1, 1, 1, 1], [2, 0.3, 0.35, -1.35, -0.06], [2.75, -1.3, 3.6, 1.4, 0.77]])[:, order]
-    D = np.array([[0, 0], [1.5, 0.67], [-0.2, 1.4]])
+    C = np.array([[1, 1, 1, 1, 1], [2, 0.3, 0.35, -1.35, -0.06], [2.75, -1.3, 3.6, 1.4, 0.77]])[:n_outputs, order]
+    D = np.array([[0, 0], [1.5, 0.67], [-0.2, 1.4]])[:n_outputs]
     return ModalModel(
-        ModalStructure.from_pattern("all-ones", 5, 2, 3), A, B, C, D,
-        input_names=("u1", "u2"), output_names=("y1", "y2", "y3"),
+        ModalStructure.from_pattern("all-ones", 5, 2, n_outputs), A, B, C, D,
+        input_names=("u1", "u2"), output_names=tuple(f"y{i + 1}" for i in range(n_outputs)),
         meta={"source": "Best & Bogdanski 2017, eq. 15"},
     )
 
@@ -128,6 +132,23 @@ def true_model() -> ModalModel:
 def euler_equivalent(eigenvalues: Any, dt: float = DT) -> np.ndarray:
     """``(e^{lambda T} - 1)/T``: where the Euler filter's eigenvalues converge."""
     return (np.exp(np.asarray(eigenvalues, dtype=complex) * dt) - 1.0) / dt
+
+
+def identification_input(seed: int = 0, *, duration: float = 100.0) -> tuple[np.ndarray, np.ndarray]:
+    """Eq. 16: times (N,) and inputs (N, 2): N(0, 1) points at 50 Hz, linear between, plus offsets +0.1, -0.1.
+
+    ``N = duration x 500``; samples past the last 50 Hz point hold its value.
+    """
+    if not duration > 0:
+        raise InputError(f"duration must be positive; got {duration}")
+    rng = np.random.default_rng(seed)
+    coarse_dt = 0.02  # 50 Hz points
+    n_coarse = int(round(duration / coarse_dt))
+    coarse = rng.standard_normal((n_coarse, 2))
+    t_coarse = np.arange(n_coarse) * coarse_dt
+    t = np.arange(int(round(duration / DT))) * DT
+    u = np.column_stack([np.interp(t, t_coarse, coarse[:, i]) for i in range(2)]) + np.array([0.1, -0.1])
+    return t, u
 
 
 def make_data(
@@ -140,23 +161,17 @@ def make_data(
     """The eq. 16 record: returns the (possibly noisy) record and the clean outputs (N, n_y).
 
     Noise is white and Gaussian with a standard deviation of ``noise_ratio``
-    times each output's RMS, drawn from the same seeded generator after the inputs.
+    times each output's RMS, drawn from a generator seeded with ``seed + 1_000_003``
+    so that the inputs are the same with and without noise.
     """
     if not 0.0 <= noise_ratio < 10.0:
         raise InputError(f"noise_ratio must lie in [0, 10); got {noise_ratio}")
-    rng = np.random.default_rng(seed)
-    coarse_dt = 0.02  # 50 Hz points
-    n_coarse = int(round(duration / coarse_dt))
-    coarse = rng.standard_normal((n_coarse, 2))
-    t_coarse = np.arange(n_coarse) * coarse_dt
-    n = int(round(duration / DT))
-    t = np.arange(n) * DT  # the last 9 samples lie past the final knot and hold its value
-    u = np.column_stack([np.interp(t, t_coarse, coarse[:, i]) for i in range(2)]) + np.array([0.1, -0.1])
+    t, u = identification_input(seed, duration=duration)
     clean = true_model().simulate(u, DT)[:, list(outputs)]
     y = clean
     if noise_ratio > 0:
         rms = np.sqrt(np.mean(clean**2, axis=0))
-        y = clean + noise_ratio * rms * rng.standard_normal(clean.shape)
+        y = clean + noise_ratio * rms * np.random.default_rng(seed + 1_000_003).standard_normal(clean.shape)
     data = IOData(
         t=t, u=u, y=y,
         input_names=("u1", "u2"),

@@ -10,17 +10,17 @@ import pytest
 from identification import ExcitationError, InputError, fit_metrics
 from identification.comparators import COMPARATORS, identify_with, register_comparator
 from identification.modal import ModalModel, ModalStructure
-from scenarios.linear_system import linear_example_data, true_model
+from scenarios.linear_example import make_data, true_model
 
 REQUIRED_FIT = 99.9  # percent, R of eq. 17
 
 
 @pytest.fixture(scope="module")
 def data():
-    return linear_example_data(seed=0)
+    return make_data(0, outputs=(0,))[0]
 
 
-@pytest.mark.parametrize("method", ["arx", "rls", "n4sid", "output-error"])
+@pytest.mark.parametrize("method", ["iekf", "arx", "rls", "n4sid", "output-error"])
 def test_comparator_identifies_the_linear_example(data, method):
     result = identify_with(data, method=method, order=5)
     assert result.metrics.percentage_explanation[0] > REQUIRED_FIT
@@ -29,14 +29,14 @@ def test_comparator_identifies_the_linear_example(data, method):
     # Noise-free data of the model class: the eigenvalues come out to ~1e-6; 1e-3 relative is a
     # loose bound that still fails a wrong pole (the nearest distinct one is 40 % away).
     found = np.sort_complex(result.model.eigenvalues())
-    truth = np.sort_complex(true_model().eigenvalues())
+    truth = np.sort_complex(true_model(1).eigenvalues())
     np.testing.assert_allclose(found, truth, rtol=1e-3)
 
 
 def test_output_error_improves_a_poor_start(data):
     """From the true parameters perturbed by 10 % (fit ~96 %), on the first 20 s of the record."""
     short = data[:10000]
-    truth = true_model()
+    truth = true_model(1)
     rng = np.random.default_rng(0)
     theta = truth.parameters * (1.0 + 0.1 * rng.standard_normal(truth.parameters.size))
     start = ModalModel.from_parameters(truth.structure, theta)
@@ -49,13 +49,13 @@ def test_output_error_improves_a_poor_start(data):
 
 
 def test_registry_dispatches_and_rejects(data, monkeypatch):
-    with pytest.raises(InputError, match="unknown method 'iekf'; use one of arx, n4sid, output-error, rls"):
-        identify_with(data, method="iekf", order=5)
+    with pytest.raises(InputError, match="unknown method 'kalman'; use one of arx, iekf, n4sid, output-error, rls"):
+        identify_with(data, method="kalman", order=5)
     with pytest.raises(InputError, match="unknown option"):
         identify_with(data, method="arx", order=5, lambda_=0.9)
     with pytest.raises(InputError, match="exists"):
         register_comparator("arx", COMPARATORS["arx"])
-    monkeypatch.setitem(COMPARATORS, "truth", lambda d, *, order: true_model())
+    monkeypatch.setitem(COMPARATORS, "truth", lambda d, *, order: true_model(1))
     result = identify_with(data[:2000], method="truth", order=5)
     assert result.metrics.percentage_explanation[0] == pytest.approx(100.0, abs=1e-9)
 

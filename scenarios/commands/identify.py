@@ -55,7 +55,8 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dt", type=float, help="sample interval in s (CSV without a time column)")
     parser.add_argument("--order", type=int, default=4, help="model order n (default 4)")
     parser.add_argument("--pattern", default="default", choices=C_PATTERNS, help="C pattern (default: pairs tied to outputs in turn)")
-    parser.add_argument("--method", default="iekf", help="estimator: iekf (default), or a comparator where installed")
+    parser.add_argument("--method", default="iekf", choices=("iekf", "arx", "rls", "n4sid", "output-error"),
+                        help="estimator: the IEKF (default) or a classical comparator on the same data")
     parser.add_argument("--passes", type=int, default=50, help="largest number of passes (default 50)")
     parser.add_argument("--p", type=float, default=1.0, help="tuning parameter p: Q = p I' (default 1)")
     parser.add_argument("--discretization", default="exact", choices=DISCRETIZATIONS, help="filter discretisation (default exact)")
@@ -168,14 +169,9 @@ def _save_model(model, target: str) -> Path:
 
 
 def _run_comparator(args: argparse.Namespace, data, structure) -> tuple[dict, str]:
-    try:
-        from identification.comparators import COMPARATORS
-    except ImportError:
-        COMPARATORS = {}
-    if args.method not in COMPARATORS:
-        known = ", ".join(["iekf", *sorted(COMPARATORS)])
-        raise InputError(f"unknown method {args.method!r}; use one of {known}")
-    outcome = COMPARATORS[args.method](data, order=structure.n)
+    from identification.comparators import identify_with
+
+    outcome = identify_with(data, method=args.method, order=structure.n)
     model = outcome.model
     summary = {
         "method": args.method,
