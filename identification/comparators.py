@@ -57,7 +57,7 @@ from .data import IOData
 from .errors import InputError
 from .least_squares import arx_regressors, estimate_arx, least_squares, model_from_theta
 from .metrics import FitMetrics, fit_metrics
-from .modal import ModalModel
+from .modal import ModalModel, ModalStructure
 from .recursive import recursive_least_squares
 from .statespace import balanced_truncation, discrete_to_continuous, modal_structure_for, to_modal
 from .subspace import estimate_subspace
