@@ -60,12 +60,18 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
         nonlinear_passes=args.nonlinear_passes, nonlinear_p=args.nonlinear_p, workers=args.workers,
     )
     state = {order: "-" for order in config.orders}
-    with Progress(planned_passes(config), "handling study", enabled=False if args.quiet else None) as progress:
+    shown: list[Progress] = []  # drawn from the first pass on, after the set-up has logged its warnings
 
-        def on_event(event) -> None:
-            state[event.order] = f"{'L' if event.stage == 'linear' else 'N'}{event.index}"
-            progress.advance(note=" ".join(f"n{order}:{done}" for order, done in state.items()))
+    def on_event(event) -> None:
+        if not shown:
+            shown.append(Progress(planned_passes(config), "handling study", enabled=False if args.quiet else None))
+        state[event.order] = f"{'L' if event.stage == 'linear' else 'N'}{event.index}"
+        shown[0].advance(note=" ".join(f"n{order}:{done}" for order, done in state.items()))
 
+    try:
         result = run_study(config, on_event=on_event)
+    finally:
+        for progress in shown:
+            progress.close()
     path = write_archive_for(result, args.out)
     return {**result.summary, "archive": str(path)}, result.text + f"\nwrote {path}"
