@@ -434,9 +434,11 @@ def run_order(job: OrderJob, report: Callable[[PassEvent], None] | None = None) 
     identification, validation = job.identification.to_iodata(), job.validation.to_iodata()
 
     def reporter(stage: str) -> Callable[[Any, Any], None] | None:
+        """An ``on_pass`` that counts passes itself: the spline IEKF's records promise no ``index``."""
         if report is None:
             return None
-        return lambda record, _: report(PassEvent(job.order, stage, int(record.index), float(record.mean_fit_filter)))
+        count = iter(range(1, 1 << 62))
+        return lambda record, _: report(PassEvent(job.order, stage, next(count), float(record.mean_fit_filter)))
 
     structure = ModalStructure.default(job.order, identification.n_u, identification.n_y)
     linear_error = None

@@ -228,8 +228,7 @@ class _StandInOptions:
 
 
 @dataclass(frozen=True, eq=False)
-class _StandInRecord:
-    index: int
+class _StandInRecord:  # only what the announced interface promises: no pass index
     fit_filter: np.ndarray
     trace_p: float
 
@@ -271,7 +270,7 @@ def test_nonlinear_call_site_with_a_stand_in(monkeypatch, tmp_path):
         calls.append(options)
         history = []
         for index in range(1, options.passes + 1):
-            record = _StandInRecord(index, np.full(data.n_y, 99.0), 1e-3 * index)
+            record = _StandInRecord(np.full(data.n_y, 99.0), 1e-3 * index)
             history.append(record)
             on_pass(record, None)
         return _StandInResult(_StandInModel(linear_model), tuple(history))
