@@ -1,0 +1,297 @@
+"""The handling study (Best & Bogdanski 2017, section 6, Table 5): its command, table, modes and archive.
+
+Independent truth: the vehicle's own linearisation (:func:`vehicle.linearize`)
+for the modes, the paper's Table 5 for the table's shape, and the archive
+read back from disk. The records are short (10 s) and the passes few, so that
+the module runs in well under a minute; the full study's figures are in the
+module notes of :mod:`scenarios.handling_study`.
+"""
+
+import json
+import subprocess
+import sys
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from identification.archive import read_archive
+from identification.errors import DivergenceError, InputError
+from scenarios import handling_study
+from scenarios.cli import main
+from scenarios.handling_study import (
+    OUTPUTS,
+    HandlingConfig,
+    compare_modes,
+    make_records,
+    parse_orders,
+    run_study,
+    write_archive_for,
+)
+
+# Short records at full amplitude (the nonlinear range). p = 1e-3 converges fast enough for
+# 20 passes on 10 s of data (measured mean R: 97.6 % for n = 2, 98.7 % for n = 3).
+FAST = ["--orders", "2-3", "--duration", "10", "--passes", "20", "--p", "1e-3", "--seed", "0"]
+TABLE_KEYS = {"order", "linear_eigenvalues", "linear_identification_R", "nonlinear_identification_R",
+              "linear_validation_R", "nonlinear_validation_R"}
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory):
+    """The command run as a user runs it, two workers (a spawned process pool), JSON on stdout."""
+    out = tmp_path_factory.mktemp("handling") / "handling_study.h5"
+    completed = subprocess.run(
+        [sys.executable, "-m", "scenarios.cli", "study", "handling", *FAST, "--workers", "2", "--json",
+         "--out", str(out)],
+        capture_output=True, text=True, check=False,
+    )
+    assert completed.returncode == 0, completed.stderr
+    return json.loads(completed.stdout), out, completed.stderr
+
+
+def test_json_summary_keys_and_types(study):
+    summary, out, _ = study
+    assert {"table", "chosen_order", "seconds", "vehicle_modes", "mode_comparison", "archive"} <= set(summary)
+    assert isinstance(summary["chosen_order"], int) and summary["chosen_order"] in (2, 3)
+    assert isinstance(summary["seconds"], float) and summary["seconds"] > 0
+    assert summary["archive"] == str(out)
+    for row in summary["table"]:
+        assert set(row) == TABLE_KEYS
+        assert isinstance(row["order"], int)
+        for key in ("linear_identification_R", "linear_validation_R"):
+            assert isinstance(row[key], float)
+        for value in row["linear_eigenvalues"]:
+            assert isinstance(value, list) and len(value) == 2 and all(isinstance(v, float) for v in value)
+
+
+def test_table_rows(study):
+    summary, _, stderr = study
+    rows = summary["table"]
+    assert [row["order"] for row in rows] == [2, 3]
+    for row in rows:
+        eigenvalues = np.array([complex(*value) for value in row["linear_eigenvalues"]])
+        assert eigenvalues.size == row["order"] and np.all(eigenvalues.real < 0)
+        # a linear model of a car at 90 % of grip: well above 95 %, short of the vehicle's own
+        # linearisation's 99.99 % in the linear regime (measured 97.6-99.0 %)
+        assert 95.0 < row["linear_identification_R"] < 99.9
+        assert 95.0 < row["linear_validation_R"] < 99.9
+    # the paper's shape: R grows with the order (n = 2: 97.6 %, n = 3: 98.7 % measured)
+    assert rows[1]["linear_identification_R"] > rows[0]["linear_identification_R"]
+    if not handling_study.nonlinear_available():
+        assert all(row["nonlinear_identification_R"] is None and row["nonlinear_validation_R"] is None for row in rows)
+        assert "spline_iekf is not available" in stderr and "linear-only" in stderr
+
+
+def test_archive_round_trip(study):
+    summary, out, _ = study
+    archive = read_archive(out, kinds=("handling-study",))
+    assert archive.kind == "handling-study" and archive.seeds == [0]
+    assert set(archive.records) == {"identification", "validation"}
+    for record in archive.records.values():
+        assert record.output_names == OUTPUTS and record.input_names == ("steer",)
+        assert record.n_samples == 5001 and record.dt == pytest.approx(0.002)
+    assert {"linear-n2", "linear-n3"} <= set(archive.runs)
+    by_order = {row["order"]: row for row in summary["table"]}
+    for order in (2, 3):
+        run = archive.runs[f"linear-n{order}"]
+        assert run.n_pass == 20
+        stored = np.sort_complex(run.model.eigenvalues())
+        reported = np.sort_complex(np.array([complex(*v) for v in by_order[order]["linear_eigenvalues"]]))
+        assert np.allclose(stored, reported, rtol=1e-12)
+        # the stored model, simulated again over the stored record, scores what the summary says
+        record = archive.records["validation"]
+        again = np.mean(handling_study.score(run.model, record))
+        assert again == pytest.approx(by_order[order]["linear_validation_R"], abs=1e-9)
+        assert np.mean(run.metrics["identification_R"]) == pytest.approx(by_order[order]["linear_identification_R"], abs=1e-12)
+    assert archive.config["orders"] == [2, 3] and archive.config["passes"] == 20
+
+
+def test_records_start_at_the_trim():
+    """The outputs start at zero, the state the models start from: no trim offset is needed."""
+    records = make_records(HandlingConfig(orders=(2,), duration=5.0))
+    for record in records.values():
+        assert np.max(np.abs(record.y[0])) < 1e-12  # trim at zero steer, straight running: exactly zero but rounding
+        assert np.max(np.abs(record.y), axis=0).min() > 1e-3  # and every output is excited
+
+
+def test_linear_modes_near_the_vehicle_modes():
+    """In the linear regime the order-3 model finds the vehicle's roll mode.
+
+    At a tenth of the steer amplitude the vehicle's linearisation explains
+    99.99 % of the data. The order-3 model's pair then lies at the roll mode:
+    measured 1.40-1.48 Hz, damping 0.59-0.61 (30 s and 10 s records, p 1e-5
+    to 1e-3) against the vehicle's 1.447 Hz and 0.575, hence 10 % in
+    frequency and 0.1 in damping. The yaw-sideslip mode (2.14 Hz, damping
+    0.98) is not pinned down by these data: nearly critically damped and close
+    to the tyre lags, it can be placed elsewhere at no cost (a model with two
+    pairs and two real poles explains 99.997 % with its poles at -26 +/- 14j
+    and a double pole at -8.6). Its nearest identified mode is asserted only
+    to be well damped and slower: measured damping 1.0, 0.96-1.07 Hz.
+    """
+    result = run_study(HandlingConfig(orders=(3,), duration=10.0, amplitude_scale=0.1, p=1e-3, passes=30,
+                                      nonlinear=False, workers=1))
+    assert result.summary["table"][0]["linear_identification_R"] > 99.5  # measured 99.57 %
+    modes = {item["mode"]: item for item in result.summary["mode_comparison"]}
+    roll = modes["roll"]
+    assert roll["vehicle_frequency_hz"] == pytest.approx(1.447, abs=1e-3)
+    assert abs(roll["frequency_ratio"] - 1.0) < 0.10
+    assert abs(roll["identified_damping"] - roll["vehicle_damping"]) < 0.10
+    yaw = modes["yaw-sideslip"]
+    assert yaw["identified_damping"] > 0.75
+    assert 0.3 < yaw["frequency_ratio"] < 1.0
+
+
+def test_compare_modes_picks_the_nearest_mode():
+    from vehicle.linearize import Mode
+
+    roll = Mode(complex(-5, 7), abs(complex(-5, 7)) / (2 * np.pi), 5 / abs(complex(-5, 7)), "roll", ("phi",))
+    found = compare_modes([complex(-20, 0), complex(-4, -6.5)], {"roll": roll})["roll"]  # a conjugate counts as its pair
+    assert found["identified_eigenvalue"] == complex(-4, 6.5)
+    assert found["identified_damping"] == pytest.approx(4 / abs(complex(-4, 6.5)), rel=1e-12)
+
+
+def test_pool_and_single_process_agree(study):
+    """The parallel run gives what one process gives: each order is a function of its data alone.
+
+    Same compiled code and data, so the figures agree to rounding (1e-9 points leaves room for
+    a BLAS that sums in another order in another process; measured: identical).
+    """
+    summary, _, _ = study
+    single = run_study(HandlingConfig(orders=(2, 3), duration=10.0, passes=20, p=1e-3, nonlinear=False, workers=1))
+    for pooled, alone in zip(summary["table"], single.summary["table"]):
+        assert pooled["linear_identification_R"] == pytest.approx(alone["linear_identification_R"], abs=1e-9)
+        assert pooled["linear_validation_R"] == pytest.approx(alone["linear_validation_R"], abs=1e-9)
+
+
+def test_a_diverged_order_leaves_the_others_standing(monkeypatch, tmp_path):
+    real = handling_study.identify_iekf
+
+    def diverge_at_three(data, structure, **options):
+        if structure.n == 3:
+            raise DivergenceError("pass 1: the identified model is unstable", last_good=None)
+        return real(data, structure, **options)
+
+    monkeypatch.setattr(handling_study, "identify_iekf", diverge_at_three)
+    result = run_study(HandlingConfig(orders=(2, 3), duration=5.0, passes=3, p=1e-3, nonlinear=False, workers=1))
+    failed = result.summary["table"][1]
+    assert failed["linear_eigenvalues"] == [] and failed["linear_identification_R"] is None
+    assert "unstable" in result.summary["linear_runs"][1]["error"]
+    assert result.summary["chosen_order"] == 2
+    assert "(failed)" in result.text
+    assert set(read_archive(write_archive_for(result, tmp_path / "h.h5")).runs) == {"linear-n2"}
+
+    def always_diverge(data, structure, **options):
+        raise DivergenceError("pass 1: non-finite values", last_good=None)
+
+    monkeypatch.setattr(handling_study, "identify_iekf", always_diverge)
+    with pytest.raises(DivergenceError, match="no order gave a linear model"):
+        run_study(HandlingConfig(orders=(2,), duration=5.0, passes=3, nonlinear=False, workers=1))
+
+
+@pytest.mark.parametrize(
+    "options, message",
+    [
+        (["--orders", "7-2"], "runs backwards"),
+        (["--orders", "1"], "from 2 to 8"),
+        (["--orders", "2-9"], "from 2 to 8"),
+        (["--orders", "four"], "orders must look like"),
+        (["--nodes", "2"], "nodes must be a whole number from 3"),
+        (["--passes", "1"], "passes must be"),
+        (["--workers", "0"], "workers must be"),
+        (["--duration", "2"], "duration must be at least"),
+        (["--amplitude-scale", "0"], "amplitude_scale must be a positive number"),
+    ],
+)
+def test_bad_options_exit_2_with_one_line(options, message, capsys):
+    assert main(["study", "handling", *options]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and message in lines[0], captured.err
+
+
+def test_parse_orders():
+    assert parse_orders("2-6") == (2, 3, 4, 5, 6)
+    assert parse_orders("4") == (4,)
+    assert parse_orders(" 2, 4-5 ") == (2, 4, 5)
+    for text in ("3,2", "2,2", "2-", ""):
+        with pytest.raises(InputError):
+            parse_orders(text)
+
+
+# ----------------------------------------------------------------- the nonlinear call site
+@dataclass(frozen=True)
+class _StandInOptions:
+    nodes: int = 5
+    passes: int = 3
+    p: float = 1e-6
+
+
+@dataclass(frozen=True, eq=False)
+class _StandInRecord:  # only what the announced interface promises: no pass index
+    fit_filter: np.ndarray
+    trace_p: float
+
+    @property
+    def mean_fit_filter(self) -> float:
+        return float(np.mean(self.fit_filter))
+
+
+@dataclass(frozen=True, eq=False)
+class _StandInModel:
+    """Behaves as the announced spline model: the linear model with a gain of 1.01 on the outputs."""
+
+    linear: object
+
+    def simulate(self, u, dt):
+        return 1.01 * self.linear.simulate(u, dt)
+
+    def mode_frequency_damping(self, mode, amplitudes):
+        amplitudes = np.asarray(amplitudes)
+        return 1.0 - 0.2 * amplitudes, 0.7 - 0.1 * amplitudes  # frequency and damping falling with amplitude
+
+    def spline_tables(self):
+        return {"sigma1": {"nodes": np.linspace(-1, 1, 5), "values": np.full(5, -4.0)}}
+
+
+@dataclass(frozen=True, eq=False)
+class _StandInResult:
+    model: _StandInModel
+    history: tuple
+    seconds: float = 0.5
+    stop_reason: str = "passes"
+
+
+def test_nonlinear_call_site_with_a_stand_in(monkeypatch, tmp_path):
+    """The study's one call site, fed by a stand-in with the announced interface of identification.spline_iekf."""
+    calls = []
+
+    def identify(data, linear_model, *, options, on_pass):
+        calls.append(options)
+        history = []
+        for index in range(1, options.passes + 1):
+            record = _StandInRecord(np.full(data.n_y, 99.0), 1e-3 * index)
+            history.append(record)
+            on_pass(record, None)
+        return _StandInResult(_StandInModel(linear_model), tuple(history))
+
+    monkeypatch.setattr(handling_study, "identify_spline_iekf", identify)
+    monkeypatch.setattr(handling_study, "SplineIEKFOptions", _StandInOptions)
+    events = []
+    result = run_study(HandlingConfig(orders=(2,), duration=5.0, passes=3, p=1e-3, nodes=7, workers=1),
+                       on_event=events.append)
+    assert calls == [_StandInOptions(nodes=7)]  # passes and p left to the identifier's own defaults
+    assert [(e.stage, e.index) for e in events] == [("linear", 1), ("linear", 2), ("linear", 3),
+                                                    ("nonlinear", 1), ("nonlinear", 2), ("nonlinear", 3)]
+    row = result.summary["table"][0]
+    outcome = result.outcomes[2]
+    assert row["nonlinear_identification_R"] == pytest.approx(np.mean(handling_study.score(
+        _StandInModel(outcome.linear.model), result.records["identification"])), abs=1e-12)
+    assert row["nonlinear_validation_R"] is not None
+    run = result.summary["nonlinear_runs"][0]
+    assert run["passes_run"] == 3 and run["missing"] is None
+    assert run["mode_frequency_hz"][0][-1] < run["mode_frequency_hz"][0][0]
+    path = write_archive_for(result, tmp_path / "handling.h5")
+    stored = read_archive(path).runs["nonlinear-n2"]
+    assert stored.n_pass == 3 and np.allclose(stored.history["trace_p"], [1e-3, 2e-3, 3e-3])
+    assert np.allclose(stored.metrics["validation_R"], outcome.nonlinear.fit_validation)
