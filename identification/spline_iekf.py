@@ -58,7 +58,12 @@ class SplineIEKFOptions:
     nodes : int
         Nodes per spline, 3..9 (paper: 5).
     p : float
-        Tuning parameter: ``Q = p I'`` on the node ordinates, ``P0 = Q``.
+        Tuning parameter: ``Q = p I'`` on the node ordinates, ``P0 = Q``. The
+        default, 1e-7, is chosen by measurement on the handling study (n = 4,
+        60 passes, validation mean R): 1e-5 98.56 %, 3e-6 99.15 %, 1e-6 99.41 %,
+        1e-7 99.59 %, against 98.85 % for the linear start. The filter
+        minimises one-step prediction errors; a larger p lets the ordinates
+        follow them away from the model that simulates best.
     passes : int
         Largest number of passes.
     discretization, covariance : str
@@ -72,8 +77,8 @@ class SplineIEKFOptions:
     """
 
     nodes: int = 5
-    p: float = 1e-4
-    passes: int = 20
+    p: float = 1e-7
+    passes: int = 60
     discretization: str = "exact"
     covariance: str = "joseph"
     redistribute: bool = True

@@ -403,13 +403,14 @@ def identify_nonlinear(
     return identify_spline_iekf(data, linear_model, options=SplineIEKFOptions(**settings), on_pass=on_pass)
 
 
-def _nonlinear_outcome(result: Any, identification: IOData, validation: IOData, n_modes: int) -> NonlinearOutcome:
+def _nonlinear_outcome(result: Any, identification: IOData, validation: IOData, n_pairs: int) -> NonlinearOutcome:
     model = result.model
     curves = {}
-    for mode in range(n_modes):
+    for mode in range(n_pairs):  # frequency and damping curves exist for the complex pairs
         frequency, damping = model.mode_frequency_damping(mode, MODE_AMPLITUDES)
         curves[mode] = (np.asarray(frequency, dtype=float), np.asarray(damping, dtype=float))
-    tables = {name: {key: np.asarray(value) for key, value in table.items()}
+    tables = {name: {key: value if isinstance(value, str) else np.asarray(value, dtype=float)
+                     for key, value in table.items()}
               for name, table in model.spline_tables().items()}
     return NonlinearOutcome(
         fit_identification=score(model, identification),
@@ -460,9 +461,13 @@ def run_order(job: OrderJob, report: Callable[[PassEvent], None] | None = None) 
         try:
             result = identify_nonlinear(identification, linear.model, nodes=job.nodes, passes=job.nonlinear_passes,
                                         p=job.nonlinear_p, on_pass=reporter("nonlinear"))
-            nonlinear = _nonlinear_outcome(result, identification, validation, len(linear.model.mode_eigenvalues()))
+            nonlinear = _nonlinear_outcome(result, identification, validation, linear.model.structure.n_complex_pairs)
         except DivergenceError as exc:
             nonlinear_error = f"diverged: {exc}"
+            last_good = exc.last_good
+            if last_good is not None and last_good.history:  # keep the passes that finished
+                nonlinear = _nonlinear_outcome(last_good, identification, validation,
+                                               linear.model.structure.n_complex_pairs)
     return OrderOutcome(job.order, linear, fit_identification, fit_validation, linear_error, nonlinear,
                         nonlinear_error, time.perf_counter() - started)
 
