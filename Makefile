@@ -18,7 +18,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 study: $(STAMP)
-	$(VENV)/bin/vehid study linear-example --case single-output
+	$(VENV)/bin/vehid study handling
 
 test: $(STAMP)
 	$(VPY) -m pytest

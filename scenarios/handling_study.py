@@ -356,6 +356,7 @@ class NonlinearOutcome:
     ``mode_curves[mode] = (frequency_hz, damping)`` over :data:`MODE_AMPLITUDES`.
     """
 
+    model: Any
     fit_identification: np.ndarray
     fit_validation: np.ndarray
     fit_filter: np.ndarray
@@ -413,6 +414,7 @@ def _nonlinear_outcome(result: Any, identification: IOData, validation: IOData, 
                      for key, value in table.items()}
               for name, table in model.spline_tables().items()}
     return NonlinearOutcome(
+        model=model,
         fit_identification=score(model, identification),
         fit_validation=score(model, validation),
         fit_filter=np.array([record.fit_filter for record in result.history], dtype=float),
@@ -581,7 +583,8 @@ def _mean(values: np.ndarray | None) -> float | None:
 
 
 def _summary(config: HandlingConfig, outcomes: dict[int, OrderOutcome], vehicle_modes: dict[str, Mode],
-             assessment: OrderAssessment, nonlinear_status: str, seconds: float, workers: int) -> dict[str, Any]:
+             assessment: OrderAssessment, nonlinear_status: str, seconds: float, workers: int,
+             vehicle_linearization: dict[str, Any] | None = None) -> dict[str, Any]:
     table, linear_runs, nonlinear_runs, comparison = [], [], [], []
     assessed = {row.order: row for row in assessment.rows}
     for order in config.orders:
@@ -619,6 +622,8 @@ def _summary(config: HandlingConfig, outcomes: dict[int, OrderOutcome], vehicle_
             "mode_amplitudes": MODE_AMPLITUDES,
             "mode_frequency_hz": None if nonlinear is None else [c[0] for c in nonlinear.mode_curves.values()],
             "mode_damping": None if nonlinear is None else [c[1] for c in nonlinear.mode_curves.values()],
+            "fit_filter_by_pass": None if nonlinear is None else nonlinear.fit_filter,
+            "trace_p_by_pass": None if nonlinear is None else nonlinear.trace_p,
             "missing": outcome.nonlinear_error,
         })
         if linear is not None:
@@ -629,6 +634,7 @@ def _summary(config: HandlingConfig, outcomes: dict[int, OrderOutcome], vehicle_
         "chosen_order": assessment.chosen_order,
         "seconds": seconds,
         "vehicle_modes": {label: {**_mode_values(mode.eigenvalue), "label": mode.label} for label, mode in vehicle_modes.items()},
+        "vehicle_linearization": vehicle_linearization,
         "mode_comparison": comparison,
         "linear_runs": linear_runs,
         "nonlinear_runs": nonlinear_runs,
@@ -724,7 +730,9 @@ def run_study(config: HandlingConfig | None = None, *, on_event: Callable[[PassE
                               + "; ".join(f"n = {o.order}: {o.linear_error}" for o in outcomes.values()))
     assessment = assess_orders(linear)
     seconds = time.perf_counter() - started
-    summary = _summary(config, outcomes, vehicle_modes, assessment, nonlinear_status, seconds, workers)
+    rows = [list(linearisation.output_names).index(name) for name in OUTPUTS]
+    steer_to_outputs = {"A": linearisation.A, "B": linearisation.B, "C": linearisation.C[rows], "D": linearisation.D[rows]}
+    summary = _summary(config, outcomes, vehicle_modes, assessment, nonlinear_status, seconds, workers, steer_to_outputs)
     return HandlingResult(config, records, outcomes, vehicle_modes, assessment, nonlinear_status, summary,
                           _text(config, summary), seconds, workers)
 
@@ -742,8 +750,8 @@ def _write_nonlinear_run(archive: Any, name: str, outcome: NonlinearOutcome) -> 
     history_run = run_group(archive, name)
     for fit, trace in zip(outcome.fit_filter, outcome.trace_p):
         append_history(history_run, {"fit_filter": fit, "trace_p": trace}, units=NONLINEAR_HISTORY_UNITS)
-    run = write_run(archive, name, metrics={"identification_R": outcome.fit_identification,
-                                            "validation_R": outcome.fit_validation})
+    run = write_run(archive, name, model=outcome.model, metrics={"identification_R": outcome.fit_identification,
+                                                                 "validation_R": outcome.fit_validation})
     write_value(run, "spline_tables", outcome.spline_tables)
     write_value(run, "mode_amplitudes", MODE_AMPLITUDES)
     for mode, (frequency, damping) in outcome.mode_curves.items():

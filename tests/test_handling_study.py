@@ -10,6 +10,7 @@ module notes of :mod:`scenarios.handling_study`.
 import json
 import subprocess
 import sys
+from identification.spline_modal import SplineModalModel
 from dataclasses import dataclass
 
 import numpy as np
@@ -237,26 +238,17 @@ class _StandInRecord:  # only what the announced interface promises: no pass ind
         return float(np.mean(self.fit_filter))
 
 
-@dataclass(frozen=True, eq=False)
-class _StandInModel:
-    """Behaves as the announced spline model: the linear model with a gain of 1.01 on the outputs."""
-
-    linear: object
-
-    def simulate(self, u, dt):
-        return 1.01 * self.linear.simulate(u, dt)
-
-    def mode_frequency_damping(self, mode, amplitudes):
-        amplitudes = np.asarray(amplitudes)
-        return 1.0 - 0.2 * amplitudes, 0.7 - 0.1 * amplitudes  # frequency and damping falling with amplitude
-
-    def spline_tables(self):
-        return {"sigma1": {"nodes": np.linspace(-1, 1, 5), "values": np.full(5, -4.0)}}
+def _stand_in_model(linear, data, nodes):
+    """A real spline model (so that it archives): the linear one, its first omega falling by 20 % over the amplitude."""
+    model = SplineModalModel.from_linear(linear, nodes, np.abs(data.u).max(0), np.abs(data.y).max(0), data.dt)
+    gammas = model.structure.gammas(model.theta).copy()
+    gammas[1] *= np.linspace(1.0, 0.8, nodes)  # omega1 against the pair's amplitude
+    return model.with_parameters(gammas.ravel())
 
 
 @dataclass(frozen=True, eq=False)
 class _StandInResult:
-    model: _StandInModel
+    model: object
     history: tuple
     seconds: float = 0.5
     stop_reason: str = "passes"
@@ -273,7 +265,7 @@ def test_nonlinear_call_site_with_a_stand_in(monkeypatch, tmp_path):
             record = _StandInRecord(np.full(data.n_y, 99.0), 1e-3 * index)
             history.append(record)
             on_pass(record, None)
-        return _StandInResult(_StandInModel(linear_model), tuple(history))
+        return _StandInResult(_stand_in_model(linear_model, data, options.nodes), tuple(history))
 
     monkeypatch.setattr(handling_study, "identify_spline_iekf", identify)
     monkeypatch.setattr(handling_study, "SplineIEKFOptions", _StandInOptions)
@@ -286,7 +278,7 @@ def test_nonlinear_call_site_with_a_stand_in(monkeypatch, tmp_path):
     row = result.summary["table"][0]
     outcome = result.outcomes[2]
     assert row["nonlinear_identification_R"] == pytest.approx(np.mean(handling_study.score(
-        _StandInModel(outcome.linear.model), result.records["identification"])), abs=1e-12)
+        outcome.nonlinear.model, result.records["identification"])), abs=1e-12)
     assert row["nonlinear_validation_R"] is not None
     run = result.summary["nonlinear_runs"][0]
     assert run["passes_run"] == 3 and run["missing"] is None
@@ -295,3 +287,40 @@ def test_nonlinear_call_site_with_a_stand_in(monkeypatch, tmp_path):
     stored = read_archive(path).runs["nonlinear-n2"]
     assert stored.n_pass == 3 and np.allclose(stored.history["trace_p"], [1e-3, 2e-3, 3e-3])
     assert np.allclose(stored.metrics["validation_R"], outcome.nonlinear.fit_validation)
+
+
+@pytest.mark.slow
+def test_nonlinear_beats_linear_and_reaches_the_target_at_order_four():
+    """Issue targets at n = 4, the paper's and our chosen order, with the study's default settings.
+
+    Measured (seed 0): linear 99.28 / 98.85 %, nonlinear 99.65 / 99.59 % (identification / validation).
+    The paper's vehicle: 99.79 / 99.37 % linear, 99.96 / 99.80 % nonlinear (Table 5).
+    """
+    result = run_study(HandlingConfig(orders=(4,), workers=1))
+    row = result.summary["table"][0]
+    assert row["nonlinear_identification_R"] > row["linear_identification_R"]
+    assert row["nonlinear_validation_R"] > row["linear_validation_R"]
+    assert row["nonlinear_validation_R"] >= 99.5
+    # the first mode's frequency falls as its amplitude grows (the paper's Figure 8 reading)
+    frequency = result.summary["nonlinear_runs"][0]["mode_frequency_hz"][0]
+    assert frequency[-1] < frequency[0]
+
+
+def test_report_writes_every_figure_the_table_and_the_casadi_export(study):
+    """The study command writes its report folder beside the archive, as make study does."""
+    import casadi as ca
+
+    summary, archive, _ = study
+    folder = archive.with_suffix("")
+    assert summary["report"] == str(folder)
+    files = {path.name for path in folder.iterdir()}
+    expected = {"fits_identification.png", "fits_validation.png", "orders.png", "linear_parameters.png",
+                "linear_convergence.png", "eigenvalues.png", "bode.png", "report.pdf", "table.md"}
+    assert expected <= files
+    if summary["table"][-1]["nonlinear_validation_R"] is not None:
+        chosen = summary["chosen_order"]
+        assert {"splines.png", "mode_amplitude.png", "residuals.png", f"nonlinear_n{chosen}.casadi"} <= files
+        function = ca.Function.load(str(folder / f"nonlinear_n{chosen}.casadi"))
+        assert function.size1_in(0) == 1 and function.size1_out(0) == 3
+    table = (folder / "table.md").read_text()
+    assert "nonlinear validation R %" in table and f"Chosen order: {summary['chosen_order']}" in table

@@ -53,6 +53,13 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
         raise InputError(f"--window needs two finite times T0 < T1; got {args.window}")
     path = Path(args.archive)
     archive = read_archive(path)
+    if archive.kind == "handling-study":
+        from scenarios.handling_report import write_handling_report
+
+        folder = _output_folder(path, args.out)
+        files = write_handling_report(path, folder)
+        summary = {"archive": str(path), "kind": archive.kind, "out": str(folder), "files": [str(f) for f in files]}
+        return summary, f"{path.name} (handling study): wrote {len(files)} files to {folder}"
     figures = archive_figures(archive, window=tuple(args.window) if args.window else None, max_lag=args.max_lag)
     if not figures:
         raise InputError(f"nothing to draw in {path}: it holds no records and no runs with histories or models")

@@ -49,6 +49,8 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--vehicle", default=_DEFAULTS.vehicle, help="baseline, understeer, or a vehicle file")
     parser.add_argument("--speed", type=float, default=_DEFAULTS.speed, help="trim speed in m/s (default 20)")
     parser.add_argument("--out", default=None, help="archive file name (default handling_study.h5 under results/)")
+    parser.add_argument("--no-report", action="store_true",
+                        help="write only the archive, not the report folder beside it (figures, PDF, table, CasADi export)")
     parser.set_defaults(handler=run)
 
 
@@ -74,4 +76,13 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
         for progress in shown:
             progress.close()
     path = write_archive_for(result, args.out)
-    return {**result.summary, "archive": str(path)}, result.text + f"\nwrote {path}"
+    summary = {**result.summary, "archive": str(path)}
+    text = result.text + f"\nwrote {path}"
+    if not args.no_report:
+        from scenarios.handling_report import write_handling_report
+
+        folder = path.with_suffix("")
+        files = write_handling_report(path, folder)
+        summary["report"] = str(folder)
+        text += f"\nwrote {len(files)} report files to {folder}"
+    return summary, text

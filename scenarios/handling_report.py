@@ -1,0 +1,227 @@
+"""The handling study's report, drawn from its archive (``results/handling_study.h5``).
+
+Figures (names are the PNG files' stems):
+
+``fits_identification``, ``fits_validation``
+    Measured outputs and the chosen order's linear and nonlinear models
+    simulated from rest (the paper's Figures 7 and 9).
+``splines``
+    The chosen order's first-mode sigma and omega against the mode's
+    amplitude, and two typical coefficients, nodes marked (Figure 8).
+``mode_amplitude``
+    The first mode's frequency and damping against its amplitude, every
+    order (the Figure 8 finding: both fall as the state grows).
+``orders``
+    Mean R per order, linear and nonlinear, identification and validation (Table 5).
+``linear_parameters``, ``linear_convergence``, ``nonlinear_convergence``
+    The chosen order's parameter development and R, trace(P) per pass (Figures 1-4).
+``eigenvalues``, ``bode``
+    The identified linear models' eigenvalues and frequency responses beside
+    the vehicle's own linearisation.
+``residuals``
+    Residual autocorrelation of the chosen nonlinear model on the validation data.
+
+Besides the figures, ``table.md`` holds the Table-5 style table and
+``nonlinear_n<order>.casadi`` the chosen nonlinear model as a CasADi Function
+(``casadi.Function.load``; input steer (1, N) in rad, outputs (3, N)).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from identification.archive import open_archive, read_records
+from identification.iekf_archive import read_iekf_run
+from identification.storage import read_group
+
+from . import plots
+from .report import format_eigenvalues, markdown_table, write_report
+
+__all__ = ["handling_figures", "handling_table", "write_handling_report"]
+
+TABLE_HEADERS = {
+    "order": "n",
+    "linear_eigenvalues": "linear eigenvalues",
+    "linear_identification_R": "linear identification R %",
+    "nonlinear_identification_R": "nonlinear identification R %",
+    "linear_validation_R": "linear validation R %",
+    "nonlinear_validation_R": "nonlinear validation R %",
+}
+
+
+def _load(path: str | Path) -> dict[str, Any]:
+    with open_archive(path, kinds=["handling-study"]) as archive:
+        summary = json.loads(archive.attrs["summary_json"])
+        records = read_records(archive)
+        linear, nonlinear = {}, {}
+        for name in archive["runs"]:
+            if name.startswith("linear-n"):
+                linear[int(name[8:])] = read_iekf_run(archive, name)
+            elif name.startswith("nonlinear-n") and "model" in archive["runs"][name]:
+                nonlinear[int(name[11:])] = read_group(archive["runs"][name]["model"])
+    return {"summary": summary, "records": records, "linear": linear, "nonlinear": nonlinear}
+
+
+def handling_table(summary: dict[str, Any]) -> str:
+    """The Table-5 style table as markdown, with the chosen order below it."""
+    rows = []
+    for row in summary["table"]:
+        rows.append({**row, "linear_eigenvalues": format_eigenvalues([complex(*v) for v in row["linear_eigenvalues"]])})
+    text = markdown_table(rows, list(TABLE_HEADERS), headers=TABLE_HEADERS, digits=2)
+    return text + f"\nChosen order: {summary['chosen_order']}.\n"
+
+
+def handling_figures(path: str | Path) -> dict[str, Figure]:
+    """Every figure of the handling report, from the study's archive."""
+    loaded = _load(path)
+    summary, records = loaded["summary"], loaded["records"]
+    linear, nonlinear = loaded["linear"], loaded["nonlinear"]
+    chosen = summary["chosen_order"]
+    figures: dict[str, Figure] = {}
+    names = list(records["identification"].output_names)
+    units = list(records["identification"].output_units)
+
+    for record_name, label in (("identification", "identification"), ("validation", "validation")):
+        data = records[record_name]
+        predictions = {}
+        if chosen in linear:
+            predictions[f"linear n = {chosen}"] = linear[chosen].model.simulate(data.u, data.dt)
+        if chosen in nonlinear:
+            predictions[f"nonlinear n = {chosen}"] = nonlinear[chosen].simulate(data.u, data.dt)
+        figures[f"fits_{record_name}"] = plots.plot_time_fits(
+            data.t, data.y, predictions, names, units,
+            title=f"Handling model fits on the {label} manoeuvre (n = {chosen})",
+        )
+
+    if chosen in nonlinear:
+        model = nonlinear[chosen]
+        coefficient_names = model.structure.coefficient_names()
+        picks = [name for name in ("sigma1", "omega1") if name in coefficient_names]
+        picks += [name for name in coefficient_names if name.startswith(("b", "c"))][:2]
+        xs, values, node_x, node_y, x_labels = [], [], [], [], []
+        tables = model.spline_tables()
+        for name in picks:
+            table = tables[name]
+            nodes = table["nodes"]
+            span = nodes[-1] - nodes[0]
+            lower = 0.0 if table["variable"].startswith("amplitude") else nodes[0] - 0.2 * span  # amplitudes are >= 0
+            grid = np.linspace(lower, nodes[-1] + 0.2 * span, 200)
+            xs.append(grid)
+            values.append(model.coefficient(name, grid))
+            node_x.append(nodes)
+            node_y.append(table["values"])
+            x_labels.append(f"{table['variable']} (normalised)")
+        figures["splines"] = plots.plot_splines(
+            xs, values, node_x, node_y, picks, x_labels=x_labels,
+            title=f"Splined coefficients of the nonlinear model (n = {chosen})",
+        )
+
+    curves = [run for run in summary.get("nonlinear_runs", []) if run.get("mode_frequency_hz")]
+    if curves:
+        figure = plots.new_figure()
+        frequency_axis = figure.add_subplot(2, 1, 1)
+        damping_axis = figure.add_subplot(2, 1, 2, sharex=frequency_axis)
+        for run in curves:
+            amplitudes = run["mode_amplitudes"]
+            frequency_axis.plot(amplitudes, run["mode_frequency_hz"][0], marker="o", label=f"n = {run['order']}")
+            damping_axis.plot(amplitudes, run["mode_damping"][0], marker="o", label=f"n = {run['order']}")
+        frequency_axis.set_ylabel("frequency (Hz)")
+        damping_axis.set_ylabel("damping ratio (-)")
+        damping_axis.set_xlabel("first mode's amplitude (normalised state units)")
+        frequency_axis.set_title("First mode of the nonlinear models against its amplitude")
+        frequency_axis.legend(fontsize=8, ncol=3)
+        for axis in (frequency_axis, damping_axis):
+            axis.grid(True, alpha=0.3)
+        figures["mode_amplitude"] = figure
+
+    table = summary["table"]
+    figure = plots.new_figure()
+    axis = figure.add_subplot(1, 1, 1)
+    orders = [row["order"] for row in table]
+    for key, label, style in (
+        ("linear_identification_R", "linear, identification", "o--"),
+        ("nonlinear_identification_R", "nonlinear, identification", "o-"),
+        ("linear_validation_R", "linear, validation", "s--"),
+        ("nonlinear_validation_R", "nonlinear, validation", "s-"),
+    ):
+        values = [np.nan if row[key] is None else row[key] for row in table]
+        axis.plot(orders, values, style, label=label)
+    axis.axvline(chosen, color="0.6", linestyle=":", label=f"chosen n = {chosen}")
+    axis.set_xlabel("model order n")
+    axis.set_ylabel("mean R over the outputs (%)")
+    axis.set_title("Handling study: explanation per order (Table 5)")
+    axis.set_xticks(orders)
+    axis.grid(True, alpha=0.3)
+    axis.legend(fontsize=8)
+    figures["orders"] = figure
+
+    if chosen in linear:
+        run = linear[chosen]
+        history = run.parameter_history()
+        figures["linear_parameters"] = plots.plot_parameter_history(
+            history, run.structure.parameter_names(), title=f"Linear model parameters over the passes (n = {chosen})",
+        )
+        figures["linear_convergence"] = plots.plot_convergence(
+            np.array([r.fit_filter for r in run.history]), np.array([r.trace_p for r in run.history]),
+            min_eig_p=np.array([r.min_eig_p for r in run.history]), output_names=names,
+            title=f"Linear IEKF: R and trace(P) per pass (n = {chosen})",
+        )
+    nonlinear_run = next((r for r in summary.get("nonlinear_runs", []) if r["order"] == chosen), None)
+    if nonlinear_run and nonlinear_run.get("fit_filter_by_pass"):
+        figures["nonlinear_convergence"] = plots.plot_convergence(
+            np.array(nonlinear_run["fit_filter_by_pass"]), np.array(nonlinear_run["trace_p_by_pass"]),
+            output_names=names, title=f"Nonlinear IEKF: R and trace(P) per pass (n = {chosen})",
+        )
+
+    vehicle = summary.get("vehicle_linearization")
+    reference_eigenvalues = None
+    reference = None
+    if vehicle:
+        reference = tuple(np.array(vehicle[key]) for key in ("A", "B", "C", "D"))
+        reference_eigenvalues = np.linalg.eigvals(reference[0])
+        reference_eigenvalues = reference_eigenvalues[np.abs(reference_eigenvalues) < 60]  # the handling band
+    models = {f"n = {order}": run.model for order, run in sorted(linear.items())}
+    if models:
+        figures["eigenvalues"] = plots.plot_eigenvalue_map(
+            models, reference_eigenvalues, title="Identified linear models and the vehicle's modes (x)",
+        )
+        figures["bode"] = plots.plot_bode(
+            models, reference=reference, output_names=names, output_units=units, input_name="steer", input_unit="rad",
+            frequencies=np.logspace(-1.3, 1.2, 200),
+            title="Steer to outputs: identified linear models and the vehicle's linearisation",
+        )
+    if chosen in nonlinear:
+        data = records["validation"]
+        residuals = data.y - nonlinear[chosen].simulate(data.u, data.dt)
+        figures["residuals"] = plots.plot_residual_autocorrelation(
+            residuals, 100, names, dt=data.dt,
+            title=f"Residual autocorrelation, nonlinear n = {chosen}, validation data",
+        )
+    return figures
+
+
+def write_handling_report(path: str | Path, out_dir: str | Path) -> list[Path]:
+    """Write the report beside the archive: PNGs, ``report.pdf``, ``table.md`` and the CasADi export."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    figures = handling_figures(path)
+    written = write_report(figures, out_dir, title="vehid handling study")
+    for figure in figures.values():
+        figure.clear()
+    loaded = _load(path)
+    table_path = out_dir / "table.md"
+    table_path.write_text("# Handling study (Table 5 style)\n\n" + handling_table(loaded["summary"]))
+    written.append(table_path)
+    chosen = loaded["summary"]["chosen_order"]
+    if chosen in loaded["nonlinear"]:
+        model = loaded["nonlinear"][chosen]
+        n = loaded["records"]["identification"].n_samples
+        export = out_dir / f"nonlinear_n{chosen}.casadi"
+        model.to_casadi_function(n).save(str(export))
+        written.append(export)
+    return written
