@@ -24,3 +24,24 @@ def test_top_level_help_lists_groups():
 
 def test_parser_builds():
     assert build_parser().prog == "vehid"
+
+
+def _subcommands():
+    from scenarios.cli import GROUPS, _command_modules
+
+    commands = []
+    for module in _command_modules():
+        commands.append([module.NAME] if module.GROUP is None else [module.GROUP, module.NAME])
+    assert {"study", "bench"} == set(GROUPS)
+    return commands
+
+
+def test_every_subcommand_has_help_json_and_quiet():
+    commands = _subcommands()
+    assert ["identify"] in commands and ["study", "handling"] in commands and ["report"] in commands
+    for command in commands:
+        completed = subprocess.run(
+            [sys.executable, "-m", "scenarios.cli", *command, "--help"], capture_output=True, text=True, check=False
+        )
+        assert completed.returncode == 0, (command, completed.stderr)
+        assert "--json" in completed.stdout and "--quiet" in completed.stdout, command
