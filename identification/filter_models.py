@@ -37,7 +37,7 @@ import casadi as ca
 from .errors import InputError
 from .modal import ModalStructure
 
-__all__ = ["DISCRETIZATIONS", "LinearModalFilterModel", "mode_transition"]
+__all__ = ["DISCRETIZATIONS", "LinearModalFilterModel", "mode_transition", "modal_transition"]
 
 DISCRETIZATIONS = ("euler", "exact", "exact-zoh")
 
@@ -151,6 +151,28 @@ def mode_transition(
     return (xi[0] + dt * forced[0], xi[1] + dt * forced[1])
 
 
+def modal_transition(
+    structure: ModalStructure, modal: Any, x: Any, drive0: Any, drive1: Any, dt: float, discretization: str
+) -> Any:
+    """Every mode of a modal structure advanced over a sample (SX, n).
+
+    ``modal`` holds each state's sigma/omega values in theta's modal order
+    (pairs as sigma, omega; real poles as sigma), ``drive0``/``drive1`` the
+    input terms of each state at the two ends of the sample.
+    """
+    rows: list[Any] = [None] * structure.n
+    for states in structure.mode_states():
+        a = states[0]
+        if len(states) == 2:
+            new = mode_transition(modal[a], modal[a + 1], (x[a], x[a + 1]), (drive0[a], drive0[a + 1]),
+                                  (drive1[a], drive1[a + 1]), dt, discretization)
+        else:
+            new = mode_transition(modal[a], None, (x[a],), (drive0[a],), (drive1[a],), dt, discretization)
+        for state, value in zip(states, new):
+            rows[state] = value
+    return ca.vertcat(*rows)
+
+
 @dataclass(frozen=True)
 class LinearModalFilterModel:
     """The linear modal model of :class:`ModalStructure` as a filter model."""
@@ -182,20 +204,7 @@ class LinearModalFilterModel:
         _, B, _, _ = s.matrices(theta, backend=ca.SX)
         drive0 = ca.mtimes(B, u0)
         drive1 = ca.mtimes(B, u1)
-        modal = theta[: s.n_modal]
-        rows: list[Any] = [None] * s.n
-        for states in s.mode_states():
-            a = states[0]
-            if len(states) == 2:
-                new = mode_transition(
-                    modal[a], modal[a + 1], (x[a], x[a + 1]),
-                    (drive0[a], drive0[a + 1]), (drive1[a], drive1[a + 1]), dt, discretization,
-                )
-            else:
-                new = mode_transition(modal[a], None, (x[a],), (drive0[a],), (drive1[a],), dt, discretization)
-            for state, value in zip(states, new):
-                rows[state] = value
-        return ca.vertcat(*rows)
+        return modal_transition(s, theta[: s.n_modal], x, drive0, drive1, dt, discretization)
 
     def output(self, x: Any, theta: Any, u: Any, constants: Any = None) -> Any:
         """``y = C x + D u`` (SX, n_y)."""

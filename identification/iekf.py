@@ -53,6 +53,17 @@ START_VALUES = {
 }
 
 
+def check_filter_options(p: Any, passes: Any, discretization: str, covariance: str) -> None:
+    """The checks every IEKF's options share: a positive p, a whole number of passes, known forms."""
+    if not (isinstance(p, (int, float)) and math.isfinite(p) and p > 0):
+        raise InputError(f"the tuning parameter p must be a positive number; got {p!r}")
+    if isinstance(passes, bool) or int(passes) != passes or passes < 1:
+        raise InputError(f"passes must be a whole number >= 1; got {passes!r}")
+    check_discretization(discretization)
+    if covariance not in COVARIANCE_FORMS:
+        raise InputError(f"unknown covariance form {covariance!r}; use one of {', '.join(COVARIANCE_FORMS)}")
+
+
 @dataclass(frozen=True)
 class IEKFOptions:
     """Settings of an IEKF identification.
@@ -94,13 +105,7 @@ class IEKFOptions:
     min_passes: int = 2
 
     def __post_init__(self) -> None:
-        if not (isinstance(self.p, (int, float)) and math.isfinite(self.p) and self.p > 0):
-            raise InputError(f"the tuning parameter p must be a positive number; got {self.p!r}")
-        if isinstance(self.passes, bool) or int(self.passes) != self.passes or self.passes < 1:
-            raise InputError(f"passes must be a whole number >= 1; got {self.passes!r}")
-        check_discretization(self.discretization)
-        if self.covariance not in COVARIANCE_FORMS:
-            raise InputError(f"unknown covariance form {self.covariance!r}; use one of {', '.join(COVARIANCE_FORMS)}")
+        check_filter_options(self.p, self.passes, self.discretization, self.covariance)
         if self.measurement_noise is not None and not (math.isfinite(self.measurement_noise) and self.measurement_noise > 0):
             raise InputError(f"measurement_noise must be positive; got {self.measurement_noise!r}")
         if self.start not in START_VALUES:

@@ -19,7 +19,6 @@ differences the paper gives:
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable
@@ -28,8 +27,8 @@ import numpy as np
 
 from .data import IOData
 from .errors import DivergenceError, InputError
-from .filter_models import check_discretization
-from .iekf_pass import COVARIANCE_FORMS, compiled_pass, pack_covariance, unpack_covariance
+from .iekf import check_filter_options
+from .iekf_pass import compiled_pass, pack_covariance, unpack_covariance
 from .metrics import percentage_explanation
 from .modal import ModalModel
 from .spline import MAX_NODES, MIN_NODES
@@ -88,13 +87,7 @@ class SplineIEKFOptions:
     def __post_init__(self) -> None:
         if isinstance(self.nodes, bool) or int(self.nodes) != self.nodes or not MIN_NODES <= self.nodes <= MAX_NODES:
             raise InputError(f"nodes must be a whole number from {MIN_NODES} to {MAX_NODES}; got {self.nodes!r}")
-        if not (isinstance(self.p, (int, float)) and math.isfinite(self.p) and self.p > 0):
-            raise InputError(f"the tuning parameter p must be a positive number; got {self.p!r}")
-        if isinstance(self.passes, bool) or int(self.passes) != self.passes or self.passes < 1:
-            raise InputError(f"passes must be a whole number >= 1; got {self.passes!r}")
-        check_discretization(self.discretization)
-        if self.covariance not in COVARIANCE_FORMS:
-            raise InputError(f"unknown covariance form {self.covariance!r}; use one of {', '.join(COVARIANCE_FORMS)}")
+        check_filter_options(self.p, self.passes, self.discretization, self.covariance)
 
 
 @dataclass(frozen=True, eq=False)

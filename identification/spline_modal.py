@@ -41,7 +41,7 @@ import numpy as np
 
 from .compiled import CompiledRecursion
 from .errors import InputError
-from .filter_models import check_discretization, mode_transition
+from .filter_models import check_discretization, modal_transition
 from .modal import ModalModel, ModalStructure
 from .spline import MAX_NODES, MIN_NODES, SplineBasis, resample
 
@@ -218,17 +218,7 @@ class SplineModalFilterModel:
         modal = self.coefficients(x, theta, u0, constants, s.slices()["modal"])
         drive0 = self._input_drive(x, theta, u0, constants)
         drive1 = self._input_drive(x, theta, u1, constants)
-        rows: list[Any] = [None] * s.n
-        for states in s.mode_states():
-            a = states[0]
-            if len(states) == 2:
-                new = mode_transition(modal[a], modal[a + 1], (x[a], x[a + 1]), (drive0[a], drive0[a + 1]),
-                                      (drive1[a], drive1[a + 1]), dt, discretization)
-            else:
-                new = mode_transition(modal[a], None, (x[a],), (drive0[a],), (drive1[a],), dt, discretization)
-            for state, value in zip(states, new):
-                rows[state] = value
-        return ca.vertcat(*rows)
+        return modal_transition(s, modal, x, drive0, drive1, dt, discretization)
 
     def output(self, x: Any, theta: Any, u: Any, constants: Any = None) -> Any:
         s = self.structure.linear
