@@ -71,8 +71,10 @@ def handling_table(summary: dict[str, Any]) -> str:
     """The Table-5 style table as markdown, with the chosen order below it."""
     rows = []
     for row in summary["table"]:
-        rows.append({**row, "linear_eigenvalues": format_eigenvalues([complex(*v) for v in row["linear_eigenvalues"]])})
-    text = markdown_table(rows, list(TABLE_HEADERS), headers=TABLE_HEADERS, digits=2)
+        cells = {key: "" if row[key] is None else f"{row[key]:.2f}" for key in TABLE_HEADERS if key.endswith("_R")}
+        eigenvalues = format_eigenvalues([complex(*v) for v in row["linear_eigenvalues"]], 3)
+        rows.append({"order": row["order"], "linear_eigenvalues": eigenvalues, **cells})
+    text = markdown_table(rows, list(TABLE_HEADERS), headers=TABLE_HEADERS)
     return text + f"\nChosen order: {summary['chosen_order']}.\n"
 
 
