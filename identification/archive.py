@@ -19,7 +19,6 @@ stored with :mod:`identification.storage`, never pickled.
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import os
 import shutil
@@ -37,6 +36,7 @@ import numpy as np
 
 from .data import IOData
 from .errors import ArchiveError
+from .jsonable import to_jsonable
 from .storage import member_name, read_group, write_group
 
 __all__ = [
@@ -170,27 +170,6 @@ def _git_commit() -> str:
     return f"{head}-dirty" if changes else head
 
 
-def _jsonable(value: Any) -> Any:
-    """A JSON-ready copy of a config or seeds value (dataclasses, arrays, complex)."""
-    if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        return {f.name: _jsonable(getattr(value, f.name)) for f in dataclasses.fields(value)}
-    if isinstance(value, Mapping):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
-    if isinstance(value, (complex, np.complexfloating)):
-        return [float(value.real), float(value.imag)]
-    if isinstance(value, np.generic):
-        return value.item()
-    if hasattr(value, "to_dict"):
-        return _jsonable(value.to_dict())
-    if value is None or isinstance(value, (bool, int, float, str)):
-        return value
-    return str(value)
-
-
 def _temporary_beside(path: Path) -> Path:
     # A hidden name in the same directory, so that os.replace is a rename on one file system.
     return path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
@@ -294,9 +273,9 @@ def _write_header(handle: h5py.File, kind: str, config: Any, seeds: Any) -> None
     attrs["package_version"] = _package_version("vehid")
     attrs["git_commit"] = _git_commit()
     attrs["casadi_version"] = _package_version("casadi")
-    attrs["seeds"] = json.dumps(_jsonable(seeds))
+    attrs["seeds"] = json.dumps(to_jsonable(seeds))
     attrs["created"] = datetime.now(timezone.utc).isoformat(timespec="seconds")
-    attrs["config_json"] = json.dumps(_jsonable(config), sort_keys=True)
+    attrs["config_json"] = json.dumps(to_jsonable(config), sort_keys=True)
     write_group(handle.create_group("config"), {} if config is None else config)
     handle.create_group("data")
     handle.create_group("runs")

@@ -18,7 +18,6 @@ import argparse
 import importlib
 import json
 import logging
-import math
 import pkgutil
 import sys
 from typing import Any, Callable, NoReturn, Sequence
@@ -26,6 +25,7 @@ from typing import Any, Callable, NoReturn, Sequence
 import numpy as np
 
 from identification.errors import DivergenceError, InputError, WorkbenchError
+from identification.jsonable import to_jsonable
 
 __all__ = ["main", "build_parser", "to_jsonable"]
 
@@ -35,29 +35,6 @@ GROUPS = {
     "study": "reproduce a study of the paper or the textbook appendix",
     "bench": "measure speed against a baseline in the same run",
 }
-
-
-def to_jsonable(value: Any) -> Any:
-    """Convert numpy arrays and scalars, complex numbers and non-finite floats for JSON.
-
-    Complex numbers become ``[re, im]``; NaN and inf become ``null``.
-    """
-    if isinstance(value, dict):
-        return {str(k): to_jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [to_jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return to_jsonable(value.tolist())
-    if isinstance(value, (complex, np.complexfloating)):
-        return [to_jsonable(float(value.real)), to_jsonable(float(value.imag))]
-    if isinstance(value, (np.integer,)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        value = float(value)
-        return value if math.isfinite(value) else None
-    if isinstance(value, np.bool_):
-        return bool(value)
-    return value
 
 
 class _Parser(argparse.ArgumentParser):

@@ -1,0 +1,49 @@
+"""One conversion of workbench values to JSON-ready Python values.
+
+Used for the command line's ``--json`` summaries and for the JSON attributes
+of archives (configuration, seeds, summaries).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+__all__ = ["to_jsonable"]
+
+
+def to_jsonable(value: Any) -> Any:
+    """A JSON-ready copy of ``value``.
+
+    Dataclasses and objects with ``to_dict`` become dicts, arrays and tuples
+    lists, numpy scalars Python numbers, complex numbers ``[re, im]``, NaN and
+    inf ``null``; anything else unknown becomes its ``str``.
+
+    Examples
+    --------
+    >>> to_jsonable({"e": np.array([complex(-1, 2)]), "n": float("nan"), "k": np.int64(3)})
+    {'e': [[-1.0, 2.0]], 'n': None, 'k': 3}
+    """
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {f.name: to_jsonable(getattr(value, f.name)) for f in dataclasses.fields(value)}
+    if isinstance(value, Mapping):
+        return {str(k): to_jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [to_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return to_jsonable(value.tolist())
+    if isinstance(value, (complex, np.complexfloating)):
+        return [to_jsonable(float(value.real)), to_jsonable(float(value.imag))]
+    if isinstance(value, np.generic):
+        return to_jsonable(value.item())
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if value is None or isinstance(value, (bool, int, str)):
+        return value
+    if hasattr(value, "to_dict"):
+        return to_jsonable(value.to_dict())
+    return str(value)
