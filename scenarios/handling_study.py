@@ -58,7 +58,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import logging
 import math
 import os
 import queue as queue_module
@@ -77,6 +76,7 @@ from identification.data import IOData
 from identification.errors import DivergenceError, InputError
 from identification.iekf import IEKFOptions, IEKFResult, identify_iekf
 from identification.iekf_archive import write_iekf_run
+from identification.spline_iekf import SplineIEKFOptions, identify_spline_iekf
 from identification.metrics import percentage_explanation
 from identification.modal import ModalStructure
 from identification.order import OrderAssessment, assess_orders
@@ -86,12 +86,6 @@ from vehicle.linearize import Mode
 
 from .paths import results_directory
 
-try:  # the spline-nonlinear IEKF is being written; until it lands the study runs linear-only
-    from identification.spline_iekf import SplineIEKFOptions, identify_spline_iekf
-except ModuleNotFoundError as missing:
-    if missing.name != "identification.spline_iekf":
-        raise
-    SplineIEKFOptions = identify_spline_iekf = None  # type: ignore[assignment,misc]
 
 __all__ = [
     "OUTPUTS",
@@ -105,7 +99,6 @@ __all__ = [
     "HandlingResult",
     "parse_orders",
     "planned_passes",
-    "nonlinear_available",
     "make_records",
     "identify_nonlinear",
     "run_order",
@@ -114,7 +107,6 @@ __all__ = [
     "main",
 ]
 
-log = logging.getLogger("vehid.handling")
 
 OUTPUTS = ("lateral_acceleration", "yaw_rate", "roll_angle")
 COMPARED_MODES = ("yaw-sideslip", "roll")
@@ -138,15 +130,10 @@ PAPER: dict[int, dict[str, Any]] = {
 }
 
 
-def nonlinear_available() -> bool:
-    """Whether :mod:`identification.spline_iekf` could be imported."""
-    return identify_spline_iekf is not None
-
-
 def planned_passes(config: "HandlingConfig") -> int:
     """The most passes the study can run in all, linear and nonlinear (for progress displays)."""
     per_order = config.passes
-    if config.nonlinear and nonlinear_available():
+    if config.nonlinear:
         per_order += config.nonlinear_passes or SplineIEKFOptions(nodes=config.nodes).passes
     return per_order * len(config.orders)
 
@@ -394,8 +381,6 @@ def identify_nonlinear(
 
     ``passes`` and ``p`` left at None take the spline IEKF's own defaults.
     """
-    if identify_spline_iekf is None:
-        raise RuntimeError("identification.spline_iekf is not available")
     settings: dict[str, Any] = {"nodes": nodes}
     if passes is not None:
         settings["passes"] = passes
@@ -457,8 +442,6 @@ def run_order(job: OrderJob, report: Callable[[PassEvent], None] | None = None) 
     nonlinear, nonlinear_error = None, None
     if not job.nonlinear:
         nonlinear_error = "not asked for"
-    elif not nonlinear_available():
-        nonlinear_error = "identification.spline_iekf is not available"
     else:
         try:
             result = identify_nonlinear(identification, linear.model, nodes=job.nodes, passes=job.nonlinear_passes,
@@ -705,14 +688,7 @@ def run_study(config: HandlingConfig | None = None, *, on_event: Callable[[PassE
     """
     config = config or HandlingConfig()
     started = time.perf_counter()
-    if not config.nonlinear:
-        nonlinear_status = "not asked for (linear only)"
-    elif nonlinear_available():
-        nonlinear_status = f"spline IEKF, {config.nodes} nodes"
-    else:
-        nonlinear_status = "unavailable: identification.spline_iekf is not installed yet (linear only)"
-        log.warning("identification.spline_iekf is not available: the handling study runs linear-only and "
-                    "reports null for the nonlinear columns")
+    nonlinear_status = f"spline IEKF, {config.nodes} nodes" if config.nonlinear else "not asked for (linear only)"
     records = make_records(config)
     linearisation = linearize(named_vehicle(config.vehicle), speed=config.speed)
     vehicle_modes = {label: linearisation.modes_labelled(label)[0] for label in COMPARED_MODES}
@@ -742,11 +718,8 @@ NONLINEAR_HISTORY_UNITS = {"fit_filter": "%", "trace_p": "normalised units"}
 
 
 def _write_nonlinear_run(archive: Any, name: str, outcome: NonlinearOutcome) -> None:
-    """Store a nonlinear run as ``runs/<name>``: per-pass fit and trace(P), scores, spline tables, mode curves.
-
-    The place to extend once :mod:`identification.spline_iekf` offers its own
-    archive writer (model and resume state).
-    """
+    """Store a nonlinear run as ``runs/<name>``: per-pass fit and trace(P), the model, scores,
+    spline tables and mode curves (the model alone is enough to redraw or export it)."""
     history_run = run_group(archive, name)
     for fit, trace in zip(outcome.fit_filter, outcome.trace_p):
         append_history(history_run, {"fit_filter": fit, "trace_p": trace}, units=NONLINEAR_HISTORY_UNITS)
