@@ -49,6 +49,12 @@ placed elsewhere. At full amplitude the identified modes are those of an
 equivalent linear model of a saturating car: a well-damped mode near
 0.9 Hz (paper: 0.4 Hz) and a 2.8 Hz one for n = 4.
 
+Nonlinear settings: the spline IEKF's defaults (5 nodes, p = 1e-7, 60
+passes; see :class:`identification.spline_iekf.SplineIEKFOptions` for the
+measurement behind p). Measured, seed 0: nonlinear R on identification
+99.34, 99.51, 99.65, 99.81, 99.74 % and on validation 99.19, 98.89, 99.59,
+99.66, 99.63 % for n = 2..6.
+
 What to expect (paper, Table 5; our vehicle is our own, so the numbers
 differ): R rises with the order, linear 99.60-99.82 % on identification;
 the nonlinear model beats the linear one on identification and validation.
