@@ -22,6 +22,7 @@ import tempfile
 import threading
 import warnings
 from pathlib import Path
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -34,6 +35,7 @@ __all__ = [
     "find_c_compiler",
     "NoCompilerWarning",
     "CompiledRecursion",
+    "compile_driver",
 ]
 
 _LOCK = threading.RLock()
@@ -224,6 +226,34 @@ int vehid_recursion(long long int n_samples, long long int n_x, long long int n_
 """
 
 
+def compile_driver(
+    step: ca.Function,
+    driver_source: str,
+    *,
+    library_name: str,
+    entry: str,
+    n_integers: int,
+    n_arrays: int,
+    optimisation: str = "-O2",
+) -> Any:
+    """Compile ``step`` with a hand-written C driver that calls it in a loop; return the driver.
+
+    ``driver_source`` calls the step as ``STEP(...)`` and ``STEP_work(...)``;
+    those names are replaced by the generated function's. The driver's entry
+    point ``entry`` takes ``n_integers`` ``long long`` arguments, then
+    ``n_arrays`` ``double*``, and returns an ``int`` status (the ctypes function).
+    """
+    import ctypes
+
+    name = step.name()
+    driver = driver_source.replace("STEP_work", f"{name}_work").replace("STEP(", f"{name}(")
+    library = build_shared_library(library_name, generate_c(step) + driver, optimisation=optimisation)
+    function = getattr(ctypes.CDLL(str(library)), entry)
+    function.argtypes = [ctypes.c_longlong] * n_integers + [ctypes.POINTER(ctypes.c_double)] * n_arrays
+    function.restype = ctypes.c_int
+    return function
+
+
 class CompiledRecursion:
     """Run ``x_next, out = step(x, u_k, u_next, params)`` over a record in compiled code.
 
@@ -235,8 +265,6 @@ class CompiledRecursion:
     """
 
     def __init__(self, step: ca.Function, *, optimisation: str = "-O2"):
-        import ctypes
-
         self.step = step
         self.n_x = step.size1_in(0)
         self.n_u = step.size1_in(1)
@@ -251,14 +279,10 @@ class CompiledRecursion:
                 stacklevel=2,
             )
             return
-        name = step.name()
-        driver = _RECURSION_DRIVER.replace("STEP_work", f"{name}_work").replace("STEP(", f"{name}(")
-        library = build_shared_library(f"{name}_recursion", generate_c(step) + driver, optimisation=optimisation)
-        self._library = ctypes.CDLL(str(library))
-        self._function = self._library.vehid_recursion
-        double_p = ctypes.POINTER(ctypes.c_double)
-        self._function.argtypes = [ctypes.c_longlong] * 4 + [double_p] * 5
-        self._function.restype = ctypes.c_int
+        self._function = compile_driver(
+            step, _RECURSION_DRIVER, library_name=f"{step.name()}_recursion", entry="vehid_recursion",
+            n_integers=4, n_arrays=5, optimisation=optimisation,
+        )
 
     def __call__(self, x0, u, params):
         import ctypes

@@ -39,7 +39,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from .compiled import NoCompilerWarning, build_shared_library, find_c_compiler, generate_c
+from .compiled import NoCompilerWarning, compile_driver, find_c_compiler
 from .filter_models import check_discretization
 
 __all__ = [
@@ -223,12 +223,8 @@ def _constants(filter_step: FilterStep, c: np.ndarray | None) -> np.ndarray:
 class _CompiledPass:
     """A loaded pass library: ``run(state, u, y, q, r, c=None) -> (state, innovations)``."""
 
-    def __init__(self, library_path: str, filter_step: FilterStep):
-        self._library = ctypes.CDLL(library_path)
-        self._function = self._library.vehid_iekf_pass
-        double_p = ctypes.POINTER(ctypes.c_double)
-        self._function.argtypes = [ctypes.c_longlong] * 4 + [double_p] * 7
-        self._function.restype = ctypes.c_int
+    def __init__(self, function: Any, filter_step: FilterStep):
+        self._function = function
         self.filter_step = filter_step
 
     def __call__(self, state: np.ndarray, u: np.ndarray, y: np.ndarray, q: np.ndarray, r: np.ndarray, c: np.ndarray | None = None):
@@ -278,14 +274,13 @@ def _pass_for(filter_model: Any, dt: float, discretization: str, covariance: str
             stacklevel=3,
         )
         return _VirtualMachinePass(filter_step)
-    source = generate_c(filter_step.step)
-    name = "iekf_step"
-    driver = _DRIVER.replace("STEP_work", f"{name}_work").replace("STEP(", f"{name}(")
     tag = hashlib.sha256(filter_model.cache_key().encode()).hexdigest()[:8]
     large = filter_step.step.n_instructions() > LARGE_STEP_INSTRUCTIONS
-    flags = LARGE_STEP_COMPILE_FLAGS if large else PASS_COMPILE_FLAGS
-    library = build_shared_library(f"iekf_pass_{tag}", source + driver, optimisation=flags)
-    return _CompiledPass(str(library), filter_step)
+    function = compile_driver(
+        filter_step.step, _DRIVER, library_name=f"iekf_pass_{tag}", entry="vehid_iekf_pass",
+        n_integers=4, n_arrays=7, optimisation=LARGE_STEP_COMPILE_FLAGS if large else PASS_COMPILE_FLAGS,
+    )
+    return _CompiledPass(function, filter_step)
 
 
 def compiled_pass(filter_model: Any, dt: float, discretization: str, covariance: str):
