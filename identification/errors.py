@@ -1,7 +1,9 @@
 """Exception types shared by the whole workbench.
 
-The command line maps :class:`InputError` to exit status 2 and any other
-:class:`WorkbenchError` to exit status 1, printing one line and no traceback.
+Each class carries the exit status the command line ends with when it is
+raised: 2 for bad input, 1 for a failed computation, 3 for a run that
+finished with warnings under ``--strict``. The command line prints one line
+and no traceback.
 """
 
 from __future__ import annotations
@@ -12,15 +14,20 @@ __all__ = [
     "ExcitationError",
     "DivergenceError",
     "ArchiveError",
+    "StrictWarningsError",
 ]
 
 
 class WorkbenchError(Exception):
     """Base class of every error the workbench raises on purpose."""
 
+    exit_status: int = 1
+
 
 class InputError(WorkbenchError, ValueError):
     """Bad user input: wrong shape, non-finite values, unknown option or column."""
+
+    exit_status = 2
 
 
 class ExcitationError(InputError):
@@ -44,3 +51,22 @@ class DivergenceError(WorkbenchError):
 
 class ArchiveError(WorkbenchError):
     """A results archive is corrupt, truncated, of an unknown schema, or not a workbench archive."""
+
+
+class StrictWarningsError(WorkbenchError):
+    """A run finished, but with warnings, and the user asked for ``--strict``.
+
+    Attributes
+    ----------
+    warnings : tuple of str
+        The warnings, one line each.
+    summary : dict or None
+        What the run produced, so that it can still be reported.
+    """
+
+    exit_status = 3
+
+    def __init__(self, warnings: tuple[str, ...] | list[str], summary: dict | None = None):
+        super().__init__("; ".join(warnings))
+        self.warnings = tuple(warnings)
+        self.summary = summary

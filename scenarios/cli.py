@@ -6,10 +6,11 @@ or ``"bench"``), ``HELP`` and ``register(parser)``, which adds its arguments
 and sets ``handler``: a function ``(args) -> (summary: dict, text: str)``.
 
 Every subcommand accepts ``--json`` (exactly one JSON object on standard
-output: the summary), ``--quiet`` (no progress, warnings only) and
-``--verbose``. Progress and logs go to standard error. Exit status: 0 on
-success, 2 on bad input, 1 on any other failure, with one clear line on
-standard error and no traceback for expected errors.
+output: the summary, or on failure an object with ``error`` and
+``exit_status``), ``--quiet`` (no progress, warnings only) and ``--verbose``.
+Progress and logs go to standard error. Exit status: 0 on success, 2 on bad
+input, 1 on a failed computation, 3 on warnings under ``--strict``, with one
+clear line on standard error and no traceback for expected errors.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ from typing import Any, Callable, NoReturn, Sequence
 
 import numpy as np
 
-from identification.errors import DivergenceError, InputError, WorkbenchError
+from identification.errors import DivergenceError, StrictWarningsError, WorkbenchError
 from identification.jsonable import to_jsonable
 
 __all__ = ["main", "build_parser", "to_jsonable"]
@@ -109,6 +110,15 @@ def _configure_logging(args: argparse.Namespace) -> None:
     logging.captureWarnings(True)
 
 
+def _failed(args: argparse.Namespace, exc: BaseException, status: int, summary: dict | None = None) -> int:
+    """The exit status of a failed command; with ``--json`` still one JSON object on stdout."""
+    if args.json:
+        body = dict(summary or {})
+        body.update({"error": str(exc), "exit_status": status})
+        sys.stdout.write(json.dumps(to_jsonable(body), allow_nan=False) + "\n")
+    return status
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit status."""
     parser = build_parser()
@@ -117,15 +127,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     handler: Callable[[argparse.Namespace], tuple[dict, str]] = args.handler
     try:
         summary, text = handler(args)
-    except InputError as exc:
-        print(f"vehid: error: {exc}", file=sys.stderr)
-        return 2
+    except StrictWarningsError as exc:
+        for line in exc.warnings:
+            print(f"vehid: warning: {line}", file=sys.stderr)
+        print("vehid: error: warnings under --strict", file=sys.stderr)
+        return _failed(args, exc, exc.exit_status, exc.summary)
     except DivergenceError as exc:
         print(f"vehid: diverged: {exc}", file=sys.stderr)
-        return 1
+        return _failed(args, exc, exc.exit_status)
     except WorkbenchError as exc:
         print(f"vehid: error: {exc}", file=sys.stderr)
-        return 1
+        return _failed(args, exc, exc.exit_status)
     except KeyboardInterrupt:
         print("vehid: interrupted", file=sys.stderr)
         return 130
@@ -136,7 +148,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"vehid: internal error: {type(exc).__name__}: {exc} (rerun with --verbose for the traceback)",
             file=sys.stderr,
         )
-        return 1
+        return _failed(args, exc, 1)
     if args.json:
         sys.stdout.write(json.dumps(to_jsonable(summary), allow_nan=False) + "\n")
     elif text:

@@ -101,5 +101,8 @@ def test_bad_input_from_a_real_process(tmp_path):
         [sys.executable, "-m", "scenarios.cli", "simulate", "--speed", "-2", "--json"],
         capture_output=True, text=True, check=False,
     )
-    assert completed.returncode == 2 and completed.stdout == ""
+    assert completed.returncode == 2
+    # With --json a failure is still exactly one JSON object, naming the error and the status.
+    body = json.loads(completed.stdout)
+    assert body["exit_status"] == 2 and "speed" in body["error"]
     assert completed.stderr.count("\n") == 1 and "Traceback" not in completed.stderr
