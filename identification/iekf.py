@@ -329,7 +329,12 @@ def identify_iekf(
         pass_index = len(history) + 1
         pass_start = time.perf_counter()
         state = np.concatenate([np.zeros(n), theta, pack_covariance(P)])
-        state, innovations = run_pass(state, u_scaled, y_scaled, q, r)
+        try:
+            state, innovations = run_pass(state, u_scaled, y_scaled, q, r)
+        except DivergenceError as exc:
+            raise DivergenceError(
+                f"pass {pass_index}: {exc}", last_good=result(f"diverged at pass {pass_index}") if history else None
+            ) from exc
         new_theta = state[n:m]
         new_P = unpack_covariance(state[m:], m)
         if not (np.all(np.isfinite(state)) and np.all(np.isfinite(innovations))):
