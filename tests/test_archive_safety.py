@@ -3,6 +3,7 @@ report folders swapped in whole. Each test first reproduces the failure the work
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import socket
@@ -35,7 +36,9 @@ def _archive(path):
     u = np.sin(t)[:, None]
     y = np.column_stack([np.cos(t), 0.5 * np.sin(2 * t)])
     structure = ModalStructure.default(2, 1, 2)
-    model = ModalModel.from_parameters(structure, structure.initial_parameters(sigma=-2.0, omega=3.0))
+    theta = structure.initial_parameters(sigma=-2.0, omega=3.0)
+    theta[structure.slices()["B"]] = [0.5, 1.5]
+    model = ModalModel.from_parameters(structure, theta, input_names=("u",), output_names=("y1", "y2"))
     with write_archive(path, kind="identification", config={"order": 2}, seeds=[0]) as handle:
         write_record(handle, "identification", IOData(t, u, y))
         write_run(handle, "iekf", model=model)
@@ -241,3 +244,35 @@ def test_a_writer_killed_mid_report_leaves_the_old_report(tmp_path):
     with replacing_directory(folder) as partial:  # the next writer clears the dead one's leftovers
         (partial / "table.md").write_text("new")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["report"]
+
+
+def test_a_second_identify_on_the_same_archive_exits_2_before_any_work(held_elsewhere, tmp_path, capsys):
+    """Two `vehid identify --out same.h5` at once used to leave one run's record with the other's model."""
+    path, pid = held_elsewhere
+    record = tmp_path / "record.csv"
+    t = np.arange(500) * 0.01
+    np.savetxt(record, np.column_stack([t, np.sin(t), np.cos(t)]), delimiter=",", header="t,u,y", comments="")
+    assert main(["identify", str(record), "--inputs", "u", "--outputs", "y", "--order", "2", "--out", str(path),
+                 "--json"]) == 2
+    captured = capsys.readouterr()
+    assert f"process {pid} on host {socket.gethostname()}" in captured.err
+    assert len(captured.err.strip().splitlines()) == 1 and not path.exists()
+    assert main(["identify", "--resume", str(path)]) == 2  # a resume is a writer too
+
+
+def test_the_report_folder_holds_no_stale_files(tmp_path, capsys):
+    """A new report replaces the old folder whole: no stale table or PDF of an earlier run beside the new files."""
+    from identification import append_history, run_group
+
+    path = tmp_path / "run.h5"
+    with write_archive(path, kind="identification") as handle:
+        for k in range(4):
+            append_history(run_group(handle, "n3"), {"fit_filter": [90.0 + k], "trace_p": 10.0 ** -k})
+    folder = tmp_path / "figs"
+    folder.mkdir()
+    (folder / "summary.md").write_text("stale")
+    (folder / "convergence_n9.png").write_text("stale")
+    assert main(["report", str(path), "--out", str(folder), "--dpi", "30", "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert sorted(p.name for p in folder.iterdir()) == sorted(os.path.basename(f) for f in summary["files"])
+    assert "convergence_n9.png" not in summary["files"] and all(os.path.exists(f) for f in summary["files"])
