@@ -12,19 +12,19 @@
   it to the whole process group; the parent decides) and die with their
   parent: on Linux the kernel sends them SIGKILL when it dies
   (``PR_SET_PDEATHSIG``), elsewhere a watchdog thread notices the new parent
-  within half a second. So neither a signal nor ``kill -9`` of the parent
-  leaves workers running or blocked on their pipes.
+  within half a second. Both are set up by :mod:`scenarios._parent_watch`
+  as the worker's first import, before the seconds it spends importing the
+  workbench. So neither a signal nor ``kill -9`` of the parent leaves
+  workers running or blocked on their pipes.
 """
 
 from __future__ import annotations
 
-import ctypes
 import errno
 import os
 import pickle
 import queue as queue_module
 import signal
-import sys
 import threading
 import time
 from contextlib import contextmanager
@@ -32,6 +32,8 @@ from multiprocessing import get_context
 from typing import Any, Callable, Iterator, Sequence
 
 from identification.errors import WorkbenchError
+
+from ._parent_watch import ENVIRONMENT, die_with_parent
 
 __all__ = [
     "GRACE",
@@ -94,25 +96,6 @@ def stopping_on_signals() -> Iterator[None]:
 
 
 # --------------------------------------------------------------- workers
-_PR_SET_PDEATHSIG = 1
-
-
-def _die_with_parent(parent_pid: int) -> None:
-    """Make this worker end when the process that started it ends."""
-    if sys.platform.startswith("linux"):
-        try:
-            ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0)
-        except (OSError, AttributeError):  # pragma: no cover - no prctl: the watchdog below still works
-            pass
-    if os.getppid() != parent_pid:  # the parent died before we could ask
-        os._exit(1)
-
-    def watch() -> None:
-        while os.getppid() == parent_pid:
-            time.sleep(0.5)
-        os._exit(1)
-
-    threading.Thread(target=watch, name="parent-watchdog", daemon=True).start()
 
 
 def _portable(exc: BaseException) -> BaseException:
@@ -126,7 +109,7 @@ def _portable(exc: BaseException) -> BaseException:
 def _worker_main(function: Callable[..., Any], jobs: Any, results: Any, parent_pid: int) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent stops us; Ctrl-C is its to handle
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
-    _die_with_parent(parent_pid)
+    die_with_parent(parent_pid)  # already done at import of scenarios when the environment named us; idempotent
 
     def report(message: Any) -> None:
         results.put(("message", None, message))
@@ -200,8 +183,16 @@ def run_in_workers(
                                  name=f"vehid-worker-{k}", daemon=True) for k in range(workers)]
     outcomes: dict[int, Any] = {}
     try:
-        for process in processes:
-            process.start()
+        announced = os.environ.get(ENVIRONMENT)
+        os.environ[ENVIRONMENT] = str(os.getpid())  # read by each worker at its very start (scenarios/__init__)
+        try:
+            for process in processes:
+                process.start()
+        finally:
+            if announced is None:
+                del os.environ[ENVIRONMENT]
+            else:
+                os.environ[ENVIRONMENT] = announced
         all_ended_before = False
         while len(outcomes) < len(jobs):
             crashed = [p for p in processes if p.exitcode not in (None, 0)]

@@ -61,7 +61,7 @@ def _corrupt_archive(tmp_path):
 @pytest.mark.parametrize("case", [
     "identify-missing", "identify-resume-foreign", "identify-resume-corrupt", "report-missing", "report-corrupt",
     "simulate-missing-vehicle", "linearize-missing-vehicle", "handling-resume-missing", "handling-bad-orders",
-    "linear-example-bad-passes", "textbook-unwritable", "bench-unwritable",
+    "linear-example-bad-passes", "textbook-unwritable", "bench-unwritable", "identify-save-model-directory",
 ])
 def test_bad_input_exits_2(case, tmp_path, capsys, monkeypatch):
     monkeypatch.setenv("VEHID_RESULTS_DIR", str(tmp_path / "results"))
@@ -88,6 +88,13 @@ def test_bad_input_exits_2(case, tmp_path, capsys, monkeypatch):
         _check(capsys, ["study", "handling", "--orders", "9"], 2, "from 2 to 8")
     elif case == "linear-example-bad-passes":
         _check(capsys, ["study", "linear-example", "--passes", "0"], 2, "passes")
+    elif case == "identify-save-model-directory":  # IsADirectoryError after the work: the path and the cause
+        folder = tmp_path / "model.json"
+        folder.mkdir()
+        data = tmp_path / "record.csv"
+        data.write_text("t,u,y\n" + "".join(f"{k * 0.01},{(-1) ** (k // 3)},{(-1) ** (k // 4)}\n" for k in range(300)))
+        _check(capsys, ["identify", str(data), "--inputs", "u", "--outputs", "y", "--order", "2", "--method", "arx",
+                        "--save-model", str(folder)], 2, str(folder), "Is a directory")
     else:  # a protected file the command must write: the path and the cause (PermissionError is a bad target)
         target = str(tmp_path / "results" / "benchmarks.json")
 
