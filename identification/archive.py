@@ -202,12 +202,17 @@ def _atomic(path: Path, prepare: Any, mode: str) -> Iterator[h5py.File]:
     with archive_lock(path):
         temporary = _temporary_beside(path)
         try:
-            prepare(temporary)
-            with h5py.File(temporary, mode) as handle:
-                yield handle
-                write_checksums(handle)
-            _sync(temporary)
-            os.replace(temporary, path)
+            try:
+                prepare(temporary)
+                with h5py.File(temporary, mode) as handle:
+                    yield handle
+                    write_checksums(handle)
+                _sync(temporary)
+                os.replace(temporary, path)
+            except OSError as exc:  # a full disk, a vanished directory: name the archive, not the hidden copy
+                if exc.filename not in (None, str(temporary)):
+                    raise
+                raise OSError(exc.errno, f"cannot write the archive ({exc.strerror or exc})", str(path)) from exc
             _sync_directory(path.parent)
         finally:
             if temporary.exists():

@@ -160,3 +160,21 @@ def test_a_full_disk_names_the_file_and_exits_1(tmp_path, capsys, monkeypatch):
 
     monkeypatch.setattr("scenarios.commands.study_linear_example.run_case", full)
     _check(capsys, ["study", "linear-example"], 1, target, "No space left on device")
+
+
+def test_a_full_disk_while_writing_an_archive_names_it(tmp_path, capsys, monkeypatch):
+    """fsync reporting ENOSPC (a full disk found at flush): the error names the archive the user gave, not the
+    hidden copy being written, exits 1, and leaves no partial file behind."""
+    from identification import archive as archive_module
+
+    data = tmp_path / "record.csv"
+    data.write_text("t,u,y\n" + "".join(f"{k * 0.01},{(-1) ** (k // 3)},{(-1) ** (k // 4)}\n" for k in range(300)))
+    archive = tmp_path / "run.h5"
+
+    def full(path):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(archive_module, "_sync", full)
+    _check(capsys, ["identify", str(data), "--inputs", "u", "--outputs", "y", "--order", "2", "--out", str(archive)],
+           1, str(archive), "No space left on device")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["record.csv"]

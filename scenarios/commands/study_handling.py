@@ -89,7 +89,7 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
             passes=args.passes, nodes=args.nodes, nonlinear=not args.linear_only,
             nonlinear_passes=args.nonlinear_passes, nonlinear_p=args.nonlinear_p, workers=args.workers,
         )
-        path = check_output_target(archive_path(args.out), force=args.force)  # before any work
+        path = check_output_target(archive_path(args.out), inputs=[args.vehicle], force=args.force)  # before any work
     with archive_lock(path):  # one writer for the whole study: checkpoints, archive and report
         if args.resume:
             config, records, finished = read_progress(path, workers=args.workers)
