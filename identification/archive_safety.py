@@ -47,6 +47,7 @@ __all__ = [
     "OutputTargetError",
     "archive_lock",
     "check_output_target",
+    "check_output_folder",
     "is_workbench_archive",
     "write_checksums",
     "verify_checksums",
@@ -151,7 +152,6 @@ def archive_lock(path: str | Path) -> Iterator[Path]:
 def _acquire(lock_file: Path, path: Path) -> int:
     while True:
         try:
-            lock_file.parent.mkdir(parents=True, exist_ok=True)
             fd = os.open(lock_file, os.O_RDWR | os.O_CREAT, 0o644)
         except OSError as exc:
             raise OutputTargetError(f"cannot lock {path} for writing: {os_error_text(exc, lock_file)}") from None
@@ -234,6 +234,15 @@ def check_output_target(
         raise OutputTargetError(
             f"{path} exists and is not a workbench archive; refusing to overwrite it (give --force to replace it)"
         )
+    _check_writable_directory(path, what)
+    if path.exists() and not os.access(path, os.W_OK):
+        # os.replace would succeed in a writable directory, but the user protected this file
+        raise OutputTargetError(f"cannot write the {what} {path}: {os.strerror(errno.EACCES)}")
+    return path
+
+
+def _check_writable_directory(path: Path, what: str) -> None:
+    """Create ``path``'s directory if missing and prove it writable by creating and removing a file there."""
     directory = path.parent
     existing = next(folder for folder in (directory, *directory.parents) if folder.exists())
     if not existing.is_dir():
@@ -246,10 +255,22 @@ def check_output_target(
         probe.unlink()
     except OSError as exc:  # the probe's own name would only confuse: the target and the cause
         raise OutputTargetError(f"cannot write the {what} {path}: {exc.strerror or exc}") from None
-    if path.exists() and not os.access(path, os.W_OK):
-        # os.replace would succeed in a writable directory, but the user protected this file
-        raise OutputTargetError(f"cannot write the {what} {path}: {os.strerror(errno.EACCES)}")
-    return path
+
+
+def check_output_folder(folder: str | Path, *, what: str = "report folder") -> Path:
+    """Check, before any work, that ``folder`` can be replaced by :func:`replacing_directory`; returns it.
+
+    Raises
+    ------
+    OutputTargetError
+        ``folder`` exists and is not a directory, or its parent cannot be
+        created or written (the path and the cause named).
+    """
+    folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise OutputTargetError(f"cannot write the {what} {folder}: {os.strerror(errno.ENOTDIR)}")
+    _check_writable_directory(folder, what)
+    return folder
 
 
 # --------------------------------------------------------------- checksums
@@ -358,9 +379,7 @@ def replacing_directory(folder: str | Path) -> Iterator[Path]:
     one is left as it was. Leftovers of writers that were killed (hidden
     ``.<name>.*.partial`` folders of dead processes) are removed first.
     """
-    folder = Path(folder)
-    if folder.exists() and not folder.is_dir():
-        raise OutputTargetError(f"cannot write the folder {folder}: {os.strerror(errno.ENOTDIR)}")
+    folder = check_output_folder(folder, what="folder")
     try:
         folder.parent.mkdir(parents=True, exist_ok=True)
         _remove_dead_partials(folder)

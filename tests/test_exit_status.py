@@ -62,6 +62,7 @@ def _corrupt_archive(tmp_path):
     "identify-missing", "identify-resume-foreign", "identify-resume-corrupt", "report-missing", "report-corrupt",
     "simulate-missing-vehicle", "linearize-missing-vehicle", "handling-resume-missing", "handling-bad-orders",
     "linear-example-bad-passes", "textbook-unwritable", "bench-unwritable", "identify-save-model-directory",
+    "report-out-is-a-file",
 ])
 def test_bad_input_exits_2(case, tmp_path, capsys, monkeypatch):
     monkeypatch.setenv("VEHID_RESULTS_DIR", str(tmp_path / "results"))
@@ -76,6 +77,14 @@ def test_bad_input_exits_2(case, tmp_path, capsys, monkeypatch):
         _check(capsys, ["identify", "--resume", str(_corrupt_archive(tmp_path))], 2, "corrupt.h5")
     elif case == "report-missing":
         _check(capsys, ["report", missing], 2, "absent.h5")
+    elif case == "report-out-is-a-file":  # refused before drawing, and the file is left alone
+        from identification import write_archive
+
+        with write_archive(tmp_path / "a.h5", kind="identification"):
+            pass
+        monkeypatch.setattr("scenarios.commands.report.archive_figures", None)  # drawing would fail loudly
+        _check(capsys, ["report", str(tmp_path / "a.h5"), "--out", str(foreign)], 2, "foreign.csv", "Not a directory")
+        assert foreign.read_text() == "t,u,y\n0,0,0\n"
     elif case == "report-corrupt":
         _check(capsys, ["report", str(_corrupt_archive(tmp_path))], 2, "corrupt.h5")
     elif case == "simulate-missing-vehicle":

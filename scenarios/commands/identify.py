@@ -122,6 +122,8 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
         raise InputError("--resume continues in its own archive: give no --out")
     if args.out:  # before any work: a bad target must not cost the run
         check_output_target(args.out, inputs=[args.data], force=args.force)
+    if args.resume:  # a missing, foreign or corrupt file is named as such before anything is locked or created
+        open_archive(args.resume, kinds=["identification"]).close()
     target = args.resume or args.out
     with archive_lock(target) if target else nullcontext():  # one writer per archive for the whole run
         return _identify(args)

@@ -18,7 +18,7 @@ import math
 from pathlib import Path
 
 from identification.archive import read_archive
-from identification.archive_safety import replacing_directory
+from identification.archive_safety import check_output_folder, replacing_directory
 from identification.errors import InputError
 from scenarios.paths import results_directory
 from scenarios.report import archive_figures, archive_table, markdown_table, write_report
@@ -56,6 +56,7 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
         raise InputError(f"--window needs two finite times T0 < T1; got {args.window}")
     path = Path(args.archive)
     archive = read_archive(path)
+    check_output_folder(_output_folder(path, args.out))  # before drawing: a file in its place, no permission
     if archive.kind == "handling-study":
         from scenarios.handling_report import write_handling_report
 

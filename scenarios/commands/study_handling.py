@@ -21,7 +21,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from identification.archive_safety import archive_lock, check_output_target, replacing_directory
+from identification.archive import open_archive
+from identification.archive_safety import archive_lock, check_output_folder, check_output_target, replacing_directory
 from identification.errors import InputError
 from scenarios.handling_resume import StudyCheckpoint, read_progress
 from scenarios.handling_study import (HandlingConfig, archive_path, make_records, parse_orders, planned_passes,
@@ -82,6 +83,7 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
             named = ", ".join("--" + name.replace("_", "-") for name in (["out"] if args.out else []) + given)
             raise InputError(f"--resume continues the study with the settings and file of its archive; do not give {named}")
         path = Path(args.resume)
+        open_archive(path, kinds=["handling-study"]).close()  # missing, foreign or corrupt: said before anything else
     else:
         config = HandlingConfig(
             orders=parse_orders(args.orders), seed=args.seed, duration=args.duration,
@@ -90,6 +92,8 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
             nonlinear_passes=args.nonlinear_passes, nonlinear_p=args.nonlinear_p, workers=args.workers,
         )
         path = check_output_target(archive_path(args.out), inputs=[args.vehicle], force=args.force)  # before any work
+    if not args.no_report:
+        check_output_folder(path.with_suffix(""))  # the report folder too, before hours of work
     with archive_lock(path):  # one writer for the whole study: checkpoints, archive and report
         if args.resume:
             config, records, finished = read_progress(path, workers=args.workers)
