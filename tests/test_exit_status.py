@@ -187,3 +187,17 @@ def test_a_full_disk_while_writing_an_archive_names_it(tmp_path, capsys, monkeyp
     _check(capsys, ["identify", str(data), "--inputs", "u", "--outputs", "y", "--order", "2", "--out", str(archive)],
            1, str(archive), "No space left on device")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["record.csv"]
+
+
+def test_an_interrupt_still_prints_one_json_object(tmp_path, capsys, monkeypatch):
+    """SIGTERM (raised as Interrupted by the handler the CLI installs) ends with 128 + 15 and one JSON object."""
+    import signal
+
+    from scenarios.shutdown import Interrupted
+
+    def stopped(**options):
+        raise Interrupted(signal.SIGTERM)
+
+    monkeypatch.setattr("scenarios.commands.study_textbook.run_all", stopped)
+    body = _check(capsys, ["study", "textbook"], 128 + signal.SIGTERM, "interrupted by SIGTERM")
+    assert body["error"] == "interrupted by SIGTERM"
