@@ -254,7 +254,9 @@ def identify_iekf(
         Start from these parameters instead of the named start values.
     resume : IEKFResult, optional
         Continue a previous run on the same data: its parameters, P and
-        history are carried on, and ``options.passes`` counts all passes.
+        history are carried on, and ``options.passes`` counts all passes. A
+        run whose last two passes already meet the stop rule returns at once,
+        converged, as the uninterrupted run would have.
     on_pass : callable, optional
         Called after every pass with the new record and the result so far
         (for progress displays and checkpoints).
@@ -324,6 +326,8 @@ def identify_iekf(
             seconds=time.perf_counter() - started,
         )
 
+    if len(history) >= max(2, options.min_passes) and _settled(history[-2], history[-1], options):
+        return result("converged")  # a resumed run had met its stop rule (perhaps killed before it said so)
     stop_reason = "passes"
     while len(history) < options.passes:
         pass_index = len(history) + 1
