@@ -1,0 +1,274 @@
+"""Hold-out fit of `vehid identify` on public measured records, against peer libraries, in one run.
+
+    python benchmarks/real_data.py [--sets ballbeam,dryer] [--no-peers]
+
+Records: the raw files under ``tests/data/`` (see each SOURCE.md), read and
+split as ``benchmarks/_real_records.py`` states: the first 70 % of a record
+estimates, the last 30 % validates; the cascaded tanks use their published
+estimation and validation records. Score: NRMSE fit % per output on the
+validation samples (MATLAB ``compare``), simulated from the validation input
+from the least-squares initial state, the same for every linear model.
+
+Workbench rows run the command line a user runs, ``python -m scenarios.cli
+identify FILE --json`` with default options (order 4, the IEKF), and the same
+with ``--normalize``, and its comparators ``--method arx|n4sid|output-error``.
+When ``identify`` offers ``--validation FRACTION`` (and ``--validation-file``
+for a separate validation record), its own ``validation_fit_percent`` is the
+score; otherwise the benchmark hands it the estimation part only, takes the
+model it saves (``--save-model``) and simulates it on the validation part
+with the workbench's own simulation. Each workbench row is run on the
+record as published ("raw": offsets and units as measured) and on the record
+with the estimation means removed ("centred"), which is what the peers get.
+The benchmark first offers the raw file itself to ``identify``; if that fails
+it records the error and gives a CSV copy of the same numbers instead.
+
+Peers: SIPPY (N4SID, MOESP, CVA), nfoursid, python-control (Markov
+parameters + ERA) and sysidentpy (FROLS ARX and degree-2 NARX) run in their
+own virtual environment ``benchmarks/.peers-venv`` (created here on first
+use, or by ``make bench-real``), never in the workbench's, through
+``benchmarks/_peers_runner.py``.
+
+The table goes to ``results/benchmarks.json`` under ``real_data``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+import venv
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+sys.path.insert(0, str(HERE))
+sys.path.insert(0, str(ROOT))
+
+import _real_records as records  # noqa: E402
+
+PEERS_VENV = HERE / ".peers-venv"
+PEER_PACKAGES = ("sippy-unipi", "nfoursid", "control", "sysidentpy")
+WORKBENCH_METHODS = (
+    ("iekf", ()),
+    ("iekf --normalize", ("--normalize",)),
+    ("arx", ("--method", "arx")),
+    ("n4sid", ("--method", "n4sid")),
+    ("output-error", ("--method", "output-error")),
+)
+FORMS = ("raw", "centred")
+
+
+# ------------------------------------------------------------------ workbench
+def _cli(args: list[str], timeout: float = 900) -> tuple[int, dict, float]:
+    """Run ``python -m scenarios.cli`` with ``args`` (and --json); exit status, parsed JSON, wall seconds."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
+    start = time.perf_counter()
+    done = subprocess.run([sys.executable, "-m", "scenarios.cli", *args, "--json", "--quiet"], cwd=ROOT, env=env,
+                          capture_output=True, text=True, timeout=timeout)
+    seconds = time.perf_counter() - start
+    try:
+        summary = json.loads(done.stdout.strip().splitlines()[-1]) if done.stdout.strip() else {}
+    except json.JSONDecodeError:
+        summary = {"error": done.stdout.strip()[-300:]}
+    if done.returncode and "error" not in summary:
+        summary["error"] = done.stderr.strip()[-300:]
+    return done.returncode, summary, seconds
+
+
+def identify_options() -> set[str]:
+    """The options ``vehid identify`` offers, from its --help."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    text = subprocess.run([sys.executable, "-m", "scenarios.cli", "identify", "--help"], cwd=ROOT, env=env,
+                          capture_output=True, text=True).stdout
+    return {word.strip(",[]") for word in text.split() if word.startswith("--")}
+
+
+def _write_csv(path: Path, u: np.ndarray, y: np.ndarray, dt: float) -> Path:
+    names = [f"u{i + 1}" for i in range(u.shape[1])] + [f"y{i + 1}" for i in range(y.shape[1])]
+    t = np.arange(len(u)) * dt
+    np.savetxt(path, np.column_stack([t, u, y]), delimiter=",", header=",".join(["t", *names]), comments="",
+               fmt="%.10g")
+    return path
+
+
+def _column_args(entry: records.RecordSet, n_u: int, n_y: int, raw: bool) -> list[str]:
+    inputs = entry.inputs if raw else [f"u{i + 1}" for i in range(n_u)]
+    outputs = entry.outputs if raw else [f"y{i + 1}" for i in range(n_y)]
+    return ["--inputs", ",".join(inputs), "--outputs", ",".join(outputs), "--dt", repr(entry.dt)]
+
+
+def _workbench_fit(model_file: Path, u_val: np.ndarray, y_val: np.ndarray, dt: float) -> list[float]:
+    """Hold-out fit of a saved workbench model, simulated by the workbench from the least-squares initial state."""
+    from identification.modal import ModalModel
+
+    model = ModalModel.from_dict(json.loads(model_file.read_text()))
+    n = model.structure.n
+    with np.errstate(all="ignore"):
+        forced = model.simulate(u_val, dt)
+        free = np.stack([model.simulate(np.zeros_like(u_val), dt, x0=np.eye(n)[i]) for i in range(n)], axis=2)
+    return records.fit_from_estimated_state(forced, free, y_val)[0]
+
+
+def run_workbench(entry: records.RecordSet, options: set[str], scratch: Path) -> dict:
+    (u_est, y_est), (u_val, y_val) = records.load(entry)
+    separate = entry.validation_path_columns is not None
+    holdout_in_cli = "--validation-file" in options if separate else "--validation" in options
+    result: dict = {"validation_by": "identify --validation" if holdout_in_cli else "benchmark simulation of --save-model"}
+    # Offer the raw file as published; fall back to a CSV copy of the same numbers.
+    columns = _column_args(entry, u_est.shape[1], y_est.shape[1], raw=True)
+    status, summary, _ = _cli(["identify", str(entry.file), *columns, "--method", "arx"])
+    result["raw_file_read"] = status == 0
+    if status != 0:
+        result["raw_file_error"] = summary.get("error", f"exit status {status}")
+    u_offset, y_offset = u_est.mean(axis=0), y_est.mean(axis=0)
+    for form in FORMS:
+        shift_u, shift_y = (u_offset, y_offset) if form == "centred" else (0.0, 0.0)
+        ue, ye, uv, yv = u_est - shift_u, y_est - shift_y, u_val - shift_u, y_val - shift_y
+        use_raw_file = form == "raw" and result["raw_file_read"] and holdout_in_cli
+        if use_raw_file:
+            data_args = [str(entry.file), *columns]
+        elif holdout_in_cli and not separate:
+            full = _write_csv(scratch / f"{entry.name}_{form}_full.csv", np.vstack([ue, uv]), np.vstack([ye, yv]), entry.dt)
+            data_args = [str(full), *_column_args(entry, ue.shape[1], ye.shape[1], raw=False)]
+        else:
+            est = _write_csv(scratch / f"{entry.name}_{form}_est.csv", ue, ye, entry.dt)
+            data_args = [str(est), *_column_args(entry, ue.shape[1], ye.shape[1], raw=False)]
+        if holdout_in_cli:
+            if separate:
+                val = _write_csv(scratch / f"{entry.name}_{form}_val.csv", uv, yv, entry.dt)
+                data_args += ["--validation-file", str(val)]
+            else:
+                data_args += ["--validation", repr(records.HOLDOUT)]
+        for label, extra in WORKBENCH_METHODS:
+            model_file = scratch / f"{entry.name}_{form}_{label.replace(' ', '')}.json"
+            status, summary, seconds = _cli(["identify", *data_args, *extra, "--save-model", str(model_file)])
+            row: dict = {"seconds": seconds, "exit_status": status}
+            if status not in (0, 3):
+                row["error"] = summary.get("error", "")
+            elif holdout_in_cli:
+                row["validation_fit_percent"] = summary.get("validation_fit_percent")
+            else:
+                row["validation_fit_percent"] = _workbench_fit(model_file, uv, yv, entry.dt)
+            for key in ("fit_percent", "passes_run", "stop_reason", "warnings"):
+                if key in summary:
+                    row[key] = summary[key]
+            result[f"{label} [{form}]"] = row
+    return result
+
+
+# ---------------------------------------------------------------------- peers
+def peers_python() -> Path:
+    """The peers' interpreter, creating their virtual environment on first use."""
+    python = PEERS_VENV / "bin" / "python"
+    if not python.exists():
+        print(f"creating {PEERS_VENV.relative_to(ROOT)} with {', '.join(PEER_PACKAGES)}", flush=True)
+        venv.create(PEERS_VENV, with_pip=True)
+        subprocess.run([str(python), "-m", "pip", "install", "--quiet", "--disable-pip-version-check", *PEER_PACKAGES],
+                       check=True)
+    return python
+
+
+def run_peers(names: list[str]) -> dict:
+    done = subprocess.run([str(peers_python()), str(HERE / "_peers_runner.py"), *names], capture_output=True,
+                          text=True, timeout=3600)
+    if done.returncode != 0:
+        raise RuntimeError(f"peer runner failed: {done.stderr.strip()[-500:]}")
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+# ---------------------------------------------------------------------- table
+def _mean_fit(row: dict) -> float | None:
+    fits = row.get("validation_fit_percent")
+    return float(np.mean(fits)) if fits else None
+
+
+def _show(value: float | None) -> str:
+    if value is None:
+        return "failed"
+    if not np.isfinite(value) or value < -999:
+        return "< -999"
+    return f"{value:.1f}"
+
+
+def summarise(sets: dict) -> dict:
+    """Best peer and best workbench row per set, by mean hold-out fit over outputs."""
+    summary = {}
+    for name, rows in sets.items():
+        def best(prefix_filter):
+            scored = [(m, _mean_fit(r)) for m, r in rows.items() if isinstance(r, dict) and prefix_filter(m)]
+            scored = [(m, f) for m, f in scored if f is not None and np.isfinite(f)]
+            return max(scored, key=lambda item: item[1]) if scored else (None, None)
+        peer = best(lambda m: m.startswith("peer:"))
+        default = _mean_fit(rows.get("workbench:iekf [raw]", {}))
+        summary[name] = {
+            "best_peer": peer[0], "best_peer_fit": peer[1],
+            "best_workbench": best(lambda m: m.startswith("workbench:"))[0],
+            "best_workbench_fit": best(lambda m: m.startswith("workbench:"))[1],
+            "default_iekf_fit": default,
+            "default_minus_best_peer": None if default is None or peer[1] is None else default - peer[1],
+        }
+    return summary
+
+
+def print_table(sets: dict) -> None:
+    methods: list[str] = []
+    for rows in sets.values():
+        methods += [m for m, r in rows.items() if isinstance(r, dict) and m not in methods and "seconds" in r]
+    names = list(sets)
+    print("hold-out NRMSE fit % (mean over outputs); rows: method, columns: record")
+    print(f"{'method':<42}" + "".join(f"{n:>15}" for n in names))
+    for method in methods:
+        cells = "".join(f"{_show(_mean_fit(sets[n][method])) if method in sets[n] else '-':>15}" for n in names)
+        print(f"{method:<42}{cells}")
+
+
+def main(argv: list[str] | None = None) -> dict:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sets", help="comma-separated record sets (default: all)")
+    parser.add_argument("--no-peers", action="store_true", help="score the workbench only")
+    args = parser.parse_args(argv)
+    names = args.sets.split(",") if args.sets else [entry.name for entry in records.RECORD_SETS]
+    options = identify_options()
+    started = time.perf_counter()
+    peers = {} if args.no_peers else run_peers(names)
+    sets: dict = {}
+    with tempfile.TemporaryDirectory(prefix="vehid-real-") as scratch:
+        for name in names:
+            entry = records.record_set(name)
+            print(f"== {name}", flush=True)
+            workbench = run_workbench(entry, options, Path(scratch))
+            rows = {f"workbench:{k}": v for k, v in workbench.items() if isinstance(v, dict)}
+            rows.update({f"peer:{k}": v for k, v in peers.get(name, {}).items()})
+            (u_est, _), (u_val, _) = records.load(entry)
+            sets[name] = {
+                "file": entry.path, "dt": entry.dt, "dt_note": entry.dt_note,
+                "estimation_samples": len(u_est), "validation_samples": len(u_val),
+                "raw_file_read": workbench["raw_file_read"],
+                **({"raw_file_error": workbench["raw_file_error"]} if "raw_file_error" in workbench else {}),
+                "validation_by": workbench["validation_by"], **rows,
+            }
+    figures = {
+        "score": "validation NRMSE fit % per output (MATLAB compare), least-squares initial state",
+        "split": f"first {1 - records.HOLDOUT:.0%} estimates, last {records.HOLDOUT:.0%} validates "
+                 "(cascaded tanks: published estimation and validation records)",
+        "order": 4,
+        "sets": sets,
+        "summary": summarise(sets),
+        "seconds": time.perf_counter() - started,
+        "load_average_1min": os.getloadavg()[0],
+    }
+    print_table(sets)
+    from scenarios.benchmarking import record_figures
+
+    print(f"figures written to {record_figures('real_data', figures)}")
+    return figures
+
+
+if __name__ == "__main__":
+    main()
