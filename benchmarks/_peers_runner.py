@@ -37,7 +37,7 @@ def _sippy(method: str):
     def identify(u, y):
         from sippy_unipi import system_identification
 
-        model = system_identification(y, u, method, SS_fixed_order=ORDER)
+        model = system_identification(y, u, method, SS_fixed_order=ORDER, SS_D_required=True)
         return model.A, model.B, model.C, model.D
     return identify
 

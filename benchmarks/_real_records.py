@@ -119,6 +119,14 @@ def fit_from_estimated_state(forced: np.ndarray, free: np.ndarray, y: np.ndarray
     return nrmse_fit(y, y_hat.reshape(len(y), n_y)), x0
 
 
+def fit_of_linear_simulator(simulate, n_states: int, u: np.ndarray, y: np.ndarray) -> list[float]:
+    """Hold-out fit of a linear model given as ``simulate(u, x0) -> y``, from the least-squares initial state."""
+    with np.errstate(all="ignore"):
+        forced = simulate(u, np.zeros(n_states))
+        free = np.stack([simulate(np.zeros_like(u), np.eye(n_states)[i]) for i in range(n_states)], axis=2)
+    return fit_from_estimated_state(forced, free, y)[0]
+
+
 def discrete_responses(A, B, C, D, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Zero-state output and unit-initial-state responses of ``x+ = A x + B u, y = C x + D u``."""
     A, B, C, D = (np.atleast_2d(np.asarray(m, dtype=float)) for m in (A, B, C, D))

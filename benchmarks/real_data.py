@@ -54,12 +54,16 @@ import _real_records as records  # noqa: E402
 
 PEERS_VENV = HERE / ".peers-venv"
 PEER_PACKAGES = ("sippy-unipi", "nfoursid", "control", "sysidentpy")
+# label, options, factor on the time base: the IEKF's start values are absolute (rad/s), so the same samples with
+# time counted in hundredths show how much of a result is owed to the units of time alone.
 WORKBENCH_METHODS = (
-    ("iekf", ()),
-    ("iekf --normalize", ("--normalize",)),
-    ("arx", ("--method", "arx")),
-    ("n4sid", ("--method", "n4sid")),
-    ("output-error", ("--method", "output-error")),
+    ("iekf", (), 1.0),
+    ("iekf --normalize", ("--normalize",), 1.0),
+    ("iekf, dt x 0.01", (), 0.01),
+    ("iekf --normalize, dt x 0.01", ("--normalize",), 0.01),
+    ("arx", ("--method", "arx"), 1.0),
+    ("n4sid", ("--method", "n4sid"), 1.0),
+    ("output-error", ("--method", "output-error"), 1.0),
 )
 FORMS = ("raw", "centred")
 
@@ -97,10 +101,11 @@ def _write_csv(path: Path, u: np.ndarray, y: np.ndarray, dt: float) -> Path:
     return path
 
 
-def _column_args(entry: records.RecordSet, n_u: int, n_y: int, raw: bool) -> list[str]:
+def _column_args(entry: records.RecordSet, n_u: int, n_y: int, *, raw: bool, dt: float) -> list[str]:
+    """--inputs, --outputs, --dt: the published column names of the raw file, or those of the CSV copy."""
     inputs = entry.inputs if raw else [f"u{i + 1}" for i in range(n_u)]
     outputs = entry.outputs if raw else [f"y{i + 1}" for i in range(n_y)]
-    return ["--inputs", ",".join(inputs), "--outputs", ",".join(outputs), "--dt", repr(entry.dt)]
+    return ["--inputs", ",".join(inputs), "--outputs", ",".join(outputs), "--dt", repr(dt)]
 
 
 def _workbench_fit(model_file: Path, u_val: np.ndarray, y_val: np.ndarray, dt: float) -> list[float]:
@@ -108,11 +113,27 @@ def _workbench_fit(model_file: Path, u_val: np.ndarray, y_val: np.ndarray, dt: f
     from identification.modal import ModalModel
 
     model = ModalModel.from_dict(json.loads(model_file.read_text()))
-    n = model.structure.n
-    with np.errstate(all="ignore"):
-        forced = model.simulate(u_val, dt)
-        free = np.stack([model.simulate(np.zeros_like(u_val), dt, x0=np.eye(n)[i]) for i in range(n)], axis=2)
-    return records.fit_from_estimated_state(forced, free, y_val)[0]
+    return records.fit_of_linear_simulator(lambda u, x0: model.simulate(u, dt, x0=x0), model.structure.n, u_val, y_val)
+
+
+def _data_args(entry: records.RecordSet, form: str, time_factor: float, holdout_in_cli: bool, raw_file: bool,
+               estimation, validation, scratch: Path) -> list[str]:
+    """DATA and its options for ``identify``: the raw file where it is read, else a CSV copy of the same numbers."""
+    (ue, ye), (uv, yv) = estimation, validation
+    dt = entry.dt * time_factor
+    separate = entry.validation_path_columns is not None
+    if raw_file and form == "raw" and holdout_in_cli and not separate and time_factor == 1:
+        columns = _column_args(entry, ue.shape[1], ye.shape[1], raw=True, dt=dt)
+        return [str(entry.file), *columns, "--validation", repr(records.HOLDOUT)]
+    stem = scratch / f"{entry.name}_{form}_{time_factor:g}"
+    columns = _column_args(entry, ue.shape[1], ye.shape[1], raw=False, dt=dt)
+    if not holdout_in_cli:
+        return [str(_write_csv(Path(f"{stem}_est.csv"), ue, ye, dt)), *columns]
+    if separate:
+        return [str(_write_csv(Path(f"{stem}_est.csv"), ue, ye, dt)), *columns,
+                "--validation-file", str(_write_csv(Path(f"{stem}_val.csv"), uv, yv, dt))]
+    full = _write_csv(Path(f"{stem}_full.csv"), np.vstack([ue, uv]), np.vstack([ye, yv]), dt)
+    return [str(full), *columns, "--validation", repr(records.HOLDOUT)]
 
 
 def run_workbench(entry: records.RecordSet, options: set[str], scratch: Path) -> dict:
@@ -120,8 +141,8 @@ def run_workbench(entry: records.RecordSet, options: set[str], scratch: Path) ->
     separate = entry.validation_path_columns is not None
     holdout_in_cli = "--validation-file" in options if separate else "--validation" in options
     result: dict = {"validation_by": "identify --validation" if holdout_in_cli else "benchmark simulation of --save-model"}
-    # Offer the raw file as published; fall back to a CSV copy of the same numbers.
-    columns = _column_args(entry, u_est.shape[1], y_est.shape[1], raw=True)
+    # Offer the raw file as published; where identify cannot read it, a CSV copy of the same numbers is used.
+    columns = _column_args(entry, u_est.shape[1], y_est.shape[1], raw=True, dt=entry.dt)
     status, summary, _ = _cli(["identify", str(entry.file), *columns, "--method", "arx"])
     result["raw_file_read"] = status == 0
     if status != 0:
@@ -129,24 +150,11 @@ def run_workbench(entry: records.RecordSet, options: set[str], scratch: Path) ->
     u_offset, y_offset = u_est.mean(axis=0), y_est.mean(axis=0)
     for form in FORMS:
         shift_u, shift_y = (u_offset, y_offset) if form == "centred" else (0.0, 0.0)
-        ue, ye, uv, yv = u_est - shift_u, y_est - shift_y, u_val - shift_u, y_val - shift_y
-        use_raw_file = form == "raw" and result["raw_file_read"] and holdout_in_cli
-        if use_raw_file:
-            data_args = [str(entry.file), *columns]
-        elif holdout_in_cli and not separate:
-            full = _write_csv(scratch / f"{entry.name}_{form}_full.csv", np.vstack([ue, uv]), np.vstack([ye, yv]), entry.dt)
-            data_args = [str(full), *_column_args(entry, ue.shape[1], ye.shape[1], raw=False)]
-        else:
-            est = _write_csv(scratch / f"{entry.name}_{form}_est.csv", ue, ye, entry.dt)
-            data_args = [str(est), *_column_args(entry, ue.shape[1], ye.shape[1], raw=False)]
-        if holdout_in_cli:
-            if separate:
-                val = _write_csv(scratch / f"{entry.name}_{form}_val.csv", uv, yv, entry.dt)
-                data_args += ["--validation-file", str(val)]
-            else:
-                data_args += ["--validation", repr(records.HOLDOUT)]
-        for label, extra in WORKBENCH_METHODS:
-            model_file = scratch / f"{entry.name}_{form}_{label.replace(' ', '')}.json"
+        estimation, validation = (u_est - shift_u, y_est - shift_y), (u_val - shift_u, y_val - shift_y)
+        for label, extra, time_factor in WORKBENCH_METHODS:
+            data_args = _data_args(entry, form, time_factor, holdout_in_cli, result["raw_file_read"], estimation,
+                                   validation, scratch)
+            model_file = scratch / f"{entry.name}_{form}_{len(result)}.json"
             status, summary, seconds = _cli(["identify", *data_args, *extra, "--save-model", str(model_file)])
             row: dict = {"seconds": seconds, "exit_status": status}
             if status not in (0, 3):
@@ -154,7 +162,7 @@ def run_workbench(entry: records.RecordSet, options: set[str], scratch: Path) ->
             elif holdout_in_cli:
                 row["validation_fit_percent"] = summary.get("validation_fit_percent")
             else:
-                row["validation_fit_percent"] = _workbench_fit(model_file, uv, yv, entry.dt)
+                row["validation_fit_percent"] = _workbench_fit(model_file, *validation, entry.dt * time_factor)
             for key in ("fit_percent", "passes_run", "stop_reason", "warnings"):
                 if key in summary:
                     row[key] = summary[key]
