@@ -2,8 +2,8 @@
 
     benchmarks/.peers-venv/bin/python benchmarks/_peers_runner.py SET [SET ...]
 
-prints one JSON object: ``{set: {method: {"validation_fit_percent": [...],
-"seconds": s} or {"error": text}}}``. The peers (SIPPY, nfoursid,
+prints one JSON object: ``{"settings": ..., "versions": ..., "sets": {set:
+{method: {"validation_fit_percent": [...], "seconds": s} or {"error": text}}}}``. The peers (SIPPY, nfoursid,
 python-control, sysidentpy) are never imported by the workbench; this script
 needs only them, NumPy, SciPy and ``_real_records.py`` beside it.
 
@@ -119,6 +119,29 @@ def run(name: str) -> dict:
     return results
 
 
+SETTINGS = {
+    "order": ORDER,
+    "sippy": "N4SID, MOESP, CVA with SS_fixed_order = order, D estimated, other options SIPPY's defaults",
+    "nfoursid": f"num_block_rows = {NFOURSID_BLOCK_ROWS}, rank = order",
+    "control": f"markov (first {MARKOV_PARAMETERS} Markov parameters by least squares) then eigensys_realization",
+    "sysidentpy": f"FROLS, polynomial degree 1 (ARX) and 2 (NARX), {NARX_LAGS} output and input lags, AIC, "
+                  "least squares, one model per output; free-run simulation",
+}
+
+
+def versions() -> dict:
+    from importlib.metadata import PackageNotFoundError, version
+
+    found = {}
+    for package in ("sippy-unipi", "nfoursid", "control", "sysidentpy", "numpy", "scipy"):
+        try:
+            found[package] = version(package)
+        except PackageNotFoundError:
+            found[package] = None
+    return found
+
+
 if __name__ == "__main__":
-    json.dump({name: run(name) for name in sys.argv[1:]}, sys.stdout)
+    json.dump({"settings": SETTINGS, "versions": versions(), "sets": {name: run(name) for name in sys.argv[1:]}},
+              sys.stdout)
     sys.stdout.write("\n")

@@ -51,7 +51,7 @@ RECORD_SETS: tuple[RecordSet, ...] = (
     RecordSet("ballbeam", "ballbeam/ballbeam.dat", ("1",), ("2",), 0.1, "published"),
     RecordSet("dryer", "dryer/dryer.dat", ("1",), ("2",), 0.08, "Ljung's hair-dryer record (not stated in DaISy)"),
     RecordSet("robot_arm", "robot_arm/robot_arm.dat", ("1",), ("2",), 1.0, "not published: time in samples"),
-    RecordSet("exchanger", "exchanger/exchanger.dat", ("2",), ("3",), 1.0, "published"),
+    RecordSet("exchanger", "exchanger/exchanger.dat", ("2",), ("3",), 1.0, "published", nonlinear=True),
     RecordSet("cd_player_arm", "cd_player_arm/CD_player_arm.dat", ("1", "2"), ("3", "4"), 1.0,
               "not published: time in samples"),
     RecordSet("cascaded_tanks", "cascaded_tanks/dataBenchmark.mat", ("uEst",), ("yEst",), 4.0, "published",

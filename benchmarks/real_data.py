@@ -11,7 +11,10 @@ from the least-squares initial state, the same for every linear model.
 
 Workbench rows run the command line a user runs, ``python -m scenarios.cli
 identify FILE --json`` with default options (order 4, the IEKF), and the same
-with ``--normalize``, and its comparators ``--method arx|n4sid|output-error``.
+with ``--normalize``, and its comparators ``--method arx|n4sid|output-error``;
+the two IEKF rows once more with time counted in hundredths of the published
+unit ("dt x 0.01"), which shows what the units of time alone do to the result;
+on the nonlinear records also ``--nonlinear`` where ``identify`` offers it.
 When ``identify`` offers ``--validation FRACTION`` (and ``--validation-file``
 for a separate validation record), its own ``validation_fit_percent`` is the
 score; otherwise the benchmark hands it the estimation part only, takes the
@@ -136,6 +139,13 @@ def _data_args(entry: records.RecordSet, form: str, time_factor: float, holdout_
     return [str(full), *columns, "--validation", repr(records.HOLDOUT)]
 
 
+def _methods(entry: records.RecordSet, options: set[str], holdout_in_cli: bool) -> tuple:
+    """The workbench rows for a record: the spline-nonlinear IEKF too on nonlinear records, where identify has it."""
+    if entry.nonlinear and holdout_in_cli and "--nonlinear" in options:
+        return (*WORKBENCH_METHODS, ("iekf --nonlinear", ("--nonlinear",), 1.0))
+    return WORKBENCH_METHODS
+
+
 def run_workbench(entry: records.RecordSet, options: set[str], scratch: Path) -> dict:
     (u_est, y_est), (u_val, y_val) = records.load(entry)
     separate = entry.validation_path_columns is not None
@@ -151,7 +161,7 @@ def run_workbench(entry: records.RecordSet, options: set[str], scratch: Path) ->
     for form in FORMS:
         shift_u, shift_y = (u_offset, y_offset) if form == "centred" else (0.0, 0.0)
         estimation, validation = (u_est - shift_u, y_est - shift_y), (u_val - shift_u, y_val - shift_y)
-        for label, extra, time_factor in WORKBENCH_METHODS:
+        for label, extra, time_factor in _methods(entry, options, holdout_in_cli):
             data_args = _data_args(entry, form, time_factor, holdout_in_cli, result["raw_file_read"], estimation,
                                    validation, scratch)
             model_file = scratch / f"{entry.name}_{form}_{len(result)}.json"
@@ -163,8 +173,8 @@ def run_workbench(entry: records.RecordSet, options: set[str], scratch: Path) ->
                 row["validation_fit_percent"] = summary.get("validation_fit_percent")
             else:
                 row["validation_fit_percent"] = _workbench_fit(model_file, *validation, entry.dt * time_factor)
-            for key in ("fit_percent", "passes_run", "stop_reason", "warnings"):
-                if key in summary:
+            for key in summary:
+                if key in ("fit_percent", "passes_run", "stop_reason", "warnings") or "nonlinear" in key:
                     row[key] = summary[key]
             result[f"{label} [{form}]"] = row
     return result
@@ -230,10 +240,10 @@ def print_table(sets: dict) -> None:
         methods += [m for m, r in rows.items() if isinstance(r, dict) and m not in methods and "seconds" in r]
     names = list(sets)
     print("hold-out NRMSE fit % (mean over outputs); rows: method, columns: record")
-    print(f"{'method':<42}" + "".join(f"{n:>15}" for n in names))
+    print(f"{'method':<48}" + "".join(f"{n:>15}" for n in names))
     for method in methods:
         cells = "".join(f"{_show(_mean_fit(sets[n][method])) if method in sets[n] else '-':>15}" for n in names)
-        print(f"{method:<42}{cells}")
+        print(f"{method:<48}{cells}")
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -244,7 +254,7 @@ def main(argv: list[str] | None = None) -> dict:
     names = args.sets.split(",") if args.sets else [entry.name for entry in records.RECORD_SETS]
     options = identify_options()
     started = time.perf_counter()
-    peers = {} if args.no_peers else run_peers(names)
+    peers = {"sets": {}} if args.no_peers else run_peers(names)
     sets: dict = {}
     with tempfile.TemporaryDirectory(prefix="vehid-real-") as scratch:
         for name in names:
@@ -252,7 +262,7 @@ def main(argv: list[str] | None = None) -> dict:
             print(f"== {name}", flush=True)
             workbench = run_workbench(entry, options, Path(scratch))
             rows = {f"workbench:{k}": v for k, v in workbench.items() if isinstance(v, dict)}
-            rows.update({f"peer:{k}": v for k, v in peers.get(name, {}).items()})
+            rows.update({f"peer:{k}": v for k, v in peers["sets"].get(name, {}).items()})
             (u_est, _), (u_val, _) = records.load(entry)
             sets[name] = {
                 "file": entry.path, "dt": entry.dt, "dt_note": entry.dt_note,
@@ -266,6 +276,8 @@ def main(argv: list[str] | None = None) -> dict:
         "split": f"first {1 - records.HOLDOUT:.0%} estimates, last {records.HOLDOUT:.0%} validates "
                  "(cascaded tanks: published estimation and validation records)",
         "order": 4,
+        "peer_settings": peers.get("settings"),
+        "peer_versions": peers.get("versions"),
         "sets": sets,
         "summary": summarise(sets),
         "seconds": time.perf_counter() - started,
