@@ -39,7 +39,8 @@ class RecordSet:
     outputs: tuple[str, ...]
     dt: float
     dt_note: str
-    validation_path_columns: tuple[tuple[str, ...], tuple[str, ...]] | None = None  # inputs, outputs of a separate validation record
+    # inputs and outputs of a separate validation record in the same file, where the publisher split the data
+    validation_path_columns: tuple[tuple[str, ...], tuple[str, ...]] | None = None
     nonlinear: bool = False
 
     @property
@@ -93,17 +94,18 @@ def split_index(n_samples: int) -> int:
     return n_samples - int(round(HOLDOUT * n_samples))
 
 
-def nrmse_fit(y: np.ndarray, y_hat: np.ndarray) -> list[float]:
-    """MATLAB ``compare``'s fit in percent per output."""
+def nrmse_fit(y: np.ndarray, y_hat: np.ndarray) -> list[float | None]:
+    """MATLAB ``compare``'s fit in percent per output; None for every output where the simulation diverged."""
     y = np.asarray(y, dtype=float).reshape(len(y), -1)
     y_hat = np.asarray(y_hat, dtype=float).reshape(len(y), -1)
     if not np.all(np.isfinite(y_hat)):
-        return [float("-inf")] * y.shape[1]
+        return [None] * y.shape[1]  # JSON has no infinity; a diverged simulation has no fit
     spread = np.linalg.norm(y - y.mean(axis=0), axis=0)
     return [float(v) for v in (1.0 - np.linalg.norm(y - y_hat, axis=0) / spread) * 100.0]
 
 
-def fit_from_estimated_state(forced: np.ndarray, free: np.ndarray, y: np.ndarray) -> tuple[list[float], np.ndarray]:
+def fit_from_estimated_state(forced: np.ndarray, free: np.ndarray,
+                             y: np.ndarray) -> tuple[list[float | None], np.ndarray]:
     """Fit of ``forced + free @ x0`` with ``x0`` the least-squares initial state.
 
     ``forced`` (N, n_y) is the response from zero state; ``free`` (N, n_y, n)
@@ -119,7 +121,7 @@ def fit_from_estimated_state(forced: np.ndarray, free: np.ndarray, y: np.ndarray
     return nrmse_fit(y, y_hat.reshape(len(y), n_y)), x0
 
 
-def fit_of_linear_simulator(simulate, n_states: int, u: np.ndarray, y: np.ndarray) -> list[float]:
+def fit_of_linear_simulator(simulate, n_states: int, u: np.ndarray, y: np.ndarray) -> list[float | None]:
     """Hold-out fit of a linear model given as ``simulate(u, x0) -> y``, from the least-squares initial state."""
     with np.errstate(all="ignore"):
         forced = simulate(u, np.zeros(n_states))
@@ -144,7 +146,7 @@ def discrete_responses(A, B, C, D, u: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return forced, free
 
 
-def score_discrete(A, B, C, D, u_val: np.ndarray, y_val: np.ndarray, u_offset, y_offset) -> list[float]:
+def score_discrete(A, B, C, D, u_val: np.ndarray, y_val: np.ndarray, u_offset, y_offset) -> list[float | None]:
     """Hold-out fit of a discrete-time model identified on data with ``u_offset``, ``y_offset`` removed."""
     forced, free = discrete_responses(A, B, C, D, u_val - u_offset)
     return fit_from_estimated_state(forced, free, y_val - y_offset)[0]

@@ -48,12 +48,10 @@ from pathlib import Path
 
 import numpy as np
 
+import _real_records as records  # beside this script, so on sys.path when it runs
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
-sys.path.insert(0, str(HERE))
-sys.path.insert(0, str(ROOT))
-
-import _real_records as records  # noqa: E402
 
 PEERS_VENV = HERE / ".peers-venv"
 PEER_PACKAGES = ("sippy-unipi", "nfoursid", "control", "sysidentpy")
@@ -150,7 +148,8 @@ def run_workbench(entry: records.RecordSet, options: set[str], scratch: Path) ->
     (u_est, y_est), (u_val, y_val) = records.load(entry)
     separate = entry.validation_path_columns is not None
     holdout_in_cli = "--validation-file" in options if separate else "--validation" in options
-    result: dict = {"validation_by": "identify --validation" if holdout_in_cli else "benchmark simulation of --save-model"}
+    result: dict = {"validation_by": "identify --validation" if holdout_in_cli
+                    else "benchmark simulation of --save-model"}
     # Offer the raw file as published; where identify cannot read it, a CSV copy of the same numbers is used.
     columns = _column_args(entry, u_est.shape[1], y_est.shape[1], raw=True, dt=entry.dt)
     status, summary, _ = _cli(["identify", str(entry.file), *columns, "--method", "arx"])
@@ -202,16 +201,19 @@ def run_peers(names: list[str]) -> dict:
 
 # ---------------------------------------------------------------------- table
 def _mean_fit(row: dict) -> float | None:
+    """Mean hold-out fit over outputs; None where the run failed, -inf where a simulation diverged."""
     fits = row.get("validation_fit_percent")
-    return float(np.mean(fits)) if fits else None
+    if not fits:
+        return None
+    return float("-inf") if any(f is None for f in fits) else float(np.mean(fits))
 
 
 def _show(value: float | None) -> str:
     if value is None:
         return "failed"
-    if not np.isfinite(value) or value < -999:
-        return "< -999"
-    return f"{value:.1f}"
+    if not np.isfinite(value):
+        return "diverged"
+    return "< -999" if value < -999 else f"{value:.1f}"
 
 
 def summarise(sets: dict) -> dict:
