@@ -14,6 +14,7 @@ import time
 import numpy as np
 import pytest
 
+from identification.data import read_hdf5
 from identification.errors import InputError, WorkbenchError
 from scenarios.cli import main
 from vehicle import baseline, build_vehicle_model, simulate
@@ -109,7 +110,7 @@ def test_memory_estimate_against_the_available_memory(monkeypatch):
 
 # --- during the run: the physical envelope --------------------------------------------------------
 
-def test_wheelspin_beyond_the_grip_limit_stops_the_run_with_the_partial_record(capsys):
+def test_wheelspin_beyond_the_grip_limit_stops_the_run_with_the_partial_record(capsys, tmp_path, monkeypatch):
     """The identification input at 40 m/s asks for more than the tyres can give: the PI hold spins a
     front wheel up (slip ratio past 0.5 at 6.6 s). A failed computation, exit 1, one line, the
     quantity, its value and the time named; the record up to that sample is kept."""
@@ -124,9 +125,11 @@ def test_wheelspin_beyond_the_grip_limit_stops_the_run_with_the_partial_record(c
     assert partial.t[-1] == pytest.approx(error.time)
     kappa = np.abs(partial.x[:, [partial.state_names.index(f"kappa_{c}") for c in ("fl", "fr", "rl", "rr")]])
     assert np.max(kappa[:-1]) <= 0.5 < np.max(kappa[-1])  # it ends at the first sample outside
-    status, body, err = _cli(capsys, ["simulate", "--speed", "40"])
+    monkeypatch.setenv("VEHID_RESULTS_DIR", str(tmp_path))
+    status, body, err = _cli(capsys, ["simulate", "--speed", "40", "--out", "spin.h5"])
     assert status == 1 and body["exit_status"] == 1 and "longitudinal tyre slip" in body["error"]
     assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert "3302 samples" in body["error"] and read_hdf5(tmp_path / "spin.h5").n_samples == 3302
 
 
 def test_excessive_roll_stops_the_run():

@@ -56,6 +56,7 @@ __all__ = [
     "check_steer",
     "check_record_memory",
     "CROSS_CHECK_TOLERANCE",
+    "reference_outputs",
 ]
 
 DEFAULT_DT = 1.0 / 500.0  # [s] the paper's output rate
@@ -91,23 +92,27 @@ def check_steer(steer: Any) -> np.ndarray:
     return values
 
 
-def _rk4_step(model: VehicleModel, dt: float) -> ca.Function:
+def _rk4_step(model: VehicleModel, dt: float, substeps: int = 1) -> ca.Function:
     """One RK4 step from ``x[k]`` under ``u[k+1]``, also returning ``y[k] = h(x[k], u[k])``.
 
     Outputting ``y[k]`` rather than ``y[k+1]`` lets the tyre forces at ``x[k]``
     (which depend on the state only) serve both the output and the first RK4
     stage: common subexpressions are merged, saving a fifth of the work.
+    ``substeps`` > 1 splits the sample into that many RK4 steps (a reference).
     """
     x = ca.SX.sym("x", model.n_x)
     u_now = ca.SX.sym("u_now", model.n_u)
     u_next = ca.SX.sym("u_next", model.n_u)
     p = ca.SX.sym("p", 1)
     f = model.dynamics
-    k1 = f(x, u_next, p)
-    k2 = f(x + dt / 2 * k1, u_next, p)
-    k3 = f(x + dt / 2 * k2, u_next, p)
-    k4 = f(x + dt * k3, u_next, p)
-    x_next = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    h = dt / substeps
+    x_next = x
+    for _ in range(substeps):
+        k1 = f(x_next, u_next, p)
+        k2 = f(x_next + h / 2 * k1, u_next, p)
+        k3 = f(x_next + h / 2 * k2, u_next, p)
+        k4 = f(x_next + h * k3, u_next, p)
+        x_next = x_next + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
     y_now = model.outputs(x, u_now, p)
     return ca.Function(
         "vehicle_rk4_step",
@@ -128,6 +133,22 @@ def build_rk4_block(params: VehicleParameters, dt: float = DEFAULT_DT) -> ca.Fun
     """
     step = _rk4_step(build_vehicle_model(params), dt)
     return step.mapaccum("vehicle_rk4_block", BLOCK_SAMPLES)
+
+
+def reference_outputs(params: VehicleParameters, steer: np.ndarray, dt: float = DEFAULT_DT, *,
+                      speed: float = DEFAULT_SPEED, substeps: int = 16) -> np.ndarray:
+    """Outputs (N - 1, 10) of samples 1 ... N - 1 by RK4 with ``substeps`` steps per sample, uncompiled.
+
+    The truth the simulators are measured against: RK4's error falls as the
+    fourth power of its step, so 16 substeps leave 1/65 536 of the 500 Hz
+    RK4's error (about 1e-11 m/s^2 in lateral acceleration).
+    """
+    model = build_vehicle_model(params)
+    steer = check_steer(steer)
+    step = _rk4_step(model, dt, substeps).mapaccum("vehicle_rk4_reference", steer.size - 1)
+    x0 = model.trim(check_speed(speed), steer[0])
+    states = step(x0, steer[None, :-1], steer[None, 1:], np.full((1, steer.size - 1), speed))[0]
+    return np.asarray(model.outputs.map(steer.size - 1)(states, steer[None, 1:], speed)).T
 
 
 @functools.lru_cache(maxsize=16)
