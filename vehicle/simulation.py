@@ -12,9 +12,10 @@ method (BDF at tolerance 1e-12) is the reference to check it against. CVODES
 is restarted at every sample, where the held steer jumps: a multistep method
 carried across such a jump (as CasADi's integrator does with a control grid:
 it stops there but keeps its history) misjudges its error, which left it
-7e-5 m/s^2 off IDAS, Radau and RK4 at tolerance 1e-10 and failing at 1e-12.
-Restarted, it agrees with RK4 at 1/32 of the step to 4e-9 m/s^2, some 250
-times closer than the 500 Hz RK4 it checks (1e-6 m/s^2).
+3e-5 m/s^2 off IDAS and RK4 at tolerance 1e-10 (30 times RK4's own error) and
+failing at 1e-12. Restarted, it agrees with RK4 at 1/16 of the step
+(:func:`reference_outputs`) some 250 times more closely than the 500 Hz RK4
+it checks (figures in ``benchmarks/vehicle_sim.py``).
 
 Every record is checked against the physical envelope of
 :mod:`vehicle.validity` block by block as it is computed; the first sample

@@ -34,7 +34,8 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--amplitude-deg", type=float, default=None,
                         help="road-wheel steer amplitude in degrees (default: the manoeuvre's own)")
     parser.add_argument("--duration", type=float, default=None, help="record length in seconds")
-    parser.add_argument("--speed", type=float, default=20.0, help="trim and reference speed in m/s (default 20)")
+    parser.add_argument("--speed", type=float, default=20.0,
+                        help="trim and reference speed in m/s (default 20; the model is valid from 3 to 50)")
     parser.add_argument("--vehicle", default="baseline",
                         help="baseline, understeer, or a .toml/.json vehicle file")
     parser.add_argument("--seed", type=int, default=0, help="seed of the random parts of the input")
