@@ -93,27 +93,23 @@ def check_steer(steer: Any) -> np.ndarray:
     return values
 
 
-def _rk4_step(model: VehicleModel, dt: float, substeps: int = 1) -> ca.Function:
+def _rk4_step(model: VehicleModel, dt: float) -> ca.Function:
     """One RK4 step from ``x[k]`` under ``u[k+1]``, also returning ``y[k] = h(x[k], u[k])``.
 
     Outputting ``y[k]`` rather than ``y[k+1]`` lets the tyre forces at ``x[k]``
     (which depend on the state only) serve both the output and the first RK4
     stage: common subexpressions are merged, saving a fifth of the work.
-    ``substeps`` > 1 splits the sample into that many RK4 steps (a reference).
     """
     x = ca.SX.sym("x", model.n_x)
     u_now = ca.SX.sym("u_now", model.n_u)
     u_next = ca.SX.sym("u_next", model.n_u)
     p = ca.SX.sym("p", 1)
     f = model.dynamics
-    h = dt / substeps
-    x_next = x
-    for _ in range(substeps):
-        k1 = f(x_next, u_next, p)
-        k2 = f(x_next + h / 2 * k1, u_next, p)
-        k3 = f(x_next + h / 2 * k2, u_next, p)
-        k4 = f(x_next + h * k3, u_next, p)
-        x_next = x_next + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    k1 = f(x, u_next, p)
+    k2 = f(x + dt / 2 * k1, u_next, p)
+    k3 = f(x + dt / 2 * k2, u_next, p)
+    k4 = f(x + dt * k3, u_next, p)
+    x_next = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
     y_now = model.outputs(x, u_now, p)
     return ca.Function(
         "vehicle_rk4_step",
@@ -146,9 +142,14 @@ def reference_outputs(params: VehicleParameters, steer: np.ndarray, dt: float = 
     """
     model = build_vehicle_model(params)
     steer = check_steer(steer)
-    step = _rk4_step(model, dt, substeps).mapaccum("vehicle_rk4_reference", steer.size - 1)
+    substep = _rk4_step(model, dt / substeps)
+    x, u, p = ca.SX.sym("x", model.n_x), ca.SX.sym("u", model.n_u), ca.SX.sym("p")
+    x_next = x
+    for _ in range(substeps):
+        x_next = substep(x_next, u, u, p)[0]
+    sample = ca.Function("vehicle_rk4_reference_step", [x, u, p], [x_next])
     x0 = model.trim(check_speed(speed), steer[0])
-    states = step(x0, steer[None, :-1], steer[None, 1:], np.full((1, steer.size - 1), speed))[0]
+    states = sample.mapaccum("vehicle_rk4_reference", steer.size - 1)(x0, steer[None, 1:], speed)
     return np.asarray(model.outputs.map(steer.size - 1)(states, steer[None, 1:], speed)).T
 
 
