@@ -6,8 +6,12 @@ Measures in one run, on the same input:
 - rk4: median (and best) seconds of the compiled RK4 integration over RK4_RUNS runs
   (target <= 0.060 s, i.e. >= 500x real time);
 - virtual_machine: the same block uncompiled, in CasADi's virtual machine (the baseline);
-- cvodes: seconds of the CVODES cross-check (rtol 1e-10) on the same input,
-  and the largest RK4 - CVODES output difference relative to each output's range.
+- cvodes: seconds of the CVODES cross-check (tolerance 1e-12, restarted at every
+  sample) on the same input, and the largest RK4 - CVODES output difference
+  relative to each output's range;
+- reference: the largest error of RK4 and of CVODES against RK4 at 1/16 of the
+  step (uncompiled), in the outputs' own units: the cross-check must be the
+  more accurate of the two.
 Figures go to ``results/benchmarks.json`` under ``vehicle_sim``.
 """
 
@@ -23,7 +27,7 @@ from identification.compiled import compile_function
 from scenarios.benchmarking import median_seconds, record_figures
 from vehicle import baseline, build_vehicle_model, simulate
 from vehicle.manoeuvres import identification
-from vehicle.simulation import COMPILE_FLAGS, build_rk4_block
+from vehicle.simulation import COMPILE_FLAGS, CROSS_CHECK_TOLERANCE, build_rk4_block, reference_outputs
 
 TARGET_SECONDS = 0.060
 RK4_RUNS = 21  # each run takes ~0.06 s; many runs steady the median on a shared machine
@@ -76,6 +80,10 @@ def main() -> dict:
         name: float(np.max(np.abs(fast.output(name) - reference.output(name))) / np.ptp(reference.output(name)))
         for name in ("lateral_acceleration", "yaw_rate", "roll_angle")
     }
+    truth = reference_outputs(params, manoeuvre.steer, manoeuvre.dt, substeps=16)
+    columns = {name: fast.output_names.index(name) for name in ("lateral_acceleration", "yaw_rate", "roll_angle")}
+    rk4_error = {name: float(np.max(np.abs(fast.y[1:, i] - truth[:, i]))) for name, i in columns.items()}
+    cvodes_error = {name: float(np.max(np.abs(reference.y[1:, i] - truth[:, i]))) for name, i in columns.items()}
     figures = {
         "record_seconds": float(duration),
         "samples": int(manoeuvre.n_samples),
@@ -94,6 +102,9 @@ def main() -> dict:
         "cvodes_seconds": cvodes_seconds,
         "cvodes_over_rk4": cvodes_seconds / rk4_seconds,
         "rk4_vs_cvodes_relative_difference": difference,
+        "cvodes_tolerance": CROSS_CHECK_TOLERANCE,
+        "rk4_error_vs_reference": rk4_error,
+        "cvodes_error_vs_reference": cvodes_error,
         "peak_lateral_acceleration": float(np.max(np.abs(fast.output("lateral_acceleration")))),
     }
     print(f"vehicle simulation, {duration:g} s at {1 / manoeuvre.dt:g} Hz ({manoeuvre.n_samples} samples)")
@@ -104,6 +115,8 @@ def main() -> dict:
     print(f"  CasADi virtual machine {vm_seconds:.3f} s: compiled code {vm_seconds / rk4_seconds:.1f}x faster")
     print(f"  cvodes {cvodes_seconds:.3f} s ({cvodes_seconds / rk4_seconds:.1f}x rk4); max difference "
           + ", ".join(f"{k} {v:.1e}" for k, v in difference.items()))
+    print("  against RK4 at 1/16 of the step: rk4 " + ", ".join(f"{k} {v:.1e}" for k, v in rk4_error.items())
+          + "; cvodes " + ", ".join(f"{k} {v:.1e}" for k, v in cvodes_error.items()))
     path = record_figures("vehicle_sim", figures)
     print(f"  figures written to {path}")
     return figures

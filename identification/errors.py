@@ -16,6 +16,7 @@ __all__ = [
     "ArchiveError",
     "ConversionError",
     "StrictWarningsError",
+    "SimulationError",
 ]
 
 
@@ -80,3 +81,28 @@ class StrictWarningsError(WorkbenchError):
         super().__init__("; ".join(warnings))
         self.warnings = tuple(warnings)
         self.summary = summary
+
+
+class SimulationError(WorkbenchError):
+    """A simulation left the physical envelope in which its model is valid, or failed outright.
+
+    Attributes
+    ----------
+    partial : object or None
+        The record up to the failure (for the vehicle, an IOData ending at the
+        first sample outside the envelope), so nothing computed is lost.
+    quantity : str or None
+        What left the envelope (e.g. ``roll``, ``sideslip``, ``non-finite state``).
+    value : float or None
+        Its value there (SI units).
+    time : float or None
+        When (s).
+    """
+
+    def __init__(self, message: str, partial: object | None = None, *, quantity: str | None = None,
+                 value: float | None = None, time: float | None = None):
+        super().__init__(message)
+        self.partial = partial
+        self.quantity = quantity
+        self.value = value
+        self.time = time

@@ -65,6 +65,7 @@ def _bad_vehicle(tmp_path, text):
         (["simulate", "--duration", "-1"], "duration"),
         (["simulate", "--seed", "-1"], "seed must be a non-negative integer"),
         (["linearize", "--speed", "-3"], "speed must be positive"),
+        (["linearize", "--speed", "80"], "above the model's valid range (3-50 m/s)"),
         (["simulate", "--vehicle", "VEHICLE:base = \"baseline\"\n[chassis]\nmass = 0.0\n"], "mass must be positive"),
         (["linearize", "--vehicle", "VEHICLE:base = \"baseline\"\n[chassis]\nwings = 2\n"], "unknown field"),
         (["simulate", "--vehicle", "VEHICLE:base = \"baseline\"\n[tyre]\nwheel_inertia = -1.0\n"], "wheel_inertia"),

@@ -8,6 +8,10 @@ Typical use::
     record = simulate(baseline(), identification(seed=0))   # IOData, 30 s at 500 Hz
     handling = record.select_outputs(["lateral_acceleration", "yaw_rate", "roll_angle"])
     modes = linearize(baseline(), speed=20.0).modes
+
+A run that leaves the model's physical envelope (:data:`ENVELOPE`) raises
+``identification.errors.SimulationError`` with the record up to that point;
+speeds outside ``MIN_SPEED``-``MAX_SPEED`` (m/s) are input errors.
 """
 
 from .linearize import Linearization, Mode, linearize
@@ -33,6 +37,7 @@ from .parameters import (
     understeer,
 )
 from .simulation import DEFAULT_DT, rk4_simulator, simulate
+from .validity import ENVELOPE, MAX_SPEED, MIN_SPEED
 
 __all__ = [
     "Linearization",
@@ -60,4 +65,7 @@ __all__ = [
     "named_vehicle",
     "simulate",
     "rk4_simulator",
+    "ENVELOPE",
+    "MIN_SPEED",
+    "MAX_SPEED",
 ]

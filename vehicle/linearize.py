@@ -13,16 +13,17 @@ part in a mode fairly (Perez-Arriaga, Verghese & Schweppe, IEEE Trans. PAS-101,
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
 
-from .model import DEFAULT_SPEED, build_vehicle_model, check_speed
+from .model import DEFAULT_SPEED, VehicleModel, build_vehicle_model, check_speed
 from .parameters import VehicleParameters, named_vehicle
 
-__all__ = ["Mode", "Linearization", "linearize", "MODE_GROUPS", "modes_of"]
+__all__ = ["Mode", "Linearization", "linearize", "linearization_function", "MODE_GROUPS", "modes_of"]
 
 # Which states make which kind of motion; a mode is labelled by the group with
 # the largest share of its participation.
@@ -126,6 +127,18 @@ def modes_of(A: np.ndarray, state_names: tuple[str, ...]) -> tuple[Mode, ...]:
     return tuple(sorted(modes, key=lambda mode: (mode.frequency_hz, mode.label)))
 
 
+@functools.lru_cache(maxsize=16)
+def linearization_function(model: VehicleModel) -> ca.Function:
+    """``vehicle_linearization(x, u, p) -> (A, B, C, D)``: exact Jacobians, built once per model."""
+    return ca.Function(
+        "vehicle_linearization",
+        [model.x, model.u, model.p],
+        [ca.jacobian(model.xdot, model.x), ca.jacobian(model.xdot, model.u),
+         ca.jacobian(model.y, model.x), ca.jacobian(model.y, model.u)],
+        ["x", "u", "p"], ["A", "B", "C", "D"],
+    )
+
+
 def linearize(
     params: VehicleParameters | str = "baseline", *, speed: float = DEFAULT_SPEED, steer: float = 0.0
 ) -> Linearization:
@@ -140,13 +153,7 @@ def linearize(
     speed = check_speed(speed)
     model = build_vehicle_model(params)
     x0 = model.trim(speed, steer)
-    jacobians = ca.Function(
-        "vehicle_linearization",
-        [model.x, model.u, model.p],
-        [ca.jacobian(model.xdot, model.x), ca.jacobian(model.xdot, model.u),
-         ca.jacobian(model.y, model.x), ca.jacobian(model.y, model.u)],
-    )
-    A, B, C, D = (np.asarray(m) for m in jacobians(x0, steer, speed))
+    A, B, C, D = (np.asarray(m) for m in linearization_function(model)(x0, steer, speed))
     return Linearization(
         A=A, B=B, C=C, D=D, x0=x0, u0=np.array([float(steer)]), speed=speed,
         state_names=model.state_names, input_names=model.input_names, output_names=model.output_names,

@@ -18,7 +18,7 @@ import numpy as np
 
 from identification.errors import InputError
 
-from .simulation import DEFAULT_DT, check_steer
+from .simulation import DEFAULT_DT, check_record_memory, check_steer
 
 __all__ = [
     "Manoeuvre",
@@ -81,6 +81,7 @@ def _samples(duration: float, dt: float) -> int:
     n = int(round(duration / dt)) + 1
     if n < 2:
         raise InputError(f"duration {duration} s holds fewer than 2 samples at dt = {dt} s")
+    check_record_memory(n)  # a manoeuvre is made to be simulated: refuse one too long before building it
     return n
 
 

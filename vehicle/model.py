@@ -14,8 +14,14 @@ Modelling choices (documented here once):
   phi > 0 (the body leans outward: left side up).
 * The tyre nodes are massless, so corner deflections are algebraic in the body
   pose and velocity and there are no unsprung states. Each tyre's force acts on
-  the body at its contact point, fixed in body axes at ``(x_i, y_i, -h)``: the
-  roll and pitch axes sit at the ground, as in the closed-form roll gradient.
+  the body at its contact point, which stays on the road: horizontally it
+  follows the body point ``(x_i, y_i, -h)`` (static ground level below the
+  strut), so the roll and pitch axes sit at the ground, as in the closed-form
+  roll gradient; vertically it is the road, ``h + z`` below the CG. Roll and
+  pitch therefore move the struts, not the contact geometry: the lateral
+  forces' lever arm about the CG stays ``h + z`` (a contact point fixed in body
+  axes would sink below the road on the outside of a turn and lengthen it,
+  raising the roll gradient by 6 % at 0.77 g).
 * Suspension force = static corner load + k * compression + c * compression
   rate + anti-roll-bar term; the tyre load is a smooth ``max(force, 0)``, so a
   wheel may lift off.
@@ -49,6 +55,7 @@ from identification.errors import DivergenceError, InputError
 
 from .parameters import GRAVITY, VehicleParameters, static_axle_loads
 from .tyre import combined_forces
+from .validity import check_speed_range
 
 __all__ = [
     "VehicleModel",
@@ -263,8 +270,9 @@ def positive_number(value: float, name: str, unit: str) -> float:
 
 
 def check_speed(speed: float) -> float:
-    """Return ``speed`` (m/s) as a float, or raise InputError if it is not positive and finite."""
-    return positive_number(speed, "speed", "m/s")
+    """Return ``speed`` (m/s) as a float, or raise InputError if it is not positive and finite
+    or lies outside the model's valid range (:data:`vehicle.validity.MIN_SPEED` to ``MAX_SPEED``)."""
+    return check_speed_range(positive_number(speed, "speed", "m/s"))
 
 
 @functools.lru_cache(maxsize=8)
@@ -349,8 +357,14 @@ def build_vehicle_model(params: VehicleParameters) -> VehicleModel:
     slip_lateral_rate, slip_longitudinal_rate, wheel_acceleration = [], [], []
     cos_steer, sin_steer = ca.cos(steer), ca.sin(steer)
     for i, corner in enumerate(CORNERS):
-        contact = ca.vertcat(corner_x[i], corner_y[i], -h)
-        contact_velocity = ca.mtimes(to_road, velocity + ca.cross(rates, contact))
+        # The wheel follows the body point at static ground level below its strut
+        # (roll and pitch axes at the ground), horizontally only: its contact point
+        # stays on the road, h + z below the CG, however the body rolls or pitches.
+        ground_point = ca.vertcat(corner_x[i], corner_y[i], -h)
+        ground_point_road = ca.mtimes(to_road, ground_point)
+        contact_road = ca.vertcat(ground_point_road[0], ground_point_road[1], -(h + s["z"]))
+        # The contact point moves horizontally as that body point does; slip needs no more.
+        contact_velocity = ca.mtimes(to_road, velocity + ca.cross(rates, ground_point))
         cd, sd = (cos_steer, sin_steer) if steered[i] else (1, 0)
         v_cx = cd * contact_velocity[0] + sd * contact_velocity[1]
         v_cy = -sd * contact_velocity[0] + cd * contact_velocity[1]
@@ -366,9 +380,8 @@ def build_vehicle_model(params: VehicleParameters) -> VehicleModel:
         wheel_acceleration.append((drive_torque[i] - tyre.rolling_radius * fx) / tyre.wheel_inertia)
         force_road = ca.vertcat(cd * fx - sd * fy, sd * fx + cd * fy, load[i])
         lateral_force_road = lateral_force_road + force_road[1]
-        force = ca.mtimes(to_road.T, force_road)
-        force_body = force_body + force
-        moment_body = moment_body + ca.cross(contact, force)
+        force_body = force_body + ca.mtimes(to_road.T, force_road)
+        moment_body = moment_body + ca.mtimes(to_road.T, ca.cross(contact_road, force_road))
 
     gravity_body = ca.mtimes(to_road.T, ca.vertcat(0, 0, -g))
     acceleration = force_body / m + gravity_body  # inertial acceleration of the CG in body axes

@@ -38,6 +38,9 @@ __all__ = [
     "vehicle_from_mapping",
     "describe",
     "static_axle_loads",
+    "roll_stiffness",
+    "peak_lateral_friction",
+    "static_stability_factor",
     "NAMED_VEHICLES",
 ]
 
@@ -211,6 +214,58 @@ def _validate(params: VehicleParameters) -> None:
     inertia_det = chassis.roll_inertia * chassis.yaw_inertia - chassis.roll_yaw_product**2
     if inertia_det <= 0:
         raise InputError("vehicle inertia is not positive definite: I_xx I_zz must exceed I_xz^2")
+    _check_static_stability(params)
+
+
+def roll_stiffness(params: VehicleParameters) -> float:
+    """Total roll stiffness ``K_phi = sum(k t^2 / 2 + K_arb)`` of springs and bars (N m/rad)."""
+    c, s = params.chassis, params.suspension
+    return (s.front_wheel_rate * c.front_track**2 / 2 + s.front_anti_roll_bar
+            + s.rear_wheel_rate * c.rear_track**2 / 2 + s.rear_anti_roll_bar)
+
+
+def peak_lateral_friction(params: VehicleParameters) -> float:
+    """The tyres' peak lateral friction ``mu_y = PDY1 + PDY2 dfz`` at the mean static corner load (eq. 4.E23)."""
+    tyre = params.tyre
+    corner_load = params.chassis.mass * GRAVITY / 4
+    return tyre.PDY1 + tyre.PDY2 * (corner_load - tyre.nominal_load) / tyre.nominal_load
+
+
+def static_stability_factor(params: VehicleParameters) -> float:
+    """``t / (2 h)`` with the narrower track: the lateral acceleration (in g) that tips a rigid car over."""
+    c = params.chassis
+    return min(c.front_track, c.rear_track) / (2 * c.cg_height)
+
+
+def _check_static_stability(params: VehicleParameters) -> None:
+    """Reject a vehicle the model cannot represent: one that falls over in roll, or tips before it slides.
+
+    * Roll: with the roll axis at the ground, gravity's moment ``m g h phi``
+      must be smaller than the springs' and bars' ``K_phi phi``, or the body
+      falls over at rest.
+    * Rollover: a car whose static stability factor ``t / (2 h)`` is below its
+      tyres' friction ``mu_y`` lifts its inner wheels before its tyres slide
+      (NHTSA's rollover resistance rating rests on this factor; road cars have
+      1.0-1.5, this baseline 1.38, against mu_y of about 0.88). The model has
+      no bump stops or rollover kinematics, so such a car would roll on without
+      bound (a 3 m CG height reaches hundreds of degrees).
+    """
+    c = params.chassis
+    weight_moment = c.mass * GRAVITY * c.cg_height
+    stiffness = roll_stiffness(params)
+    if stiffness <= weight_moment:
+        raise InputError(
+            f"vehicle is unstable in roll: springs and bars give K_phi = {stiffness:.4g} N m/rad, "
+            f"no more than m g h = {weight_moment:.4g} N m/rad (CG height {c.cg_height} m)"
+        )
+    factor, friction = static_stability_factor(params), peak_lateral_friction(params)
+    if factor <= friction:
+        raise InputError(
+            f"vehicle would tip over before its tyres slide: static stability factor t / (2 h) = {factor:.3g} "
+            f"(track {min(c.front_track, c.rear_track)} m, CG height {c.cg_height} m) is below the tyres' "
+            f"friction {friction:.3g}; the model has no rollover, so the CG must be lower than "
+            f"{min(c.front_track, c.rear_track) / (2 * friction):.3g} m"
+        )
 
 
 def baseline() -> VehicleParameters:

@@ -8,7 +8,21 @@ no Python runs per time step: a record is a handful of calls, one per block.
 
 At 20 m/s the fastest modes sit near 190 rad/s, so RK4 at 500 Hz
 (lambda dt = 0.38) is accurate to about 1e-4 of the outputs; the ``cvodes``
-method (BDF, relative tolerance 1e-10) is the reference to check it against.
+method (BDF at tolerance 1e-12) is the reference to check it against. CVODES
+is restarted at every sample, where the held steer jumps: a multistep method
+carried across such a jump (as CasADi's integrator does with a control grid:
+it stops there but keeps its history) misjudges its error, which left it
+3e-5 m/s^2 off IDAS and RK4 at tolerance 1e-10 (30 times RK4's own error) and
+failing at 1e-12. Restarted, it agrees with RK4 at 1/16 of the step
+(:func:`reference_outputs`) some 400 times more closely than the 500 Hz RK4
+it checks (5.7e-9 against 2.3e-6 m/s^2 over the 30 s identification record;
+``benchmarks/vehicle_sim.py``).
+
+Every record is checked against the physical envelope of
+:mod:`vehicle.validity` block by block as it is computed; the first sample
+outside ends the run with a :class:`~identification.errors.SimulationError`
+that carries the record up to it. The speed, the step and the memory a record
+needs are checked before any work.
 
 Timing convention: ``u[k]`` is held on the interval that ends at ``t[k]``, so
 ``x[k] = step(x[k-1], u[k])``; the record starts at the exact trim of the
@@ -27,10 +41,12 @@ import numpy as np
 
 from identification.compiled import compile_function
 from identification.data import IOData
-from identification.errors import DivergenceError, InputError
+from identification.errors import InputError, SimulationError
 
+from .linearize import linearization_function
 from .model import DEFAULT_SPEED, MAX_STEER, VehicleModel, build_vehicle_model, check_speed, positive_number
 from .parameters import VehicleParameters, named_vehicle
+from .validity import Violation, check_memory, check_rk4_step, first_violation
 
 __all__ = [
     "simulate",
@@ -40,11 +56,21 @@ __all__ = [
     "DEFAULT_DT",
     "BLOCK_SAMPLES",
     "check_steer",
+    "check_record_memory",
+    "CROSS_CHECK_TOLERANCE",
+    "reference_outputs",
 ]
 
 DEFAULT_DT = 1.0 / 500.0  # [s] the paper's output rate
 BLOCK_SAMPLES = 1000  # samples per compiled call; any record length runs as whole blocks plus padding
 COMPILE_FLAGS = "-O1"  # the generated step is large; -O1 compiles much faster than -O2 at similar speed
+CROSS_CHECK_TOLERANCE = 1e-12  # CVODES relative and absolute tolerance: ~400x closer to the truth than RK4
+_RECORD_COLUMNS = 23 + 10 + 1 + 1  # states, outputs, steer and time of one sample
+
+
+def check_record_memory(n_samples: int) -> int:
+    """Refuse a record of ``n_samples`` that would not fit in memory (InputError); return its estimate in bytes."""
+    return check_memory(n_samples, _RECORD_COLUMNS)
 
 
 def check_steer(steer: Any) -> np.ndarray:
@@ -107,14 +133,38 @@ def build_rk4_block(params: VehicleParameters, dt: float = DEFAULT_DT) -> ca.Fun
     return step.mapaccum("vehicle_rk4_block", BLOCK_SAMPLES)
 
 
+def reference_outputs(params: VehicleParameters, steer: np.ndarray, dt: float = DEFAULT_DT, *,
+                      speed: float = DEFAULT_SPEED, substeps: int = 16) -> np.ndarray:
+    """Outputs (N - 1, 10) of samples 1 ... N - 1 by RK4 with ``substeps`` steps per sample, uncompiled.
+
+    The truth the simulators are measured against: RK4's error falls as the
+    fourth power of its step, so 16 substeps leave 1/65 536 of the 500 Hz
+    RK4's error (about 1e-11 m/s^2 in lateral acceleration).
+    """
+    model = build_vehicle_model(params)
+    steer = check_steer(steer)
+    substep = _rk4_step(model, dt / substeps)
+    x, u, p = ca.SX.sym("x", model.n_x), ca.SX.sym("u", model.n_u), ca.SX.sym("p")
+    x_next = x
+    for _ in range(substeps):
+        x_next = substep(x_next, u, u, p)[0]
+    sample = ca.Function("vehicle_rk4_reference_step", [x, u, p], [x_next])
+    x0 = model.trim(check_speed(speed), steer[0])
+    states = sample.mapaccum("vehicle_rk4_reference", steer.size - 1)(x0, steer[None, 1:], speed)
+    return np.asarray(model.outputs.map(steer.size - 1)(states, steer[None, 1:], speed)).T
+
+
 @functools.lru_cache(maxsize=16)
 def rk4_simulator(params: VehicleParameters, dt: float = DEFAULT_DT) -> ca.Function:
     """:func:`build_rk4_block` compiled to native code (built once, cached in memory and on disk)."""
     return compile_function(build_rk4_block(params, dt), optimisation=COMPILE_FLAGS)
 
 
-def _run_rk4(params: VehicleParameters, dt: float, x0: np.ndarray, steer: np.ndarray, speed: float):
-    """States x[1:] and outputs y[:-1] of the record (the caller adds x[0] and y[-1]).
+def _run_rk4(params: VehicleParameters, dt: float, x0: np.ndarray, steer: np.ndarray, speed: float,
+             monitor=None):
+    """States x[1:] and outputs y[:-1] of the record (the caller adds x[0] and y[-1]), and the
+    first envelope violation found by ``monitor(states, outputs, start)`` after each block (or None);
+    the run stops at the block holding it.
 
     The compiled block writes straight into preallocated NumPy arrays through
     CasADi's function buffer: a column-major ``(n, B)`` block is, byte for byte,
@@ -143,25 +193,32 @@ def _run_rk4(params: VehicleParameters, dt: float, x0: np.ndarray, steer: np.nda
         evaluate()
         if buffer.ret() != 0:
             raise RuntimeError(f"the compiled simulator {simulator.name()} failed (status {buffer.ret()})")
+        if monitor is not None:
+            violation = monitor(states[start:min(stop, n_steps)], outputs[start:min(stop, n_steps)], start)
+            if violation is not None:
+                return states[:min(stop, n_steps)], outputs[:min(stop, n_steps)], violation
         state = states[stop - 1].copy()
-    return states[:n_steps], outputs[:n_steps]
+    return states[:n_steps], outputs[:n_steps], None
 
 
 @functools.lru_cache(maxsize=8)
-def _cvodes_integrator(params: VehicleParameters, dt: float, n_steps: int, tolerance: float) -> ca.Function:
+def _cvodes_interval(params: VehicleParameters, dt: float, tolerance: float) -> ca.Function:
+    """CVODES over one sample interval at constant steer: each call starts afresh (CVodeReInit)."""
     model = build_vehicle_model(params)
     dae = {"x": model.x, "u": model.u, "p": model.p, "ode": model.xdot}
-    grid = [dt * (k + 1) for k in range(n_steps)]
     options = {"abstol": tolerance, "reltol": tolerance, "max_num_steps": 100000}
-    return ca.integrator("vehicle_cvodes", "cvodes", dae, 0.0, grid, options)
+    return ca.integrator("vehicle_cvodes", "cvodes", dae, 0.0, dt, options)
 
 
-def _run_cvodes(params, dt, x0, steer, speed, tolerance=1e-10):
+def _run_cvodes(params, dt, x0, steer, speed, tolerance=CROSS_CHECK_TOLERANCE):
+    """States x[1:] and outputs y[1:]: the interval integrator chained over the record by mapaccum."""
     model = build_vehicle_model(params)
     n_steps = steer.size - 1
-    integrator = _cvodes_integrator(params, dt, n_steps, tolerance)
-    result = integrator(x0=x0, u=steer[None, 1:], p=speed)
-    states = np.asarray(result["xf"])
+    chain = _cvodes_interval(params, dt, tolerance).mapaccum("vehicle_cvodes_record", n_steps, ["x0"], ["xf"])
+    try:
+        states = np.asarray(chain(x0=x0, u=steer[None, 1:], p=speed)["xf"])
+    except RuntimeError as exc:
+        raise SimulationError(f"the CVODES cross-check failed: {str(exc).splitlines()[-1]}") from None
     outputs = np.asarray(model.outputs.map(n_steps)(states, steer[None, 1:], speed))
     return states.T, outputs.T
 
@@ -190,8 +247,8 @@ def simulate(
     speed : float
         Reference speed of the PI speed hold and of the initial trim (m/s).
     method : {"rk4", "cvodes"}
-        Compiled fixed-step RK4 (one step per sample), or CVODES at relative
-        tolerance 1e-10 as a cross-check (much slower).
+        Compiled fixed-step RK4 (one step per sample), or CVODES at tolerance
+        1e-12, restarted at every sample, as a cross-check (much slower).
     meta : dict, optional
         Extra metadata to store with the record (manoeuvre, seed, ...).
 
@@ -209,9 +266,16 @@ def simulate(
     Raises
     ------
     InputError
-        On non-finite steer, steer beyond +/-30 deg, a non-positive speed or dt.
-    DivergenceError
-        If the simulation produced non-finite values.
+        Before any work: on non-finite steer, steer beyond +/-30 deg, a speed
+        outside the model's valid range (:mod:`vehicle.validity`), a
+        non-positive dt or one too long for RK4 at this speed, or a record
+        too large for the memory available.
+    SimulationError
+        If the states leave the physical envelope of
+        :data:`vehicle.validity.ENVELOPE` (roll, pitch, sideslip, tyre slip,
+        speed departure, heave, non-finite or exploding values): the message
+        names the quantity, its value and the time; ``partial`` holds the
+        record up to that sample (meta ``partial`` and ``stop_reason``).
     """
     params = named_vehicle(params)
     t0 = 0.0
@@ -240,29 +304,39 @@ def simulate(
     if method not in ("rk4", "cvodes"):
         raise InputError(f"unknown simulation method {method!r}; use 'rk4' or 'cvodes'")
 
+    check_record_memory(values.size)
+
     model = build_vehicle_model(params)
     x0 = model.trim(speed, values[0])
     if method == "rk4":
+        state_matrix = np.asarray(linearization_function(model)(x0, values[0], speed)[0])
+        check_rk4_step(np.linalg.eigvals(state_matrix), dt, speed)
         rk4_simulator(params, dt)  # build and compile outside the timed section
+
+    def monitor(state_block: np.ndarray, output_block: np.ndarray, first_step: int) -> Violation | None:
+        # Step k (from 0) ends at sample k + 1; the output beside it belongs to sample k.
+        return first_violation(state_block, model.state_names, output_block, model.output_names, speed,
+                               state_offset=first_step + 1, output_offset=first_step)
+
     start, cpu_start = time.perf_counter(), time.process_time()
     if method == "rk4":
-        states, outputs = _run_rk4(params, dt, x0, values, speed)
+        states, outputs, violation = _run_rk4(params, dt, x0, values, speed, monitor)
     else:
         states, outputs = _run_cvodes(params, dt, x0, values, speed)
+        # States and outputs both of samples 1 ... N - 1 here.
+        violation = first_violation(states, model.state_names, outputs, model.output_names, speed,
+                                    state_offset=1, output_offset=1)
     seconds = time.perf_counter() - start
     cpu_seconds = time.process_time() - cpu_start
     states = np.vstack([x0, states])
     if method == "rk4":
-        last = np.asarray(model.outputs(states[-1], values[-1], speed)).ravel()
+        last = np.asarray(model.outputs(states[-1], values[states.shape[0] - 1], speed)).ravel()
         outputs = np.vstack([outputs, last])
+        if violation is None:  # the last output is the one the blocks did not see
+            violation = monitor(states[:0], outputs[-1:], states.shape[0] - 1)
     else:
         first = np.asarray(model.outputs(x0, values[0], speed)).ravel()
         outputs = np.vstack([first, outputs])
-    if not (np.all(np.isfinite(states)) and np.all(np.isfinite(outputs))):
-        first = int(np.argmax(~np.all(np.isfinite(states), axis=1)))
-        raise DivergenceError(
-            f"the vehicle simulation diverged at t = {t0 + first * dt:.3f} s (non-finite states)"
-        )
     record_meta = {
         **extra,
         **(meta or {}),
@@ -273,16 +347,28 @@ def simulate(
         "cpu_seconds": cpu_seconds,
         "source": "vehicle.simulate (23-state full-vehicle model)",
     }
-    return IOData(
-        t=t0 + dt * np.arange(values.size),
-        u=values[:, None],
-        y=outputs,
-        x=states,
-        input_names=model.input_names,
-        output_names=model.output_names,
-        state_names=model.state_names,
-        input_units=model.input_units,
-        output_units=model.output_units,
-        state_units=model.state_units,
-        meta=record_meta,
-    )
+
+    def record(n_samples: int, extra_meta: dict) -> IOData:
+        return IOData(
+            t=t0 + dt * np.arange(n_samples),
+            u=values[:n_samples, None],
+            y=outputs[:n_samples],
+            x=states[:n_samples],
+            input_names=model.input_names,
+            output_names=model.output_names,
+            state_names=model.state_names,
+            input_units=model.input_units,
+            output_units=model.output_units,
+            state_units=model.state_units,
+            meta={**record_meta, **extra_meta},
+        )
+
+    if violation is not None:
+        message = violation.message(t0, dt)
+        kept = violation.sample + 1
+        if not (np.all(np.isfinite(states[violation.sample])) and np.all(np.isfinite(outputs[violation.sample]))):
+            kept -= 1  # a record holds finite values only: it ends just before
+        partial = record(kept, {"partial": True, "stop_reason": message}) if kept >= 2 else None
+        raise SimulationError(message, partial, quantity=violation.quantity, value=violation.value,
+                              time=t0 + violation.sample * dt)
+    return record(values.size, {})

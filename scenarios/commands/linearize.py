@@ -18,7 +18,8 @@ HELP = "linearise the full-vehicle model at trim and list its modes"
 
 
 def register(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--speed", type=float, default=20.0, help="trim speed in m/s (default 20)")
+    parser.add_argument("--speed", type=float, default=20.0,
+                        help="trim speed in m/s (default 20; the model is valid from 3 to 50)")
     parser.add_argument("--vehicle", default="baseline",
                         help="baseline, understeer, or a .toml/.json vehicle file")
     parser.set_defaults(handler=run)

@@ -4,7 +4,9 @@ Runs the compiled RK4 simulator (500 Hz) from the trim at the given speed and
 prints a summary: peak lateral acceleration, speed range and the wall time of
 the simulation; for a step, also the steady-state gains. With --out, the
 record (steer, all outputs and all 23 states) is written to an HDF5 file
-under the results folder.
+under the results folder. A run that leaves the model's physical envelope
+fails (exit status 1) naming the quantity and the time; with --out, the record
+up to that sample is still written.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from identification.archive_safety import check_output_target
-from identification.errors import InputError
+from identification.errors import InputError, SimulationError
 from scenarios.paths import results_directory
 from vehicle import MANOEUVRES, make_manoeuvre, named_vehicle, simulate
 
@@ -33,7 +35,8 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--amplitude-deg", type=float, default=None,
                         help="road-wheel steer amplitude in degrees (default: the manoeuvre's own)")
     parser.add_argument("--duration", type=float, default=None, help="record length in seconds")
-    parser.add_argument("--speed", type=float, default=20.0, help="trim and reference speed in m/s (default 20)")
+    parser.add_argument("--speed", type=float, default=20.0,
+                        help="trim and reference speed in m/s (default 20; the model is valid from 3 to 50)")
     parser.add_argument("--vehicle", default="baseline",
                         help="baseline, understeer, or a .toml/.json vehicle file")
     parser.add_argument("--seed", type=int, default=0, help="seed of the random parts of the input")
@@ -63,6 +66,19 @@ def _output_path(out: str) -> Path:
     return path if path.is_absolute() else results_directory() / path
 
 
+def _write_record(data, args: argparse.Namespace) -> Path:
+    import casadi
+    import h5py
+
+    path = _output_path(args.out)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with h5py.File(path, "w") as handle:
+        handle.attrs["casadi_version"] = casadi.__version__
+        handle.attrs["seed"] = args.seed
+        data.to_hdf5(handle.create_group("data"))
+    return path
+
+
 def run(args: argparse.Namespace) -> tuple[dict, str]:
     params = named_vehicle(args.vehicle)
     options = {"seed": args.seed}
@@ -75,7 +91,16 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     manoeuvre = make_manoeuvre(args.manoeuvre, **options)
     if args.out:  # before the simulation: no directory, no input file, a writable place
         check_output_target(_output_path(args.out), inputs=[args.vehicle], force=True, what="record")
-    data = simulate(params, manoeuvre, speed=args.speed, method=args.method)
+    try:
+        data = simulate(params, manoeuvre, speed=args.speed, method=args.method)
+    except SimulationError as exc:
+        if not args.out or exc.partial is None:
+            raise
+        path = _write_record(exc.partial, args)  # nothing computed is lost
+        raise SimulationError(
+            f"{exc}; the record up to it ({exc.partial.n_samples} samples) is in {path}",
+            exc.partial, quantity=exc.quantity, value=exc.value, time=exc.time,
+        ) from None
     a_y = data.output("lateral_acceleration")
     speed = data.output("speed")
     summary = {
@@ -93,16 +118,7 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     if args.manoeuvre == "step":
         summary.update(step_gains(data, float(manoeuvre.meta["amplitude"])))
     if args.out:
-        import casadi
-        import h5py
-
-        path = _output_path(args.out)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with h5py.File(path, "w") as handle:
-            handle.attrs["casadi_version"] = casadi.__version__
-            handle.attrs["seed"] = args.seed
-            data.to_hdf5(handle.create_group("data"))
-        summary["out"] = str(path)
+        summary["out"] = str(_write_record(data, args))
     lines = [
         f"{args.manoeuvre} on {params.name} at {args.speed:g} m/s: {data.n_samples} samples, "
         f"{data.duration:g} s simulated in {summary['seconds'] * 1000:.1f} ms ({args.method})",
