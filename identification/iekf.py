@@ -219,6 +219,40 @@ def _scales(data: IOData | tuple[IOData, ...], normalize: bool) -> tuple[np.ndar
                  for key in ("u", "y"))
 
 
+def _settle_states(state, u, y, structure: ModalStructure, run_pass, q, r, dt: float):
+    """Run the head of a further record with the parameters held, so that its unknown start state settles.
+
+    A record of a campaign need not start at rest. Over its first five time
+    constants of the slowest mode (at most a quarter of the record) the
+    filter estimates the states alone, from a prior as large as the output
+    power, with the parameter covariance set aside (so the gain leaves them
+    unchanged); then the parameters' covariance is restored, uncorrelated
+    with the settled states, and the rest of the record rinses as usual.
+    """
+    n = structure.n
+    m = n + structure.n_parameters
+    theta = state[n:m]
+    slowest = float(np.min(-ModalModel.from_parameters(structure, theta).eigenvalues().real))
+    head = min(y.shape[0] // 4, int(np.ceil(5.0 / max(slowest, 1e-9) / dt)))
+    if head < 2:
+        return state, u, y
+    P = unpack_covariance(state[m:], m)
+    held = np.zeros_like(P)
+    power = np.mean(y**2, axis=0)
+    held[np.arange(n), np.arange(n)] = [power[structure.output_of_state(j)] for j in range(n)]
+    q_states = q.copy()
+    q_states[n:] = 0.0
+    settled, _ = run_pass(np.concatenate([state[:m], pack_covariance(held)]), u[:head], y[:head], q_states, r)
+    settled = settled.copy()
+    settled[n:m] = theta
+    P_next = P.copy()
+    P_next[:n, :] = 0.0
+    P_next[:, :n] = 0.0
+    P_next[:n, :n] = unpack_covariance(settled[m:], m)[:n, :n]
+    settled[m:] = pack_covariance(P_next)
+    return settled, u[head:], y[head:]
+
+
 def denormalize(structure: ModalStructure, theta: np.ndarray, input_scale: np.ndarray, output_scale: np.ndarray) -> np.ndarray:
     """Parameters in original units from those identified on scaled data.
 
@@ -345,6 +379,8 @@ def identify_iekf(
         where = None
         for experiment, u_k, y_k in zip(records, u_scaled, y_scaled):
             state[:n] = 0.0  # each record starts from its own rest state; parameters and P carry on
+            if len(records) > 1:
+                state, u_k, y_k = _settle_states(state, u_k, y_k, structure, run_pass, q, r, dt)
             state, innovations = run_pass(state, u_k, y_k, q, r)
             if not (np.all(np.isfinite(state)) and np.all(np.isfinite(innovations))):
                 bad = np.flatnonzero(~np.all(np.isfinite(innovations), axis=1))
