@@ -388,6 +388,7 @@ def identify_iekf(
                 if len(records) > 1:
                     where += f" of record {experiment.meta.get('source', records.index(experiment) + 1)}"
                 break
+        del innovations  # (N, n_y): not kept while the model is scored
         new_theta = state[n:m]
         new_P = unpack_covariance(state[m:], m)
         if where is not None:

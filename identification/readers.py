@@ -19,7 +19,7 @@ Text tables (``.csv``, ``.dat``, ``.txt``)
     holds one of them). Only the chosen columns must hold numbers: text,
     blank cells and trailing delimiters elsewhere are ignored. The columns are
     parsed by NumPy's C reader; on any irregularity (a blank line of spaces, a
-    short row, a text cell) a careful line-by-line pass reads the file again
+    ``%`` comment, a short row, a text cell) a careful line-by-line pass reads the file again
     and either parses it or names the column and line at fault.
 """
 
@@ -275,7 +275,7 @@ def read_table(
     lines = None
     try:
         table = np.loadtxt(path, delimiter=layout.delimiter, skiprows=layout.skip, usecols=indices, ndmin=2,
-                           comments=list(_COMMENTS), encoding=layout.encoding, dtype=float, **quoting)
+                           comments="#", encoding=layout.encoding, dtype=float, **quoting)
         if table.shape[0] == 0:
             raise InputError(f"{path.name} holds no data rows")
     except ValueError as exc:
@@ -288,13 +288,14 @@ def read_table(
         row, column = (int(i) for i in np.argwhere(bad)[0])
         raise InputError(f"{path.name}: column {read_names[column]!r} holds a non-finite value "
                          f"({table[row, column]}) at {locate(column, row)}")
-    t = np.ascontiguousarray(table[:, -1]) if time_name is not None else None
+    # columns stay views of the parsed table: a copy per column of a long file is memory for nothing
+    t = table[:, -1] if time_name is not None else None
     units = tuple(layout.units[i] if layout.units and i < len(layout.units) and layout.units[i] else "-"
                   for i in indices[: len(names)])
     return RawRecord(
         source=path.name,
         names=tuple(names),
-        values=tuple(np.ascontiguousarray(table[:, i]) for i in range(len(names))),
+        values=tuple(table[:, i] for i in range(len(names))),
         times=(t,) * len(names),
         units=units,
         time_name=time_name,

@@ -69,7 +69,11 @@ def parse_segment(text: str | Sequence[float] | None) -> tuple[float, float] | N
     return pair  # type: ignore[return-value]
 
 
-def _check_increasing(raw: RawRecord, channel: int, t: np.ndarray, rows: np.ndarray) -> float:
+def _row(rows: np.ndarray | None, k: int) -> int:
+    return k if rows is None else int(rows[k])
+
+
+def _check_increasing(raw: RawRecord, channel: int, t: np.ndarray, rows: np.ndarray | None) -> float:
     """The median step of ``t``, after checking that time increases without gaps."""
     if t.size < 2:
         raise InputError(f"{raw.source}: {raw.names[channel]!r} has fewer than 2 samples")
@@ -78,7 +82,7 @@ def _check_increasing(raw: RawRecord, channel: int, t: np.ndarray, rows: np.ndar
     if falling.size:
         k = int(falling[0])
         raise InputError(
-            f"{raw.source}: time does not increase at {raw.locate(channel, int(rows[k + 1]))} "
+            f"{raw.source}: time does not increase at {raw.locate(channel, _row(rows, k + 1))} "
             f"({t[k + 1]:.9g} s after {t[k]:.9g} s)"
         )
     median = float(np.median(steps))
@@ -86,7 +90,7 @@ def _check_increasing(raw: RawRecord, channel: int, t: np.ndarray, rows: np.ndar
     if gaps.size:
         k = int(gaps[0])
         raise InputError(
-            f"{raw.source}: gap in time at {raw.locate(channel, int(rows[k + 1]))}: {steps[k]:.6g} s after the "
+            f"{raw.source}: gap in time at {raw.locate(channel, _row(rows, k + 1))}: {steps[k]:.6g} s after the "
             f"previous sample, {steps[k] / median:.1f} times the median step of {median:.6g} s"
         )
     return median
@@ -110,6 +114,17 @@ def _low_pass_onto(t: np.ndarray, values: np.ndarray, source_step: float, grid: 
         raise InputError(f"{raw.source}: {raw.names[channel]!r} has too few samples ({fine.size}) to filter "
                          f"before resampling")
     return np.interp(grid, fine_t, scipy.signal.sosfiltfilt(sos, fine))
+
+
+def _columns_of_one_table(columns: list[np.ndarray]) -> np.ndarray:
+    """The columns as one (N, k) array: a view where they are the first k columns of one parsed table, else a stack."""
+    base = columns[0].base
+    if base is not None and base.ndim == 2 and base.shape[0] == columns[0].size and base.dtype == np.float64:
+        origin = base.__array_interface__["data"][0]
+        if all(c.base is base and c.strides == (base.strides[0],)
+               and c.__array_interface__["data"][0] == origin + i * base.strides[1] for i, c in enumerate(columns)):
+            return base[:, : len(columns)]
+    return np.column_stack(columns)
 
 
 def uniform_record(
@@ -161,7 +176,7 @@ def uniform_record(
             raise InputError(f"{raw.source} has no time: give dt")
         times = [np.arange(raw.values[0].size) * float(dt)] * len(times)
     values = list(raw.values)
-    rows = [np.arange(v.size) for v in values]
+    rows: list[np.ndarray | None] = [None] * len(values)  # file rows of the samples, where a segment selected them
     if segment is not None:
         for c, t in enumerate(times):
             keep = np.flatnonzero((t >= segment[0]) & (t <= segment[1]))
@@ -173,16 +188,17 @@ def uniform_record(
             times[c], values[c], rows[c] = t[keep], values[c][keep], keep
     shared = raw.shares_time
     steps = [_check_increasing(raw, c, times[c], rows[c]) for c in (range(1) if shared else range(len(times)))]
-    jitter = max(float(np.max(_stray(t))) for t in (times[:1] if shared else times))
+    strays = [_stray(t) for t in (times[:1] if shared else times)]
+    jitter = max(float(np.max(stray)) for stray in strays)
     report: dict[str, Any] = {"sample_jitter": jitter, "resample": None, "decimate": None,
                               "segment": None if segment is None else list(segment)}
     if resample is None and shared:
-        stray = _stray(times[0])
+        stray = strays[0]
         if jitter > jitter_tolerance:
             k = int(np.flatnonzero(stray > jitter_tolerance)[0])
             raise InputError(
                 f"{raw.source}: sample times stray from a uniform grid by {stray[k]:.3g} of a step at "
-                f"{raw.locate(0, int(rows[0][k]))} (tolerance {jitter_tolerance:g}): resample with "
+                f"{raw.locate(0, _row(rows[0], k))} (tolerance {jitter_tolerance:g}): resample with "
                 f"--resample HZ, or widen --jitter-tolerance"
             )
         t0, count = times[0][0], times[0].size
@@ -211,7 +227,8 @@ def uniform_record(
                               "new Nyquist frequency, zero phase") if filtered else None,
             "filtered_channels": filtered,
         }
-    table = np.column_stack(columns)
+    del strays
+    table = _columns_of_one_table(columns)
     if decimate is not None and decimate > 1:
         factor = int(decimate)
         if table.shape[0] < 2 * factor:

@@ -108,3 +108,35 @@ def test_raw_file_identify_archive_reapply_gives_the_same_fit(record, tmp_path):
 def test_records_must_share_channels_and_rate(record):
     with pytest.raises(InputError, match="resample them to one rate"):
         prepare([record[:1000], record[:1000].replace(t=record.t[:1000] * 2)])
+
+
+def test_identify_several_files_of_different_formats(record, tmp_path):
+    """`vehid identify run1.csv run2.mat`: one model, fits per record and overall, preparation in the JSON."""
+    import scipy.io
+
+    first, second = _offset(record[:12000], OFFSETS[0]), _offset(record[12000:24000], OFFSETS[1])
+    csv_path = tmp_path / "run1.csv"
+    np.savetxt(csv_path, np.column_stack([first.t, first.u, first.y]), delimiter=",", header="t,u1,u2,y1",
+               comments="", fmt="%.12g")
+    mat_path = tmp_path / "run2.mat"
+    scipy.io.savemat(mat_path, {"t": second.t, "u1": second.u[:, 0], "u2": second.u[:, 1], "y1": second.y[:, 0]})
+    completed = subprocess.run(
+        [*VEHID, "identify", str(csv_path), str(mat_path), "--inputs", "u1,u2", "--outputs", "y1", "--order", "5",
+         "--passes", "6", "--method", "n4sid", "--json"], capture_output=True, text=True, check=False)
+    assert completed.returncode == 0, completed.stderr
+    summary = json.loads(completed.stdout)
+    assert [(r["name"], r["samples"]) for r in summary["records"]] == [("run1.csv", 12000), ("run2.mat", 12000)]
+    # each record's offsets are its own means (the added offsets plus the signal's small mean)
+    found = [r["output_offset"][0] for r in summary["preparation"]["records"]]
+    np.testing.assert_allclose(found, [first.y.mean(), second.y.mean()], rtol=1e-9)
+    # pooled R (eq. 17) lies between the per-record fits, which are both high on noise-free data
+    fits = [r["fits"][0] for r in summary["records"]]
+    assert min(fits) - 1e-9 <= summary["fit_percent"][0] <= max(fits) + 1e-9 and min(fits) > 99.0
+    # a file whose rate differs cannot join: one clear line, exit status 2
+    scipy.io.savemat(tmp_path / "fast.mat", {"t": second.t / 2, "u1": second.u[:, 0], "u2": second.u[:, 1],
+                                            "y1": second.y[:, 0]})
+    rejected = subprocess.run([*VEHID, "identify", str(csv_path), str(tmp_path / "fast.mat"), "--inputs", "u1,u2",
+                               "--outputs", "y1"], capture_output=True, text=True, check=False)
+    assert rejected.returncode == 2
+    assert rejected.stderr.strip() == ("vehid: error: record 2 is sampled every 0.001 s, record 1 every 0.002 s: "
+                                       "resample them to one rate (--resample HZ)")
