@@ -220,7 +220,7 @@ def _scales(data: IOData | tuple[IOData, ...], normalize: bool) -> tuple[np.ndar
 
 
 def _settle_states(state, u, y, structure: ModalStructure, run_pass, q, r, dt: float):
-    """Run the head of a further record with the parameters held, so that its unknown start state settles.
+    """Run the head of a record with the parameters held, so that its unknown start state settles.
 
     A record of a campaign need not start at rest. Over its first five time
     constants of the slowest mode (at most a quarter of the record) the
@@ -281,6 +281,7 @@ def identify_iekf(
     initial_model: ModalModel | None = None,
     resume: IEKFResult | None = None,
     on_pass: Callable[[PassRecord, "IEKFResult"], None] | None = None,
+    settle_start: bool | None = None,
 ) -> IEKFResult:
     """Identify a linear modal model with the IEKF.
 
@@ -302,6 +303,11 @@ def identify_iekf(
     on_pass : callable, optional
         Called after every pass with the new record and the result so far
         (for progress displays and checkpoints).
+    settle_start : bool, optional
+        Whether each record's start state is unknown (a record of a campaign,
+        or one whose offsets were removed, is not at rest at its start): then
+        the head of each record settles the states with the parameters held
+        (:func:`_settle_states`). Default: when there are several records.
 
     Returns
     -------
@@ -320,6 +326,7 @@ def identify_iekf(
     records = as_records(data)
     data = records[0]
     _check_data(records, structure)
+    settle = len(records) > 1 if settle_start is None else bool(settle_start)
     started = time.perf_counter()
     dt = data.dt
     n, m_theta = structure.n, structure.n_parameters
@@ -379,12 +386,13 @@ def identify_iekf(
         where = None
         for experiment, u_k, y_k in zip(records, u_scaled, y_scaled):
             state[:n] = 0.0  # each record starts from its own rest state; parameters and P carry on
-            if len(records) > 1:
+            if settle:
                 state, u_k, y_k = _settle_states(state, u_k, y_k, structure, run_pass, q, r, dt)
             state, innovations = run_pass(state, u_k, y_k, q, r)
             if not (np.all(np.isfinite(state)) and np.all(np.isfinite(innovations))):
                 bad = np.flatnonzero(~np.all(np.isfinite(innovations), axis=1))
-                where = f" from t = {experiment.t[bad[0]]:.3f} s" if bad.size else ""
+                head = experiment.n_samples - y_k.shape[0]  # samples used to settle the start state
+                where = f" from t = {experiment.t[head + bad[0]]:.3f} s" if bad.size else ""
                 if len(records) > 1:
                     where += f" of record {experiment.meta.get('source', records.index(experiment) + 1)}"
                 break

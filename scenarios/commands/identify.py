@@ -122,7 +122,9 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
                 checkpoint(record, so_far)
             progress.advance(note=f"R {record.mean_fit_filter:.4f} %")
 
-        result = identify_iekf(data, structure, options=options, resume=previous, on_pass=on_pass)
+        # offsets removed: the prepared record no longer starts at rest, so its start state settles first
+        settle = True if preparation is not None and preparation.detrend != "none" else None
+        result = identify_iekf(data, structure, options=options, resume=previous, on_pass=on_pass, settle_start=settle)
     model = result.model
     summary = {
         "method": "iekf",
