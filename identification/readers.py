@@ -266,7 +266,7 @@ def read_table(
     layout = _layout(path)
     names = [str(name).strip() for name in channels]
     indices = [_column_index(path, layout.header, name, "data") for name in names]
-    time_name = _time_name(path, layout.header, time_column, dt)
+    time_name = _time_name(path, layout.header is not None and "t" in layout.header, time_column, dt)
     read_names = list(names)
     if time_name is not None:
         indices.append(_column_index(path, layout.header, time_name, "time"))
@@ -303,7 +303,8 @@ def read_table(
     )
 
 
-def _time_name(path: Path, header: tuple[str, ...] | None, time_column: str | None, dt: float | None) -> str | None:
+def _time_name(path: Path, has_t: bool, time_column: str | None, dt: float | None, kind: str = "column"
+               ) -> str | None:
     """The time column in use: given, or ``t`` when present; None when disabled or absent."""
     if _is_time_disabled(time_column):
         return None
@@ -311,13 +312,20 @@ def _time_name(path: Path, header: tuple[str, ...] | None, time_column: str | No
         if dt is not None:
             raise _dt_conflict(path, time_column)
         return time_column.strip()
-    if header is not None and "t" in header:
+    if has_t:
         if dt is not None:
             raise _dt_conflict(path, "t")
         return "t"
     if dt is None:
-        raise InputError(f"{path.name} has no time column 't': name one with --time-column NAME, or give --dt")
+        raise InputError(f"{path.name} has no time {kind} 't': name one with --time-column NAME, or give --dt")
     return None
+
+
+def _check_finite(path: Path, kind: str, names: Sequence[str], values: Sequence[np.ndarray]) -> None:
+    for name, value in zip(names, values):
+        if not np.all(np.isfinite(value)):
+            k = int(np.flatnonzero(~np.isfinite(value))[0])
+            raise InputError(f"{path.name}: {kind} {name!r} holds a non-finite value at sample {k + 1}")
 
 
 def _existing(path: str | Path) -> Path:
@@ -425,26 +433,15 @@ def read_mat(
     lookup, available = _mat_variables(path)
     names = [str(name).strip() for name in channels]
     values = [_mat_column(path, lookup, name, available) for name in names]
-    time_name = None
-    if not _is_time_disabled(time_column):
-        if time_column is not None:
-            time_name = time_column.strip()
-        elif lookup("t") is not None:
-            time_name = "t"
-        if time_name is not None and dt is not None:
-            raise _dt_conflict(path, time_name)
-        if time_name is None and dt is None:
-            raise InputError(f"{path.name} has no time variable 't': name one with --time-column NAME, or give --dt")
+    time_name = _time_name(path, lookup("t") is not None, time_column, dt, kind="variable")
     t = _mat_column(path, lookup, time_name, available) if time_name is not None else None
     lengths = {v.size for v in values} | ({t.size} if t is not None else set())
     if len(lengths) > 1:
         sizes = ", ".join(f"{n} {v.size}" for n, v in zip(names, values))
         raise InputError(f"the chosen variables of {path.name} differ in length ({sizes}"
                          + (f", {time_name} {t.size}" if t is not None else "") + ")")
-    for name, value in zip(names + ([time_name] if t is not None else []), values + ([t] if t is not None else [])):
-        if not np.all(np.isfinite(value)):
-            k = int(np.flatnonzero(~np.isfinite(value))[0])
-            raise InputError(f"{path.name}: variable {name!r} holds a non-finite value at sample {k + 1}")
+    _check_finite(path, "variable", names + ([time_name] if t is not None else []),
+                  values + ([t] if t is not None else []))
     return RawRecord(path.name, tuple(names), tuple(values), (t,) * len(names), ("-",) * len(names), time_name)
 
 
@@ -499,10 +496,7 @@ def read_mdf(
             units.append(str(signal.unit) or "-")
     finally:
         mdf.close()
-    for name, value in zip(names, values):
-        if not np.all(np.isfinite(value)):
-            k = int(np.flatnonzero(~np.isfinite(value))[0])
-            raise InputError(f"{path.name}: channel {name!r} holds a non-finite value at sample {k + 1}")
+    _check_finite(path, "channel", names, values)
     return RawRecord(path.name, tuple(names), tuple(values), tuple(times), tuple(units), "time stamps")
 
 
