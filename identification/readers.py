@@ -307,6 +307,8 @@ def _time_name(path: Path, has_t: bool, time_column: str | None, dt: float | Non
                ) -> str | None:
     """The time column in use: given, or ``t`` when present; None when disabled or absent."""
     if _is_time_disabled(time_column):
+        if dt is None:
+            raise InputError(f"the time {kind} of {path.name} is disabled (--time-column none): give --dt")
         return None
     if time_column is not None:
         if dt is not None:

@@ -71,6 +71,8 @@ def test_time_column_none_and_dt(tmp_path):
     path = _write(tmp_path / "log.csv", "stamp,u,y\n12:00:01,1,2\n12:00:02,2,3\n12:00:03,3,4\n")
     _rejects("log.csv has no time column 't': name one with --time-column NAME, or give --dt", path,
              inputs=["u"], outputs=["y"])
+    _rejects("the time column of log.csv is disabled (--time-column none): give --dt", path, inputs=["u"],
+             outputs=["y"], time_column="none")
     data = read_record(path, inputs=["u"], outputs=["y"], dt=0.25)
     assert data.dt == 0.25 and data.t[-1] == 0.5
     _rejects("log.csv: column 'stamp' holds '12:00:01' at line 2, not a number", path, inputs=["u"],
@@ -147,7 +149,10 @@ def test_daisy_style_dat_by_column_number(tmp_path):
     t = np.arange(50) * 0.5
     table = np.column_stack([t, np.sin(t), np.cos(t)])
     path = tmp_path / "exchanger.dat"
-    np.savetxt(path, table, fmt="%15.7e")
+    # as DaISy publishes them: padded fields, three-digit exponents, tab-separated with a trailing tab
+    path.write_text("".join("".join(f"  {value:.7e}".replace("e+0", "e+00").replace("e-0", "e-00") + "\t"
+                                    for value in row) + "\n" for row in table))
+    assert path.read_text().startswith("  0.0000000e+000\t  0.0000000e+000\t  1.0000000e+000\t\n")
     data = read_record(path, inputs=["2"], outputs=["3"], time_column="1")
     np.testing.assert_allclose(data.y[:, 0], np.cos(t), rtol=1e-7)
     assert data.dt == pytest.approx(0.5)
