@@ -386,9 +386,14 @@ def identify_iekf(
         where = None
         for experiment, u_k, y_k in zip(records, u_scaled, y_scaled):
             state[:n] = 0.0  # each record starts from its own rest state; parameters and P carry on
-            if settle:
-                state, u_k, y_k = _settle_states(state, u_k, y_k, structure, run_pass, q, r, dt)
-            state, innovations = run_pass(state, u_k, y_k, q, r)
+            try:
+                if settle:
+                    state, u_k, y_k = _settle_states(state, u_k, y_k, structure, run_pass, q, r, dt)
+                state, innovations = run_pass(state, u_k, y_k, q, r)
+            except DivergenceError as exc:
+                raise DivergenceError(
+                    f"pass {pass_index}: {exc}", last_good=result(f"diverged at pass {pass_index}") if history else None
+                ) from exc
             if not (np.all(np.isfinite(state)) and np.all(np.isfinite(innovations))):
                 bad = np.flatnonzero(~np.all(np.isfinite(innovations), axis=1))
                 head = experiment.n_samples - y_k.shape[0]  # samples used to settle the start state
