@@ -44,6 +44,7 @@ def test_means_and_lines_are_removed_and_scales_applied(record):
         prepare(raw, scale=["steer=0.0625"])
 
 
+@pytest.mark.slow  # about 12 s on a quiet machine, 21-23 s with the other core busy
 def test_three_segments_with_different_offsets_identify_the_whole_records_model(record):
     """One model from three offset segments equals the whole record's (eigenvalues within 1 %)."""
     structure = ModalStructure.default(5, 2, 1)
