@@ -47,6 +47,7 @@ __all__ = [
     "estimate_preparation",
     "prepare",
     "load_records",
+    "read_raw_records",
     "prepare_validation",
     "parse_scale",
 ]
@@ -402,15 +403,29 @@ def load_records(
     ``options`` are the fields of :class:`ReadSettings` (``inputs``, ``outputs``,
     ``time_column``, ``dt``, ``resample``, ``decimate``, ``segment``, ``jitter_tolerance``).
     """
+    raw, settings = read_raw_records(paths, settings, **options)
+    return prepare(raw, detrend=detrend, scale=scale, settings=settings)
+
+
+def read_raw_records(
+    paths: str | Path | Sequence[str | Path],
+    settings: ReadSettings | None = None,
+    **options: Any,
+) -> tuple[tuple[IOData, ...], ReadSettings]:
+    """Raw records of several files read alike (:func:`read_record`), and the settings that read them.
+
+    For a hold-out split, split a raw record, :func:`prepare` the estimation
+    part with these settings and :func:`prepare_validation` the rest.
+    """
     if isinstance(paths, (str, Path)):
         paths = [paths]
     if not paths:
         raise InputError("give at least one data file")
     settings = ReadSettings(**options) if settings is None else replace(settings, **options)
-    raw = [read_record(path, settings) for path in paths]
-    if not settings.inputs or not settings.outputs:  # an HDF5 record chose its own channels
+    raw = tuple(read_record(path, settings) for path in paths)
+    if not settings.inputs or not settings.outputs:  # a workbench HDF5 record chose its own channels
         settings = replace(settings, inputs=raw[0].input_names, outputs=raw[0].output_names)
-    return prepare(raw, detrend=detrend, scale=scale, settings=settings)
+    return raw, settings
 
 
 def prepare_validation(

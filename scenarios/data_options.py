@@ -22,11 +22,11 @@ from identification.archive import read_records, write_record
 from identification.data import IOData
 from identification.errors import InputError
 from identification.multirecord import score_records
-from identification.preparation import DETRENDS, Preparation, ReadSettings, load_records
+from identification.preparation import DETRENDS, Preparation, ReadSettings, prepare, read_raw_records
 from identification.storage import read_value, write_value
 from identification.timebase import JITTER_TOLERANCE
 
-__all__ = ["register_data_options", "settings_from_args", "load_from_args", "records_summary", "record_names",
+__all__ = ["register_data_options", "settings_from_args", "read_from_args", "load_from_args", "records_summary", "record_names",
            "archive_records", "archived_records", "archived_preparation", "save_model"]
 
 PREPARATION_MEMBER = "preparation"
@@ -69,11 +69,24 @@ def settings_from_args(args: argparse.Namespace) -> ReadSettings:
     )
 
 
-def load_from_args(args: argparse.Namespace, paths: Sequence[str]) -> tuple[tuple[IOData, ...], Preparation]:
-    """Read and prepare the data files named on the command line."""
+def read_from_args(args: argparse.Namespace, paths: Sequence[str]) -> tuple[tuple[IOData, ...], ReadSettings]:
+    """The raw records of the data files named on the command line, and the settings they were read with.
+
+    For a hold-out split: split a raw record first, then :func:`prepare` the
+    estimation part (``detrend=args.detrend, scale=args.scale, settings=settings``)
+    and :func:`~identification.preparation.prepare_validation` the rest.
+    """
+    if not paths:
+        raise InputError("give a DATA file (or --resume ARCHIVE)")
     if len(set(paths)) != len(paths):
         raise InputError("a data file is named twice")
-    return load_records(list(paths), detrend=args.detrend, scale=args.scale, settings=settings_from_args(args))
+    return read_raw_records(list(paths), settings_from_args(args))
+
+
+def load_from_args(args: argparse.Namespace, paths: Sequence[str]) -> tuple[tuple[IOData, ...], Preparation]:
+    """Read and prepare the data files named on the command line (each record with its own offsets)."""
+    raw, settings = read_from_args(args, paths)
+    return prepare(raw, detrend=args.detrend, scale=args.scale, settings=settings)
 
 
 def record_names(records: Sequence[IOData]) -> list[str]:

@@ -141,3 +141,22 @@ def test_identify_several_files_of_different_formats(record, tmp_path):
     assert rejected.returncode == 2
     assert rejected.stderr.strip() == ("vehid: error: record 2 is sampled every 0.001 s, record 1 every 0.002 s: "
                                        "resample them to one rate (--resample HZ)")
+
+
+def test_validation_data_take_the_estimation_datas_preparation(record, tmp_path):
+    """A hold-out tail is prepared with the estimation part's scale and offsets, never its own means."""
+    from identification import read_raw_records
+
+    raw = _offset(record[:4000], OFFSETS[2])
+    path = tmp_path / "run.csv"
+    np.savetxt(path, np.column_stack([raw.t, raw.u, raw.y]), delimiter=",", header="t,u1,u2,y1", comments="",
+               fmt="%.12g")
+    (whole,), settings = read_raw_records(path, inputs=["u1", "u2"], outputs=["y1"])
+    estimation_raw, validation_raw = whole.split(0.75)
+    (estimation,), preparation = prepare(estimation_raw, scale={"y1": 10.0}, settings=settings)
+    validation = prepare_validation(validation_raw, preparation)
+    np.testing.assert_allclose(validation.y, 10.0 * validation_raw.y - 10.0 * estimation_raw.y.mean(), atol=1e-9)
+    np.testing.assert_allclose(validation.u, validation_raw.u - estimation_raw.u.mean(axis=0), atol=1e-12)
+    # a second file read with the archived settings gets the same treatment
+    again = prepare_validation(path, preparation)
+    np.testing.assert_allclose(again.y, 10.0 * whole.y - 10.0 * estimation_raw.y.mean(), atol=1e-9)
