@@ -18,7 +18,8 @@ Text tables (``.csv``, ``.dat``, ``.txt``)
     ``.csv`` (a ``.dat``/``.txt`` is whitespace-separated unless its first line
     holds one of them). Only the chosen columns must hold numbers: text,
     blank cells and trailing delimiters elsewhere are ignored. The columns are
-    parsed by NumPy's C reader; on any irregularity (a blank line of spaces, a
+    parsed by NumPy's C reader (a decimal comma, ``0,5``, is read where the
+    delimiter is not a comma); on any irregularity (a blank line of spaces, a
     ``%`` comment, a short row, a text cell) a careful line-by-line pass reads the file again
     and either parses it or names the column and line at fault.
 """
@@ -101,9 +102,12 @@ def _dt_conflict(path: Path, time_name: str) -> InputError:
     )
 
 
-def _float(cell: str) -> float | None:
+_DECIMAL_COMMA = re.compile(r"^[+-]?[0-9]*,[0-9]+([eE][+-]?[0-9]+)?$")
+
+
+def _float(cell: str, decimal_comma: bool = False) -> float | None:
     try:
-        return float(cell)
+        return float(cell.replace(",", ".") if decimal_comma else cell)
     except ValueError:
         return None
 
@@ -146,6 +150,7 @@ class _Layout:
     units: tuple[str, ...] | None
     skip: int  # lines before the first data line
     encoding: str
+    decimal_comma: bool = False  # "0,5": files written with a European locale (then ';' or tabs separate)
 
 
 def _layout(path: Path) -> _Layout:
@@ -158,16 +163,16 @@ def _layout(path: Path) -> _Layout:
     first = head[index].rstrip("\r\n")
     delimiter = _delimiter(first, path.suffix.lower())
     cells = _split(first, delimiter)
-    if all(_float(cell) is not None for cell in cells if cell):
-        return _Layout(delimiter, None, None, index, encoding)
+    nearby = [c for line in head[index: index + 3] for c in _split(line.rstrip("\r\n"), delimiter)]
+    comma = delimiter != "," and any(_DECIMAL_COMMA.match(c) for c in nearby)
+    if all(_float(cell, comma) is not None for cell in cells if cell):
+        return _Layout(delimiter, None, None, index, encoding, comma)
     header = tuple(cells)
-    units = None
     if index + 1 < len(head):
         second = [c for c in _split(head[index + 1].rstrip("\r\n"), delimiter)]
-        if any(second) and all(_float(c) is None for c in second if c):
-            units = tuple(second)
-            return _Layout(delimiter, header, units, index + 2, encoding)
-    return _Layout(delimiter, header, units, index + 1, encoding)
+        if any(second) and all(_float(c, comma) is None for c in second if c):
+            return _Layout(delimiter, header, tuple(second), index + 2, encoding, comma)
+    return _Layout(delimiter, header, None, index + 1, encoding, comma)
 
 
 def _column_index(path: Path, header: tuple[str, ...] | None, name: str, kind: str) -> int:
@@ -206,7 +211,7 @@ def _careful_parse(path: Path, layout: _Layout, columns: list[int], names: list[
                 )
             row = []
             for column, name in zip(columns, names):
-                value = _float(cells[column])
+                value = _float(cells[column], layout.decimal_comma)
                 if value is None:
                     shown = repr(cells[column]) if cells[column] else "a blank cell"
                     raise InputError(f"{path.name}: column {name!r} holds {shown} at line {number}, not a number")
@@ -272,6 +277,8 @@ def read_table(
         indices.append(_column_index(path, layout.header, time_name, "time"))
         read_names.append(time_name)
     quoting = {"quotechar": '"'} if layout.delimiter is not None else {}
+    if layout.decimal_comma:  # NumPy's reader knows only the decimal point: each cell converted in Python
+        quoting["converters"] = lambda cell: float(cell.replace(",", "."))
     lines = None
     try:
         table = np.loadtxt(path, delimiter=layout.delimiter, skiprows=layout.skip, usecols=indices, ndmin=2,

@@ -42,6 +42,14 @@ def test_semicolon_csv_and_named_time_column(tmp_path):
     assert data.dt == pytest.approx(0.1) and data.t[0] == 10.0
 
 
+def test_european_csv_with_decimal_commas(tmp_path):
+    path = _write(tmp_path / "eu.csv", "Zeit;Lenkwinkel;Gierrate\n0,0;1,5;-2,25\n0,1;2,5;3e-1\n0,2;3,5;4,0\n")
+    data = read_record(path, inputs=["Lenkwinkel"], outputs=["Gierrate"], time_column="Zeit")
+    np.testing.assert_array_equal(data.u[:, 0], [1.5, 2.5, 3.5])
+    np.testing.assert_array_equal(data.y[:, 0], [-2.25, 0.3, 4.0])
+    assert data.dt == pytest.approx(0.1)
+
+
 CSV = "t,u,y,u\n0,1,2,9\n0.5,2,3,9\n1,3,x,9\n1.5,4,5,9\n"
 
 
