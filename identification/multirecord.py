@@ -66,12 +66,20 @@ def score_records(model: Any, data: IOData | Sequence[IOData], *, method: str = 
         Simulation method, ``foh`` (exact, inputs linear between samples) by default.
     names : sequence of str, optional
         Record names; default each record's ``meta["source"]`` or ``record k``.
+
+    A record on which a metric is undefined (a constant output) gets NaN
+    fits rather than failing the whole scoring.
     """
     records = as_records(data)
     fits, pairs = [], []
     for index, record in enumerate(records):
         simulated = model.simulate(record.u, record.dt, method=method)
         name = names[index] if names is not None else str(record.meta.get("source", f"record {index + 1}"))
-        fits.append(RecordFit(name, record.n_samples, fit_metrics(record.y, simulated)))
+        try:
+            metrics = fit_metrics(record.y, simulated)
+        except InputError:  # a record with a constant output has no fit; the others still count
+            undefined = np.full(record.n_y, np.nan)
+            metrics = FitMetrics(undefined, undefined, undefined)
+        fits.append(RecordFit(name, record.n_samples, metrics))
         pairs.append((record.y, simulated))
     return MultiRecordFit(tuple(fits), pooled_percentage_explanation(pairs))
