@@ -15,7 +15,7 @@ import numpy as np
 
 from .data import IOData, as_records
 from .errors import InputError
-from .metrics import FitMetrics, fit_metrics
+from .metrics import FitMetrics, nrmse_fit, percentage_explanation, r_squared
 
 __all__ = ["RecordFit", "MultiRecordFit", "score_records", "pooled_percentage_explanation"]
 
@@ -30,6 +30,14 @@ def pooled_percentage_explanation(pairs: Iterable[tuple[np.ndarray, np.ndarray]]
     if np.any(energy == 0):
         raise InputError("an output is identically zero over all records: R (eq. 17) is undefined")
     return (1.0 - error / energy) * 100.0
+
+
+def _defined(metric: Any, y: np.ndarray, y_hat: np.ndarray) -> np.ndarray:
+    """The metric per output, NaN where it is undefined (a constant or zero output in this record)."""
+    try:
+        return metric(y, y_hat)
+    except InputError:
+        return np.full(y.shape[1], np.nan)
 
 
 @dataclass(frozen=True, eq=False)
@@ -75,11 +83,7 @@ def score_records(model: Any, data: IOData | Sequence[IOData], *, method: str = 
     for index, record in enumerate(records):
         simulated = model.simulate(record.u, record.dt, method=method)
         name = names[index] if names is not None else str(record.meta.get("source", f"record {index + 1}"))
-        try:
-            metrics = fit_metrics(record.y, simulated)
-        except InputError:  # a record with a constant output has no fit; the others still count
-            undefined = np.full(record.n_y, np.nan)
-            metrics = FitMetrics(undefined, undefined, undefined)
-        fits.append(RecordFit(name, record.n_samples, metrics))
+        fits.append(RecordFit(name, record.n_samples, FitMetrics(
+            *(_defined(metric, record.y, simulated) for metric in (percentage_explanation, nrmse_fit, r_squared)))))
         pairs.append((record.y, simulated))
     return MultiRecordFit(tuple(fits), pooled_percentage_explanation(pairs))
