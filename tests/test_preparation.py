@@ -160,3 +160,16 @@ def test_validation_data_take_the_estimation_datas_preparation(record, tmp_path)
     # a second file read with the archived settings gets the same treatment
     again = prepare_validation(path, preparation)
     np.testing.assert_allclose(again.y, 10.0 * whole.y - 10.0 * estimation_raw.y.mean(), atol=1e-9)
+
+
+def test_a_constant_output_record_has_undefined_fits_not_a_failed_summary(record):
+    from identification import IOData
+
+    model = identify_with(record[:3000], method="arx", order=5).model
+    constant = IOData(t=record.t[:500], u=record.u[:500], y=np.full((500, 1), 2.0))
+    scored = score_records(model, [record[:3000], constant])
+    assert np.isnan(scored.records[1].metrics.nrmse_fit[0])  # NRMSE needs a varying output
+    # R (eq. 17) needs only energy: 1 - sum (2 - y_hat)^2 / sum 2^2, in closed form from the simulation
+    y_hat = model.simulate(constant.u, constant.dt)
+    expected = 100 * (1 - np.sum((2.0 - y_hat) ** 2) / (500 * 4.0))
+    assert scored.records[1].metrics.percentage_explanation[0] == pytest.approx(expected, rel=1e-12)
