@@ -40,8 +40,12 @@ def test_means_and_lines_are_removed_and_scales_applied(record):
                                rtol=1e-9)
     line = np.polyfit(raw.t - raw.t[0], raw.u, 1)  # inputs: scaled back by 1/16, then their own line removed
     np.testing.assert_allclose(prepared.u, raw.u - line[1] - np.outer(raw.t - raw.t[0], line[0]), atol=1e-9)
-    with pytest.raises(InputError, match="--scale names 'steer', which is not a chosen channel"):
+    with pytest.raises(InputError) as caught:
         prepare(raw, scale=["steer=0.0625"])
+    assert str(caught.value) == "--scale names 'steer', which is not a chosen channel; inputs: u1, u2; outputs: y1"
+    with pytest.raises(InputError) as caught:
+        prepare(raw, scale=["u1=0"])
+    assert str(caught.value) == "the scale factor of 'u1' must be a finite non-zero number; got 0.0"
 
 
 @pytest.mark.slow  # about 12 s on a quiet machine, 21-23 s with the other core busy

@@ -1,7 +1,5 @@
 """Readers of measured files and the uniform time base: every format, every rejection with its exact message."""
 
-import re
-
 import h5py
 import numpy as np
 import pytest
@@ -224,8 +222,8 @@ def test_mdf4_channels_at_two_rates_onto_one_time_base(tmp_path):
     np.testing.assert_allclose(data.y[:, 0], -2.0 * data.t, atol=1e-12)
     np.testing.assert_allclose(data.u[:, 0], 3.0 * data.t + 1.0, atol=1e-12)
     assert data.input_units == ("deg",) and data.meta["time_base"]["resample"]["rate_hz"] == pytest.approx(100.0)
-    with pytest.raises(InputError, match=re.escape("unknown channel 'roll' in log.mf4; channels: ")):
-        read_record(path, inputs=["steer"], outputs=["roll"])
+    _rejects("unknown channel 'roll' in log.mf4; channels: steer, yaw_rate", path, inputs=["steer"],
+             outputs=["roll"])
     _rejects("log.mf4 is an MDF file and carries its own time stamps: --dt does not apply "
              "(use --resample HZ for another rate)", path, inputs=["steer"], outputs=["yaw_rate"], dt=0.1)
 
@@ -233,3 +231,15 @@ def test_mdf4_channels_at_two_rates_onto_one_time_base(tmp_path):
 def test_unknown_file_type(tmp_path):
     _rejects("unknown data file type '.xlsx': give a .h5, .csv, .dat, .txt, .mat or .mf4 file",
              _write(tmp_path / "a.xlsx", "x"), inputs=["a"], outputs=["b"])
+
+
+@pytest.mark.parametrize("options, message", [
+    (dict(resample=-5.0), "the resampling rate must be a positive number of Hz; got -5.0"),
+    (dict(decimate=2.5), "the decimation factor must be a whole number >= 1; got 2.5"),
+    (dict(segment="3"), "a segment is T0:T1 in seconds; got '3'"),
+    (dict(segment="4:2"), "a segment needs T0 < T1; got 4:2"),
+    (dict(jitter_tolerance=0.7), "the jitter tolerance is a fraction of a step in [0, 0.5); got 0.7"),
+    (dict(dt=-1.0, time_column="none"), "dt must be a positive number; got -1.0"),
+])
+def test_time_base_option_rejections(tmp_path, options, message):
+    _rejects(message, _timed(tmp_path / "ok.csv", np.arange(20) * 0.1), inputs=["u"], outputs=["y"], **options)
