@@ -510,6 +510,15 @@ def read_mdf(
 
 
 # ---------------------------------------------------------------------- dispatch
+def _is_mdf(path: Path) -> bool:
+    """An ASAM MDF file by its identification block ("MDF     " or "UnFinMF ")."""
+    try:
+        with path.open("rb") as handle:
+            return handle.read(8) in (b"MDF     ", b"UnFinMF ")
+    except OSError:
+        return False
+
+
 def read_raw(
     path: str | Path,
     *,
@@ -519,10 +528,13 @@ def read_raw(
 ) -> RawRecord:
     """Read the chosen channels of a measurement file; the reader is chosen by the file's suffix.
 
-    ``.csv``, ``.dat``, ``.txt``: :func:`read_table`; ``.mat``: :func:`read_mat`;
-    ``.mf4``, ``.mdf``: :func:`read_mdf`.
+    ``.csv``, ``.dat``, ``.txt``: :func:`read_table` (a ``.dat`` that is an
+    MDF file by its first bytes, as MDF3 loggers write them: :func:`read_mdf`);
+    ``.mat``: :func:`read_mat`; ``.mf4``, ``.mdf``: :func:`read_mdf`.
     """
     suffix = Path(path).suffix.lower()
+    if suffix in TEXT_SUFFIXES and _is_mdf(Path(path)):  # MDF3 loggers often name their files .dat
+        return read_mdf(path, channels=channels, time_column=time_column, dt=dt)
     if suffix in TEXT_SUFFIXES:
         return read_table(path, channels=channels, time_column=time_column, dt=dt)
     if suffix in MAT_SUFFIXES:

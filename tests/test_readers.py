@@ -226,6 +226,9 @@ def test_mdf4_channels_at_two_rates_onto_one_time_base(tmp_path):
              outputs=["roll"])
     _rejects("log.mf4 is an MDF file and carries its own time stamps: --dt does not apply "
              "(use --resample HZ for another rate)", path, inputs=["steer"], outputs=["yaw_rate"], dt=0.1)
+    # an MDF file named .dat (as MDF3 loggers name them) is known by its first bytes
+    renamed = path.rename(tmp_path / "log.dat")
+    np.testing.assert_array_equal(read_record(renamed, inputs=["steer"], outputs=["yaw_rate"]).y, data.y)
 
 
 def test_unknown_file_type(tmp_path):
