@@ -16,7 +16,11 @@ from .archive import (
     write_record,
     write_run,
 )
-from .data import IOData, read_csv, read_hdf5
+from .data import IOData, as_records, read_hdf5
+from .readers import RawRecord, read_mat, read_mdf, read_raw, read_table
+from .timebase import JITTER_TOLERANCE, uniform_record
+from .preparation import (DETRENDS, Preparation, ReadSettings, RecordOffsets, estimate_preparation, load_records,
+                          prepare, prepare_validation, read_csv, read_raw_records, read_record)
 from .errors import ArchiveError, DivergenceError, ExcitationError, InputError, WorkbenchError
 from .iekf import START_VALUES, FilterState, IEKFOptions, IEKFResult, PassRecord, identify_iekf
 from .metrics import FitMetrics, fit_metrics, nrmse_fit, percentage_explanation, r_squared
@@ -40,6 +44,24 @@ __all__ = [
     "IOData",
     "read_csv",
     "read_hdf5",
+    "as_records",
+    "RawRecord",
+    "read_raw",
+    "read_table",
+    "read_mat",
+    "read_mdf",
+    "JITTER_TOLERANCE",
+    "uniform_record",
+    "DETRENDS",
+    "ReadSettings",
+    "RecordOffsets",
+    "Preparation",
+    "read_record",
+    "estimate_preparation",
+    "prepare",
+    "load_records",
+    "read_raw_records",
+    "prepare_validation",
     "ArchiveError",
     "DivergenceError",
     "ExcitationError",

@@ -39,6 +39,12 @@ Methods (:data:`COMPARATORS`, a registry ``name -> function``):
 
 Other methods join with :func:`register_comparator` (the IEKF, for one):
 a function ``(data: IOData, *, order: int, **options) -> ModalModel``.
+
+Several records (a sequence of IOData of one ``dt``) identify one model:
+least-squares rows (ARX, RLS) are stacked per record and never span a
+record boundary, N4SID joins each record's Hankel columns and estimates one
+initial state per record, output error simulates each record from rest, and
+the IEKF rinses over the records in turn.
 """
 
 from __future__ import annotations
@@ -53,9 +59,9 @@ import scipy.optimize
 from scipy.special import comb
 
 from ._checks import positive_int
-from .data import IOData
+from .data import IOData, as_records
 from .errors import ConversionError, InputError
-from .least_squares import arx_regressors, estimate_arx, least_squares, model_from_theta
+from .least_squares import estimate_arx, least_squares, model_from_theta, stacked_arx_regressors
 from .metrics import FitMetrics, fit_metrics
 from .modal import ModalModel, ModalStructure
 from .recursive import recursive_least_squares
@@ -109,10 +115,14 @@ class ComparatorResult:
         }
 
 
-def _check_data(data: Any) -> IOData:
-    if not isinstance(data, IOData):
-        raise InputError("the comparators take an IOData record")
-    return data
+def _check_data(data: Any) -> tuple[IOData, ...]:
+    if not isinstance(data, (IOData, list, tuple)):
+        raise InputError("the comparators take an IOData record or a sequence of them")
+    return as_records(data)
+
+
+def _experiments(records: tuple[IOData, ...], output: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    return [(record.u, record.y[:, [output]]) for record in records]
 
 
 def _discrete_to_modal(Ad: np.ndarray, Bd: np.ndarray, Cd: np.ndarray, Dd: np.ndarray, dt: float,
@@ -150,13 +160,14 @@ def _reject_unknown(options: dict[str, Any], method: str) -> None:
 
 def arx_comparator(data: IOData, *, order: int, **options: Any) -> ModalModel:
     """ARX by batch least squares, to modal form (module docstring). Options: ``na``, ``nb``, ``nk``."""
-    data = _check_data(data)
+    records = _check_data(data)
+    data = records[0]
     order = positive_int(order, "order")
     na, nb, nk = _arx_orders(order, options)
     _reject_unknown(options, "arx")
     realisations = []
     for output in range(data.n_y):
-        fit = estimate_arx((data.u, data.y[:, [output]]), na=na, nb=nb, nk=nk)
+        fit = estimate_arx(_experiments(records, output), na=na, nb=nb, nk=nk)
         realisations.append(fit.model.to_state_space())
     discrete = _stack_and_reduce(realisations, order)
     return _discrete_to_modal(*discrete, data.dt, {"method": "arx", "na": na, "nb": nb, "nk": nk})
@@ -173,14 +184,15 @@ def _difference_matrix(size: int) -> np.ndarray:
 
 def rls_comparator(data: IOData, *, order: int, **options: Any) -> ModalModel:
     """ARX by recursive least squares, to modal form. Options: ``na``, ``nb``, ``nk``, ``forgetting``."""
-    data = _check_data(data)
+    records = _check_data(data)
+    data = records[0]
     order = positive_int(order, "order")
     na, nb, nk = _arx_orders(order, options)
     forgetting = options.pop("forgetting", 1.0)
     _reject_unknown(options, "rls")
     realisations = []
     for output in range(data.n_y):
-        phi, target, _, _ = arx_regressors(data.u, data.y[:, [output]], na=na, nb=nb, nk=nk)
+        phi, target, _, _ = stacked_arx_regressors(_experiments(records, output), na=na, nb=nb, nk=nk)
         blocks = [na] + ([nb] * data.n_u if np.isscalar(nb) else list(nb))
         transform = scipy.linalg.block_diag(*[_difference_matrix(size) for size in blocks if size])
         scaled = phi @ transform.T
@@ -202,11 +214,12 @@ def rls_comparator(data: IOData, *, order: int, **options: Any) -> ModalModel:
 
 def n4sid_comparator(data: IOData, *, order: int, **options: Any) -> ModalModel:
     """Subspace identification (PO-MOESP), to modal form. Option: ``block_rows``."""
-    data = _check_data(data)
+    records = _check_data(data)
+    data = records[0]
     order = positive_int(order, "order")
     block_rows = options.pop("block_rows", None)
     _reject_unknown(options, "n4sid")
-    fit = estimate_subspace(data, order=order, block_rows=block_rows)
+    fit = estimate_subspace(data if len(records) == 1 else list(records), order=order, block_rows=block_rows)
     return _discrete_to_modal(fit.A, fit.B, fit.C, fit.D, data.dt,
                               {"method": "n4sid (PO-MOESP)", "block_rows": fit.block_rows})
 
@@ -221,7 +234,8 @@ def output_error_comparator(data: IOData, *, order: int, **options: Any) -> Moda
     one simulation per parameter),
     ``tolerance`` (``ftol``/``xtol``/``gtol``, default 1e-10).
     """
-    data = _check_data(data)
+    records = _check_data(data)
+    data = records[0]
     order = positive_int(order, "order")
     start = options.pop("start", "auto")
     if isinstance(start, str) and start == "auto":
@@ -232,23 +246,25 @@ def output_error_comparator(data: IOData, *, order: int, **options: Any) -> Moda
     if isinstance(start, ModalModel):
         initial = start
     elif start in ("arx", "n4sid"):
-        initial = COMPARATORS[start](data, order=order)
+        initial = COMPARATORS[start](records, order=order)
     else:
         raise InputError(f"start must be 'arx', 'n4sid' or a ModalModel; got {start!r}")
     if initial.structure.n != order or (initial.structure.n_u, initial.structure.n_y) != (data.n_u, data.n_y):
         raise InputError("the starting model's order, inputs or outputs differ from the request")
     structure = initial.structure
-    weights = 1.0 / np.sqrt(np.mean(data.y**2, axis=0))
-    u, y, dt = data.u, data.y, data.dt
-    limit = 1e6 * np.sqrt(y.size)
+    size = sum(record.y.size for record in records)
+    weights = 1.0 / np.sqrt(sum(np.sum(record.y**2, axis=0) for record in records) / (size / data.n_y))
+    dt = data.dt
+    limit = 1e6 * np.sqrt(size)
 
     def residuals(theta: np.ndarray) -> np.ndarray:
         A, B, C, D = structure.matrices(theta)
-        try:
-            simulated = ModalModel(structure, A, B, C, D).simulate(u, dt, method="foh")
+        try:  # each record simulated from rest
+            model = ModalModel(structure, A, B, C, D)
+            error = np.concatenate([((model.simulate(record.u, dt, method="foh") - record.y) * weights).ravel()
+                                    for record in records])
         except InputError:
-            return np.full(y.size, limit)
-        error = ((simulated - y) * weights).ravel()
+            return np.full(size, limit)
         # an unstable trial step can overflow: a large finite error sends the optimiser back
         return np.where(np.isfinite(error), np.clip(error, -limit, limit), limit)
 
@@ -272,8 +288,9 @@ def iekf_comparator(data: IOData, *, order: int, **options: Any) -> ModalModel:
         settings = IEKFOptions(**options)
     except TypeError as exc:
         raise InputError(f"unknown option for the iekf method: {exc}") from None
-    structure = ModalStructure.default(order, data.n_u, data.n_y)
-    return identify_iekf(data, structure, options=settings).model
+    records = _check_data(data)
+    structure = ModalStructure.default(order, records[0].n_u, records[0].n_y)
+    return identify_iekf(records, structure, options=settings).model
 
 
 #: The comparators by name; ``identify_with(data, method=name, order=n)`` dispatches here.
@@ -300,7 +317,8 @@ def identify_with(data: IOData, *, method: str, order: int, **options: Any) -> C
 
     Parameters
     ----------
-    data : IOData
+    data : IOData or sequence of IOData
+        One record, or several records of one experiment campaign (one ``dt``).
     method : str
         A key of :data:`COMPARATORS`: ``iekf``, ``arx``, ``rls``, ``n4sid``,
         ``output-error`` (and whatever :func:`register_comparator` added).
@@ -328,11 +346,15 @@ def identify_with(data: IOData, *, method: str, order: int, **options: Any) -> C
     >>> bool(result.metrics.mean_percentage_explanation > 99)
     True
     """
-    data = _check_data(data)
+    records = _check_data(data)
     if method not in COMPARATORS:
         raise InputError(f"unknown method {method!r}; use one of {', '.join(sorted(COMPARATORS))}")
     start = time.perf_counter()
-    model = COMPARATORS[method](data, order=order, **options)
+    model = COMPARATORS[method](data if isinstance(data, IOData) else records, order=order, **options)
     seconds = time.perf_counter() - start
-    simulated = model.simulate(data.u, data.dt, method="foh")
-    return ComparatorResult(method, model, fit_metrics(data.y, simulated), seconds, {"order": order})
+    if len(records) == 1:
+        metrics = fit_metrics(records[0].y, model.simulate(records[0].u, records[0].dt, method="foh"))
+    else:  # each record from rest, all records scored together
+        simulated = [model.simulate(record.u, record.dt, method="foh") for record in records]
+        metrics = fit_metrics(np.vstack([record.y for record in records]), np.vstack(simulated))
+    return ComparatorResult(method, model, metrics, seconds, {"order": order, "records": len(records)})

@@ -6,7 +6,6 @@ states ``x`` are ``(N, n_x)``; ``t`` is ``(N,)`` and uniformly sampled.
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import math
 from dataclasses import dataclass, field
@@ -18,7 +17,7 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["IOData", "read_csv", "read_hdf5"]
+__all__ = ["IOData", "as_records", "read_hdf5"]
 
 _UNIFORM_TOLERANCE = 1e-6  # relative spread of sample intervals accepted as uniform
 
@@ -315,65 +314,28 @@ def read_hdf5(path: str | Path, group: str | None = None) -> IOData:
         return _read_iodata(handle)
 
 
-def read_csv(
-    path: str | Path,
-    *,
-    inputs: Sequence[str],
-    outputs: Sequence[str],
-    dt: float | None = None,
-    time_column: str = "t",
-) -> IOData:
-    """Read a record from a CSV file with a header row.
+def as_records(data: "IOData | Sequence[IOData]") -> tuple[IOData, ...]:
+    """One record or several as a tuple of records of one sample interval and the same channels.
 
-    Parameters
-    ----------
-    path : str or Path
-        The file; comma-separated, first row the column names.
-    inputs, outputs : sequence of str
-        Names of the input and output columns.
-    dt : float, optional
-        Sample interval in seconds; required when the file has no time column.
-    time_column : str
-        Name of the time column, used when present and ``dt`` is not given.
+    Several records of one experiment campaign identify one model; they must
+    share ``dt`` (to 1e-9 relative) and the input and output names.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"no such data file: {path}")
-    with path.open(newline="") as handle:
-        reader = csv.reader(handle)
-        try:
-            header = [name.strip() for name in next(reader)]
-        except StopIteration:
-            raise InputError(f"{path} is empty") from None
-        rows = [row for row in reader if row and any(cell.strip() for cell in row)]
-    if not inputs or not outputs:
-        raise InputError("name at least one input and one output column (--inputs, --outputs)")
-    for name in (*inputs, *outputs):
-        if name not in header:
-            raise InputError(f"unknown column {name!r} in {path}; columns: {', '.join(header)}")
-    for number, row in enumerate(rows, start=2):
-        if len(row) != len(header):
-            raise InputError(f"{path}: line {number} has {len(row)} values; every row must have {len(header)}")
-    try:
-        table = np.array([[float(cell) for cell in row] for row in rows], dtype=float)
-    except ValueError as exc:
-        raise InputError(f"{path} holds a value that is not a number ({exc})") from None
-    if table.ndim != 2 or table.shape[0] == 0:
-        raise InputError(f"{path} holds no data rows")
-    column = {name: i for i, name in enumerate(header)}
-    if dt is not None:
-        if not (dt > 0 and math.isfinite(dt)):
-            raise InputError(f"dt must be a positive number; got {dt}")
-        t = np.arange(table.shape[0]) * dt
-    elif time_column in column:
-        t = table[:, column[time_column]]
-    else:
-        raise InputError(f"{path} has no time column {time_column!r}: give --dt")
-    return IOData(
-        t=t,
-        u=table[:, [column[n] for n in inputs]],
-        y=table[:, [column[n] for n in outputs]],
-        input_names=tuple(inputs),
-        output_names=tuple(outputs),
-        meta={"source": str(path.name)},
-    )
+    records = (data,) if isinstance(data, IOData) else tuple(data)
+    if not records:
+        raise InputError("give at least one record")
+    for index, record in enumerate(records):
+        if not isinstance(record, IOData):
+            raise InputError(f"record {index + 1} is a {type(record).__name__}, not IOData")
+    first = records[0]
+    for index, record in enumerate(records[1:], start=2):
+        if (record.input_names, record.output_names) != (first.input_names, first.output_names):
+            raise InputError(
+                f"record {index} has channels {', '.join(record.input_names)} -> {', '.join(record.output_names)}; "
+                f"record 1 has {', '.join(first.input_names)} -> {', '.join(first.output_names)}"
+            )
+        if not math.isclose(record.dt, first.dt, rel_tol=1e-9):
+            raise InputError(
+                f"record {index} is sampled every {record.dt:.9g} s, record 1 every {first.dt:.9g} s: "
+                "resample them to one rate (--resample HZ)"
+            )
+    return records

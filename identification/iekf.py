@@ -30,12 +30,12 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .data import IOData
+from .data import IOData, as_records
 from .errors import DivergenceError, ExcitationError, InputError
 from .filter_models import LinearModalFilterModel, check_discretization
 from .iekf_pass import COVARIANCE_FORMS, compiled_pass, pack_covariance, unpack_covariance
-from .metrics import percentage_explanation
 from .modal import ModalModel, ModalStructure
+from .multirecord import pooled_percentage_explanation
 
 __all__ = [
     "IEKFOptions",
@@ -185,31 +185,72 @@ class IEKFResult:
         return np.array([record.parameters for record in self.history])
 
 
-def _check_data(data: IOData, structure: ModalStructure) -> None:
+def _check_data(data: IOData | tuple[IOData, ...], structure: ModalStructure) -> None:
+    records = as_records(data)
+    data = records[0]
     if data.n_u != structure.n_u or data.n_y != structure.n_y:
         raise InputError(
             f"the structure has {structure.n_u} inputs and {structure.n_y} outputs; "
             f"the data have {data.n_u} and {data.n_y}"
         )
-    if data.n_samples <= structure.n_parameters:
+    samples = sum(record.n_samples for record in records)
+    if samples <= structure.n_parameters:
         raise InputError(
-            f"{data.n_samples} samples cannot identify {structure.n_parameters} parameters: "
+            f"{samples} samples cannot identify {structure.n_parameters} parameters: "
             "give more data or a lower order"
         )
-    spread = data.u.std(axis=0)
+    spread = np.max([record.u.std(axis=0) for record in records], axis=0)
+    largest = max(float(np.abs(record.u).max()) for record in records)
     for name, value in zip(data.input_names, spread):
-        if not value > 1e-12 * max(1.0, float(np.abs(data.u).max())):
+        if not value > 1e-12 * max(1.0, largest):
             raise ExcitationError(f"input {name!r} is constant: nothing is excited, the model cannot be identified")
-    energy = np.sum(data.y**2, axis=0)
+    energy = np.sum([np.sum(record.y**2, axis=0) for record in records], axis=0)
     for name, value in zip(data.output_names, energy):
         if value == 0:
             raise ExcitationError(f"output {name!r} is identically zero: nothing to identify")
 
 
-def _scales(data: IOData, normalize: bool) -> tuple[np.ndarray, np.ndarray]:
+def _scales(data: IOData | tuple[IOData, ...], normalize: bool) -> tuple[np.ndarray, np.ndarray]:
+    records = as_records(data)
     if not normalize:
-        return np.ones(data.n_u), np.ones(data.n_y)
-    return np.sqrt(np.mean(data.u**2, axis=0)), np.sqrt(np.mean(data.y**2, axis=0))
+        return np.ones(records[0].n_u), np.ones(records[0].n_y)
+    samples = sum(record.n_samples for record in records)
+    return tuple(np.sqrt(np.sum([np.sum(getattr(record, key) ** 2, axis=0) for record in records], axis=0) / samples)
+                 for key in ("u", "y"))
+
+
+def _settle_states(state, u, y, structure: ModalStructure, run_pass, q, r, dt: float):
+    """Run the head of a record with the parameters held, so that its unknown start state settles.
+
+    A record of a campaign need not start at rest. Over its first five time
+    constants of the slowest mode (at most a quarter of the record) the
+    filter estimates the states alone, from a prior as large as the output
+    power, with the parameter covariance set aside (so the gain leaves them
+    unchanged); then the parameters' covariance is restored, uncorrelated
+    with the settled states, and the rest of the record rinses as usual.
+    """
+    n = structure.n
+    m = n + structure.n_parameters
+    theta = state[n:m]
+    slowest = float(np.min(-ModalModel.from_parameters(structure, theta).eigenvalues().real))
+    head = min(y.shape[0] // 4, int(np.ceil(5.0 / max(slowest, 1e-9) / dt)))
+    if head < 2:
+        return state, u, y
+    P = unpack_covariance(state[m:], m)
+    held = np.zeros_like(P)
+    power = np.mean(y**2, axis=0)
+    held[np.arange(n), np.arange(n)] = [power[structure.output_of_state(j)] for j in range(n)]
+    q_states = q.copy()
+    q_states[n:] = 0.0
+    settled, _ = run_pass(np.concatenate([state[:m], pack_covariance(held)]), u[:head], y[:head], q_states, r)
+    settled = settled.copy()
+    settled[n:m] = theta
+    P_next = P.copy()
+    P_next[:n, :] = 0.0
+    P_next[:, :n] = 0.0
+    P_next[:n, :n] = unpack_covariance(settled[m:], m)[:n, :n]
+    settled[m:] = pack_covariance(P_next)
+    return settled, u[head:], y[head:]
 
 
 def denormalize(structure: ModalStructure, theta: np.ndarray, input_scale: np.ndarray, output_scale: np.ndarray) -> np.ndarray:
@@ -240,13 +281,17 @@ def identify_iekf(
     initial_model: ModalModel | None = None,
     resume: IEKFResult | None = None,
     on_pass: Callable[[PassRecord, "IEKFResult"], None] | None = None,
+    settle_start: bool | None = None,
 ) -> IEKFResult:
     """Identify a linear modal model with the IEKF.
 
     Parameters
     ----------
-    data : IOData
-        The record; ``u`` (N, n_u), ``y`` (N, n_y), uniform ``dt``.
+    data : IOData or sequence of IOData
+        The record; ``u`` (N, n_u), ``y`` (N, n_y), uniform ``dt``. Several
+        records of one ``dt`` identify one model: each pass runs over them in
+        turn, each from a zero state, parameters and P carried on, and the
+        fits pool all records (:func:`~identification.multirecord.pooled_percentage_explanation`).
     structure : ModalStructure
         Order, modes and fixed C entries.
     options : IEKFOptions, optional
@@ -260,6 +305,11 @@ def identify_iekf(
     on_pass : callable, optional
         Called after every pass with the new record and the result so far
         (for progress displays and checkpoints).
+    settle_start : bool, optional
+        Whether each record's start state is unknown (a record of a campaign,
+        or one whose offsets were removed, is not at rest at its start): then
+        the head of each record settles the states with the parameters held
+        (:func:`_settle_states`). Default: when there are several records.
 
     Returns
     -------
@@ -275,7 +325,10 @@ def identify_iekf(
         the last good pass.
     """
     options = options or IEKFOptions()
-    _check_data(data, structure)
+    records = as_records(data)
+    data = records[0]
+    _check_data(records, structure)
+    settle = len(records) > 1 if settle_start is None else bool(settle_start)
     started = time.perf_counter()
     dt = data.dt
     n, m_theta = structure.n, structure.n_parameters
@@ -291,7 +344,7 @@ def identify_iekf(
         P = resume.state.P.copy()
         history = list(resume.history)
     else:
-        input_scale, output_scale = _scales(data, options.normalize)
+        input_scale, output_scale = _scales(records, options.normalize)
         if initial_model is not None:
             if initial_model.structure != structure:
                 raise InputError("the initial model has a different structure")
@@ -306,8 +359,9 @@ def identify_iekf(
     if P is None:
         P = np.diag(q)
     r = np.eye(structure.n_y) * (1.0 if options.measurement_noise is None else options.measurement_noise)
-    u_scaled = data.u / input_scale
-    y_scaled = data.y / output_scale
+    # unscaled data are passed as they are: a copy of a long record per channel is memory for nothing
+    u_scaled = [record.u if np.all(input_scale == 1) else record.u / input_scale for record in records]
+    y_scaled = [record.y if np.all(output_scale == 1) else record.y / output_scale for record in records]
     run_pass = compiled_pass(LinearModalFilterModel(structure), dt, options.discretization, options.covariance)
 
     def result(stop_reason: str) -> IEKFResult:
@@ -333,17 +387,28 @@ def identify_iekf(
         pass_index = len(history) + 1
         pass_start = time.perf_counter()
         state = np.concatenate([np.zeros(n), theta, pack_covariance(P)])
-        try:
-            state, innovations = run_pass(state, u_scaled, y_scaled, q, r)
-        except DivergenceError as exc:
-            raise DivergenceError(
-                f"pass {pass_index}: {exc}", last_good=result(f"diverged at pass {pass_index}") if history else None
-            ) from exc
+        where = None
+        for experiment, u_k, y_k in zip(records, u_scaled, y_scaled):
+            state[:n] = 0.0  # each record starts from its own rest state; parameters and P carry on
+            try:
+                if settle:
+                    state, u_k, y_k = _settle_states(state, u_k, y_k, structure, run_pass, q, r, dt)
+                state, innovations = run_pass(state, u_k, y_k, q, r)
+            except DivergenceError as exc:
+                raise DivergenceError(
+                    f"pass {pass_index}: {exc}", last_good=result(f"diverged at pass {pass_index}") if history else None
+                ) from exc
+            if not (np.all(np.isfinite(state)) and np.all(np.isfinite(innovations))):
+                bad = np.flatnonzero(~np.all(np.isfinite(innovations), axis=1))
+                head = experiment.n_samples - y_k.shape[0]  # samples used to settle the start state
+                where = f" from t = {experiment.t[head + bad[0]]:.3f} s" if bad.size else ""
+                if len(records) > 1:
+                    where += f" of record {experiment.meta.get('source', records.index(experiment) + 1)}"
+                break
+        del innovations  # (N, n_y): not kept while the model is scored
         new_theta = state[n:m]
         new_P = unpack_covariance(state[m:], m)
-        if not (np.all(np.isfinite(state)) and np.all(np.isfinite(innovations))):
-            bad = np.flatnonzero(~np.all(np.isfinite(innovations), axis=1))
-            where = f" from t = {data.t[bad[0]]:.3f} s" if bad.size else ""
+        if where is not None:
             raise DivergenceError(
                 f"pass {pass_index}: the filter produced non-finite values{where} "
                 f"(try a lower p, the joseph covariance form, or a lower order)",
@@ -365,14 +430,16 @@ def identify_iekf(
                 f"(eigenvalues {np.round(model.eigenvalues(), 4).tolist()})",
                 last_good=result(f"diverged at pass {pass_index}") if history else None,
             )
-        y_filter = model.simulate(data.u, dt, method=options.simulation_method)
-        y_exact = y_filter if options.simulation_method == "foh" else model.simulate(data.u, dt, method="foh")
+        fit_filter = pooled_percentage_explanation(
+            (rec.y, model.simulate(rec.u, dt, method=options.simulation_method)) for rec in records)
+        fit_exact = fit_filter if options.simulation_method == "foh" else pooled_percentage_explanation(
+            (rec.y, model.simulate(rec.u, dt, method="foh")) for rec in records)
         previous = history[-1] if history else None
         record = PassRecord(
             index=pass_index,
             parameters=theta_original,
-            fit_filter=percentage_explanation(data.y, y_filter),
-            fit_continuous=percentage_explanation(data.y, y_exact),
+            fit_filter=fit_filter,
+            fit_continuous=fit_exact,
             trace_p=trace,
             min_eig_p=min_eig,
             seconds=time.perf_counter() - pass_start,

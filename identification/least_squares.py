@@ -28,7 +28,7 @@ two input lags, a zero input) reaches 1e15 or more.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 import scipy.linalg
@@ -43,6 +43,7 @@ __all__ = [
     "ArxModel",
     "ArxResult",
     "arx_regressors",
+    "stacked_arx_regressors",
     "estimate_arx",
     "observer_form",
 ]
@@ -344,6 +345,20 @@ def arx_regressors(u: Any, y: Any, *, na: int, nb: Any = None, nk: Any = 0
     return phi, y[k0:], tuple(names), k0
 
 
+def stacked_arx_regressors(experiments: Sequence[tuple[Any, Any]], *, na: int, nb: Any = None, nk: Any = 0
+                           ) -> tuple[np.ndarray, np.ndarray, tuple[str, ...], int]:
+    """The ARX regression of several experiments: each one's rows, stacked, none across a boundary.
+
+    ``experiments`` is a sequence of ``(u, y)`` pairs; every experiment loses
+    its own first ``k0`` samples, whose regressors would reach into another
+    record. Returns ``phi``, ``Y``, ``names``, ``k0`` as :func:`arx_regressors`.
+    """
+    pieces = [arx_regressors(u, y, na=na, nb=nb, nk=nk) for u, y in experiments]
+    if len(pieces) == 1:
+        return pieces[0]
+    return (np.vstack([p[0] for p in pieces]), np.vstack([p[1] for p in pieces]), pieces[0][2], pieces[0][3])
+
+
 def model_from_theta(theta: np.ndarray, n_u: int, n_y: int, na: int, nb: tuple[int, ...], nk: tuple[int, ...],
                      dt: float | None) -> ArxModel:
     """The :class:`ArxModel` of a parameter array laid out as :func:`arx_regressors` orders it."""
@@ -368,8 +383,10 @@ def estimate_arx(data_or_arrays: Any, *, na: int, nb: Any = None, nk: Any = 0,
 
     Parameters
     ----------
-    data_or_arrays : IOData or (u, y)
-        Time-major inputs (N, n_u) and outputs (N, n_y).
+    data_or_arrays : IOData, (u, y), or a list of them
+        Time-major inputs (N, n_u) and outputs (N, n_y); a list holds
+        several experiments, whose regression rows are stacked without
+        crossing a record boundary (:func:`stacked_arx_regressors`).
     na : int
         Output lags (the order of A(q)).
     nb : int or sequence of int, optional
@@ -392,8 +409,10 @@ def estimate_arx(data_or_arrays: Any, *, na: int, nb: Any = None, nk: Any = 0,
     ExcitationError
         The input is not persistently exciting for these orders.
     """
-    u, y, dt = io_arrays(data_or_arrays)
-    phi, target, names, k0 = arx_regressors(u, y, na=na, nb=nb, nk=nk)
+    experiments = [io_arrays(item) for item in data_or_arrays] if isinstance(data_or_arrays, list) \
+        else [io_arrays(data_or_arrays)]
+    u, y, dt = experiments[0]
+    phi, target, names, k0 = stacked_arx_regressors([(e[0], e[1]) for e in experiments], na=na, nb=nb, nk=nk)
     na_i, nb_t, nk_t = _orders(u.shape[1], y.shape[1], na, nb, nk)
     fit = least_squares(phi, target, names=names, condition_limit=condition_limit)
     model = model_from_theta(fit.theta, u.shape[1], y.shape[1], na_i, nb_t, nk_t, dt)

@@ -470,7 +470,9 @@ class ModalModel:
         x0 = np.zeros(s.n) if x0 is None else np.asarray(x0, dtype=float).ravel()
         if x0.shape != (s.n,):
             raise InputError(f"x0 must have {s.n} entries; got {x0.shape}")
-        x = np.empty((u.shape[0], s.n))
+        # without states asked for, y gathers each mode in turn: no (N, n) state array held for a long record
+        x = np.empty((u.shape[0], s.n)) if return_states else None
+        y = None if return_states else u @ self.D.T
         theta = self.parameters
         for states in s.mode_states():
             if len(states) == 2:
@@ -484,11 +486,18 @@ class ModalModel:
                 drive = (u @ self.B[a]).astype(complex)
                 start = complex(x0[a], 0.0)
             xi = _first_order_recursion(lam, drive, dt, method, start)
-            x[:, a] = xi.real
-            if len(states) == 2:
-                x[:, states[1]] = xi.imag
-        y = x @ self.C.T + u @ self.D.T
-        return (y, x) if return_states else y
+            del drive
+            if x is not None:
+                x[:, a] = xi.real
+                if len(states) == 2:
+                    x[:, states[1]] = xi.imag
+            else:
+                y += np.multiply.outer(xi.real, self.C[:, a])
+                if len(states) == 2:
+                    y += np.multiply.outer(xi.imag, self.C[:, states[1]])
+        if x is None:
+            return y
+        return x @ self.C.T + u @ self.D.T, x
 
     # -------------------------------------------------------------- export
     def to_control(self) -> Any:

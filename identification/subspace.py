@@ -98,8 +98,11 @@ def estimate_subspace(data_or_arrays: Any, *, order: int, block_rows: int | None
 
     Parameters
     ----------
-    data_or_arrays : IOData or (u, y)
-        Time-major inputs (N, n_u) and outputs (N, n_y).
+    data_or_arrays : IOData, (u, y), or a list of them
+        Time-major inputs (N, n_u) and outputs (N, n_y). A list holds several
+        experiments: their Hankel columns are joined (no column spans two
+        records), and B, D are estimated with one initial state per
+        experiment (``x0`` is the first one's; ``residuals`` are stacked).
     order : int
         Number of states n.
     block_rows : int, optional
@@ -120,19 +123,26 @@ def estimate_subspace(data_or_arrays: Any, *, order: int, block_rows: int | None
         The data do not reveal ``order`` states (rank-deficient ``L_32``)
         or do not determine B and D.
     """
-    u, y, dt = io_arrays(data_or_arrays)
+    experiments = [io_arrays(item) for item in data_or_arrays] if isinstance(data_or_arrays, list) \
+        else [io_arrays(data_or_arrays)]
+    u, y, dt = experiments[0]
     n = positive_int(order, "order")
     s = max(2 * n, n + 1) if block_rows is None else positive_int(block_rows, "block_rows")
-    n_u, n_y, samples = u.shape[1], y.shape[1], u.shape[0]
+    n_u, n_y = u.shape[1], y.shape[1]
     if s * n_y < n:
         raise InputError(f"block_rows={s} with {n_y} outputs cannot reveal {n} states (need s * n_y >= order)")
-    columns = samples - 2 * s + 1
-    if columns < 2 * s * (n_u + n_y):
+    counts = [e[0].shape[0] - 2 * s + 1 for e in experiments]
+    if min(counts) < 1 or sum(counts) < 2 * s * (n_u + n_y):
+        samples = sum(e[0].shape[0] for e in experiments)
         raise InputError(f"{samples} samples are too few for {s} block rows: fewer columns than rows in the data matrix")
-    u_h = _hankel(u, 2 * s, columns)
-    y_h = _hankel(y, 2 * s, columns)
     su, sy = s * n_u, s * n_y
-    stacked = np.vstack([u_h[su:], u_h[:su], y_h[:sy], y_h[sy:]])  # U_f, U_p, Y_p, Y_f
+    blocks = []
+    for (u_e, y_e, _), columns in zip(experiments, counts):
+        u_h = _hankel(u_e, 2 * s, columns)
+        y_h = _hankel(y_e, 2 * s, columns)
+        blocks.append(np.vstack([u_h[su:], u_h[:su], y_h[:sy], y_h[sy:]]))  # U_f, U_p, Y_p, Y_f
+    stacked = blocks[0] if len(blocks) == 1 else np.hstack(blocks)
+    del blocks
     lower = scipy.linalg.qr(stacked.T, mode="r", overwrite_a=True)[0][: stacked.shape[0]].T
     start = su
     stop = 2 * su + sy
@@ -146,20 +156,27 @@ def estimate_subspace(data_or_arrays: Any, *, order: int, block_rows: int | None
     observability = left[:, :n] * np.sqrt(singular[:n])
     C = observability[:n_y]
     A = np.linalg.lstsq(observability[:-n_y], observability[n_y:], rcond=None)[0]
-    free, forced = _responses(A, C, u)
-    blocks = [forced.reshape(samples * n_y, n * n_u)]
-    d_columns = np.zeros((samples, n_y, n_y * n_u))
-    for i in range(n_y):
-        d_columns[:, i, i * n_u:(i + 1) * n_u] = u
-    blocks.append(d_columns.reshape(samples * n_y, n_y * n_u))
-    if estimate_x0:
-        blocks.append(free.reshape(samples * n_y, n))
-    regressors = np.hstack(blocks)
-    solution, _, rank, _ = np.linalg.lstsq(regressors, y.reshape(-1), rcond=None)
+    n_x0 = n * len(experiments) if estimate_x0 else 0
+    rows = []
+    for index, (u_e, _, _) in enumerate(experiments):
+        samples = u_e.shape[0]
+        free, forced = _responses(A, C, u_e)
+        d_columns = np.zeros((samples, n_y, n_y * n_u))
+        for i in range(n_y):
+            d_columns[:, i, i * n_u:(i + 1) * n_u] = u_e
+        x0_columns = np.zeros((samples * n_y, n_x0))
+        if estimate_x0:
+            x0_columns[:, index * n: (index + 1) * n] = free.reshape(samples * n_y, n)
+        rows.append(np.hstack([forced.reshape(samples * n_y, n * n_u), d_columns.reshape(samples * n_y, n_y * n_u),
+                               x0_columns]))
+    regressors = rows[0] if len(rows) == 1 else np.vstack(rows)
+    del rows
+    target = np.concatenate([e[1].reshape(-1) for e in experiments])
+    solution, _, rank, _ = np.linalg.lstsq(regressors, target, rcond=None)
     if rank < regressors.shape[1]:
         raise ExcitationError("the input does not determine B and D (rank-deficient regression)")
     B = solution[: n * n_u].reshape(n, n_u)
     D = solution[n * n_u: n * n_u + n_y * n_u].reshape(n_y, n_u)
-    x0 = solution[n * n_u + n_y * n_u:] if estimate_x0 else np.zeros(n)
-    residuals = y - (regressors @ solution).reshape(samples, n_y)
+    x0 = solution[n * n_u + n_y * n_u: n * n_u + n_y * n_u + n] if estimate_x0 else np.zeros(n)
+    residuals = (target - regressors @ solution).reshape(-1, n_y)
     return SubspaceResult(A, B, C, D, x0, singular, residuals, s, dt)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from identification import IOData, InputError, fit_metrics, nrmse_fit, percentage_explanation, r_squared
-from identification.data import read_csv, read_hdf5
+from identification import read_csv, read_hdf5
 
 
 def _record(n=100, dt=0.01):
@@ -60,7 +60,10 @@ def test_csv_round_trip(tmp_path):
     np.testing.assert_array_equal(data.y[:, 0], [1, 2, 3])
     with pytest.raises(InputError, match="unknown column 'yaw'"):
         read_csv(path, inputs=["steer"], outputs=["yaw"])
-    by_dt = read_csv(path, inputs=["steer"], outputs=["ay"], dt=0.1)
+    # --dt beside a time column would silently override it: an error unless the time column is disabled
+    with pytest.raises(InputError, match="has a time column 't': --dt would override it"):
+        read_csv(path, inputs=["steer"], outputs=["ay"], dt=0.1)
+    by_dt = read_csv(path, inputs=["steer"], outputs=["ay"], dt=0.1, time_column="none")
     assert by_dt.dt == pytest.approx(0.1)
 
 

@@ -1,9 +1,14 @@
 """Identify a modal state-space model from an input/output record.
 
-DATA is a workbench HDF5 file (as written by `vehid simulate --out`) or a CSV
-file with a header row. Name the columns with --inputs and --outputs (for an
-HDF5 record they select among its inputs and outputs; for a CSV they are
-required); time comes from a column `t` or from --dt.
+DATA is one or several files: workbench HDF5 (as written by `vehid simulate
+--out`), CSV, whitespace-separated .dat/.txt, MATLAB .mat or ASAM MDF4 .mf4.
+Name the channels with --inputs and --outputs (for an HDF5 record they select
+among its inputs and outputs; for other files they are required; text tables
+also take 1-based column numbers). Time comes from a column `t`, the column
+--time-column names, or --dt; --resample, --decimate and --segment shape the
+time base. Each record's offsets (means, or lines with --detrend linear) are
+removed and kept with the model, --scale multiplies a channel; several files
+identify one model, scored per record ("records" in the JSON summary).
 
 The default method is the Identifying EKF (Best & Bogdanski 2017) with the
 exact first-order-hold discretisation, so the identified parameters are those
@@ -30,15 +35,17 @@ import dataclasses
 from contextlib import nullcontext
 from pathlib import Path
 
-from identification import read_csv, read_hdf5
 from identification.errors import DivergenceError, InputError
 from identification.filter_models import DISCRETIZATIONS
 from identification.iekf import START_VALUES, IEKFOptions, identify_iekf
-from identification.archive import open_archive, read_records, write_archive, write_record, write_run
+from identification.archive import open_archive, write_archive, write_run
 from identification.archive_safety import archive_lock, check_output_target
+from identification.preparation import read_record
 from identification.iekf_archive import Checkpointer, read_iekf_run
 from identification.iekf_pass import COVARIANCE_FORMS
 from identification.modal import C_PATTERNS, ModalStructure
+from scenarios.data_options import (archive_records, archived_preparation, archived_records, load_from_args,
+                                    records_summary, register_data_options, save_model)
 from scenarios.progress import Progress
 
 NAME = "identify"
@@ -46,20 +53,10 @@ GROUP = None
 HELP = "identify a modal state-space model from a data file (IEKF by default)"
 
 
-def _names(text: str | None) -> list[str] | None:
-    if text is None:
-        return None
-    names = [name.strip() for name in text.split(",") if name.strip()]
-    if not names:
-        raise InputError("an empty column list was given")
-    return names
-
-
 def register(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("data", nargs="?", help="workbench HDF5 file or CSV file with a header row")
+    parser.add_argument("data", nargs="*", help="data files: .h5, .csv, .dat, .txt, .mat, .mf4 (several: one model)")
     parser.add_argument("--inputs", help="comma-separated input column names")
     parser.add_argument("--outputs", help="comma-separated output column names")
-    parser.add_argument("--dt", type=float, help="sample interval in s (CSV without a time column)")
     parser.add_argument("--order", type=int, default=4, help="model order n (default 4)")
     parser.add_argument("--pattern", default="default", choices=C_PATTERNS, help="C pattern (default: pairs tied to outputs in turn)")
     parser.add_argument("--method", default="iekf", choices=("iekf", "arx", "rls", "n4sid", "output-error"),
@@ -77,26 +74,13 @@ def register(parser: argparse.ArgumentParser) -> None:
                         help="let --out replace an existing file that is not a workbench archive")
     parser.add_argument("--resume", metavar="ARCHIVE",
                         help="continue the run checkpointed in ARCHIVE (its data and settings; --passes counts all passes)")
+    register_data_options(parser)
     parser.set_defaults(handler=run)
 
 
 def load_record(path: str, inputs: list[str] | None, outputs: list[str] | None, dt: float | None):
-    """Read DATA as the identify command does: HDF5 or CSV, columns selected by name."""
-    suffix = Path(path).suffix.lower()
-    if suffix in (".h5", ".hdf5", ".hdf"):
-        if dt is not None:
-            raise InputError("--dt applies to CSV files; an HDF5 record carries its own time base")
-        data = read_hdf5(path)
-        if inputs:
-            data = data.select_inputs(inputs)
-        if outputs:
-            data = data.select_outputs(outputs)
-        return data
-    if suffix == ".csv":
-        if not inputs or not outputs:
-            raise InputError("a CSV file needs --inputs and --outputs naming its columns")
-        return read_csv(path, inputs=inputs, outputs=outputs, dt=dt)
-    raise InputError(f"unknown data file type {suffix or '(none)'!r}: give a .h5 or .csv file")
+    """Read one raw record (any supported file type), channels selected by name."""
+    return read_record(path, inputs=tuple(inputs or ()), outputs=tuple(outputs or ()), dt=dt)
 
 
 RUN_NAME = "iekf"
@@ -105,23 +89,24 @@ DEFAULT_PASSES = 50
 
 def _resume(args: argparse.Namespace):
     """Data, structure, options and the finished passes of a checkpointed run."""
-    if args.data is not None:
+    if args.data:
         raise InputError("--resume takes its data from the archive: give no DATA file")
     with open_archive(args.resume, kinds=["identification"]) as archive:
         previous = read_iekf_run(archive, RUN_NAME)
-        records = read_records(archive)
-    if "identification" not in records:
+        records = archived_records(archive)
+        preparation = archived_preparation(archive)
+    if not records:
         raise InputError(f"{args.resume} holds no identification record to resume on")
     budget = previous.options.passes if args.passes is None else args.passes
     options = dataclasses.replace(previous.options, passes=max(budget, previous.passes_run))
-    return records["identification"], previous.structure, options, previous
+    return records, previous.structure, options, previous, preparation
 
 
 def run(args: argparse.Namespace) -> tuple[dict, str]:
     if args.resume and args.out:
         raise InputError("--resume continues in its own archive: give no --out")
     if args.out:  # before any work: a bad target must not cost the run
-        check_output_target(args.out, inputs=[args.data], force=args.force)
+        check_output_target(args.out, inputs=list(args.data), force=args.force)
     if args.resume:  # a missing, foreign or corrupt file is named as such before anything is locked or created
         open_archive(args.resume, kinds=["identification"]).close()
     target = args.resume or args.out
@@ -132,15 +117,17 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
 def _identify(args: argparse.Namespace) -> tuple[dict, str]:
     previous = None
     if args.resume:
-        data, structure, options, previous = _resume(args)
+        records, structure, options, previous, preparation = _resume(args)
+        data = records[0] if len(records) == 1 else records
         archive_path = Path(args.resume)
     else:
-        if args.data is None:
+        if not args.data:
             raise InputError("give a DATA file (or --resume ARCHIVE)")
-        data = load_record(args.data, _names(args.inputs), _names(args.outputs), args.dt)
-        structure = ModalStructure.from_pattern(args.pattern, args.order, data.n_u, data.n_y)
+        records, preparation = load_from_args(args, args.data)
+        data = records[0] if len(records) == 1 else records
+        structure = ModalStructure.from_pattern(args.pattern, args.order, records[0].n_u, records[0].n_y)
         if args.method != "iekf":
-            return _run_comparator(args, data, structure)
+            return _run_comparator(args, data, structure, records, preparation)
         options = IEKFOptions(
             p=args.p, passes=DEFAULT_PASSES if args.passes is None else args.passes,
             discretization=args.discretization, covariance=args.covariance,
@@ -149,7 +136,7 @@ def _identify(args: argparse.Namespace) -> tuple[dict, str]:
         archive_path = Path(args.out) if args.out else None
         if archive_path is not None:
             with write_archive(archive_path, kind="identification", config=options, seeds=[]) as archive:
-                write_record(archive, "identification", data)
+                archive_records(archive, records, preparation)
     checkpoint = Checkpointer(archive_path, RUN_NAME) if archive_path is not None else None
     done = previous.passes_run if previous is not None else 0
     with Progress(options.passes, "IEKF passes", enabled=None if not args.quiet else False) as progress:
@@ -160,8 +147,11 @@ def _identify(args: argparse.Namespace) -> tuple[dict, str]:
                 checkpoint(record, so_far)
             progress.advance(note=f"R {record.mean_fit_filter:.4f} %")
 
+        # offsets removed: the prepared record no longer starts at rest, so its start state settles first
+        settle = True if preparation is not None and preparation.detrend != "none" else None
         try:
-            result = identify_iekf(data, structure, options=options, resume=previous, on_pass=on_pass)
+            result = identify_iekf(data, structure, options=options, resume=previous, on_pass=on_pass,
+                                   settle_start=settle)
         except DivergenceError as exc:
             if checkpoint is not None and exc.last_good is not None:
                 checkpoint.finish(exc.last_good)  # the archive says how the run ended: diverged at pass k
@@ -184,23 +174,15 @@ def _identify(args: argparse.Namespace) -> tuple[dict, str]:
         "D": model.D,
         "seconds": result.seconds,
     }
+    summary.update(records_summary(model, records, preparation))
     if archive_path is not None:
         summary["archive"] = str(archive_path)
     if args.save_model:
-        summary["model_file"] = str(_save_model(model, args.save_model))
-    return summary, _text(summary, data)
+        summary["model_file"] = str(save_model(model, args.save_model, preparation))
+    return summary, _text(summary, records[0])
 
 
-def _save_model(model, target: str) -> Path:
-    path = Path(target)
-    if path.suffix.lower() == ".mat":
-        return model.save_mat(path)
-    if path.suffix.lower() == ".json":
-        return model.save_json(path)
-    raise InputError(f"--save-model takes a .json or .mat file; got {target!r}")
-
-
-def _run_comparator(args: argparse.Namespace, data, structure) -> tuple[dict, str]:
+def _run_comparator(args: argparse.Namespace, data, structure, records, preparation) -> tuple[dict, str]:
     from identification.comparators import identify_with
 
     outcome = identify_with(data, method=args.method, order=structure.n)
@@ -218,19 +200,20 @@ def _run_comparator(args: argparse.Namespace, data, structure) -> tuple[dict, st
         "D": model.D,
         "seconds": outcome.seconds,
     }
+    summary.update(records_summary(model, records, preparation))
     if args.save_model:
-        summary["model_file"] = str(_save_model(model, args.save_model))
+        summary["model_file"] = str(save_model(model, args.save_model, preparation))
     if args.out:
-        summary["archive"] = str(_archive_comparator(args, data, outcome))
-    return summary, _text(summary, data)
+        summary["archive"] = str(_archive_comparator(args, records, preparation, outcome))
+    return summary, _text(summary, records[0])
 
 
-def _archive_comparator(args: argparse.Namespace, data, outcome) -> Path:
-    """The record and the comparator's model and fit, as ``runs/<method>`` of an identification archive."""
+def _archive_comparator(args: argparse.Namespace, records, preparation, outcome) -> Path:
+    """The records and the comparator's model and fit, as ``runs/<method>`` of an identification archive."""
     path = Path(args.out)
     config = {"method": args.method, "order": outcome.model.structure.n}
     with write_archive(path, kind="identification", config=config, seeds=[]) as archive:
-        write_record(archive, "identification", data)
+        archive_records(archive, records, preparation)
         run = write_run(archive, args.method, model=outcome.model, metrics=outcome.metrics)
         run.attrs["stop_reason"] = "finished"
         run.attrs["seconds"] = outcome.seconds
@@ -248,6 +231,9 @@ def _text(summary: dict, data) -> str:
         f"eigenvalues: {eigen}",
         f"fit R (continuous model simulated exactly): {fits}",
     ]
+    if len(summary.get("records", ())) > 1:
+        lines += [f"  {entry['name']} ({entry['samples']} samples): "
+                  + ", ".join(f"{value:.3f} %" for value in entry["fits"]) for entry in summary["records"]]
     if "model_file" in summary:
         lines.append(f"wrote {summary['model_file']}")
     return "\n".join(lines)

@@ -1,0 +1,463 @@
+"""Reading settings and data preparation, kept with the model so that it can be applied to raw files again.
+
+A model identified from measured data is a model of *prepared* signals:
+each chosen channel multiplied by its scale factor (a steering ratio, a unit
+conversion), then its offset removed. The offsets are estimated on the
+estimation records, by default each record's mean (``detrend="mean"``),
+optionally a straight line through each record (``detrend="linear"``), or
+not at all (``detrend="none"``). Each estimation record keeps its own
+offsets (different runs of a campaign sit at different operating points and
+sensor offsets), and the sample-weighted mean of them is the model's
+operating point, applied to any other data (validation records, new files).
+
+A :class:`Preparation` is a frozen value holding the reading settings
+(:class:`ReadSettings`), the scale factors and the estimated offsets. It is
+archived with an identification run, so that an archived model can be
+re-applied to the raw files: ``prepare_validation(path, preparation)``.
+
+Workflow::
+
+    estimation, preparation = load_records(["run1.csv", "run2.mat"], inputs=["steer"],
+                                           outputs=["yaw_rate"], scale={"steer": 1 / 16})
+    model = identify_iekf(estimation, structure).model
+    validation = prepare_validation("run3.csv", preparation)   # estimation offsets applied
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from .data import IOData, as_records, read_hdf5
+from .errors import InputError
+from .readers import RawRecord, read_raw
+from .timebase import JITTER_TOLERANCE, parse_segment, uniform_record
+
+__all__ = [
+    "DETRENDS",
+    "ReadSettings",
+    "RecordOffsets",
+    "Preparation",
+    "read_record",
+    "read_csv",
+    "estimate_preparation",
+    "prepare",
+    "load_records",
+    "read_raw_records",
+    "prepare_validation",
+    "parse_scale",
+]
+
+#: How offsets are estimated: each record's mean, a line through each record, or none.
+DETRENDS = ("mean", "linear", "none")
+
+_HDF5_SUFFIXES = (".h5", ".hdf5", ".hdf")
+
+
+@dataclass(frozen=True)
+class ReadSettings:
+    """How a record is read from a file and put on a uniform time base (the CLI's options of the same names).
+
+    Attributes
+    ----------
+    inputs, outputs : tuple of str
+        Channel names (or 1-based column numbers of text tables); empty for
+        a workbench HDF5 record means all of its inputs or outputs.
+    time_column : str or None
+        Time column or variable; None: ``t`` when present; ``"none"``: no time column.
+    dt : float or None
+        Sample interval in s, where there is no time column.
+    resample : float or None
+        Rate in Hz of a uniform grid to interpolate onto.
+    decimate : int or None
+        Keep every K-th sample after an anti-aliasing filter.
+    segment : (float, float) or None
+        Only ``T0 <= t <= T1`` (file time, s).
+    jitter_tolerance : float
+        Largest stray of a sample time from the uniform grid, as a fraction of a step.
+    """
+
+    inputs: tuple[str, ...] = ()
+    outputs: tuple[str, ...] = ()
+    time_column: str | None = None
+    dt: float | None = None
+    resample: float | None = None
+    decimate: int | None = None
+    segment: tuple[float, float] | None = None
+    jitter_tolerance: float = JITTER_TOLERANCE
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "inputs", tuple(str(n).strip() for n in self.inputs))
+        object.__setattr__(self, "outputs", tuple(str(n).strip() for n in self.outputs))
+        object.__setattr__(self, "segment", parse_segment(self.segment))
+        for kind, names in (("input", self.inputs), ("output", self.outputs)):
+            if any(not name for name in names):
+                raise InputError(f"an empty {kind} column name was given")
+        both = [n for n in self.inputs if n in self.outputs]
+        if both:
+            raise InputError(f"column {both[0]!r} is named both as an input and as an output")
+
+
+def read_record(path: str | Path, settings: ReadSettings | None = None, **options: Any) -> IOData:
+    """Read one raw record, uniformly sampled, in the file's units (no offsets removed, no scaling).
+
+    Parameters
+    ----------
+    path : str or Path
+        ``.csv``, ``.dat``, ``.txt``, ``.mat``, ``.mf4`` or a workbench ``.h5`` file.
+    settings : ReadSettings, optional
+    **options
+        Or the fields of :class:`ReadSettings` as keywords: ``inputs``,
+        ``outputs``, ``time_column``, ``dt``, ``resample``, ``decimate``,
+        ``segment``, ``jitter_tolerance``.
+
+    Returns
+    -------
+    IOData
+        With ``meta["source"]`` and ``meta["time_base"]`` (``sample_jitter``,
+        and what resampling, decimation and segment were applied).
+    """
+    if settings is None:
+        settings = ReadSettings(**options)
+    elif options:
+        settings = replace(settings, **options)
+    path = Path(path)
+    if path.suffix.lower() in _HDF5_SUFFIXES:
+        data = _hdf5_record(path, settings)
+        raw, n_inputs = _as_raw(data), data.n_u
+    else:
+        if not settings.inputs or not settings.outputs:
+            raise InputError(f"{path.name} needs --inputs and --outputs naming its columns")
+        raw = read_raw(path, channels=settings.inputs + settings.outputs, time_column=settings.time_column,
+                       dt=settings.dt)
+        n_inputs = len(settings.inputs)
+    return uniform_record(raw, n_inputs=n_inputs, dt=settings.dt, resample=settings.resample,
+                          decimate=settings.decimate, segment=settings.segment,
+                          jitter_tolerance=settings.jitter_tolerance)
+
+
+def read_csv(path: str | Path, *, inputs: Sequence[str], outputs: Sequence[str], **options: Any) -> IOData:
+    """A raw record from a CSV file: :func:`read_record` with the columns named (kept for older callers)."""
+    return read_record(path, inputs=tuple(inputs), outputs=tuple(outputs), **options)
+
+
+def _hdf5_record(path: Path, settings: ReadSettings) -> IOData:
+    if settings.dt is not None:
+        raise InputError("--dt applies to files without time; an HDF5 record carries its own time base")
+    data = read_hdf5(path)
+    if settings.inputs:
+        data = data.select_inputs(settings.inputs)
+    if settings.outputs:
+        data = data.select_outputs(settings.outputs)
+    return data
+
+
+def _as_raw(data: IOData) -> RawRecord:
+    values = tuple(np.ascontiguousarray(c) for c in (*data.u.T, *data.y.T))
+    return RawRecord(str(data.meta.get("source", "record")), data.input_names + data.output_names, values,
+                     (data.t,) * len(values), data.input_units + data.output_units, "t")
+
+
+# --------------------------------------------------------------------- preparation
+@dataclass(frozen=True, eq=False)
+class RecordOffsets:
+    """The offsets removed from one estimation record (in scaled units).
+
+    The offset of a channel at time ``t`` is ``offset + slope (t - t_start)``,
+    ``t_start`` the record's first sample time; the slope is zero unless
+    ``detrend="linear"``.
+    """
+
+    source: str
+    samples: int
+    input_offset: np.ndarray
+    output_offset: np.ndarray
+    input_slope: np.ndarray
+    output_slope: np.ndarray
+
+
+def parse_scale(items: Mapping[str, float] | Sequence[str] | None) -> dict[str, float]:
+    """Scale factors from a mapping or from ``NAME=FACTOR`` strings (the CLI's ``--scale``)."""
+    if items is None:
+        return {}
+    if isinstance(items, Mapping):
+        pairs = list(items.items())
+    else:
+        pairs = []
+        for item in items:
+            name, equals, factor = str(item).rpartition("=")
+            if not equals or not name.strip():
+                raise InputError(f"a scale is NAME=FACTOR; got {item!r}")
+            try:
+                pairs.append((name.strip(), float(factor)))
+            except ValueError:
+                raise InputError(f"the scale factor of {name.strip()!r} is not a number: {factor!r}") from None
+    scale: dict[str, float] = {}
+    for name, factor in pairs:
+        if not (isinstance(factor, (int, float)) and math.isfinite(factor) and factor != 0):
+            raise InputError(f"the scale factor of {name!r} must be a finite non-zero number; got {factor!r}")
+        if name in scale:
+            raise InputError(f"channel {name!r} is scaled twice")
+        scale[str(name)] = float(factor)
+    return scale
+
+
+@dataclass(frozen=True, eq=False)
+class Preparation:
+    """Scale factors and offsets that turn raw records into the model's signals: a frozen value.
+
+    ``prepared = scale * raw - offset(t)`` per channel. Build one with
+    :func:`estimate_preparation` (or :func:`prepare`, :func:`load_records`);
+    apply it with :meth:`apply` or :func:`prepare_validation`.
+
+    Attributes
+    ----------
+    input_names, output_names : tuple of str
+    input_scale, output_scale : ndarray
+        Factors multiplying the raw channels.
+    detrend : {"mean", "linear", "none"}
+    offsets : tuple of RecordOffsets
+        One per estimation record, in order.
+    settings : ReadSettings or None
+        How the estimation records were read (None for records given in memory).
+    """
+
+    input_names: tuple[str, ...]
+    output_names: tuple[str, ...]
+    input_scale: np.ndarray
+    output_scale: np.ndarray
+    detrend: str
+    offsets: tuple[RecordOffsets, ...]
+    settings: ReadSettings | None = None
+
+    def _pooled(self, name: str) -> np.ndarray:
+        weights = np.array([o.samples for o in self.offsets], dtype=float)
+        return np.average(np.array([getattr(o, name) for o in self.offsets]), axis=0, weights=weights)
+
+    @property
+    def input_offset(self) -> np.ndarray:
+        """The model's input operating point: the sample-weighted mean of the records' offsets."""
+        return self._pooled("input_offset")
+
+    @property
+    def output_offset(self) -> np.ndarray:
+        """The model's output operating point (as :attr:`input_offset`)."""
+        return self._pooled("output_offset")
+
+    def _offsets(self, record: int | None) -> RecordOffsets:
+        if record is None:
+            return RecordOffsets("model", 0, self.input_offset, self.output_offset,
+                                 self._pooled("input_slope"), self._pooled("output_slope"))
+        if not 0 <= record < len(self.offsets):
+            raise InputError(f"the preparation holds {len(self.offsets)} records; no record {record}")
+        return self.offsets[record]
+
+    def _check(self, data: IOData) -> None:
+        if data.input_names != self.input_names or data.output_names != self.output_names:
+            raise InputError(
+                f"the record's channels ({', '.join(data.input_names)} -> {', '.join(data.output_names)}) "
+                f"differ from the model's ({', '.join(self.input_names)} -> {', '.join(self.output_names)})"
+            )
+
+    def apply(self, data: IOData, record: int | None = None) -> IOData:
+        """The prepared record: scaled, offsets removed.
+
+        Parameters
+        ----------
+        data : IOData
+            A raw record with the model's channels.
+        record : int, optional
+            Use the offsets of estimation record ``record``; by default the
+            model's operating point (:attr:`input_offset`, :attr:`output_offset`).
+        """
+        self._check(data)
+        offsets = self._offsets(record)
+        elapsed = (data.t - data.t[0])[:, None]
+        u = data.u * self.input_scale - offsets.input_offset - elapsed * offsets.input_slope
+        y = data.y * self.output_scale - offsets.output_offset - elapsed * offsets.output_slope
+        meta = dict(data.meta)
+        meta["preparation"] = {"detrend": self.detrend, "offsets_of": offsets.source}
+        return data.replace(u=u, y=y, meta=meta)
+
+    def restore_outputs(self, y: np.ndarray, t: np.ndarray, record: int | None = None) -> np.ndarray:
+        """Outputs of the model (prepared units) back in the raw file's units and offsets."""
+        offsets = self._offsets(record)
+        elapsed = (np.asarray(t) - t[0])[:, None]
+        return (np.asarray(y) + offsets.output_offset + elapsed * offsets.output_slope) / self.output_scale
+
+    def simulate(self, model: Any, data: IOData, record: int | None = None, method: str = "foh") -> np.ndarray:
+        """The model's outputs on a raw record, in raw units: prepare the inputs, simulate, restore."""
+        prepared = self.apply(data, record)
+        return self.restore_outputs(model.simulate(prepared.u, prepared.dt, method=method), data.t, record)
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready form (saved beside a model)."""
+        return {
+            "inputs": list(self.input_names),
+            "outputs": list(self.output_names),
+            "input_scale": self.input_scale.tolist(),
+            "output_scale": self.output_scale.tolist(),
+            "detrend": self.detrend,
+            "input_offset": self.input_offset.tolist(),
+            "output_offset": self.output_offset.tolist(),
+            "records": [
+                {"source": o.source, "samples": o.samples, "input_offset": o.input_offset.tolist(),
+                 "output_offset": o.output_offset.tolist(), "input_slope": o.input_slope.tolist(),
+                 "output_slope": o.output_slope.tolist()}
+                for o in self.offsets
+            ],
+            "settings": None if self.settings is None else {
+                k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(self.settings).items()
+            },
+        }
+
+
+def _scales(names: tuple[str, ...], scale: Mapping[str, float]) -> np.ndarray:
+    return np.array([scale.get(name, 1.0) for name in names], dtype=float)
+
+
+def _trend(t: np.ndarray, values: np.ndarray, detrend: str) -> tuple[np.ndarray, np.ndarray]:
+    """Offset at the record's start and slope per second of each column."""
+    if detrend == "none":
+        return np.zeros(values.shape[1]), np.zeros(values.shape[1])
+    if detrend == "mean":
+        return values.mean(axis=0), np.zeros(values.shape[1])
+    slope, intercept = np.polyfit(t - t[0], values, 1)
+    return intercept, slope
+
+
+def estimate_preparation(
+    records: IOData | Sequence[IOData],
+    *,
+    detrend: str = "mean",
+    scale: Mapping[str, float] | Sequence[str] | None = None,
+    settings: ReadSettings | None = None,
+) -> Preparation:
+    """Estimate the offsets of raw estimation records (after scaling).
+
+    Parameters
+    ----------
+    records : IOData or sequence of IOData
+        Raw records with the same channels.
+    detrend : {"mean", "linear", "none"}
+    scale : mapping or sequence of "NAME=FACTOR", optional
+        Factors for named channels (default 1).
+    settings : ReadSettings, optional
+        How the records were read, kept so that the preparation can read raw files again.
+    """
+    records = as_records(records)
+    if detrend not in DETRENDS:
+        raise InputError(f"unknown detrend {detrend!r}; use one of {', '.join(DETRENDS)}")
+    scale = parse_scale(scale)
+    first = records[0]
+    unknown = [name for name in scale if name not in first.input_names + first.output_names]
+    if unknown:
+        raise InputError(
+            f"--scale names {unknown[0]!r}, which is not a chosen channel; inputs: "
+            f"{', '.join(first.input_names)}; outputs: {', '.join(first.output_names)}"
+        )
+    input_scale, output_scale = _scales(first.input_names, scale), _scales(first.output_names, scale)
+    offsets = []
+    for data in records:
+        u_offset, u_slope = _trend(data.t, data.u * input_scale, detrend)
+        y_offset, y_slope = _trend(data.t, data.y * output_scale, detrend)
+        offsets.append(RecordOffsets(str(data.meta.get("source", "record")), data.n_samples,
+                                     u_offset, y_offset, u_slope, y_slope))
+    return Preparation(first.input_names, first.output_names, input_scale, output_scale, detrend,
+                       tuple(offsets), settings)
+
+
+def prepare(
+    records: IOData | Sequence[IOData],
+    *,
+    detrend: str = "mean",
+    scale: Mapping[str, float] | Sequence[str] | None = None,
+    settings: ReadSettings | None = None,
+) -> tuple[tuple[IOData, ...], Preparation]:
+    """Estimate the preparation of raw records and apply it to each with its own offsets.
+
+    Returns
+    -------
+    prepared : tuple of IOData
+    preparation : Preparation
+    """
+    records = as_records(records)
+    preparation = estimate_preparation(records, detrend=detrend, scale=scale, settings=settings)
+    return tuple(preparation.apply(data, i) for i, data in enumerate(records)), preparation
+
+
+def load_records(
+    paths: str | Path | Sequence[str | Path],
+    *,
+    detrend: str = "mean",
+    scale: Mapping[str, float] | Sequence[str] | None = None,
+    settings: ReadSettings | None = None,
+    **options: Any,
+) -> tuple[tuple[IOData, ...], Preparation]:
+    """Read raw files (:func:`read_record`) and prepare them (:func:`prepare`): the identify command's input.
+
+    ``options`` are the fields of :class:`ReadSettings` (``inputs``, ``outputs``,
+    ``time_column``, ``dt``, ``resample``, ``decimate``, ``segment``, ``jitter_tolerance``).
+    """
+    raw, settings = read_raw_records(paths, settings, **options)
+    return prepare(raw, detrend=detrend, scale=scale, settings=settings)
+
+
+def read_raw_records(
+    paths: str | Path | Sequence[str | Path],
+    settings: ReadSettings | None = None,
+    **options: Any,
+) -> tuple[tuple[IOData, ...], ReadSettings]:
+    """Raw records of several files read alike (:func:`read_record`), and the settings that read them.
+
+    For a hold-out split, split a raw record, :func:`prepare` the estimation
+    part with these settings and :func:`prepare_validation` the rest.
+    """
+    if isinstance(paths, (str, Path)):
+        paths = [paths]
+    if not paths:
+        raise InputError("give at least one data file")
+    settings = ReadSettings(**options) if settings is None else replace(settings, **options)
+    raw = tuple(read_record(path, settings) for path in paths)
+    if not settings.inputs or not settings.outputs:  # a workbench HDF5 record chose its own channels
+        settings = replace(settings, inputs=raw[0].input_names, outputs=raw[0].output_names)
+    return raw, settings
+
+
+def prepare_validation(
+    data: IOData | str | Path,
+    preparation: Preparation,
+    *,
+    record: int | None = None,
+) -> IOData:
+    """Prepare validation data exactly as the estimation data were prepared.
+
+    Parameters
+    ----------
+    data : IOData or path
+        A raw record (for example the held-out tail of a raw estimation file,
+        split *before* preparing), or a file read with the preparation's
+        reading settings (same channels, time column, resampling, decimation;
+        the segment is not applied, since it selected the estimation part).
+    preparation : Preparation
+        Of the estimation data; its scale factors and the model's offsets are applied.
+    record : int, optional
+        Apply the offsets of estimation record ``record`` instead (re-applying a
+        model to its own raw estimation file).
+
+    Returns
+    -------
+    IOData
+        Prepared, in the model's units.
+    """
+    if not isinstance(data, IOData):
+        if preparation.settings is None:
+            raise InputError("this preparation was estimated on records in memory: it holds no reading settings "
+                             "to read a file with")
+        segment = preparation.settings.segment if record is not None else None
+        data = read_record(data, replace(preparation.settings, segment=segment))
+    return preparation.apply(data, record)

@@ -1,0 +1,165 @@
+"""The command line's data options: reading, time base and preparation of one or several records.
+
+``vehid identify`` (and any command that reads measured data) registers them
+with :func:`register_data_options` and loads its records with
+:func:`load_from_args`; :func:`records_summary` adds the public JSON keys
+``records`` (name, samples, fits per record), ``sample_jitter`` and
+``preparation``; :func:`archive_records` and :func:`archived_records` keep
+the prepared records and the :class:`~identification.preparation.Preparation`
+in a results archive.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any, Sequence
+
+import h5py
+
+from identification.archive import read_records, write_record
+from identification.data import IOData
+from identification.errors import InputError
+from identification.multirecord import score_records
+from identification.preparation import DETRENDS, Preparation, ReadSettings, prepare, read_raw_records
+from identification.storage import read_value, write_value
+from identification.timebase import JITTER_TOLERANCE
+
+__all__ = ["register_data_options", "settings_from_args", "read_from_args", "load_from_args", "records_summary", "record_names",
+           "archive_records", "archived_records", "archived_preparation", "save_model"]
+
+PREPARATION_MEMBER = "preparation"
+RECORD_PREFIX = "identification"
+
+
+def _names(text: str | None) -> tuple[str, ...]:
+    if text is None:
+        return ()
+    names = tuple(name.strip() for name in text.split(",") if name.strip())
+    if not names:
+        raise InputError("an empty column list was given")
+    return names
+
+
+def register_data_options(parser: argparse.ArgumentParser) -> None:
+    """Add the reading, time-base and preparation options (their names are the Python API's)."""
+    group = parser.add_argument_group("data files")
+    group.add_argument("--time-column", metavar="NAME",
+                       help="time column or variable (default: t when present; 'none' disables it)")
+    group.add_argument("--dt", type=float, help="sample interval in s, for files without a time column")
+    group.add_argument("--resample", type=float, metavar="HZ",
+                       help="interpolate every channel linearly onto a uniform grid at HZ (low-passed first when the rate falls)")
+    group.add_argument("--decimate", type=int, metavar="K", help="keep every K-th sample after an anti-aliasing FIR filter")
+    group.add_argument("--segment", metavar="T0:T1", help="use only T0 <= t <= T1 (s, file time)")
+    group.add_argument("--jitter-tolerance", type=float, default=JITTER_TOLERANCE, metavar="FRACTION",
+                       help=f"largest stray of a sample time from a uniform grid, in steps (default {JITTER_TOLERANCE:g})")
+    group.add_argument("--detrend", default="mean", choices=DETRENDS,
+                       help="offsets removed per record and stored with the model (default: the means)")
+    group.add_argument("--scale", action="append", metavar="NAME=FACTOR", default=None,
+                       help="multiply a channel by FACTOR before identification (repeatable)")
+
+
+def settings_from_args(args: argparse.Namespace) -> ReadSettings:
+    """The :class:`ReadSettings` the options describe."""
+    return ReadSettings(
+        inputs=_names(args.inputs), outputs=_names(args.outputs), time_column=args.time_column, dt=args.dt,
+        resample=args.resample, decimate=args.decimate, segment=args.segment,
+        jitter_tolerance=args.jitter_tolerance,
+    )
+
+
+def read_from_args(args: argparse.Namespace, paths: Sequence[str]) -> tuple[tuple[IOData, ...], ReadSettings]:
+    """The raw records of the data files named on the command line, and the settings they were read with.
+
+    For a hold-out split: split a raw record first, then :func:`prepare` the
+    estimation part (``detrend=args.detrend, scale=args.scale, settings=settings``)
+    and :func:`~identification.preparation.prepare_validation` the rest.
+    """
+    if not paths:
+        raise InputError("give a DATA file (or --resume ARCHIVE)")
+    if len(set(paths)) != len(paths):
+        raise InputError("a data file is named twice")
+    return read_raw_records(list(paths), settings_from_args(args))
+
+
+def load_from_args(args: argparse.Namespace, paths: Sequence[str]) -> tuple[tuple[IOData, ...], Preparation]:
+    """Read and prepare the data files named on the command line (each record with its own offsets)."""
+    raw, settings = read_from_args(args, paths)
+    return prepare(raw, detrend=args.detrend, scale=args.scale, settings=settings)
+
+
+def record_names(records: Sequence[IOData]) -> list[str]:
+    """Unique display names of records: their sources, numbered where one repeats."""
+    names = [str(r.meta.get("source", f"record {i + 1}")) for i, r in enumerate(records)]
+    return [f"{n} ({i + 1})" if names.count(n) > 1 else n for i, n in enumerate(names)]
+
+
+def records_summary(model: Any, records: Sequence[IOData], preparation: Preparation | None) -> dict[str, Any]:
+    """The JSON keys about the data: ``records``, ``sample_jitter``, ``preparation``."""
+    scored = score_records(model, records, names=record_names(records))
+    jitters = [r.meta.get("time_base", {}).get("sample_jitter") for r in records]
+    summary: dict[str, Any] = {
+        "records": [fit.as_dict() for fit in scored.records],
+        "sample_jitter": max((j for j in jitters if j is not None), default=None),
+    }
+    if preparation is not None:
+        summary["preparation"] = preparation.as_dict()
+    resampled = [r.meta.get("time_base", {}).get("resample") for r in records]
+    if any(resampled):
+        summary["resample"] = next(r for r in resampled if r)
+    return summary
+
+
+def archive_records(archive: h5py.File, records: Sequence[IOData], preparation: Preparation | None) -> None:
+    """Store the prepared records (``data/identification``, ``data/identification_2``, ...) and the preparation."""
+    for index, record in enumerate(records):
+        write_record(archive, RECORD_PREFIX if index == 0 else f"{RECORD_PREFIX}_{index + 1}", record)
+    if preparation is not None:
+        write_value(archive, PREPARATION_MEMBER, preparation)
+
+
+def archived_records(archive: h5py.File) -> tuple[IOData, ...]:
+    """The prepared estimation records of an identification archive, in order."""
+    records = read_records(archive)
+    found = []
+    index = 1
+    while (RECORD_PREFIX if index == 1 else f"{RECORD_PREFIX}_{index}") in records:
+        found.append(records[RECORD_PREFIX if index == 1 else f"{RECORD_PREFIX}_{index}"])
+        index += 1
+    return tuple(found)
+
+
+def archived_preparation(archive: h5py.File) -> Preparation | None:
+    """The preparation stored with an identification run (None in archives written before it was kept)."""
+    if PREPARATION_MEMBER not in archive:
+        return None
+    value = read_value(archive, PREPARATION_MEMBER)
+    if not isinstance(value, Preparation):
+        raise InputError(f"the archive's {PREPARATION_MEMBER!r} member is not a Preparation")
+    return value
+
+
+def save_model(model: Any, target: str, preparation: Preparation | None) -> Path:
+    """Write the model, with its preparation, to a ``.json`` or ``.mat`` file."""
+    path = Path(target)
+    suffix = path.suffix.lower()
+    if suffix == ".json":
+        content = model.to_dict()
+        if preparation is not None:
+            content["preparation"] = preparation.as_dict()
+        path.write_text(json.dumps(content, indent=2, default=str) + "\n")
+        return path
+    if suffix == ".mat":
+        model.save_mat(path)
+        if preparation is not None:
+            from scipy.io import loadmat, savemat
+
+            contents = {k: v for k, v in loadmat(path).items() if not k.startswith("__")}
+            contents.update({
+                "input_scale": preparation.input_scale, "output_scale": preparation.output_scale,
+                "input_offset": preparation.input_offset, "output_offset": preparation.output_offset,
+            })
+            savemat(path, contents)
+        return path
+    raise InputError(f"--save-model takes a .json or .mat file; got {target!r}")
