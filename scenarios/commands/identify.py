@@ -8,8 +8,16 @@ required); time comes from a column `t` or from --dt.
 The default method is the Identifying EKF (Best & Bogdanski 2017) with the
 exact first-order-hold discretisation, so the identified parameters are those
 of the continuous-time model; --discretization euler reproduces the paper's
-filter. The summary gives the eigenvalues, the fit R (eq. 17) per output of
-the continuous model simulated exactly, the matrices and the run time.
+filter. The defaults do not depend on the units of time or of the signals:
+signals normalised (--no-normalize to switch off), start values from a
+subspace model of the record (--start paper for the paper's), time counted
+in samples inside the filter and p per dominant time constant (--timescale
+seconds for the absolute behaviour). The summary gives the eigenvalues, the
+fit R (eq. 17) per output of the continuous model simulated exactly, NRMSE
+fits on estimation and validation data (--validation, --validation-file),
+whether the run converged, any warnings (--strict: exit status 3), the
+matrices and the run time. --order takes a number, a range (2-8) or auto,
+chosen on validation data; --nonlinear adds the spline-nonlinear model.
 
 With --out ARCHIVE the record and every finished pass are written to an HDF5
 archive as the run goes (atomically, so a killed run leaves the archive of
@@ -24,14 +32,17 @@ import argparse
 import dataclasses
 from pathlib import Path
 
+import numpy as np
+
 from identification import read_csv, read_hdf5
 from identification.errors import InputError
 from identification.filter_models import DISCRETIZATIONS
-from identification.iekf import START_VALUES, IEKFOptions, identify_iekf
+from identification.iekf import identify_iekf
 from identification.archive import open_archive, read_records, write_archive, write_record
 from identification.iekf_archive import Checkpointer, read_iekf_run
 from identification.iekf_pass import COVARIANCE_FORMS
 from identification.modal import C_PATTERNS, ModalStructure
+from scenarios import identify_workflow as workflow
 from scenarios.progress import Progress
 
 NAME = "identify"
@@ -53,20 +64,23 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--inputs", help="comma-separated input column names")
     parser.add_argument("--outputs", help="comma-separated output column names")
     parser.add_argument("--dt", type=float, help="sample interval in s (CSV without a time column)")
-    parser.add_argument("--order", type=int, default=4, help="model order n (default 4)")
+    parser.add_argument("--order", default="4", help="model order n, a range such as 2-8, or auto (default 4)")
     parser.add_argument("--pattern", default="default", choices=C_PATTERNS, help="C pattern (default: pairs tied to outputs in turn)")
     parser.add_argument("--method", default="iekf", choices=("iekf", "arx", "rls", "n4sid", "output-error"),
                         help="estimator: the IEKF (default) or a classical comparator on the same data")
     parser.add_argument("--passes", type=int, default=50, help="largest number of passes (default 50)")
-    parser.add_argument("--p", type=float, default=1.0, help="tuning parameter p: Q = p I' (default 1)")
+    parser.add_argument("--p", type=float, default=None,
+                        help="tuning parameter p: Q = p I' (default 1e-3 per dominant time constant; 1 with --timescale seconds)")
     parser.add_argument("--discretization", default="exact", choices=DISCRETIZATIONS, help="filter discretisation (default exact)")
     parser.add_argument("--covariance", default="joseph", choices=COVARIANCE_FORMS, help="covariance numerics (default joseph)")
-    parser.add_argument("--start", default="default", choices=sorted(START_VALUES), help="start values of sigma/omega")
-    parser.add_argument("--normalize", action="store_true", help="scale inputs and outputs by their RMS while filtering")
+    parser.add_argument("--start", default="data", choices=workflow.START_CHOICES, help=workflow.START_HELP)
+    parser.add_argument("--normalize", action=argparse.BooleanOptionalAction, default=True,
+                        help="scale inputs and outputs by their RMS while filtering (default on)")
     parser.add_argument("--save-model", help="write the model to this .json or .mat file")
     parser.add_argument("--out", help="HDF5 archive of the run, checkpointed after every pass")
     parser.add_argument("--resume", metavar="ARCHIVE",
                         help="continue the run checkpointed in ARCHIVE (its data and settings; --passes counts all passes)")
+    workflow.register_options(parser)
     parser.set_defaults(handler=run)
 
 
@@ -102,29 +116,36 @@ def _resume(args: argparse.Namespace):
     if "identification" not in records:
         raise InputError(f"{args.resume} holds no identification record to resume on")
     options = dataclasses.replace(previous.options, passes=max(args.passes, previous.passes_run))
-    return records["identification"], previous.structure, options, previous
+    return records["identification"], previous.structure, options, previous, records.get("validation")
 
 
 def run(args: argparse.Namespace) -> tuple[dict, str]:
     previous = None
+
+    def load(path: str):
+        return load_record(path, _names(args.inputs), _names(args.outputs), args.dt)
+
     if args.resume:
-        data, structure, options, previous = _resume(args)
+        data, structure, options, previous, held_out = _resume(args)
+        plan = workflow.make_plan(args, data, load, held_out=held_out)
         archive_path = Path(args.resume)
     else:
         if args.data is None:
             raise InputError("give a DATA file (or --resume ARCHIVE)")
-        data = load_record(args.data, _names(args.inputs), _names(args.outputs), args.dt)
-        structure = ModalStructure.from_pattern(args.pattern, args.order, data.n_u, data.n_y)
+        plan = workflow.make_plan(args, load(args.data), load)
+        data = plan.estimation
         if args.method != "iekf":
-            return _run_comparator(args, data, structure)
-        options = IEKFOptions(
-            p=args.p, passes=args.passes, discretization=args.discretization, covariance=args.covariance,
-            start=args.start, normalize=args.normalize,
-        )
+            return _run_comparator(args, plan)
+        options = workflow.iekf_options(args)
+        if len(plan.orders) > 1:
+            return _run_order_search(args, plan, options)
+        structure = ModalStructure.from_pattern(args.pattern, plan.orders[0], data.n_u, data.n_y)
         archive_path = Path(args.out) if args.out else None
         if archive_path is not None:
             with write_archive(archive_path, kind="identification", config=options, seeds=[]) as archive:
                 write_record(archive, "identification", data)
+                if args.validation is not None:
+                    write_record(archive, "validation", plan.validation[0])
     checkpoint = Checkpointer(archive_path, RUN_NAME) if archive_path is not None else None
     done = previous.passes_run if previous is not None else 0
     with Progress(options.passes, "IEKF passes", enabled=None if not args.quiet else False) as progress:
@@ -136,27 +157,89 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
             progress.advance(note=f"R {record.mean_fit_filter:.4f} %")
 
         result = identify_iekf(data, structure, options=options, resume=previous, on_pass=on_pass)
+    return _finish(args, plan, _iekf_summary(result), result.model, result=result, archive_path=archive_path)
+
+
+def _iekf_summary(result) -> dict:
+    """The IEKF run's summary keys (the public contract of `vehid identify --json`)."""
     model = result.model
-    summary = {
+    return {
         "method": "iekf",
-        "order": structure.n,
+        "order": result.structure.n,
         "eigenvalues": model.eigenvalues(),
         "fit_percent": result.fit_percent,
         "fit_percent_filter": result.history[-1].fit_filter,
         "passes_run": result.passes_run,
         "stop_reason": result.stop_reason,
-        "discretization": options.discretization,
+        "discretization": result.options.discretization,
         "A": model.A,
         "B": model.B,
         "C": model.C,
         "D": model.D,
         "seconds": result.seconds,
     }
+
+
+def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None) -> tuple[dict, str]:
+    """Scores, warnings, the nonlinear model, archive and model file: the common end of every identify run."""
+    data = plan.estimation
+    evaluation = workflow.evaluate(model, plan, args)
+    summary.update(workflow.scores_summary(evaluation, summary["fit_percent"]))
+    summary.setdefault("orders_tried", [{"order": summary["order"], "fit_percent": summary["fit_percent"],
+                                         "estimation_fit_percent": evaluation.estimation.fit,
+                                         "validation_fit_percent": evaluation.validation_fit,
+                                         "seconds": summary["seconds"]}])
+    allow_unstable = bool(getattr(args, "allow_unstable", False)) or (
+        result is not None and result.options.allow_unstable)
+    warnings = workflow.run_warnings(
+        model=model, evaluation=evaluation, stop_reason=summary.get("stop_reason"),
+        start_fit=workflow.start_fit_of(result, data) if result is not None else None,
+        final_fit=float(summary["fit_percent"].mean()) if result is not None else None,
+        allow_unstable=allow_unstable,
+    )
+    if evaluation.horizon is not None and args.horizon is None:
+        warnings.append(f"the model is unstable: scored by {evaluation.horizon}-step-ahead prediction, "
+                        "since its simulation diverges (--horizon K to choose K)")
+    if result is not None:
+        summary["start"] = {k: v for k, v in result.meta.items() if k != "start_parameters"}
+    if args.nonlinear:
+        from identification.archive import update_archive, write_run
+
+        outcome = workflow.identify_nonlinear(model, plan, args)
+        summary["nonlinear"] = outcome.summary
+        warnings += workflow.run_warnings(
+            model=outcome.result.model, evaluation=workflow.Evaluation(
+                workflow.score(outcome.result.model, data, initial_state="zero"), outcome.summary["fit_percent"],
+                tuple(workflow.score(outcome.result.model, r, initial_state="zero") for r in plan.validation), None),
+            stop_reason=outcome.result.stop_reason, start_fit=float(np.mean(outcome.result.start_fit)),
+            final_fit=float(np.mean(outcome.result.fit_percent)), allow_unstable=True, label="nonlinear")
+        if archive_path is not None:
+            with update_archive(archive_path) as archive:
+                write_run(archive, "nonlinear", model=outcome.result.model)
     if archive_path is not None:
         summary["archive"] = str(archive_path)
     if args.save_model:
         summary["model_file"] = str(_save_model(model, args.save_model))
-    return summary, _text(summary, data)
+    workflow.emit(summary, warnings, args)
+    return summary, workflow.text_summary(summary, data, plan)
+
+
+def _run_order_search(args, plan, options) -> tuple[dict, str]:
+    """Each order of a range identified on the estimation data; one chosen on validation data."""
+    rows, kept = workflow.search_orders(
+        plan, lambda order: workflow.run_iekf_order(args, plan.estimation, options, order), args)
+    chosen = workflow.choose_order(rows)
+    model, extra, _ = kept[chosen]
+    result = extra["result"]
+    summary = {**_iekf_summary(result), "orders_tried": rows, "seconds": sum(row["seconds"] for row in rows)}
+    archive_path = Path(args.out) if args.out else None
+    if archive_path is not None:
+        from identification.iekf_archive import write_iekf_run
+
+        with write_archive(archive_path, kind="identification", config=options, seeds=[]) as archive:
+            write_record(archive, "identification", plan.estimation)
+            write_iekf_run(archive, RUN_NAME, result)
+    return _finish(args, plan, summary, model, result=result, archive_path=archive_path)
 
 
 def _save_model(model, target: str) -> Path:
@@ -168,40 +251,39 @@ def _save_model(model, target: str) -> Path:
     raise InputError(f"--save-model takes a .json or .mat file; got {target!r}")
 
 
-def _run_comparator(args: argparse.Namespace, data, structure) -> tuple[dict, str]:
+def _run_comparator(args: argparse.Namespace, plan) -> tuple[dict, str]:
     from identification.comparators import identify_with
 
-    outcome = identify_with(data, method=args.method, order=structure.n)
+    outcomes = {}
+
+    def fit_one(order):
+        outcome = identify_with(plan.estimation, method=args.method, order=order)
+        outcomes[order] = outcome
+        return outcome.model, {"fit_percent": outcome.metrics.percentage_explanation}
+
+    rows = None
+    if len(plan.orders) == 1:
+        chosen = plan.orders[0]
+        fit_one(chosen)  # errors carry their own exit status
+    else:
+        rows, _ = workflow.search_orders(plan, fit_one, args)
+        chosen = workflow.choose_order(rows)
+    outcome = outcomes[chosen]
     model = outcome.model
     summary = {
         "method": args.method,
-        "order": structure.n,
+        "order": chosen,
         "eigenvalues": model.eigenvalues(),
         "fit_percent": outcome.metrics.percentage_explanation,
         "passes_run": 0,
         "discretization": "exact",
+        "time_domain": model.meta.get("time_domain", "continuous"),
         "A": model.A,
         "B": model.B,
         "C": model.C,
         "D": model.D,
         "seconds": outcome.seconds,
     }
-    if args.save_model:
-        summary["model_file"] = str(_save_model(model, args.save_model))
-    return summary, _text(summary, data)
-
-
-def _text(summary: dict, data) -> str:
-    eigen = ", ".join(
-        f"{v.real:.4g}{v.imag:+.4g}j" if v.imag else f"{v.real:.4g}" for v in summary["eigenvalues"]
-    )
-    fits = ", ".join(f"{name} {value:.3f} %" for name, value in zip(data.output_names, summary["fit_percent"]))
-    lines = [
-        f"{summary['method']}: order {summary['order']}, {summary['passes_run']} passes, "
-        f"{summary['discretization']} discretisation, {summary['seconds']:.2f} s",
-        f"eigenvalues: {eigen}",
-        f"fit R (continuous model simulated exactly): {fits}",
-    ]
-    if "model_file" in summary:
-        lines.append(f"wrote {summary['model_file']}")
-    return "\n".join(lines)
+    if rows is not None:
+        summary["orders_tried"] = rows
+    return _finish(args, plan, summary, model)

@@ -1,0 +1,426 @@
+"""What `vehid identify` does around one estimator run: hold-out validation, order choice, warnings.
+
+* Validation records: ``--validation FRACTION`` holds out the last part of
+  the record; ``--validation-file FILE`` (repeatable) adds other records.
+* Scores on estimation and validation data (:mod:`identification.validation`):
+  NRMSE fit and R per output, linear models simulated from a least-squares
+  initial state unless ``--initial-state zero``; an unstable model (allowed
+  by ``--allow-unstable``) is scored by k-step-ahead prediction.
+* Order: one order, a range ``2-8`` or ``auto`` (1, 2, ... up to
+  :data:`AUTO_MAX_ORDER`, stopping after two orders in a row that do not
+  improve on the best). Parsimony rule: the smallest order whose mean
+  validation fit is within :data:`ORDER_TOLERANCE` points of the best order's;
+  models that diverged or are unstable where stability was asked take no part.
+* Warnings: a model no better than its start, a fit below zero on any
+  output, an unstable model where stability was asked, a run that did not
+  converge: one line each on standard error and in the JSON ``warnings``;
+  ``--strict`` turns them into exit status 3.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+from identification.data import IOData
+from identification.errors import DivergenceError, InputError, StrictWarningsError, WorkbenchError
+from identification.iekf import INVARIANT_P, START_CHOICES, TIMESCALES, IEKFOptions, identify_iekf
+from identification.modal import ModalModel, ModalStructure
+from identification.validation import INITIAL_STATES, Scores, default_horizon, score, split_holdout
+
+__all__ = [
+    "AUTO_MAX_ORDER",
+    "ORDER_TOLERANCE",
+    "Plan",
+    "register_options",
+    "parse_orders",
+    "make_plan",
+    "iekf_options",
+    "choose_order",
+    "evaluate",
+    "run_warnings",
+]
+
+AUTO_MAX_ORDER = 8
+ORDER_TOLERANCE = 0.5  # points of mean validation fit
+AUTO_HOLDOUT = 0.3  # fraction held out to choose an order when no validation data are given
+NO_BETTER_MARGIN = 0.01  # points: a final fit within this of the start's counts as no better
+NOTHING_TO_GAIN = 99.0  # percent R: a start this good leaves nothing to improve, so "no better" is no warning
+WORSE_MARGIN = 0.5  # points of R below the start's: the filter made the model worse
+
+
+def register_options(parser: argparse.ArgumentParser) -> None:
+    """The validation, order, model-class and warning options of `vehid identify`."""
+    parser.add_argument("--validation", type=float, metavar="FRACTION",
+                        help="hold out the last FRACTION of the record for validation (e.g. 0.3)")
+    parser.add_argument("--validation-file", action="append", default=[], metavar="FILE",
+                        help="validate on this record too (repeatable; same columns)")
+    parser.add_argument("--initial-state", default="estimate", choices=INITIAL_STATES,
+                        help="simulate linear models from a least-squares initial state (default) or from rest")
+    parser.add_argument("--horizon", type=int, metavar="K",
+                        help="score by K-step-ahead prediction instead of simulation (automatic for unstable models)")
+    parser.add_argument("--allow-unstable", action="store_true",
+                        help="keep unstable modes (open-loop unstable plants) instead of stopping")
+    parser.add_argument("--timescale", default="auto", choices=TIMESCALES,
+                        help="filter time unit: auto (samples; p per dominant time constant, default) or seconds (absolute, the paper's)")
+    parser.add_argument("--nonlinear", action="store_true",
+                        help="after the linear model, identify the spline-nonlinear model started from it")
+    parser.add_argument("--nodes", type=int, default=5, help="nodes per spline with --nonlinear (default 5)")
+    parser.add_argument("--nonlinear-p", type=float, action="append", metavar="P",
+                        help="tuning parameter(s) of the spline model; several are tried and one chosen on "
+                             "validation data (default 1e-7, or 1e-7, 1e-6 with validation data)")
+    parser.add_argument("--nonlinear-passes", type=int, default=30, help="largest number of nonlinear passes (default 30)")
+    parser.add_argument("--strict", action="store_true", help="exit with status 3 when the run ends with warnings")
+
+
+def parse_orders(text: Any) -> tuple[list[int], bool]:
+    """``"4"``, ``"2-8"`` or ``"auto"``: the orders to try and whether to stop early (auto)."""
+    value = str(text).strip().lower()
+    if value == "auto":
+        return list(range(1, AUTO_MAX_ORDER + 1)), True
+    try:
+        if "-" in value:
+            low, high = (int(part) for part in value.split("-", 1))
+        else:
+            low = high = int(value)
+    except ValueError:
+        raise InputError(f"--order takes a whole number, a range such as 2-8, or auto; got {text!r}") from None
+    if low < 1 or high < low:
+        raise InputError(f"--order {text!r}: orders must be >= 1 and the range increasing")
+    return list(range(low, high + 1)), False
+
+
+@dataclass(frozen=True, eq=False)
+class Plan:
+    """The records and orders of one identify command."""
+
+    estimation: IOData
+    validation: tuple[IOData, ...]
+    validation_names: tuple[str, ...]
+    orders: tuple[int, ...]
+    auto: bool
+    notes: tuple[str, ...] = ()
+
+
+def make_plan(args: argparse.Namespace, data: IOData, load: Callable[[str], IOData],
+              held_out: IOData | None = None) -> Plan:
+    """Split and load the validation records named by the options (``held_out``: one already split off)."""
+    orders, auto = parse_orders(args.order)
+    notes: list[str] = []
+    validation, names = [], []
+    fraction = args.validation
+    if held_out is not None:
+        validation.append(held_out)
+        names.append("held-out part")
+        fraction = None
+    if fraction is None and held_out is None and len(orders) > 1 and not args.validation_file:
+        fraction = AUTO_HOLDOUT
+        notes.append(f"the last {AUTO_HOLDOUT:.0%} of the record held out to choose the order")
+    estimation = data
+    if fraction is not None:
+        estimation, part = split_holdout(data, fraction)
+        validation.append(part)
+        names.append(f"last {fraction:g} of the record")
+    for path in args.validation_file:
+        record = load(path)
+        if (record.n_u, record.n_y) != (data.n_u, data.n_y):
+            raise InputError(f"{path} has {record.n_u} inputs and {record.n_y} outputs; the record has {data.n_u} and {data.n_y}")
+        if record.input_names != data.input_names or record.output_names != data.output_names:
+            raise InputError(f"{path} names its columns differently from the identification record")
+        validation.append(record)
+        names.append(str(path))
+    if args.horizon is not None and args.horizon < 1:
+        raise InputError(f"--horizon must be >= 1 sample; got {args.horizon}")
+    return Plan(estimation, tuple(validation), tuple(names), tuple(orders), auto, tuple(notes))
+
+
+def iekf_options(args: argparse.Namespace) -> IEKFOptions:
+    """IEKF settings of the command line: the unit-invariant ones unless asked otherwise."""
+    p = args.p if args.p is not None else (INVARIANT_P if args.timescale == "auto" else 1.0)
+    return IEKFOptions(
+        p=p, passes=args.passes, discretization=args.discretization, covariance=args.covariance,
+        start=args.start, normalize=args.normalize, timescale=args.timescale, allow_unstable=args.allow_unstable,
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class Evaluation:
+    """Scores of one model on the estimation record and on each validation record."""
+
+    estimation: Scores
+    estimation_R_from_rest: np.ndarray
+    validation: tuple[Scores, ...]
+    horizon: int | None
+
+    @property
+    def validation_fit(self) -> np.ndarray | None:
+        """NRMSE fit per output, mean over validation records."""
+        if not self.validation:
+            return None
+        return np.mean([s.fit for s in self.validation], axis=0)
+
+    @property
+    def validation_R(self) -> np.ndarray | None:
+        if not self.validation:
+            return None
+        return np.mean([s.R for s in self.validation], axis=0)
+
+    def ranking_fit(self) -> float:
+        """Mean validation fit (estimation fit without validation data)."""
+        values = self.validation_fit if self.validation else self.estimation.fit
+        return float(np.mean(values))
+
+
+def evaluate(model: Any, plan: Plan, args: argparse.Namespace) -> Evaluation:
+    """Score ``model`` on the plan's records (k-step-ahead where asked or where simulation diverges)."""
+    horizon = args.horizon if args.horizon is not None else default_horizon(model)
+    estimation = score(model, plan.estimation, initial_state=args.initial_state, horizon=horizon)
+    from_rest = score(model, plan.estimation, initial_state="zero", horizon=horizon).R
+    validation = tuple(score(model, record, initial_state=args.initial_state, horizon=horizon)
+                       for record in plan.validation)
+    return Evaluation(estimation, from_rest, validation, horizon)
+
+
+def run_warnings(*, model: Any, evaluation: Evaluation, stop_reason: str | None, start_fit: float | None,
+                 final_fit: float | None, allow_unstable: bool, label: str = "") -> list[str]:
+    """One line per problem, naming its cause and the likely fix (module docstring)."""
+    prefix = f"{label}: " if label else ""
+    lines = []
+    if stop_reason is not None and stop_reason != "converged":
+        lines.append(f"{prefix}the run did not converge ({stop_reason}): raise --passes, or lower --p or the order")
+    if start_fit is not None and final_fit is not None:
+        if final_fit < start_fit - WORSE_MARGIN:
+            lines.append(f"{prefix}the model is worse than its start (mean R {final_fit:.3f} % against "
+                         f"{start_fit:.3f} %): lower --p, or fewer passes")
+        elif final_fit <= start_fit + NO_BETTER_MARGIN and start_fit < NOTHING_TO_GAIN:
+            lines.append(f"{prefix}the model is no better than its start (mean R {final_fit:.3f} % against "
+                         f"{start_fit:.3f} %): try another --start, a larger --p, or --normalize")
+    if isinstance(model, ModalModel) and not allow_unstable and not model.is_stable():
+        lines.append(f"{prefix}the model is unstable where stability was asked: lower the order, or give "
+                     "--allow-unstable for an open-loop unstable plant")
+    scored = [("estimation", evaluation.estimation)] + [("validation", s) for s in evaluation.validation]
+    for where, scores in scored:
+        bad = np.flatnonzero(~(scores.fit >= 0))
+        if bad.size:
+            lines.append(f"{prefix}fit below zero on {where} data for output(s) {', '.join(str(i + 1) for i in bad)} "
+                         f"({', '.join(f'{scores.fit[i]:.1f} %' for i in bad)}): the model explains less than the "
+                         "output's mean; try another order, --initial-state estimate, or check the data")
+            break
+    return lines
+
+
+def choose_order(rows: list[dict[str, Any]]) -> int:
+    """The smallest order within :data:`ORDER_TOLERANCE` points of the best mean validation fit (eligible rows only)."""
+    eligible = [row for row in rows if row.get("eligible")]
+    if not eligible:
+        raise DivergenceError("no order gave a usable model: " + "; ".join(
+            f"n = {row['order']}: {row.get('error') or 'unstable or diverged'}" for row in rows))
+    best = max(row["ranking_fit"] for row in eligible)
+    return min(row["order"] for row in eligible if row["ranking_fit"] >= best - ORDER_TOLERANCE)
+
+
+def scores_summary(evaluation: Evaluation, fit_percent: Any) -> dict[str, Any]:
+    """The public score keys of a model: ``fit_percent`` (R, estimation, as before), NRMSE fits and ``validation_R``."""
+    summary: dict[str, Any] = {
+        "fit_percent": fit_percent,
+        "estimation_fit_percent": evaluation.estimation.fit,
+        "estimation_R": evaluation.estimation.R,
+        "validation_fit_percent": evaluation.validation_fit,
+        "validation_R": evaluation.validation_R,
+        "validation_records": [s.as_dict() for s in evaluation.validation],
+        "initial_state": evaluation.estimation.initial_state,
+        "horizon": evaluation.horizon,
+    }
+    return summary
+
+
+def search_orders(plan: Plan, fit_one: Callable[[int], tuple[Any, dict[str, Any]]], args: argparse.Namespace
+                  ) -> tuple[list[dict[str, Any]], dict[int, tuple[Any, dict[str, Any], Evaluation]]]:
+    """Identify each order of the plan (``fit_one(order) -> (model, extra)``), score it, stop early for auto."""
+    rows: list[dict[str, Any]] = []
+    kept: dict[int, tuple[Any, dict[str, Any], Evaluation]] = {}
+    best, without_gain = -np.inf, 0
+    for order in plan.orders:
+        started = time.perf_counter()
+        row: dict[str, Any] = {"order": order}
+        try:
+            model, extra = fit_one(order)
+        except WorkbenchError as exc:
+            row.update(error=str(exc), eligible=False, seconds=time.perf_counter() - started)
+            rows.append(row)
+            continue
+        evaluation = evaluate(model, plan, args)
+        stable_enough = args.allow_unstable or not isinstance(model, ModalModel) or model.is_stable()
+        row.update(
+            fit_percent=extra.get("fit_percent"),
+            estimation_fit_percent=evaluation.estimation.fit,
+            validation_fit_percent=evaluation.validation_fit,
+            ranking_fit=evaluation.ranking_fit(),
+            stop_reason=extra.get("stop_reason"),
+            seconds=time.perf_counter() - started,
+            eligible=bool(stable_enough and np.isfinite(evaluation.ranking_fit())),
+        )
+        rows.append(row)
+        kept[order] = (model, extra, evaluation)
+        if plan.auto:
+            if row["eligible"] and row["ranking_fit"] > best + ORDER_TOLERANCE:
+                best, without_gain = row["ranking_fit"], 0
+            else:
+                without_gain += 1
+                if without_gain >= 2:
+                    break
+    return rows, kept
+
+
+def emit(summary: dict[str, Any], warnings: list[str], args: argparse.Namespace) -> None:
+    """Print the warnings (one line each) and raise under --strict."""
+    summary["warnings"] = list(warnings)
+    if args.strict and warnings:
+        raise StrictWarningsError(warnings, summary)
+    for line in warnings:
+        print(f"vehid: warning: {line}", file=sys.stderr)
+
+
+def _fits(names: tuple[str, ...], values: Any) -> str:
+    if values is None:
+        return "-"
+    return ", ".join(f"{name} {value:.2f}" for name, value in zip(names, values))
+
+
+def text_summary(summary: dict[str, Any], data: IOData, plan: Plan) -> str:
+    """The text face: model, convergence, estimation and validation scores side by side."""
+    eigen = ", ".join(
+        f"{v.real:.4g}{v.imag:+.4g}j" if v.imag else f"{v.real:.4g}" for v in np.asarray(summary["eigenvalues"], dtype=complex)
+    )
+    stop = summary.get("stop_reason")
+    converged = "converged" if stop == "converged" else (f"NOT converged ({stop})" if stop else "direct method (no iterations)")
+    kind = summary.get("time_domain", "continuous")
+    lines = [
+        f"{summary['method']}: order {summary['order']}, {summary['passes_run']} passes, "
+        f"{summary['discretization']} discretisation, {summary['seconds']:.2f} s, {converged}",
+        f"eigenvalues ({kind}-time): {eigen}",
+        f"fit R (continuous model simulated exactly): {_fits(data.output_names, summary['fit_percent'])}",
+    ]
+    how = (f"{summary['horizon']}-step-ahead prediction" if summary.get("horizon")
+           else f"simulation, initial state {summary.get('initial_state', 'zero')}")
+    lines.append(f"{'NRMSE fit %':<14} {'estimation':>28} {'validation':>28}   ({how})")
+    for i, name in enumerate(data.output_names):
+        est = summary["estimation_fit_percent"][i]
+        val = summary["validation_fit_percent"][i] if summary.get("validation_fit_percent") is not None else None
+        lines.append(f"{name:<14} {est:>28.2f} {('-' if val is None else f'{val:.2f}'):>28}")
+    if plan.validation:
+        lines.append("validation on: " + "; ".join(plan.validation_names))
+    for note in plan.notes:
+        lines.append(f"note: {note}")
+    if summary.get("orders_tried") and len(summary["orders_tried"]) > 1:
+        tried = ", ".join(
+            f"n={row['order']}: " + (f"{row['ranking_fit']:.2f}" if "ranking_fit" in row else "failed")
+            for row in summary["orders_tried"])
+        lines.append(f"orders tried (mean validation fit %): {tried}; chosen {summary['order']} "
+                     f"(smallest within {ORDER_TOLERANCE} points of the best)")
+    if "nonlinear" in summary:
+        nl = summary["nonlinear"]
+        lines.append(f"nonlinear (spline, {nl['nodes']} nodes, p {nl['p']:g}, {nl['passes_run']} passes, "
+                     f"{'converged' if nl['stop_reason'] == 'converged' else 'NOT converged'}): "
+                     f"estimation {_fits(data.output_names, nl['estimation_fit_percent'])}; "
+                     f"validation {_fits(data.output_names, nl['validation_fit_percent'])}")
+    if "model_file" in summary:
+        lines.append(f"wrote {summary['model_file']}")
+    return "\n".join(lines)
+
+
+@dataclass
+class NonlinearOutcome:
+    """The chosen spline model's run and its summary entries."""
+
+    result: Any
+    summary: dict[str, Any] = field(default_factory=dict)
+
+
+def identify_nonlinear(linear: ModalModel, plan: Plan, args: argparse.Namespace) -> NonlinearOutcome:
+    """The spline-nonlinear model started from ``linear``, its p chosen on validation data from a small grid."""
+    from identification.spline_iekf import SplineIEKFOptions, identify_spline_iekf
+
+    grid = args.nonlinear_p or ([1e-7, 1e-6] if plan.validation else [1e-7])
+    tried, best = [], None
+    for p in grid:
+        options = SplineIEKFOptions(nodes=args.nodes, p=p, passes=args.nonlinear_passes)
+        started = time.perf_counter()
+        try:
+            result = identify_spline_iekf(plan.estimation, linear, options=options)
+        except DivergenceError as exc:
+            tried.append({"p": p, "error": str(exc), "seconds": time.perf_counter() - started})
+            continue
+        scores = NonlinearScores(result.model, plan)
+        row = {"p": p, "estimation_fit_percent": scores.estimation.fit, "validation_fit_percent": scores.validation_fit,
+               "seconds": time.perf_counter() - started, "ranking_fit": scores.ranking_fit()}
+        tried.append(row)
+        if np.isfinite(row["ranking_fit"]) and (best is None or row["ranking_fit"] > best[1]["ranking_fit"]):
+            best = (result, row, scores)
+    if best is None:
+        raise DivergenceError("the spline-nonlinear model diverged at every p tried: " +
+                              "; ".join(f"p = {row['p']:g}: {row['error']}" for row in tried))
+    result, row, scores = best
+    summary = {
+        "nodes": args.nodes, "p": row["p"], "p_tried": tried, "passes_run": result.passes_run,
+        "stop_reason": result.stop_reason, "fit_percent": scores.estimation.R,
+        "estimation_fit_percent": scores.estimation.fit, "validation_fit_percent": scores.validation_fit,
+        "validation_R": scores.validation_R, "start_fit_percent": result.start_fit, "seconds": result.seconds,
+    }
+    return NonlinearOutcome(result, summary)
+
+
+class NonlinearScores:
+    """Scores of a spline model (simulated from rest in its own time base) on the plan's records."""
+
+    def __init__(self, model: Any, plan: Plan):
+        self.estimation = score(model, plan.estimation, initial_state="zero")
+        self.validation = tuple(score(model, record, initial_state="zero") for record in plan.validation)
+
+    @property
+    def validation_fit(self) -> np.ndarray | None:
+        return np.mean([s.fit for s in self.validation], axis=0) if self.validation else None
+
+    @property
+    def validation_R(self) -> np.ndarray | None:
+        return np.mean([s.R for s in self.validation], axis=0) if self.validation else None
+
+    def ranking_fit(self) -> float:
+        return float(np.mean(self.validation_fit if self.validation else self.estimation.fit))
+
+
+def start_fit_of(result: Any, data: IOData) -> float | None:
+    """Mean R (eq. 17) of an IEKF run's start model simulated from rest, or None where unknown."""
+    theta = result.meta.get("start_parameters") if hasattr(result, "meta") else None
+    if theta is None:
+        return None
+    model = ModalModel.from_parameters(result.structure, theta)
+    with np.errstate(all="ignore"):
+        simulated = model.simulate(data.u, data.dt)
+    if not np.all(np.isfinite(simulated)):
+        return None
+    from identification.metrics import percentage_explanation
+
+    return float(np.mean(percentage_explanation(data.y, simulated)))
+
+
+def structure_for(args: argparse.Namespace, order: int, data: IOData) -> ModalStructure:
+    return ModalStructure.from_pattern(args.pattern, order, data.n_u, data.n_y)
+
+
+def run_iekf_order(args: argparse.Namespace, data: IOData, options: IEKFOptions, order: int
+                   ) -> tuple[ModalModel, dict[str, Any]]:
+    """One IEKF run of an order search (no checkpoints): its model and what the summary needs."""
+    result = identify_iekf(data, structure_for(args, order, data), options=options)
+    return result.model, {"fit_percent": result.fit_percent, "stop_reason": result.stop_reason, "result": result}
+
+
+START_HELP = ("start values: data (a subspace model of the record, default), band (modes across the record's band), "
+              "default (sigma = -10, omega = 10 rad/s, absolute) or paper (sigma = -1, omega = 1)")
+__all__ += ["START_HELP", "START_CHOICES", "Evaluation", "search_orders", "emit", "text_summary",
+            "identify_nonlinear", "start_fit_of", "run_iekf_order", "scores_summary"]
