@@ -24,10 +24,9 @@ same start, bit for bit up to rounding.
     record to a quarter of the Nyquist frequency, damping 0.5; B and D by
     least squares.
 
-Each start also gives the dominant time constant of the start model (the
-inverse of the median natural frequency of its modes), in samples: the time
-unit in which the filter's tuning parameter p is stated (see
-:mod:`identification.iekf`).
+The dominant time constant of the start model (the inverse of the median
+natural frequency of its modes) is the time unit in which the filter's
+tuning parameter p is stated (see :mod:`identification.iekf`).
 """
 
 from __future__ import annotations
@@ -44,7 +43,6 @@ __all__ = ["DataStart", "data_start", "band_eigenvalues", "place_eigenvalues", "
 DATA_STARTS = ("data", "band")
 
 _BAND_DAMPING = 0.5
-_MIN_RATE = 1e-6  # rad/sample: slower modes count as this for the time unit
 _MAX_RATE = 3.0  # rad/sample: the fastest a discrete model can say (pi) with a margin of rounding
 
 
@@ -57,8 +55,6 @@ class DataStart:
     model : ModalModel
         Continuous-time in units of samples: eigenvalues in rad/sample,
         inputs and outputs divided by their RMS.
-    time_constant : float
-        The dominant time constant of ``model`` in samples.
     source : str
         ``"subspace"``, ``"subspace eigenvalues"`` or ``"band"``.
     note : str
@@ -66,7 +62,6 @@ class DataStart:
     """
 
     model: ModalModel
-    time_constant: float
     source: str
     note: str = ""
 
@@ -169,11 +164,6 @@ def fit_input_gains(structure: ModalStructure, modes: np.ndarray, u: np.ndarray,
     return ModalModel.from_parameters(structure, theta)
 
 
-def _time_constant(model: ModalModel) -> float:
-    rates = np.abs(model.mode_eigenvalues())
-    return float(1.0 / np.clip(np.median(rates), _MIN_RATE, _MAX_RATE))
-
-
 def _simulation_fit(model: ModalModel, u: np.ndarray, y: np.ndarray) -> float:
     """Mean R (eq. 17) of the model simulated from rest (time in samples); -inf where it overflows."""
     from .metrics import percentage_explanation
@@ -201,14 +191,14 @@ def _subspace_start(u: np.ndarray, y: np.ndarray, structure: ModalStructure, sta
         elif not np.all(np.abs(model.mode_eigenvalues()) < _MAX_RATE * 10):
             note = "the subspace model has modes beyond the sample rate"
         else:
-            return DataStart(model, _time_constant(model), "subspace")
+            return DataStart(model, "subspace")
     except InputError as exc:
         note = str(exc)
     with np.errstate(divide="ignore"):
         continuous = np.log(np.where(np.abs(discrete) > 1e-12, discrete, 1e-12).astype(complex))
     modes = place_eigenvalues(continuous, structure, stable=stable)
     model = fit_input_gains(structure, modes, u, y)
-    return DataStart(model, _time_constant(model), "subspace eigenvalues", note)
+    return DataStart(model, "subspace eigenvalues", note)
 
 
 def data_start(u: np.ndarray, y: np.ndarray, structure: ModalStructure, *, method: str = "data",
@@ -233,7 +223,7 @@ def data_start(u: np.ndarray, y: np.ndarray, structure: ModalStructure, *, metho
         raise InputError(f"unknown data start {method!r}; use one of {', '.join(DATA_STARTS)}")
     modes = band_eigenvalues(structure, u.shape[0])
     model = fit_input_gains(structure, modes, u, y)
-    band = DataStart(model, _time_constant(model), "band")
+    band = DataStart(model, "band")
     if method == "band":
         return band
     # Subspace models with a few block-row counts (more rows average noise better, fewer suit short
@@ -248,4 +238,4 @@ def data_start(u: np.ndarray, y: np.ndarray, structure: ModalStructure, *, metho
     fits = [_simulation_fit(candidate.model, u, y) for candidate in candidates]
     best = candidates[int(np.argmax(fits))]
     note = "; ".join(filter(None, [best.note, *notes]))
-    return DataStart(best.model, best.time_constant, best.source, note)
+    return DataStart(best.model, best.source, note)

@@ -30,6 +30,7 @@ import scipy.linalg
 from .data import IOData
 from .errors import InputError
 from .metrics import nrmse_fit, percentage_explanation
+from .discrete import DiscreteModel
 from .modal import ModalModel
 
 __all__ = [
@@ -97,11 +98,17 @@ def _check(model: Any, data: IOData) -> None:
 def _sizes(model: Any) -> tuple[int, int]:
     if isinstance(model, ModalModel):
         return model.structure.n_u, model.structure.n_y
+    if isinstance(model, DiscreteModel):
+        return model.n_u, model.n_y
     linear = model.structure.linear
     return linear.n_u, linear.n_y
 
 
-def estimate_initial_state(model: ModalModel, data: IOData, *, method: str = "foh") -> np.ndarray:
+def _linear(model: Any) -> bool:
+    return isinstance(model, (ModalModel, DiscreteModel))
+
+
+def estimate_initial_state(model: ModalModel | DiscreteModel, data: IOData, *, method: str = "foh") -> np.ndarray:
     """The initial state ``x0`` (n,) that fits the record best, by linear least squares.
 
     The regressors are the free responses of the model's states (one
@@ -109,7 +116,7 @@ def estimate_initial_state(model: ModalModel, data: IOData, *, method: str = "fo
     weighted by the inverse of its RMS so that units do not matter.
     """
     _check(model, data)
-    n = model.structure.n
+    n = model.n_states if isinstance(model, DiscreteModel) else model.structure.n
     weights = 1.0 / np.maximum(np.sqrt(np.mean(data.y**2, axis=0)), 1e-300)
     with np.errstate(all="ignore"):
         forced = model.simulate(data.u, data.dt, method=method)
@@ -125,7 +132,7 @@ def estimate_initial_state(model: ModalModel, data: IOData, *, method: str = "fo
 
 def default_horizon(model: Any) -> int | None:
     """None for a stable model (simulate); for an unstable one a short k-step-ahead horizon."""
-    if isinstance(model, ModalModel) and not model.is_stable():
+    if _linear(model) and not model.is_stable():
         return _UNSTABLE_HORIZON
     return None
 
@@ -134,7 +141,10 @@ def _k_step(model: ModalModel, data: IOData, horizon: int) -> np.ndarray:
     """Outputs predicted ``horizon`` samples ahead of a steady-state Kalman filter's state; the first ``horizon`` from rest."""
     from .statespace import _phi_matrices, continuous_to_discrete
 
-    Ad, Bd, Cd, Dd = continuous_to_discrete(model.A, model.B, model.C, model.D, data.dt, hold="foh")
+    if isinstance(model, DiscreteModel):
+        Ad, Bd, Cd, Dd = model.A, model.B, model.C, model.D
+    else:
+        Ad, Bd, Cd, Dd = continuous_to_discrete(model.A, model.B, model.C, model.D, data.dt, hold="foh")
     scale = np.maximum(np.sqrt(np.mean(data.y**2, axis=0)), 1e-300)
     Cn, Dn = Cd / scale[:, None], Dd / scale[:, None]
     yn = data.y / scale
@@ -153,8 +163,9 @@ def _k_step(model: ModalModel, data: IOData, horizon: int) -> np.ndarray:
     states = np.zeros((N, n))
     x = np.zeros(n)
     if model.is_stable():  # start the observer at the least-squares initial state (foh state xi = x - G2 u)
-        g2 = data.dt * _phi_matrices(model.A, data.dt)[2] @ model.B
-        x = estimate_initial_state(model, data) - g2 @ u[0]
+        x = estimate_initial_state(model, data)
+        if isinstance(model, ModalModel):
+            x = x - data.dt * _phi_matrices(model.A, data.dt)[2] @ model.B @ u[0]
     observer = Ad - gain @ Cn
     drive = u @ (Bd - gain @ Dn).T + yn @ gain.T
     for k in range(N):  # the one-step predictor's state x(k|k-1)
@@ -187,7 +198,7 @@ def predict(model: Any, data: IOData, *, initial_state: str = "estimate", horizo
     _check(model, data)
     if initial_state not in INITIAL_STATES:
         raise InputError(f"unknown initial state {initial_state!r}; use one of {', '.join(INITIAL_STATES)}")
-    if not isinstance(model, ModalModel):
+    if not _linear(model):
         return model.simulate(data.u)
     if horizon is not None:
         if isinstance(horizon, bool) or int(horizon) != horizon or horizon < 1:
@@ -208,7 +219,7 @@ def score(model: Any, data: IOData, *, initial_state: str = "estimate", horizon:
             fit, R = nrmse_fit(y, y_hat), percentage_explanation(y, y_hat)
         else:
             fit = R = np.full(data.n_y, -np.inf)
-    return Scores(fit, R, initial_state if isinstance(model, ModalModel) and horizon is None else "zero",
+    return Scores(fit, R, initial_state if _linear(model) and horizon is None else "zero",
                   horizon, int(y.shape[0]))
 
 

@@ -30,10 +30,21 @@ import numpy as np
 from identification.data import IOData
 from identification.errors import DivergenceError, InputError, StrictWarningsError, WorkbenchError
 from identification.iekf import INVARIANT_P, START_CHOICES, TIMESCALES, IEKFOptions, identify_iekf
+from identification.discrete import DiscreteModel
 from identification.modal import ModalModel, ModalStructure
 from identification.validation import INITIAL_STATES, Scores, default_horizon, score, split_holdout
 
 __all__ = [
+    "START_HELP",
+    "START_CHOICES",
+    "Evaluation",
+    "search_orders",
+    "emit",
+    "text_summary",
+    "identify_nonlinear",
+    "start_fit_of",
+    "run_iekf_order",
+    "scores_summary",
     "AUTO_MAX_ORDER",
     "ORDER_TOLERANCE",
     "Plan",
@@ -47,8 +58,11 @@ __all__ = [
 ]
 
 AUTO_MAX_ORDER = 8
+LINEAR_MODELS = (ModalModel, DiscreteModel)
 ORDER_TOLERANCE = 0.5  # points of mean validation fit
 AUTO_HOLDOUT = 0.3  # fraction held out to choose an order when no validation data are given
+START_HELP = ("start values: data (a subspace model of the record, default), band (modes across the record's band), "
+              "default (sigma = -10, omega = 10 rad/s, absolute) or paper (sigma = -1, omega = 1)")
 NO_BETTER_MARGIN = 0.01  # points: a final fit within this of the start's counts as no better
 NOTHING_TO_GAIN = 99.0  # percent R: a start this good leaves nothing to improve, so "no better" is no warning
 WORSE_MARGIN = 0.5  # points of R below the start's: the filter made the model worse
@@ -200,7 +214,7 @@ def run_warnings(*, model: Any, evaluation: Evaluation, stop_reason: str | None,
         elif final_fit <= start_fit + NO_BETTER_MARGIN and start_fit < NOTHING_TO_GAIN:
             lines.append(f"{prefix}the model is no better than its start (mean R {final_fit:.3f} % against "
                          f"{start_fit:.3f} %): try another --start, a larger --p, or --normalize")
-    if isinstance(model, ModalModel) and not allow_unstable and not model.is_stable():
+    if isinstance(model, LINEAR_MODELS) and not allow_unstable and not model.is_stable():
         lines.append(f"{prefix}the model is unstable where stability was asked: lower the order, or give "
                      "--allow-unstable for an open-loop unstable plant")
     scored = [("estimation", evaluation.estimation)] + [("validation", s) for s in evaluation.validation]
@@ -255,7 +269,7 @@ def search_orders(plan: Plan, fit_one: Callable[[int], tuple[Any, dict[str, Any]
             rows.append(row)
             continue
         evaluation = evaluate(model, plan, args)
-        stable_enough = args.allow_unstable or not isinstance(model, ModalModel) or model.is_stable()
+        stable_enough = args.allow_unstable or not isinstance(model, LINEAR_MODELS) or model.is_stable()
         row.update(
             fit_percent=extra.get("fit_percent"),
             estimation_fit_percent=evaluation.estimation.fit,
@@ -315,6 +329,8 @@ def text_summary(summary: dict[str, Any], data: IOData, plan: Plan) -> str:
         lines.append(f"{name:<14} {est:>28.2f} {('-' if val is None else f'{val:.2f}'):>28}")
     if plan.validation:
         lines.append("validation on: " + "; ".join(plan.validation_names))
+    if summary.get("scoring_note"):
+        lines.append(f"note: {summary['scoring_note']}")
     for note in plan.notes:
         lines.append(f"note: {note}")
     if summary.get("orders_tried") and len(summary["orders_tried"]) > 1:
@@ -346,6 +362,9 @@ def identify_nonlinear(linear: ModalModel, plan: Plan, args: argparse.Namespace)
     """The spline-nonlinear model started from ``linear``, its p chosen on validation data from a small grid."""
     from identification.spline_iekf import SplineIEKFOptions, identify_spline_iekf
 
+    if not isinstance(linear, ModalModel):
+        raise InputError("--nonlinear starts from a continuous-time modal model; this linear model is discrete-time "
+                         "(a pole on the negative real axis): use --method iekf or another order")
     grid = args.nonlinear_p or ([1e-7, 1e-6] if plan.validation else [1e-7])
     tried, best = [], None
     for p in grid:
@@ -419,8 +438,3 @@ def run_iekf_order(args: argparse.Namespace, data: IOData, options: IEKFOptions,
     result = identify_iekf(data, structure_for(args, order, data), options=options)
     return result.model, {"fit_percent": result.fit_percent, "stop_reason": result.stop_reason, "result": result}
 
-
-START_HELP = ("start values: data (a subspace model of the record, default), band (modes across the record's band), "
-              "default (sigma = -10, omega = 10 rad/s, absolute) or paper (sigma = -1, omega = 1)")
-__all__ += ["START_HELP", "START_CHOICES", "Evaluation", "search_orders", "emit", "text_summary",
-            "identify_nonlinear", "start_fit_of", "run_iekf_order", "scores_summary"]

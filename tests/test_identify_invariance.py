@@ -154,3 +154,41 @@ def test_cli_order_range_chooses_on_validation_data(tmp_path):
     assert all({"order", "seconds", "validation_fit_percent"} <= set(row) for row in summary["orders_tried"])
     # the true order is 3: lower orders miss a mode by more than the parsimony tolerance, 4 gains nothing
     assert summary["order"] == 3
+
+
+def test_a_negative_real_discrete_pole_gives_a_labelled_discrete_model():
+    """y(k) = -0.6 y(k-1) + u(k-1): no continuous-time equivalent; ARX returns the discrete model, not an error."""
+    from identification.comparators import identify_with
+    from identification.discrete import DiscreteModel
+
+    u = np.random.default_rng(11).standard_normal((400, 1))
+    y = np.zeros((400, 1))
+    for k in range(1, 400):
+        y[k] = -0.6 * y[k - 1] + u[k - 1]
+    record = IOData(t=np.arange(400) * 0.1, u=u, y=y)
+    outcome = identify_with(record, method="arx", order=1)
+    assert isinstance(outcome.model, DiscreteModel) and outcome.model.meta["time_domain"] == "discrete"
+    assert outcome.model.eigenvalues()[0].real == pytest.approx(-0.6, abs=1e-9)  # exact data: exact pole
+    assert score(outcome.model, record).fit[0] > 99.99
+
+
+@pytest.mark.slow
+def test_cli_nonlinear_scores_and_archives_both_models(tmp_path):
+    """--nonlinear: the linear start, then the spline model; both scored, both archived (compiles the spline filter)."""
+    import h5py
+
+    data = _record(100.0, seed=12)
+    record = tmp_path / "nl.csv"
+    np.savetxt(record, np.column_stack([data.t, data.u, data.y - 0.2 * data.y**3]), delimiter=",",
+               header="t,u1,y1", comments="")
+    archive = tmp_path / "run.h5"
+    completed = subprocess.run([*VEHID, "identify", str(record), "--inputs", "u1", "--outputs", "y1", "--order", "3",
+                                "--validation", "0.3", "--nonlinear", "--nonlinear-p", "1e-7", "--nonlinear-passes", "5",
+                                "--out", str(archive), "--json"], capture_output=True, text=True, check=False)
+    assert completed.returncode == 0, completed.stderr
+    summary = json.loads(completed.stdout)
+    nonlinear = summary["nonlinear"]
+    assert {"estimation_fit_percent", "validation_fit_percent", "validation_R", "fit_percent", "p"} <= set(nonlinear)
+    assert summary["validation_fit_percent"] is not None and len(nonlinear["validation_fit_percent"]) == 1
+    with h5py.File(archive, "r") as handle:
+        assert {"iekf", "nonlinear"} <= set(handle["runs"])

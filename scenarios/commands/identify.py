@@ -198,8 +198,8 @@ def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None)
         allow_unstable=allow_unstable,
     )
     if evaluation.horizon is not None and args.horizon is None:
-        warnings.append(f"the model is unstable: scored by {evaluation.horizon}-step-ahead prediction, "
-                        "since its simulation diverges (--horizon K to choose K)")
+        summary["scoring_note"] = (f"the model is unstable: scored by {evaluation.horizon}-step-ahead prediction, "
+                                   "since its simulation diverges (--horizon K to choose K)")
     if result is not None:
         summary["start"] = {k: v for k, v in result.meta.items() if k != "start_parameters"}
     if args.nonlinear:
