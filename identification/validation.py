@@ -49,6 +49,7 @@ INITIAL_STATES = ("zero", "estimate")
 # process noise this fraction of the input-driven state variance per sample, unit measurement noise.
 _PREDICTOR_PROCESS_NOISE = 1e-2
 _UNSTABLE_HORIZON = 10  # samples, when a model's simulation diverges and no horizon is given
+_UNSTABLE_WINDOW = 50  # samples over which an unstable model's initial state is fitted
 
 
 @dataclass(frozen=True)
@@ -162,8 +163,11 @@ def _k_step(model: ModalModel, data: IOData, horizon: int) -> np.ndarray:
     N = u.shape[0]
     states = np.zeros((N, n))
     x = np.zeros(n)
-    if model.is_stable():  # start the observer at the least-squares initial state (foh state xi = x - G2 u)
-        x = estimate_initial_state(model, data)
+    # Start the observer at the least-squares initial state (foh state xi = x - G2 u): from the whole
+    # record for a stable model, from its first samples for an unstable one (whose free responses grow).
+    window = data if model.is_stable() else data[: min(N, max(_UNSTABLE_WINDOW, 10 * n))]
+    if window.n_samples > n:
+        x = estimate_initial_state(model, window)
         if isinstance(model, ModalModel):
             x = x - data.dt * _phi_matrices(model.A, data.dt)[2] @ model.B @ u[0]
     observer = Ad - gain @ Cn

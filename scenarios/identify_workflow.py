@@ -223,7 +223,7 @@ def run_warnings(*, model: Any, evaluation: Evaluation, stop_reason: str | None,
         if bad.size:
             lines.append(f"{prefix}fit below zero on {where} data for output(s) {', '.join(str(i + 1) for i in bad)} "
                          f"({', '.join(f'{scores.fit[i]:.1f} %' for i in bad)}): the model explains less than the "
-                         "output's mean; try another order, --initial-state estimate, or check the data")
+                         "output's mean; try another order, or check that the inputs drive these outputs")
             break
     return lines
 

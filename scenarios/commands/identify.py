@@ -70,7 +70,7 @@ def register(parser: argparse.ArgumentParser) -> None:
                         help="estimator: the IEKF (default) or a classical comparator on the same data")
     parser.add_argument("--passes", type=int, default=50, help="largest number of passes (default 50)")
     parser.add_argument("--p", type=float, default=None,
-                        help="tuning parameter p: Q = p I' (default 1e-3 per dominant time constant; 1 with --timescale seconds)")
+                        help="tuning parameter p: Q = p I' (default 1e-4 per dominant time constant; 1 with --timescale seconds)")
     parser.add_argument("--discretization", default="exact", choices=DISCRETIZATIONS, help="filter discretisation (default exact)")
     parser.add_argument("--covariance", default="joseph", choices=COVARIANCE_FORMS, help="covariance numerics (default joseph)")
     parser.add_argument("--start", default="data", choices=workflow.START_CHOICES, help=workflow.START_HELP)
