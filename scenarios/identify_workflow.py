@@ -11,10 +11,13 @@
   improve on the best). Parsimony rule: the smallest order whose mean
   validation fit is within :data:`ORDER_TOLERANCE` points of the best order's;
   models that diverged or are unstable where stability was asked take no part.
-* Warnings: a model no better than its start, a fit below zero on any
-  output, an unstable model where stability was asked, a run that did not
-  converge: one line each on standard error and in the JSON ``warnings``;
-  ``--strict`` turns them into exit status 3.
+* Warnings: a model no better than its start (R not above the start's, or
+  modes that stayed within :data:`MOVED` of their start values, while it
+  explains less than :data:`NOTHING_TO_GAIN` percent) or worse than it by
+  :data:`WORSE_MARGIN` points of R, a fit below zero on any output, an unstable model where
+  stability was asked, a run that did not converge: one line each on
+  standard error and in the JSON ``warnings``; ``--strict`` turns them into
+  exit status 3.
 """
 
 from __future__ import annotations
@@ -42,7 +45,7 @@ __all__ = [
     "emit",
     "text_summary",
     "identify_nonlinear",
-    "start_fit_of",
+    "start_of",
     "run_iekf_order",
     "scores_summary",
     "AUTO_MAX_ORDER",
@@ -64,7 +67,8 @@ AUTO_HOLDOUT = 0.3  # fraction held out to choose an order when no validation da
 START_HELP = ("start values: data (a subspace model of the record, default), band (modes across the record's band), "
               "default (sigma = -10, omega = 10 rad/s, absolute) or paper (sigma = -1, omega = 1)")
 NO_BETTER_MARGIN = 0.01  # points: a final fit within this of the start's counts as no better
-NOTHING_TO_GAIN = 99.0  # percent R: a start this good leaves nothing to improve, so "no better" is no warning
+MOVED = 1e-3  # relative change of a mode's eigenvalue below which it stayed at its start
+NOTHING_TO_GAIN = 99.0  # percent R: a model this good is no warning for staying at its start
 WORSE_MARGIN = 0.5  # points of R below the start's: the filter made the model worse
 
 
@@ -201,7 +205,8 @@ def evaluate(model: Any, plan: Plan, args: argparse.Namespace) -> Evaluation:
 
 
 def run_warnings(*, model: Any, evaluation: Evaluation, stop_reason: str | None, start_fit: float | None,
-                 final_fit: float | None, allow_unstable: bool, label: str = "") -> list[str]:
+                 final_fit: float | None, allow_unstable: bool, label: str = "", start_moved: bool | None = None
+                 ) -> list[str]:
     """One line per problem, naming its cause and the likely fix (module docstring)."""
     prefix = f"{label}: " if label else ""
     lines = []
@@ -211,9 +216,13 @@ def run_warnings(*, model: Any, evaluation: Evaluation, stop_reason: str | None,
         if final_fit < start_fit - WORSE_MARGIN:
             lines.append(f"{prefix}the model is worse than its start (mean R {final_fit:.3f} % against "
                          f"{start_fit:.3f} %): lower --p, or fewer passes")
-        elif final_fit <= start_fit + NO_BETTER_MARGIN and start_fit < NOTHING_TO_GAIN:
+        elif final_fit <= start_fit + NO_BETTER_MARGIN and final_fit < NOTHING_TO_GAIN:
             lines.append(f"{prefix}the model is no better than its start (mean R {final_fit:.3f} % against "
-                         f"{start_fit:.3f} %): try another --start, a larger --p, or --normalize")
+                         f"{start_fit:.3f} %): the start may already be as good as this order allows; "
+                         "else try another --start or order, or a larger --p")
+    if start_moved is False and final_fit is not None and final_fit < NOTHING_TO_GAIN:
+        lines.append(f"{prefix}the model is no better than its start: its modes stayed at their start values "
+                     f"(mean R {final_fit:.3f} %): try --start data, a larger --p, or --normalize")
     if isinstance(model, LINEAR_MODELS) and not allow_unstable and not model.is_stable():
         lines.append(f"{prefix}the model is unstable where stability was asked: lower the order, or give "
                      "--allow-unstable for an open-loop unstable plant")
@@ -413,19 +422,25 @@ class NonlinearScores:
         return float(np.mean(self.validation_fit if self.validation else self.estimation.fit))
 
 
-def start_fit_of(result: Any, data: IOData) -> float | None:
-    """Mean R (eq. 17) of an IEKF run's start model simulated from rest, or None where unknown."""
+def start_of(result: Any, data: IOData) -> tuple[float | None, bool | None]:
+    """Mean R (eq. 17) of an IEKF run's start model simulated from rest, and whether the modes moved from it.
+
+    A mode moved when its eigenvalue changed by more than :data:`MOVED` of its magnitude
+    (a unit-free test; None where the start is unknown, as on a resumed run).
+    """
     theta = result.meta.get("start_parameters") if hasattr(result, "meta") else None
     if theta is None:
-        return None
+        return None, None
     model = ModalModel.from_parameters(result.structure, theta)
+    start_modes, final_modes = model.mode_eigenvalues(), result.model.mode_eigenvalues()
+    moved = bool(np.max(np.abs(final_modes - start_modes) / np.maximum(np.abs(start_modes), 1e-300)) > MOVED)
     with np.errstate(all="ignore"):
         simulated = model.simulate(data.u, data.dt)
     if not np.all(np.isfinite(simulated)):
-        return None
+        return None, moved
     from identification.metrics import percentage_explanation
 
-    return float(np.mean(percentage_explanation(data.y, simulated)))
+    return float(np.mean(percentage_explanation(data.y, simulated))), moved
 
 
 def structure_for(args: argparse.Namespace, order: int, data: IOData) -> ModalStructure:

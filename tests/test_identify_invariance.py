@@ -141,6 +141,13 @@ def test_cli_warns_and_strict_exits_3_on_a_run_that_did_not_converge(tmp_path):
     assert strict.returncode == 3
     summary = json.loads(strict.stdout)
     assert summary["exit_status"] == 3 and any("did not converge" in w for w in summary["warnings"])
+    # the case: outputs x1e-6 with the absolute settings leave the modes at their start values
+    small = _write_csv(tmp_path / "small.csv", _record(30.0, seed=8), y_factor=1e-6)
+    stuck = subprocess.run([*VEHID, "identify", str(small), "--inputs", "u1", "--outputs", "y1", "--order", "3",
+                            "--start", "default", "--timescale", "seconds", "--no-normalize", "--p", "1", "--json"],
+                           capture_output=True, text=True, check=False)
+    assert stuck.returncode == 0
+    assert any("no better than its start" in w for w in json.loads(stuck.stdout)["warnings"])
 
 
 @pytest.mark.slow
@@ -192,3 +199,38 @@ def test_cli_nonlinear_scores_and_archives_both_models(tmp_path):
     assert summary["validation_fit_percent"] is not None and len(nonlinear["validation_fit_percent"]) == 1
     with h5py.File(archive, "r") as handle:
         assert {"iekf", "nonlinear"} <= set(handle["runs"])
+
+
+def test_order_parsing_and_the_parsimony_rule():
+    from identification.errors import DivergenceError, InputError
+    from scenarios.identify_workflow import AUTO_MAX_ORDER, ORDER_TOLERANCE, choose_order, parse_orders
+
+    assert parse_orders("4") == ([4], False)
+    assert parse_orders("2-5") == ([2, 3, 4, 5], False)
+    assert parse_orders("auto") == (list(range(1, AUTO_MAX_ORDER + 1)), True)
+    for bad in ("0", "5-2", "four", "2-"):
+        with pytest.raises(InputError):
+            parse_orders(bad)
+    rows = [{"order": 2, "ranking_fit": 90.0, "eligible": True},
+            {"order": 3, "ranking_fit": 97.0 - ORDER_TOLERANCE / 2, "eligible": True},
+            {"order": 4, "ranking_fit": 97.0, "eligible": True},
+            {"order": 5, "ranking_fit": 99.0, "eligible": False}]  # unstable where stability was asked
+    assert choose_order(rows) == 3  # the smallest within the tolerance of the best eligible order
+    with pytest.raises(DivergenceError):
+        choose_order([{"order": 2, "eligible": False, "error": "diverged"}])
+
+
+def test_cli_validation_file_is_scored_and_a_mismatched_one_refused(tmp_path):
+    record = _write_csv(tmp_path / "estimation.csv", _record(60.0, seed=15))
+    other = _write_csv(tmp_path / "other.csv", _record(30.0, seed=16))
+    completed = subprocess.run([*VEHID, "identify", str(record), "--inputs", "u1", "--outputs", "y1", "--order", "3",
+                                "--validation-file", str(other), "--json"], capture_output=True, text=True, check=False)
+    assert completed.returncode == 0, completed.stderr
+    summary = json.loads(completed.stdout)
+    assert len(summary["validation_records"]) == 1 and summary["validation_fit_percent"][0] > 99.9
+    assert summary["validation_R"][0] > 99.9 and summary["estimation_fit_percent"][0] > 99.9
+    bad = tmp_path / "bad.csv"
+    np.savetxt(bad, np.ones((50, 3)), delimiter=",", header="t,u1,y2", comments="")
+    refused = subprocess.run([*VEHID, "identify", str(record), "--inputs", "u1", "--outputs", "y1", "--order", "3",
+                              "--validation-file", str(bad)], capture_output=True, text=True, check=False)
+    assert refused.returncode == 2 and "y1" in refused.stderr

@@ -191,11 +191,11 @@ def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None)
                                          "seconds": summary["seconds"]}])
     allow_unstable = bool(getattr(args, "allow_unstable", False)) or (
         result is not None and result.options.allow_unstable)
+    start_fit, start_moved = workflow.start_of(result, data) if result is not None else (None, None)
     warnings = workflow.run_warnings(
-        model=model, evaluation=evaluation, stop_reason=summary.get("stop_reason"),
-        start_fit=workflow.start_fit_of(result, data) if result is not None else None,
+        model=model, evaluation=evaluation, stop_reason=summary.get("stop_reason"), start_fit=start_fit,
         final_fit=float(summary["fit_percent"].mean()) if result is not None else None,
-        allow_unstable=allow_unstable,
+        allow_unstable=allow_unstable, start_moved=start_moved,
     )
     if evaluation.horizon is not None and args.horizon is None:
         summary["scoring_note"] = (f"the model is unstable: scored by {evaluation.horizon}-step-ahead prediction, "
