@@ -47,6 +47,7 @@ __all__ = [
     "identify_nonlinear",
     "start_of",
     "run_iekf_order",
+    "last_good_on_divergence",
     "scores_summary",
     "AUTO_MAX_ORDER",
     "ORDER_TOLERANCE",
@@ -210,7 +211,10 @@ def run_warnings(*, model: Any, evaluation: Evaluation, stop_reason: str | None,
     """One line per problem, naming its cause and the likely fix (module docstring)."""
     prefix = f"{label}: " if label else ""
     lines = []
-    if stop_reason is not None and stop_reason != "converged":
+    if stop_reason is not None and stop_reason.startswith("diverged"):
+        lines.append(f"{prefix}the run diverged ({stop_reason}); the last good pass is reported: lower --p or the "
+                     "order, or give --allow-unstable for an open-loop unstable plant")
+    elif stop_reason is not None and stop_reason != "converged":
         lines.append(f"{prefix}the run did not converge ({stop_reason}): raise --passes, or lower --p or the order")
     if start_fit is not None and final_fit is not None:
         if final_fit < start_fit - WORSE_MARGIN:
@@ -447,9 +451,25 @@ def structure_for(args: argparse.Namespace, order: int, data: IOData) -> ModalSt
     return ModalStructure.from_pattern(args.pattern, order, data.n_u, data.n_y)
 
 
+def last_good_on_divergence(run: Callable[[], Any]) -> tuple[Any, str | None]:
+    """``run()``'s IEKF result, or on a DivergenceError after some good passes the last good one and the message.
+
+    Nothing computed is lost: the caller reports that model with a warning. A divergence at the first
+    pass (no model at all) is raised as before.
+    """
+    try:
+        return run(), None
+    except DivergenceError as exc:
+        if exc.last_good is None:
+            raise
+        return exc.last_good, str(exc)
+
+
 def run_iekf_order(args: argparse.Namespace, data: IOData, options: IEKFOptions, order: int
                    ) -> tuple[ModalModel, dict[str, Any]]:
     """One IEKF run of an order search (no checkpoints): its model and what the summary needs."""
-    result = identify_iekf(data, structure_for(args, order, data), options=options)
-    return result.model, {"fit_percent": result.fit_percent, "stop_reason": result.stop_reason, "result": result}
+    result, divergence = last_good_on_divergence(
+        lambda: identify_iekf(data, structure_for(args, order, data), options=options))
+    stop_reason = f"{result.stop_reason}: {divergence}" if divergence else result.stop_reason
+    return result.model, {"fit_percent": result.fit_percent, "stop_reason": stop_reason, "result": result}
 

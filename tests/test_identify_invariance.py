@@ -234,3 +234,22 @@ def test_cli_validation_file_is_scored_and_a_mismatched_one_refused(tmp_path):
     refused = subprocess.run([*VEHID, "identify", str(record), "--inputs", "u1", "--outputs", "y1", "--order", "3",
                               "--validation-file", str(bad)], capture_output=True, text=True, check=False)
     assert refused.returncode == 2 and "y1" in refused.stderr
+
+
+def test_a_divergence_after_good_passes_reports_the_last_good_one_with_a_warning():
+    from identification.errors import DivergenceError
+    from scenarios.identify_workflow import Evaluation, last_good_on_divergence, run_warnings
+
+    good = identify_iekf(_record(20.0, seed=3), STRUCTURE, options=IEKFOptions.invariant(passes=2))
+
+    def diverging():
+        raise DivergenceError("pass 3: the identified model is unstable", last_good=good)
+
+    result, message = last_good_on_divergence(diverging)
+    assert result is good and "pass 3" in message
+    with pytest.raises(DivergenceError):  # nothing good to report: still an error
+        last_good_on_divergence(lambda: (_ for _ in ()).throw(DivergenceError("pass 1: non-finite", last_good=None)))
+    evaluation = Evaluation(score(good.model, _record(20.0, seed=3)), good.fit_percent, (), None)
+    lines = run_warnings(model=good.model, evaluation=evaluation, stop_reason=f"diverged at pass 3: {message}",
+                         start_fit=None, final_fit=None, allow_unstable=False)
+    assert len(lines) == 1 and "diverged" in lines[0] and "last good pass" in lines[0]

@@ -156,8 +156,12 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
                 checkpoint(record, so_far)
             progress.advance(note=f"R {record.mean_fit_filter:.4f} %")
 
-        result = identify_iekf(data, structure, options=options, resume=previous, on_pass=on_pass)
-    return _finish(args, plan, _iekf_summary(result), result.model, result=result, archive_path=archive_path)
+        result, divergence = workflow.last_good_on_divergence(
+            lambda: identify_iekf(data, structure, options=options, resume=previous, on_pass=on_pass))
+    summary = _iekf_summary(result)
+    if divergence:
+        summary["divergence"] = divergence
+    return _finish(args, plan, summary, result.model, result=result, archive_path=archive_path)
 
 
 def _iekf_summary(result) -> dict:
@@ -193,7 +197,9 @@ def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None)
         result is not None and result.options.allow_unstable)
     start_fit, start_moved = workflow.start_of(result, data) if result is not None else (None, None)
     warnings = workflow.run_warnings(
-        model=model, evaluation=evaluation, stop_reason=summary.get("stop_reason"), start_fit=start_fit,
+        model=model, evaluation=evaluation, start_fit=start_fit,
+        stop_reason=(f"{summary['stop_reason']}: {summary['divergence']}" if "divergence" in summary
+                     else summary.get("stop_reason")),
         final_fit=float(summary["fit_percent"].mean()) if result is not None else None,
         allow_unstable=allow_unstable, start_moved=start_moved,
     )
