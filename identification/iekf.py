@@ -406,8 +406,9 @@ def identify_iekf(
         time_constant = 1.0
         if options.timescale == "auto":
             rates = np.abs(ModalModel.from_parameters(structure, theta_seconds).mode_eigenvalues())
-            # the start's dominant time constant; clipped to the band a sampled record can show
-            time_constant = float(1.0 / np.clip(np.median(rates), 1e-6 / dt, 3.0 / dt))
+            # the start's dominant time constant, each mode's rate clipped to the band a sampled record
+            # shows well (up to a quarter of the Nyquist frequency), so that a spurious fast mode does not set it
+            time_constant = float(1.0 / np.median(np.clip(rates, 1e-6 / dt, (np.pi / 4) / dt)))
         theta = rescale_time(structure, theta_seconds, time_unit)
         P = None
         history = []

@@ -194,8 +194,11 @@ def _subspace_start(u: np.ndarray, y: np.ndarray, structure: ModalStructure, sta
             return DataStart(model, "subspace")
     except InputError as exc:
         note = str(exc)
-    with np.errstate(divide="ignore"):
-        continuous = np.log(np.where(np.abs(discrete) > 1e-12, discrete, 1e-12).astype(complex))
+    magnitude = np.maximum(np.abs(discrete), 1e-12)
+    negative = (np.abs(discrete.imag) <= 1e-9 * magnitude) & (discrete.real < 0)
+    # A negative real discrete pole (a sign flip every sample, mostly noise) has no continuous
+    # counterpart; its decay rate alone is kept, as a real pole.
+    continuous = np.where(negative, np.log(magnitude).astype(complex), np.log(discrete.astype(complex)))
     modes = place_eigenvalues(continuous, structure, stable=stable)
     model = fit_input_gains(structure, modes, u, y)
     return DataStart(model, "subspace eigenvalues", note)
