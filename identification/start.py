@@ -91,8 +91,8 @@ def place_eigenvalues(values: np.ndarray, structure: ModalStructure, *, stable: 
     Complex eigenvalues (one of each conjugate pair) fill the structure's
     pairs, slowest first; left-over pairs are made from two real poles
     (their mean as sigma, half their distance, at least a tenth of the mean,
-    as omega); left-over complex eigenvalues fill real poles by their real
-    part, then by their magnitude. With ``stable`` every real part is made
+    as omega); real eigenvalues, then left-over complex ones (by their
+    magnitude), fill the real poles. With ``stable`` every real part is made
     negative (reflected).
     """
     values = np.asarray(values, dtype=complex)
@@ -131,9 +131,8 @@ def _modal_matrix(structure: ModalStructure, modes: np.ndarray) -> np.ndarray:
     return theta
 
 
-def fit_input_gains(structure: ModalStructure, modes: np.ndarray, u: np.ndarray, y: np.ndarray,
-                    *, free_c: np.ndarray | None = None) -> ModalModel:
-    """The model with these modes (rad/sample) whose B and D fit ``y`` best, the free C entries given (default 0).
+def fit_input_gains(structure: ModalStructure, modes: np.ndarray, u: np.ndarray, y: np.ndarray) -> ModalModel:
+    """The model with these modes (rad/sample) whose B and D fit ``y`` best, the free C entries zero.
 
     ``y`` is linear in B and D once the modes and C are fixed: one
     simulation per B entry gives its regressor (time in samples, inputs
@@ -141,8 +140,6 @@ def fit_input_gains(structure: ModalStructure, modes: np.ndarray, u: np.ndarray,
     """
     theta = _modal_matrix(structure, modes)
     slices = structure.slices()
-    if free_c is not None:
-        theta[slices["C"]] = free_c
     n, n_u, n_y = structure.n, structure.n_u, structure.n_y
     columns = []
     for k in range(n * n_u):
