@@ -27,6 +27,12 @@ Methods (:data:`COMPARATORS`, a registry ``name -> function``):
     update cannot carry in double precision.
 ``n4sid``
     Subspace identification by PO-MOESP (:mod:`identification.subspace`).
+
+Where a discrete model (``arx``, ``rls``, ``n4sid``) has a pole on the
+closed negative real axis there is no continuous-time equivalent: the
+method then returns the discrete model itself as a
+:class:`~identification.discrete.DiscreteModel` (``meta["time_domain"] ==
+"discrete"``), scored alike.
 ``output-error``
     The modal model's parameters fitted by nonlinear least squares on the
     simulation error (``scipy.optimize.least_squares``, trust-region
@@ -60,6 +66,7 @@ from scipy.special import comb
 
 from ._checks import positive_int
 from .data import IOData, as_records
+from .discrete import DiscreteModel, has_no_continuous_equivalent
 from .errors import ConversionError, InputError
 from .least_squares import estimate_arx, least_squares, model_from_theta, stacked_arx_regressors
 from .metrics import FitMetrics, fit_metrics
@@ -126,7 +133,10 @@ def _experiments(records: tuple[IOData, ...], output: int) -> list[tuple[np.ndar
 
 
 def _discrete_to_modal(Ad: np.ndarray, Bd: np.ndarray, Cd: np.ndarray, Dd: np.ndarray, dt: float,
-                       meta: dict[str, Any]) -> ModalModel:
+                       meta: dict[str, Any]) -> ModalModel | DiscreteModel:
+    if has_no_continuous_equivalent(Ad):  # the discrete model itself, labelled, rather than no model
+        return DiscreteModel(Ad, Bd, Cd, Dd, dt, meta={
+            **meta, "reason": "a discrete pole on the negative real axis has no continuous-time equivalent"})
     try:
         A, B, C, D = discrete_to_continuous(Ad, Bd, Cd, Dd, dt, hold="foh")
         structure = modal_structure_for(A, B.shape[1], C.shape[0])
@@ -247,6 +257,9 @@ def output_error_comparator(data: IOData, *, order: int, **options: Any) -> Moda
         initial = start
     elif start in ("arx", "n4sid"):
         initial = COMPARATORS[start](records, order=order)
+        if isinstance(initial, DiscreteModel):
+            raise InputError(f"the {start} start model has no continuous-time equivalent (a discrete pole on the "
+                             "negative real axis): output-error needs a continuous start; give start as a ModalModel")
     else:
         raise InputError(f"start must be 'arx', 'n4sid' or a ModalModel; got {start!r}")
     if initial.structure.n != order or (initial.structure.n_u, initial.structure.n_y) != (data.n_u, data.n_y):

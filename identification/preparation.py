@@ -433,6 +433,7 @@ def prepare_validation(
     preparation: Preparation,
     *,
     record: int | None = None,
+    own_offsets: bool = False,
 ) -> IOData:
     """Prepare validation data exactly as the estimation data were prepared.
 
@@ -448,6 +449,10 @@ def prepare_validation(
     record : int, optional
         Apply the offsets of estimation record ``record`` instead (re-applying a
         model to its own raw estimation file).
+    own_offsets : bool
+        Remove the record's own offsets, estimated as the estimation records'
+        were (``detrend``), instead of the model's: for a separate experiment,
+        whose operating point is its own just as each estimation record's is.
 
     Returns
     -------
@@ -460,4 +465,9 @@ def prepare_validation(
                              "to read a file with")
         segment = preparation.settings.segment if record is not None else None
         data = read_record(data, replace(preparation.settings, segment=segment))
+    if own_offsets:
+        factors = {**dict(zip(preparation.input_names, map(float, preparation.input_scale))),
+                   **dict(zip(preparation.output_names, map(float, preparation.output_scale)))}
+        preparation._check(data)
+        return estimate_preparation(data, detrend=preparation.detrend, scale=factors).apply(data, 0)
     return preparation.apply(data, record)

@@ -300,7 +300,8 @@ def run_case(
         {"quantity": "trace(P) final", "workbench": f"{result.history[-1].trace_p:.4g}", "paper": "-", "reference": "-"},
     ]
     summary = {"case": case, **_model_summary(result), "paper": paper, "seed": seed}
-    text = _table_text(f"Linear example, {case} ({discretization}, {result.passes_run} passes, seed {seed})", rows)
+    converged = "converged" if result.stop_reason == "converged" else f"not converged ({result.stop_reason})"
+    text = _table_text(f"Linear example, {case} ({discretization}, {result.passes_run} passes, {converged}, seed {seed})", rows)
     return CaseResult(case, settings, {case: result}, {"identification": data}, tuple(rows), summary, text,
                       time.perf_counter() - started)
 

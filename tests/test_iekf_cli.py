@@ -94,7 +94,10 @@ def test_a_killed_run_resumes_to_the_same_parameters(tmp_path):
     """Kill the process after its archive holds some passes; resuming reaches the uninterrupted run's parameters."""
     data, _ = make_data(5, outputs=(0,), duration=40.0)
     record = _write_csv(tmp_path / "record.csv", data.u, data.y)
-    common = ["--inputs", "u1,u2", "--outputs", "y1", "--order", "5", "--passes", "12", "--p", "0.5", "--json"]
+    # the absolute settings (fixed start, p in seconds): a run of 12 passes, long enough to be killed mid-way
+    # (from the data start it converges by pass 3, before any kill could land)
+    common = ["--inputs", "u1,u2", "--outputs", "y1", "--order", "5", "--passes", "12", "--p", "0.5", "--json",
+              "--start", "default", "--timescale", "seconds", "--no-normalize"]
     whole = _vehid("identify", str(record), *common, "--out", str(tmp_path / "whole.h5"))
     assert whole.returncode == 0, whole.stderr
     archive = tmp_path / "killed.h5"

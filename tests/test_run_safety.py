@@ -14,6 +14,7 @@ import pytest
 
 from identification import IEKFOptions, ModalStructure, identify_iekf
 from identification.archive import open_archive, read_archive
+from identification.errors import ConversionError
 from identification.iekf_archive import Checkpointer, read_iekf_run
 from scenarios.cli import main
 from scenarios.commands import identify as identify_command
@@ -165,11 +166,8 @@ def test_comparators_archive_their_model(tmp_path, capsys):
     assert main(["report", str(out), "--out", str(tmp_path / "figs"), "--dpi", "30", "--quiet"]) == 0
 
 
-def test_a_model_conversion_failure_on_good_input_exits_1(tmp_path, capsys):
-    """An estimate with no continuous modal form is a failed computation (1), not bad input (it used to be 2).
-
-    y(k) = -0.5 y(k-1) + u(k-1): ARX finds the discrete pole -0.5 exactly, which has no continuous equivalent.
-    """
+def _alternating_record(tmp_path):
+    """y(k) = -0.5 y(k-1) + u(k-1): a discrete pole at -0.5, which has no continuous-time equivalent."""
     rng = np.random.default_rng(0)
     u = rng.normal(size=2000)
     y = np.zeros(2000)
@@ -177,6 +175,28 @@ def test_a_model_conversion_failure_on_good_input_exits_1(tmp_path, capsys):
         y[k] = -0.5 * y[k - 1] + u[k - 1]
     path = tmp_path / "alternating.csv"
     np.savetxt(path, np.column_stack([np.arange(2000) * 0.01, u, y]), delimiter=",", header="t,u,y", comments="")
+    return path
+
+
+def test_a_negative_real_discrete_pole_comes_back_as_a_labelled_discrete_model(tmp_path, capsys):
+    """It used to exit 2 (as bad input) with no model; the estimate is right, only its continuous form does not exist."""
+    path = _alternating_record(tmp_path)
+    assert main(["identify", str(path), "--inputs", "u", "--outputs", "y", "--order", "1", "--method", "arx",
+                 "--detrend", "none", "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["time_domain"] == "discrete"
+    assert summary["eigenvalues"][0] == pytest.approx(-0.5, abs=1e-6)  # noise-free: exact to rounding
+
+
+def test_a_model_conversion_failure_on_good_input_exits_1(tmp_path, capsys, monkeypatch):
+    """An estimate with no modal form is a failed computation (1), not bad input (it used to be 2)."""
+    import identification.comparators as comparators
+
+    def no_modal_form(*args, **kwargs):
+        raise ConversionError("the arx model has no continuous modal form: a defective eigenvalue")
+
+    monkeypatch.setattr(comparators, "identify_with", no_modal_form)
+    path = _alternating_record(tmp_path)
     assert main(["identify", str(path), "--inputs", "u", "--outputs", "y", "--order", "1", "--method", "arx",
                  "--json"]) == 1
     captured = capsys.readouterr()

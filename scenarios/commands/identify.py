@@ -13,8 +13,16 @@ identify one model, scored per record ("records" in the JSON summary).
 The default method is the Identifying EKF (Best & Bogdanski 2017) with the
 exact first-order-hold discretisation, so the identified parameters are those
 of the continuous-time model; --discretization euler reproduces the paper's
-filter. The summary gives the eigenvalues, the fit R (eq. 17) per output of
-the continuous model simulated exactly, the matrices and the run time.
+filter. The defaults do not depend on the units of time or of the signals:
+signals normalised (--no-normalize to switch off), start values from a
+subspace model of the record (--start paper for the paper's), time counted
+in samples inside the filter and p per dominant time constant (--timescale
+seconds for the absolute behaviour). The summary gives the eigenvalues, the
+fit R (eq. 17) per output of the continuous model simulated exactly, NRMSE
+fits on estimation and validation data (--validation, --validation-file),
+whether the run converged, any warnings (--strict: exit status 3), the
+matrices and the run time. --order takes a number, a range (2-8) or auto,
+chosen on validation data; --nonlinear adds the spline-nonlinear model.
 
 With --out ARCHIVE the record and every finished pass are written to an HDF5
 archive as the run goes (atomically, so a killed run leaves the archive of
@@ -35,17 +43,20 @@ import dataclasses
 from contextlib import nullcontext
 from pathlib import Path
 
-from identification.errors import DivergenceError, InputError
-from identification.filter_models import DISCRETIZATIONS
-from identification.iekf import START_VALUES, IEKFOptions, identify_iekf
-from identification.archive import open_archive, write_archive, write_run
+import numpy as np
+
+from identification.archive import open_archive, read_records, write_archive, write_record, write_run
 from identification.archive_safety import archive_lock, check_output_target
-from identification.preparation import read_record
+from identification.errors import InputError
+from identification.filter_models import DISCRETIZATIONS
+from identification.iekf import identify_iekf
 from identification.iekf_archive import Checkpointer, read_iekf_run
 from identification.iekf_pass import COVARIANCE_FORMS
 from identification.modal import C_PATTERNS, ModalStructure
-from scenarios.data_options import (archive_records, archived_preparation, archived_records, load_from_args,
-                                    records_summary, register_data_options, save_model)
+from identification.preparation import prepare_validation, read_record
+from scenarios import identify_workflow as workflow
+from scenarios.data_options import (archive_records, archived_preparation, archived_records, records_summary,
+                                    register_data_options, save_model, settings_from_args)
 from scenarios.progress import Progress
 
 NAME = "identify"
@@ -57,17 +68,19 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("data", nargs="*", help="data files: .h5, .csv, .dat, .txt, .mat, .mf4 (several: one model)")
     parser.add_argument("--inputs", help="comma-separated input column names")
     parser.add_argument("--outputs", help="comma-separated output column names")
-    parser.add_argument("--order", type=int, default=4, help="model order n (default 4)")
+    parser.add_argument("--order", default="4", help="model order n, a range such as 2-8, or auto (default 4)")
     parser.add_argument("--pattern", default="default", choices=C_PATTERNS, help="C pattern (default: pairs tied to outputs in turn)")
     parser.add_argument("--method", default="iekf", choices=("iekf", "arx", "rls", "n4sid", "output-error"),
                         help="estimator: the IEKF (default) or a classical comparator on the same data")
     parser.add_argument("--passes", type=int, default=None,
                         help=f"largest number of passes (default {DEFAULT_PASSES}; with --resume, the run's own)")
-    parser.add_argument("--p", type=float, default=1.0, help="tuning parameter p: Q = p I' (default 1)")
+    parser.add_argument("--p", type=float, default=None,
+                        help="tuning parameter p: Q = p I' (default 1e-4 per dominant time constant; 1 with --timescale seconds)")
     parser.add_argument("--discretization", default="exact", choices=DISCRETIZATIONS, help="filter discretisation (default exact)")
     parser.add_argument("--covariance", default="joseph", choices=COVARIANCE_FORMS, help="covariance numerics (default joseph)")
-    parser.add_argument("--start", default="default", choices=sorted(START_VALUES), help="start values of sigma/omega")
-    parser.add_argument("--normalize", action="store_true", help="scale inputs and outputs by their RMS while filtering")
+    parser.add_argument("--start", default="data", choices=workflow.START_CHOICES, help=workflow.START_HELP)
+    parser.add_argument("--normalize", action=argparse.BooleanOptionalAction, default=True,
+                        help="scale inputs and outputs by their RMS while filtering (default on)")
     parser.add_argument("--save-model", help="write the model to this .json or .mat file")
     parser.add_argument("--out", help="HDF5 archive of the run, checkpointed after every pass")
     parser.add_argument("--force", action="store_true",
@@ -75,6 +88,7 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--resume", metavar="ARCHIVE",
                         help="continue the run checkpointed in ARCHIVE (its data and settings; --passes counts all passes)")
     register_data_options(parser)
+    workflow.register_options(parser)
     parser.set_defaults(handler=run)
 
 
@@ -85,28 +99,36 @@ def load_record(path: str, inputs: list[str] | None, outputs: list[str] | None, 
 
 RUN_NAME = "iekf"
 DEFAULT_PASSES = 50
+VALIDATION_PREFIX = "validation"
 
 
 def _resume(args: argparse.Namespace):
-    """Data, structure, options and the finished passes of a checkpointed run."""
+    """Plan, structure, options and the finished passes of a checkpointed run."""
     if args.data:
         raise InputError("--resume takes its data from the archive: give no DATA file")
     with open_archive(args.resume, kinds=["identification"]) as archive:
         previous = read_iekf_run(archive, RUN_NAME)
         records = archived_records(archive)
         preparation = archived_preparation(archive)
+        stored = read_records(archive)
     if not records:
         raise InputError(f"{args.resume} holds no identification record to resume on")
+    held_out = tuple(stored[name] for name in sorted(stored) if name.startswith(VALIDATION_PREFIX))
     budget = previous.options.passes if args.passes is None else args.passes
     options = dataclasses.replace(previous.options, passes=max(budget, previous.passes_run))
-    return records, previous.structure, options, previous, preparation
+    if preparation is not None:
+        load = lambda path: prepare_validation(path, preparation, own_offsets=True)  # noqa: E731
+    else:  # an archive written before preparations were kept
+        load = lambda path: read_record(path, settings_from_args(args))  # noqa: E731
+    plan = workflow.make_plan(args, records, load, held_out=held_out, preparation=preparation)
+    return plan, previous.structure, options, previous
 
 
 def run(args: argparse.Namespace) -> tuple[dict, str]:
     if args.resume and args.out:
         raise InputError("--resume continues in its own archive: give no --out")
     if args.out:  # before any work: a bad target must not cost the run
-        check_output_target(args.out, inputs=list(args.data), force=args.force)
+        check_output_target(args.out, inputs=[*args.data, *args.validation_file], force=args.force)
     if args.resume:  # a missing, foreign or corrupt file is named as such before anything is locked or created
         open_archive(args.resume, kinds=["identification"]).close()
     target = args.resume or args.out
@@ -114,29 +136,33 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
         return _identify(args)
 
 
+def _archive_plan(archive, plan) -> None:
+    """The prepared estimation records, the preparation and the held-out parts (what a resume needs)."""
+    archive_records(archive, plan.records, plan.preparation)
+    for index, record in enumerate(plan.validation[:plan.held_out_count]):
+        write_record(archive, VALIDATION_PREFIX if index == 0 else f"{VALIDATION_PREFIX}_{index + 1}", record)
+
+
 def _identify(args: argparse.Namespace) -> tuple[dict, str]:
     previous = None
     if args.resume:
-        records, structure, options, previous, preparation = _resume(args)
-        data = records[0] if len(records) == 1 else records
+        plan, structure, options, previous = _resume(args)
         archive_path = Path(args.resume)
     else:
         if not args.data:
             raise InputError("give a DATA file (or --resume ARCHIVE)")
-        records, preparation = load_from_args(args, args.data)
-        data = records[0] if len(records) == 1 else records
-        structure = ModalStructure.from_pattern(args.pattern, args.order, records[0].n_u, records[0].n_y)
+        plan = workflow.load_plan(args, args.data)
         if args.method != "iekf":
-            return _run_comparator(args, data, structure, records, preparation)
-        options = IEKFOptions(
-            p=args.p, passes=DEFAULT_PASSES if args.passes is None else args.passes,
-            discretization=args.discretization, covariance=args.covariance,
-            start=args.start, normalize=args.normalize,
-        )
+            return _run_comparator(args, plan)
+        options = workflow.iekf_options(args, DEFAULT_PASSES)
+        if len(plan.orders) > 1:
+            return _run_order_search(args, plan, options)
+        first = plan.records[0]
+        structure = ModalStructure.from_pattern(args.pattern, plan.orders[0], first.n_u, first.n_y)
         archive_path = Path(args.out) if args.out else None
         if archive_path is not None:
             with write_archive(archive_path, kind="identification", config=options, seeds=[]) as archive:
-                archive_records(archive, records, preparation)
+                _archive_plan(archive, plan)
     checkpoint = Checkpointer(archive_path, RUN_NAME) if archive_path is not None else None
     done = previous.passes_run if previous is not None else 0
     with Progress(options.passes, "IEKF passes", enabled=None if not args.quiet else False) as progress:
@@ -147,93 +173,148 @@ def _identify(args: argparse.Namespace) -> tuple[dict, str]:
                 checkpoint(record, so_far)
             progress.advance(note=f"R {record.mean_fit_filter:.4f} %")
 
-        # offsets removed: the prepared record no longer starts at rest, so its start state settles first
-        settle = True if preparation is not None and preparation.detrend != "none" else None
-        try:
-            result = identify_iekf(data, structure, options=options, resume=previous, on_pass=on_pass,
-                                   settle_start=settle)
-        except DivergenceError as exc:
-            if checkpoint is not None and exc.last_good is not None:
-                checkpoint.finish(exc.last_good)  # the archive says how the run ended: diverged at pass k
-            raise
+        result, divergence = workflow.last_good_on_divergence(
+            lambda: identify_iekf(plan.estimation, structure, options=options, resume=previous, on_pass=on_pass,
+                                  settle_start=plan.settle_start))
     if checkpoint is not None:
-        checkpoint.finish(result)
+        checkpoint.finish(result)  # the archive says how the run ended: converged, passes or diverged at pass k
+    summary = _iekf_summary(result)
+    if divergence:
+        summary["divergence"] = divergence
+    return _finish(args, plan, summary, result.model, result=result, archive_path=archive_path)
+
+
+def _iekf_summary(result) -> dict:
+    """The IEKF run's summary keys (the public contract of `vehid identify --json`)."""
     model = result.model
-    summary = {
+    return {
         "method": "iekf",
-        "order": structure.n,
+        "order": result.structure.n,
         "eigenvalues": model.eigenvalues(),
         "fit_percent": result.fit_percent,
         "fit_percent_filter": result.history[-1].fit_filter,
         "passes_run": result.passes_run,
         "stop_reason": result.stop_reason,
-        "discretization": options.discretization,
+        "discretization": result.options.discretization,
         "A": model.A,
         "B": model.B,
         "C": model.C,
         "D": model.D,
         "seconds": result.seconds,
     }
-    summary.update(records_summary(model, records, preparation))
+
+
+def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None) -> tuple[dict, str]:
+    """Scores, warnings, the nonlinear model, archive and model file: the common end of every identify run."""
+    data = plan.records[0]
+    evaluation = workflow.evaluate(model, plan, args)
+    summary.update(workflow.scores_summary(evaluation, summary["fit_percent"]))
+    summary.update(records_summary(model, plan.records, plan.preparation))
+    summary.setdefault("orders_tried", [{"order": summary["order"], "fit_percent": summary["fit_percent"],
+                                         "estimation_fit_percent": evaluation.estimation.fit,
+                                         "validation_fit_percent": evaluation.validation_fit,
+                                         "seconds": summary["seconds"]}])
+    allow_unstable = bool(getattr(args, "allow_unstable", False)) or (
+        result is not None and result.options.allow_unstable)
+    start_fit, start_moved = workflow.start_of(result, plan.records) if result is not None else (None, None)
+    warnings = workflow.run_warnings(
+        model=model, evaluation=evaluation, start_fit=start_fit,
+        stop_reason=(f"{summary['stop_reason']}: {summary['divergence']}" if "divergence" in summary
+                     else summary.get("stop_reason")),
+        final_fit=float(summary["fit_percent"].mean()) if result is not None else None,
+        allow_unstable=allow_unstable, start_moved=start_moved,
+    )
+    if evaluation.horizon is not None and args.horizon is None:
+        summary["scoring_note"] = (f"the model is unstable: scored by {evaluation.horizon}-step-ahead prediction, "
+                                   "since its simulation diverges (--horizon K to choose K)")
+    if result is not None:
+        summary["start"] = {k: v for k, v in result.meta.items() if k != "start_parameters"}
+    if args.nonlinear:
+        from identification.archive import update_archive
+
+        outcome = workflow.identify_nonlinear(model, plan, args)
+        summary["nonlinear"] = outcome.summary
+        warnings += workflow.run_warnings(
+            model=outcome.result.model, evaluation=workflow.Evaluation(
+                workflow.score(outcome.result.model, data, initial_state="zero"), outcome.summary["fit_percent"],
+                tuple(workflow.score(outcome.result.model, r, initial_state="zero") for r in plan.validation), None),
+            stop_reason=outcome.result.stop_reason, start_fit=float(np.mean(outcome.result.start_fit)),
+            final_fit=float(np.mean(outcome.result.fit_percent)), allow_unstable=True, label="nonlinear")
+        if archive_path is not None:
+            with update_archive(archive_path) as archive:
+                write_run(archive, "nonlinear", model=outcome.result.model)
     if archive_path is not None:
         summary["archive"] = str(archive_path)
     if args.save_model:
-        summary["model_file"] = str(save_model(model, args.save_model, preparation))
-    return summary, _text(summary, records[0])
+        summary["model_file"] = str(save_model(model, args.save_model, plan.preparation))
+    workflow.emit(summary, warnings, args)
+    return summary, workflow.text_summary(summary, data, plan)
 
 
-def _run_comparator(args: argparse.Namespace, data, structure, records, preparation) -> tuple[dict, str]:
+def _run_order_search(args, plan, options) -> tuple[dict, str]:
+    """Each order of a range identified on the estimation data; one chosen on validation data."""
+    rows, kept = workflow.search_orders(
+        plan, lambda order: workflow.run_iekf_order(args, plan, options, order), args)
+    chosen = workflow.choose_order(rows)
+    model, extra, _ = kept[chosen]
+    result = extra["result"]
+    summary = {**_iekf_summary(result), "orders_tried": rows, "seconds": sum(row["seconds"] for row in rows)}
+    archive_path = Path(args.out) if args.out else None
+    if archive_path is not None:
+        from identification.iekf_archive import write_iekf_run
+
+        with write_archive(archive_path, kind="identification", config=options, seeds=[]) as archive:
+            _archive_plan(archive, plan)
+            write_iekf_run(archive, RUN_NAME, result)
+    return _finish(args, plan, summary, model, result=result, archive_path=archive_path)
+
+
+def _run_comparator(args: argparse.Namespace, plan) -> tuple[dict, str]:
     from identification.comparators import identify_with
 
-    outcome = identify_with(data, method=args.method, order=structure.n)
+    outcomes = {}
+
+    def fit_one(order):
+        outcome = identify_with(plan.estimation, method=args.method, order=order)
+        outcomes[order] = outcome
+        return outcome.model, {"fit_percent": outcome.metrics.percentage_explanation}
+
+    rows = None
+    if len(plan.orders) == 1:
+        chosen = plan.orders[0]
+        fit_one(chosen)  # errors carry their own exit status
+    else:
+        rows, _ = workflow.search_orders(plan, fit_one, args)
+        chosen = workflow.choose_order(rows)
+    outcome = outcomes[chosen]
     model = outcome.model
     summary = {
         "method": args.method,
-        "order": structure.n,
+        "order": chosen,
         "eigenvalues": model.eigenvalues(),
         "fit_percent": outcome.metrics.percentage_explanation,
         "passes_run": 0,
         "discretization": "exact",
+        "time_domain": model.meta.get("time_domain", "continuous"),
         "A": model.A,
         "B": model.B,
         "C": model.C,
         "D": model.D,
         "seconds": outcome.seconds,
     }
-    summary.update(records_summary(model, records, preparation))
-    if args.save_model:
-        summary["model_file"] = str(save_model(model, args.save_model, preparation))
-    if args.out:
-        summary["archive"] = str(_archive_comparator(args, records, preparation, outcome))
-    return summary, _text(summary, records[0])
+    if rows is not None:
+        summary["orders_tried"] = rows
+    archive_path = _archive_comparator(args, plan, outcome) if args.out else None
+    return _finish(args, plan, summary, model, archive_path=archive_path)
 
 
-def _archive_comparator(args: argparse.Namespace, records, preparation, outcome) -> Path:
+def _archive_comparator(args: argparse.Namespace, plan, outcome) -> Path:
     """The records and the comparator's model and fit, as ``runs/<method>`` of an identification archive."""
     path = Path(args.out)
     config = {"method": args.method, "order": outcome.model.structure.n}
     with write_archive(path, kind="identification", config=config, seeds=[]) as archive:
-        archive_records(archive, records, preparation)
+        _archive_plan(archive, plan)
         run = write_run(archive, args.method, model=outcome.model, metrics=outcome.metrics)
         run.attrs["stop_reason"] = "finished"
         run.attrs["seconds"] = outcome.seconds
     return path
-
-
-def _text(summary: dict, data) -> str:
-    eigen = ", ".join(
-        f"{v.real:.4g}{v.imag:+.4g}j" if v.imag else f"{v.real:.4g}" for v in summary["eigenvalues"]
-    )
-    fits = ", ".join(f"{name} {value:.3f} %" for name, value in zip(data.output_names, summary["fit_percent"]))
-    lines = [
-        f"{summary['method']}: order {summary['order']}, {summary['passes_run']} passes, "
-        f"{summary['discretization']} discretisation, {summary['seconds']:.2f} s",
-        f"eigenvalues: {eigen}",
-        f"fit R (continuous model simulated exactly): {fits}",
-    ]
-    if len(summary.get("records", ())) > 1:
-        lines += [f"  {entry['name']} ({entry['samples']} samples): "
-                  + ", ".join(f"{value:.3f} %" for value in entry["fits"]) for entry in summary["records"]]
-    if "model_file" in summary:
-        lines.append(f"wrote {summary['model_file']}")
-    return "\n".join(lines)

@@ -1,0 +1,237 @@
+"""Scoring a model on estimation and held-out data: simulation, initial state, k-step prediction.
+
+Each function takes a model and an :class:`~identification.data.IOData`
+record, so that any preparation of the record (offsets, scaling, resampling)
+happens before and outside.
+
+* :func:`estimate_initial_state`: the initial state of a linear model by
+  linear least squares. A record that starts mid-motion is not explained by
+  a simulation from rest, however good the model: the output is
+  ``y = y_forced + O x0`` with ``O`` the free responses of the states, linear
+  in ``x0``.
+* :func:`predict` with a horizon ``K``: the output ``K`` samples ahead of a
+  state estimated by a steady-state Kalman filter on the model; for models
+  whose simulation diverges (unstable plants) this is the score that means
+  something. ``K`` large approaches simulation.
+* :func:`score`: NRMSE fit in percent (MATLAB's ``compare``:
+  ``100 (1 - ||y - yhat|| / ||y - mean(y)||)``) and the paper's R (eq. 17)
+  per output.
+* :func:`split_holdout`: the last fraction of a record held out.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import scipy.linalg
+
+from .data import IOData
+from .errors import InputError
+from .metrics import nrmse_fit, percentage_explanation
+from .discrete import DiscreteModel
+from .modal import ModalModel
+
+__all__ = [
+    "INITIAL_STATES",
+    "Scores",
+    "estimate_initial_state",
+    "predict",
+    "score",
+    "split_holdout",
+    "default_horizon",
+]
+
+INITIAL_STATES = ("zero", "estimate")
+
+# Steady-state Kalman filter of the k-step predictor, in outputs divided by their RMS:
+# process noise this fraction of the input-driven state variance per sample, unit measurement noise.
+_PREDICTOR_PROCESS_NOISE = 1e-2
+_UNSTABLE_HORIZON = 10  # samples, when a model's simulation diverges and no horizon is given
+_UNSTABLE_WINDOW = 50  # samples over which an unstable model's initial state is fitted
+
+
+@dataclass(frozen=True)
+class Scores:
+    """Per-output scores of a model on one record.
+
+    Attributes
+    ----------
+    fit : ndarray
+        NRMSE fit, percent (``-inf`` where the prediction is not finite).
+    R : ndarray
+        Percentage explanation (eq. 17), percent.
+    initial_state : str
+        ``"zero"`` or ``"estimate"``.
+    horizon : int or None
+        ``K`` of a k-step-ahead prediction, None for a simulation.
+    n_samples : int
+    """
+
+    fit: np.ndarray
+    R: np.ndarray
+    initial_state: str
+    horizon: int | None
+    n_samples: int
+
+    @property
+    def mean_fit(self) -> float:
+        return float(np.mean(self.fit))
+
+    @property
+    def mean_R(self) -> float:
+        return float(np.mean(self.R))
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"fit_percent": self.fit, "R": self.R, "initial_state": self.initial_state,
+                "horizon": self.horizon, "n_samples": self.n_samples}
+
+
+def _check(model: Any, data: IOData) -> None:
+    if not isinstance(data, IOData):
+        raise InputError("scores need an IOData record")
+    n_u, n_y = _sizes(model)
+    if (data.n_u, data.n_y) != (n_u, n_y):
+        raise InputError(f"the model has {n_u} inputs and {n_y} outputs; the record has {data.n_u} and {data.n_y}")
+
+
+def _sizes(model: Any) -> tuple[int, int]:
+    if isinstance(model, ModalModel):
+        return model.structure.n_u, model.structure.n_y
+    if isinstance(model, DiscreteModel):
+        return model.n_u, model.n_y
+    linear = model.structure.linear
+    return linear.n_u, linear.n_y
+
+
+def _linear(model: Any) -> bool:
+    return isinstance(model, (ModalModel, DiscreteModel))
+
+
+def estimate_initial_state(model: ModalModel | DiscreteModel, data: IOData, *, method: str = "foh") -> np.ndarray:
+    """The initial state ``x0`` (n,) that fits the record best, by linear least squares.
+
+    The regressors are the free responses of the model's states (one
+    simulation from each unit state with zero input); each output is
+    weighted by the inverse of its RMS so that units do not matter.
+    """
+    _check(model, data)
+    n = model.n_states if isinstance(model, DiscreteModel) else model.structure.n
+    weights = 1.0 / np.maximum(np.sqrt(np.mean(data.y**2, axis=0)), 1e-300)
+    with np.errstate(all="ignore"):
+        forced = model.simulate(data.u, data.dt, method=method)
+        zero = np.zeros_like(data.u)
+        free = np.column_stack([
+            (model.simulate(zero, data.dt, method=method, x0=np.eye(n)[i]) * weights).ravel() for i in range(n)
+        ])
+    target = ((data.y - forced) * weights).ravel()
+    if not (np.all(np.isfinite(free)) and np.all(np.isfinite(target))):
+        return np.zeros(n)
+    return np.linalg.lstsq(free, target, rcond=None)[0]
+
+
+def default_horizon(model: Any) -> int | None:
+    """None for a stable model (simulate); for an unstable one a short k-step-ahead horizon."""
+    if _linear(model) and not model.is_stable():
+        return _UNSTABLE_HORIZON
+    return None
+
+
+def _k_step(model: ModalModel, data: IOData, horizon: int) -> np.ndarray:
+    """Outputs predicted ``horizon`` samples ahead of a steady-state Kalman filter's state; the first ``horizon`` from rest."""
+    from .statespace import _phi_matrices, continuous_to_discrete
+
+    if isinstance(model, DiscreteModel):
+        Ad, Bd, Cd, Dd = model.A, model.B, model.C, model.D
+    else:
+        Ad, Bd, Cd, Dd = continuous_to_discrete(model.A, model.B, model.C, model.D, data.dt, hold="foh")
+    scale = np.maximum(np.sqrt(np.mean(data.y**2, axis=0)), 1e-300)
+    Cn, Dn = Cd / scale[:, None], Dd / scale[:, None]
+    yn = data.y / scale
+    n = Ad.shape[0]
+    driven = scipy.linalg.solve_discrete_lyapunov(Ad * min(1.0, 0.99 / max(np.abs(np.linalg.eigvals(Ad)).max(), 1e-12)),
+                                                  Bd @ Bd.T) if n else np.zeros((0, 0))
+    Q = _PREDICTOR_PROCESS_NOISE * (driven + 1e-9 * np.trace(driven) * np.eye(n) / max(n, 1))
+    R = np.eye(Cn.shape[0])
+    try:
+        S = scipy.linalg.solve_discrete_are(Ad.T, Cn.T, Q, R)
+        gain = Ad @ S @ Cn.T @ np.linalg.inv(Cn @ S @ Cn.T + R)
+    except (np.linalg.LinAlgError, ValueError):
+        gain = np.zeros((n, Cn.shape[0]))
+    u = data.u
+    N = u.shape[0]
+    states = np.zeros((N, n))
+    x = np.zeros(n)
+    # Start the observer at the least-squares initial state (foh state xi = x - G2 u): from the whole
+    # record for a stable model, from its first samples for an unstable one (whose free responses grow).
+    window = data if model.is_stable() else data[: min(N, max(_UNSTABLE_WINDOW, 10 * n))]
+    if window.n_samples > n:
+        x = estimate_initial_state(model, window)
+        if isinstance(model, ModalModel):
+            x = x - data.dt * _phi_matrices(model.A, data.dt)[2] @ model.B @ u[0]
+    observer = Ad - gain @ Cn
+    drive = u @ (Bd - gain @ Dn).T + yn @ gain.T
+    for k in range(N):  # the one-step predictor's state x(k|k-1)
+        states[k] = x
+        x = observer @ x + drive[k]
+    ahead = states[: N - horizon].copy() if horizon < N else np.zeros((0, n))
+    for j in range(min(horizon, N)):
+        ahead = ahead @ Ad.T + u[j: j + ahead.shape[0]] @ Bd.T
+    predicted = np.empty_like(data.y)
+    with np.errstate(all="ignore"):
+        predicted[:horizon] = model.simulate(u[:horizon], data.dt)
+        if horizon < N:
+            predicted[horizon:] = ahead @ Cd.T + u[horizon:] @ Dd.T
+    return predicted
+
+
+def predict(model: Any, data: IOData, *, initial_state: str = "estimate", horizon: int | None = None) -> np.ndarray:
+    """The model's outputs on the record: simulated (from the initial state asked for) or ``horizon`` steps ahead.
+
+    Parameters
+    ----------
+    model : ModalModel or SplineModalModel
+        Spline models are simulated from rest in their own time base.
+    data : IOData
+    initial_state : {"zero", "estimate"}
+        Linear models only; ``estimate`` by :func:`estimate_initial_state`.
+    horizon : int, optional
+        Predict this many samples ahead (linear models only) instead of simulating.
+    """
+    _check(model, data)
+    if initial_state not in INITIAL_STATES:
+        raise InputError(f"unknown initial state {initial_state!r}; use one of {', '.join(INITIAL_STATES)}")
+    if not _linear(model):
+        return model.simulate(data.u)
+    if horizon is not None:
+        if isinstance(horizon, bool) or int(horizon) != horizon or horizon < 1:
+            raise InputError(f"the prediction horizon must be a whole number of samples >= 1; got {horizon!r}")
+        return _k_step(model, data, int(horizon))
+    x0 = estimate_initial_state(model, data) if initial_state == "estimate" else None
+    with np.errstate(all="ignore"):
+        return model.simulate(data.u, data.dt, x0=x0)
+
+
+def score(model: Any, data: IOData, *, initial_state: str = "estimate", horizon: int | None = None) -> Scores:
+    """NRMSE fit and R per output of :func:`predict` against the record (``-inf`` where not finite)."""
+    predicted = predict(model, data, initial_state=initial_state, horizon=horizon)
+    start = 0 if horizon is None else min(int(horizon), data.n_samples - 2)
+    y, y_hat = data.y[start:], predicted[start:]
+    with np.errstate(all="ignore"):
+        if np.all(np.isfinite(y_hat)) and np.max(np.abs(y_hat)) < 1e150:
+            fit, R = nrmse_fit(y, y_hat), percentage_explanation(y, y_hat)
+        else:
+            fit = R = np.full(data.n_y, -np.inf)
+    return Scores(fit, R, initial_state if _linear(model) and horizon is None else "zero",
+                  horizon, int(y.shape[0]))
+
+
+def split_holdout(data: IOData, fraction: float) -> tuple[IOData, IOData]:
+    """The record without its last ``fraction`` and that last part (held out for validation)."""
+    if not (isinstance(fraction, (int, float)) and 0.0 < fraction < 1.0):
+        raise InputError(f"the validation fraction must lie strictly between 0 and 1; got {fraction!r}")
+    estimation, validation = data.split(1.0 - fraction)
+    if min(estimation.n_samples, validation.n_samples) < 10:
+        raise InputError(f"holding out {fraction:g} of {data.n_samples} samples leaves too few on one side")
+    return estimation, validation

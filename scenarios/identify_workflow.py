@@ -1,0 +1,533 @@
+"""What `vehid identify` does around one estimator run: hold-out validation, order choice, warnings.
+
+* Validation records: ``--validation FRACTION`` holds out the last part of
+  the record; ``--validation-file FILE`` (repeatable) adds other records.
+* Scores on estimation and validation data (:mod:`identification.validation`):
+  NRMSE fit and R per output, linear models simulated from a least-squares
+  initial state unless ``--initial-state zero``; an unstable model (allowed
+  by ``--allow-unstable``) is scored by k-step-ahead prediction.
+* Order: one order, a range ``2-8`` or ``auto`` (1, 2, ... up to
+  :data:`AUTO_MAX_ORDER`, stopping after two orders in a row that do not
+  improve on the best). Parsimony rule: the smallest order whose mean
+  validation fit is within :data:`ORDER_TOLERANCE` points of the best order's;
+  models that diverged or are unstable where stability was asked take no part.
+* Warnings: a model no better than its start (R not above the start's, or
+  modes that stayed within :data:`MOVED` of their start values, while it
+  explains less than :data:`NOTHING_TO_GAIN` percent) or worse than it by
+  :data:`WORSE_MARGIN` points of R, a fit below zero on any output, an unstable model where
+  stability was asked, a run that did not converge: one line each on
+  standard error and in the JSON ``warnings``; ``--strict`` turns them into
+  exit status 3.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+from identification.data import IOData
+from identification.errors import DivergenceError, InputError, StrictWarningsError, WorkbenchError
+from identification.iekf import INVARIANT_P, START_CHOICES, TIMESCALES, IEKFOptions, identify_iekf
+from identification.discrete import DiscreteModel
+from identification.modal import ModalModel, ModalStructure
+from identification.validation import INITIAL_STATES, Scores, default_horizon, score, split_holdout
+
+__all__ = [
+    "START_HELP",
+    "START_CHOICES",
+    "Evaluation",
+    "search_orders",
+    "emit",
+    "text_summary",
+    "identify_nonlinear",
+    "start_of",
+    "run_iekf_order",
+    "last_good_on_divergence",
+    "scores_summary",
+    "AUTO_MAX_ORDER",
+    "ORDER_TOLERANCE",
+    "Plan",
+    "register_options",
+    "parse_orders",
+    "make_plan",
+    "iekf_options",
+    "choose_order",
+    "evaluate",
+    "run_warnings",
+]
+
+AUTO_MAX_ORDER = 8
+LINEAR_MODELS = (ModalModel, DiscreteModel)
+ORDER_TOLERANCE = 0.5  # points of mean validation fit
+AUTO_HOLDOUT = 0.3  # fraction held out to choose an order when no validation data are given
+START_HELP = ("start values: data (a subspace model of the record, default), band (modes across the record's band), "
+              "default (sigma = -10, omega = 10 rad/s, absolute) or paper (sigma = -1, omega = 1)")
+NO_BETTER_MARGIN = 0.01  # points: a final fit within this of the start's counts as no better
+MOVED = 1e-3  # relative change of a mode's eigenvalue below which it stayed at its start
+NOTHING_TO_GAIN = 99.0  # percent R: a model this good is no warning for staying at its start
+WORSE_MARGIN = 0.5  # points of R below the start's: the filter made the model worse
+
+
+def register_options(parser: argparse.ArgumentParser) -> None:
+    """The validation, order, model-class and warning options of `vehid identify`."""
+    parser.add_argument("--validation", type=float, metavar="FRACTION",
+                        help="hold out the last FRACTION of the record for validation (e.g. 0.3)")
+    parser.add_argument("--validation-file", action="append", default=[], metavar="FILE",
+                        help="validate on this record too (repeatable; same columns)")
+    parser.add_argument("--initial-state", default="estimate", choices=INITIAL_STATES,
+                        help="simulate linear models from a least-squares initial state (default) or from rest")
+    parser.add_argument("--horizon", type=int, metavar="K",
+                        help="score by K-step-ahead prediction instead of simulation (automatic for unstable models)")
+    parser.add_argument("--allow-unstable", action="store_true",
+                        help="keep unstable modes (open-loop unstable plants) instead of stopping")
+    parser.add_argument("--timescale", default="auto", choices=TIMESCALES,
+                        help="filter time unit: auto (samples; p per dominant time constant, default) or seconds (absolute, the paper's)")
+    parser.add_argument("--nonlinear", action="store_true",
+                        help="after the linear model, identify the spline-nonlinear model started from it")
+    parser.add_argument("--nodes", type=int, default=5, help="nodes per spline with --nonlinear (default 5)")
+    parser.add_argument("--nonlinear-p", type=float, action="append", metavar="P",
+                        help="tuning parameter(s) of the spline model; several are tried and one chosen on "
+                             "validation data (default 1e-7, or 1e-7, 1e-6 with validation data)")
+    parser.add_argument("--nonlinear-passes", type=int, default=30, help="largest number of nonlinear passes (default 30)")
+    parser.add_argument("--strict", action="store_true", help="exit with status 3 when the run ends with warnings")
+
+
+def parse_orders(text: Any) -> tuple[list[int], bool]:
+    """``"4"``, ``"2-8"`` or ``"auto"``: the orders to try and whether to stop early (auto)."""
+    value = str(text).strip().lower()
+    if value == "auto":
+        return list(range(1, AUTO_MAX_ORDER + 1)), True
+    try:
+        if "-" in value:
+            low, high = (int(part) for part in value.split("-", 1))
+        else:
+            low = high = int(value)
+    except ValueError:
+        raise InputError(f"--order takes a whole number, a range such as 2-8, or auto; got {text!r}") from None
+    if low < 1 or high < low:
+        raise InputError(f"--order {text!r}: orders must be >= 1 and the range increasing")
+    return list(range(low, high + 1)), False
+
+
+@dataclass(frozen=True, eq=False)
+class Plan:
+    """The records and orders of one identify command.
+
+    ``records`` are the prepared estimation records (several identify one
+    model); ``preparation`` holds their offsets and scale factors, with which
+    validation records were prepared alike.
+    """
+
+    records: tuple[IOData, ...]
+    validation: tuple[IOData, ...]
+    validation_names: tuple[str, ...]
+    orders: tuple[int, ...]
+    auto: bool
+    notes: tuple[str, ...] = ()
+    preparation: Any = None
+    held_out_count: int = 0  # the first validation records are held-out parts of the estimation records
+
+    @property
+    def estimation(self) -> IOData | tuple[IOData, ...]:
+        """What the estimators take: the record, or the records when there are several."""
+        return self.records[0] if len(self.records) == 1 else self.records
+
+    @property
+    def settle_start(self) -> bool | None:
+        """Whether each record's start state is unknown (offsets removed, or several records)."""
+        if self.preparation is not None and self.preparation.detrend != "none":
+            return True
+        return None
+
+
+def holdout_fraction(args: argparse.Namespace) -> tuple[float | None, str | None]:
+    """The fraction of each record held out, and a note when it is held out only to choose the order."""
+    orders, _ = parse_orders(args.order)
+    if args.validation is not None:
+        if not 0 < args.validation < 1:
+            raise InputError(f"--validation takes a fraction between 0 and 1; got {args.validation}")
+        return args.validation, None
+    if len(orders) > 1 and not args.validation_file:
+        return AUTO_HOLDOUT, f"the last {AUTO_HOLDOUT:.0%} of the record held out to choose the order"
+    return None, None
+
+
+def load_plan(args: argparse.Namespace, paths: list[str]) -> Plan:
+    """Read the data files, hold out the tail of each record where asked, and prepare both alike.
+
+    The split comes before the preparation, so the offsets kept with the model
+    are the estimation part's own (the held-out part plays no role in them).
+    """
+    from identification.preparation import prepare, prepare_validation
+    from scenarios.data_options import read_from_args
+
+    fraction, note = holdout_fraction(args)
+    raw, settings = read_from_args(args, paths)
+    held_raw: tuple[IOData, ...] = ()
+    if fraction is not None:
+        parts = [split_holdout(record, fraction) for record in raw]
+        raw, held_raw = tuple(part[0] for part in parts), tuple(part[1] for part in parts)
+    records, preparation = prepare(raw, detrend=args.detrend, scale=args.scale, settings=settings)
+    held = tuple(prepare_validation(part, preparation, record=i) for i, part in enumerate(held_raw))
+    # a validation file is another experiment: its offsets are its own, as each estimation record's are
+    return make_plan(args, records, lambda path: prepare_validation(path, preparation, own_offsets=True), held_out=held,
+                     fraction=fraction, note=note, preparation=preparation)
+
+
+def make_plan(args: argparse.Namespace, records: tuple[IOData, ...], load: Callable[[str], IOData],
+              held_out: tuple[IOData, ...] = (), fraction: float | None = None, note: str | None = None,
+              preparation: Any = None) -> Plan:
+    """The plan of one command: estimation records, their held-out parts and the validation files (``load`` reads one)."""
+    orders, auto = parse_orders(args.order)
+    first = records[0]
+    validation = list(held_out)
+    names = [f"last {fraction:g} of the record" if fraction is not None else "held-out part"] * len(held_out)
+    if len(held_out) > 1:
+        names = [f"{name} {i + 1}" for i, name in enumerate(names)]
+    for path in args.validation_file:
+        record = load(path)
+        if (record.n_u, record.n_y) != (first.n_u, first.n_y):
+            raise InputError(f"{path} has {record.n_u} inputs and {record.n_y} outputs; the record has {first.n_u} and {first.n_y}")
+        if record.input_names != first.input_names or record.output_names != first.output_names:
+            raise InputError(f"{path} names its columns differently from the identification record")
+        validation.append(record)
+        names.append(str(path))
+    if args.horizon is not None and args.horizon < 1:
+        raise InputError(f"--horizon must be >= 1 sample; got {args.horizon}")
+    return Plan(tuple(records), tuple(validation), tuple(names), tuple(orders), auto, (note,) if note else (),
+                preparation, len(held_out))
+
+
+def iekf_options(args: argparse.Namespace, default_passes: int) -> IEKFOptions:
+    """IEKF settings of the command line: the unit-invariant ones unless asked otherwise."""
+    p = args.p if args.p is not None else (INVARIANT_P if args.timescale == "auto" else 1.0)
+    return IEKFOptions(
+        p=p, passes=default_passes if args.passes is None else args.passes, discretization=args.discretization, covariance=args.covariance,
+        start=args.start, normalize=args.normalize, timescale=args.timescale, allow_unstable=args.allow_unstable,
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class Evaluation:
+    """Scores of one model on the estimation record and on each validation record."""
+
+    estimation: Scores
+    estimation_R_from_rest: np.ndarray
+    validation: tuple[Scores, ...]
+    horizon: int | None
+
+    @property
+    def validation_fit(self) -> np.ndarray | None:
+        """NRMSE fit per output, mean over validation records."""
+        if not self.validation:
+            return None
+        return np.mean([s.fit for s in self.validation], axis=0)
+
+    @property
+    def validation_R(self) -> np.ndarray | None:
+        if not self.validation:
+            return None
+        return np.mean([s.R for s in self.validation], axis=0)
+
+    def ranking_fit(self) -> float:
+        """Mean validation fit (estimation fit without validation data)."""
+        values = self.validation_fit if self.validation else self.estimation.fit
+        return float(np.mean(values))
+
+
+def evaluate(model: Any, plan: Plan, args: argparse.Namespace) -> Evaluation:
+    """Score ``model`` on the plan's records (k-step-ahead where asked or where simulation diverges)."""
+    horizon = args.horizon if args.horizon is not None else default_horizon(model)
+    estimation = _mean_scores(model, plan.records, initial_state=args.initial_state, horizon=horizon)
+    from_rest = _mean_scores(model, plan.records, initial_state="zero", horizon=horizon).R
+    validation = tuple(score(model, record, initial_state=args.initial_state, horizon=horizon)
+                       for record in plan.validation)
+    return Evaluation(estimation, from_rest, validation, horizon)
+
+
+def _mean_scores(model: Any, records: tuple[IOData, ...], **options: Any) -> Scores:
+    """Scores on one record, or their mean per output over several (as validation records are averaged)."""
+    scores = [score(model, record, **options) for record in records]
+    if len(scores) == 1:
+        return scores[0]
+    return dataclasses.replace(scores[0], fit=np.mean([s.fit for s in scores], axis=0),
+                               R=np.mean([s.R for s in scores], axis=0),
+                               n_samples=sum(s.n_samples for s in scores))
+
+
+def run_warnings(*, model: Any, evaluation: Evaluation, stop_reason: str | None, start_fit: float | None,
+                 final_fit: float | None, allow_unstable: bool, label: str = "", start_moved: bool | None = None
+                 ) -> list[str]:
+    """One line per problem, naming its cause and the likely fix (module docstring)."""
+    prefix = f"{label}: " if label else ""
+    lines = []
+    if stop_reason is not None and stop_reason.startswith("diverged"):
+        lines.append(f"{prefix}the run diverged ({stop_reason}); the last good pass is reported: lower --p or the "
+                     "order, or give --allow-unstable for an open-loop unstable plant")
+    elif stop_reason is not None and stop_reason != "converged":
+        lines.append(f"{prefix}the run did not converge ({stop_reason}): raise --passes, or lower --p or the order")
+    if start_fit is not None and final_fit is not None:
+        if final_fit < start_fit - WORSE_MARGIN:
+            lines.append(f"{prefix}the model is worse than its start (mean R {final_fit:.3f} % against "
+                         f"{start_fit:.3f} %): lower --p, or fewer passes")
+        elif final_fit <= start_fit + NO_BETTER_MARGIN and final_fit < NOTHING_TO_GAIN:
+            lines.append(f"{prefix}the model is no better than its start (mean R {final_fit:.3f} % against "
+                         f"{start_fit:.3f} %): the start may already be as good as this order allows; "
+                         "else try another --start or order, or a larger --p")
+    if start_moved is False and final_fit is not None and final_fit < NOTHING_TO_GAIN:
+        lines.append(f"{prefix}the model is no better than its start: its modes stayed at their start values "
+                     f"(mean R {final_fit:.3f} %): try --start data, a larger --p, or --normalize")
+    if isinstance(model, LINEAR_MODELS) and not allow_unstable and not model.is_stable():
+        lines.append(f"{prefix}the model is unstable where stability was asked: lower the order, or give "
+                     "--allow-unstable for an open-loop unstable plant")
+    scored = [("estimation", evaluation.estimation)] + [("validation", s) for s in evaluation.validation]
+    for where, scores in scored:
+        bad = np.flatnonzero(~(scores.fit >= 0))
+        if bad.size:
+            lines.append(f"{prefix}fit below zero on {where} data for output(s) {', '.join(str(i + 1) for i in bad)} "
+                         f"({', '.join(f'{scores.fit[i]:.1f} %' for i in bad)}): the model explains less than the "
+                         "output's mean; try another order, or check that the inputs drive these outputs")
+            break
+    return lines
+
+
+def choose_order(rows: list[dict[str, Any]]) -> int:
+    """The smallest order within :data:`ORDER_TOLERANCE` points of the best mean validation fit (eligible rows only)."""
+    eligible = [row for row in rows if row.get("eligible")]
+    if not eligible:
+        raise DivergenceError("no order gave a usable model: " + "; ".join(
+            f"n = {row['order']}: {row.get('error') or 'unstable or diverged'}" for row in rows))
+    best = max(row["ranking_fit"] for row in eligible)
+    return min(row["order"] for row in eligible if row["ranking_fit"] >= best - ORDER_TOLERANCE)
+
+
+def scores_summary(evaluation: Evaluation, fit_percent: Any) -> dict[str, Any]:
+    """The public score keys of a model: ``fit_percent`` (R, estimation, as before), NRMSE fits and ``validation_R``."""
+    summary: dict[str, Any] = {
+        "fit_percent": fit_percent,
+        "estimation_fit_percent": evaluation.estimation.fit,
+        "estimation_R": evaluation.estimation.R,
+        "validation_fit_percent": evaluation.validation_fit,
+        "validation_R": evaluation.validation_R,
+        "validation_records": [s.as_dict() for s in evaluation.validation],
+        "initial_state": evaluation.estimation.initial_state,
+        "horizon": evaluation.horizon,
+    }
+    return summary
+
+
+def search_orders(plan: Plan, fit_one: Callable[[int], tuple[Any, dict[str, Any]]], args: argparse.Namespace
+                  ) -> tuple[list[dict[str, Any]], dict[int, tuple[Any, dict[str, Any], Evaluation]]]:
+    """Identify each order of the plan (``fit_one(order) -> (model, extra)``), score it, stop early for auto."""
+    rows: list[dict[str, Any]] = []
+    kept: dict[int, tuple[Any, dict[str, Any], Evaluation]] = {}
+    best, without_gain = -np.inf, 0
+    for order in plan.orders:
+        started = time.perf_counter()
+        row: dict[str, Any] = {"order": order}
+        try:
+            model, extra = fit_one(order)
+        except WorkbenchError as exc:
+            row.update(error=str(exc), eligible=False, seconds=time.perf_counter() - started)
+            rows.append(row)
+            continue
+        evaluation = evaluate(model, plan, args)
+        stable_enough = args.allow_unstable or not isinstance(model, LINEAR_MODELS) or model.is_stable()
+        row.update(
+            fit_percent=extra.get("fit_percent"),
+            estimation_fit_percent=evaluation.estimation.fit,
+            validation_fit_percent=evaluation.validation_fit,
+            ranking_fit=evaluation.ranking_fit(),
+            stop_reason=extra.get("stop_reason"),
+            seconds=time.perf_counter() - started,
+            eligible=bool(stable_enough and np.isfinite(evaluation.ranking_fit())),
+        )
+        rows.append(row)
+        kept[order] = (model, extra, evaluation)
+        if plan.auto:
+            if row["eligible"] and row["ranking_fit"] > best + ORDER_TOLERANCE:
+                best, without_gain = row["ranking_fit"], 0
+            else:
+                without_gain += 1
+                if without_gain >= 2:
+                    break
+    return rows, kept
+
+
+def emit(summary: dict[str, Any], warnings: list[str], args: argparse.Namespace) -> None:
+    """Print the warnings (one line each) and raise under --strict."""
+    summary["warnings"] = list(warnings)
+    if args.strict and warnings:
+        raise StrictWarningsError(warnings, summary)
+    for line in warnings:
+        print(f"vehid: warning: {line}", file=sys.stderr)
+
+
+def _fits(names: tuple[str, ...], values: Any) -> str:
+    if values is None:
+        return "-"
+    return ", ".join(f"{name} {value:.2f}" for name, value in zip(names, values))
+
+
+def text_summary(summary: dict[str, Any], data: IOData, plan: Plan) -> str:
+    """The text face: model, convergence, estimation and validation scores side by side."""
+    eigen = ", ".join(
+        f"{v.real:.4g}{v.imag:+.4g}j" if v.imag else f"{v.real:.4g}" for v in np.asarray(summary["eigenvalues"], dtype=complex)
+    )
+    stop = summary.get("stop_reason")
+    converged = "converged" if stop == "converged" else (f"NOT converged ({stop})" if stop else "direct method (no iterations)")
+    kind = summary.get("time_domain", "continuous")
+    lines = [
+        f"{summary['method']}: order {summary['order']}, {summary['passes_run']} passes, "
+        f"{summary['discretization']} discretisation, {summary['seconds']:.2f} s, {converged}",
+        f"eigenvalues ({kind}-time): {eigen}",
+        f"fit R (continuous model simulated exactly): {_fits(data.output_names, summary['fit_percent'])}",
+    ]
+    how = (f"{summary['horizon']}-step-ahead prediction" if summary.get("horizon")
+           else f"simulation, initial state {summary.get('initial_state', 'zero')}")
+    lines.append(f"{'NRMSE fit %':<14} {'estimation':>28} {'validation':>28}   ({how})")
+    for i, name in enumerate(data.output_names):
+        est = summary["estimation_fit_percent"][i]
+        val = summary["validation_fit_percent"][i] if summary.get("validation_fit_percent") is not None else None
+        lines.append(f"{name:<14} {est:>28.2f} {('-' if val is None else f'{val:.2f}'):>28}")
+    if plan.validation:
+        lines.append("validation on: " + "; ".join(plan.validation_names))
+    if summary.get("scoring_note"):
+        lines.append(f"note: {summary['scoring_note']}")
+    for note in plan.notes:
+        lines.append(f"note: {note}")
+    if summary.get("orders_tried") and len(summary["orders_tried"]) > 1:
+        tried = ", ".join(
+            f"n={row['order']}: " + (f"{row['ranking_fit']:.2f}" if "ranking_fit" in row else "failed")
+            for row in summary["orders_tried"])
+        lines.append(f"orders tried (mean validation fit %): {tried}; chosen {summary['order']} "
+                     f"(smallest within {ORDER_TOLERANCE} points of the best)")
+    if "nonlinear" in summary:
+        nl = summary["nonlinear"]
+        lines.append(f"nonlinear (spline, {nl['nodes']} nodes, p {nl['p']:g}, {nl['passes_run']} passes, "
+                     f"{'converged' if nl['stop_reason'] == 'converged' else 'NOT converged'}): "
+                     f"estimation {_fits(data.output_names, nl['estimation_fit_percent'])}; "
+                     f"validation {_fits(data.output_names, nl['validation_fit_percent'])}")
+    if "model_file" in summary:
+        lines.append(f"wrote {summary['model_file']}")
+    return "\n".join(lines)
+
+
+@dataclass
+class NonlinearOutcome:
+    """The chosen spline model's run and its summary entries."""
+
+    result: Any
+    summary: dict[str, Any] = field(default_factory=dict)
+
+
+def identify_nonlinear(linear: ModalModel, plan: Plan, args: argparse.Namespace) -> NonlinearOutcome:
+    """The spline-nonlinear model started from ``linear``, its p chosen on validation data from a small grid."""
+    from identification.spline_iekf import SplineIEKFOptions, identify_spline_iekf
+
+    if not isinstance(linear, ModalModel):
+        raise InputError("--nonlinear starts from a continuous-time modal model; this linear model is discrete-time "
+                         "(a pole on the negative real axis): use --method iekf or another order")
+    if len(plan.records) > 1:
+        raise InputError("--nonlinear identifies the spline model from one record; give one data file")
+    grid = args.nonlinear_p or ([1e-7, 1e-6] if plan.validation else [1e-7])
+    tried, best = [], None
+    for p in grid:
+        options = SplineIEKFOptions(nodes=args.nodes, p=p, passes=args.nonlinear_passes)
+        started = time.perf_counter()
+        try:
+            result = identify_spline_iekf(plan.estimation, linear, options=options)
+        except DivergenceError as exc:
+            tried.append({"p": p, "error": str(exc), "seconds": time.perf_counter() - started})
+            continue
+        scores = NonlinearScores(result.model, plan)
+        row = {"p": p, "estimation_fit_percent": scores.estimation.fit, "validation_fit_percent": scores.validation_fit,
+               "seconds": time.perf_counter() - started, "ranking_fit": scores.ranking_fit()}
+        tried.append(row)
+        if np.isfinite(row["ranking_fit"]) and (best is None or row["ranking_fit"] > best[1]["ranking_fit"]):
+            best = (result, row, scores)
+    if best is None:
+        raise DivergenceError("the spline-nonlinear model diverged at every p tried: " +
+                              "; ".join(f"p = {row['p']:g}: {row['error']}" for row in tried))
+    result, row, scores = best
+    summary = {
+        "nodes": args.nodes, "p": row["p"], "p_tried": tried, "passes_run": result.passes_run,
+        "stop_reason": result.stop_reason, "fit_percent": scores.estimation.R,
+        "estimation_fit_percent": scores.estimation.fit, "validation_fit_percent": scores.validation_fit,
+        "validation_R": scores.validation_R, "start_fit_percent": result.start_fit, "seconds": result.seconds,
+    }
+    return NonlinearOutcome(result, summary)
+
+
+class NonlinearScores:
+    """Scores of a spline model (simulated from rest in its own time base) on the plan's records."""
+
+    def __init__(self, model: Any, plan: Plan):
+        self.estimation = _mean_scores(model, plan.records, initial_state="zero")
+        self.validation = tuple(score(model, record, initial_state="zero") for record in plan.validation)
+
+    @property
+    def validation_fit(self) -> np.ndarray | None:
+        return np.mean([s.fit for s in self.validation], axis=0) if self.validation else None
+
+    @property
+    def validation_R(self) -> np.ndarray | None:
+        return np.mean([s.R for s in self.validation], axis=0) if self.validation else None
+
+    def ranking_fit(self) -> float:
+        return float(np.mean(self.validation_fit if self.validation else self.estimation.fit))
+
+
+def start_of(result: Any, records: tuple[IOData, ...]) -> tuple[float | None, bool | None]:
+    """Mean R (eq. 17) of an IEKF run's start model simulated from rest, and whether the modes moved from it.
+
+    A mode moved when its eigenvalue changed by more than :data:`MOVED` of its magnitude
+    (a unit-free test; None where the start is unknown, as on a resumed run).
+    """
+    theta = result.meta.get("start_parameters") if hasattr(result, "meta") else None
+    if theta is None:
+        return None, None
+    model = ModalModel.from_parameters(result.structure, theta)
+    start_modes, final_modes = model.mode_eigenvalues(), result.model.mode_eigenvalues()
+    moved = bool(np.max(np.abs(final_modes - start_modes) / np.maximum(np.abs(start_modes), 1e-300)) > MOVED)
+    with np.errstate(all="ignore"):
+        simulated = [model.simulate(data.u, data.dt) for data in records]
+    if not all(np.all(np.isfinite(y_hat)) for y_hat in simulated):
+        return None, moved
+    from identification.multirecord import pooled_percentage_explanation
+
+    return float(np.mean(pooled_percentage_explanation(zip((data.y for data in records), simulated)))), moved
+
+
+def structure_for(args: argparse.Namespace, order: int, data: IOData) -> ModalStructure:
+    return ModalStructure.from_pattern(args.pattern, order, data.n_u, data.n_y)
+
+
+def last_good_on_divergence(run: Callable[[], Any]) -> tuple[Any, str | None]:
+    """``run()``'s IEKF result, or on a DivergenceError after some good passes the last good one and the message.
+
+    Nothing computed is lost: the caller reports that model with a warning. A divergence at the first
+    pass (no model at all) is raised as before.
+    """
+    try:
+        return run(), None
+    except DivergenceError as exc:
+        if exc.last_good is None:
+            raise
+        return exc.last_good, str(exc)
+
+
+def run_iekf_order(args: argparse.Namespace, plan: Plan, options: IEKFOptions, order: int
+                   ) -> tuple[ModalModel, dict[str, Any]]:
+    """One IEKF run of an order search (no checkpoints): its model and what the summary needs."""
+    result, divergence = last_good_on_divergence(
+        lambda: identify_iekf(plan.estimation, structure_for(args, order, plan.records[0]), options=options,
+                              settle_start=plan.settle_start))
+    stop_reason = f"{result.stop_reason}: {divergence}" if divergence else result.stop_reason
+    return result.model, {"fit_percent": result.fit_percent, "stop_reason": stop_reason, "result": result}
