@@ -4,6 +4,9 @@ Measures, in one run:
 * seconds per nonlinear pass (n = 4, three outputs, p = 5 nodes, 30 s at 500 Hz
   of the vehicle's identification manoeuvre), median of repeats, beside the
   linear pass of the same order on the same data (the baseline);
+* the same pass on both compiled kernels (the covariance algebra as C loops
+  with the low-rank prediction, and the whole generated SX step), for the
+  nonlinear and the linear model, and their ratio (target: loops >= 2x);
 * the build and compile time of the nonlinear step (a first run on a machine);
 * with ``--study``, the wall time of the whole ``vehid study handling`` as a
   user runs it (subprocess, default settings).
@@ -49,7 +52,11 @@ def measure(repeats: int) -> dict:
     n, m = 4, 4 + model.structure.n_parameters
     q = np.concatenate([np.zeros(n), np.full(m - n, 1e-4)])
     state = np.concatenate([np.zeros(n), model.theta, pack_covariance(np.diag(q))])
-    nonlinear = median_seconds(lambda: spline_pass(state, u_n, y_n, q, R, model.constants), repeats=repeats)
+
+    generated_pass = compiled_pass(SplineModalFilterModel(model.structure), data.dt, "exact", "joseph", "generated")
+    nonlinear_generated = median_seconds(lambda: generated_pass(state, u_n, y_n, q, R, model.constants), repeats=repeats)
+    structured_pass = compiled_pass(SplineModalFilterModel(model.structure), data.dt, "exact", "joseph", "structured")
+    nonlinear = median_seconds(lambda: structured_pass(state, u_n, y_n, q, R, model.constants), repeats=repeats)
 
     linear_pass = compiled_pass(LinearModalFilterModel(structure), data.dt, "exact", "joseph")
     m_lin = 4 + structure.n_parameters
@@ -58,11 +65,20 @@ def measure(repeats: int) -> dict:
     y_s = data.y / linear.state.output_scale
     u_s = data.u / linear.state.input_scale
     linear_seconds = median_seconds(lambda: linear_pass(state_lin, u_s, y_s, q_lin, np.eye(3)), repeats=repeats)
+    kernels = {}
+    for kernel in ("structured", "generated"):
+        run = compiled_pass(LinearModalFilterModel(structure), data.dt, "exact", "joseph", kernel)
+        kernels[kernel] = median_seconds(lambda: run(state_lin, u_s, y_s, q_lin, np.eye(3)), repeats=repeats)
     return {
         "samples": data.n_samples,
         "nonlinear_filter_states": m,
         "nonlinear_step_instructions": spline_pass.filter_step.step.n_instructions(),
         "nonlinear_s_per_pass": nonlinear,
+        "nonlinear_generated_step_s_per_pass": nonlinear_generated,
+        "nonlinear_loops_speedup": nonlinear_generated / nonlinear,
+        "linear_loops_s_per_pass": kernels["structured"],
+        "linear_generated_step_s_per_pass": kernels["generated"],
+        "linear_loops_speedup": kernels["generated"] / kernels["structured"],
         "linear_s_per_pass": linear_seconds,
         "nonlinear_to_linear_ratio": nonlinear / linear_seconds,
         "nonlinear_build_and_compile_s": build_seconds,
@@ -87,6 +103,10 @@ def main(argv=None) -> int:
     figures = measure(args.repeats)
     print(f"nonlinear pass (n = 4, 3 outputs, 5 nodes, {figures['samples']} samples, "
           f"{figures['nonlinear_filter_states']} filter states): {figures['nonlinear_s_per_pass']:.3f} s median")
+    print(f"  the whole generated step: {figures['nonlinear_generated_step_s_per_pass']:.3f} s; "
+          f"loops with the low-rank prediction {figures['nonlinear_loops_speedup']:.2f}x faster (target >= 2x)")
+    print(f"linear pass, loops {figures['linear_loops_s_per_pass'] * 1e3:.2f} ms against the generated step "
+          f"{figures['linear_generated_step_s_per_pass'] * 1e3:.2f} ms ({figures['linear_loops_speedup']:.2f}x)")
     print(f"linear pass on the same data: {figures['linear_s_per_pass'] * 1e3:.2f} ms "
           f"(nonlinear/linear {figures['nonlinear_to_linear_ratio']:.0f}x)")
     print(f"nonlinear step build and compile (first run; cached after): {figures['nonlinear_build_and_compile_s']:.1f} s")

@@ -110,18 +110,19 @@ def compile_function(
         return _LOADED[key]
 
 
-def generate_c(function: ca.Function) -> str:
-    """The C source CasADi generates for ``function`` (no header, no main).
+def generate_c(function: ca.Function, *more: ca.Function) -> str:
+    """The C source CasADi generates for ``function`` and any ``more`` (no header, no main).
 
     It defines ``int NAME(const casadi_real** arg, casadi_real** res,
-    casadi_int* iw, casadi_real* w, int mem)`` and ``NAME_work(...)``, with
-    ``casadi_real`` double and ``casadi_int`` long long int, so that a
-    hand-written driver appended to it can call the function in a loop.
+    casadi_int* iw, casadi_real* w, int mem)`` and ``NAME_work(...)`` for
+    each, with ``casadi_real`` double and ``casadi_int`` long long int, so
+    that a hand-written driver appended to it can call them in a loop.
     """
     with tempfile.TemporaryDirectory(prefix="vehid-gen-") as scratch:
         source_name = f"{function.name()}.c"
         generator = ca.CodeGenerator(source_name, {"with_header": False})
-        generator.add(function)
+        for each in (function, *more):
+            generator.add(each)
         previous = os.getcwd()
         try:
             os.chdir(scratch)
@@ -227,7 +228,7 @@ int vehid_recursion(long long int n_samples, long long int n_x, long long int n_
 
 
 def compile_driver(
-    step: ca.Function,
+    step: ca.Function | tuple[ca.Function, ...],
     driver_source: str,
     *,
     library_name: str,
@@ -242,12 +243,15 @@ def compile_driver(
     those names are replaced by the generated function's. The driver's entry
     point ``entry`` takes ``n_integers`` ``long long`` arguments, then
     ``n_arrays`` ``double*``, and returns an ``int`` status (the ctypes function).
+    A tuple of functions is generated together; ``STEP`` names the first, the
+    driver may call the others by their own names.
     """
     import ctypes
 
-    name = step.name()
+    steps = step if isinstance(step, tuple) else (step,)
+    name = steps[0].name()
     driver = driver_source.replace("STEP_work", f"{name}_work").replace("STEP(", f"{name}(")
-    library = build_shared_library(library_name, generate_c(step) + driver, optimisation=optimisation)
+    library = build_shared_library(library_name, generate_c(*steps) + driver, optimisation=optimisation)
     function = getattr(ctypes.CDLL(str(library)), entry)
     function.argtypes = [ctypes.c_longlong] * n_integers + [ctypes.POINTER(ctypes.c_double)] * n_arrays
     function.restype = ctypes.c_int
