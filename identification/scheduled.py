@@ -7,21 +7,27 @@ piecewise linearly in that variable. Interpolating entry by entry is only
 meaningful when every grid model labels its modes alike and fixes each
 mode's state coordinates alike, so before interpolating:
 
-* **canonical form.** A complex pair's block ``[[s, w], [-w, s]]`` commutes
-  with every scaled rotation ``T = [[p, q], [-q, p]]``, so ``x -> T x``
-  leaves A unchanged and moves only B and C; and ``w < 0`` is the same mode
-  as ``w > 0`` seen through the reflection ``diag(1, -1)``. Each pair is
-  reflected to ``w > 0`` and rotated and scaled so that its C entries on its
-  reference output (the structure's fixed entries) are ``(1, 1)`` again; a
-  real pole is scaled so that its fixed C entry is 1. The input-output
-  behaviour is unchanged (a similarity transform).
+* **gauge.** A complex pair's block ``[[s, w], [-w, s]]`` commutes with
+  every scaled rotation ``T = [[p, q], [-q, p]]``, so ``x -> T x`` leaves A
+  unchanged and moves only B and C; and ``w < 0`` is the same mode as
+  ``w > 0`` seen through the reflection ``diag(1, -1)``. Each model is
+  brought to the **input gauge**: pairs reflected to ``w > 0``, each pair's
+  first-input B entries made ``(1, 0)`` and each real pole's 1, so that a
+  mode's C columns are its residues for that input, input-output quantities
+  independent of how the identification happened to scale the states. These
+  are what is interpolated. (Interpolating in the structure's own gauge,
+  fixed C entries 1, was measured worse: for the order-2 handling model
+  identified at 15 and 25 m/s, validation R at 20 m/s was 97.4 % against
+  99.4 % in the input gauge and 99.5 % for the model identified at 20 m/s;
+  there the pair's B and C entries run into the hundreds and their products,
+  not the entries, vary smoothly.) :meth:`ScheduledModalModel.model_at`
+  returns the **canonical form**: the structure's fixed C entries 1 again.
 * **mode matching**, made explicit: walking the grid in increasing order,
   the modes of each model are assigned to those of its neighbour by the
   least total relative eigenvalue distance (pairs among pairs, real poles
-  among real poles; the assignment problem, solved exactly), permuted into
-  the neighbour's slots and brought to the canonical form of their new slot.
-  The permutation and its cost at every grid point are kept
-  (:attr:`ScheduledModalModel.matching`).
+  among real poles; the assignment problem, solved exactly) and permuted
+  into the neighbour's slots. The permutation and its cost at every grid
+  point are kept (:attr:`ScheduledModalModel.matching`).
 
 Between grid points the parameters are interpolated linearly; outside the
 grid the family is not defined (an error names the range).
@@ -42,37 +48,72 @@ from .modal import ModalModel, ModalStructure
 __all__ = ["ModeMatch", "ScheduledModalModel", "canonical_modal_model", "schedule_models"]
 
 
-def _pair_transform(c_ref: np.ndarray) -> np.ndarray:
-    """The scaled rotation ``T`` with ``c_ref T = (1, 1)`` (``c_ref`` the pair's C entries on its reference row)."""
-    c1, c2 = c_ref
-    if c1 * c1 + c2 * c2 == 0:
-        raise InputError("a complex pair has no output on its reference row: it cannot be put in canonical form")
-    p, q = np.linalg.solve(np.array([[c1, -c2], [c2, c1]]), np.ones(2))
-    return np.array([[p, q], [-q, p]])
+def _input_gauge(model: ModalModel, order: list[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A, B, C with the modes in ``order``, omega > 0, and each mode's first-input B entries (1, 0) or 1.
+
+    In this gauge a mode's C columns are its residues for the first input
+    (gauge-invariant input-output quantities), which is what interpolation
+    between grid points should act on.
+    """
+    modes = model.structure.mode_states()
+    source = [state for mode in order for state in modes[mode]]
+    A = model.A[np.ix_(source, source)].copy()
+    B = model.B[source, :].copy()
+    C = model.C[:, source].copy()
+    for states in modes:
+        if len(states) == 1:
+            (j,) = states
+            scale = B[j, 0]
+            if scale == 0:
+                raise InputError("a real pole is not driven by the first input: its scheduling gauge is undefined")
+            B[j, :] /= scale
+            C[:, j] *= scale
+            continue
+        a, b = states
+        if A[a, b] < 0:  # omega < 0: the same mode seen through the reflection diag(1, -1)
+            A[a, b], A[b, a] = -A[a, b], -A[b, a]
+            B[b, :] *= -1
+            C[:, b] *= -1
+        ba, bb = B[a, 0], B[b, 0]
+        if ba == 0 and bb == 0:
+            raise InputError("a complex pair is not driven by the first input: its scheduling gauge is undefined")
+        T = np.array([[ba, -bb], [bb, ba]])  # a scaled rotation: commutes with the pair's block
+        B[[a, b], :] = np.linalg.solve(T, B[[a, b], :])
+        C[:, [a, b]] = C[:, [a, b]] @ T
+    return A, B, C
 
 
-def _canonical_mode(A: np.ndarray, B: np.ndarray, C: np.ndarray, states: tuple[int, ...], row: int) -> None:
-    """Bring one mode (its states' rows of A, B and columns of C) to canonical form, in place."""
-    if len(states) == 1:
-        (j,) = states
-        if C[row, j] == 0:
-            raise InputError("a real pole has no output on its reference row: it cannot be put in canonical form")
-        scale = C[row, j]
-        C[:, j] /= scale
-        B[j, :] *= scale
-        return
-    a, b = states
-    if A[a, b] < 0:  # omega < 0: reflect the second coordinate
-        A[a, b], A[b, a] = -A[a, b], -A[b, a]
-        B[b, :] *= -1
-        C[:, b] *= -1
-    T = _pair_transform(C[row, [a, b]])
-    C[:, [a, b]] = C[:, [a, b]] @ T
-    B[[a, b], :] = np.linalg.solve(T, B[[a, b], :])
+def _structure_gauge(structure: ModalStructure, A: Any, B: Any, C: Any) -> tuple[Any, Any, Any]:
+    """The similarity that makes the structure's fixed C entries 1 again (NumPy arrays or CasADi SX, copied)."""
+    A, B, C = A.copy() if hasattr(A, "copy") else A, B.copy() if hasattr(B, "copy") else B, C.copy() if hasattr(C, "copy") else C
+    n_u, n_y = structure.n_u, structure.n_y
+    for states in structure.mode_states():
+        row = structure.output_of_state(states[0])
+        if len(states) == 1:
+            (j,) = states
+            scale = C[row, j]
+            for i in range(n_y):
+                C[i, j] = C[i, j] / scale
+            for k in range(n_u):
+                B[j, k] = B[j, k] * scale
+            continue
+        a, b = states
+        c1, c2 = C[row, a], C[row, b]
+        norm = c1 * c1 + c2 * c2
+        p, q = (c1 + c2) / norm, (c1 - c2) / norm  # T = [[p, q], [-q, p]] with [c1, c2] T = [1, 1]
+        for i in range(n_y):
+            ca_, cb_ = C[i, a], C[i, b]
+            C[i, a], C[i, b] = ca_ * p - cb_ * q, ca_ * q + cb_ * p
+        det = p * p + q * q
+        for k in range(n_u):
+            ba, bb = B[a, k], B[b, k]
+            B[a, k], B[b, k] = (p * ba - q * bb) / det, (q * ba + p * bb) / det
+    return A, B, C
 
 
 def canonical_modal_model(model: ModalModel, order: list[int] | None = None) -> ModalModel:
-    """The same input-output model with its modes reordered (``order[slot] = mode``) and in canonical form.
+    """The same input-output model with its modes reordered (``order[slot] = mode``), omega > 0 and
+    the structure's fixed C entries equal to 1 (a similarity transform).
 
     Modes keep to their kind: ``order`` permutes pairs among pairs and real
     poles among real poles. The result has the structure of ``model``.
@@ -82,12 +123,7 @@ def canonical_modal_model(model: ModalModel, order: list[int] | None = None) -> 
     order = list(range(len(modes))) if order is None else list(order)
     if sorted(order) != list(range(len(modes))) or any(len(modes[o]) != len(modes[s]) for s, o in enumerate(order)):
         raise InputError(f"a mode order must permute the modes within their kind; got {order}")
-    source = [state for mode in order for state in modes[mode]]
-    A = model.A[np.ix_(source, source)].copy()
-    B = model.B[source, :].copy()
-    C = model.C[:, source].copy()
-    for slot, states in enumerate(modes):
-        _canonical_mode(A, B, C, states, structure.output_of_state(states[0]))
+    A, B, C = _structure_gauge(structure, *_input_gauge(model, order))
     return ModalModel(structure, A, B, C, model.D.copy(), model.input_names, model.output_names, dict(model.meta))
 
 
@@ -104,11 +140,14 @@ class ModeMatch:
     cost: float
 
 
-def _mode_eigenvalues(model: ModalModel) -> np.ndarray:
-    """One eigenvalue per mode read from A's blocks (whatever the model's C gauge), ``sigma + j|omega|``."""
-    A = model.A
+def _block_eigenvalues(structure: ModalStructure, A: np.ndarray) -> np.ndarray:
+    """One eigenvalue per mode read from A's blocks, ``sigma + j|omega|``."""
     return np.array([complex(A[s[0], s[0]], abs(A[s[0], s[1]]) if len(s) == 2 else 0.0)
-                     for s in model.structure.mode_states()])
+                     for s in structure.mode_states()])
+
+
+def _mode_eigenvalues(model: ModalModel) -> np.ndarray:
+    return _block_eigenvalues(model.structure, model.A)
 
 
 def _match(reference: np.ndarray, candidate: np.ndarray, n_pairs: int) -> tuple[list[int], float]:
@@ -135,8 +174,10 @@ class ScheduledModalModel:
     structure : ModalStructure
     grid : ndarray (n_grid,)
         The scheduling variable's grid values, increasing.
-    theta : ndarray (n_grid, n_parameters)
-        The matched, canonical parameters at each grid value.
+    modal : ndarray (n_grid, n)
+        sigma/omega of every mode at each grid value (theta's modal order, omega > 0).
+    B, C, D : ndarray (n_grid, n, n_u), (n_grid, n_y, n), (n_grid, n_y, n_u)
+        The matched models in the input gauge (module notes): these are interpolated.
     matching : tuple of ModeMatch
         The mode assignment at each grid value (the first is the identity).
     variable : str
@@ -145,7 +186,10 @@ class ScheduledModalModel:
 
     structure: ModalStructure
     grid: np.ndarray
-    theta: np.ndarray
+    modal: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
     matching: tuple[ModeMatch, ...]
     variable: str = "speed"
     input_names: tuple[str, ...] | None = None
@@ -153,52 +197,72 @@ class ScheduledModalModel:
     meta: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        s = self.structure
         grid = np.array(self.grid, dtype=float).ravel()
-        theta = np.array(self.theta, dtype=float)
         if grid.size < 2 or np.any(np.diff(grid) <= 0) or not np.all(np.isfinite(grid)):
             raise InputError(f"a scheduled model needs at least two increasing grid values; got {grid.tolist()}")
-        if theta.shape != (grid.size, self.structure.n_parameters) or not np.all(np.isfinite(theta)):
-            raise InputError(f"theta must be finite with shape {(grid.size, self.structure.n_parameters)}; got {theta.shape}")
-        for name, array in (("grid", grid), ("theta", theta)):
+        object.__setattr__(self, "grid", grid)
+        grid.setflags(write=False)
+        for name, shape in (("modal", (s.n,)), ("B", (s.n, s.n_u)), ("C", (s.n_y, s.n)), ("D", (s.n_y, s.n_u))):
+            array = np.array(getattr(self, name), dtype=float)
+            if array.shape != (grid.size, *shape) or not np.all(np.isfinite(array)):
+                raise InputError(f"{name} must be finite with shape {(grid.size, *shape)}; got {array.shape}")
             array.setflags(write=False)
             object.__setattr__(self, name, array)
 
-    def parameters_at(self, value: float) -> np.ndarray:
-        """theta at ``value``, interpolated linearly between the grid values."""
+    def _weights(self, value: float) -> np.ndarray:
         value = float(value)
         low, high = float(self.grid[0]), float(self.grid[-1])
         if not low <= value <= high:
             raise InputError(f"{self.variable} {value:g} lies outside the scheduled range {low:g}..{high:g}")
-        return np.array([np.interp(value, self.grid, column) for column in self.theta.T])
+        return np.array([np.interp(value, self.grid, np.eye(self.grid.size)[k]) for k in range(self.grid.size)])
 
     def model_at(self, value: float) -> ModalModel:
-        """The modal model at ``value`` of the scheduling variable (within the grid's range)."""
-        return ModalModel.from_parameters(
-            self.structure, self.parameters_at(value), input_names=self.input_names, output_names=self.output_names,
-            meta={**self.meta, self.variable: float(value), "scheduled": True},
-        )
+        """The modal model at ``value`` of the scheduling variable (within the grid's range), canonical form."""
+        w = self._weights(value)
+        modal, B, C, D = (np.tensordot(w, array, axes=1) for array in (self.modal, self.B, self.C, self.D))
+        A = self.structure.matrices(np.concatenate([modal, np.zeros(self.structure.n_parameters - self.structure.n)]))[0]
+        A, B, C = _structure_gauge(self.structure, A, B, C)
+        return ModalModel(self.structure, A, B, C, D, input_names=self.input_names, output_names=self.output_names,
+                          meta={**self.meta, self.variable: float(value), "scheduled": True})
 
     def to_casadi(self, name: str = "scheduled_modal_model") -> ca.Function:
         """One CasADi Function ``(x, u, <variable>) -> (xdot, y)`` of the continuous-time family.
 
-        The parameters are piecewise-linear functions of the scheduling
-        variable (``casadi.pw_lin``; linear continuation beyond the grid, where
-        the family is not validated), so the Function differentiates and
-        generates C like any other (for MPC).
+        Its states are those of :meth:`model_at` (the structure's canonical
+        form). The interpolated entries are piecewise-linear functions of the
+        scheduling variable (``casadi.pw_lin``; linear continuation beyond the
+        grid, where the family is not validated), so the Function
+        differentiates and generates C like any other (for MPC).
         """
         s = self.structure
         x = ca.SX.sym("x", s.n)
         u = ca.SX.sym("u", s.n_u)
         v = ca.SX.sym(self.variable)
         grid = ca.DM(self.grid)
-        theta = ca.vertcat(*[ca.pw_lin(v, grid, ca.DM(column)) for column in self.theta.T])
-        A, B, C, D = s.matrices(theta, backend=ca.SX)
+
+        def interpolated(array: np.ndarray) -> ca.SX:
+            flat = array.reshape(array.shape[0], -1)
+            values = [ca.pw_lin(v, grid, ca.DM(flat[:, k])) for k in range(flat.shape[1])]
+            return ca.reshape(ca.vertcat(*values), array.shape[2], array.shape[1]).T if array.ndim == 3 else ca.vertcat(*values)
+
+        modal = interpolated(self.modal)
+        A = ca.SX.zeros(s.n, s.n)
+        for states in s.mode_states():
+            a = states[0]
+            A[a, a] = modal[a]
+            if len(states) == 2:
+                A[a, a + 1], A[a + 1, a], A[a + 1, a + 1] = modal[a + 1], -modal[a + 1], modal[a]
+        B, C = interpolated(self.B), interpolated(self.C)
+        D = interpolated(self.D)
+        A, B, C = _structure_gauge(s, A, B, C)
         return ca.Function(name, [x, u, v], [ca.mtimes(A, x) + ca.mtimes(B, u), ca.mtimes(C, x) + ca.mtimes(D, u)],
                            ["x", "u", self.variable], ["xdot", "y"])
 
     def to_dict(self) -> dict[str, Any]:
         return {
-            "structure": self.structure.to_dict(), "grid": self.grid, "theta": self.theta, "variable": self.variable,
+            "structure": self.structure.to_dict(), "grid": self.grid, "modal": self.modal, "B": self.B, "C": self.C,
+            "D": self.D, "variable": self.variable,
             "matching": [{"value": m.value, "order": list(m.order), "cost": m.cost} for m in self.matching],
         }
 
@@ -206,7 +270,7 @@ class ScheduledModalModel:
     def from_dict(cls, values: Mapping[str, Any]) -> "ScheduledModalModel":
         matching = tuple(ModeMatch(float(m["value"]), tuple(int(o) for o in m["order"]), float(m["cost"]))
                          for m in values["matching"])
-        return cls(ModalStructure.from_dict(values["structure"]), np.asarray(values["grid"]), np.asarray(values["theta"]),
+        return cls(ModalStructure.from_dict(values["structure"]), *(np.asarray(values[k]) for k in ("grid", "modal", "B", "C", "D")),
                    matching, str(values["variable"]))
 
 
@@ -222,7 +286,7 @@ def schedule_models(models: Mapping[float, ModalModel], *, variable: str = "spee
     Returns
     -------
     ScheduledModalModel
-        Modes matched along the grid and in canonical form (module notes).
+        Modes matched along the grid, each model in the input gauge (module notes).
     """
     if len(models) < 2:
         raise InputError(f"a scheduled model needs models at two or more {variable} values; got {len(models)}")
@@ -232,13 +296,16 @@ def schedule_models(models: Mapping[float, ModalModel], *, variable: str = "spee
     for value, model in zip(values, ordered):
         if model.structure != structure:
             raise InputError(f"the model at {variable} {value:g} has another structure than the first")
-    first = canonical_modal_model(ordered[0])
-    matched = [first]
-    matching = [ModeMatch(values[0], tuple(range(len(structure.mode_states()))), 0.0)]
+    identity = list(range(len(structure.mode_states())))
+    gauged = [_input_gauge(ordered[0], identity)]
+    matching = [ModeMatch(values[0], tuple(identity), 0.0)]
     for value, model in zip(values[1:], ordered[1:]):
-        order, cost = _match(_mode_eigenvalues(matched[-1]), _mode_eigenvalues(model), structure.n_complex_pairs)
-        matched.append(canonical_modal_model(model, order))
+        order, cost = _match(_block_eigenvalues(structure, gauged[-1][0]), _mode_eigenvalues(model), structure.n_complex_pairs)
+        gauged.append(_input_gauge(model, order))
         matching.append(ModeMatch(value, tuple(order), cost))
-    theta = np.array([model.parameters for model in matched])
-    return ScheduledModalModel(structure, np.array(values), theta, tuple(matching), variable,
-                               first.input_names, first.output_names)
+    modal = np.array([[A[s[0], s[0]] if k == 0 else A[s[0], s[1]] for s in structure.mode_states() for k in range(len(s))]
+                      for A, _, _ in gauged])
+    return ScheduledModalModel(
+        structure, np.array(values), modal, np.array([g[1] for g in gauged]), np.array([g[2] for g in gauged]),
+        np.array([m.D for m in ordered]), tuple(matching), variable, ordered[0].input_names, ordered[0].output_names,
+    )

@@ -84,7 +84,7 @@ def test_modes_are_matched_across_the_grid_and_interpolated():
     with pytest.raises(InputError, match="outside the scheduled range"):
         family.model_at(35.0)
     again = ScheduledModalModel.from_dict(family.to_dict())
-    assert np.array_equal(again.theta, family.theta) and again.matching == family.matching
+    assert np.array_equal(again.C, family.C) and again.matching == family.matching
 
 
 def test_casadi_export_equals_the_model_at_each_speed():
