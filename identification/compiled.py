@@ -8,7 +8,10 @@ Where no C compiler is found, the function runs in CasADi's virtual machine
 and a warning says so.
 
 The cache directory is ``$VEHID_CACHE_DIR`` if set, else
-``$XDG_CACHE_HOME/vehid`` or ``~/.cache/vehid``.
+``$XDG_CACHE_HOME/vehid`` or ``~/.cache/vehid``. The key holds no path or
+host name, so a cache shared between machines works: each library is built
+once per CPU type (native code is keyed by the CPU), and processes on one
+host wait for each other's build (a file lock) instead of compiling twice.
 """
 
 from __future__ import annotations
@@ -21,8 +24,9 @@ import subprocess
 import tempfile
 import threading
 import warnings
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 import casadi as ca
 import numpy as np
@@ -147,6 +151,23 @@ def _cpu_identity() -> str:
     return identity
 
 
+@contextmanager
+def _host_lock(path: Path) -> Iterator[None]:
+    """An exclusive lock between processes (POSIX ``flock``): parallel workers on one host compile a
+    library once, the others wait for it. Without ``fcntl`` each process may compile (still safe)."""
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not POSIX
+        yield
+        return
+    with open(path, "a") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+
+
 def build_shared_library(
     name: str,
     source: str,
@@ -175,7 +196,7 @@ def build_shared_library(
     directory = cache_directory()
     directory.mkdir(parents=True, exist_ok=True)
     library = directory / f"{name}_{key}.so"
-    with _LOCK:
+    with _LOCK, _host_lock(directory / f".{name}_{key}.lock"):
         if library.exists():
             return library
         with tempfile.TemporaryDirectory(prefix="vehid-cc-") as scratch:

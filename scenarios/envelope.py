@@ -72,6 +72,7 @@ __all__ = [
     "EnvelopeResult",
     "GripLimit",
     "grip_limit",
+    "mode_comparison",
     "parse_speeds",
     "plan_jobs",
     "run_job",
@@ -542,6 +543,30 @@ def _schedule(config: EnvelopeConfig, outcomes: dict[str, JobOutcome], jobs: lis
     return families, off_grid
 
 
+def _eigenvalue(frequency_hz: float, damping: float) -> complex:
+    omega = 2 * math.pi * frequency_hz
+    if not math.isfinite(damping):
+        return complex(0.0, omega)
+    if damping >= 1.0:  # a real pole (or an overdamped pair's slower pole): on the real axis
+        return complex(-damping * omega, 0.0)
+    return complex(-damping * omega, omega * math.sqrt(1.0 - damping * damping))
+
+
+def mode_comparison(modes: Sequence[tuple[float, float]], vehicle_modes: dict[str, tuple[float, float]]) -> list[dict]:
+    """For each vehicle mode, the identified mode nearest to it in the complex plane, side by side."""
+    comparison = []
+    if not modes:
+        return comparison
+    candidates = [_eigenvalue(*mode) for mode in modes]
+    for label, (frequency, damping) in vehicle_modes.items():
+        target = _eigenvalue(frequency, damping)
+        k = int(np.argmin([abs(c - target) for c in candidates]))
+        comparison.append({"label": label, "vehicle_frequency_hz": frequency, "vehicle_damping": damping,
+                           "identified_frequency_hz": modes[k][0], "identified_damping": modes[k][1],
+                           "frequency_error": modes[k][0] / frequency - 1.0, "damping_error": modes[k][1] - damping})
+    return comparison
+
+
 def _rows(config: EnvelopeConfig, outcomes: dict[str, JobOutcome]) -> list[dict[str, Any]]:
     """One row per vehicle, speed and order: R averaged over seeds, modes of the first seed."""
     groups: dict[tuple[str, float, int], list[JobOutcome]] = {}
@@ -565,6 +590,7 @@ def _rows(config: EnvelopeConfig, outcomes: dict[str, JobOutcome]) -> list[dict[
             "modes": [{"frequency_hz": f, "damping": d} for f, d in first.modes],
             "vehicle_modes": [{"label": label, "frequency_hz": f, "damping": d}
                               for label, (f, d) in first.vehicle_modes.items()],
+            "mode_comparison": mode_comparison(first.modes, first.vehicle_modes),
             "amplitude_deg": math.degrees(first.amplitude),
             "seconds": float(np.mean([o.seconds for o in members])),
             "error": "; ".join(o.error for o in members if o.error) or None,

@@ -73,6 +73,8 @@ def test_campaign_archive_rows_and_scheduled_model(pooled):
         assert row["linear_validation_R"] > 98.0  # linear regime, 10 passes: measured 99.2-99.3 %
         assert len(row["modes"]) == 1 and {"frequency_hz", "damping"} <= set(row["modes"][0])
         assert {m["label"] for m in row["vehicle_modes"]} == {"yaw-sideslip", "roll"}
+        for item in row["mode_comparison"]:  # the only identified mode is the nearest to each vehicle mode
+            assert item["identified_frequency_hz"] == row["modes"][0]["frequency_hz"]
     (item,) = summary["scheduled"]["off_grid"]
     assert summary["scheduled"]["grid_speeds"] == [15.0, 25.0] and item["speed"] == 20.0
     # the scheduled model between 15 and 25 m/s against the model identified at 20 m/s: measured 0.46 points
