@@ -6,7 +6,8 @@ Measures, in one run:
   linear pass of the same order on the same data (the baseline);
 * the same pass on both compiled kernels (the covariance algebra as C loops
   with the low-rank prediction, and the whole generated SX step), for the
-  nonlinear and the linear model, and their ratio (target: loops >= 2x);
+  nonlinear and the linear model, timed in turn round by round, and their
+  ratio (target: loops >= 2x);
 * the build and compile time of the nonlinear step (a first run on a machine);
 * with ``--study``, the wall time of the whole ``vehid study handling`` as a
   user runs it (subprocess, default settings).
@@ -54,9 +55,10 @@ def measure(repeats: int) -> dict:
     state = np.concatenate([np.zeros(n), model.theta, pack_covariance(np.diag(q))])
 
     generated_pass = compiled_pass(SplineModalFilterModel(model.structure), data.dt, "exact", "joseph", "generated")
-    nonlinear_generated = median_seconds(lambda: generated_pass(state, u_n, y_n, q, R, model.constants), repeats=repeats)
     structured_pass = compiled_pass(SplineModalFilterModel(model.structure), data.dt, "exact", "joseph", "structured")
-    nonlinear = median_seconds(lambda: structured_pass(state, u_n, y_n, q, R, model.constants), repeats=repeats)
+    nonlinear_generated, nonlinear = interleaved_medians(
+        [lambda: generated_pass(state, u_n, y_n, q, R, model.constants),
+         lambda: structured_pass(state, u_n, y_n, q, R, model.constants)], repeats)
 
     linear_pass = compiled_pass(LinearModalFilterModel(structure), data.dt, "exact", "joseph")
     m_lin = 4 + structure.n_parameters
@@ -65,10 +67,11 @@ def measure(repeats: int) -> dict:
     y_s = data.y / linear.state.output_scale
     u_s = data.u / linear.state.input_scale
     linear_seconds = median_seconds(lambda: linear_pass(state_lin, u_s, y_s, q_lin, np.eye(3)), repeats=repeats)
-    kernels = {}
-    for kernel in ("structured", "generated"):
-        run = compiled_pass(LinearModalFilterModel(structure), data.dt, "exact", "joseph", kernel)
-        kernels[kernel] = median_seconds(lambda: run(state_lin, u_s, y_s, q_lin, np.eye(3)), repeats=repeats)
+    runs = {kernel: compiled_pass(LinearModalFilterModel(structure), data.dt, "exact", "joseph", kernel)
+            for kernel in ("structured", "generated")}
+    timed = interleaved_medians([lambda run=run: run(state_lin, u_s, y_s, q_lin, np.eye(3)) for run in runs.values()],
+                                repeats)
+    kernels = dict(zip(runs, timed))
     return {
         "samples": data.n_samples,
         "nonlinear_filter_states": m,
@@ -84,6 +87,19 @@ def measure(repeats: int) -> dict:
         "nonlinear_build_and_compile_s": build_seconds,
         "linear_filter_states": m_lin,
     }
+
+
+def interleaved_medians(works: list, repeats: int) -> list[float]:
+    """Median wall time of each of ``works``, called in turn every round, so that a change in the
+    machine's load falls on all of them alike (one uncounted round first)."""
+    times: list[list[float]] = [[] for _ in works]
+    for round_index in range(repeats + 1):
+        for work, record in zip(works, times):
+            started = time.perf_counter()
+            work()
+            if round_index:
+                record.append(time.perf_counter() - started)
+    return [float(np.median(record)) for record in times]
 
 
 def study_wall_time() -> float:

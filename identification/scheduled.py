@@ -84,8 +84,8 @@ def _input_gauge(model: ModalModel, order: list[int]) -> tuple[np.ndarray, np.nd
 
 
 def _structure_gauge(structure: ModalStructure, A: Any, B: Any, C: Any) -> tuple[Any, Any, Any]:
-    """The similarity that makes the structure's fixed C entries 1 again (NumPy arrays or CasADi SX, copied)."""
-    A, B, C = A.copy() if hasattr(A, "copy") else A, B.copy() if hasattr(B, "copy") else B, C.copy() if hasattr(C, "copy") else C
+    """The similarity that makes the structure's fixed C entries 1 again, on B and C in place
+    (NumPy arrays or CasADi SX; A commutes with it and is returned as it is)."""
     n_u, n_y = structure.n_u, structure.n_y
     for states in structure.mode_states():
         row = structure.output_of_state(states[0])

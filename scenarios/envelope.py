@@ -30,9 +30,10 @@ at that speed and set beside the model identified directly there.
 Executors: a local process pool (spawned processes), or Dask distributed
 (an existing scheduler, or a local cluster of ``workers`` processes). Dask
 reschedules the jobs of a lost worker on the others; a job that raised is
-retried once. Compiled filters are cached on disk under a hash of their
-generated source, compiler, flags, CasADi version and (for native code)
-the CPU, so each worker host compiles each filter once.
+retried once. Workers of a remote scheduler need the workbench installed
+(jobs travel as its own classes). Compiled filters are cached on disk under
+a hash of their generated source, compiler, flags, CasADi version and (for
+native code) the CPU, so each worker host compiles each filter once.
 """
 
 from __future__ import annotations
