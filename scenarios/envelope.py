@@ -450,13 +450,16 @@ def _run_dask(jobs: list[EnvelopeJob], on_done: Callable[[JobOutcome], None], *,
         from distributed import Client, LocalCluster, as_completed as dask_completed
     except ImportError:
         raise InputError("--executor dask needs dask.distributed: pip install 'vehid[cluster]'") from None
-    # Dask logs its cluster's life at INFO; the workbench shows warnings unless asked to be verbose
-    logging.getLogger("distributed").setLevel(max(logging.WARNING, logging.getLogger().getEffectiveLevel()))
+    # Dask logs its cluster's life at INFO, and a local cluster's workers may log a failed heartbeat while
+    # it shuts down; the workbench shows them only when asked to be verbose (job failures still raise)
+    verbose = logging.getLogger().getEffectiveLevel() <= logging.INFO
+    logging.getLogger("distributed").setLevel(logging.INFO if verbose else logging.CRITICAL)
     cluster = None
     if scheduler:
         client = Client(scheduler, timeout=30)
     else:
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                               silence_logs=logging.INFO if verbose else logging.CRITICAL)
         client = Client(cluster)
     try:
         token = os.urandom(4).hex()  # keys unique to this run: a shared scheduler may hold an earlier campaign's
