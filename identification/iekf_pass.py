@@ -23,7 +23,10 @@ Two covariance forms:
     ``P`` positive definite.
 
 The pass runs as CasADi-generated C called in a loop by a small C driver
-compiled into the same library: no Python per sample. Without a C compiler
+compiled into the same library: no Python per sample. Where the step is
+large (the spline-nonlinear model), only the model and its Jacobians are
+generated and the covariance algebra runs as C loops with the low-rank
+prediction instead (:mod:`identification.iekf_kernel`, ``kernel``). Without a C compiler
 the step runs under CasADi's virtual machine, lifted with ``mapaccum``.
 """
 
