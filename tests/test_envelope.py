@@ -140,3 +140,22 @@ def test_dask_campaign_survives_a_killed_worker(tmp_path):
         assert mine["modes"][0]["frequency_hz"] == pytest.approx(theirs["modes"][0]["frequency_hz"], rel=1e-9)
     assert result.summary["scheduled"]["off_grid"][0]["validation_R"] == pytest.approx(
         reference.summary["scheduled"]["off_grid"][0]["validation_R"], abs=1e-9)
+
+
+@pytest.mark.parametrize(
+    "options, message",
+    [
+        (["--speeds", "20,10"], "speeds must increase"),
+        (["--speeds", "fast"], "speeds must be numbers"),
+        (["--amplitude-fraction", "2"], "beyond its grip limit"),
+        (["--seeds", "a"], "seeds must be whole numbers"),
+        (["--scheduler", "tcp://127.0.0.1:1"], "needs --executor dask"),
+        (["--off-grid", "50"], "must lie strictly between"),
+    ],
+)
+def test_bad_options_exit_2_with_one_line(options, message, capsys, tmp_path):
+    assert main(["study", "envelope", "--out", str(tmp_path / "x.h5"), *options]) == 2
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert captured.out == "" and len(lines) == 1 and message in lines[0], captured.err
+    assert not (tmp_path / "x.h5").exists()
