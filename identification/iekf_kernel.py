@@ -128,6 +128,22 @@ static void vehid_invert(long long n, double* A, double* inverse) {
   }
 }
 
+/* sum over t in [first, last) of values[t] * column[index[t]], in four partial sums so that the
+   additions do not wait on each other */
+static inline double sparse_dot(const double* column, const long long* index, const double* values,
+                                long long first, long long last) {
+  double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
+  long long t = first;
+  for (; t + 3 < last; t += 4) {
+    s0 += values[t] * column[index[t]];
+    s1 += values[t + 1] * column[index[t + 1]];
+    s2 += values[t + 2] * column[index[t + 2]];
+    s3 += values[t + 3] * column[index[t + 3]];
+  }
+  for (; t < last; ++t) s0 += values[t] * column[index[t]];
+  return (s0 + s1) + (s2 + s3);
+}
+
 int vehid_iekf_pass(long long int n_samples, long long int n_u, long long int n_y,
                     long long int n_state, const double* u, const double* y,
                     const double* q, const double* r, const double* c,
@@ -153,6 +169,7 @@ int vehid_iekf_pass(long long int n_samples, long long int n_u, long long int n_
   double* e = malloc(sizeof(double) * n_y);
   if (!arg || !res || !iw || !w || !h || !Hnz || !Enz || !x_next || !W || !K || !V || !S || !S_work
       || !S_inverse || !G || !e) return -1;
+  long long h_end[N_Y], e_end[N_X > 0 ? N_X : 1];
   double* z = state;
   double* P = state + m;
   int status = 0;
@@ -165,7 +182,8 @@ int vehid_iekf_pass(long long int n_samples, long long int n_u, long long int n_
     res[0] = h; res[1] = Hnz;
     if (iekf_measure(arg, res, iw, w, 0)) { status = 1; break; }
     for (o = 0; o < n_y; ++o) { e[o] = y[k * n_y + o] - h[o]; innovations[k * n_y + o] = e[o]; }
-    /* W = P H' (m x n_y, column-major), S = H W + R */
+    /* W = P H' (m x n_y, column-major), S = H W + R. P(i, l) lies in column l for i <= l and in
+       column i for i > l: both parts read whole columns, never a strided row */
     memset(W, 0, sizeof(double) * m * n_y);
     for (o = 0; o < n_y; ++o) {
       double* Wo = W + o * m;
@@ -174,7 +192,14 @@ int vehid_iekf_pass(long long int n_samples, long long int n_u, long long int n_
         double hv = Hnz[t];
         const double* column = P + UP(0, l);
         for (i = 0; i <= l; ++i) Wo[i] += column[i] * hv;
-        for (i = l + 1; i < m; ++i) Wo[i] += P[UP(l, i)] * hv;
+      }
+    }
+    for (o = 0; o < N_Y; ++o) h_end[o] = H_POINTERS[o];
+    for (i = 1; i < m; ++i) {
+      const double* column = P + UP(0, i);
+      for (o = 0; o < N_Y; ++o) {
+        while (h_end[o] < H_POINTERS[o + 1] && H_COLUMNS[h_end[o]] < i) ++h_end[o];
+        W[o * m + i] += sparse_dot(column, H_COLUMNS, Hnz, H_POINTERS[o], h_end[o]);
       }
     }
     for (s = 0; s < n_y; ++s) {
@@ -247,15 +272,22 @@ int vehid_iekf_pass(long long int n_samples, long long int n_u, long long int n_
 #endif
     /* Phi P Phi' with Phi = I + E (E nonzero in the state rows only): G = E P, then
        P + G + G' (+ E G' in the congruence form) on the state rows and columns */
-    for (a = 0; a < nx; ++a) {
+    for (a = 0; a < nx; ++a) {  /* P(l, j) in column l for j < l, in column j for j >= l (as for W) */
       double* Ga = G + a * m;
       for (j = 0; j < m; ++j) Ga[j] = 0.0;
       for (t = E_POINTERS[a]; t < E_POINTERS[a + 1]; ++t) {
         long long l = E_COLUMNS[t];
         double ev = Enz[t];
         const double* column = P + UP(0, l);
-        for (j = 0; j <= l; ++j) Ga[j] += ev * column[j];
-        for (j = l + 1; j < m; ++j) Ga[j] += ev * P[UP(l, j)];
+        for (j = 0; j < l; ++j) Ga[j] += ev * column[j];
+      }
+    }
+    for (a = 0; a < N_X; ++a) e_end[a] = E_POINTERS[a];
+    for (j = 0; j < m; ++j) {
+      const double* column = P + UP(0, j);
+      for (a = 0; a < N_X; ++a) {
+        while (e_end[a] < E_POINTERS[a + 1] && E_COLUMNS[e_end[a]] <= j) ++e_end[a];
+        G[a * m + j] += sparse_dot(column, E_COLUMNS, Enz, E_POINTERS[a], e_end[a]);
       }
     }
     for (a = 0; a < nx; ++a) {
