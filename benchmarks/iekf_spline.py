@@ -4,6 +4,10 @@ Measures, in one run:
 * seconds per nonlinear pass (n = 4, three outputs, p = 5 nodes, 30 s at 500 Hz
   of the vehicle's identification manoeuvre), median of repeats, beside the
   linear pass of the same order on the same data (the baseline);
+* the same pass on both compiled kernels (the covariance algebra as C loops
+  with the low-rank prediction, and the whole generated SX step), for the
+  nonlinear and the linear model, timed in turn round by round, and their
+  ratio (target: loops >= 2x);
 * the build and compile time of the nonlinear step (a first run on a machine);
 * with ``--study``, the wall time of the whole ``vehid study handling`` as a
   user runs it (subprocess, default settings).
@@ -49,7 +53,14 @@ def measure(repeats: int) -> dict:
     n, m = 4, 4 + model.structure.n_parameters
     q = np.concatenate([np.zeros(n), np.full(m - n, 1e-4)])
     state = np.concatenate([np.zeros(n), model.theta, pack_covariance(np.diag(q))])
-    nonlinear = median_seconds(lambda: spline_pass(state, u_n, y_n, q, R, model.constants), repeats=repeats)
+
+    generated_pass = compiled_pass(SplineModalFilterModel(model.structure), data.dt, "exact", "joseph", "generated")
+    structured_pass = compiled_pass(SplineModalFilterModel(model.structure), data.dt, "exact", "joseph", "structured")
+    both = [lambda: generated_pass(state, u_n, y_n, q, R, model.constants),
+            lambda: structured_pass(state, u_n, y_n, q, R, model.constants)]
+    nonlinear_generated, nonlinear = interleaved_medians(both, repeats)
+    # CPU time of this process: on a machine shared with other work it moves far less than wall time
+    cpu_generated, cpu_structured = interleaved_medians(both, repeats, clock=time.process_time)
 
     linear_pass = compiled_pass(LinearModalFilterModel(structure), data.dt, "exact", "joseph")
     m_lin = 4 + structure.n_parameters
@@ -58,16 +69,42 @@ def measure(repeats: int) -> dict:
     y_s = data.y / linear.state.output_scale
     u_s = data.u / linear.state.input_scale
     linear_seconds = median_seconds(lambda: linear_pass(state_lin, u_s, y_s, q_lin, np.eye(3)), repeats=repeats)
+    runs = {kernel: compiled_pass(LinearModalFilterModel(structure), data.dt, "exact", "joseph", kernel)
+            for kernel in ("structured", "generated")}
+    timed = interleaved_medians([lambda run=run: run(state_lin, u_s, y_s, q_lin, np.eye(3)) for run in runs.values()],
+                                repeats)
+    kernels = dict(zip(runs, timed))
     return {
         "samples": data.n_samples,
         "nonlinear_filter_states": m,
         "nonlinear_step_instructions": spline_pass.filter_step.step.n_instructions(),
         "nonlinear_s_per_pass": nonlinear,
+        "nonlinear_generated_step_s_per_pass": nonlinear_generated,
+        "nonlinear_loops_speedup": nonlinear_generated / nonlinear,
+        "nonlinear_loops_cpu_s_per_pass": cpu_structured,
+        "nonlinear_generated_step_cpu_s_per_pass": cpu_generated,
+        "nonlinear_loops_cpu_speedup": cpu_generated / cpu_structured,
+        "linear_loops_s_per_pass": kernels["structured"],
+        "linear_generated_step_s_per_pass": kernels["generated"],
+        "linear_loops_speedup": kernels["generated"] / kernels["structured"],
         "linear_s_per_pass": linear_seconds,
         "nonlinear_to_linear_ratio": nonlinear / linear_seconds,
         "nonlinear_build_and_compile_s": build_seconds,
         "linear_filter_states": m_lin,
     }
+
+
+def interleaved_medians(works: list, repeats: int, clock=time.perf_counter) -> list[float]:
+    """Median time of each of ``works`` on ``clock``, called in turn every round, so that a change in
+    the machine's load falls on all of them alike (one uncounted round first)."""
+    times: list[list[float]] = [[] for _ in works]
+    for round_index in range(repeats + 1):
+        for work, record in zip(works, times):
+            started = clock()
+            work()
+            if round_index:
+                record.append(clock() - started)
+    return [float(np.median(record)) for record in times]
 
 
 def study_wall_time() -> float:
@@ -87,6 +124,12 @@ def main(argv=None) -> int:
     figures = measure(args.repeats)
     print(f"nonlinear pass (n = 4, 3 outputs, 5 nodes, {figures['samples']} samples, "
           f"{figures['nonlinear_filter_states']} filter states): {figures['nonlinear_s_per_pass']:.3f} s median")
+    print(f"  the whole generated step: {figures['nonlinear_generated_step_s_per_pass']:.3f} s; "
+          f"loops with the low-rank prediction {figures['nonlinear_loops_speedup']:.2f}x faster (target >= 2x)")
+    print(f"  CPU time per pass: loops {figures['nonlinear_loops_cpu_s_per_pass']:.3f} s, generated step "
+          f"{figures['nonlinear_generated_step_cpu_s_per_pass']:.3f} s ({figures['nonlinear_loops_cpu_speedup']:.2f}x)")
+    print(f"linear pass, loops {figures['linear_loops_s_per_pass'] * 1e3:.2f} ms against the generated step "
+          f"{figures['linear_generated_step_s_per_pass'] * 1e3:.2f} ms ({figures['linear_loops_speedup']:.2f}x)")
     print(f"linear pass on the same data: {figures['linear_s_per_pass'] * 1e3:.2f} ms "
           f"(nonlinear/linear {figures['nonlinear_to_linear_ratio']:.0f}x)")
     print(f"nonlinear step build and compile (first run; cached after): {figures['nonlinear_build_and_compile_s']:.1f} s")

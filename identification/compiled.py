@@ -8,7 +8,10 @@ Where no C compiler is found, the function runs in CasADi's virtual machine
 and a warning says so.
 
 The cache directory is ``$VEHID_CACHE_DIR`` if set, else
-``$XDG_CACHE_HOME/vehid`` or ``~/.cache/vehid``.
+``$XDG_CACHE_HOME/vehid`` or ``~/.cache/vehid``. The key holds no path or
+host name, so a cache shared between machines works: each library is built
+once per CPU type (native code is keyed by the CPU), and processes on one
+host wait for each other's build (a file lock) instead of compiling twice.
 """
 
 from __future__ import annotations
@@ -21,8 +24,9 @@ import subprocess
 import tempfile
 import threading
 import warnings
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 import casadi as ca
 import numpy as np
@@ -110,18 +114,19 @@ def compile_function(
         return _LOADED[key]
 
 
-def generate_c(function: ca.Function) -> str:
-    """The C source CasADi generates for ``function`` (no header, no main).
+def generate_c(function: ca.Function, *more: ca.Function) -> str:
+    """The C source CasADi generates for ``function`` and any ``more`` (no header, no main).
 
     It defines ``int NAME(const casadi_real** arg, casadi_real** res,
-    casadi_int* iw, casadi_real* w, int mem)`` and ``NAME_work(...)``, with
-    ``casadi_real`` double and ``casadi_int`` long long int, so that a
-    hand-written driver appended to it can call the function in a loop.
+    casadi_int* iw, casadi_real* w, int mem)`` and ``NAME_work(...)`` for
+    each, with ``casadi_real`` double and ``casadi_int`` long long int, so
+    that a hand-written driver appended to it can call them in a loop.
     """
     with tempfile.TemporaryDirectory(prefix="vehid-gen-") as scratch:
         source_name = f"{function.name()}.c"
         generator = ca.CodeGenerator(source_name, {"with_header": False})
-        generator.add(function)
+        for each in (function, *more):
+            generator.add(each)
         # The prefix names the directory, so no process-wide working directory changes hands.
         generator.generate(scratch + os.sep)
         return Path(scratch, source_name).read_text()
@@ -140,6 +145,23 @@ def _cpu_identity() -> str:
     except OSError:
         identity += platform.processor()
     return identity
+
+
+@contextmanager
+def _host_lock(path: Path) -> Iterator[None]:
+    """An exclusive lock between processes (POSIX ``flock``): parallel workers on one host compile a
+    library once, the others wait for it. Without ``fcntl`` each process may compile (still safe)."""
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not POSIX
+        yield
+        return
+    with open(path, "a") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
 
 
 def build_shared_library(
@@ -170,7 +192,7 @@ def build_shared_library(
     directory = cache_directory()
     directory.mkdir(parents=True, exist_ok=True)
     library = directory / f"{name}_{key}.so"
-    with _LOCK:
+    with _LOCK, _host_lock(directory / f".{name}_{key}.lock"):
         if library.exists():
             return library
         with tempfile.TemporaryDirectory(prefix="vehid-cc-") as scratch:
@@ -223,7 +245,7 @@ int vehid_recursion(long long int n_samples, long long int n_x, long long int n_
 
 
 def compile_driver(
-    step: ca.Function,
+    step: ca.Function | tuple[ca.Function, ...],
     driver_source: str,
     *,
     library_name: str,
@@ -238,12 +260,15 @@ def compile_driver(
     those names are replaced by the generated function's. The driver's entry
     point ``entry`` takes ``n_integers`` ``long long`` arguments, then
     ``n_arrays`` ``double*``, and returns an ``int`` status (the ctypes function).
+    A tuple of functions is generated together; ``STEP`` names the first, the
+    driver may call the others by their own names.
     """
     import ctypes
 
-    name = step.name()
+    steps = step if isinstance(step, tuple) else (step,)
+    name = steps[0].name()
     driver = driver_source.replace("STEP_work", f"{name}_work").replace("STEP(", f"{name}(")
-    library = build_shared_library(library_name, generate_c(step) + driver, optimisation=optimisation)
+    library = build_shared_library(library_name, generate_c(*steps) + driver, optimisation=optimisation)
     function = getattr(ctypes.CDLL(str(library)), entry)
     function.argtypes = [ctypes.c_longlong] * n_integers + [ctypes.POINTER(ctypes.c_double)] * n_arrays
     function.restype = ctypes.c_int

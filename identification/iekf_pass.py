@@ -23,7 +23,10 @@ Two covariance forms:
     ``P`` positive definite.
 
 The pass runs as CasADi-generated C called in a loop by a small C driver
-compiled into the same library: no Python per sample. Without a C compiler
+compiled into the same library: no Python per sample. Where the step is
+large (the spline-nonlinear model), only the model and its Jacobians are
+generated and the covariance algebra runs as C loops with the low-rank
+prediction instead (:mod:`identification.iekf_kernel`, ``kernel``). Without a C compiler
 the step runs under CasADi's virtual machine, lifted with ``mapaccum``.
 """
 
@@ -42,9 +45,11 @@ import numpy as np
 from .compiled import NoCompilerWarning, compile_driver, find_c_compiler
 from .errors import DivergenceError
 from .filter_models import check_discretization
+from .iekf_kernel import structured_pass_source
 
 __all__ = [
     "COVARIANCE_FORMS",
+    "KERNELS",
     "FilterStep",
     "build_filter_step",
     "compiled_pass",
@@ -54,6 +59,7 @@ __all__ = [
 ]
 
 COVARIANCE_FORMS = ("joseph", "paper")
+KERNELS = ("auto", "structured", "generated")
 
 # Measured on the single-output pass (m = 22): -O3 -march=native runs in about
 # 0.6 of the -O2 time; the library is cached per CPU (see build_shared_library).
@@ -268,7 +274,7 @@ class _VirtualMachinePass:
 
 
 @functools.lru_cache(maxsize=32)
-def _pass_for(filter_model: Any, dt: float, discretization: str, covariance: str):
+def _pass_for(filter_model: Any, dt: float, discretization: str, covariance: str, kernel: str):
     filter_step = build_filter_step(filter_model, dt, discretization, covariance)
     if find_c_compiler() is None:
         warnings.warn(
@@ -280,6 +286,13 @@ def _pass_for(filter_model: Any, dt: float, discretization: str, covariance: str
         return _VirtualMachinePass(filter_step)
     tag = hashlib.sha256(filter_model.cache_key().encode()).hexdigest()[:8]
     large = filter_step.step.n_instructions() > LARGE_STEP_INSTRUCTIONS
+    if kernel == "structured" or (kernel == "auto" and large):
+        source, functions = structured_pass_source(filter_step)
+        function = compile_driver(
+            tuple(functions), source, library_name=f"iekf_loops_{tag}", entry="vehid_iekf_pass",
+            n_integers=4, n_arrays=7, optimisation=PASS_COMPILE_FLAGS,
+        )
+        return _CompiledPass(function, filter_step)
     function = compile_driver(
         filter_step.step, _DRIVER, library_name=f"iekf_pass_{tag}", entry="vehid_iekf_pass",
         n_integers=4, n_arrays=7, optimisation=LARGE_STEP_COMPILE_FLAGS if large else PASS_COMPILE_FLAGS,
@@ -287,8 +300,18 @@ def _pass_for(filter_model: Any, dt: float, discretization: str, covariance: str
     return _CompiledPass(function, filter_step)
 
 
-def compiled_pass(filter_model: Any, dt: float, discretization: str, covariance: str):
+def compiled_pass(filter_model: Any, dt: float, discretization: str, covariance: str, kernel: str = "auto"):
     """The pass function for a filter model, built and compiled once (cached in memory and on disk).
+
+    ``kernel`` chooses the compiled code: ``structured`` generates only the
+    model and its Jacobians and runs the covariance algebra as C loops with
+    the low-rank prediction (:mod:`identification.iekf_kernel`);
+    ``generated`` compiles the whole SX step; ``auto`` (default) takes the
+    loops where the generated step is large (above
+    ``LARGE_STEP_INSTRUCTIONS``). Measured (n = 4, three outputs, 15,001
+    samples, same run): the spline model's pass (99 filter states) runs
+    2.7x faster on the loops, the linear one's (23 states) 1.3x slower, its
+    unrolled step being small enough to stay in cache.
 
     Returns a callable ``run(state, u, y, q, r, c=None) -> (state, innovations)`` with
     ``state = [z; upper(P)]`` (see :func:`pack_covariance`), ``u`` (N, n_u),
@@ -296,7 +319,9 @@ def compiled_pass(filter_model: Any, dt: float, discretization: str, covariance:
     model's constants (none for a linear model).
     Its attribute ``filter_step`` is the :class:`FilterStep`.
     """
-    return _pass_for(filter_model, float(dt), discretization, covariance)
+    if kernel not in KERNELS:
+        raise ValueError(f"unknown kernel {kernel!r}; use one of {', '.join(KERNELS)}")
+    return _pass_for(filter_model, float(dt), discretization, covariance, kernel)
 
 
 def numpy_reference_pass(

@@ -163,3 +163,42 @@ def test_code_generation_leaves_the_working_directory_alone(monkeypatch):
     monkeypatch.setattr(os, "chdir", refuse)
     x = ca.SX.sym("x")
     assert "generated_twice" in generate_c(ca.Function("generated_twice", [x], [2 * x]))
+
+
+@pytest.mark.parametrize("covariance", ["joseph", "paper"])
+@pytest.mark.parametrize("spline", [False, True])
+def test_structured_loops_equal_the_generated_step(covariance, spline):
+    # The low-rank prediction and looped Joseph update are the generated step's algebra in another
+    # order: 1,000 steps agree to 1e-10 relative (rounding, as against the NumPy reference above).
+    from identification.spline_modal import SplineModalFilterModel, SplineModalStructure
+
+    data, _ = make_data(3, outputs=(0, 1, 2), duration=2.2)
+    u, y = data.u[:1000, :1], data.y[:1000]
+    if spline:  # a spline model of one output: the Jacobian patterns depend on the state
+        y = y[:, :1]
+        linear = ModalStructure.default(2, 1, 1)
+        structure = SplineModalStructure(linear, 3)
+        filter_model = SplineModalFilterModel(structure)
+        theta = structure.from_linear(linear.initial_parameters(sigma=-10, omega=10)) * np.linspace(0.8, 1.2, 3 * linear.n_parameters)
+        constants = structure.constants(structure.default_ranges() * 3.0)
+    else:
+        linear = ModalStructure.from_pattern("eq18", 5, 1, 3)
+        filter_model = LinearModalFilterModel(linear)
+        theta = linear.initial_parameters(sigma=-10, omega=10, omega_spread=0.5)
+        constants = None
+    m = linear.n + theta.size
+    q = np.concatenate([np.zeros(linear.n), np.full(theta.size, 0.1)])
+    state = np.concatenate([np.zeros(linear.n), theta, pack_covariance(np.diag(q) + 1e-3 * np.eye(m))])
+    r = np.diag(np.linspace(0.5, 1.0, y.shape[1]))
+    loops = compiled_pass(filter_model, DT, "exact", covariance, kernel="structured")
+    generated = compiled_pass(filter_model, DT, "exact", covariance, kernel="generated")
+    state_loops, innovations_loops = loops(state, u, y, q, r, constants)
+    state_generated, innovations_generated = generated(state, u, y, q, r, constants)
+    assert np.max(np.abs(state_loops - state_generated)) < 1e-10 * np.max(np.abs(state_generated))
+    assert np.max(np.abs(innovations_loops - innovations_generated)) < 1e-10 * np.max(np.abs(y))
+    assert np.max(np.abs(state_generated - state)) > 1e-3  # the pass moved the state: the comparison can fail
+
+
+def test_unknown_kernel_is_rejected():
+    with pytest.raises(ValueError, match="kernel"):
+        compiled_pass(LinearModalFilterModel(ModalStructure.default(2, 1, 1)), DT, "exact", "joseph", kernel="fast")
