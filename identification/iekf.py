@@ -36,6 +36,7 @@ from .filter_models import LinearModalFilterModel, check_discretization
 from .iekf_pass import COVARIANCE_FORMS, compiled_pass, pack_covariance, unpack_covariance
 from .metrics import percentage_explanation
 from .modal import ModalModel, ModalStructure
+from .uncertainty import iekf_parameter_covariance
 
 __all__ = [
     "IEKFOptions",
@@ -123,7 +124,9 @@ class PassRecord:
 
     ``fit_filter``: R per output of the frozen model simulated with the
     filter's own discretisation; ``fit_continuous``: R per output of the
-    continuous model simulated exactly (inputs linear between samples).
+    continuous model simulated exactly (inputs linear between samples);
+    ``nis``: the pass's mean normalised innovation squared ``e' R^-1 e``
+    (n_y for innovations as large as the filter assumes; NaN where unknown).
     """
 
     index: int
@@ -133,6 +136,7 @@ class PassRecord:
     trace_p: float
     min_eig_p: float
     seconds: float
+    nis: float = float("nan")
 
     @property
     def mean_fit_filter(self) -> float:
@@ -310,10 +314,15 @@ def identify_iekf(
 
     def result(stop_reason: str) -> IEKFResult:
         last = history[-1].parameters if history else denormalize(structure, theta, input_scale, output_scale)
+        covariance = None
+        if history and np.isfinite(history[-1].nis):
+            covariance = iekf_parameter_covariance(
+                structure, P[n:, n:], input_scale, output_scale, history[-1].nis / structure.n_y)
         return IEKFResult(
             model=ModalModel.from_parameters(
                 structure, last, input_names=data.input_names, output_names=data.output_names,
                 meta={"estimator": "iekf", "discretization": options.discretization, "passes": len(history)},
+                parameter_covariance=covariance,
             ),
             structure=structure,
             options=options,
@@ -367,6 +376,7 @@ def identify_iekf(
             trace_p=trace,
             min_eig_p=min_eig,
             seconds=time.perf_counter() - pass_start,
+            nis=float(np.mean(np.sum(innovations * np.linalg.solve(r, innovations.T).T, axis=1))),
         )
         theta, P = new_theta, new_P
         history.append(record)

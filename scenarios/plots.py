@@ -27,6 +27,7 @@ from matplotlib.figure import Figure
 
 from identification.errors import InputError
 from identification.metrics import percentage_explanation
+from identification.residuals import autocorrelation as residual_autocorrelation
 
 __all__ = [
     "REPORT_SIZE",
@@ -642,29 +643,11 @@ def plot_bode(
 
 # --------------------------------------------------- residual whiteness
 def autocorrelation(residuals: Any, max_lag: int) -> np.ndarray:
-    """Normalised autocorrelation of each residual column at lags 0..max_lag.
+    """Normalised autocorrelation of each residual column at lags 0..max_lag, shape (max_lag + 1, n_y).
 
-    Parameters
-    ----------
-    residuals : array_like, shape (N, n_y)
-    max_lag : int
-        Largest lag in samples, below N.
-
-    Returns
-    -------
-    ndarray, shape (max_lag + 1, n_y)
-        ``r(k) / r(0)`` of the mean-removed residuals (1 at lag 0).
+    See :func:`identification.residuals.autocorrelation`.
     """
-    e = _matrix("residuals", residuals)
-    e = e - e.mean(axis=0)
-    n = e.shape[0]
-    if not (isinstance(max_lag, (int, np.integer)) and 0 < max_lag < n):
-        raise InputError(f"max_lag must be an integer in 1..{n - 1}; got {max_lag!r}")
-    energy = np.sum(e**2, axis=0)
-    if np.any(energy == 0):
-        raise InputError("a residual is constant: its autocorrelation is undefined")
-    lags = np.array([np.sum(e[: n - k] * e[k:], axis=0) for k in range(max_lag + 1)])
-    return lags / energy
+    return residual_autocorrelation(_matrix("residuals", residuals), max_lag)
 
 
 def plot_residual_autocorrelation(

@@ -28,10 +28,12 @@ from identification import read_csv, read_hdf5
 from identification.errors import InputError
 from identification.filter_models import DISCRETIZATIONS
 from identification.iekf import START_VALUES, IEKFOptions, identify_iekf
-from identification.archive import open_archive, read_records, write_archive, write_record
+from identification.archive import open_archive, read_records, run_group, update_archive, write_archive, write_record
 from identification.iekf_archive import Checkpointer, read_iekf_run
 from identification.iekf_pass import COVARIANCE_FORMS
 from identification.modal import C_PATTERNS, ModalStructure
+from identification.storage import write_value
+from scenarios.model_checks import uncertainty_lines, uncertainty_summary
 from scenarios.progress import Progress
 
 NAME = "identify"
@@ -152,7 +154,11 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
         "D": model.D,
         "seconds": result.seconds,
     }
+    checks, tests = uncertainty_summary(model, data, [record.nis for record in result.history])
+    summary.update(checks)
     if archive_path is not None:
+        with update_archive(archive_path) as archive:
+            write_value(run_group(archive, RUN_NAME), "residual_tests", tests)
         summary["archive"] = str(archive_path)
     if args.save_model:
         summary["model_file"] = str(_save_model(model, args.save_model))
@@ -186,6 +192,7 @@ def _run_comparator(args: argparse.Namespace, data, structure) -> tuple[dict, st
         "D": model.D,
         "seconds": outcome.seconds,
     }
+    summary.update(uncertainty_summary(model, data)[0])
     if args.save_model:
         summary["model_file"] = str(_save_model(model, args.save_model))
     return summary, _text(summary, data)
@@ -202,6 +209,8 @@ def _text(summary: dict, data) -> str:
         f"eigenvalues: {eigen}",
         f"fit R (continuous model simulated exactly): {fits}",
     ]
+    if "modes" in summary:
+        lines += uncertainty_lines(summary, data.output_names)
     if "model_file" in summary:
         lines.append(f"wrote {summary['model_file']}")
     return "\n".join(lines)
