@@ -1,0 +1,142 @@
+"""Residual tests: whiteness, input cross-correlation, Ljung-Box, innovation consistency, and the identify command's keys."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import h5py
+import numpy as np
+import pytest
+from scipy.signal import lfilter
+
+from identification.comparators import identify_with
+from identification.archive import open_archive, update_archive
+from identification.iekf import IEKFOptions, identify_iekf
+from identification.iekf_archive import append_iekf_pass, read_iekf_run
+from identification.modal import ModalStructure
+from identification.residuals import nis_band, residual_tests
+from identification.storage import read_value
+from scenarios import calibration
+from scenarios.linear_example import make_data, true_model
+from scenarios.model_checks import model_residual_tests
+
+
+def test_white_residuals_pass_with_the_nominal_false_alarm_rate():
+    """200 white series of 1000 samples: the 99 % Ljung-Box test rejects about 2 (binomial, P(X > 8) < 1e-4)."""
+    rng = np.random.default_rng(0)
+    rejected = 0
+    for _ in range(200):
+        tests = residual_tests(rng.standard_normal((1000, 1)), rng.standard_normal((1000, 1)))
+        rejected += int(tests.residual_whiteness_p[0] < 0.01)
+    assert rejected <= 8
+
+
+def test_coloured_or_input_correlated_residuals_are_flagged():
+    rng = np.random.default_rng(1)
+    u = rng.standard_normal((4000, 1))
+    coloured = lfilter([1.0], [1.0, -0.3], rng.standard_normal(4000))[:, None]
+    tests = residual_tests(u, coloured)
+    assert tests.residual_whiteness_p[0] < 1e-6 and not tests.adequate
+    leaking = rng.standard_normal((4000, 1)) + 0.2 * np.roll(u, 3, axis=0)  # the residual follows the input 3 samples late
+    tests = residual_tests(u, leaking)
+    lags = np.arange(-tests.lags, tests.lags + 1)
+    assert tests.input_correlation_max[0] > 3 * tests.bound
+    assert lags[np.argmax(np.abs(tests.cross_correlation[:, 0, 0]))] == 3
+
+
+def test_nis_band_holds_consistent_innovations():
+    """The mean of e'e for unit-variance innovations lies in the 99 % band in about 99 of 100 trials (at most 4 out)."""
+    rng = np.random.default_rng(2)
+    low, high = nis_band(2000, 3)
+    outside = sum(not low <= np.mean(np.sum(rng.standard_normal((2000, 3)) ** 2, axis=1)) <= high for _ in range(100))
+    assert outside <= 4
+
+
+@pytest.mark.parametrize("low_order, adequate_order", [(2, 4)])
+def test_residual_tests_flag_too_low_an_order_and_pass_the_true_one(low_order, adequate_order):
+    """The calibration system (two pairs) with 10 % output noise, identified by the IEKF."""
+    data, _ = calibration.make_record(21, 0.1, duration=30.0)
+    verdicts = {}
+    for order in (low_order, adequate_order):
+        structure = ModalStructure.default(order, 1, 1)
+        model = identify_iekf(data, structure, options=IEKFOptions(**calibration.IEKF_SETTINGS)).model
+        verdicts[order] = model_residual_tests(model, data)
+    assert not verdicts[low_order].adequate
+    assert verdicts[adequate_order].adequate
+
+
+def test_residual_tests_on_the_paper_linear_example():
+    """Eq. 15, output 1, 10 % noise, 20 s (Table 4 tuning p = 0.001, 40 passes).
+
+    n = 3 leaves the -15 +/- 10j pair in the residuals and is flagged. The
+    true model passes, and so does n = 4 (the paper's chosen order: the
+    real pole at -4 is weak in output 1) once output error refines the
+    IEKF's model. The IEKF's own n = 4 and 5 models at this tuning are not
+    yet converged after 40 passes on 20 s (the real pole near -9) and the
+    cross-correlation test says so (measured, see the issue's report).
+    """
+    data, _ = make_data(0, outputs=(0,), noise_ratio=0.1, duration=20.0)
+    options = IEKFOptions(p=1e-3, passes=40, normalize=True)
+    low = identify_iekf(data, ModalStructure.from_pattern("all-ones", 3, 2, 1), options=options).model
+    assert not model_residual_tests(low, data).adequate
+    assert model_residual_tests(true_model(1), data).adequate
+    start = identify_iekf(data, ModalStructure.from_pattern("all-ones", 4, 2, 1), options=options).model
+    refined = identify_with(data, method="output-error", order=4, start=start).model
+    assert model_residual_tests(refined, data).adequate
+
+
+def _csv(tmp_path, seed=3):
+    data, _ = calibration.make_record(seed, 0.1, duration=20.0)
+    path = tmp_path / "record.csv"
+    np.savetxt(path, np.column_stack([data.t, data.u, data.y]), delimiter=",", header="t,u,y", comments="")
+    return path
+
+
+def _identify(*arguments):
+    return subprocess.run([sys.executable, "-m", "scenarios.cli", "identify", *arguments, "--quiet"],
+                          capture_output=True, text=True, check=False)
+
+
+def test_identify_json_carries_modes_with_std_and_residual_keys(tmp_path):
+    path = _csv(tmp_path)
+    archive = tmp_path / "run.h5"
+    done = _identify(str(path), "--inputs", "u", "--outputs", "y", "--order", "4", "--normalize", "--p", "0.001",
+                     "--passes", "15", "--json", "--out", str(archive))
+    assert done.returncode == 0, done.stderr
+    summary = json.loads(done.stdout)
+    assert len(summary["modes"]) == 2
+    for mode in summary["modes"]:
+        assert set(mode) >= {"eigenvalue", "eigenvalue_std", "frequency_hz", "frequency_hz_std", "damping", "damping_std"}
+        assert len(mode["eigenvalue_std"]) == 2 and mode["frequency_hz_std"] > 0
+    assert len(summary["residual_whiteness_p"]) == 1 and len(summary["input_correlation_max"]) == 1
+    assert len(summary["innovation_nis"]) == summary["passes_run"]
+    with open_archive(archive) as handle:
+        run = read_iekf_run(handle, "iekf")
+        tests = read_value(handle["runs/iekf"], "residual_tests")
+    assert run.model.parameter_covariance is not None
+    assert np.isfinite(run.history[-1].nis)
+    np.testing.assert_allclose(tests.residual_whiteness_p, summary["residual_whiteness_p"])
+    text = _identify(str(path), "--inputs", "u", "--outputs", "y", "--order", "4", "--normalize", "--p", "0.001",
+                     "--passes", "5")
+    assert text.returncode == 0, text.stderr
+    assert "\u00b1" in text.stdout and "whiteness p" in text.stdout
+
+
+def test_an_archive_without_the_nis_column_still_reads_and_resumes(tmp_path):
+    """Runs archived before the history recorded the NIS keep their columns when resumed."""
+    path = _csv(tmp_path, seed=5)
+    archive = tmp_path / "run.h5"
+    assert _identify(str(path), "--inputs", "u", "--outputs", "y", "--order", "4", "--passes", "2", "--out",
+                     str(archive)).returncode == 0
+    with h5py.File(archive, "r+") as handle:
+        del handle["runs/iekf/history/nis"]
+    with open_archive(archive) as handle:
+        previous = read_iekf_run(handle, "iekf")
+    assert np.isnan(previous.history[-1].nis)
+    with update_archive(archive) as handle:
+        append_iekf_pass(handle, "iekf", previous.history[-1].__class__(**{**previous.history[-1].__dict__, "index": 3}),
+                         previous)
+    with open_archive(archive) as handle:
+        assert "nis" not in handle["runs/iekf/history"] and read_iekf_run(handle, "iekf").passes_run == 3
