@@ -221,6 +221,10 @@ class FrequencyResponseBand:
     phase_deg_std: np.ndarray
     level: float
 
+    def normal_quantile(self) -> float:
+        """``z`` of the bands: ``value +/- z std`` holds :attr:`level`."""
+        return normal_quantile(self.level)
+
     def magnitude_band(self) -> tuple[np.ndarray, np.ndarray]:
         """Lower and upper magnitude at :attr:`level` (the lower one floored just above zero for log axes)."""
         z = normal_quantile(self.level)

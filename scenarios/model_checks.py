@@ -72,10 +72,11 @@ def uncertainty_lines(summary: dict[str, Any], output_names: Sequence[str]) -> l
         )
     bound = summary["residual_tests"]["bound"]
     lines.append(f"residual tests (99 %, {summary['residual_tests']['lags']} lags, bound {bound:.3g}):")
-    for name, p, correlation in zip(output_names, summary["residual_whiteness_p"], summary["input_correlation_max"]):
-        verdict = "white" if p >= 0.01 else "NOT white"
-        independent = "independent of the input" if correlation <= bound else "correlated with the input"
-        lines.append(f"  {name}: whiteness p = {p:.3g} ({verdict}); max input correlation {correlation:.3g} ({independent})")
+    for name, output in zip(output_names, summary["residual_tests"]["outputs"]):
+        verdict = "white" if output["white"] else "NOT white"
+        independent = "independent of the input" if output["independent"] else "correlated with the input"
+        lines.append(f"  {name}: whiteness p = {output['residual_whiteness_p']:.3g} ({verdict}); input correlation "
+                     f"max {output['input_correlation_max']:.3g}, p = {output['input_correlation_p']:.3g} ({independent})")
     if "innovation_nis" in summary:
         low, high = summary["innovation_nis_band"]
         last = float(summary["innovation_nis"][-1])

@@ -24,10 +24,12 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+from scipy.stats import chi2
 
 from identification.errors import InputError
 from identification.metrics import percentage_explanation
 from identification.residuals import autocorrelation as residual_autocorrelation
+from identification.uncertainty import frequency_response as response_band
 
 __all__ = [
     "REPORT_SIZE",
@@ -43,6 +45,7 @@ __all__ = [
     "plot_bode",
     "autocorrelation",
     "plot_residual_autocorrelation",
+    "plot_residual_tests",
 ]
 
 #: Default figure size in inches: legible on an A4 page at 100 % with 9-10 pt text.
@@ -480,8 +483,13 @@ def plot_eigenvalue_map(
     annotate: bool = True,
     title: str = "Eigenvalues of the identified models",
     ax: Axes | None = None,
+    confidence: bool = True,
 ) -> Figure:
     """Eigenvalues in the complex plane, each oscillatory mode annotated with frequency and damping.
+
+    Models that carry a parameter covariance get the 95 % confidence ellipse
+    of each eigenvalue (delta method; chi-square with 2 degrees of freedom,
+    a line along the real axis for a real pole) unless ``confidence`` is False.
 
     Parameters
     ----------
@@ -504,8 +512,11 @@ def plot_eigenvalue_map(
     markers = "xs^Dv<>p"
     for k, (label, model) in enumerate(models.items()):
         values = _eigenvalues(model)
-        ax.plot(values.real, values.imag, linestyle="none", marker=markers[k % len(markers)],
-                markersize=7, markeredgewidth=1.6, label=label)
+        points = ax.plot(values.real, values.imag, linestyle="none", marker=markers[k % len(markers)],
+                         markersize=7, markeredgewidth=1.6, label=label)
+        if confidence and getattr(model, "parameter_covariance", None) is not None:
+            for mode in model.uncertainty().modes:
+                _ellipse(ax, mode.eigenvalue, mode.eigenvalue_covariance, points[0].get_color())
         if annotate:
             for value in values[values.imag >= 0]:
                 magnitude = abs(value)
@@ -523,6 +534,22 @@ def plot_eigenvalue_map(
     ax.set_title(title)
     _legend(ax, loc="best")
     return fig
+
+
+ELLIPSE_SCALE = float(np.sqrt(chi2.ppf(0.95, 2)))  # 95 % region of a 2-D normal, in standard deviations
+
+
+def _ellipse(ax: Axes, value: complex, covariance: np.ndarray, color: Any) -> None:
+    """The 95 % ellipse of an eigenvalue (and its mirror image for a pair) from the covariance of (re, im)."""
+    if not np.all(np.isfinite(covariance)):
+        return
+    values, vectors = np.linalg.eigh(covariance)
+    angle = np.linspace(0.0, 2 * np.pi, 60)
+    circle = np.vstack([np.cos(angle), np.sin(angle)])
+    outline = vectors @ (ELLIPSE_SCALE * np.sqrt(np.maximum(values, 0.0))[:, None] * circle)
+    ax.plot(value.real + outline[0], value.imag + outline[1], color=color, linewidth=0.9)
+    if value.imag != 0:
+        ax.plot(value.real + outline[0], -value.imag - outline[1], color=color, linewidth=0.9)
 
 
 def _state_space(model: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -584,8 +611,13 @@ def plot_bode(
     frequencies: Any = None,
     title: str | None = None,
     fig: Figure | None = None,
+    confidence: bool = True,
 ) -> Figure:
     """Magnitude and phase from one input to every output, for several models.
+
+    Models that carry a parameter covariance get their 95 % band shaded
+    (delta method, :func:`identification.uncertainty.frequency_response`)
+    unless ``confidence`` is False.
 
     Parameters
     ----------
@@ -619,6 +651,8 @@ def plot_bode(
     n_y = next(iter(curves.values())).shape[1]
     if any(g.shape[1] != n_y for g in curves.values()):
         raise InputError("all models must have the same number of outputs")
+    bands = {label: response_band(model, frequencies) for label, model in models.items()
+             if confidence and getattr(model, "parameter_covariance", None) is not None}
     if output_names is None:
         first = next(iter(models.values()), None)
         output_names = getattr(first, "output_names", None)
@@ -630,8 +664,16 @@ def plot_bode(
         ax_mag, ax_phase = _style(axes[0, i]), _style(axes[1, i])
         for label, g in curves.items():
             style = {"color": "k", "linestyle": "--"} if label == "reference" else {}
-            ax_mag.loglog(frequencies, np.abs(g[:, i]), linewidth=1.4, label=label, **style)
-            ax_phase.semilogx(frequencies, np.degrees(np.unwrap(np.angle(g[:, i]))), linewidth=1.4, **style)
+            lines = ax_mag.loglog(frequencies, np.abs(g[:, i]), linewidth=1.4, label=label, **style)
+            phase = np.degrees(np.unwrap(np.angle(g[:, i])))
+            ax_phase.semilogx(frequencies, phase, linewidth=1.4, **style)
+            if label in bands:
+                band = bands[label]
+                lower, upper = (edge[:, i, input_index] for edge in band.magnitude_band())
+                ax_mag.fill_between(frequencies, lower, upper, color=lines[0].get_color(), alpha=0.2, linewidth=0)
+                spread = band.normal_quantile() * band.phase_deg_std[:, i, input_index]
+                ax_phase.fill_between(frequencies, phase - spread, phase + spread, color=lines[0].get_color(),
+                                      alpha=0.2, linewidth=0)
         ax_mag.set_title(names[i], fontsize=10)
         ax_mag.set_ylabel(f"|G| ({units[i]}/{input_unit})")
         ax_phase.set_ylabel("phase (deg)")
@@ -696,4 +738,53 @@ def plot_residual_autocorrelation(
         _legend(ax, loc="upper right")
     axes[-1].set_xlabel("lag (s)" if dt else "lag (samples)")
     fig.suptitle(title)
+    return fig
+
+
+def plot_residual_tests(tests: Any, *, dt: float | None = None, title: str = "Residual tests",
+                        fig: Figure | None = None) -> Figure:
+    """The residual-test page: per output, the autocorrelation and the input cross-correlations with their band.
+
+    Parameters
+    ----------
+    tests : identification.residuals.ResidualTests
+    dt : float, optional
+        Sample interval (s): lags in seconds.
+    title : str
+    fig : Figure, optional
+
+    Returns
+    -------
+    Figure
+        One row per output: left the autocorrelation at lags 1..L with the
+        Ljung-Box p-value, right each input's cross-correlation at lags
+        -L..L with the largest magnitude; the band ``+/- z / sqrt(N)`` at the
+        tests' level shaded.
+    """
+    n_y = len(tests.output_names)
+    scale = dt if dt else 1.0
+    fig = _figure(fig, (REPORT_SIZE[0], max(REPORT_SIZE[1], 1.0 + 2.0 * n_y)))
+    axes = fig.subplots(n_y, 2, squeeze=False)
+    band = tests.bound
+    level = f"{100 * tests.level:g} %"
+    lags = np.arange(-tests.lags, tests.lags + 1) * scale
+    for i, name in enumerate(tests.output_names):
+        left, right = _style(axes[i, 0]), _style(axes[i, 1])
+        for ax in (left, right):
+            ax.axhspan(-band, band, color="tab:blue", alpha=0.15)
+        auto = tests.autocorrelation[1:, i]
+        left.vlines(np.arange(1, tests.lags + 1) * scale, 0.0, auto, color="k", linewidth=1.2)
+        verdict = "white" if tests.white[i] else "NOT white"
+        left.set_title(f"{name}: autocorrelation, Ljung-Box p = {tests.residual_whiteness_p[i]:.3g} ({verdict})",
+                       fontsize=9)
+        for j, input_name in enumerate(tests.input_names):
+            right.plot(lags, tests.cross_correlation[:, j, i], marker="o", markersize=2, linewidth=0.8, label=input_name)
+        independent = "independent" if tests.independent[i] else "NOT independent"
+        right.set_title(f"{name}: input cross-correlation, p = {tests.input_correlation_p[i]:.3g} ({independent})",
+                        fontsize=9)
+        if len(tests.input_names) > 1:
+            _legend(right, loc="upper right", fontsize=7)
+    for ax in axes[-1]:
+        ax.set_xlabel("lag (s)" if dt else "lag (samples)")
+    fig.suptitle(f"{title} ({level} bands, N = {tests.samples})")
     return fig

@@ -20,6 +20,7 @@ from matplotlib.figure import Figure
 
 from identification.errors import InputError
 from identification.metrics import percentage_explanation
+from identification.residuals import DEFAULT_LAGS, residual_tests
 
 from . import plots
 
@@ -247,7 +248,10 @@ def archive_figures(archive: Any, *, window: tuple[float, float] | None = None, 
         ``orders`` (two or more runs with histories and models of different
         order), ``eigenvalues`` and ``bode`` (models with A, B, C, D); per
         record: ``fits_<record>`` (models that can simulate it) and
-        ``residuals_<record>_<run>``.
+        ``residuals_<record>_<run>`` and ``residual_tests_<record>_<run>``
+        (whiteness and input cross-correlation with 99 % bands). Models
+        carrying a parameter covariance get confidence ellipses on the
+        eigenvalue map and bands on the Bode plot.
     """
     figures: dict[str, Figure] = {}
     runs = archive.runs
@@ -291,6 +295,11 @@ def archive_figures(archive: Any, *, window: tuple[float, float] | None = None, 
             figures[_stem("residuals", record_name, name)] = plots.plot_residual_autocorrelation(
                 shown.y - result[1], min(max_lag, shown.n_samples - 1), shown.output_names, dt=shown.dt,
                 title=f"Residual autocorrelation: {name} on {record_name}")
+            if shown.n_samples > 2 * DEFAULT_LAGS:
+                tests = residual_tests(shown.u, shown.y - result[1], input_names=shown.input_names,
+                                       output_names=shown.output_names)
+                figures[_stem("residual_tests", record_name, name)] = plots.plot_residual_tests(
+                    tests, dt=shown.dt, title=f"Residual tests: {name} on {record_name}")
         if shown is not None:
             figures[_stem("fits", record_name)] = plots.plot_time_fits(
                 shown.t, shown.y, predictions, shown.output_names, shown.output_units, window=window,

@@ -24,13 +24,23 @@ from scenarios.model_checks import model_residual_tests
 
 
 def test_white_residuals_pass_with_the_nominal_false_alarm_rate():
-    """200 white series of 1000 samples: the 99 % Ljung-Box test rejects about 2 (binomial, P(X > 8) < 1e-4)."""
+    """100 white residual series of 1000 samples beside a smooth (low-passed) input.
+
+    Each 99 % test rejects about 1 (binomial, P(X > 6) < 1e-3). The largest
+    cross-correlation over 51 lags of a smooth input would exceed the
+    per-lag band far more often: that is why the verdict uses the
+    portmanteau with the input's autocorrelation.
+    """
     rng = np.random.default_rng(0)
-    rejected = 0
-    for _ in range(200):
-        tests = residual_tests(rng.standard_normal((1000, 1)), rng.standard_normal((1000, 1)))
-        rejected += int(tests.residual_whiteness_p[0] < 0.01)
-    assert rejected <= 8
+    rejected = {"white": 0, "independent": 0, "max over the band": 0}
+    for _ in range(100):
+        u = lfilter([0.1], [1.0, -0.9], rng.standard_normal(1000))[:, None]
+        tests = residual_tests(u, rng.standard_normal((1000, 1)))
+        rejected["white"] += int(not tests.white[0])
+        rejected["independent"] += int(not tests.independent[0])
+        rejected["max over the band"] += int(tests.input_correlation_max[0] > tests.bound)
+    assert rejected["white"] <= 6 and rejected["independent"] <= 6, rejected
+    assert rejected["max over the band"] > 6, rejected
 
 
 def test_coloured_or_input_correlated_residuals_are_flagged():
@@ -42,7 +52,7 @@ def test_coloured_or_input_correlated_residuals_are_flagged():
     leaking = rng.standard_normal((4000, 1)) + 0.2 * np.roll(u, 3, axis=0)  # the residual follows the input 3 samples late
     tests = residual_tests(u, leaking)
     lags = np.arange(-tests.lags, tests.lags + 1)
-    assert tests.input_correlation_max[0] > 3 * tests.bound
+    assert tests.input_correlation_max[0] > 3 * tests.bound and tests.input_correlation_p[0] < 1e-6
     assert lags[np.argmax(np.abs(tests.cross_correlation[:, 0, 0]))] == 3
 
 
@@ -99,6 +109,7 @@ def _identify(*arguments):
                           capture_output=True, text=True, check=False)
 
 
+@pytest.mark.slow  # two CLI runs in subprocesses, about 20 s on a loaded machine
 def test_identify_json_carries_modes_with_std_and_residual_keys(tmp_path):
     path = _csv(tmp_path)
     archive = tmp_path / "run.h5"
