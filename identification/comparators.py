@@ -27,12 +27,6 @@ Methods (:data:`COMPARATORS`, a registry ``name -> function``):
     update cannot carry in double precision.
 ``n4sid``
     Subspace identification by PO-MOESP (:mod:`identification.subspace`).
-
-Every method leaves a parameter covariance on its model
-(:mod:`identification.uncertainty`): ``arx`` and ``rls`` the least-squares
-covariance carried through the conversion, ``n4sid`` a residual bootstrap
-(options ``bootstrap`` replicates, default 30, and ``seed``),
-``output-error`` the Gauss-Newton covariance of its fit.
 ``output-error``
     The modal model's parameters fitted by nonlinear least squares on the
     simulation error (``scipy.optimize.least_squares``, trust-region
@@ -42,6 +36,12 @@ covariance carried through the conversion, ``n4sid`` a residual bootstrap
     by balanced truncation are only approximate: from that start the
     three-output linear example was still at R = 99.997 % after 50
     iterations and 210 s, from the N4SID start exact after 2).
+
+Every method leaves a parameter covariance on its model
+(:mod:`identification.uncertainty`): ``arx`` and ``rls`` the least-squares
+covariance carried through the conversion, ``n4sid`` a residual bootstrap
+(options ``bootstrap`` replicates, default 30, and ``seed``),
+``output-error`` the Gauss-Newton covariance of its fit.
 
 Other methods join with :func:`register_comparator` (the IEKF, for one):
 a function ``(data: IOData, *, order: int, **options) -> ModalModel``.
@@ -187,8 +187,11 @@ def _arx_modal(data: IOData, order: int, thetas: list[np.ndarray], covariances: 
 
     theta = np.concatenate(thetas)
     model = modal(theta)
-    covariance = propagate_by_differences(lambda value: modal(value, model.structure).parameters, theta,
-                                          scipy.linalg.block_diag(*covariances))
+    try:
+        covariance = propagate_by_differences(lambda value: modal(value, model.structure).parameters, theta,
+                                              scipy.linalg.block_diag(*covariances))
+    except InputError:  # a mode on the edge of real and complex: no smooth map, the model stands without
+        return model
     return model.with_parameter_covariance(covariance)
 
 

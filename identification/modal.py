@@ -428,6 +428,13 @@ class ModalModel:
 
         return model_uncertainty(self, level=level)
 
+    def frequency_response_band(self, frequencies_hz: Any, *, level: float = 0.95) -> Any:
+        """Magnitude and phase at ``frequencies_hz`` with delta-method bands
+        (:func:`identification.uncertainty.frequency_response`)."""
+        from .uncertainty import frequency_response
+
+        return frequency_response(self, frequencies_hz, level=level)
+
     # --------------------------------------------------------------- modes
     def mode_eigenvalues(self) -> np.ndarray:
         """One eigenvalue per mode, ``sigma + j|omega|`` for pairs, real for poles (pairs first)."""
