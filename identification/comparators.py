@@ -40,7 +40,8 @@ Methods (:data:`COMPARATORS`, a registry ``name -> function``):
 Every method leaves a parameter covariance on its model
 (:mod:`identification.uncertainty`): ``arx`` and ``rls`` the least-squares
 covariance carried through the conversion, ``n4sid`` a residual bootstrap
-(options ``bootstrap`` replicates, default 30, and ``seed``),
+(options ``bootstrap`` replicates, default 30, each one subspace fit, 0 for
+none; and ``seed``),
 ``output-error`` the Gauss-Newton covariance of its fit.
 
 Other methods join with :func:`register_comparator` (the IEKF, for one):
@@ -60,7 +61,7 @@ import scipy.linalg
 import scipy.optimize
 from scipy.special import comb
 
-from ._checks import positive_int
+from ._checks import non_negative_int, positive_int
 from .data import IOData
 from .errors import ExcitationError, InputError
 from .least_squares import arx_regressors, estimate_arx, least_squares, model_from_theta
@@ -240,7 +241,7 @@ def n4sid_comparator(data: IOData, *, order: int, **options: Any) -> ModalModel:
     data = _check_data(data)
     order = positive_int(order, "order")
     block_rows = options.pop("block_rows", None)
-    replicates = positive_int(options.pop("bootstrap", N4SID_BOOTSTRAP), "bootstrap")
+    replicates = non_negative_int(options.pop("bootstrap", N4SID_BOOTSTRAP), "bootstrap")
     seed = options.pop("seed", 0)
     _reject_unknown(options, "n4sid")
     fit = estimate_subspace(data, order=order, block_rows=block_rows)
@@ -257,6 +258,8 @@ def n4sid_comparator(data: IOData, *, order: int, **options: Any) -> ModalModel:
         except (InputError, ExcitationError, np.linalg.LinAlgError):  # left out, and counted
             return None
 
+    if replicates == 0:  # asked for no covariance (each replicate costs one subspace fit)
+        return model
     try:
         covariance, used = bootstrap_covariance(replicate, data.y - fit.residuals, fit.residuals,
                                                 samples=replicates, rng=np.random.default_rng(seed))

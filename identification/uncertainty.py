@@ -22,6 +22,12 @@ N4SID
     could be used, so its spread is measured by re-identifying from the
     model's simulated output plus resampled blocks of its own residuals.
 
+spline IEKF
+    The parameter block of its final ``P`` as it stands: that filter's R is
+    the measured residual covariance already (:mod:`identification.spline_iekf`);
+    :class:`~identification.spline_modal.SplineModalModel` carries it and
+    gives bands on its splines and on a mode's frequency and damping.
+
 What follows from a covariance is propagated by the delta method with exact
 CasADi derivatives (:func:`model_uncertainty`, :func:`frequency_response`):
 for a function ``g(theta)``, ``cov g = J cov(theta) J'`` with ``J = dg/dtheta``.
@@ -30,6 +36,15 @@ frequency ``|lambda| / 2 pi`` and damping ``-sigma / |lambda|`` follow from
 them; the steady-state gain is ``D - C A^-1 B``; the frequency response
 ``C (j w I - A)^-1 B + D`` in magnitude and phase. Intervals are
 ``value +/- z sigma`` with ``z`` the normal quantile of the level.
+
+Calibration, measured (``benchmarks/uncertainty_calibration.py``): on a
+known two-mode system with 10 % and 30 % output noise the 95 % intervals of
+frequency and damping cover the truth in 90-98 % of 60 realisations for the
+IEKF at p = 0.001 and for output error. At p = 1 the IEKF's ``P`` is the
+covariance of a random walk of the parameters that the data do not have,
+and the intervals come out about 2.3 times too wide. Every interval here
+assumes white residuals: where :mod:`identification.residuals` rejects
+whiteness, model error dominates and the intervals are formal.
 """
 
 from __future__ import annotations

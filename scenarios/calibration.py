@@ -77,7 +77,7 @@ def _realisation(model: ModalModel, seconds: float) -> Realisation:
     )
 
 
-def identify_realisation(data: IOData) -> dict[str, Realisation]:
+def identify_realisation(data: IOData, *, iekf_settings: dict[str, Any] | None = None) -> dict[str, Realisation]:
     """Identify ``data`` with the true structure by the IEKF and by output error; each model's modes.
 
     Output error starts from the IEKF's model: its default ARX start is
@@ -86,7 +86,8 @@ def identify_realisation(data: IOData) -> dict[str, Realisation]:
     basin of attraction.
     """
     started = time.perf_counter()
-    iekf = identify_iekf(data, true_model().structure, options=IEKFOptions(**IEKF_SETTINGS)).model
+    settings = {**IEKF_SETTINGS, **(iekf_settings or {})}
+    iekf = identify_iekf(data, true_model().structure, options=IEKFOptions(**settings)).model
     middle = time.perf_counter()
     output_error = identify_with(data, method="output-error", order=true_model().structure.n,
                                  start=iekf.with_parameter_covariance(None)).model

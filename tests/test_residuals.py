@@ -77,6 +77,7 @@ def test_residual_tests_flag_too_low_an_order_and_pass_the_true_one(low_order, a
     assert verdicts[adequate_order].adequate
 
 
+@pytest.mark.slow  # four identifications of the 10,000-sample example, 15-30 s
 def test_residual_tests_on_the_paper_linear_example():
     """Eq. 15, output 1, 10 % noise, 20 s (Table 4 tuning p = 0.001, 40 passes).
 
