@@ -8,7 +8,7 @@ VENV ?= .venv
 VPY := $(VENV)/bin/python
 STAMP := $(VENV)/.vehid-installed
 
-.PHONY: study test bench clean-cache setup
+.PHONY: study test bench bench-real clean-cache setup
 
 setup: $(STAMP)
 
@@ -25,6 +25,11 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	$(VPY) benchmarks/run_all.py
+
+# Hold-out fits on the public records in tests/data against peer libraries, which the
+# script installs into their own environment, benchmarks/.peers-venv (never into .venv).
+bench-real: $(STAMP)
+	$(VPY) benchmarks/real_data.py
 
 clean-cache:
 	rm -rf $${VEHID_CACHE_DIR:-$$HOME/.cache/vehid}

@@ -34,6 +34,7 @@ from typing import Any, Iterator, Mapping, Sequence
 import h5py
 import numpy as np
 
+from .archive_safety import archive_lock, verify_checksums, write_checksums
 from .data import IOData
 from .errors import ArchiveError
 from .jsonable import to_jsonable
@@ -196,17 +197,26 @@ def _sync_directory(directory: Path) -> None:
 
 @contextmanager
 def _atomic(path: Path, prepare: Any, mode: str) -> Iterator[h5py.File]:
-    temporary = _temporary_beside(path)
-    try:
-        prepare(temporary)
-        with h5py.File(temporary, mode) as handle:
-            yield handle
-        _sync(temporary)
-        os.replace(temporary, path)
-        _sync_directory(path.parent)
-    finally:
-        if temporary.exists():
-            temporary.unlink()
+    # The writer's lock is held from before the copy to after the rename: two writers of one
+    # archive cannot interleave (one is refused, naming the other).
+    with archive_lock(path):
+        temporary = _temporary_beside(path)
+        try:
+            try:
+                prepare(temporary)
+                with h5py.File(temporary, mode) as handle:
+                    yield handle
+                    write_checksums(handle)
+                _sync(temporary)
+                os.replace(temporary, path)
+            except OSError as exc:  # a full disk, a vanished directory: name the archive, not the hidden copy
+                if exc.filename not in (None, str(temporary)):
+                    raise
+                raise OSError(exc.errno, f"cannot write the archive ({exc.strerror or exc})", str(path)) from exc
+            _sync_directory(path.parent)
+        finally:
+            if temporary.exists():
+                temporary.unlink()
 
 
 @contextmanager
@@ -303,10 +313,11 @@ def update_archive(path: str | Path, *, kinds: Sequence[str] | None = None) -> I
     h5py.File
     """
     path = Path(path)
-    open_archive(path, kinds).close()
-    with _atomic(path, lambda temporary: shutil.copyfile(path, temporary), "r+") as handle:
-        handle.attrs["updated"] = datetime.now(timezone.utc).isoformat(timespec="seconds")
-        yield handle
+    with archive_lock(path):
+        open_archive(path, kinds).close()
+        with _atomic(path, lambda temporary: shutil.copyfile(path, temporary), "r+") as handle:
+            handle.attrs["updated"] = datetime.now(timezone.utc).isoformat(timespec="seconds")
+            yield handle
 
 
 def open_archive(path: str | Path, kinds: Sequence[str] | None = None) -> h5py.File:
@@ -329,7 +340,9 @@ def open_archive(path: str | Path, kinds: Sequence[str] | None = None) -> h5py.F
         Naming the problem: no such file; not an HDF5 file; truncated or
         corrupt; an HDF5 file that is not a workbench archive (no
         ``schema_version``); a newer schema version than this workbench reads;
-        a missing root attribute or required group; a kind not in ``kinds``.
+        a missing root attribute or required group; a kind not in ``kinds``;
+        a dataset or group whose content no longer matches the checksum
+        written with it (:mod:`identification.archive_safety`).
     """
     path = Path(path)
     if not path.exists():
@@ -344,6 +357,7 @@ def open_archive(path: str | Path, kinds: Sequence[str] | None = None) -> h5py.F
         raise ArchiveError(f"{path} is truncated or corrupt: the HDF5 library cannot open it ({exc})") from None
     try:
         _check_archive(handle, path, kinds)
+        verify_checksums(handle, path)
     except BaseException:
         handle.close()
         raise

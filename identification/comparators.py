@@ -63,7 +63,7 @@ from scipy.special import comb
 
 from ._checks import non_negative_int, positive_int
 from .data import IOData
-from .errors import ExcitationError, InputError
+from .errors import ConversionError, ExcitationError, InputError
 from .least_squares import arx_regressors, estimate_arx, least_squares, model_from_theta
 from .metrics import FitMetrics, fit_metrics
 from .modal import ModalModel, ModalStructure
@@ -130,9 +130,12 @@ def _check_data(data: Any) -> IOData:
 
 def _discrete_to_modal(Ad: np.ndarray, Bd: np.ndarray, Cd: np.ndarray, Dd: np.ndarray, dt: float,
                        meta: dict[str, Any]) -> ModalModel:
-    A, B, C, D = discrete_to_continuous(Ad, Bd, Cd, Dd, dt, hold="foh")
-    structure = modal_structure_for(A, B.shape[1], C.shape[0])
-    return to_modal(A, B, C, D, structure, meta=meta)
+    try:
+        A, B, C, D = discrete_to_continuous(Ad, Bd, Cd, Dd, dt, hold="foh")
+        structure = modal_structure_for(A, B.shape[1], C.shape[0])
+        return to_modal(A, B, C, D, structure, meta=meta)
+    except InputError as exc:  # the data were accepted: the estimate, not the input, has no modal form
+        raise ConversionError(f"{meta.get('method', 'the')} model has no continuous modal form: {exc}") from None
 
 
 def _stack_and_reduce(realisations: list[tuple[np.ndarray, ...]], order: int) -> tuple[np.ndarray, ...]:

@@ -122,12 +122,8 @@ def generate_c(function: ca.Function) -> str:
         source_name = f"{function.name()}.c"
         generator = ca.CodeGenerator(source_name, {"with_header": False})
         generator.add(function)
-        previous = os.getcwd()
-        try:
-            os.chdir(scratch)
-            generator.generate()
-        finally:
-            os.chdir(previous)
+        # The prefix names the directory, so no process-wide working directory changes hands.
+        generator.generate(scratch + os.sep)
         return Path(scratch, source_name).read_text()
 
 

@@ -14,6 +14,7 @@ __all__ = [
     "ExcitationError",
     "DivergenceError",
     "ArchiveError",
+    "ConversionError",
     "StrictWarningsError",
 ]
 
@@ -50,7 +51,16 @@ class DivergenceError(WorkbenchError):
 
 
 class ArchiveError(WorkbenchError):
-    """A results archive is corrupt, truncated, of an unknown schema, or not a workbench archive."""
+    """A results archive is corrupt, truncated, of an unknown schema, or not a workbench archive.
+
+    Exit status 2: a missing, foreign or corrupt file is bad input.
+    """
+
+    exit_status = 2
+
+
+class ConversionError(WorkbenchError):
+    """An identified model cannot be brought to the requested form (e.g. modal); the input was good (exit 1)."""
 
 
 class StrictWarningsError(WorkbenchError):

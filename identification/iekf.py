@@ -258,7 +258,9 @@ def identify_iekf(
         Start from these parameters instead of the named start values.
     resume : IEKFResult, optional
         Continue a previous run on the same data: its parameters, P and
-        history are carried on, and ``options.passes`` counts all passes.
+        history are carried on, and ``options.passes`` counts all passes. A
+        run whose last two passes already meet the stop rule returns at once,
+        converged, as the uninterrupted run would have.
     on_pass : callable, optional
         Called after every pass with the new record and the result so far
         (for progress displays and checkpoints).
@@ -333,12 +335,19 @@ def identify_iekf(
             seconds=time.perf_counter() - started,
         )
 
+    if len(history) >= max(2, options.min_passes) and _settled(history[-2], history[-1], options):
+        return result("converged")  # a resumed run had met its stop rule (perhaps killed before it said so)
     stop_reason = "passes"
     while len(history) < options.passes:
         pass_index = len(history) + 1
         pass_start = time.perf_counter()
         state = np.concatenate([np.zeros(n), theta, pack_covariance(P)])
-        state, innovations = run_pass(state, u_scaled, y_scaled, q, r)
+        try:
+            state, innovations = run_pass(state, u_scaled, y_scaled, q, r)
+        except DivergenceError as exc:
+            raise DivergenceError(
+                f"pass {pass_index}: {exc}", last_good=result(f"diverged at pass {pass_index}") if history else None
+            ) from exc
         new_theta = state[n:m]
         new_P = unpack_covariance(state[m:], m)
         if not (np.all(np.isfinite(state)) and np.all(np.isfinite(innovations))):

@@ -145,3 +145,8 @@ class Checkpointer:
     def __call__(self, record: PassRecord, result: IEKFResult) -> None:
         with update_archive(self.path) as archive:
             append_iekf_pass(archive, self.name, record, result)
+
+    def finish(self, result: IEKFResult) -> None:
+        """Record how the run ended: its final stop reason (no longer ``running``), model, state and time."""
+        with update_archive(self.path) as archive:
+            _write_summary(run_group(archive, self.name), result)

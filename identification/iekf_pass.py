@@ -40,6 +40,7 @@ import casadi as ca
 import numpy as np
 
 from .compiled import NoCompilerWarning, compile_driver, find_c_compiler
+from .errors import DivergenceError
 from .filter_models import check_discretization
 
 __all__ = [
@@ -203,7 +204,8 @@ int vehid_iekf_pass(long long int n_samples, long long int n_u, long long int n_
     arg[6] = c;
     res[0] = next;
     res[1] = innovations + k * n_y;
-    if (STEP(arg, res, iw, w, 0)) { status = 1; break; }
+    /* A failed step reports the sample it failed at (1-based), so the caller never takes a half-advanced state for a finished pass. */
+    if (STEP(arg, res, iw, w, 0)) { status = k < 2147483646LL ? (int)(k + 1) : 2147483647; break; }
     double* swap = current; current = next; next = swap;
   }
   if (current != state) memcpy(state, current, sizeof(double) * n_state);
@@ -245,6 +247,8 @@ class _CompiledPass:
         )
         if status < 0:
             raise MemoryError("the compiled IEKF pass could not allocate its work arrays")
+        if status > 0:
+            raise DivergenceError(f"the compiled filter step failed at sample {status - 1} of {n}")
         return state, innovations
 
 

@@ -232,7 +232,10 @@ def identify_spline_iekf(
         index = len(history) + 1
         pass_start = time.perf_counter()
         state = np.concatenate([np.zeros(n), model.theta, pack_covariance(P)])
-        state, innovations = run_pass(state, u_n, y_n, q, R, model.constants)
+        try:
+            state, innovations = run_pass(state, u_n, y_n, q, R, model.constants)
+        except DivergenceError as exc:
+            raise DivergenceError(f"nonlinear pass {index}: {exc}", last_good=result(f"diverged at pass {index}")) from exc
         if not (np.all(np.isfinite(state)) and np.all(np.isfinite(innovations))):
             raise DivergenceError(
                 f"nonlinear pass {index}: the filter produced non-finite values (try a lower p)",

@@ -10,7 +10,12 @@ output: the summary, or on failure an object with ``error`` and
 ``exit_status``), ``--quiet`` (no progress, warnings only) and ``--verbose``.
 Progress and logs go to standard error. Exit status: 0 on success, 2 on bad
 input, 1 on a failed computation, 3 on warnings under ``--strict``, with one
-clear line on standard error and no traceback for expected errors.
+clear line on standard error and no traceback for expected errors. An
+operating-system error names the file and the cause (exit 2 for a path that
+is missing, protected or of the wrong kind; 1 for others, such as a full
+disk). SIGTERM and SIGINT stop a command the same way (worker processes
+included, see :mod:`scenarios.shutdown`), with one line and the exit status
+128 + the signal's number.
 """
 
 from __future__ import annotations
@@ -25,8 +30,10 @@ from typing import Any, Callable, NoReturn, Sequence
 
 import numpy as np
 
+from identification.archive_safety import os_error_text
 from identification.errors import DivergenceError, StrictWarningsError, WorkbenchError
 from identification.jsonable import to_jsonable
+from scenarios.shutdown import PATH_ERRNOS, signal_name, stopping_on_signals
 
 __all__ = ["main", "build_parser", "to_jsonable"]
 
@@ -110,11 +117,12 @@ def _configure_logging(args: argparse.Namespace) -> None:
     logging.captureWarnings(True)
 
 
-def _failed(args: argparse.Namespace, exc: BaseException, status: int, summary: dict | None = None) -> int:
+def _failed(args: argparse.Namespace, exc: BaseException, status: int, summary: dict | None = None,
+            message: str | None = None) -> int:
     """The exit status of a failed command; with ``--json`` still one JSON object on stdout."""
     if args.json:
         body = dict(summary or {})
-        body.update({"error": str(exc), "exit_status": status})
+        body.update({"error": str(exc) if message is None else message, "exit_status": status})
         sys.stdout.write(json.dumps(to_jsonable(body), allow_nan=False) + "\n")
     return status
 
@@ -126,7 +134,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     _configure_logging(args)
     handler: Callable[[argparse.Namespace], tuple[dict, str]] = args.handler
     try:
-        summary, text = handler(args)
+        with stopping_on_signals():
+            summary, text = handler(args)
     except StrictWarningsError as exc:
         for line in exc.warnings:
             print(f"vehid: warning: {line}", file=sys.stderr)
@@ -138,9 +147,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     except WorkbenchError as exc:
         print(f"vehid: error: {exc}", file=sys.stderr)
         return _failed(args, exc, exc.exit_status)
-    except KeyboardInterrupt:
-        print("vehid: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        name, status = signal_name(exc)
+        print(f"vehid: interrupted by {name}", file=sys.stderr)
+        return _failed(args, exc, status, message=f"interrupted by {name}")
+    except OSError as exc:  # a file read or written: its name and the cause, never "internal error"
+        text = os_error_text(exc)
+        print(f"vehid: error: {text}", file=sys.stderr)
+        return _failed(args, exc, 2 if exc.errno in PATH_ERRNOS else 1, message=text)
     except Exception as exc:  # an unexpected failure: one line, traceback on request
         if args.verbose:
             log.exception("internal error")

@@ -41,6 +41,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from identification.archive import open_archive, read_records
+from identification.errors import InputError
 from identification.iekf_archive import read_iekf_run
 from identification.residuals import residual_tests
 from identification.storage import read_group
@@ -63,6 +64,9 @@ TABLE_HEADERS = {
 
 def _load(path: str | Path) -> dict[str, Any]:
     with open_archive(path, kinds=["handling-study"]) as archive:
+        if "summary_json" not in archive.attrs:
+            raise InputError(f"{path} is an unfinished handling study (no summary yet): "
+                             f"finish it with vehid study handling --resume {path}")
         summary = json.loads(archive.attrs["summary_json"])
         records = read_records(archive)
         linear, nonlinear = {}, {}

@@ -66,14 +66,12 @@ import dataclasses
 import json
 import math
 import os
-import queue as queue_module
 import re
 import time
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from contextlib import contextmanager
 from dataclasses import dataclass
-from multiprocessing import get_context
 from pathlib import Path
-from typing import Any, Callable, Mapping, NamedTuple
+from typing import Any, Callable, Iterator, Mapping, NamedTuple
 
 import numpy as np
 
@@ -91,6 +89,7 @@ from vehicle import DEFAULT_DT, DEFAULT_SPEED, linearize, make_manoeuvre, named_
 from vehicle.linearize import Mode
 
 from .paths import results_directory
+from .shutdown import run_in_workers
 
 
 __all__ = [
@@ -109,7 +108,11 @@ __all__ = [
     "identify_nonlinear",
     "run_order",
     "run_study",
+    "archive_path",
+    "start_archive",
+    "write_order",
     "write_archive_for",
+    "write_study_archive",
     "main",
 ]
 
@@ -464,61 +467,25 @@ def run_order(job: OrderJob, report: Callable[[PassEvent], None] | None = None) 
 
 
 # -------------------------------------------------------- all the orders
-_WORKER_QUEUE: Any = None  # set in each pool process by _start_worker: where its PassEvents go
+def _run_orders(jobs: list[OrderJob], workers: int, on_event: Callable[[PassEvent], None] | None,
+                on_outcome: Callable[[OrderOutcome], None] | None = None) -> dict[int, OrderOutcome]:
+    """Run the jobs: in this process with one worker (or one job), else in spawned worker processes.
 
-
-def _start_worker(events: Any) -> None:
-    global _WORKER_QUEUE
-    _WORKER_QUEUE = events
-
-
-def _pooled_order(job: OrderJob) -> OrderOutcome:
-    return run_order(job, report=_WORKER_QUEUE.put if _WORKER_QUEUE is not None else None)
-
-
-def _run_orders(jobs: list[OrderJob], workers: int, on_event: Callable[[PassEvent], None] | None) -> dict[int, OrderOutcome]:
-    """Run the jobs: in this process with one worker (or one job), else in a spawned process pool.
-
-    Spawned (not forked) processes: forking a process that holds threads
-    (BLAS, CasADi) is unsafe. Each worker sends its PassEvents through a
-    queue handed over at its start; this process draws them as they come.
+    Workers send their PassEvents as they go; ``on_outcome`` is called here
+    with each order's outcome as it arrives (checkpoints). An interrupt or a
+    failed order stops every worker at once (:func:`scenarios.shutdown.run_in_workers`).
     """
     if workers == 1 or len(jobs) == 1:
-        return {job.order: run_order(job, on_event) for job in jobs}
-    context = get_context("spawn")
-    events = context.Queue()
-
-    def drain() -> None:
-        while True:
-            try:
-                event = events.get_nowait()
-            except queue_module.Empty:
-                return
-            if on_event is not None:
-                on_event(event)
-
-    outcomes: dict[int, OrderOutcome] = {}
+        outcomes = {}
+        for job in jobs:
+            outcomes[job.order] = run_order(job, on_event)
+            if on_outcome is not None:
+                on_outcome(outcomes[job.order])
+        return outcomes
     jobs = sorted(jobs, key=lambda job: -job.order)  # the longest first: the last to finish is a short one
-    try:
-        with ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_start_worker,
-                                 initargs=(events,)) as pool:
-            futures = {pool.submit(_pooled_order, job): job.order for job in jobs}
-            pending = set(futures)
-            try:
-                while pending:
-                    done, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
-                    drain()
-                    for future in done:
-                        outcomes[futures[future]] = future.result()
-            except BaseException:  # a failed order or an interrupt: do not start the orders still queued
-                for future in pending:
-                    future.cancel()
-                raise
-        drain()
-    finally:
-        events.close()
-        events.join_thread()
-    return outcomes
+    done = run_in_workers(run_order, jobs, workers, on_message=on_event,
+                          on_result=None if on_outcome is None else lambda job, outcome: on_outcome(outcome))
+    return {outcome.order: outcome for outcome in done}
 
 
 @dataclass(frozen=True, eq=False)
@@ -674,7 +641,14 @@ def _text(config: HandlingConfig, summary: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def run_study(config: HandlingConfig | None = None, *, on_event: Callable[[PassEvent], None] | None = None) -> HandlingResult:
+def run_study(
+    config: HandlingConfig | None = None,
+    *,
+    on_event: Callable[[PassEvent], None] | None = None,
+    records: Mapping[str, IOData] | None = None,
+    finished: Mapping[int, OrderOutcome] | None = None,
+    on_outcome: Callable[[OrderOutcome], None] | None = None,
+) -> HandlingResult:
     """Run the handling study: data, the linear and nonlinear identifications per order, scores, modes.
 
     Parameters
@@ -682,6 +656,13 @@ def run_study(config: HandlingConfig | None = None, *, on_event: Callable[[PassE
     config : HandlingConfig, optional
     on_event : callable, optional
         Called in this process with each :class:`PassEvent` (progress displays).
+    records : mapping, optional
+        The ``identification`` and ``validation`` records, when already made
+        (:func:`make_records`; a resumed study takes them from its archive).
+    finished : mapping of int to OrderOutcome, optional
+        Orders already done (a resumed study): they are not run again.
+    on_outcome : callable, optional
+        Called with each order's outcome as it finishes (checkpoints).
 
     Returns
     -------
@@ -695,17 +676,19 @@ def run_study(config: HandlingConfig | None = None, *, on_event: Callable[[PassE
     config = config or HandlingConfig()
     started = time.perf_counter()
     nonlinear_status = f"spline IEKF, {config.nodes} nodes" if config.nonlinear else "not asked for (linear only)"
-    records = make_records(config)
+    records = dict(records) if records is not None else make_records(config)
+    finished = dict(finished or {})
     linearisation = linearize(named_vehicle(config.vehicle), speed=config.speed)
     vehicle_modes = {label: linearisation.modes_labelled(label)[0] for label in COMPARED_MODES}
     arrays = {name: RecordArrays.from_iodata(record) for name, record in records.items()}
     jobs = [
         OrderJob(order, arrays["identification"], arrays["validation"], config.linear_options, config.nonlinear,
                  config.nodes, config.nonlinear_passes, config.nonlinear_p)
-        for order in config.orders
+        for order in config.orders if order not in finished
     ]
-    workers = min(config.worker_count(), len(jobs))
-    outcomes = _run_orders(jobs, workers, on_event)
+    workers = max(1, min(config.worker_count(), len(jobs)))
+    outcomes = {**finished, **_run_orders(jobs, workers, on_event, on_outcome)}
+    outcomes = {order: outcomes[order] for order in config.orders}  # in order, however they were run
     linear = {order: outcome.linear for order, outcome in outcomes.items() if outcome.linear is not None}
     if not linear:
         raise DivergenceError("no order gave a linear model: "
@@ -740,6 +723,41 @@ def _write_nonlinear_run(archive: Any, name: str, outcome: NonlinearOutcome) -> 
     run.attrs["seconds"] = outcome.seconds
 
 
+#: Root attribute of a handling-study archive: JSON {order: {linear_error, nonlinear_error, seconds}} of the orders done.
+ORDERS_DONE = "orders_done_json"
+
+
+def archive_path(out: str | Path | None = None) -> Path:
+    """The archive file of ``--out``: ``handling_study.h5`` under the results folder by default, relative names there too."""
+    path = Path(out) if out else results_directory() / "handling_study.h5"
+    if out and not path.is_absolute():
+        path = results_directory() / path
+    return path
+
+
+def write_order(archive: Any, order: int, outcome: OrderOutcome) -> None:
+    """Store one finished order: its runs and its entry in the root attribute ``orders_done_json``."""
+    if outcome.linear is not None:
+        write_iekf_run(archive, f"linear-n{order}", outcome.linear)
+        write_run(archive, f"linear-n{order}", metrics={"identification_R": outcome.linear_fit_identification,
+                                                       "validation_R": outcome.linear_fit_validation})
+    if outcome.nonlinear is not None:
+        _write_nonlinear_run(archive, f"nonlinear-n{order}", outcome.nonlinear)
+    done = json.loads(archive.attrs.get(ORDERS_DONE, "{}"))
+    done[str(order)] = {"linear_error": outcome.linear_error, "nonlinear_error": outcome.nonlinear_error,
+                        "seconds": outcome.seconds}
+    archive.attrs[ORDERS_DONE] = json.dumps(done, sort_keys=True)
+
+
+@contextmanager
+def start_archive(path: str | Path, config: HandlingConfig, records: Mapping[str, IOData]) -> Iterator[Any]:
+    """Write a new study archive (a ``with`` block): header, configuration and both records, then the caller's runs."""
+    with write_archive(path, kind="handling-study", config=config.as_dict(), seeds=[config.seed]) as archive:
+        for name, record in records.items():
+            write_record(archive, name, record)
+        yield archive
+
+
 def write_archive_for(result: HandlingResult, out: str | Path | None = None) -> Path:
     """Write the study's archive (kind ``handling-study``): both records, every run, the summary.
 
@@ -747,21 +765,17 @@ def write_archive_for(result: HandlingResult, out: str | Path | None = None) -> 
     R per output on both records) and ``nonlinear-n<n>``. The default file
     is ``handling_study.h5`` under the results folder.
     """
+    return write_study_archive(result, archive_path(out))
+
+
+def write_study_archive(result: HandlingResult, path: str | Path) -> Path:
+    """Write the study's archive to exactly ``path`` (see :func:`write_archive_for`)."""
     from .cli import to_jsonable
 
-    path = Path(out) if out else results_directory() / "handling_study.h5"
-    if out and not path.is_absolute():
-        path = results_directory() / path
-    with write_archive(path, kind="handling-study", config=result.config.as_dict(), seeds=[result.config.seed]) as archive:
-        for name, record in result.records.items():
-            write_record(archive, name, record)
+    path = Path(path)
+    with start_archive(path, result.config, result.records) as archive:
         for order, outcome in result.outcomes.items():
-            if outcome.linear is not None:
-                write_iekf_run(archive, f"linear-n{order}", outcome.linear)
-                write_run(archive, f"linear-n{order}", metrics={"identification_R": outcome.linear_fit_identification,
-                                                               "validation_R": outcome.linear_fit_validation})
-            if outcome.nonlinear is not None:
-                _write_nonlinear_run(archive, f"nonlinear-n{order}", outcome.nonlinear)
+            write_order(archive, order, outcome)
         archive.attrs["summary_json"] = json.dumps(to_jsonable(result.summary), allow_nan=False)
     return path
 

@@ -324,3 +324,130 @@ def test_report_writes_every_figure_the_table_and_the_casadi_export(study):
         assert function.size1_in(0) == 1 and function.size1_out(0) == 3
     table = (folder / "table.md").read_text()
     assert "nonlinear validation R %" in table and f"Chosen order: {summary['chosen_order']}" in table
+
+
+# ------------------------------------------------------- resume and clean shutdown
+def _study_table(summary):
+    return [{key: row[key] for key in TABLE_KEYS} for row in summary["table"]]
+
+
+def test_resume_of_a_truncated_study_redoes_only_what_is_missing(study, tmp_path, capsys):
+    """An archive holding order 2 only (as a kill after its checkpoint leaves it) resumes to the uninterrupted numbers.
+
+    The failure it reproduces: the study had no resume, so every interruption cost the whole study.
+    Equal to the last bit: the finished order is read back exactly, the missing one is the same
+    computation on the same records.
+    """
+    import shutil
+
+    from identification.archive import update_archive
+
+    summary, out, _ = study
+    partial = tmp_path / "partial.h5"
+    shutil.copyfile(out, partial)
+    with update_archive(partial) as handle:  # what the archive held before order 3 finished
+        for name in ("linear-n3", "nonlinear-n3"):
+            del handle["runs"][name]
+        done = json.loads(handle.attrs["orders_done_json"])
+        del done["3"]
+        handle.attrs["orders_done_json"] = json.dumps(done)
+        del handle.attrs["summary_json"]
+    events = []
+    real = handling_study.run_order
+    try:
+        handling_study.run_order = lambda job, report=None: events.append(job.order) or real(job, report)
+        assert main(["study", "handling", "--resume", str(partial), "--workers", "1", "--no-report",
+                     "--quiet", "--json"]) == 0
+    finally:
+        handling_study.run_order = real
+    resumed = json.loads(capsys.readouterr().out)
+    assert events == [3] and resumed["resumed_orders"] == [2]
+    assert _study_table(resumed) == _study_table(summary)
+    assert resumed["chosen_order"] == summary["chosen_order"]
+    assert read_archive(partial).runs.keys() == read_archive(out).runs.keys()
+
+
+def test_resume_refuses_settings_and_foreign_files(tmp_path, capsys):
+    assert main(["study", "handling", "--resume", str(tmp_path / "x.h5"), "--orders", "4"]) == 2
+    assert "do not give --orders" in capsys.readouterr().err
+    assert main(["study", "handling", "--resume", str(tmp_path / "absent.h5"), "--json"]) == 2
+    captured = capsys.readouterr()
+    assert "no such archive" in captured.err and json.loads(captured.out)["exit_status"] == 2
+
+
+def _session_processes(session):
+    """Live processes (not zombies) of a session, from /proc: {pid: (state, ppid)}."""
+    import os
+
+    found = {}
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/stat") as handle:
+                fields = handle.read().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        state, ppid, session_id = fields[0], int(fields[1]), int(fields[3])
+        if session_id == session and state != "Z":
+            found[int(entry)] = (state, ppid)
+    return found
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads the process tree from /proc")
+@pytest.mark.parametrize("stop", ["SIGTERM", "SIGINT", "SIGKILL"])
+def test_a_signal_stops_every_worker_and_leaves_a_readable_archive(stop, study, tmp_path, capsys):
+    """SIGTERM, Ctrl-C (SIGINT to the process group) and the parent's death stop the workers within seconds.
+
+    The failure it reproduces: workers kept running after their parent was killed, then hung on their
+    pipes. The whole session of the study (its workers and helpers) must be gone within 10 s (a worker
+    is terminated, then killed after 2 s; the kernel kills them when the parent dies).
+    """
+    import os
+    import signal
+    import time
+
+    from scenarios.handling_resume import read_progress
+
+    out = tmp_path / "stopped.h5"
+    process = subprocess.Popen(
+        [sys.executable, "-m", "scenarios.cli", "study", "handling", *FAST, "--linear-only", "--workers", "2",
+         "--no-report", "--quiet", "--out", str(out)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+    )
+    deadline = time.monotonic() + 120
+    workers = {}
+    while time.monotonic() < deadline and process.poll() is None:
+        workers = {pid for pid, (_, ppid) in _session_processes(process.pid).items() if ppid == process.pid}
+        if len(workers) >= 2 and out.exists():  # the records are checkpointed and the orders running
+            break
+        time.sleep(0.1)
+    if process.poll() is not None:
+        pytest.skip("the study finished before it could be stopped")
+    time.sleep(1.0)
+    stopped = time.monotonic()
+    if stop == "SIGINT":
+        os.killpg(process.pid, signal.SIGINT)  # as a terminal's Ctrl-C: the whole foreground group
+    else:
+        process.send_signal(getattr(signal, stop))
+    _, stderr = process.communicate(timeout=30)
+    while _session_processes(process.pid) and time.monotonic() - stopped < 10:
+        time.sleep(0.1)
+    assert _session_processes(process.pid) == {}, "processes of the study outlived it"
+    assert time.monotonic() - stopped < 10
+    if stop != "SIGKILL":
+        assert process.returncode == 128 + getattr(signal, stop)
+        assert stderr.strip().splitlines() == [f"vehid: interrupted by {stop}"]
+    else:
+        assert process.returncode == -signal.SIGKILL
+    assert not list(tmp_path.glob(".*.tmp")) or stop == "SIGKILL"  # temporary files cleaned up on a signal
+    config, records, finished = read_progress(out)  # readable: the last complete checkpoint
+    assert config.orders == (2, 3) and set(records) == {"identification", "validation"}
+    if stop == "SIGTERM":  # and it resumes to the numbers of the uninterrupted study (its linear columns)
+        assert main(["study", "handling", "--resume", str(out), "--workers", "1", "--no-report", "--quiet",
+                     "--json"]) == 0
+        resumed = json.loads(capsys.readouterr().out)
+        summary, _, _ = study
+        for row, whole in zip(resumed["table"], summary["table"]):
+            for key in ("order", "linear_eigenvalues", "linear_identification_R", "linear_validation_R"):
+                assert row[key] == whole[key]

@@ -134,3 +134,32 @@ def test_covariance_packing_round_trip():
     M = rng.standard_normal((6, 6))
     P = M @ M.T
     assert np.array_equal(unpack_covariance(pack_covariance(P), 6), P)
+
+
+def test_a_failed_generated_step_is_an_error_naming_the_sample():
+    """The C driver returns 1 + the sample at which the generated step failed; that must never pass as a finished pass."""
+    from identification.errors import DivergenceError
+    from identification.iekf_pass import _CompiledPass, build_filter_step
+
+    structure = ModalStructure.default(2, 1, 1)
+    step = build_filter_step(LinearModalFilterModel(structure), 0.01, "exact", "joseph")
+    failing_at_sample_4 = lambda *args: 5  # noqa: E731  (stands in for the loaded library)
+    run = _CompiledPass(failing_at_sample_4, step)
+    state = np.zeros(step.n_state)
+    with pytest.raises(DivergenceError, match="failed at sample 4 of 10"):
+        run(state, np.zeros((10, 1)), np.zeros((10, 1)), np.ones(step.n_z), np.eye(1))
+
+
+def test_code_generation_leaves_the_working_directory_alone(monkeypatch):
+    """Changing the process's directory would move every relative path of other threads."""
+    import casadi as ca
+    import os
+
+    from identification.compiled import generate_c
+
+    def refuse(path):
+        raise AssertionError(f"os.chdir({path!r}) called during code generation")
+
+    monkeypatch.setattr(os, "chdir", refuse)
+    x = ca.SX.sym("x")
+    assert "generated_twice" in generate_c(ca.Function("generated_twice", [x], [2 * x]))

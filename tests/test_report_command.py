@@ -94,7 +94,7 @@ def test_report_rejects_foreign_and_empty_archives(capsys, tmp_path, monkeypatch
     foreign = tmp_path / "foreign.h5"
     with h5py.File(foreign, "w") as handle:
         handle["x"] = np.arange(3)
-    assert main(["report", str(foreign)]) == 1
+    assert main(["report", str(foreign)]) == 2  # a foreign file is bad input
     assert "not a workbench results archive" in capsys.readouterr().err
     with write_archive(tmp_path / "empty.h5", kind="identification"):
         pass

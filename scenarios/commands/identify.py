@@ -15,20 +15,28 @@ With --out ARCHIVE the record and every finished pass are written to an HDF5
 archive as the run goes (atomically, so a killed run leaves the archive of
 its last finished pass); --resume ARCHIVE continues such a run from there
 with the same data and settings, and reaches the same parameters as a run
-that was never interrupted.
+that was never interrupted: it runs to the run's own pass budget and stop
+rule (--passes, given explicitly, sets a new budget). Once the run ends, the
+archive records its final stop reason. Every method writes its model to
+--out; the target is checked before any work (no directory, no input file,
+no existing file that is not a workbench archive unless --force), and an
+archive being written is locked against a second writer.
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+from contextlib import nullcontext
 from pathlib import Path
 
 from identification import read_csv, read_hdf5
-from identification.errors import InputError
+from identification.errors import DivergenceError, InputError
 from identification.filter_models import DISCRETIZATIONS
 from identification.iekf import START_VALUES, IEKFOptions, identify_iekf
-from identification.archive import open_archive, read_records, run_group, update_archive, write_archive, write_record
+from identification.archive import (open_archive, read_records, run_group, update_archive, write_archive,
+                                    write_record, write_run)
+from identification.archive_safety import archive_lock, check_output_target
 from identification.iekf_archive import Checkpointer, read_iekf_run
 from identification.iekf_pass import COVARIANCE_FORMS
 from identification.modal import C_PATTERNS, ModalStructure
@@ -59,7 +67,8 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--pattern", default="default", choices=C_PATTERNS, help="C pattern (default: pairs tied to outputs in turn)")
     parser.add_argument("--method", default="iekf", choices=("iekf", "arx", "rls", "n4sid", "output-error"),
                         help="estimator: the IEKF (default) or a classical comparator on the same data")
-    parser.add_argument("--passes", type=int, default=50, help="largest number of passes (default 50)")
+    parser.add_argument("--passes", type=int, default=None,
+                        help=f"largest number of passes (default {DEFAULT_PASSES}; with --resume, the run's own)")
     parser.add_argument("--p", type=float, default=1.0, help="tuning parameter p: Q = p I' (default 1)")
     parser.add_argument("--discretization", default="exact", choices=DISCRETIZATIONS, help="filter discretisation (default exact)")
     parser.add_argument("--covariance", default="joseph", choices=COVARIANCE_FORMS, help="covariance numerics (default joseph)")
@@ -67,6 +76,8 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--normalize", action="store_true", help="scale inputs and outputs by their RMS while filtering")
     parser.add_argument("--save-model", help="write the model to this .json or .mat file")
     parser.add_argument("--out", help="HDF5 archive of the run, checkpointed after every pass")
+    parser.add_argument("--force", action="store_true",
+                        help="let --out replace an existing file that is not a workbench archive")
     parser.add_argument("--resume", metavar="ARCHIVE",
                         help="continue the run checkpointed in ARCHIVE (its data and settings; --passes counts all passes)")
     parser.set_defaults(handler=run)
@@ -92,6 +103,7 @@ def load_record(path: str, inputs: list[str] | None, outputs: list[str] | None, 
 
 
 RUN_NAME = "iekf"
+DEFAULT_PASSES = 50
 
 
 def _resume(args: argparse.Namespace):
@@ -103,11 +115,24 @@ def _resume(args: argparse.Namespace):
         records = read_records(archive)
     if "identification" not in records:
         raise InputError(f"{args.resume} holds no identification record to resume on")
-    options = dataclasses.replace(previous.options, passes=max(args.passes, previous.passes_run))
+    budget = previous.options.passes if args.passes is None else args.passes
+    options = dataclasses.replace(previous.options, passes=max(budget, previous.passes_run))
     return records["identification"], previous.structure, options, previous
 
 
 def run(args: argparse.Namespace) -> tuple[dict, str]:
+    if args.resume and args.out:
+        raise InputError("--resume continues in its own archive: give no --out")
+    if args.out:  # before any work: a bad target must not cost the run
+        check_output_target(args.out, inputs=[args.data], force=args.force)
+    if args.resume:  # a missing, foreign or corrupt file is named as such before anything is locked or created
+        open_archive(args.resume, kinds=["identification"]).close()
+    target = args.resume or args.out
+    with archive_lock(target) if target else nullcontext():  # one writer per archive for the whole run
+        return _identify(args)
+
+
+def _identify(args: argparse.Namespace) -> tuple[dict, str]:
     previous = None
     if args.resume:
         data, structure, options, previous = _resume(args)
@@ -120,7 +145,8 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
         if args.method != "iekf":
             return _run_comparator(args, data, structure)
         options = IEKFOptions(
-            p=args.p, passes=args.passes, discretization=args.discretization, covariance=args.covariance,
+            p=args.p, passes=DEFAULT_PASSES if args.passes is None else args.passes,
+            discretization=args.discretization, covariance=args.covariance,
             start=args.start, normalize=args.normalize,
         )
         archive_path = Path(args.out) if args.out else None
@@ -137,7 +163,14 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
                 checkpoint(record, so_far)
             progress.advance(note=f"R {record.mean_fit_filter:.4f} %")
 
-        result = identify_iekf(data, structure, options=options, resume=previous, on_pass=on_pass)
+        try:
+            result = identify_iekf(data, structure, options=options, resume=previous, on_pass=on_pass)
+        except DivergenceError as exc:
+            if checkpoint is not None and exc.last_good is not None:
+                checkpoint.finish(exc.last_good)  # the archive says how the run ended: diverged at pass k
+            raise
+    if checkpoint is not None:
+        checkpoint.finish(result)
     model = result.model
     summary = {
         "method": "iekf",
@@ -192,10 +225,26 @@ def _run_comparator(args: argparse.Namespace, data, structure) -> tuple[dict, st
         "D": model.D,
         "seconds": outcome.seconds,
     }
-    summary.update(uncertainty_summary(model, data)[0])
+    checks, tests = uncertainty_summary(model, data)
+    summary.update(checks)
     if args.save_model:
         summary["model_file"] = str(_save_model(model, args.save_model))
+    if args.out:
+        summary["archive"] = str(_archive_comparator(args, data, outcome, tests))
     return summary, _text(summary, data)
+
+
+def _archive_comparator(args: argparse.Namespace, data, outcome, tests) -> Path:
+    """The record and the comparator's model and fit, as ``runs/<method>`` of an identification archive."""
+    path = Path(args.out)
+    config = {"method": args.method, "order": outcome.model.structure.n}
+    with write_archive(path, kind="identification", config=config, seeds=[]) as archive:
+        write_record(archive, "identification", data)
+        run = write_run(archive, args.method, model=outcome.model, metrics=outcome.metrics)
+        write_value(run, "residual_tests", tests)
+        run.attrs["stop_reason"] = "finished"
+        run.attrs["seconds"] = outcome.seconds
+    return path
 
 
 def _text(summary: dict, data) -> str:

@@ -6,7 +6,9 @@ per-pass history, final model) and draws what is present: parameter
 development and convergence per run, the order study across runs, an
 eigenvalue map and Bode plots of the models, time fits and residual
 autocorrelation on each record. Writes one PNG per figure, a PDF of them all
-and summary.md (one table row per run) to the output folder.
+and summary.md (one table row per run) to the output folder, which is
+written under a hidden name beside it and swapped in whole (an interrupted
+report leaves the previous one, never a mixture of old and new files).
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ import math
 from pathlib import Path
 
 from identification.archive import read_archive
+from identification.archive_safety import check_output_folder, replacing_directory
 from identification.errors import InputError
 from scenarios.paths import results_directory
 from scenarios.report import archive_figures, archive_table, markdown_table, write_report
@@ -53,23 +56,27 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
         raise InputError(f"--window needs two finite times T0 < T1; got {args.window}")
     path = Path(args.archive)
     archive = read_archive(path)
+    check_output_folder(_output_folder(path, args.out))  # before drawing: a file in its place, no permission
     if archive.kind == "handling-study":
         from scenarios.handling_report import write_handling_report
 
         folder = _output_folder(path, args.out)
-        files = write_handling_report(path, folder)
+        with replacing_directory(folder) as partial:
+            files = [folder / f.relative_to(partial) for f in write_handling_report(path, partial)]
         summary = {"archive": str(path), "kind": archive.kind, "out": str(folder), "files": [str(f) for f in files]}
         return summary, f"{path.name} (handling study): wrote {len(files)} files to {folder}"
     figures = archive_figures(archive, window=tuple(args.window) if args.window else None, max_lag=args.max_lag)
     if not figures:
         raise InputError(f"nothing to draw in {path}: it holds no records and no runs with histories or models")
     folder = _output_folder(path, args.out)
-    files = write_report(figures, folder, dpi=args.dpi, title=f"vehid report: {path.name}")
     rows = archive_table(archive)
-    if rows:
-        table = folder / "summary.md"
-        table.write_text(f"# {path.name}: {archive.kind}\n\n" + markdown_table(rows))
-        files.append(table)
+    with replacing_directory(folder) as partial:
+        files = write_report(figures, partial, dpi=args.dpi, title=f"vehid report: {path.name}")
+        if rows:
+            table = partial / "summary.md"
+            table.write_text(f"# {path.name}: {archive.kind}\n\n" + markdown_table(rows))
+            files.append(table)
+    files = [folder / file.relative_to(partial) for file in files]
     summary = {
         "archive": str(path),
         "kind": archive.kind,

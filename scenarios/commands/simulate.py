@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from identification.archive_safety import check_output_target
 from identification.errors import InputError
 from scenarios.paths import results_directory
 from vehicle import MANOEUVRES, make_manoeuvre, named_vehicle, simulate
@@ -72,6 +73,8 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     if args.duration is not None:
         options["duration"] = args.duration
     manoeuvre = make_manoeuvre(args.manoeuvre, **options)
+    if args.out:  # before the simulation: no directory, no input file, a writable place
+        check_output_target(_output_path(args.out), inputs=[args.vehicle], force=True, what="record")
     data = simulate(params, manoeuvre, speed=args.speed, method=args.method)
     a_y = data.output("lateral_acceleration")
     speed = data.output("speed")

@@ -8,15 +8,25 @@ IEKF and a spline-nonlinear one is started from it; every model is scored by
 the mean R (eq. 17) on both records. Orders run in parallel processes. Prints
 the Table-5 style table, the chosen order and the identified modes beside the
 vehicle's own yaw-sideslip and roll modes, and writes an HDF5 archive
-(results/handling_study.h5 by default). Until identification.spline_iekf is
-installed the study runs linear-only and says so.
+(results/handling_study.h5 by default), checkpointed as each order finishes.
+--resume ARCHIVE continues an interrupted study from its archive: its own
+settings and records, only the orders still missing, to the same numbers as
+an uninterrupted run. SIGTERM or Ctrl-C stop every worker within seconds and
+leave the archive of the orders finished so far. The report folder beside
+the archive is written under a hidden name and swapped in whole.
 """
 
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
-from scenarios.handling_study import HandlingConfig, parse_orders, planned_passes, run_study, write_archive_for
+from identification.archive import open_archive
+from identification.archive_safety import archive_lock, check_output_folder, check_output_target, replacing_directory
+from identification.errors import InputError
+from scenarios.handling_resume import StudyCheckpoint, read_progress
+from scenarios.handling_study import (HandlingConfig, archive_path, make_records, parse_orders, planned_passes,
+                                      run_study, write_study_archive)
 from scenarios.progress import Progress
 
 NAME = "handling"
@@ -51,16 +61,50 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default=None, help="archive file name (default handling_study.h5 under results/)")
     parser.add_argument("--no-report", action="store_true",
                         help="write only the archive, not the report folder beside it (figures, PDF, table, CasADi export)")
+    parser.add_argument("--force", action="store_true",
+                        help="let --out replace an existing file that is not a workbench archive")
+    parser.add_argument("--resume", metavar="ARCHIVE", default=None,
+                        help="continue the study checkpointed in ARCHIVE: its settings, only the orders missing")
     parser.set_defaults(handler=run)
+    for name in _SETTINGS:
+        _SETTING_DEFAULTS[name] = parser.get_default(name)
+
+
+# options that set the study's results: with --resume they come from the archive
+_SETTINGS = ("orders", "nodes", "seed", "passes", "p", "nonlinear_passes", "nonlinear_p", "linear_only",
+             "duration", "amplitude_scale", "vehicle", "speed")
+_SETTING_DEFAULTS: dict = {}
 
 
 def run(args: argparse.Namespace) -> tuple[dict, str]:
-    config = HandlingConfig(
-        orders=parse_orders(args.orders), seed=args.seed, duration=args.duration,
-        amplitude_scale=args.amplitude_scale, vehicle=args.vehicle, speed=args.speed, p=args.p,
-        passes=args.passes, nodes=args.nodes, nonlinear=not args.linear_only,
-        nonlinear_passes=args.nonlinear_passes, nonlinear_p=args.nonlinear_p, workers=args.workers,
-    )
+    if args.resume:
+        given = [name for name in _SETTINGS if getattr(args, name) != _SETTING_DEFAULTS.get(name)]
+        if args.out or given:
+            named = ", ".join("--" + name.replace("_", "-") for name in (["out"] if args.out else []) + given)
+            raise InputError(f"--resume continues the study with the settings and file of its archive; do not give {named}")
+        path = Path(args.resume)
+        open_archive(path, kinds=["handling-study"]).close()  # missing, foreign or corrupt: said before anything else
+    else:
+        config = HandlingConfig(
+            orders=parse_orders(args.orders), seed=args.seed, duration=args.duration,
+            amplitude_scale=args.amplitude_scale, vehicle=args.vehicle, speed=args.speed, p=args.p,
+            passes=args.passes, nodes=args.nodes, nonlinear=not args.linear_only,
+            nonlinear_passes=args.nonlinear_passes, nonlinear_p=args.nonlinear_p, workers=args.workers,
+        )
+        path = check_output_target(archive_path(args.out), inputs=[args.vehicle], force=args.force)  # before any work
+    if not args.no_report:
+        check_output_folder(path.with_suffix(""))  # the report folder too, before hours of work
+    with archive_lock(path):  # one writer for the whole study: checkpoints, archive and report
+        if args.resume:
+            config, records, finished = read_progress(path, workers=args.workers)
+            checkpoint = StudyCheckpoint(path, config, records, fresh=False)
+        else:
+            records, finished = make_records(config), {}
+            checkpoint = StudyCheckpoint(path, config, records)
+        return _study(args, config, path, records, finished, checkpoint)
+
+
+def _study(args, config, path, records, finished, checkpoint) -> tuple[dict, str]:
     state = {order: "-" for order in config.orders}
     shown: list[Progress] = []  # drawn from the first pass on, after the set-up has logged its warnings
 
@@ -71,18 +115,22 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
         shown[0].advance(note=" ".join(f"n{order}:{done}" for order, done in state.items()))
 
     try:
-        result = run_study(config, on_event=on_event)
+        result = run_study(config, on_event=on_event, records=records, finished=finished, on_outcome=checkpoint)
     finally:
         for progress in shown:
             progress.close()
-    path = write_archive_for(result, args.out)
+    path = write_study_archive(result, path)
     summary = {**result.summary, "archive": str(path)}
+    if finished:
+        summary["resumed_orders"] = sorted(finished)
     text = result.text + f"\nwrote {path}"
     if not args.no_report:
         from scenarios.handling_report import write_handling_report
 
         folder = path.with_suffix("")
-        files = write_handling_report(path, folder)
+        with replacing_directory(folder) as partial:  # a kill leaves the old report or the new, never a mixture
+            written = write_handling_report(path, partial)
+        files = [folder / file.relative_to(partial) for file in written]
         summary["report"] = str(folder)
         text += f"\nwrote {len(files)} report files to {folder}"
     return summary, text

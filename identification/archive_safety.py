@@ -1,0 +1,426 @@
+"""Safe output files: writer locks, checks of a target before any work, checksums, whole-folder swaps.
+
+Four guards for the files the workbench writes:
+
+* :func:`archive_lock` holds an exclusive lock on an archive for as long as
+  one process writes it (a whole identification, a whole study). A second
+  writer is refused at once with :class:`ArchiveLockedError`, which names
+  the holder (process id and host). The lock is an ``flock`` on a hidden
+  file beside the archive, so the operating system releases it when the
+  holder dies, even by ``SIGKILL``: no stale lock survives a crash.
+* :func:`check_output_target` runs before any work: it refuses a target that
+  is a directory, an input of the same run, or an existing file that is not
+  a workbench archive (unless forced), and proves the directory writable by
+  creating and removing a file there. Each refusal is one line naming the
+  path and the operating system's cause.
+* :func:`write_checksums` and :func:`verify_checksums` keep a digest of every
+  dataset's bytes and every object's attributes in the archive (attribute
+  ``vehid_digest``); a reader finds any value changed on disk behind the
+  workbench's back and names the dataset or group. Archives written before
+  checksums existed carry none and still read.
+* :func:`replacing_directory` writes a folder (a report) under a hidden name
+  beside its final place and swaps it in whole when it is complete, so an
+  interrupted writer leaves either the old folder or the new one.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import errno
+import fcntl
+import os
+import shutil
+import socket
+import uuid
+import zlib
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any, Iterable, Iterator
+
+import h5py
+import numpy as np
+
+from .errors import ArchiveError, InputError
+
+__all__ = [
+    "ArchiveLockedError",
+    "OutputTargetError",
+    "archive_lock",
+    "check_output_target",
+    "check_output_folder",
+    "is_workbench_archive",
+    "write_checksums",
+    "verify_checksums",
+    "replacing_directory",
+    "os_error_text",
+]
+
+DIGEST_ATTRIBUTE = "vehid_digest"
+#: Root attribute naming the digest scheme; its presence promises a digest on every object.
+CHECKSUM_ATTRIBUTE = "vehid_checksums"
+CHECKSUM_SCHEME = "crc32"  # against faults, not forgery: 25 times faster than a cryptographic hash here
+
+
+class ArchiveLockedError(InputError):
+    """Another process is writing the archive (exit status 2: choose another file or wait)."""
+
+
+class OutputTargetError(InputError):
+    """The output target cannot or must not be written (a directory, an input, a foreign file, no permission)."""
+
+
+def os_error_text(exc: OSError, path: str | Path | None = None) -> str:
+    """``'<path>: <cause>'`` for an operating-system error, the path from the error if it has one."""
+    name = exc.filename if exc.filename is not None else path
+    cause = exc.strerror or str(exc) or type(exc).__name__
+    return f"{name}: {cause}" if name is not None else cause
+
+
+# ----------------------------------------------------------------- locking
+_HELD: dict[str, tuple[int, int]] = {}  # lock-file path -> (file descriptor, nesting depth) held by this process
+
+
+def _lock_path(path: Path) -> Path:
+    return path.with_name(f".{path.name}.lock")
+
+
+def _holder(lock_file: Path) -> str:
+    try:
+        text = lock_file.read_text().strip()
+    except OSError:
+        text = ""
+    fields = dict(part.split("=", 1) for part in text.split() if "=" in part)
+    if "pid" in fields:
+        return f"process {fields['pid']} on host {fields.get('host', 'unknown')}"
+    return "another process"
+
+
+@contextmanager
+def archive_lock(path: str | Path) -> Iterator[Path]:
+    """Hold the exclusive writer's lock of ``path`` for the ``with`` block.
+
+    Parameters
+    ----------
+    path : str or Path
+        The archive (it need not exist yet). The lock is the hidden file
+        ``.<name>.lock`` beside it, holding ``pid=<pid> host=<host>`` of the
+        writer; it is removed when the lock is released.
+
+    Yields
+    ------
+    Path
+        The archive's path.
+
+    Raises
+    ------
+    ArchiveLockedError
+        Another process holds the lock; the message names it (pid and host).
+    OutputTargetError
+        The lock file cannot be created (the path and the cause named).
+
+    Notes
+    -----
+    Re-entrant within one process: nested blocks on the same archive share
+    the outer lock, so a command can hold it across a whole run while the
+    archive functions take it for each write.
+    """
+    path = Path(path)
+    lock_file = _lock_path(path.absolute())
+    key = str(lock_file)
+    if key in _HELD:
+        fd, depth = _HELD[key]
+        _HELD[key] = (fd, depth + 1)
+        try:
+            yield path
+        finally:
+            fd, depth = _HELD[key]
+            _HELD[key] = (fd, depth - 1)
+        return
+    fd = _acquire(lock_file, path)
+    _HELD[key] = (fd, 1)
+    try:
+        yield path
+    finally:
+        del _HELD[key]
+        try:
+            lock_file.unlink()
+        except OSError:
+            pass
+        os.close(fd)  # closing the descriptor releases the flock
+
+
+def _acquire(lock_file: Path, path: Path) -> int:
+    while True:
+        try:
+            fd = os.open(lock_file, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as exc:
+            raise OutputTargetError(f"cannot lock {path} for writing: {os_error_text(exc, lock_file)}") from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError as exc:
+            os.close(fd)
+            if exc.errno not in (errno.EWOULDBLOCK, errno.EACCES, errno.EAGAIN):
+                raise OutputTargetError(f"cannot lock {path} for writing: {os_error_text(exc, lock_file)}") from None
+            raise ArchiveLockedError(
+                f"{path} is being written by {_holder(lock_file)}; wait for it to finish or choose another file"
+            ) from None
+        # The holder before us may have removed the file after we opened it: then our lock is on an
+        # orphaned inode and a third process could lock a new file. Lock only the file the name points to.
+        try:
+            if os.stat(lock_file).st_ino == os.fstat(fd).st_ino:
+                break
+        except FileNotFoundError:
+            pass
+        os.close(fd)
+    os.ftruncate(fd, 0)
+    os.write(fd, f"pid={os.getpid()} host={socket.gethostname()}\n".encode())
+    return fd
+
+
+# ------------------------------------------------------------ target checks
+def is_workbench_archive(path: str | Path) -> bool:
+    """True when ``path`` is an HDF5 file with the workbench's ``schema_version`` root attribute."""
+    try:
+        if not h5py.is_hdf5(path):
+            return False
+        with h5py.File(path, "r") as handle:
+            return "schema_version" in handle.attrs
+    except (OSError, RuntimeError):
+        return False
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return a.exists() and b.exists() and os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def check_output_target(
+    path: str | Path,
+    *,
+    inputs: Iterable[str | Path | None] = (),
+    force: bool = False,
+    what: str = "archive",
+) -> Path:
+    """Check, before any work, that ``path`` may and can be written; returns it.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to be written (replaced atomically later).
+    inputs : iterable of path
+        Files the run reads; the target must be none of them (never, even
+        with ``force``: the run would replace its own data).
+    force : bool
+        Allow replacing an existing file that is not a workbench archive.
+    what : str
+        What is written, for the messages.
+
+    Raises
+    ------
+    OutputTargetError
+        One line naming the path and the cause: a directory; one of the
+        inputs; an existing file that is not a workbench archive (without
+        ``force``); a directory that cannot be created or written.
+    """
+    path = Path(path)
+    for source in inputs:
+        if source is not None and _same_file(path, Path(source)):
+            raise OutputTargetError(f"the {what} {path} is an input of this run; choose another output file")
+    if path.is_dir():
+        raise OutputTargetError(f"cannot write the {what} {path}: {os.strerror(errno.EISDIR)}")
+    if path.exists() and not force and not is_workbench_archive(path):
+        raise OutputTargetError(
+            f"{path} exists and is not a workbench archive; refusing to overwrite it (give --force to replace it)"
+        )
+    _check_writable_directory(path, what)
+    if path.exists() and not os.access(path, os.W_OK):
+        # os.replace would succeed in a writable directory, but the user protected this file
+        raise OutputTargetError(f"cannot write the {what} {path}: {os.strerror(errno.EACCES)}")
+    return path
+
+
+def _check_writable_directory(path: Path, what: str) -> None:
+    """Create ``path``'s directory if missing and prove it writable by creating and removing a file there."""
+    directory = path.parent
+    existing = next(folder for folder in (directory, *directory.parents) if folder.exists())
+    if not existing.is_dir():
+        raise OutputTargetError(f"cannot write the {what} {path}: {existing}: {os.strerror(errno.ENOTDIR)}")
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+        probe = directory / f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.probe"
+        fd = os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+        os.close(fd)
+        probe.unlink()
+    except OSError as exc:  # the probe's own name would only confuse: the target and the cause
+        raise OutputTargetError(f"cannot write the {what} {path}: {exc.strerror or exc}") from None
+
+
+def check_output_folder(folder: str | Path, *, what: str = "report folder") -> Path:
+    """Check, before any work, that ``folder`` can be replaced by :func:`replacing_directory`; returns it.
+
+    Raises
+    ------
+    OutputTargetError
+        ``folder`` exists and is not a directory, or its parent cannot be
+        created or written (the path and the cause named).
+    """
+    folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise OutputTargetError(f"cannot write the {what} {folder}: {os.strerror(errno.ENOTDIR)}")
+    _check_writable_directory(folder, what)
+    return folder
+
+
+# --------------------------------------------------------------- checksums
+def _value_bytes(value: Any) -> bytes:
+    if isinstance(value, h5py.Empty):
+        return b"<empty>"
+    if isinstance(value, bytes):
+        return value
+    if isinstance(value, str):
+        return value.encode("utf-8")
+    array = np.asarray(value)
+    if array.dtype.kind == "O":
+        return repr([_value_bytes(item) for item in array.ravel().tolist()]).encode() + repr(array.shape).encode()
+    return array.dtype.str.encode() + repr(array.shape).encode() + np.ascontiguousarray(array).tobytes()
+
+
+def _digest(obj: h5py.HLObject) -> str:
+    crc = 0
+    for name in sorted(obj.attrs.keys()):
+        if name in (DIGEST_ATTRIBUTE, CHECKSUM_ATTRIBUTE):
+            continue
+        crc = zlib.crc32(name.encode() + b"\0" + _value_bytes(obj.attrs[name]) + b"\0", crc)
+    if isinstance(obj, h5py.Dataset):
+        crc = zlib.crc32(b"data\0", crc)
+        crc = zlib.crc32(_value_bytes(h5py.Empty(obj.dtype) if obj.shape is None else obj[()]), crc)
+    else:
+        crc = zlib.crc32(("members\0" + "\0".join(sorted(obj.keys()))).encode(), crc)
+    return f"{crc:08x}"
+
+
+def _objects(handle: h5py.File) -> list[h5py.HLObject]:
+    found: list[h5py.HLObject] = [handle]
+    handle.visititems(lambda name, obj: found.append(obj))
+    return found
+
+
+def write_checksums(handle: h5py.File) -> None:
+    """Store the digest of every group's and dataset's content in its ``vehid_digest`` attribute.
+
+    Call last, when nothing else will change: the digest covers the object's
+    attributes, a dataset's bytes and a group's member names.
+    """
+    handle.attrs[CHECKSUM_ATTRIBUTE] = CHECKSUM_SCHEME
+    for obj in _objects(handle):
+        obj.attrs[DIGEST_ATTRIBUTE] = _digest(obj)
+
+
+def verify_checksums(handle: h5py.File, path: str | Path) -> None:
+    """Check every digest written by :func:`write_checksums`.
+
+    Raises
+    ------
+    ArchiveError
+        Naming the first dataset or group whose content no longer matches
+        its digest (or lacks one in an archive that promises digests).
+        An archive without the root ``vehid_checksums`` attribute (written
+        before checksums existed) is not checked.
+    """
+    if CHECKSUM_ATTRIBUTE not in handle.attrs:
+        return
+    scheme = handle.attrs[CHECKSUM_ATTRIBUTE]
+    if scheme != CHECKSUM_SCHEME:
+        raise ArchiveError(f"{path} uses the checksum scheme {scheme!r}, which this workbench does not know")
+    for obj in _objects(handle):
+        kind = "dataset" if isinstance(obj, h5py.Dataset) else "group"
+        try:
+            stored = obj.attrs.get(DIGEST_ATTRIBUTE)
+            actual = _digest(obj)
+        except (OSError, RuntimeError, ValueError, TypeError) as exc:
+            raise ArchiveError(f"{path} is corrupt: its {kind} {obj.name} cannot be read ({exc})") from None
+        if stored is None:
+            raise ArchiveError(f"{path} is corrupt: its {kind} {obj.name} has no checksum")
+        if stored != actual:
+            raise ArchiveError(
+                f"{path} is corrupt: the {kind} {obj.name} does not match its checksum "
+                "(changed on disk after it was written)"
+            )
+
+
+# ---------------------------------------------------------- whole folders
+_RENAME_EXCHANGE = 2  # renameat2 flag (Linux): swap two names atomically
+_AT_FDCWD = -100
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Swap two existing names in one step where the system can (Linux renameat2); False where it cannot."""
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        renameat2 = libc.renameat2
+    except (OSError, AttributeError):
+        return False
+    renameat2.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint]
+    result = renameat2(_AT_FDCWD, os.fsencode(a), _AT_FDCWD, os.fsencode(b), _RENAME_EXCHANGE)
+    return result == 0
+
+
+@contextmanager
+def replacing_directory(folder: str | Path) -> Iterator[Path]:
+    """Yield a fresh hidden directory beside ``folder``; swap it in for ``folder`` when the block ends normally.
+
+    On Linux the old and new folders change places in one ``renameat2``
+    call, so at every instant ``folder`` is either the complete old folder
+    or the complete new one; elsewhere the old folder is first renamed aside
+    (a crash in between leaves it under its hidden name). The old folder is
+    removed afterwards; on an exception the new one is removed and the old
+    one is left as it was. Leftovers of writers that were killed (hidden
+    ``.<name>.*.partial`` folders of dead processes) are removed first.
+    """
+    folder = check_output_folder(folder, what="folder")
+    try:
+        folder.parent.mkdir(parents=True, exist_ok=True)
+        _remove_dead_partials(folder)
+        fresh = folder.with_name(f".{folder.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.partial")
+        fresh.mkdir()
+    except OSError as exc:
+        raise OutputTargetError(f"cannot write the folder {folder}: {os_error_text(exc)}") from None
+    try:
+        yield fresh
+        if folder.exists() and _exchange(fresh, folder):
+            shutil.rmtree(fresh, ignore_errors=True)  # now the old folder
+        else:
+            if folder.exists():
+                aside = folder.with_name(f".{folder.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.partial")
+                os.replace(folder, aside)
+                os.replace(fresh, folder)
+                shutil.rmtree(aside, ignore_errors=True)
+            else:
+                os.replace(fresh, folder)
+    finally:
+        if fresh.exists():
+            shutil.rmtree(fresh, ignore_errors=True)
+
+
+def _remove_dead_partials(folder: Path) -> None:
+    for candidate in folder.parent.glob(f".{folder.name}.*.partial"):
+        parts = candidate.name[len(folder.name) + 2:].split(".")
+        try:
+            pid = int(parts[0])
+        except (ValueError, IndexError):
+            continue
+        if pid == os.getpid() or _alive(pid):
+            continue
+        shutil.rmtree(candidate, ignore_errors=True)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True

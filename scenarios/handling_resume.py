@@ -1,0 +1,144 @@
+"""Checkpoints and resume of the handling study.
+
+While the study runs, its archive is rewritten atomically (under the
+writer's lock) each time an order finishes: the records first, then each
+order's runs and its entry in the root attribute ``orders_done_json``. The
+finished archive adds the summary. ``vehid study handling --resume ARCHIVE``
+reads the settings, the records and every finished order back (bit for bit:
+HDF5 keeps float64 exactly) and runs only the orders that are missing, so
+its table equals that of a run that was never interrupted.
+
+The unit of work is one order (its linear and then its nonlinear
+identification): an order that was interrupted is run again from its start.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from identification.archive import open_archive, read_history, read_records, update_archive
+from identification.errors import ArchiveError, InputError
+from identification.iekf_archive import read_iekf_run
+from identification.storage import read_group, read_value
+
+from .handling_study import (
+    ORDERS_DONE,
+    HandlingConfig,
+    NonlinearOutcome,
+    OrderOutcome,
+    start_archive,
+    write_order,
+)
+
+__all__ = ["StudyCheckpoint", "read_progress"]
+
+
+class StudyCheckpoint:
+    """Writes the study's archive as it goes: records at the start, then each order as it finishes.
+
+    Parameters
+    ----------
+    path : Path
+        The archive; the caller holds its writer's lock for the whole study.
+    config : HandlingConfig
+    records : mapping of str to IOData
+    fresh : bool
+        Start a new archive (True) or add to a resumed one (False).
+    """
+
+    def __init__(self, path: str | Path, config: HandlingConfig, records: dict, *, fresh: bool = True):
+        self.path = Path(path)
+        if fresh:
+            with start_archive(self.path, config, records):
+                pass
+
+    def __call__(self, outcome: OrderOutcome) -> None:
+        with update_archive(self.path, kinds=["handling-study"]) as archive:
+            write_order(archive, outcome.order, outcome)
+
+
+def _config(stored: Any, path: Path, workers: int | None) -> HandlingConfig:
+    if not isinstance(stored, dict) or "orders" not in stored:
+        raise ArchiveError(f"{path} holds no handling-study settings to resume with")
+    try:
+        return HandlingConfig(**{**stored, "orders": tuple(stored["orders"]), "workers": workers})
+    except TypeError as exc:
+        raise ArchiveError(f"{path} holds settings this workbench does not know ({exc})") from None
+
+
+def _nonlinear(run: Any) -> NonlinearOutcome:
+    history = read_history(run)
+    metrics = read_group(run["metrics"])
+    curves = {}
+    mode = 0
+    while f"mode{mode}_frequency" in run:
+        curves[mode] = (read_value(run, f"mode{mode}_frequency"), read_value(run, f"mode{mode}_damping"))
+        mode += 1
+    return NonlinearOutcome(
+        model=read_group(run["model"]),
+        fit_identification=np.asarray(metrics["identification_R"]),
+        fit_validation=np.asarray(metrics["validation_R"]),
+        fit_filter=history.get("fit_filter", np.zeros((0, 0))),
+        trace_p=history.get("trace_p", np.zeros(0)),
+        spline_tables=read_value(run, "spline_tables"),
+        mode_curves=curves,
+        stop_reason=str(run.attrs["stop_reason"]),
+        seconds=float(run.attrs["seconds"]),
+    )
+
+
+def _outcome(archive: Any, order: int, status: dict) -> OrderOutcome:
+    runs = archive["runs"]
+    linear = fit_identification = fit_validation = nonlinear = None
+    if f"linear-n{order}" in runs:
+        linear = read_iekf_run(archive, f"linear-n{order}")
+        metrics = read_group(runs[f"linear-n{order}"]["metrics"])
+        fit_identification = np.asarray(metrics["identification_R"])
+        fit_validation = np.asarray(metrics["validation_R"])
+    if f"nonlinear-n{order}" in runs:
+        nonlinear = _nonlinear(runs[f"nonlinear-n{order}"])
+    return OrderOutcome(order, linear, fit_identification, fit_validation, status.get("linear_error"), nonlinear,
+                        status.get("nonlinear_error"), float(status.get("seconds", 0.0)))
+
+
+def read_progress(path: str | Path, workers: int | None = None) -> tuple[HandlingConfig, dict, dict[int, OrderOutcome]]:
+    """The settings, records and finished orders of a (possibly unfinished) study archive.
+
+    Parameters
+    ----------
+    path : str or Path
+        A ``handling-study`` archive written by the study (finished or not).
+    workers : int, optional
+        Worker processes for the orders still to run (not part of the results).
+
+    Returns
+    -------
+    config : HandlingConfig
+    records : dict of str to IOData
+    finished : dict of int to OrderOutcome
+
+    Raises
+    ------
+    ArchiveError
+        A missing, foreign or corrupt file, or one that is not a handling study
+        this workbench can continue.
+    """
+    path = Path(path)
+    with open_archive(path, kinds=["handling-study"]) as archive:
+        try:
+            config = _config(read_group(archive["config"]), path, workers)
+            records = read_records(archive)
+            done = json.loads(archive.attrs.get(ORDERS_DONE, "{}"))
+            finished = {int(order): _outcome(archive, int(order), status) for order, status in done.items()
+                        if int(order) in config.orders}
+        except InputError as exc:
+            raise ArchiveError(f"{path} cannot be resumed: {exc}") from None
+        except (KeyError, ValueError) as exc:
+            raise ArchiveError(f"{path} cannot be resumed: it is incomplete ({exc})") from None
+    if set(records) != {"identification", "validation"}:
+        raise ArchiveError(f"{path} cannot be resumed: it lacks the identification and validation records")
+    return config, records, finished
