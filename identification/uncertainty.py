@@ -42,7 +42,7 @@ known two-mode system with 10 % and 30 % output noise the 95 % intervals of
 frequency and damping cover the truth in 90-98 % of 60 realisations for the
 IEKF at p = 0.001 and for output error. At p = 1 the IEKF's ``P`` is the
 covariance of a random walk of the parameters that the data do not have,
-and the intervals come out about 2.3 times too wide. Every interval here
+and the intervals come out 1.8-2.4 times too wide. Every interval here
 assumes white residuals: where :mod:`identification.residuals` rejects
 whiteness, model error dominates and the intervals are formal.
 """

@@ -6,12 +6,10 @@ import json
 import subprocess
 import sys
 
-import h5py
 import numpy as np
 import pytest
 from scipy.signal import lfilter
 
-from identification.comparators import identify_with
 from identification.archive import open_archive, update_archive
 from identification.iekf import IEKFOptions, identify_iekf
 from identification.iekf_archive import append_iekf_pass, read_iekf_run
@@ -77,25 +75,23 @@ def test_residual_tests_flag_too_low_an_order_and_pass_the_true_one(low_order, a
     assert verdicts[adequate_order].adequate
 
 
-@pytest.mark.slow  # four identifications of the 10,000-sample example, 15-30 s
 def test_residual_tests_on_the_paper_linear_example():
     """Eq. 15, output 1, 10 % noise, 20 s (Table 4 tuning p = 0.001, 40 passes).
 
-    n = 3 leaves the -15 +/- 10j pair in the residuals and is flagged. The
-    true model passes, and so does n = 4 (the paper's chosen order: the
-    real pole at -4 is weak in output 1) once output error refines the
-    IEKF's model. The IEKF's own n = 4 and 5 models at this tuning are not
-    yet converged after 40 passes on 20 s (the real pole near -9) and the
-    cross-correlation test says so (measured, see the issue's report).
+    n = 3 leaves the -15 +/- 10j pair in the residuals and is flagged; n = 4
+    (the paper's chosen order: the real pole at -4 is weak in output 1)
+    passes, and so does the true model (measured p-values in
+    benchmarks/residual_adequacy.py: whiteness 0.40, cross-correlation 1.0).
     """
     data, _ = make_data(0, outputs=(0,), noise_ratio=0.1, duration=20.0)
     options = IEKFOptions(p=1e-3, passes=40, normalize=True)
-    low = identify_iekf(data, ModalStructure.from_pattern("all-ones", 3, 2, 1), options=options).model
-    assert not model_residual_tests(low, data).adequate
+    verdicts = {}
+    for order in (3, 4):
+        model = identify_iekf(data, ModalStructure.from_pattern("all-ones", order, 2, 1), options=options).model
+        verdicts[order] = model_residual_tests(model, data)
+    assert not verdicts[3].adequate
+    assert verdicts[4].adequate
     assert model_residual_tests(true_model(1), data).adequate
-    start = identify_iekf(data, ModalStructure.from_pattern("all-ones", 4, 2, 1), options=options).model
-    refined = identify_with(data, method="output-error", order=4, start=start).model
-    assert model_residual_tests(refined, data).adequate
 
 
 def _csv(tmp_path, seed=3):
@@ -142,7 +138,7 @@ def test_an_archive_without_the_nis_column_still_reads_and_resumes(tmp_path):
     archive = tmp_path / "run.h5"
     assert _identify(str(path), "--inputs", "u", "--outputs", "y", "--order", "4", "--passes", "2", "--out",
                      str(archive)).returncode == 0
-    with h5py.File(archive, "r+") as handle:
+    with update_archive(archive) as handle:  # as an older workbench wrote it
         del handle["runs/iekf/history/nis"]
     with open_archive(archive) as handle:
         previous = read_iekf_run(handle, "iekf")
