@@ -55,6 +55,7 @@ from typing import Any, Callable
 
 import casadi as ca
 import numpy as np
+import scipy.linalg
 from scipy.stats import norm
 
 from .errors import InputError
@@ -356,7 +357,7 @@ def sample_parameters(model: Any, count: int, rng: np.random.Generator) -> np.nd
     """``count`` parameter vectors drawn from N(parameters, parameter_covariance), shape (count, n_theta)."""
     if model.parameter_covariance is None:
         raise InputError("the model carries no parameter covariance to sample")
-    values, vectors = np.linalg.eigh(model.parameter_covariance)
+    values, vectors = scipy.linalg.eigh(model.parameter_covariance)
     root = vectors * np.sqrt(np.maximum(values, 0.0))
     return model.parameters + rng.standard_normal((count, values.size)) @ root.T
 
@@ -441,7 +442,7 @@ def gauss_newton_covariance(jacobian: np.ndarray, residuals: np.ndarray) -> np.n
     variance = np.maximum(np.mean(residuals**2, axis=0) / dof, 1e-300)
     weighted = np.asarray(jacobian, dtype=float).reshape(samples, n_y, n_theta) / np.sqrt(variance)[None, :, None]
     _, upper = np.linalg.qr(weighted.reshape(samples * n_y, n_theta))
-    inverse = np.linalg.pinv(upper)
+    inverse = scipy.linalg.pinv(upper)
     covariance = inverse @ inverse.T
     return 0.5 * (covariance + covariance.T)
 

@@ -24,6 +24,7 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+import scipy.linalg
 from scipy.stats import chi2
 
 from identification.errors import InputError
@@ -46,6 +47,7 @@ __all__ = [
     "autocorrelation",
     "plot_residual_autocorrelation",
     "plot_residual_tests",
+    "plot_innovation_consistency",
 ]
 
 #: Default figure size in inches: legible on an A4 page at 100 % with 9-10 pt text.
@@ -543,7 +545,7 @@ def _ellipse(ax: Axes, value: complex, covariance: np.ndarray, color: Any) -> No
     """The 95 % ellipse of an eigenvalue (and its mirror image for a pair) from the covariance of (re, im)."""
     if not np.all(np.isfinite(covariance)):
         return
-    values, vectors = np.linalg.eigh(covariance)
+    values, vectors = scipy.linalg.eigh(covariance)  # numpy's stalls under load with this BLAS
     angle = np.linspace(0.0, 2 * np.pi, 60)
     circle = np.vstack([np.cos(angle), np.sin(angle)])
     outline = vectors @ (ELLIPSE_SCALE * np.sqrt(np.maximum(values, 0.0))[:, None] * circle)
@@ -787,4 +789,35 @@ def plot_residual_tests(tests: Any, *, dt: float | None = None, title: str = "Re
     for ax in axes[-1]:
         ax.set_xlabel("lag (s)" if dt else "lag (samples)")
     fig.suptitle(f"{title} ({level} bands, N = {tests.samples})")
+    return fig
+
+
+def plot_innovation_consistency(nis: Any, band: tuple[float, float], *, title: str = "Innovation consistency",
+                                fig: Figure | None = None) -> Figure:
+    """The IEKF's mean normalised innovation squared per pass against the band of a consistent filter.
+
+    Parameters
+    ----------
+    nis : array_like, shape (n_pass,)
+        Mean ``e' R^-1 e`` of each pass.
+    band : (float, float)
+        :func:`identification.residuals.nis_band` for the record.
+    title : str
+    fig : Figure, optional
+
+    Returns
+    -------
+    Figure
+        Above the band the filter's R is too small for the data, below it too large.
+    """
+    nis = np.asarray(nis, dtype=float).ravel()
+    fig = _figure(fig, REPORT_SIZE)
+    ax = _style(fig.subplots())
+    passes = np.arange(1, nis.size + 1)
+    ax.axhspan(band[0], band[1], color="tab:green", alpha=0.2, label="99 % band of a consistent filter")
+    ax.semilogy(passes, nis, marker="o", color="k", label="mean NIS")
+    ax.set_xlabel("pass")
+    ax.set_ylabel("mean e' R^-1 e (-)")
+    ax.set_title(title)
+    _legend(ax, loc="best")
     return fig

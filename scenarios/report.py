@@ -20,7 +20,7 @@ from matplotlib.figure import Figure
 
 from identification.errors import InputError
 from identification.metrics import percentage_explanation
-from identification.residuals import DEFAULT_LAGS, residual_tests
+from identification.residuals import DEFAULT_LAGS, nis_band, residual_tests
 
 from . import plots
 
@@ -249,7 +249,9 @@ def archive_figures(archive: Any, *, window: tuple[float, float] | None = None, 
         order), ``eigenvalues`` and ``bode`` (models with A, B, C, D); per
         record: ``fits_<record>`` (models that can simulate it) and
         ``residuals_<record>_<run>`` and ``residual_tests_<record>_<run>``
-        (whiteness and input cross-correlation with 99 % bands). Models
+        (whiteness and input cross-correlation with 99 % bands);
+        ``innovation_consistency_<run>`` for IEKF runs that recorded their
+        NIS beside an ``identification`` record. Models
         carrying a parameter covariance get confidence ellipses on the
         eigenvalue map and bands on the Bode plot.
     """
@@ -269,6 +271,11 @@ def archive_figures(archive: Any, *, window: tuple[float, float] | None = None, 
                 min_eig_p=history.get("min_eig_p"),
                 output_names=outputs if outputs is not None and len(outputs) == fit.shape[1] else None,
                 title=f"Explanation and convergence per pass: {name}")
+        nis = history.get("nis")
+        record = archive.records.get("identification")
+        if nis is not None and record is not None and len(nis) and np.all(np.isfinite(nis)):
+            figures[_stem("innovation_consistency", name)] = plots.plot_innovation_consistency(
+                nis, nis_band(record.n_samples, record.n_y), title=f"Innovation consistency per pass: {name}")
     studied = [run for run in runs.values()
                if {"fit_filter", "trace_p", "parameters"} <= set(run.history) and run.n_pass > 1
                and getattr(getattr(run.model, "structure", None), "n", None) is not None]

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter
 
-from identification.archive import open_archive, update_archive
+from identification.archive import open_archive, read_archive, update_archive
 from identification.iekf import IEKFOptions, identify_iekf
 from identification.iekf_archive import append_iekf_pass, read_iekf_run
 from identification.modal import ModalStructure
@@ -19,6 +19,7 @@ from identification.storage import read_value
 from scenarios import calibration
 from scenarios.linear_example import make_data, true_model
 from scenarios.model_checks import model_residual_tests
+from scenarios.report import archive_figures
 
 
 def test_white_residuals_pass_with_the_nominal_false_alarm_rate():
@@ -126,6 +127,10 @@ def test_identify_json_carries_modes_with_std_and_residual_keys(tmp_path):
     assert run.model.parameter_covariance is not None
     assert np.isfinite(run.history[-1].nis)
     np.testing.assert_allclose(tests.residual_whiteness_p, summary["residual_whiteness_p"])
+    figures = archive_figures(read_archive(archive))
+    assert {"innovation_consistency_iekf", "residual_tests_identification_iekf"} <= set(figures)
+    # two modes: one marker line plus an ellipse and its mirror image per pair
+    assert len(figures["eigenvalues"].axes[0].get_lines()) >= 1 + 2 * 2
     text = _identify(str(path), "--inputs", "u", "--outputs", "y", "--order", "4", "--normalize", "--p", "0.001",
                      "--passes", "5")
     assert text.returncode == 0, text.stderr
