@@ -12,10 +12,14 @@ Kept apart from the command so that the command only calls
 ``residual_whiteness_p``, ``input_correlation_max``
     Per output, of the continuous model's simulation residuals on the
     record (:mod:`identification.residuals`); ``residual_tests`` holds the
-    full test results with their 99 % bound.
+    full test results per output (also ``ljung_box``,
+    ``input_correlation_p``, ``white``, ``independent``) with the 99 % bound.
 ``innovation_nis``, ``innovation_nis_band``
-    IEKF only: the mean normalised innovation squared of every pass and
-    the 99 % band of a consistent filter.
+    IEKF only: the mean normalised innovation squared ``e' R^-1 e`` of every
+    pass and the 99 % band of a consistent filter. The filter's innovation
+    covariance is ``H P H' + R``; the compiled pass returns innovations
+    only, so R stands for it, which overstates the NIS a little while P is
+    large and not at all once it has settled.
 """
 
 from __future__ import annotations

@@ -9,7 +9,11 @@ The default method is the Identifying EKF (Best & Bogdanski 2017) with the
 exact first-order-hold discretisation, so the identified parameters are those
 of the continuous-time model; --discretization euler reproduces the paper's
 filter. The summary gives the eigenvalues, the fit R (eq. 17) per output of
-the continuous model simulated exactly, the matrices and the run time.
+the continuous model simulated exactly, the matrices and the run time, and
+how sure the model is (scenarios.model_checks): each mode with standard
+deviations (text: value +/- 2 sigma; JSON: the list `modes`), the residual
+tests per output (`residual_whiteness_p`, `input_correlation_max`) and, for
+the IEKF, the innovation NIS per pass with its band.
 
 With --out ARCHIVE the record and every finished pass are written to an HDF5
 archive as the run goes (atomically, so a killed run leaves the archive of
