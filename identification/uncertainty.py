@@ -294,11 +294,8 @@ def model_uncertainty(model: Any, *, level: float = 0.95) -> ModelUncertainty:
             level=level,
         ))
     shape = (structure.n_y, structure.n_u)
-    try:
-        gain, gain_jacobian = (np.asarray(v) for v in _gain_function(structure)(theta))
-        gain_std = _spread(gain_jacobian, covariance)
-    except RuntimeError:  # a pole at the origin: no finite steady state
-        gain, gain_std = np.full(structure.n_y * structure.n_u, np.inf), np.full(structure.n_y * structure.n_u, np.nan)
+    gain, gain_jacobian = (np.asarray(v) for v in _gain_function(structure)(theta))
+    gain_std = _spread(gain_jacobian, covariance)  # a pole at the origin leaves both non-finite
     return ModelUncertainty(
         modes=tuple(modes),
         gain=np.asarray(gain).ravel().reshape(shape, order="F"),
