@@ -107,7 +107,6 @@ def _identify(*arguments):
                           capture_output=True, text=True, check=False)
 
 
-@pytest.mark.slow  # two CLI runs in subprocesses, about 20 s on a loaded machine
 def test_identify_json_carries_modes_with_std_and_residual_keys(tmp_path):
     path = _csv(tmp_path)
     archive = tmp_path / "run.h5"

@@ -136,7 +136,6 @@ def test_every_comparator_leaves_a_covariance_that_covers_the_truth():
         assert np.all(np.abs([m.frequency_hz for m in modes] - truth) < 4 * std), (method, modes)
 
 
-@pytest.mark.slow  # 24 identifications, 15-30 s
 def test_intervals_are_calibrated_on_the_known_system_lean():
     """The z-scores (estimate - truth) / std of frequency and damping have mean square near 1.
 
