@@ -44,6 +44,7 @@ from .errors import InputError
 
 __all__ = [
     "DEFAULT_LAGS",
+    "EXACT_FIT",
     "ResidualTests",
     "autocorrelation",
     "cross_correlation",
@@ -52,6 +53,8 @@ __all__ = [
 ]
 
 DEFAULT_LAGS = 25  # lags of the tests, MATLAB's resid default
+#: Residual RMS, relative to the output's, below which a fit counts as exact (rounding, not noise).
+EXACT_FIT = 1e-9
 
 
 def _columns(name: str, values: Any) -> np.ndarray:
@@ -131,6 +134,10 @@ class ResidualTests:
     input_correlation_p : ndarray, shape (n_y,)
         p-value of the cross-correlation portmanteau (smallest over the
         inputs times their number, at most 1).
+    exact : ndarray of bool, shape (n_y,)
+        Outputs fitted to rounding (residual RMS below :data:`EXACT_FIT` of
+        the output's): nothing is left to test; both p-values are 1, the
+        largest cross-correlation 0, the correlations and Q NaN.
     """
 
     output_names: tuple[str, ...]
@@ -145,6 +152,7 @@ class ResidualTests:
     residual_whiteness_p: np.ndarray
     input_correlation_max: np.ndarray
     input_correlation_p: np.ndarray
+    exact: np.ndarray
 
     @property
     def white(self) -> np.ndarray:
@@ -176,6 +184,7 @@ class ResidualTests:
                     "input_correlation_p": float(self.input_correlation_p[i]),
                     "white": bool(self.white[i]),
                     "independent": bool(self.independent[i]),
+                    "exact": bool(self.exact[i]),
                 }
                 for i, name in enumerate(self.output_names)
             ],
@@ -190,6 +199,7 @@ def residual_tests(
     level: float = 0.99,
     input_names: Sequence[str] | None = None,
     output_names: Sequence[str] | None = None,
+    output_scale: Any = None,
 ) -> ResidualTests:
     """Whiteness (autocorrelation, Ljung-Box) and input cross-correlation tests of residuals.
 
@@ -204,6 +214,10 @@ def residual_tests(
     level : float
         Confidence level of the bands (default 0.99).
     input_names, output_names : sequence of str, optional
+    output_scale : array_like, shape (n_y,), optional
+        RMS of each measured output: an output whose residual RMS is below
+        :data:`EXACT_FIT` of it is fitted exactly (noise-free data and the
+        right model), and its rounding-level residuals are not tested.
 
     Returns
     -------
@@ -223,10 +237,22 @@ def residual_tests(
     n = e.shape[0]
     if n <= 2 * lags:
         raise InputError(f"{n} samples are too few for residual tests at {lags} lags")
-    r_e = autocorrelation(e, lags)
-    r_ue = cross_correlation(u, e, lags)
-    k = np.arange(1, lags + 1)
-    statistic = n * (n + 2) * np.sum(r_e[1:] ** 2 / (n - k)[:, None], axis=0)
+    exact = np.zeros(e.shape[1], dtype=bool)
+    if output_scale is not None:
+        exact = np.sqrt(np.mean(e**2, axis=0)) < EXACT_FIT * np.asarray(output_scale, dtype=float).ravel()
+    tested = ~exact
+    r_e = np.full((lags + 1, e.shape[1]), np.nan)
+    r_ue = np.full((2 * lags + 1, u.shape[1], e.shape[1]), np.nan)
+    statistic = np.full(e.shape[1], np.nan)
+    whiteness_p = np.ones(e.shape[1])
+    correlation_p = np.ones(e.shape[1])
+    if np.any(tested):
+        r_e[:, tested] = autocorrelation(e[:, tested], lags)
+        r_ue[:, :, tested] = cross_correlation(u, e[:, tested], lags)
+        k = np.arange(1, lags + 1)
+        statistic[tested] = n * (n + 2) * np.sum(r_e[1:, tested] ** 2 / (n - k)[:, None], axis=0)
+        whiteness_p[tested] = chi2.sf(statistic[tested], lags)
+        correlation_p[tested] = _cross_correlation_p(u, r_ue[:, :, tested], n)
     return ResidualTests(
         output_names=tuple(output_names) if output_names else tuple(f"y{i + 1}" for i in range(e.shape[1])),
         input_names=tuple(input_names) if input_names else tuple(f"u{i + 1}" for i in range(u.shape[1])),
@@ -237,9 +263,10 @@ def residual_tests(
         autocorrelation=r_e,
         cross_correlation=r_ue,
         ljung_box=statistic,
-        residual_whiteness_p=chi2.sf(statistic, lags),
-        input_correlation_max=np.abs(r_ue).max(axis=(0, 1)),
-        input_correlation_p=_cross_correlation_p(u, r_ue, n),
+        residual_whiteness_p=whiteness_p,
+        input_correlation_max=np.where(exact, 0.0, np.abs(np.nan_to_num(r_ue)).max(axis=(0, 1))),
+        input_correlation_p=correlation_p,
+        exact=exact,
     )
 
 

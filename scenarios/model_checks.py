@@ -38,7 +38,8 @@ __all__ = ["model_residual_tests", "uncertainty_summary", "uncertainty_lines"]
 def model_residual_tests(model: Any, data: IOData) -> ResidualTests:
     """The residual tests of ``model`` simulated exactly (first-order hold) from rest over ``data``."""
     residuals = data.y - model.simulate(data.u, data.dt)
-    return residual_tests(data.u, residuals, input_names=data.input_names, output_names=data.output_names)
+    return residual_tests(data.u, residuals, input_names=data.input_names, output_names=data.output_names,
+                          output_scale=np.sqrt(np.mean(data.y**2, axis=0)))
 
 
 def uncertainty_summary(model: ModalModel, data: IOData, nis: Sequence[float] | None = None) -> tuple[dict[str, Any], ResidualTests]:
@@ -77,6 +78,9 @@ def uncertainty_lines(summary: dict[str, Any], output_names: Sequence[str]) -> l
     bound = summary["residual_tests"]["bound"]
     lines.append(f"residual tests (99 %, {summary['residual_tests']['lags']} lags, bound {bound:.3g}):")
     for name, output in zip(output_names, summary["residual_tests"]["outputs"]):
+        if output["exact"]:
+            lines.append(f"  {name}: fitted to rounding, no residual left to test")
+            continue
         verdict = "white" if output["white"] else "NOT white"
         independent = "independent of the input" if output["independent"] else "correlated with the input"
         lines.append(f"  {name}: whiteness p = {output['residual_whiteness_p']:.3g} ({verdict}); input correlation "

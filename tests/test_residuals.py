@@ -11,6 +11,7 @@ import pytest
 from scipy.signal import lfilter
 
 from identification.archive import open_archive, read_archive, update_archive
+from identification.errors import InputError
 from identification.iekf import IEKFOptions, identify_iekf
 from identification.iekf_archive import append_iekf_pass, read_iekf_run
 from identification.modal import ModalStructure
@@ -152,3 +153,12 @@ def test_an_archive_without_the_nis_column_still_reads_and_resumes(tmp_path):
                          previous)
     with open_archive(archive) as handle:
         assert "nis" not in handle["runs/iekf/history"] and read_iekf_run(handle, "iekf").passes_run == 3
+
+
+def test_an_exact_fit_is_not_called_coloured():
+    """Noise-free data and the true model leave rounding (1e-16): the tests must not reject it."""
+    data, _ = calibration.make_record(2, 0.0, duration=20.0)
+    tests = model_residual_tests(calibration.true_model(), data)
+    assert tests.exact[0] and tests.adequate
+    with pytest.raises(InputError, match="constant"):  # without the outputs' scale, as any residual
+        residual_tests(data.u, data.y - calibration.true_model().simulate(data.u, data.dt))
