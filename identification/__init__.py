@@ -39,6 +39,8 @@ from .factorised import sqrt_step, ud_step
 from .statespace import (balanced_truncation, continuous_to_discrete, discrete_to_continuous,
                          modal_structure_for, to_modal)
 from .subspace import SubspaceResult, estimate_subspace
+from .residuals import ResidualTests, residual_tests
+from .uncertainty import FrequencyResponseBand, ModelUncertainty, ModeEstimate, model_uncertainty
 
 __all__ = [
     "IOData",
@@ -142,4 +144,10 @@ __all__ = [
     "ComparatorResult",
     "identify_with",
     "register_comparator",
+    "ResidualTests",
+    "residual_tests",
+    "ModeEstimate",
+    "ModelUncertainty",
+    "FrequencyResponseBand",
+    "model_uncertainty",
 ]

@@ -54,6 +54,7 @@ from .iekf_pass import COVARIANCE_FORMS, compiled_pass, pack_covariance, unpack_
 from .modal import ModalModel, ModalStructure
 from .multirecord import pooled_percentage_explanation
 from .start import DATA_STARTS, data_start
+from .uncertainty import iekf_parameter_covariance
 
 __all__ = [
     "IEKFOptions",
@@ -181,7 +182,9 @@ class PassRecord:
 
     ``fit_filter``: R per output of the frozen model simulated with the
     filter's own discretisation; ``fit_continuous``: R per output of the
-    continuous model simulated exactly (inputs linear between samples).
+    continuous model simulated exactly (inputs linear between samples);
+    ``nis``: the pass's mean normalised innovation squared ``e' R^-1 e``
+    (n_y for innovations as large as the filter assumes; NaN where unknown).
     """
 
     index: int
@@ -191,6 +194,7 @@ class PassRecord:
     trace_p: float
     min_eig_p: float
     seconds: float
+    nis: float = float("nan")
 
     @property
     def mean_fit_filter(self) -> float:
@@ -499,10 +503,15 @@ def identify_iekf(
 
     def result(stop_reason: str) -> IEKFResult:
         last = history[-1].parameters if history else original_units(theta)
+        covariance = None
+        if history and np.isfinite(history[-1].nis):
+            covariance = iekf_parameter_covariance(
+                structure, P[n:, n:], input_scale, output_scale, history[-1].nis / structure.n_y, time_unit=time_unit)
         return IEKFResult(
             model=ModalModel.from_parameters(
                 structure, last, input_names=data.input_names, output_names=data.output_names,
                 meta={"estimator": "iekf", "discretization": options.discretization, "passes": len(history)},
+                parameter_covariance=covariance,
             ),
             structure=structure,
             options=options,
@@ -524,6 +533,7 @@ def identify_iekf(
         pass_start = time.perf_counter()
         state = np.concatenate([np.zeros(n), theta, pack_covariance(P)])
         where = None
+        nis_sum, nis_count = 0.0, 0
         for experiment, u_k, y_k in zip(records, u_scaled, y_scaled):
             state[:n] = 0.0  # each record starts from its own rest state; parameters and P carry on
             try:
@@ -541,6 +551,8 @@ def identify_iekf(
                 if len(records) > 1:
                     where += f" of record {experiment.meta.get('source', records.index(experiment) + 1)}"
                 break
+            nis_sum += float(np.sum(innovations * np.linalg.solve(r, innovations.T).T))
+            nis_count += innovations.shape[0]
         del innovations  # (N, n_y): not kept while the model is scored
         new_theta = state[n:m]
         new_P = unpack_covariance(state[m:], m)
@@ -578,6 +590,7 @@ def identify_iekf(
             trace_p=trace,
             min_eig_p=min_eig,
             seconds=time.perf_counter() - pass_start,
+            nis=nis_sum / max(nis_count, 1),
         )
         theta, P = new_theta, new_P
         history.append(record)

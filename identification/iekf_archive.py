@@ -40,6 +40,7 @@ HISTORY_UNITS = {
     "trace_p": "normalised units",
     "min_eig_p": "normalised units",
     "seconds": "s",
+    "nis": "-",
 }
 
 
@@ -52,6 +53,7 @@ def _history_row(record: PassRecord) -> dict[str, Any]:
         "trace_p": record.trace_p,
         "min_eig_p": record.min_eig_p,
         "seconds": record.seconds,
+        "nis": record.nis,
     }
 
 
@@ -81,7 +83,10 @@ def append_iekf_pass(archive: h5py.File, name: str, record: PassRecord, result: 
     recorded = int(run["history"].attrs.get("n_pass", 0)) if "history" in run else 0
     if record.index != recorded + 1:
         raise ArchiveError(f"run {name!r} holds {recorded} passes; pass {record.index} cannot follow")
-    append_history(run, _history_row(record), units=HISTORY_UNITS)
+    row = _history_row(record)
+    if recorded and "nis" not in run["history"]:
+        del row["nis"]  # a run begun before the history recorded it keeps its columns
+    append_history(run, row, units=HISTORY_UNITS)
     _write_summary(run, result)
 
 
@@ -112,6 +117,7 @@ def read_iekf_run(archive: h5py.File, name: str) -> IEKFResult:
             trace_p=float(history["trace_p"][k]),
             min_eig_p=float(history["min_eig_p"][k]),
             seconds=float(history["seconds"][k]),
+            nis=float(history["nis"][k]) if "nis" in history else float("nan"),
         )
         for k in range(len(history.get("index", ())))
     )

@@ -27,6 +27,7 @@ reports a model.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -363,6 +364,10 @@ class ModalModel:
     input_names, output_names : tuple of str, optional
     meta : dict, optional
         Provenance (estimator, discretisation, passes, ...).
+    parameter_covariance : ndarray, optional
+        Covariance of :attr:`parameters` (n_theta, n_theta), in the model's
+        units, as the estimator found it (see :mod:`identification.uncertainty`);
+        ``None`` where none was estimated.
     """
 
     structure: ModalStructure
@@ -373,6 +378,7 @@ class ModalModel:
     input_names: tuple[str, ...] | None = None
     output_names: tuple[str, ...] | None = None
     meta: dict[str, Any] = field(default_factory=dict)
+    parameter_covariance: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         s = self.structure
@@ -387,6 +393,10 @@ class ModalModel:
         object.__setattr__(self, "input_names", tuple(self.input_names) if self.input_names else tuple(f"u{i + 1}" for i in range(s.n_u)))
         object.__setattr__(self, "output_names", tuple(self.output_names) if self.output_names else tuple(f"y{i + 1}" for i in range(s.n_y)))
         object.__setattr__(self, "meta", dict(self.meta))
+        if self.parameter_covariance is not None:
+            from .uncertainty import checked_covariance
+
+            object.__setattr__(self, "parameter_covariance", checked_covariance(self.parameter_covariance, s.n_parameters))
 
     @classmethod
     def from_parameters(cls, structure: ModalStructure, theta: Any, **kwargs: Any) -> "ModalModel":
@@ -397,6 +407,33 @@ class ModalModel:
     def parameters(self) -> np.ndarray:
         """theta, laid out as :class:`ModalStructure` describes."""
         return self.structure.pack(self.A, self.B, self.C, self.D)
+
+    def parameter_std(self) -> np.ndarray | None:
+        """Standard deviations of :attr:`parameters` (``None`` without a covariance)."""
+        if self.parameter_covariance is None:
+            return None
+        return np.sqrt(np.diag(self.parameter_covariance))
+
+    def with_parameter_covariance(self, covariance: Any) -> "ModalModel":
+        """The same model carrying ``covariance`` (n_theta, n_theta) of its parameters."""
+        return dataclasses.replace(self, parameter_covariance=covariance)
+
+    def uncertainty(self, *, level: float = 0.95) -> Any:
+        """Modes, steady-state gains and their confidence intervals by the delta method.
+
+        Returns an :class:`identification.uncertainty.ModelUncertainty`;
+        without a parameter covariance every standard deviation is NaN.
+        """
+        from .uncertainty import model_uncertainty
+
+        return model_uncertainty(self, level=level)
+
+    def frequency_response_band(self, frequencies_hz: Any, *, level: float = 0.95) -> Any:
+        """Magnitude and phase at ``frequencies_hz`` with delta-method bands
+        (:func:`identification.uncertainty.frequency_response`)."""
+        from .uncertainty import frequency_response
+
+        return frequency_response(self, frequencies_hz, level=level)
 
     # --------------------------------------------------------------- modes
     def mode_eigenvalues(self) -> np.ndarray:
@@ -520,11 +557,13 @@ class ModalModel:
             "input_names": list(self.input_names),
             "output_names": list(self.output_names),
             "meta": self.meta,
+            **({} if self.parameter_covariance is None else {"parameter_covariance": self.parameter_covariance.tolist()}),
         }
 
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> "ModalModel":
-        """Inverse of :meth:`to_dict`."""
+        """Inverse of :meth:`to_dict` (a dict without ``parameter_covariance`` gives none)."""
+        covariance = values.get("parameter_covariance")
         return cls(
             ModalStructure.from_dict(values["structure"]),
             np.array(values["A"]),
@@ -534,6 +573,7 @@ class ModalModel:
             input_names=tuple(values.get("input_names") or ()),
             output_names=tuple(values.get("output_names") or ()),
             meta=dict(values.get("meta") or {}),
+            parameter_covariance=None if covariance is None else np.array(covariance, dtype=float),
         )
 
     def save_json(self, path: str | Path) -> Path:

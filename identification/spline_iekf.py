@@ -19,6 +19,7 @@ differences the paper gives:
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable
@@ -220,8 +221,9 @@ def identify_spline_iekf(
     history: list[SplinePassRecord] = []
 
     def result(stop_reason: str) -> SplineIEKFResult:
+        # R is the measured residual covariance, so P needs no rescaling (see identification.uncertainty)
         return SplineIEKFResult(
-            model=model, start=start, options=options, history=tuple(history), P=P.copy(), R=R.copy(),
+            model=dataclasses.replace(model, parameter_covariance=P[n:, n:]) if history else model, start=start, options=options, history=tuple(history), P=P.copy(), R=R.copy(),
             start_fit=start_fit, stop_reason=stop_reason, seconds=time.perf_counter() - started,
         )
 

@@ -272,6 +272,9 @@ class SplineModalModel:
     dt : float
         The sample interval it was identified at.
     discretization : str
+    parameter_covariance : ndarray, optional
+        Covariance of ``theta`` (normalised units), as the spline IEKF left it
+        in its P; ``None`` where none was estimated.
     """
 
     structure: SplineModalStructure
@@ -284,6 +287,7 @@ class SplineModalModel:
     input_names: tuple[str, ...] | None = None
     output_names: tuple[str, ...] | None = None
     meta: dict[str, Any] = field(default_factory=dict)
+    parameter_covariance: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         st = self.structure
@@ -301,6 +305,11 @@ class SplineModalModel:
         st.constants(self.ranges)  # checks the ranges
         check_discretization(self.discretization)
         object.__setattr__(self, "meta", dict(self.meta))
+        if self.parameter_covariance is not None:
+            from .uncertainty import checked_covariance
+
+            object.__setattr__(self, "parameter_covariance",
+                               checked_covariance(self.parameter_covariance, st.n_parameters))
 
     @classmethod
     def from_linear(
@@ -390,6 +399,55 @@ class SplineModalModel:
         natural = np.hypot(sigma, omega)
         return natural / (2 * np.pi), -sigma / natural
 
+    def _block(self, index: int) -> np.ndarray | None:
+        """The covariance of one coefficient's node ordinates (p, p), or None."""
+        if self.parameter_covariance is None:
+            return None
+        p = self.structure.nodes
+        return self.parameter_covariance[index * p:(index + 1) * p, index * p:(index + 1) * p]
+
+    def coefficient_std(self, name: str, values: Any) -> np.ndarray:
+        """Standard deviation of a coefficient at values of its variable (normalised units; NaN without a covariance).
+
+        The spline is linear in its ordinates, ``c(v) = phi(v)' gamma``, so
+        ``var c(v) = phi(v)' cov(gamma) phi(v)`` exactly.
+        """
+        index = self.structure.coefficient_names().index(name)
+        basis, _ = self.spline(index)
+        rows = basis.evaluate(np.asarray(values, dtype=float).ravel())
+        block = self._block(index)
+        if block is None:
+            return np.full(rows.shape[0], np.nan)
+        return np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", rows, block, rows), 0.0))
+
+    def mode_frequency_damping_std(self, mode: int, amplitudes: Any) -> tuple[np.ndarray, np.ndarray]:
+        """Standard deviations of :meth:`mode_frequency_damping` by the delta method (NaN without a covariance).
+
+        With ``sigma = phi' g_s``, ``omega = phi' g_w`` and ``r = |sigma + j omega|``:
+        ``df = (sigma ds + omega dw) / (2 pi r)``, ``dzeta = (-omega^2 ds + sigma omega dw) / r^3``;
+        the ordinates of sigma and omega and their cross-covariance enter.
+        """
+        if not 0 <= mode < self.structure.linear.n_complex_pairs:
+            raise InputError(f"mode {mode} is not a complex pair of this model")
+        amplitudes = np.asarray(amplitudes, dtype=float).ravel()
+        if self.parameter_covariance is None:
+            return np.full(amplitudes.size, np.nan), np.full(amplitudes.size, np.nan)
+        names = self.structure.coefficient_names()
+        indices = [names.index(f"sigma{mode + 1}"), names.index(f"omega{mode + 1}")]
+        p = self.structure.nodes
+        rows = self.spline(indices[0])[0].evaluate(amplitudes)  # sigma and omega share the amplitude's nodes
+        sigma = rows @ self.structure.gammas(self.theta)[indices[0]]
+        omega = rows @ self.structure.gammas(self.theta)[indices[1]]
+        radius = np.hypot(sigma, omega)
+        positions = np.concatenate([np.arange(i * p, (i + 1) * p) for i in indices])
+        covariance = self.parameter_covariance[np.ix_(positions, positions)]
+        results = []
+        for d_sigma, d_omega in ((sigma / (2 * np.pi * radius), omega / (2 * np.pi * radius)),
+                                 (-omega**2 / radius**3, sigma * omega / radius**3)):
+            jacobian = np.hstack([d_sigma[:, None] * rows, d_omega[:, None] * rows])
+            results.append(np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", jacobian, covariance, jacobian), 0.0)))
+        return results[0], results[1]
+
     def linear_model(self, at: float = 0.0) -> ModalModel:
         """The linear model of the splines' values at zero input, states and amplitude ``at``."""
         from .iekf import denormalize
@@ -470,14 +528,17 @@ class SplineModalModel:
             "input_names": list(self.input_names or ()),
             "output_names": list(self.output_names or ()),
             "meta": self.meta,
+            **({} if self.parameter_covariance is None else {"parameter_covariance": self.parameter_covariance.tolist()}),
         }
 
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> "SplineModalModel":
+        covariance = values.get("parameter_covariance")
         return cls(
             SplineModalStructure.from_dict(values["structure"]), np.array(values["theta"]),
             np.array(values["ranges"]), np.array(values["input_scale"]), np.array(values["output_scale"]),
             float(values["dt"]), values.get("discretization", "exact"),
             tuple(values.get("input_names") or ()) or None, tuple(values.get("output_names") or ()) or None,
             dict(values.get("meta") or {}),
+            None if covariance is None else np.array(covariance, dtype=float),
         )

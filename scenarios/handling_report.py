@@ -10,7 +10,9 @@ Figures (names are the PNG files' stems):
     amplitude, and two typical coefficients, nodes marked (Figure 8).
 ``mode_amplitude``
     The first mode's frequency and damping against its amplitude, every
-    order (the Figure 8 finding: both fall as the state grows).
+    order (the Figure 8 finding: both fall as the state grows), with the
+    95 % band of each model that carries a parameter covariance (from the
+    spline IEKF's final P, delta method); ``splines`` shades the same band.
 ``orders``
     Mean R per order, linear and nonlinear, identification and validation (Table 5).
 ``linear_parameters``, ``linear_convergence``, ``nonlinear_convergence``
@@ -20,6 +22,9 @@ Figures (names are the PNG files' stems):
     the vehicle's own linearisation.
 ``residuals``
     Residual autocorrelation of the chosen nonlinear model on the validation data.
+``residual_tests``
+    Whiteness and input cross-correlation tests (99 %) of the chosen
+    order's linear and nonlinear models on the identification data.
 
 Besides the figures, ``table.md`` holds the Table-5 style table and
 ``nonlinear_n<order>.casadi`` the chosen nonlinear model as a CasADi Function
@@ -38,7 +43,9 @@ from matplotlib.figure import Figure
 from identification.archive import open_archive, read_records
 from identification.errors import InputError
 from identification.iekf_archive import read_iekf_run
+from identification.residuals import residual_tests
 from identification.storage import read_group
+from identification.uncertainty import normal_quantile
 
 from . import plots
 from .report import format_eigenvalues, markdown_table, write_report
@@ -109,7 +116,7 @@ def handling_figures(path: str | Path) -> dict[str, Figure]:
         coefficient_names = model.structure.coefficient_names()
         picks = [name for name in ("sigma1", "omega1") if name in coefficient_names]
         picks += [name for name in coefficient_names if name.startswith(("b", "c"))][:2]
-        xs, values, node_x, node_y, x_labels = [], [], [], [], []
+        xs, values, node_x, node_y, x_labels, spreads = [], [], [], [], [], []
         tables = model.spline_tables()
         for name in picks:
             table = tables[name]
@@ -119,6 +126,7 @@ def handling_figures(path: str | Path) -> dict[str, Figure]:
             grid = np.linspace(lower, nodes[-1] + 0.2 * span, 200)
             xs.append(grid)
             values.append(model.coefficient(name, grid))
+            spreads.append(model.coefficient_std(name, grid))
             node_x.append(nodes)
             node_y.append(table["values"])
             x_labels.append(f"{table['variable']} (normalised)")
@@ -126,6 +134,7 @@ def handling_figures(path: str | Path) -> dict[str, Figure]:
             xs, values, node_x, node_y, picks, x_labels=x_labels,
             title=f"Splined coefficients of the nonlinear model (n = {chosen})",
         )
+        _shade(figures["splines"].axes, xs, values, spreads)
 
     curves = [run for run in summary.get("nonlinear_runs", []) if run.get("mode_frequency_hz")]
     if curves:
@@ -134,8 +143,13 @@ def handling_figures(path: str | Path) -> dict[str, Figure]:
         damping_axis = figure.add_subplot(2, 1, 2, sharex=frequency_axis)
         for run in curves:
             amplitudes = run["mode_amplitudes"]
-            frequency_axis.plot(amplitudes, run["mode_frequency_hz"][0], marker="o", label=f"n = {run['order']}")
+            line = frequency_axis.plot(amplitudes, run["mode_frequency_hz"][0], marker="o", label=f"n = {run['order']}")
             damping_axis.plot(amplitudes, run["mode_damping"][0], marker="o", label=f"n = {run['order']}")
+            model = nonlinear.get(run["order"])
+            if getattr(model, "parameter_covariance", None) is not None:
+                spread = model.mode_frequency_damping_std(0, amplitudes)
+                _shade([frequency_axis, damping_axis], [amplitudes] * 2,
+                       [run["mode_frequency_hz"][0], run["mode_damping"][0]], spread, color=line[0].get_color())
         frequency_axis.set_ylabel("frequency (Hz)")
         damping_axis.set_ylabel("damping ratio (-)")
         damping_axis.set_xlabel("first mode's amplitude (normalised state units)")
@@ -208,7 +222,25 @@ def handling_figures(path: str | Path) -> dict[str, Figure]:
             residuals, 100, names, dt=data.dt,
             title=f"Residual autocorrelation, nonlinear n = {chosen}, validation data",
         )
+    data = records["identification"]
+    for kind, model in (("linear", linear[chosen].model if chosen in linear else None), ("nonlinear", nonlinear.get(chosen))):
+        if model is not None:
+            tests = residual_tests(data.u, data.y - model.simulate(data.u, data.dt), input_names=data.input_names,
+                                   output_names=names)
+            figures[f"residual_tests_{kind}"] = plots.plot_residual_tests(
+                tests, dt=data.dt, title=f"Residual tests, {kind} n = {chosen}, identification data")
     return figures
+
+
+def _shade(axes: Any, xs: Any, values: Any, spreads: Any, color: Any = "tab:blue") -> None:
+    """A 95 % band (+/- 1.96 std, delta method) under each curve whose spread is known."""
+    z = normal_quantile(0.95)
+    for axis, x, value, spread in zip(axes, xs, values, spreads):
+        spread = np.asarray(spread, dtype=float)
+        if np.all(np.isfinite(spread)):
+            value = np.asarray(value, dtype=float)
+            axis.fill_between(x, value - z * spread, value + z * spread, color=color, alpha=0.2, linewidth=0,
+                              label="95 % band")
 
 
 def write_handling_report(path: str | Path, out_dir: str | Path) -> list[Path]:

@@ -24,9 +24,13 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+import scipy.linalg
+from scipy.stats import chi2
 
 from identification.errors import InputError
 from identification.metrics import percentage_explanation
+from identification.residuals import autocorrelation as residual_autocorrelation
+from identification.uncertainty import frequency_response as response_band
 
 __all__ = [
     "REPORT_SIZE",
@@ -42,6 +46,8 @@ __all__ = [
     "plot_bode",
     "autocorrelation",
     "plot_residual_autocorrelation",
+    "plot_residual_tests",
+    "plot_innovation_consistency",
 ]
 
 #: Default figure size in inches: legible on an A4 page at 100 % with 9-10 pt text.
@@ -86,7 +92,7 @@ def _style(ax: Axes) -> Axes:
 def _legend(ax: Axes, **options: Any) -> None:
     handles, labels = ax.get_legend_handles_labels()
     if 0 < len(handles) <= _MAX_LEGEND_ENTRIES:
-        ax.legend(fontsize=_LEGEND_SIZE, **options)
+        ax.legend(**{"fontsize": _LEGEND_SIZE, **options})
 
 
 def _matrix(name: str, value: Any, columns: int | None = None) -> np.ndarray:
@@ -479,8 +485,13 @@ def plot_eigenvalue_map(
     annotate: bool = True,
     title: str = "Eigenvalues of the identified models",
     ax: Axes | None = None,
+    confidence: bool = True,
 ) -> Figure:
     """Eigenvalues in the complex plane, each oscillatory mode annotated with frequency and damping.
+
+    Models that carry a parameter covariance get the 95 % confidence ellipse
+    of each eigenvalue (delta method; chi-square with 2 degrees of freedom,
+    a line along the real axis for a real pole) unless ``confidence`` is False.
 
     Parameters
     ----------
@@ -503,8 +514,11 @@ def plot_eigenvalue_map(
     markers = "xs^Dv<>p"
     for k, (label, model) in enumerate(models.items()):
         values = _eigenvalues(model)
-        ax.plot(values.real, values.imag, linestyle="none", marker=markers[k % len(markers)],
-                markersize=7, markeredgewidth=1.6, label=label)
+        points = ax.plot(values.real, values.imag, linestyle="none", marker=markers[k % len(markers)],
+                         markersize=7, markeredgewidth=1.6, label=label)
+        if confidence and getattr(model, "parameter_covariance", None) is not None:
+            for mode in model.uncertainty().modes:
+                _ellipse(ax, mode.eigenvalue, mode.eigenvalue_covariance, points[0].get_color())
         if annotate:
             for value in values[values.imag >= 0]:
                 magnitude = abs(value)
@@ -522,6 +536,22 @@ def plot_eigenvalue_map(
     ax.set_title(title)
     _legend(ax, loc="best")
     return fig
+
+
+ELLIPSE_SCALE = float(np.sqrt(chi2.ppf(0.95, 2)))  # 95 % region of a 2-D normal, in standard deviations
+
+
+def _ellipse(ax: Axes, value: complex, covariance: np.ndarray, color: Any) -> None:
+    """The 95 % ellipse of an eigenvalue (and its mirror image for a pair) from the covariance of (re, im)."""
+    if not np.all(np.isfinite(covariance)):
+        return
+    values, vectors = scipy.linalg.eigh(covariance)  # numpy's stalls under load with this BLAS
+    angle = np.linspace(0.0, 2 * np.pi, 60)
+    circle = np.vstack([np.cos(angle), np.sin(angle)])
+    outline = vectors @ (ELLIPSE_SCALE * np.sqrt(np.maximum(values, 0.0))[:, None] * circle)
+    ax.plot(value.real + outline[0], value.imag + outline[1], color=color, linewidth=0.9)
+    if value.imag != 0:
+        ax.plot(value.real + outline[0], -value.imag - outline[1], color=color, linewidth=0.9)
 
 
 def _state_space(model: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -583,8 +613,13 @@ def plot_bode(
     frequencies: Any = None,
     title: str | None = None,
     fig: Figure | None = None,
+    confidence: bool = True,
 ) -> Figure:
     """Magnitude and phase from one input to every output, for several models.
+
+    Models that carry a parameter covariance get their 95 % band shaded
+    (delta method, :func:`identification.uncertainty.frequency_response`)
+    unless ``confidence`` is False.
 
     Parameters
     ----------
@@ -618,6 +653,8 @@ def plot_bode(
     n_y = next(iter(curves.values())).shape[1]
     if any(g.shape[1] != n_y for g in curves.values()):
         raise InputError("all models must have the same number of outputs")
+    bands = {label: response_band(model, frequencies) for label, model in models.items()
+             if confidence and getattr(model, "parameter_covariance", None) is not None}
     if output_names is None:
         first = next(iter(models.values()), None)
         output_names = getattr(first, "output_names", None)
@@ -629,8 +666,16 @@ def plot_bode(
         ax_mag, ax_phase = _style(axes[0, i]), _style(axes[1, i])
         for label, g in curves.items():
             style = {"color": "k", "linestyle": "--"} if label == "reference" else {}
-            ax_mag.loglog(frequencies, np.abs(g[:, i]), linewidth=1.4, label=label, **style)
-            ax_phase.semilogx(frequencies, np.degrees(np.unwrap(np.angle(g[:, i]))), linewidth=1.4, **style)
+            lines = ax_mag.loglog(frequencies, np.abs(g[:, i]), linewidth=1.4, label=label, **style)
+            phase = np.degrees(np.unwrap(np.angle(g[:, i])))
+            ax_phase.semilogx(frequencies, phase, linewidth=1.4, **style)
+            if label in bands:
+                band = bands[label]
+                lower, upper = (edge[:, i, input_index] for edge in band.magnitude_band())
+                ax_mag.fill_between(frequencies, lower, upper, color=lines[0].get_color(), alpha=0.2, linewidth=0)
+                spread = band.normal_quantile() * band.phase_deg_std[:, i, input_index]
+                ax_phase.fill_between(frequencies, phase - spread, phase + spread, color=lines[0].get_color(),
+                                      alpha=0.2, linewidth=0)
         ax_mag.set_title(names[i], fontsize=10)
         ax_mag.set_ylabel(f"|G| ({units[i]}/{input_unit})")
         ax_phase.set_ylabel("phase (deg)")
@@ -642,29 +687,11 @@ def plot_bode(
 
 # --------------------------------------------------- residual whiteness
 def autocorrelation(residuals: Any, max_lag: int) -> np.ndarray:
-    """Normalised autocorrelation of each residual column at lags 0..max_lag.
+    """Normalised autocorrelation of each residual column at lags 0..max_lag, shape (max_lag + 1, n_y).
 
-    Parameters
-    ----------
-    residuals : array_like, shape (N, n_y)
-    max_lag : int
-        Largest lag in samples, below N.
-
-    Returns
-    -------
-    ndarray, shape (max_lag + 1, n_y)
-        ``r(k) / r(0)`` of the mean-removed residuals (1 at lag 0).
+    See :func:`identification.residuals.autocorrelation`.
     """
-    e = _matrix("residuals", residuals)
-    e = e - e.mean(axis=0)
-    n = e.shape[0]
-    if not (isinstance(max_lag, (int, np.integer)) and 0 < max_lag < n):
-        raise InputError(f"max_lag must be an integer in 1..{n - 1}; got {max_lag!r}")
-    energy = np.sum(e**2, axis=0)
-    if np.any(energy == 0):
-        raise InputError("a residual is constant: its autocorrelation is undefined")
-    lags = np.array([np.sum(e[: n - k] * e[k:], axis=0) for k in range(max_lag + 1)])
-    return lags / energy
+    return residual_autocorrelation(_matrix("residuals", residuals), max_lag)
 
 
 def plot_residual_autocorrelation(
@@ -713,4 +740,84 @@ def plot_residual_autocorrelation(
         _legend(ax, loc="upper right")
     axes[-1].set_xlabel("lag (s)" if dt else "lag (samples)")
     fig.suptitle(title)
+    return fig
+
+
+def plot_residual_tests(tests: Any, *, dt: float | None = None, title: str = "Residual tests",
+                        fig: Figure | None = None) -> Figure:
+    """The residual-test page: per output, the autocorrelation and the input cross-correlations with their band.
+
+    Parameters
+    ----------
+    tests : identification.residuals.ResidualTests
+    dt : float, optional
+        Sample interval (s): lags in seconds.
+    title : str
+    fig : Figure, optional
+
+    Returns
+    -------
+    Figure
+        One row per output: left the autocorrelation at lags 1..L with the
+        Ljung-Box p-value, right each input's cross-correlation at lags
+        -L..L with the largest magnitude; the band ``+/- z / sqrt(N)`` at the
+        tests' level shaded.
+    """
+    n_y = len(tests.output_names)
+    scale = dt if dt else 1.0
+    fig = _figure(fig, (REPORT_SIZE[0], max(REPORT_SIZE[1], 1.0 + 2.0 * n_y)))
+    axes = fig.subplots(n_y, 2, squeeze=False)
+    band = tests.bound
+    level = f"{100 * tests.level:g} %"
+    lags = np.arange(-tests.lags, tests.lags + 1) * scale
+    for i, name in enumerate(tests.output_names):
+        left, right = _style(axes[i, 0]), _style(axes[i, 1])
+        for ax in (left, right):
+            ax.axhspan(-band, band, color="tab:blue", alpha=0.15)
+        auto = tests.autocorrelation[1:, i]
+        left.vlines(np.arange(1, tests.lags + 1) * scale, 0.0, auto, color="k", linewidth=1.2)
+        verdict = "white" if tests.white[i] else "NOT white"
+        left.set_title(f"{name}: autocorrelation, Ljung-Box p = {tests.residual_whiteness_p[i]:.3g} ({verdict})",
+                       fontsize=9)
+        for j, input_name in enumerate(tests.input_names):
+            right.plot(lags, tests.cross_correlation[:, j, i], marker="o", markersize=2, linewidth=0.8, label=input_name)
+        independent = "independent" if tests.independent[i] else "NOT independent"
+        right.set_title(f"{name}: input cross-correlation, p = {tests.input_correlation_p[i]:.3g} ({independent})",
+                        fontsize=9)
+        if len(tests.input_names) > 1:
+            _legend(right, loc="upper right", fontsize=7)
+    for ax in axes[-1]:
+        ax.set_xlabel("lag (s)" if dt else "lag (samples)")
+    fig.suptitle(f"{title} ({level} bands, N = {tests.samples})")
+    return fig
+
+
+def plot_innovation_consistency(nis: Any, band: tuple[float, float], *, title: str = "Innovation consistency",
+                                fig: Figure | None = None) -> Figure:
+    """The IEKF's mean normalised innovation squared per pass against the band of a consistent filter.
+
+    Parameters
+    ----------
+    nis : array_like, shape (n_pass,)
+        Mean ``e' R^-1 e`` of each pass.
+    band : (float, float)
+        :func:`identification.residuals.nis_band` for the record.
+    title : str
+    fig : Figure, optional
+
+    Returns
+    -------
+    Figure
+        Above the band the filter's R is too small for the data, below it too large.
+    """
+    nis = np.asarray(nis, dtype=float).ravel()
+    fig = _figure(fig, REPORT_SIZE)
+    ax = _style(fig.subplots())
+    passes = np.arange(1, nis.size + 1)
+    ax.axhspan(band[0], band[1], color="tab:green", alpha=0.2, label="99 % band of a consistent filter")
+    ax.semilogy(passes, nis, marker="o", color="k", label="mean NIS")
+    ax.set_xlabel("pass")
+    ax.set_ylabel("mean e' R^-1 e (-)")
+    ax.set_title(title)
+    _legend(ax, loc="best")
     return fig

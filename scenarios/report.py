@@ -20,6 +20,7 @@ from matplotlib.figure import Figure
 
 from identification.errors import InputError
 from identification.metrics import percentage_explanation
+from identification.residuals import DEFAULT_LAGS, nis_band, residual_tests
 
 from . import plots
 
@@ -247,7 +248,12 @@ def archive_figures(archive: Any, *, window: tuple[float, float] | None = None, 
         ``orders`` (two or more runs with histories and models of different
         order), ``eigenvalues`` and ``bode`` (models with A, B, C, D); per
         record: ``fits_<record>`` (models that can simulate it) and
-        ``residuals_<record>_<run>``.
+        ``residuals_<record>_<run>`` and ``residual_tests_<record>_<run>``
+        (whiteness and input cross-correlation with 99 % bands);
+        ``innovation_consistency_<run>`` for IEKF runs that recorded their
+        NIS beside an ``identification`` record. Models
+        carrying a parameter covariance get confidence ellipses on the
+        eigenvalue map and bands on the Bode plot.
     """
     figures: dict[str, Figure] = {}
     runs = archive.runs
@@ -265,6 +271,11 @@ def archive_figures(archive: Any, *, window: tuple[float, float] | None = None, 
                 min_eig_p=history.get("min_eig_p"),
                 output_names=outputs if outputs is not None and len(outputs) == fit.shape[1] else None,
                 title=f"Explanation and convergence per pass: {name}")
+        nis = history.get("nis")
+        record = archive.records.get("identification")
+        if nis is not None and record is not None and len(nis) and np.all(np.isfinite(nis)):
+            figures[_stem("innovation_consistency", name)] = plots.plot_innovation_consistency(
+                nis, nis_band(record.n_samples, record.n_y), title=f"Innovation consistency per pass: {name}")
     studied = [run for run in runs.values()
                if {"fit_filter", "trace_p", "parameters"} <= set(run.history) and run.n_pass > 1
                and getattr(getattr(run.model, "structure", None), "n", None) is not None]
@@ -291,6 +302,11 @@ def archive_figures(archive: Any, *, window: tuple[float, float] | None = None, 
             figures[_stem("residuals", record_name, name)] = plots.plot_residual_autocorrelation(
                 shown.y - result[1], min(max_lag, shown.n_samples - 1), shown.output_names, dt=shown.dt,
                 title=f"Residual autocorrelation: {name} on {record_name}")
+            if shown.n_samples > 2 * DEFAULT_LAGS:
+                tests = residual_tests(shown.u, shown.y - result[1], input_names=shown.input_names,
+                                       output_names=shown.output_names)
+                figures[_stem("residual_tests", record_name, name)] = plots.plot_residual_tests(
+                    tests, dt=shown.dt, title=f"Residual tests: {name} on {record_name}")
         if shown is not None:
             figures[_stem("fits", record_name)] = plots.plot_time_fits(
                 shown.t, shown.y, predictions, shown.output_names, shown.output_units, window=window,

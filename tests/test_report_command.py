@@ -57,6 +57,7 @@ def test_archive_figures_and_table_cover_everything_present(tmp_path):
     assert set(figures) == {
         "parameters_n2", "parameters_n4", "convergence_n2", "convergence_n4", "orders", "eigenvalues",
         "bode", "residuals_identification_n2", "residuals_identification_n4", "fits_identification",
+        "residual_tests_identification_n2", "residual_tests_identification_n4",
     }
     assert [ax.get_title().split(" (")[0] for ax in figures["parameters_n4"].axes] == ["modal", "B", "C", "D"]
     assert len(figures["orders"].axes[0].get_lines()) == 2

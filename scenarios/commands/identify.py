@@ -22,7 +22,11 @@ fit R (eq. 17) per output of the continuous model simulated exactly, NRMSE
 fits on estimation and validation data (--validation, --validation-file),
 whether the run converged, any warnings (--strict: exit status 3), the
 matrices and the run time. --order takes a number, a range (2-8) or auto,
-chosen on validation data; --nonlinear adds the spline-nonlinear model.
+chosen on validation data; --nonlinear adds the spline-nonlinear model. It
+also says how sure the model is (scenarios.model_checks): each mode with
+standard deviations (text: value +/- 2 sigma; JSON: the list `modes`), the
+residual tests per output (`residual_whiteness_p`, `input_correlation_max`)
+and, for the IEKF, the innovation NIS per pass with its band.
 
 With --out ARCHIVE the record and every finished pass are written to an HDF5
 archive as the run goes (atomically, so a killed run leaves the archive of
@@ -45,18 +49,21 @@ from pathlib import Path
 
 import numpy as np
 
-from identification.archive import open_archive, read_records, write_archive, write_record, write_run
+from identification.archive import (open_archive, read_records, run_group, update_archive, write_archive,
+                                    write_record, write_run)
 from identification.archive_safety import archive_lock, check_output_target
 from identification.errors import InputError
 from identification.filter_models import DISCRETIZATIONS
 from identification.iekf import identify_iekf
 from identification.iekf_archive import Checkpointer, read_iekf_run
 from identification.iekf_pass import COVARIANCE_FORMS
-from identification.modal import C_PATTERNS, ModalStructure
+from identification.modal import C_PATTERNS, ModalModel, ModalStructure
 from identification.preparation import prepare_validation, read_record
+from identification.storage import write_value
 from scenarios import identify_workflow as workflow
 from scenarios.data_options import (archive_records, archived_preparation, archived_records, records_summary,
                                     register_data_options, save_model, settings_from_args)
+from scenarios.model_checks import uncertainty_lines, uncertainty_summary
 from scenarios.progress import Progress
 
 NAME = "identify"
@@ -210,6 +217,10 @@ def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None)
     evaluation = workflow.evaluate(model, plan, args)
     summary.update(workflow.scores_summary(evaluation, summary["fit_percent"]))
     summary.update(records_summary(model, plan.records, plan.preparation))
+    tests = None
+    if isinstance(model, ModalModel):  # how sure the model is; on the (first) estimation record
+        checks, tests = uncertainty_summary(model, data, [record.nis for record in result.history] if result else None)
+        summary.update(checks)
     summary.setdefault("orders_tried", [{"order": summary["order"], "fit_percent": summary["fit_percent"],
                                          "estimation_fit_percent": evaluation.estimation.fit,
                                          "validation_fit_percent": evaluation.validation_fit,
@@ -230,8 +241,6 @@ def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None)
     if result is not None:
         summary["start"] = {k: v for k, v in result.meta.items() if k != "start_parameters"}
     if args.nonlinear:
-        from identification.archive import update_archive
-
         outcome = workflow.identify_nonlinear(model, plan, args)
         summary["nonlinear"] = outcome.summary
         warnings += workflow.run_warnings(
@@ -244,11 +253,17 @@ def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None)
             with update_archive(archive_path) as archive:
                 write_run(archive, "nonlinear", model=outcome.result.model)
     if archive_path is not None:
+        if tests is not None:
+            with update_archive(archive_path) as archive:
+                write_value(run_group(archive, RUN_NAME if result is not None else args.method), "residual_tests", tests)
         summary["archive"] = str(archive_path)
     if args.save_model:
         summary["model_file"] = str(save_model(model, args.save_model, plan.preparation))
     workflow.emit(summary, warnings, args)
-    return summary, workflow.text_summary(summary, data, plan)
+    text = workflow.text_summary(summary, data, plan)
+    if "modes" in summary:
+        text += "\n" + "\n".join(uncertainty_lines(summary, data.output_names))
+    return summary, text
 
 
 def _run_order_search(args, plan, options) -> tuple[dict, str]:

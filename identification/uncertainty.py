@@ -1,0 +1,529 @@
+"""How sure is a modal model? Parameter covariances and what follows from them.
+
+Every estimator leaves a covariance of the modal parameter vector
+(:attr:`ModalModel.parameter_covariance`, laid out as
+:class:`~identification.modal.ModalStructure` describes ``theta``):
+
+IEKF
+    The parameter block of the filter's final ``P``, scaled by the measured
+    innovations and mapped to original units, :func:`iekf_parameter_covariance`.
+output error
+    The Gauss-Newton covariance ``(J' W J)^-1`` of the simulation errors'
+    Jacobian with each output weighted by its residual variance,
+    :func:`gauss_newton_covariance`.
+ARX
+    The least-squares covariance ``sigma^2 (Phi'Phi)^-1`` of each output's
+    ARX coefficients (seed appendix eq. A.58), carried to the modal
+    parameters through the ARX-to-modal conversion by central differences,
+    :func:`propagate_by_differences`.
+N4SID
+    A residual (moving-block) bootstrap, :func:`bootstrap_covariance`: the
+    subspace estimate is not the minimiser of a criterion whose curvature
+    could be used, so its spread is measured by re-identifying from the
+    model's simulated output plus resampled blocks of its own residuals.
+
+spline IEKF
+    The parameter block of its final ``P`` as it stands: that filter's R is
+    the measured residual covariance already (:mod:`identification.spline_iekf`);
+    :class:`~identification.spline_modal.SplineModalModel` carries it and
+    gives bands on its splines and on a mode's frequency and damping.
+
+What follows from a covariance is propagated by the delta method with exact
+CasADi derivatives (:func:`model_uncertainty`, :func:`frequency_response`):
+for a function ``g(theta)``, ``cov g = J cov(theta) J'`` with ``J = dg/dtheta``.
+The eigenvalues of a modal model are its sigma/omega parameters; natural
+frequency ``|lambda| / 2 pi`` and damping ``-sigma / |lambda|`` follow from
+them; the steady-state gain is ``D - C A^-1 B``; the frequency response
+``C (j w I - A)^-1 B + D`` in magnitude and phase. Intervals are
+``value +/- z sigma`` with ``z`` the normal quantile of the level.
+
+Calibration, measured (``benchmarks/uncertainty_calibration.py``): on a
+known two-mode system with 10 % and 30 % output noise the 95 % intervals of
+frequency and damping cover the truth in 90-98 % of 60 realisations for the
+IEKF at p = 0.001 and for output error. At p = 1 the IEKF's ``P`` is the
+covariance of a random walk of the parameters that the data do not have,
+and the intervals come out 1.8-2.4 times too wide. Every interval here
+assumes white residuals: where :mod:`identification.residuals` rejects
+whiteness, model error dominates and the intervals are formal.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import casadi as ca
+import numpy as np
+import scipy.linalg
+from scipy.stats import norm
+
+from .errors import InputError
+
+__all__ = [
+    "ModeEstimate",
+    "ModelUncertainty",
+    "FrequencyResponseBand",
+    "checked_covariance",
+    "normal_quantile",
+    "model_uncertainty",
+    "frequency_response",
+    "iekf_parameter_covariance",
+    "gauss_newton_covariance",
+    "propagate_by_differences",
+    "bootstrap_covariance",
+    "sample_parameters",
+]
+
+
+def checked_covariance(covariance: Any, size: int) -> np.ndarray:
+    """A finite, symmetric (size, size) covariance, read-only; InputError otherwise."""
+    array = np.array(covariance, dtype=float)
+    if array.shape != (size, size):
+        raise InputError(f"the parameter covariance has shape {array.shape}; the model has {size} parameters")
+    if not np.all(np.isfinite(array)):
+        raise InputError("the parameter covariance holds a non-finite value")
+    scale = max(float(np.abs(array).max()), 1e-300)
+    if not np.allclose(array, array.T, rtol=0, atol=1e-8 * scale):
+        raise InputError("the parameter covariance is not symmetric")
+    array = 0.5 * (array + array.T)
+    array.setflags(write=False)
+    return array
+
+
+def normal_quantile(level: float) -> float:
+    """``z`` of a two-sided interval ``+/- z sigma`` holding ``level`` of a normal distribution."""
+    if not 0 < level < 1:
+        raise InputError(f"a confidence level lies between 0 and 1; got {level!r}")
+    return float(norm.ppf(0.5 + level / 2))
+
+
+def _spread(jacobian: np.ndarray, covariance: np.ndarray | None) -> np.ndarray:
+    """Standard deviations of ``g`` by the delta method (NaN without a covariance)."""
+    if covariance is None:
+        return np.full(jacobian.shape[0], np.nan)
+    variance = np.einsum("ij,jk,ik->i", jacobian, covariance, jacobian)
+    return np.sqrt(np.maximum(variance, 0.0))
+
+
+# ------------------------------------------------------------- symbolic maps
+@functools.lru_cache(maxsize=64)
+def _mode_function(structure: Any) -> ca.Function:
+    """theta -> [re, im, frequency (Hz), damping] of every mode, and their exact Jacobian."""
+    theta = ca.SX.sym("theta", structure.n_parameters)
+    re, im = [], []
+    for pair in range(structure.n_complex_pairs):
+        re.append(theta[2 * pair])
+        im.append(ca.fabs(theta[2 * pair + 1]))
+    for pole in range(structure.n_real):
+        re.append(theta[2 * structure.n_complex_pairs + pole])
+        im.append(ca.SX(0))
+    re, im = ca.vertcat(*re), ca.vertcat(*im)
+    natural = ca.sqrt(re**2 + im**2)
+    values = ca.vertcat(re, im, natural / (2 * np.pi), -re / natural)
+    return ca.Function("vehid_modes", [theta], [values, ca.jacobian(values, theta)], ["theta"], ["g", "J"])
+
+
+@functools.lru_cache(maxsize=64)
+def _gain_function(structure: Any) -> ca.Function:
+    """theta -> the steady-state gain ``D - C A^-1 B`` (column-major) and its exact Jacobian."""
+    theta = ca.SX.sym("theta", structure.n_parameters)
+    A, B, C, D = structure.matrices(theta, backend=ca.SX)
+    gain = ca.vec(D - ca.mtimes(C, ca.solve(A, B)))
+    return ca.Function("vehid_gain", [theta], [gain, ca.jacobian(gain, theta)], ["theta"], ["g", "J"])
+
+
+@functools.lru_cache(maxsize=64)
+def _response_function(structure: Any) -> ca.Function:
+    """(theta, w) -> magnitude and phase (rad) of ``G(j w)`` (column-major) and their exact Jacobians.
+
+    ``(j w I - A) X = B`` is solved in real arithmetic as the 2n system
+    ``[[-A, -w I], [w I, -A]] [Re X; Im X] = [B; 0]``.
+    """
+    n = structure.n
+    theta = ca.SX.sym("theta", structure.n_parameters)
+    w = ca.SX.sym("w")
+    A, B, C, D = structure.matrices(theta, backend=ca.SX)
+    eye = ca.SX.eye(n)
+    system = ca.vertcat(ca.horzcat(-A, -w * eye), ca.horzcat(w * eye, -A))
+    solution = ca.solve(system, ca.vertcat(B, ca.SX.zeros(n, structure.n_u)))
+    real = ca.vec(ca.mtimes(C, solution[:n, :]) + D)
+    imag = ca.vec(ca.mtimes(C, solution[n:, :]))
+    magnitude = ca.sqrt(real**2 + imag**2)
+    phase = ca.atan2(imag, real)
+    return ca.Function(
+        "vehid_response", [theta, w],
+        [magnitude, phase, ca.jacobian(magnitude, theta), ca.jacobian(phase, theta)],
+        ["theta", "w"], ["magnitude", "phase", "J_magnitude", "J_phase"],
+    )
+
+
+# ------------------------------------------------------------------ results
+@dataclass(frozen=True, eq=False)
+class ModeEstimate:
+    """One mode's eigenvalue, natural frequency and damping with their standard deviations.
+
+    ``eigenvalue`` is ``sigma + j|omega|`` for a pair (the upper one), real
+    for a real pole; ``eigenvalue_covariance`` (2, 2) is that of its real and
+    imaginary parts (for the pole map's ellipses).
+    """
+
+    eigenvalue: complex
+    eigenvalue_std: tuple[float, float]
+    eigenvalue_covariance: np.ndarray
+    frequency_hz: float
+    frequency_hz_std: float
+    damping: float
+    damping_std: float
+    level: float
+
+    def interval(self, name: str) -> tuple[float, float]:
+        """``value -/+ z std`` of ``frequency_hz`` or ``damping`` at :attr:`level`."""
+        if name not in ("frequency_hz", "damping"):
+            raise InputError(f"intervals are given for frequency_hz and damping; got {name!r}")
+        value, std = getattr(self, name), getattr(self, f"{name}_std")
+        z = normal_quantile(self.level)
+        return value - z * std, value + z * std
+
+    def as_dict(self) -> dict[str, Any]:
+        """The JSON form: ``eigenvalue`` and ``eigenvalue_std`` as [re, im], frequency and damping with their std."""
+        return {
+            "eigenvalue": [float(self.eigenvalue.real), float(self.eigenvalue.imag)],
+            "eigenvalue_std": [float(v) for v in self.eigenvalue_std],
+            "frequency_hz": float(self.frequency_hz),
+            "frequency_hz_std": float(self.frequency_hz_std),
+            "damping": float(self.damping),
+            "damping_std": float(self.damping_std),
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class ModelUncertainty:
+    """Modes and steady-state gains of a model with standard deviations (delta method).
+
+    Attributes
+    ----------
+    modes : tuple of ModeEstimate
+        Pairs first, then real poles, as the structure orders its modes.
+    gain, gain_std : ndarray, shape (n_y, n_u)
+        Steady-state gain ``D - C A^-1 B`` and its standard deviation.
+    level : float
+        Confidence level of the intervals.
+    """
+
+    modes: tuple[ModeEstimate, ...]
+    gain: np.ndarray
+    gain_std: np.ndarray
+    level: float
+
+    def gain_interval(self) -> tuple[np.ndarray, np.ndarray]:
+        """Lower and upper bounds of the steady-state gains at :attr:`level`."""
+        z = normal_quantile(self.level)
+        return self.gain - z * self.gain_std, self.gain + z * self.gain_std
+
+
+@dataclass(frozen=True, eq=False)
+class FrequencyResponseBand:
+    """A frequency response with delta-method bands.
+
+    Arrays are (n_frequencies, n_y, n_u); magnitude is linear (output units
+    per input unit), phase in degrees, unwrapped along frequency.
+    """
+
+    frequencies_hz: np.ndarray
+    magnitude: np.ndarray
+    magnitude_std: np.ndarray
+    phase_deg: np.ndarray
+    phase_deg_std: np.ndarray
+    level: float
+
+    def normal_quantile(self) -> float:
+        """``z`` of the bands: ``value +/- z std`` holds :attr:`level`."""
+        return normal_quantile(self.level)
+
+    def magnitude_band(self) -> tuple[np.ndarray, np.ndarray]:
+        """Lower and upper magnitude at :attr:`level` (the lower one floored just above zero for log axes)."""
+        z = normal_quantile(self.level)
+        lower = np.maximum(self.magnitude - z * self.magnitude_std, 1e-3 * self.magnitude)
+        return lower, self.magnitude + z * self.magnitude_std
+
+    def phase_band(self) -> tuple[np.ndarray, np.ndarray]:
+        """Lower and upper phase (degrees) at :attr:`level`."""
+        z = normal_quantile(self.level)
+        return self.phase_deg - z * self.phase_deg_std, self.phase_deg + z * self.phase_deg_std
+
+
+def model_uncertainty(model: Any, *, level: float = 0.95) -> ModelUncertainty:
+    """Modes and steady-state gains of ``model`` with their standard deviations by the delta method.
+
+    Parameters
+    ----------
+    model : ModalModel
+        Its :attr:`~identification.modal.ModalModel.parameter_covariance` is
+        propagated; without one every standard deviation is NaN.
+    level : float
+        Confidence level of the intervals (default 0.95).
+
+    Returns
+    -------
+    ModelUncertainty
+    """
+    normal_quantile(level)
+    structure = model.structure
+    theta = model.parameters
+    covariance = model.parameter_covariance
+    values, jacobian = (np.asarray(v) for v in _mode_function(structure)(theta))
+    values = values.ravel()
+    std = _spread(jacobian, covariance)
+    count = structure.n_complex_pairs + structure.n_real
+    modes = []
+    for mode in range(count):
+        rows = [mode, count + mode]
+        if covariance is None:
+            block = np.full((2, 2), np.nan)
+        else:
+            block = jacobian[rows] @ covariance @ jacobian[rows].T
+        modes.append(ModeEstimate(
+            eigenvalue=complex(values[mode], values[count + mode]),
+            eigenvalue_std=(float(std[mode]), float(std[count + mode])),
+            eigenvalue_covariance=block,
+            frequency_hz=float(values[2 * count + mode]),
+            frequency_hz_std=float(std[2 * count + mode]),
+            damping=float(values[3 * count + mode]),
+            damping_std=float(std[3 * count + mode]),
+            level=level,
+        ))
+    shape = (structure.n_y, structure.n_u)
+    gain, gain_jacobian = (np.asarray(v) for v in _gain_function(structure)(theta))
+    gain_std = _spread(gain_jacobian, covariance)  # a pole at the origin leaves both non-finite
+    return ModelUncertainty(
+        modes=tuple(modes),
+        gain=np.asarray(gain).ravel().reshape(shape, order="F"),
+        gain_std=gain_std.reshape(shape, order="F"),
+        level=level,
+    )
+
+
+def frequency_response(model: Any, frequencies_hz: Any, *, level: float = 0.95) -> FrequencyResponseBand:
+    """Magnitude and phase of ``model`` at ``frequencies_hz`` with delta-method standard deviations.
+
+    Parameters
+    ----------
+    model : ModalModel
+    frequencies_hz : array_like, shape (n_f,)
+        Frequencies in Hz (non-negative).
+    level : float
+        Confidence level of the bands.
+
+    Returns
+    -------
+    FrequencyResponseBand
+    """
+    normal_quantile(level)
+    frequencies = np.asarray(frequencies_hz, dtype=float).ravel()
+    if frequencies.size == 0 or not np.all(np.isfinite(frequencies)) or np.any(frequencies < 0):
+        raise InputError("frequencies must be finite, non-negative and at least one")
+    structure = model.structure
+    function = _response_function(structure).map(frequencies.size)
+    magnitude, phase, j_magnitude, j_phase = (np.asarray(v) for v in function(model.parameters, 2 * np.pi * frequencies))
+    n_g, n_theta = structure.n_y * structure.n_u, structure.n_parameters
+    shape = (frequencies.size, structure.n_y, structure.n_u)
+    covariance = model.parameter_covariance
+    magnitude_std = np.empty((frequencies.size, n_g))
+    phase_std = np.empty((frequencies.size, n_g))
+    for k in range(frequencies.size):
+        columns = slice(k * n_theta, (k + 1) * n_theta)
+        magnitude_std[k] = _spread(j_magnitude[:, columns], covariance)
+        phase_std[k] = _spread(j_phase[:, columns], covariance)
+    phase = np.unwrap(phase.T, axis=0)
+
+    def arranged(values: np.ndarray) -> np.ndarray:
+        return values.reshape(frequencies.size, structure.n_u, structure.n_y).transpose(0, 2, 1).reshape(shape)
+
+    return FrequencyResponseBand(
+        frequencies_hz=frequencies,
+        magnitude=arranged(magnitude.T),
+        magnitude_std=arranged(magnitude_std),
+        phase_deg=arranged(np.degrees(phase)),
+        phase_deg_std=arranged(np.degrees(phase_std)),
+        level=level,
+    )
+
+
+def sample_parameters(model: Any, count: int, rng: np.random.Generator) -> np.ndarray:
+    """``count`` parameter vectors drawn from N(parameters, parameter_covariance), shape (count, n_theta)."""
+    if model.parameter_covariance is None:
+        raise InputError("the model carries no parameter covariance to sample")
+    values, vectors = scipy.linalg.eigh(model.parameter_covariance)
+    root = vectors * np.sqrt(np.maximum(values, 0.0))
+    return model.parameters + rng.standard_normal((count, values.size)) @ root.T
+
+
+# ------------------------------------------------------ covariances of estimators
+def iekf_parameter_covariance(
+    structure: Any,
+    P_parameters: np.ndarray,
+    input_scale: np.ndarray,
+    output_scale: np.ndarray,
+    noise_ratio: float,
+    *,
+    time_unit: float = 1.0,
+) -> np.ndarray:
+    """The IEKF's parameter covariance in original units from its final ``P``.
+
+    Parameters
+    ----------
+    structure : ModalStructure
+    P_parameters : ndarray, shape (n_theta, n_theta)
+        The parameter block of the filter's ``P`` after the last pass, in the
+        normalised units the filter ran in.
+    input_scale, output_scale : ndarray
+        The normalisation (``u = input_scale u_n``, ``y = output_scale y_n``).
+    noise_ratio : float
+        Measured innovation variance over the variance the filter assumed:
+        the mean normalised innovation squared ``e' R^-1 e`` of the last
+        pass divided by the number of outputs.
+    time_unit : float
+        The filter's unit of time in seconds (the sample interval when it
+        counts time in samples): sigma, omega and B are rescaled to 1/s.
+
+    Notes
+    -----
+    Why the scaling: the filter's ``P`` is a covariance only under the noise
+    model it was given, ``R`` (by default ``I`` in normalised units, the
+    paper's choice, which is a tuning choice and not a measurement). The
+    gain, and so the estimate, is computed with that ``R``; the estimate's
+    actual error is driven by the actual noise, whose variance is
+    ``noise_ratio`` times ``R``. The noise-driven part of the error is
+    linear in the noise, so its covariance scales with the noise variance:
+    ``P`` is multiplied by the measured ratio. The innovations also carry
+    ``H P H'``, which is small against ``R`` once the parameters have
+    converged on a long record; the ratio therefore errs on the wide side.
+
+    The map to original units is the Jacobian of
+    :func:`identification.iekf.rescale_time` and
+    :func:`identification.iekf.denormalize`, a diagonal matrix since both
+    scale each parameter alone: ``cov = J P J'``.
+    """
+    from .iekf import denormalize, rescale_time
+
+    if not (np.isfinite(noise_ratio) and noise_ratio > 0):
+        raise InputError(f"the measured noise ratio must be positive; got {noise_ratio!r}")
+    n_theta = structure.n_parameters
+    jacobian = np.column_stack([
+        denormalize(structure, rescale_time(structure, unit, 1.0 / time_unit), input_scale, output_scale)
+        for unit in np.eye(n_theta)
+    ])
+    P_parameters = np.asarray(P_parameters, dtype=float)
+    covariance = noise_ratio * jacobian @ P_parameters @ jacobian.T
+    return 0.5 * (covariance + covariance.T)
+
+
+def gauss_newton_covariance(jacobian: np.ndarray, residuals: np.ndarray) -> np.ndarray:
+    """The covariance ``(J' W J)^-1`` of a least-squares fit of several outputs' errors.
+
+    Parameters
+    ----------
+    jacobian : ndarray, shape (N n_y, n_theta)
+        Derivatives of the (weighted) errors, rows time-major (sample k,
+        output i at row ``k n_y + i``), as the output-error fit stacks them.
+    residuals : ndarray, shape (N, n_y)
+        The (weighted) errors at the solution.
+
+    Notes
+    -----
+    Each output's error variance ``s_i^2`` is measured from its residuals
+    (``N n_y - n_theta`` degrees of freedom shared in proportion), and ``W``
+    weights its rows by ``1 / s_i^2``: the covariance of the weighted
+    least-squares estimate with white errors, which is the output-error
+    model's noise assumption (Ljung 1999, eq. 9.17).
+    """
+    residuals = np.asarray(residuals, dtype=float)
+    samples, n_y = residuals.shape
+    n_theta = jacobian.shape[1]
+    dof = max(samples * n_y - n_theta, 1) / (samples * n_y)
+    # an exact fit (noise-free data) has no spread: the floor makes its covariance vanish, not divide by zero
+    variance = np.maximum(np.mean(residuals**2, axis=0) / dof, 1e-300)
+    weighted = np.asarray(jacobian, dtype=float).reshape(samples, n_y, n_theta) / np.sqrt(variance)[None, :, None]
+    _, upper = np.linalg.qr(weighted.reshape(samples * n_y, n_theta))
+    inverse = scipy.linalg.pinv(upper)
+    covariance = inverse @ inverse.T
+    return 0.5 * (covariance + covariance.T)
+
+
+def propagate_by_differences(
+    function: Callable[[np.ndarray], np.ndarray],
+    point: np.ndarray,
+    covariance: np.ndarray,
+    *,
+    relative_step: float = 1e-6,
+) -> np.ndarray:
+    """``J cov J'`` for a function without symbolic form, ``J`` by central differences.
+
+    Used for conversions that pass through eigen-decompositions and
+    similarity transforms (ARX polynomials to a modal model): the step in
+    each direction is ``relative_step`` times that direction's standard
+    deviation, which keeps it inside the region the delta method assumes
+    linear and far from rounding.
+    """
+    point = np.asarray(point, dtype=float)
+    std = np.sqrt(np.maximum(np.diag(covariance), 0.0))
+    columns = []
+    for index in range(point.size):
+        step = relative_step * max(std[index], 1e-12 * max(abs(point[index]), 1.0))
+        forward, backward = point.copy(), point.copy()
+        forward[index] += step
+        backward[index] -= step
+        columns.append((function(forward) - function(backward)) / (2 * step))
+    jacobian = np.column_stack(columns)
+    result = jacobian @ covariance @ jacobian.T
+    return 0.5 * (result + result.T)
+
+
+def bootstrap_covariance(
+    estimate: Callable[[np.ndarray], np.ndarray | None],
+    fitted: np.ndarray,
+    residuals: np.ndarray,
+    *,
+    samples: int,
+    rng: np.random.Generator,
+    block: int | None = None,
+) -> tuple[np.ndarray, int]:
+    """Covariance of an estimator by a moving-block residual bootstrap.
+
+    Parameters
+    ----------
+    estimate : callable
+        ``estimate(y) -> theta`` re-identifies from outputs ``y`` (N, n_y),
+        or returns ``None`` when a replicate cannot be put in the reference
+        structure (it is then left out).
+    fitted, residuals : ndarray, shape (N, n_y)
+        The model's simulated output and the measured-minus-simulated residuals.
+    samples : int
+        Number of replicates.
+    rng : numpy.random.Generator
+    block : int, optional
+        Block length in samples (default ``round(N ** (1/3))``): blocks keep
+        the residuals' short-range correlation, as the bootstrap of
+        dependent data requires (Kuensch 1989).
+
+    Returns
+    -------
+    covariance : ndarray (n_theta, n_theta)
+    used : int
+        Replicates that entered it.
+    """
+    length = residuals.shape[0]
+    block = max(1, int(round(length ** (1 / 3)))) if block is None else int(block)
+    centred = residuals - residuals.mean(axis=0)
+    thetas = []
+    blocks_needed = -(-length // block)
+    for _ in range(samples):
+        starts = rng.integers(0, length - block + 1, size=blocks_needed)
+        index = (starts[:, None] + np.arange(block)[None, :]).ravel()[:length]
+        theta = estimate(fitted + centred[index])
+        if theta is not None:
+            thetas.append(theta)
+    if len(thetas) < 2:
+        raise InputError("fewer than two bootstrap replicates could be identified: no covariance follows")
+    return np.cov(np.array(thetas), rowvar=False), len(thetas)

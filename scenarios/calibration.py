@@ -1,0 +1,122 @@
+"""Calibration of the workbench's confidence intervals on a known linear system with measurement noise.
+
+The system is two lightly-coupled modes seen by one output: pairs at
+-1.5 +/- 6j (0.98 Hz, damping 0.24) and -4 +/- 20j (3.25 Hz, damping 0.20),
+sampled at 100 Hz. The input is N(0, 1) points at 10 Hz, linear between
+(a 5 Hz band, as eq. 16 of Best & Bogdanski 2017 designs it at its own
+rates). Each realisation draws a new input and new white output noise of a
+given ratio of the output's RMS; the IEKF and the output-error method
+identify a model of the true structure, and each mode's 95 % interval of
+frequency and damping is checked against the truth.
+
+A calibrated method covers the truth in about 95 % of realisations;
+with R realisations the count is binomial, so that 90-99 % is the
+acceptance band of the workbench's uncertainty issue.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from identification.comparators import identify_with
+from identification.data import IOData
+from identification.iekf import IEKFOptions, identify_iekf
+from identification.modal import ModalModel, ModalStructure
+
+__all__ = ["DT", "true_model", "make_record", "Realisation", "identify_realisation", "coverage"]
+
+DT = 0.01  # [s] 100 Hz
+DURATION = 60.0  # [s]
+#: The IEKF's settings in the calibration (normalised signals, a small p for noisy data as in the paper's Table 4).
+IEKF_SETTINGS = {"p": 1e-3, "passes": 40, "normalize": True}
+
+
+def true_model() -> ModalModel:
+    """The calibration system: pairs -1.5 +/- 6j and -4 +/- 20j, one input, one output, C = [1 1 1 1]."""
+    structure = ModalStructure.default(4, 1, 1)
+    A = np.array([[-1.5, 6.0, 0, 0], [-6.0, -1.5, 0, 0], [0, 0, -4.0, 20.0], [0, 0, -20.0, -4.0]])
+    B = np.array([[2.0], [1.0], [-6.0], [8.0]])
+    C = np.ones((1, 4))
+    D = np.zeros((1, 1))
+    return ModalModel(structure, A, B, C, D, input_names=("u",), output_names=("y",),
+                      meta={"source": "calibration system"})
+
+
+def make_record(seed: int, noise_ratio: float, *, duration: float = DURATION) -> tuple[IOData, np.ndarray]:
+    """A noisy record of :func:`true_model` and its clean output; noise std = ``noise_ratio`` x output RMS."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(int(round(duration / DT))) * DT
+    coarse_t = np.arange(0.0, duration + 0.1, 0.1)
+    u = np.interp(t, coarse_t, rng.standard_normal(coarse_t.size))[:, None]
+    clean = true_model().simulate(u, DT)
+    rms = np.sqrt(np.mean(clean**2, axis=0))
+    y = clean + noise_ratio * rms * rng.standard_normal(clean.shape)
+    return IOData(t=t, u=u, y=y, input_names=("u",), output_names=("y",)), clean
+
+
+@dataclass(frozen=True)
+class Realisation:
+    """One identification: per mode frequency (Hz), damping and their standard deviations, and the time."""
+
+    frequency_hz: np.ndarray
+    frequency_hz_std: np.ndarray
+    damping: np.ndarray
+    damping_std: np.ndarray
+    seconds: float
+
+
+def _realisation(model: ModalModel, seconds: float) -> Realisation:
+    modes = model.uncertainty().modes
+    return Realisation(
+        np.array([m.frequency_hz for m in modes]), np.array([m.frequency_hz_std for m in modes]),
+        np.array([m.damping for m in modes]), np.array([m.damping_std for m in modes]), seconds,
+    )
+
+
+def identify_realisation(data: IOData, *, iekf_settings: dict[str, Any] | None = None) -> dict[str, Realisation]:
+    """Identify ``data`` with the true structure by the IEKF and by output error; each model's modes.
+
+    Output error starts from the IEKF's model: its default ARX start is
+    biased by output noise (at 30 % noise it lands on the wrong modes) and
+    it is a local method; what is measured here is its intervals, not its
+    basin of attraction.
+    """
+    started = time.perf_counter()
+    settings = {**IEKF_SETTINGS, **(iekf_settings or {})}
+    iekf = identify_iekf(data, true_model().structure, options=IEKFOptions(**settings)).model
+    middle = time.perf_counter()
+    output_error = identify_with(data, method="output-error", order=true_model().structure.n,
+                                 start=iekf.with_parameter_covariance(None)).model
+    stop = time.perf_counter()
+    return {"iekf": _realisation(iekf, middle - started), "output-error": _realisation(output_error, stop - middle)}
+
+
+def coverage(realisations: list[Realisation], *, z: float = 1.959963984540054) -> dict[str, Any]:
+    """Share of realisations whose interval ``value +/- z std`` holds the true value, per mode.
+
+    Also the ratio of the empirical standard deviation over realisations to
+    the mean reported one (1 for calibrated intervals), and the bias over
+    the empirical standard deviation.
+    """
+    truth = true_model()
+    natural, damping = truth.frequencies_damping()
+    natural, damping = natural[:2], damping[:2]
+    true = {"frequency_hz": natural / (2 * np.pi), "damping": damping}
+    result: dict[str, Any] = {}
+    for name in ("frequency_hz", "damping"):
+        values = np.array([getattr(r, name) for r in realisations])
+        stds = np.array([getattr(r, f"{name}_std") for r in realisations])
+        inside = np.abs(values - true[name]) <= z * stds
+        spread = values.std(axis=0, ddof=1)
+        result[name] = {
+            "coverage": inside.mean(axis=0).tolist(),
+            "spread_over_reported": (spread / stds.mean(axis=0)).tolist(),
+            "bias_over_spread": ((values.mean(axis=0) - true[name]) / spread).tolist(),
+        }
+    result["realisations"] = len(realisations)
+    result["median_seconds"] = float(np.median([r.seconds for r in realisations]))
+    return result

@@ -1,0 +1,94 @@
+"""What `vehid identify` adds to a model's summary about how sure it is: modes with standard deviations and residual tests.
+
+Kept apart from the command so that the command only calls
+:func:`uncertainty_summary` and :func:`uncertainty_lines`. Public JSON keys
+(a contract once released):
+
+``modes``
+    One object per mode (pairs first, then real poles): ``eigenvalue`` and
+    ``eigenvalue_std`` as [re, im], ``frequency_hz``, ``frequency_hz_std``,
+    ``damping``, ``damping_std`` (NaN standard deviations where the
+    estimator gave no covariance).
+``residual_whiteness_p``, ``input_correlation_max``
+    Per output, of the continuous model's simulation residuals on the
+    record (:mod:`identification.residuals`); ``residual_tests`` holds the
+    full test results per output (also ``ljung_box``,
+    ``input_correlation_p``, ``white``, ``independent``) with the 99 % bound.
+``innovation_nis``, ``innovation_nis_band``
+    IEKF only: the mean normalised innovation squared ``e' R^-1 e`` of every
+    pass and the 99 % band of a consistent filter. The filter's innovation
+    covariance is ``H P H' + R``; the compiled pass returns innovations
+    only, so R stands for it, which overstates the NIS a little while P is
+    large and not at all once it has settled.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+import numpy as np
+
+from identification.data import IOData
+from identification.modal import ModalModel
+from identification.residuals import ResidualTests, nis_band, residual_tests
+
+__all__ = ["model_residual_tests", "uncertainty_summary", "uncertainty_lines"]
+
+
+def model_residual_tests(model: Any, data: IOData) -> ResidualTests:
+    """The residual tests of ``model`` simulated exactly (first-order hold) from rest over ``data``."""
+    residuals = data.y - model.simulate(data.u, data.dt)
+    return residual_tests(data.u, residuals, input_names=data.input_names, output_names=data.output_names,
+                          output_scale=np.sqrt(np.mean(data.y**2, axis=0)))
+
+
+def uncertainty_summary(model: ModalModel, data: IOData, nis: Sequence[float] | None = None) -> tuple[dict[str, Any], ResidualTests]:
+    """The summary entries of the module docstring, and the residual tests (for an archive)."""
+    tests = model_residual_tests(model, data)
+    summary: dict[str, Any] = {
+        "modes": [mode.as_dict() for mode in model.uncertainty().modes],
+        "residual_whiteness_p": tests.residual_whiteness_p,
+        "input_correlation_max": tests.input_correlation_max,
+        "residual_tests": tests.as_dict(),
+    }
+    if nis is not None:
+        summary["innovation_nis"] = np.asarray(nis, dtype=float)
+        summary["innovation_nis_band"] = list(nis_band(data.n_samples, data.n_y))
+    return summary, tests
+
+
+def _plus_minus(value: float, std: float, digits: str) -> str:
+    if not np.isfinite(std):
+        return f"{value:{digits}}"
+    return f"{value:{digits}} \u00b1 {2 * std:{digits}}"
+
+
+def uncertainty_lines(summary: dict[str, Any], output_names: Sequence[str]) -> list[str]:
+    """Text lines: each mode as value +/- 2 sigma, and the residual tests per output."""
+    lines = ["modes (value \u00b1 2 sigma):"]
+    for index, mode in enumerate(summary["modes"], start=1):
+        re, im = mode["eigenvalue"]
+        re_std, im_std = mode["eigenvalue_std"]
+        eigen = f"({_plus_minus(re, re_std, '.4g')}) \u00b1 j({_plus_minus(im, im_std, '.4g')})" if im else \
+            _plus_minus(re, re_std, '.4g')
+        lines.append(
+            f"  mode {index}: {eigen}; {_plus_minus(mode['frequency_hz'], mode['frequency_hz_std'], '.4g')} Hz, "
+            f"damping {_plus_minus(mode['damping'], mode['damping_std'], '.3f')}"
+        )
+    bound = summary["residual_tests"]["bound"]
+    lines.append(f"residual tests (99 %, {summary['residual_tests']['lags']} lags, bound {bound:.3g}):")
+    for name, output in zip(output_names, summary["residual_tests"]["outputs"]):
+        if output["exact"]:
+            lines.append(f"  {name}: fitted to rounding, no residual left to test")
+            continue
+        verdict = "white" if output["white"] else "NOT white"
+        independent = "independent of the input" if output["independent"] else "correlated with the input"
+        lines.append(f"  {name}: whiteness p = {output['residual_whiteness_p']:.3g} ({verdict}); input correlation "
+                     f"max {output['input_correlation_max']:.3g}, p = {output['input_correlation_p']:.3g} ({independent})")
+    if "innovation_nis" in summary:
+        low, high = summary["innovation_nis_band"]
+        last = float(summary["innovation_nis"][-1])
+        state = "inside" if low <= last <= high else ("above: the filter's R is too small for these data" if last > high
+                                                       else "below: the filter's R is too large for these data")
+        lines.append(f"innovation NIS of the last pass {last:.3g}, band [{low:.3g}, {high:.3g}]: {state}")
+    return lines

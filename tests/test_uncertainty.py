@@ -1,0 +1,185 @@
+"""Parameter covariances, their propagation by the delta method, and the calibration of the intervals."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from identification.comparators import identify_with
+from identification.errors import InputError
+from identification.least_squares import least_squares
+from identification.modal import ModalModel, ModalStructure
+from identification.uncertainty import (
+    frequency_response,
+    gauss_newton_covariance,
+    model_uncertainty,
+    sample_parameters,
+)
+from scenarios import calibration
+
+
+def _model_with_covariance() -> ModalModel:
+    """Two pairs and a real pole, two inputs, two outputs; 2 % standard deviation on every parameter."""
+    structure = ModalStructure.default(5, 2, 2)
+    rng = np.random.default_rng(3)
+    A = np.zeros((5, 5))
+    A[:2, :2] = [[-2.0, 7.0], [-7.0, -2.0]]
+    A[2:4, 2:4] = [[-5.0, 25.0], [-25.0, -5.0]]
+    A[4, 4] = -3.0
+    B = rng.normal(size=(5, 2))
+    C = rng.normal(size=(2, 5))
+    for i, j in structure.fixed_c:
+        C[i, j] = 1.0
+    D = rng.normal(size=(2, 2))
+    model = ModalModel(structure, A, B, C, D)
+    std = 0.02 * np.maximum(np.abs(model.parameters), 0.1)
+    correlation = np.full((std.size, std.size), 0.2) + 0.8 * np.eye(std.size)
+    return model.with_parameter_covariance(correlation * np.outer(std, std))
+
+
+def test_delta_method_matches_monte_carlo_sampling_of_the_covariance():
+    """Mode frequencies and damping, steady-state gains and the frequency response, against 4000 samples.
+
+    The sample standard deviation of 4000 draws has a relative standard error
+    of 1/sqrt(2 x 4000) = 1.1 %; the delta method is exact to first order and
+    the parameters' spread is 2 %, so second-order terms are of order 2 % of
+    the std as well: 6 % covers both with margin (seeded).
+    """
+    model = _model_with_covariance()
+    samples = sample_parameters(model, 4000, np.random.default_rng(0))
+    predicted = model_uncertainty(model)
+    frequencies, dampings, gains, magnitudes, phases = [], [], [], [], []
+    probe = np.array([0.5, 1.1, 4.0])
+    for theta in samples:
+        drawn = ModalModel.from_parameters(model.structure, theta)
+        natural, damping = drawn.frequencies_damping()
+        frequencies.append(natural / (2 * np.pi))
+        dampings.append(damping)
+        gains.append(drawn.D - drawn.C @ np.linalg.solve(drawn.A, drawn.B))
+        response = np.array([drawn.C @ np.linalg.solve(2j * np.pi * f * np.eye(5) - drawn.A, drawn.B) + drawn.D
+                             for f in probe])
+        magnitudes.append(np.abs(response))
+        phases.append(np.angle(response))
+    band = frequency_response(model, probe)
+    checks = [
+        (np.std(frequencies, axis=0), [m.frequency_hz_std for m in predicted.modes]),
+        (np.std(dampings, axis=0)[:2], [m.damping_std for m in predicted.modes][:2]),
+        (np.std(gains, axis=0), predicted.gain_std),
+        (np.std(magnitudes, axis=0), band.magnitude_std),
+        (np.degrees(np.std(np.unwrap(phases, axis=0), axis=0)), band.phase_deg_std),
+    ]
+    for sampled, delta in checks:
+        np.testing.assert_allclose(delta, sampled, rtol=0.06)
+    assert predicted.modes[2].damping_std == 0.0  # a real pole's damping is 1 whatever its value
+
+
+def test_eigenvalue_std_is_the_sigma_omega_std_and_values_are_the_model_s():
+    """The modal parameters are the eigenvalues: their std is read off the covariance exactly (1e-12)."""
+    model = _model_with_covariance()
+    result = model.uncertainty()
+    std = np.sqrt(np.diag(model.parameter_covariance))
+    np.testing.assert_allclose([m.eigenvalue_std for m in result.modes], [(std[0], std[1]), (std[2], std[3]), (std[4], 0.0)],
+                               rtol=1e-12)
+    np.testing.assert_allclose([m.eigenvalue for m in result.modes], model.mode_eigenvalues(), rtol=1e-12)
+    band = frequency_response(model, [0.3, 2.0])
+    exact = [model.C @ np.linalg.solve(2j * np.pi * f * np.eye(5) - model.A, model.B) + model.D for f in (0.3, 2.0)]
+    np.testing.assert_allclose(band.magnitude, np.abs(exact), rtol=1e-12)
+
+
+def test_a_model_without_covariance_gives_nan_std_and_the_covariance_round_trips():
+    model = _model_with_covariance()
+    bare = model.with_parameter_covariance(None)
+    assert np.all(np.isnan([m.frequency_hz_std for m in bare.uncertainty().modes]))
+    again = ModalModel.from_dict(model.to_dict())
+    np.testing.assert_array_equal(again.parameter_covariance, model.parameter_covariance)
+    assert ModalModel.from_dict(bare.to_dict()).parameter_covariance is None
+    with pytest.raises(InputError, match="shape"):
+        model.with_parameter_covariance(np.eye(3))
+
+
+def test_gauss_newton_covariance_equals_least_squares_on_a_linear_regression():
+    """On a linear model the Gauss-Newton covariance is the textbook sigma^2 (Phi'Phi)^-1 (appendix eq. A.58), to 1e-10."""
+    rng = np.random.default_rng(1)
+    phi = rng.normal(size=(400, 3))
+    y = phi @ [1.0, -2.0, 0.5] + 0.3 * rng.normal(size=400)
+    reference = least_squares(phi, y)
+    residuals = y - phi @ reference.theta[:, 0]
+    covariance = gauss_newton_covariance(-phi, residuals[:, None])
+    np.testing.assert_allclose(covariance, reference.covariance[0], rtol=1e-10)
+
+
+def _arx_record(seed: int):
+    """The calibration system with equation-error noise ``e / A(q)`` (the ARX noise model), 20 s at 100 Hz."""
+    from scipy.signal import lfilter
+
+    from identification.data import IOData
+    from identification.statespace import continuous_to_discrete
+
+    clean_data, clean = calibration.make_record(seed, 0.0, duration=20.0)
+    truth = calibration.true_model()
+    Ad = continuous_to_discrete(truth.A, truth.B, truth.C, truth.D, calibration.DT)[0]
+    denominator = np.real(np.poly(np.linalg.eigvals(Ad)))
+    noise = lfilter([1.0], denominator, 0.002 * np.random.default_rng(seed + 7).standard_normal(clean.shape[0]))
+    return IOData(t=clean_data.t, u=clean_data.u, y=clean + noise[:, None])
+
+
+def test_every_comparator_leaves_a_covariance_that_covers_the_truth():
+    """ARX and RLS on data with ARX noise, N4SID (bootstrap) on the same: each mode's frequency within 4 std of the truth."""
+    data = _arx_record(4)
+    truth = calibration.true_model().frequencies_damping()[0][:2] / (2 * np.pi)
+    for method, options in (("arx", {}), ("rls", {}), ("n4sid", {"bootstrap": 10, "block_rows": 20})):
+        model = identify_with(data, method=method, order=4, **options).model
+        assert model.parameter_covariance is not None, method
+        modes = model.uncertainty().modes
+        std = np.array([m.frequency_hz_std for m in modes])
+        assert np.all(std > 0), method
+        assert np.all(np.abs([m.frequency_hz for m in modes] - truth) < 4 * std), (method, modes)
+
+
+def test_intervals_are_calibrated_on_the_known_system_lean():
+    """The z-scores (estimate - truth) / std of frequency and damping have mean square near 1.
+
+    12 realisations x 2 modes x 2 quantities = 48 z-scores per method. For
+    calibrated intervals the mean of z^2 is 1 with a standard deviation of
+    sqrt(2 / 48) = 0.20 if independent (0.29 if frequency and damping of a
+    mode were fully dependent); [0.35, 2.2] is beyond 2 sigma below and 4
+    sigma above even then, while intervals off by a factor of 2 in std give
+    0.25 or 4. The full table (2 noise levels x 60 realisations) is
+    benchmarks/uncertainty_calibration.py.
+    """
+    natural, damping = calibration.true_model().frequencies_damping()
+    truth = {"frequency_hz": natural / (2 * np.pi), "damping": damping}
+    scores: dict[str, list] = {"iekf": [], "output-error": []}
+    for seed in range(100, 112):
+        data, _ = calibration.make_record(seed, 0.3, duration=30.0)
+        for method, realisation in calibration.identify_realisation(data).items():
+            for name in ("frequency_hz", "damping"):
+                scores[method].extend((getattr(realisation, name) - truth[name]) / getattr(realisation, f"{name}_std"))
+    for method, z in scores.items():
+        assert 0.35 < np.mean(np.square(z)) < 2.2, (method, np.mean(np.square(z)))
+
+
+def test_spline_bands_match_monte_carlo_sampling():
+    """Spline coefficient and first-mode frequency/damping std against 1500 samples of the ordinates (relative error of a sampled std 1.8 %: 6 % is 3.3 of it)."""
+    from identification.spline_modal import SplineModalModel
+
+    linear = _model_with_covariance().with_parameter_covariance(None)
+    spline = SplineModalModel.from_linear(linear, 5, np.ones(2), np.ones(2), 0.01)
+    rng = np.random.default_rng(5)
+    theta = spline.theta + 0.05 * rng.standard_normal(spline.theta.size)  # make the splines non-constant
+    std = 0.03 * np.maximum(np.abs(theta), 0.2)
+    spline = spline.with_parameters(theta)
+    import dataclasses
+
+    spline = dataclasses.replace(spline, parameter_covariance=np.diag(std**2))
+    amplitudes = np.linspace(0.0, 1.0, 7)
+    frequency_std, damping_std = spline.mode_frequency_damping_std(0, amplitudes)
+    sigma_std = spline.coefficient_std("sigma1", amplitudes)
+    draws = theta + rng.standard_normal((1500, theta.size)) * std
+    sampled = [spline.with_parameters(draw) for draw in draws]
+    curves = np.array([model.mode_frequency_damping(0, amplitudes) for model in sampled])
+    np.testing.assert_allclose(frequency_std, curves[:, 0].std(axis=0), rtol=0.06)
+    np.testing.assert_allclose(damping_std, curves[:, 1].std(axis=0), rtol=0.06)
+    sigmas = np.array([model.coefficient("sigma1", amplitudes) for model in sampled])
+    np.testing.assert_allclose(sigma_std, sigmas.std(axis=0), rtol=0.06)
+    assert SplineModalModel.from_dict(spline.to_dict()).parameter_covariance is not None
