@@ -54,7 +54,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from identification.archive import open_archive, read_run, update_archive, write_archive, write_run
-from identification.errors import DivergenceError, InputError
+from identification.errors import DivergenceError, InputError, SimulationError
 from identification.iekf import IEKFOptions, identify_iekf
 from identification.modal import ModalModel, ModalStructure
 from identification.scheduled import ScheduledModalModel, schedule_models
@@ -242,13 +242,22 @@ def grip_limit(params: VehicleParameters, speed: float, linearisation: Any = Non
     """
     amplitude = min(_MAX_STEER, 20 * _DEG * (20.0 / speed) ** 2)
     ramp = make_manoeuvre("ramp", amplitude=amplitude, duration=_RAMP_DURATION, dt=_RAMP_DT)
-    record = simulate(params, ramp, speed=speed)
-    steer = np.asarray(ramp.steer, dtype=float).ravel()
+    left_envelope = None
+    try:
+        record = simulate(params, ramp, speed=speed)
+    except SimulationError as exc:
+        if exc.partial is None:
+            raise
+        # past the peak the ramp drives the tyres beyond their valid slip: the record up to there holds the peak
+        record, left_envelope = exc.partial, exc
+    steer = np.asarray(ramp.steer, dtype=float).ravel()[:record.n_samples]
     lateral = np.abs(record.y[:, list(record.output_names).index("lateral_acceleration")])
     if not np.all(np.isfinite(lateral)):
         raise DivergenceError(f"the grip ramp at {speed:g} m/s did not stay finite")
     peak = int(np.argmax(lateral))
     if peak >= lateral.size - 1:
+        if left_envelope is not None:
+            raise InputError(f"at {speed:g} m/s the car leaves its valid range before its grip limit: {left_envelope}")
         raise InputError(f"at {speed:g} m/s the grip limit lies beyond {math.degrees(amplitude):.0f} deg of steer: "
                          "too slow for this campaign")
     gain = steady_state_gain(linearisation if linearisation is not None else linearize(params, speed=speed))
