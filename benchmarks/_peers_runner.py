@@ -8,8 +8,9 @@ python-control, sysidentpy) are never imported by the workbench; this script
 needs only them, NumPy, SciPy and ``_real_records.py`` beside it.
 
 Each peer sees the estimation record with its mean removed (the peers do not
-remove offsets themselves); the same means are removed from the validation
-record and added back to the simulated output before scoring. Linear models
+remove offsets themselves); the validation record is centred as ``vehid
+identify`` centres it (``_real_records.validation_offsets``: the estimation
+means for a held-out tail, its own means for a separate validation record). Linear models
 have the workbench's default order (``ORDER``); each is simulated on the
 validation input from its least-squares initial state (``_real_records``).
 """
@@ -102,6 +103,9 @@ def run(name: str) -> dict:
     (u_est, y_est), (u_val, y_val) = records.load(entry)
     u_offset, y_offset = u_est.mean(axis=0), y_est.mean(axis=0)
     u_c, y_c = u_est - u_offset, y_est - y_offset
+    # the validation samples are centred as `vehid identify` centres them (the estimation means, or a separate
+    # validation record's own), so every method is scored on the same numbers
+    u_val_offset, y_val_offset = records.validation_offsets(entry, (u_est, y_est), (u_val, y_val))
     results = {}
     for method, identify in {**LINEAR_PEERS, **NARX_PEERS}.items():
         start = time.perf_counter()
@@ -109,10 +113,10 @@ def run(name: str) -> dict:
             with warnings.catch_warnings(), contextlib.redirect_stdout(io.StringIO()):
                 warnings.simplefilter("ignore")
                 if method in NARX_PEERS:
-                    fits = identify(u_c, y_c, u_val - u_offset, y_val - y_offset)
+                    fits = identify(u_c, y_c, u_val - u_val_offset, y_val - y_val_offset)
                 else:
                     A, B, C, D = identify(u_c, y_c)
-                    fits = records.score_discrete(A, B, C, D, u_val, y_val, u_offset, y_offset)
+                    fits = records.score_discrete(A, B, C, D, u_val, y_val, u_val_offset, y_val_offset)
             results[method] = {"validation_fit_percent": fits, "seconds": time.perf_counter() - start}
         except Exception as exc:  # a peer failing on a record is a result, not a crash of the benchmark
             results[method] = {"error": f"{type(exc).__name__}: {exc}"[:300], "seconds": time.perf_counter() - start}

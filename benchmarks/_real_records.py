@@ -5,9 +5,15 @@ runner (in its own virtual environment) and the tests read the records and
 score the models with the same code.
 
 Every record is read from its file exactly as published. The split is the
-same for every method: the first ``1 - HOLDOUT`` of a record estimates, the
-last ``HOLDOUT`` validates (the cascaded tanks come with their own estimation
-and validation records, which are used as published).
+same for every method and the same as ``vehid identify --validation
+HOLDOUT``'s: the first ``round((1 - HOLDOUT) N)`` samples of a record
+estimate, the rest validates (the cascaded tanks come with their own
+estimation and validation records, which are used as published).
+
+Offsets, as ``vehid identify`` removes them by default: the estimation
+part's means, from both parts of a split record; a separate validation
+record (``--validation-file``) is another experiment and has its own means
+removed (``validation_offsets``).
 
 The score is MATLAB ``compare``'s NRMSE fit per output on the validation
 samples, ``100 (1 - ||y - yhat|| / ||y - mean(y)||)``, with ``yhat`` simulated
@@ -35,7 +41,7 @@ class RecordSet:
 
     name: str
     path: str  # relative to tests/data
-    inputs: tuple[str, ...]  # column names (a .dat file: "1", "2", ... in DaISy's numbering)
+    inputs: tuple[str, ...]  # column names, as `vehid identify --inputs` takes them (a headerless .dat: 1-based numbers)
     outputs: tuple[str, ...]
     dt: float
     dt_note: str
@@ -90,8 +96,19 @@ def load(entry: RecordSet) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndar
 
 
 def split_index(n_samples: int) -> int:
-    """First validation sample of a single record: the last ``HOLDOUT`` of it is held out."""
-    return n_samples - int(round(HOLDOUT * n_samples))
+    """First validation sample of a single record: the last ``HOLDOUT`` of it is held out (as ``IOData.split``)."""
+    return int(round((1.0 - HOLDOUT) * n_samples))
+
+
+def validation_offsets(entry: RecordSet, estimation: tuple[np.ndarray, np.ndarray],
+                       validation: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Input and output offsets removed from the validation part before scoring, as ``vehid identify`` removes them.
+
+    A held-out tail of a record shares the estimation part's operating point;
+    a separate validation record is centred on its own means.
+    """
+    u, y = validation if entry.validation_path_columns is not None else estimation
+    return u.mean(axis=0), y.mean(axis=0)
 
 
 def nrmse_fit(y: np.ndarray, y_hat: np.ndarray) -> list[float | None]:

@@ -1,40 +1,43 @@
 """Identification on public measured records (tests/data), scored on held-out data.
 
-The records, split and score are those of ``benchmarks/real_data.py`` (its
-module ``benchmarks/_real_records.py`` is loaded here): the first 70 % of a
-record estimates, the last 30 % validates, and the score is MATLAB
-``compare``'s NRMSE fit of the model simulated on the validation input from
-its least-squares initial state. Floors are measured hold-out fits minus a
-margin stated with each case.
+The raw published files go straight to ``vehid identify`` with default
+options and ``--validation 0.3`` (the cascaded tanks: their published
+validation record through ``--validation-file``), exactly as
+``benchmarks/real_data.py`` runs them (its modules are loaded here), and the
+command's own ``validation_fit_percent`` is checked: MATLAB ``compare``'s
+NRMSE fit on the held-out samples, simulated from the least-squares initial
+state. Floors are measured hold-out fits minus a margin stated below.
 """
 
 from __future__ import annotations
 
 import hashlib
 import importlib.util
+import json
 import re
+import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from identification import IEKFOptions, IOData, ModalStructure, identify_iekf
-from identification.comparators import identify_with
+from identification import IOData
 from identification.metrics import nrmse_fit
 
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def _load_records_module():
-    spec = importlib.util.spec_from_file_location("_real_records", ROOT / "benchmarks" / "_real_records.py")
+def _load_benchmark_module(name: str):
+    spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up by name
+    sys.modules[spec.name] = module  # dataclasses look their module up by name; real_data imports _real_records
     spec.loader.exec_module(module)
     return module
 
 
-records = _load_records_module()
+records = _load_benchmark_module("_real_records")
+benchmark = _load_benchmark_module("real_data")
 
 # Sizes stated by the publishers (DaISy descriptions; the cascaded tanks' 2 x 1024 samples).
 PUBLISHED_SHAPES = {"ballbeam": (1000, 1, 1), "dryer": (1000, 1, 1), "robot_arm": (1024, 1, 1),
@@ -71,63 +74,79 @@ def test_score_is_matlab_fit_and_recovers_the_initial_state():
     assert records.nrmse_fit(y_noisy, y) == pytest.approx(list(nrmse_fit(y_noisy, y)), rel=1e-12)
 
 
-def _holdout_fit(model, entry, centred: bool, time_factor: float = 1.0) -> list[float]:
-    (u_est, y_est), (u_val, y_val) = records.load(entry)
-    if centred:
-        u_val, y_val = u_val - u_est.mean(axis=0), y_val - y_est.mean(axis=0)
-    dt = entry.dt * time_factor
-    return records.fit_of_linear_simulator(lambda u, x0: model.simulate(u, dt, x0=x0), model.structure.n, u_val, y_val)
+SPLIT_SETS = [entry for entry in records.RECORD_SETS if entry.validation_path_columns is None]
 
 
-def _estimation(entry, centred: bool, time_factor: float = 1.0) -> IOData:
-    (u_est, y_est), _ = records.load(entry)
-    if centred:
-        u_est, y_est = u_est - u_est.mean(axis=0), y_est - y_est.mean(axis=0)
-    return IOData(t=np.arange(len(u_est)) * entry.dt * time_factor, u=u_est, y=y_est)
+@pytest.mark.parametrize("entry", SPLIT_SETS, ids=lambda e: e.name)
+def test_peers_and_identify_hold_out_the_same_samples(entry):
+    """The benchmark's split is identify's (``IOData.split``), so peers and workbench validate on the same samples."""
+    (u_est, _), (u_val, _) = records.load(entry)
+    n = len(u_est) + len(u_val)
+    data = IOData(t=np.arange(n, dtype=float), u=np.zeros((n, 1)), y=np.zeros((n, 1)))
+    estimation, validation = data.split(1.0 - records.HOLDOUT)
+    assert (estimation.n_samples, validation.n_samples) == (len(u_est), len(u_val))
 
 
-# Hold-out floors. Measured on the workbench as it stands, with the benchmark's split
-# and score (benchmarks/real_data.py reports the same figures through the command line);
-# each floor is the measured fit less MARGIN. The cases are ones whose result does not
-# move when the data are perturbed by 1e-7 relative (checked when the floors were set;
-# the heat exchanger at the default time base is not such a case: its IEKF run flips
-# between converging and diverging). "centred": the estimation means are removed from
-# both parts first, as the benchmark does for the peers, because the workbench does not
-# remove offsets itself yet. A time factor of 0.01 counts time in hundredths of the
-# published unit: the IEKF's default start values are absolute (rad/s), and on these
-# records they only fit the faster time base.
-IEKF_CASES = [
-    # set, centred, time factor, options, measured hold-out fit per output
-    ("dryer", True, 1.0, {}, [82.45]),
-    ("cd_player_arm", True, 1.0, {}, [29.62, 76.47]),  # output 1 moves by 0.4 under perturbation
-    ("exchanger", True, 0.01, {"normalize": True}, [62.15]),
-    ("cascaded_tanks", True, 0.01, {}, [71.11]),
-]
-COMPARATOR_CASES = [
-    ("robot_arm", False, "n4sid", [96.80]),
-    ("robot_arm", False, "output-error", [94.42]),
-    ("exchanger", True, "n4sid", [58.30]),
-    ("cascaded_tanks", True, "n4sid", [69.74]),
-]
-# 3 points: the runs use no random numbers, so a re-run reproduces the figure to rounding
-# (0.4 point at most under perturbation, above); a loss of 3 points on held-out data is
-# one a user would notice.
-MARGIN = 3.0
+def _identify(entry, scratch: Path, *options: str) -> tuple[int, dict]:
+    """``vehid identify`` on the raw file with the benchmark's arguments; exit status and JSON summary."""
+    command = [sys.executable, "-m", "scenarios.cli", "identify", *benchmark.data_args(entry, scratch), *options,
+               "--json", "--quiet"]
+    done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert done.returncode in (0, 3), done.stderr[-500:]
+    return done.returncode, json.loads(done.stdout.strip().splitlines()[-1])
 
 
-@pytest.mark.parametrize("name, centred, time_factor, options, measured", IEKF_CASES, ids=[c[0] for c in IEKF_CASES])
-def test_iekf_holdout_fit_on_measured_record(name, centred, time_factor, options, measured):
+# Hold-out fit per output of `vehid identify` with default options, measured on the raw files
+# (benchmarks/real_data.py, same commands). Floors are these less MARGIN. Spread measured by
+# running the same command on copies of the records with every sample perturbed by 1e-6
+# relative noise (two seeds): at most 0.45 point (cascaded tanks, 71.16 -> 70.80 and 70.71);
+# dryer 0.05, cd player arm 0.002, the others below 0.001. Two unperturbed runs agree exactly
+# (no random numbers). The ball-and-beam plant is open-loop unstable: the default run (stable
+# modes asked) diverges at pass 6 and reports the last good pass with a warning; its floor
+# guards that reported model, and the test checks the warning is there.
+DEFAULT_FITS = {
+    "ballbeam": [20.98],
+    "dryer": [82.55],
+    "robot_arm": [96.16],
+    "exchanger": [59.83],
+    "cd_player_arm": [62.33, 79.12],
+    "cascaded_tanks": [71.16],
+}
+# 2 points: more than four times the largest spread under perturbation, and the same
+# yardstick as the benchmark's goal (within 2 points of the best peer).
+MARGIN = 2.0
+
+
+@pytest.mark.parametrize("name", list(DEFAULT_FITS))
+def test_default_identify_holdout_fit_on_raw_record(name, tmp_path):
     entry = records.record_set(name)
-    data = _estimation(entry, centred, time_factor)
-    result = identify_iekf(data, ModalStructure.default(4, data.n_u, data.n_y), options=IEKFOptions(**options))
-    fits = _holdout_fit(result.model, entry, centred, time_factor)
-    assert np.all(np.array(fits) >= np.array(measured) - MARGIN), (fits, measured)
+    _, summary = _identify(entry, tmp_path)
+    fits = np.array(summary["validation_fit_percent"], dtype=float)
+    assert summary["order"] == 4 and summary["preparation"]["detrend"] == "mean"
+    assert np.all(fits >= np.array(DEFAULT_FITS[name]) - MARGIN), (fits, DEFAULT_FITS[name])
+    if name == "ballbeam":
+        assert any("diverged" in line for line in summary["warnings"]), summary["warnings"]
 
 
-@pytest.mark.parametrize("name, centred, method, measured", COMPARATOR_CASES,
-                         ids=[f"{c[0]}-{c[2]}" for c in COMPARATOR_CASES])
-def test_comparator_holdout_fit_on_measured_record(name, centred, method, measured):
-    entry = records.record_set(name)
-    outcome = identify_with(_estimation(entry, centred), method=method, order=4)
-    fits = _holdout_fit(outcome.model, entry, centred)
-    assert np.all(np.array(fits) >= np.array(measured) - MARGIN), (fits, measured)
+# Comparators on the raw files, measured the same way (direct least squares: under the
+# perturbation above they move by less than 0.01 point); same MARGIN.
+COMPARATOR_FITS = [("robot_arm", "n4sid", [96.80]), ("cascaded_tanks", "arx", [69.58])]
+
+
+@pytest.mark.parametrize("name, method, measured", COMPARATOR_FITS, ids=[f"{c[0]}-{c[1]}" for c in COMPARATOR_FITS])
+def test_comparator_holdout_fit_on_raw_record(name, method, measured, tmp_path):
+    _, summary = _identify(records.record_set(name), tmp_path, "--method", method)
+    assert np.all(np.array(summary["validation_fit_percent"]) >= np.array(measured) - MARGIN), summary
+
+
+@pytest.mark.slow  # the spline filter's first compilation takes up to ~30 s on a fresh cache
+def test_spline_model_holdout_fit_on_raw_heat_exchanger(tmp_path):
+    """``--nonlinear`` on the raw heat-exchanger record: the spline model beats its linear start on held-out data.
+
+    Measured 73.29 % (linear start 59.83 %, best peer 58.2 %); under the 1e-6 perturbation
+    73.287 and 73.287 (spread 0.001 point); floor: less MARGIN.
+    """
+    _, summary = _identify(records.record_set("exchanger"), tmp_path, "--nonlinear")
+    spline = summary["nonlinear"]["validation_fit_percent"]
+    assert spline[0] >= 73.29 - MARGIN, summary["nonlinear"]
+    assert spline[0] > summary["validation_fit_percent"][0] + 10.0  # measured 13.5 points better than linear
