@@ -54,6 +54,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from identification.archive import open_archive, read_run, update_archive, write_archive, write_run
+from identification.archive_safety import archive_lock
 from identification.errors import DivergenceError, InputError, SimulationError
 from identification.iekf import IEKFOptions, identify_iekf
 from identification.modal import ModalModel, ModalStructure
@@ -683,40 +684,43 @@ def run_campaign(
     path = Path(out) if out else results_directory() / "envelope.h5"
     if out and not path.is_absolute():
         path = results_directory() / path
-    if path.exists() and not resume:
-        raise InputError(f"{path} exists: pass --resume to continue that campaign, or another --out")
-    outcomes = _read_done(path, config) if path.exists() else {}
-    if not path.exists():
-        with write_archive(path, kind=ARCHIVE_KIND, config=config.as_dict(), seeds=list(config.seeds)):
-            pass
-    known = {job.key for job in jobs}
-    outcomes = {key: outcome for key, outcome in outcomes.items() if key in known}
-    skipped = len(outcomes)
-    pending = sorted((job for job in jobs if job.key not in outcomes), key=lambda job: -_job_cost(job))
-    count = workers or max(1, min(len(pending), os.cpu_count() or 1))
+    if path.is_dir():
+        raise InputError(f"{path} is a directory: --out names the campaign's archive file")
+    with archive_lock(path):  # one writer per campaign archive: a second campaign on it is refused, naming the holder
+        if path.exists() and not resume:
+            raise InputError(f"{path} exists: pass --resume to continue that campaign, or another --out")
+        outcomes = _read_done(path, config) if path.exists() else {}
+        if not path.exists():
+            with write_archive(path, kind=ARCHIVE_KIND, config=config.as_dict(), seeds=list(config.seeds)):
+                pass
+        known = {job.key for job in jobs}
+        outcomes = {key: outcome for key, outcome in outcomes.items() if key in known}
+        skipped = len(outcomes)
+        pending = sorted((job for job in jobs if job.key not in outcomes), key=lambda job: -_job_cost(job))
+        count = workers or max(1, min(len(pending), os.cpu_count() or 1))
 
-    def done(outcome: JobOutcome) -> None:
-        _write_outcome(path, outcome)
-        outcomes[outcome.key] = outcome
-        if on_job is not None:
-            on_job(outcome, len(outcomes), len(jobs))
+        def done(outcome: JobOutcome) -> None:
+            _write_outcome(path, outcome)
+            outcomes[outcome.key] = outcome
+            if on_job is not None:
+                on_job(outcome, len(outcomes), len(jobs))
 
-    if pending:
-        if executor == "dask":
-            _run_dask(pending, done, scheduler=scheduler, workers=count)
-        else:
-            _run_process_pool(pending, count, done)
-    families, off_grid = _schedule(config, outcomes, jobs)
-    seconds = time.perf_counter() - started
-    summary = {
-        "executor": executor,
-        "jobs": len(jobs),
-        "seconds": seconds,
-        "rows": _rows(config, outcomes),
-        "scheduled": {"grid_speeds": list(config.speeds), "off_grid": off_grid},
-    }
-    where = f"on {scheduler}" if scheduler else f"on {count} worker(s)"
-    result_line = (f"\n{len(jobs)} jobs ({skipped} already in the archive) in {seconds:.1f} s, {executor} {where}; "
-                   f"wrote {path}")
-    return EnvelopeResult(config, outcomes, families, summary, _text(config, summary, result_line), path, executor,
-                          count, seconds, skipped)
+        if pending:
+            if executor == "dask":
+                _run_dask(pending, done, scheduler=scheduler, workers=count)
+            else:
+                _run_process_pool(pending, count, done)
+        families, off_grid = _schedule(config, outcomes, jobs)
+        seconds = time.perf_counter() - started
+        summary = {
+            "executor": executor,
+            "jobs": len(jobs),
+            "seconds": seconds,
+            "rows": _rows(config, outcomes),
+            "scheduled": {"grid_speeds": list(config.speeds), "off_grid": off_grid},
+        }
+        where = f"on {scheduler}" if scheduler else f"on {count} worker(s)"
+        result_line = (f"\n{len(jobs)} jobs ({skipped} already in the archive) in {seconds:.1f} s, {executor} {where}; "
+                       f"wrote {path}")
+        return EnvelopeResult(config, outcomes, families, summary, _text(config, summary, result_line), path, executor,
+                              count, seconds, skipped)

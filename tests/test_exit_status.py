@@ -20,7 +20,7 @@ from scenarios.cli import main
 
 COMMANDS = {  # every subcommand; test_every_command_is_covered fails when one is added without a row below
     ("identify",), ("report",), ("simulate",), ("linearize",), ("study", "handling"),
-    ("study", "linear-example"), ("study", "textbook"), ("bench", "iekf"),
+    ("study", "linear-example"), ("study", "textbook"), ("bench", "iekf"), ("study", "envelope"),
 }
 
 
@@ -62,7 +62,7 @@ def _corrupt_archive(tmp_path):
     "identify-missing", "identify-resume-foreign", "identify-resume-corrupt", "report-missing", "report-corrupt",
     "simulate-missing-vehicle", "linearize-missing-vehicle", "handling-resume-missing", "handling-bad-orders",
     "linear-example-bad-passes", "textbook-unwritable", "bench-unwritable", "identify-save-model-directory",
-    "report-out-is-a-file",
+    "report-out-is-a-file", "envelope-bad-speeds", "envelope-out-is-a-directory",
 ])
 def test_bad_input_exits_2(case, tmp_path, capsys, monkeypatch):
     monkeypatch.setenv("VEHID_RESULTS_DIR", str(tmp_path / "results"))
@@ -95,6 +95,12 @@ def test_bad_input_exits_2(case, tmp_path, capsys, monkeypatch):
         _check(capsys, ["study", "handling", "--resume", missing], 2, "absent.h5")
     elif case == "handling-bad-orders":
         _check(capsys, ["study", "handling", "--orders", "9"], 2, "from 2 to 8")
+    elif case == "envelope-bad-speeds":
+        _check(capsys, ["study", "envelope", "--speeds", "0", "--linear-only"], 2, "speed")
+    elif case == "envelope-out-is-a-directory":
+        (tmp_path / "campaign.h5").mkdir()
+        _check(capsys, ["study", "envelope", "--speeds", "15", "--orders", "2", "--linear-only",
+                        "--out", str(tmp_path / "campaign.h5")], 2, "campaign.h5", "directory")
     elif case == "linear-example-bad-passes":
         _check(capsys, ["study", "linear-example", "--passes", "0"], 2, "passes")
     elif case == "identify-save-model-directory":  # IsADirectoryError after the work: the path and the cause
@@ -154,6 +160,9 @@ def test_a_failed_computation_exits_1(command, tmp_path, capsys, monkeypatch):
         monkeypatch.setattr("scenarios.commands.study_linear_example.run_case", diverge)
     elif command == ("study", "textbook"):
         monkeypatch.setattr("scenarios.commands.study_textbook.run_all", diverge)
+    elif command == ("study", "envelope"):
+        monkeypatch.setattr("scenarios.commands.study_envelope.run_campaign", diverge)
+        argv += ["--speeds", "15", "--orders", "2", "--linear-only"]
     else:
         monkeypatch.setattr("scenarios.commands.bench_iekf.measure_iekf", diverge)
     _check(capsys, argv, 1, "non-finite")
