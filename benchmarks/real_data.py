@@ -19,11 +19,8 @@ and read its ``validation_fit_percent``: default options ("iekf (default)"),
 absolute settings for contrast, and the comparators ``--method
 arx|n4sid|output-error``. ``identify`` removes the estimation part's means
 itself. The cascaded tanks' published validation record is a second pair
-of variables (``uVal``, ``yVal``) in the same ``.mat`` file, and
-``--validation-file`` takes the estimation record's channel names, so the
-benchmark hands it those two variables under the names ``uEst``, ``yEst``
-in a CSV (the same numbers; nothing else changed); the estimation record
-is the raw ``.mat`` itself.
+of variables (``uVal``, ``yVal``) in the same ``.mat`` file, named with
+``--validation-inputs`` and ``--validation-outputs``.
 
 Peers: SIPPY (N4SID, MOESP, CVA), nfoursid, python-control (Markov
 parameters + ERA) and sysidentpy (FROLS ARX and degree-2 NARX) run in their
@@ -85,23 +82,16 @@ def _cli(args: list[str], timeout: float = 900) -> tuple[int, dict, float]:
     return done.returncode, summary, seconds
 
 
-def _write_csv(path: Path, names: tuple[str, ...], columns: np.ndarray) -> Path:
-    np.savetxt(path, columns, delimiter=",", header=",".join(names), comments="",
-               fmt="%.17g")  # 17 digits: the copy holds exactly the same doubles
-    return path
-
-
 def data_args(entry: records.RecordSet, scratch: Path) -> list[str]:
     """The raw file, its channels, its sample interval and the hold-out, as a user gives them to ``identify``."""
     args = [str(entry.file), "--inputs", ",".join(entry.inputs), "--outputs", ",".join(entry.outputs),
             "--dt", repr(entry.dt)]
     if entry.validation_path_columns is None:
         return [*args, "--validation", repr(records.HOLDOUT)]
-    # the published validation variables under the estimation record's names (--validation-file takes those)
-    _, (u_val, y_val) = records.load(entry)
-    copy = _write_csv(scratch / f"{entry.name}_validation.csv", (*entry.inputs, *entry.outputs),
-                      np.column_stack([u_val, y_val]))
-    return [*args, "--validation-file", str(copy)]
+    # the published validation variables of the same file, named as they are there
+    inputs, outputs = entry.validation_path_columns
+    return [*args, "--validation-file", str(entry.file), "--validation-inputs", ",".join(inputs),
+            "--validation-outputs", ",".join(outputs)]
 
 
 def methods(entry: records.RecordSet) -> tuple:
@@ -118,8 +108,7 @@ SUMMARY_KEYS = ("fit_percent", "estimation_fit_percent", "order", "passes_run", 
 def run_workbench(entry: records.RecordSet, scratch: Path) -> dict:
     """One row per workbench method: exit status, hold-out fit per output, seconds, and the run's own account."""
     arguments = data_args(entry, scratch)
-    shown = {str(entry.file): f"tests/data/{entry.path}", str(scratch / f"{entry.name}_validation.csv"):
-             "<uVal,yVal named uEst,yEst>.csv"}
+    shown = {str(entry.file): f"tests/data/{entry.path}"}
     rows: dict = {"command": "identify " + " ".join(shown.get(a, a) for a in arguments)}
     for label, extra in methods(entry):
         status, summary, seconds = _cli(["identify", *arguments, *extra])

@@ -434,6 +434,7 @@ def prepare_validation(
     *,
     record: int | None = None,
     own_offsets: bool = False,
+    channels: tuple[Sequence[str], Sequence[str]] | None = None,
 ) -> IOData:
     """Prepare validation data exactly as the estimation data were prepared.
 
@@ -453,6 +454,10 @@ def prepare_validation(
         Remove the record's own offsets, estimated as the estimation records'
         were (``detrend``), instead of the model's: for a separate experiment,
         whose operating point is its own just as each estimation record's is.
+    channels : (inputs, outputs), optional
+        The names under which a file holds the model's channels, in the
+        model's order, where they differ from the estimation file's (a
+        MATLAB file with ``uVal``/``yVal`` beside ``uEst``/``yEst``).
 
     Returns
     -------
@@ -464,7 +469,17 @@ def prepare_validation(
             raise InputError("this preparation was estimated on records in memory: it holds no reading settings "
                              "to read a file with")
         segment = preparation.settings.segment if record is not None else None
-        data = read_record(data, replace(preparation.settings, segment=segment))
+        settings = replace(preparation.settings, segment=segment)
+        if channels is not None:
+            inputs, outputs = (tuple(names) for names in channels)
+            if len(inputs) != len(preparation.input_names) or len(outputs) != len(preparation.output_names):
+                raise InputError(f"the validation channels ({', '.join(inputs)} -> {', '.join(outputs)}) must "
+                                 f"match the model's {len(preparation.input_names)} inputs and "
+                                 f"{len(preparation.output_names)} outputs in number")
+            settings = replace(settings, inputs=inputs, outputs=outputs)
+        data = read_record(data, settings)
+        if channels is not None:  # the model's names for the same channels
+            data = replace(data, input_names=preparation.input_names, output_names=preparation.output_names)
     if own_offsets:
         factors = {**dict(zip(preparation.input_names, map(float, preparation.input_scale))),
                    **dict(zip(preparation.output_names, map(float, preparation.output_scale)))}

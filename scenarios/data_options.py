@@ -26,14 +26,15 @@ from identification.preparation import DETRENDS, Preparation, ReadSettings, prep
 from identification.storage import read_value, write_value
 from identification.timebase import JITTER_TOLERANCE
 
-__all__ = ["register_data_options", "settings_from_args", "read_from_args", "load_from_args", "records_summary", "record_names",
+__all__ = ["channel_names", "register_data_options", "settings_from_args", "read_from_args", "load_from_args", "records_summary", "record_names",
            "archive_records", "archived_records", "archived_preparation", "save_model"]
 
 PREPARATION_MEMBER = "preparation"
 RECORD_PREFIX = "identification"
 
 
-def _names(text: str | None) -> tuple[str, ...]:
+def channel_names(text: str | None) -> tuple[str, ...]:
+    """Channel names from a comma-separated option (empty for None); an empty list is an error."""
     if text is None:
         return ()
     names = tuple(name.strip() for name in text.split(",") if name.strip())
@@ -63,7 +64,7 @@ def register_data_options(parser: argparse.ArgumentParser) -> None:
 def settings_from_args(args: argparse.Namespace) -> ReadSettings:
     """The :class:`ReadSettings` the options describe."""
     return ReadSettings(
-        inputs=_names(args.inputs), outputs=_names(args.outputs), time_column=args.time_column, dt=args.dt,
+        inputs=channel_names(args.inputs), outputs=channel_names(args.outputs), time_column=args.time_column, dt=args.dt,
         resample=args.resample, decimate=args.decimate, segment=args.segment,
         jitter_tolerance=args.jitter_tolerance,
     )

@@ -80,6 +80,10 @@ def register_options(parser: argparse.ArgumentParser) -> None:
                         help="hold out the last FRACTION of the record for validation (e.g. 0.3)")
     parser.add_argument("--validation-file", action="append", default=[], metavar="FILE",
                         help="validate on this record too (repeatable; same columns)")
+    parser.add_argument("--validation-inputs", metavar="NAMES",
+                        help="the input channels' names in the validation files, where they differ")
+    parser.add_argument("--validation-outputs", metavar="NAMES",
+                        help="the output channels' names in the validation files, where they differ")
     parser.add_argument("--initial-state", default="estimate", choices=INITIAL_STATES,
                         help="simulate linear models from a least-squares initial state (default) or from rest")
     parser.add_argument("--horizon", type=int, metavar="K",
@@ -175,9 +179,32 @@ def load_plan(args: argparse.Namespace, paths: list[str]) -> Plan:
         raw, held_raw = tuple(part[0] for part in parts), tuple(part[1] for part in parts)
     records, preparation = prepare(raw, detrend=args.detrend, scale=args.scale, settings=settings)
     held = tuple(prepare_validation(part, preparation, record=i) for i, part in enumerate(held_raw))
+    channels = validation_channels(args, preparation)
     # a validation file is another experiment: its offsets are its own, as each estimation record's are
-    return make_plan(args, records, lambda path: prepare_validation(path, preparation, own_offsets=True), held_out=held,
+    return make_plan(args, records, lambda path: prepare_validation(path, preparation, own_offsets=True,
+                                                                    channels=channels), held_out=held,
                      fraction=fraction, note=note, preparation=preparation)
+
+
+def validation_channels(args: argparse.Namespace, preparation: Any) -> tuple[tuple[str, ...], tuple[str, ...]] | None:
+    """The validation files' channel names (model order), where the options name them."""
+    if args.validation_inputs is None and args.validation_outputs is None:
+        return None
+    from scenarios.data_options import channel_names
+
+    inputs = channel_names(args.validation_inputs) if args.validation_inputs is not None else preparation.settings.inputs
+    outputs = (channel_names(args.validation_outputs) if args.validation_outputs is not None
+               else preparation.settings.outputs)
+    return tuple(inputs), tuple(outputs)
+
+
+def _same_samples(a: IOData, b: IOData) -> bool:
+    """Whether two records start with the same samples (one experiment, perhaps cut to another length)."""
+    n = min(a.n_samples, b.n_samples)
+    if a.u.shape[1] != b.u.shape[1] or a.y.shape[1] != b.y.shape[1] or n < 2:
+        return False
+    return all(np.allclose(x[:n], z[:n], rtol=1e-9, atol=1e-12 * max(float(np.max(np.abs(z[:n]))), 1e-300))
+               for x, z in ((a.u, b.u), (a.y, b.y)))
 
 
 def make_plan(args: argparse.Namespace, records: tuple[IOData, ...], load: Callable[[str], IOData],
@@ -196,6 +223,10 @@ def make_plan(args: argparse.Namespace, records: tuple[IOData, ...], load: Calla
             raise InputError(f"{path} has {record.n_u} inputs and {record.n_y} outputs; the record has {first.n_u} and {first.n_y}")
         if record.input_names != first.input_names or record.output_names != first.output_names:
             raise InputError(f"{path} names its columns differently from the identification record")
+        if any(_same_samples(record, estimation) for estimation in records):
+            raise InputError(f"{path} holds the same samples as the estimation record: validating on it would score "
+                             "the model on its own data (where the validation record lies in other channels of the "
+                             "file, name them with --validation-inputs and --validation-outputs)")
         validation.append(record)
         names.append(str(path))
     if args.horizon is not None and args.horizon < 1:
