@@ -119,16 +119,41 @@ def estimate_initial_state(model: ModalModel | DiscreteModel, data: IOData, *, m
     _check(model, data)
     n = model.n_states if isinstance(model, DiscreteModel) else model.structure.n
     weights = 1.0 / np.maximum(np.sqrt(np.mean(data.y**2, axis=0)), 1e-300)
+    window = _free_response_samples(model, data)
+    u, y = data.u[:window], data.y[:window]
     with np.errstate(all="ignore"):
-        forced = model.simulate(data.u, data.dt, method=method)
-        zero = np.zeros_like(data.u)
+        forced = model.simulate(u, data.dt, method=method)
+        zero = np.zeros_like(u)
         free = np.column_stack([
             (model.simulate(zero, data.dt, method=method, x0=np.eye(n)[i]) * weights).ravel() for i in range(n)
         ])
-    target = ((data.y - forced) * weights).ravel()
+    target = ((y - forced) * weights).ravel()
     if not (np.all(np.isfinite(free)) and np.all(np.isfinite(target))):
         return np.zeros(n)
     return np.linalg.lstsq(free, target, rcond=None)[0]
+
+
+_FREE_RESPONSE_TIME_CONSTANTS = 10  # e^-10: beyond this the initial state's response is below rounding of the fit
+
+
+def _free_response_samples(model: ModalModel | DiscreteModel, data: IOData) -> int:
+    """The samples over which the initial state still shows: ten time constants of the slowest stable mode.
+
+    Past them the free responses are below 5e-5 of their start, so the least-squares fit over the
+    rest of a long record would only cost memory (an (N n_y, n) regressor). An unstable or
+    undamped model keeps the whole record.
+    """
+    if isinstance(model, DiscreteModel):
+        largest = float(np.max(np.abs(np.linalg.eigvals(model.A)))) if model.n_states else 0.0
+        if largest >= 1.0:
+            return data.n_samples
+        samples = _FREE_RESPONSE_TIME_CONSTANTS / max(-np.log(max(largest, 1e-300)), 1e-300)
+    else:
+        rates = -np.real(model.eigenvalues())
+        if rates.size == 0 or np.min(rates) <= 0:
+            return data.n_samples
+        samples = _FREE_RESPONSE_TIME_CONSTANTS / np.min(rates) / data.dt
+    return int(min(data.n_samples, max(np.ceil(samples), 1000)))
 
 
 def default_horizon(model: Any) -> int | None:
