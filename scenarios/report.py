@@ -213,7 +213,8 @@ def _model_prediction(model: Any, record: Any) -> tuple[Any, np.ndarray] | None:
     if set(inputs) <= set(record.input_names) and set(outputs) <= set(record.output_names) and outputs:
         record = record.select_inputs(inputs).select_outputs(outputs)
     structure = getattr(model, "structure", None)
-    if structure is None or (record.n_u, record.n_y) != (structure.n_u, structure.n_y):
+    sizes = getattr(structure, "linear", structure)  # a spline-modal structure keeps its sizes on its linear one
+    if sizes is None or (record.n_u, record.n_y) != (sizes.n_u, sizes.n_y):
         return None
     predicted = np.asarray(model.simulate(record.u, record.dt), dtype=float)
     if not np.all(np.isfinite(predicted)):

@@ -218,6 +218,12 @@ def test_cli_nonlinear_scores_and_archives_both_models(tmp_path):
     assert summary["validation_fit_percent"] is not None and len(nonlinear["validation_fit_percent"]) == 1
     with h5py.File(archive, "r") as handle:
         assert {"iekf", "nonlinear"} <= set(handle["runs"])
+    # the report draws both (a spline model keeps its sizes on its linear structure; it used to be an internal error)
+    figures = tmp_path / "figures"
+    report = subprocess.run([*VEHID, "report", str(archive), "--out", str(figures), "--dpi", "30", "--quiet"],
+                            capture_output=True, text=True, check=False)
+    assert report.returncode == 0, report.stderr
+    assert (figures / "residuals_identification_nonlinear.png").exists()
 
 
 def test_order_parsing_and_the_parsimony_rule():
