@@ -99,11 +99,6 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.set_defaults(handler=run)
 
 
-def load_record(path: str, inputs: list[str] | None, outputs: list[str] | None, dt: float | None):
-    """Read one raw record (any supported file type), channels selected by name."""
-    return read_record(path, inputs=tuple(inputs or ()), outputs=tuple(outputs or ()), dt=dt)
-
-
 RUN_NAME = "iekf"
 DEFAULT_PASSES = 50
 VALIDATION_PREFIX = "validation"
@@ -120,7 +115,8 @@ def _resume(args: argparse.Namespace):
         stored = read_records(archive)
     if not records:
         raise InputError(f"{args.resume} holds no identification record to resume on")
-    held_out = tuple(stored[name] for name in sorted(stored) if name.startswith(VALIDATION_PREFIX))
+    held_out = tuple(stored[name] for name in sorted(stored, key=lambda name: (len(name), name))
+                     if name.startswith(VALIDATION_PREFIX))  # validation, validation_2, ..., validation_10
     budget = previous.options.passes if args.passes is None else args.passes
     options = dataclasses.replace(previous.options, passes=max(budget, previous.passes_run))
     if preparation is not None:
