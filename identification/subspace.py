@@ -81,14 +81,19 @@ def _responses(A: np.ndarray, C: np.ndarray, u: np.ndarray) -> tuple[np.ndarray,
     inverse = np.linalg.inv(vectors)
     cv = C @ vectors  # (n_y, n)
     n, n_u, samples = A.shape[0], u.shape[1], u.shape[0]
-    powers = values[None, :] ** np.arange(samples)[:, None]  # (N, n) modal free responses
-    free = np.einsum("yl,kl,li->kyi", cv, powers, inverse).real
-    forced = np.zeros((samples, C.shape[0], n, n_u))
-    for mode in range(n):
-        for j in range(n_u):
-            w = np.zeros(samples, dtype=complex)
-            w[1:] = lfilter([1.0], [1.0, -values[mode]], u[:-1, j].astype(complex))
-            forced[:, :, :, j] += np.einsum("y,i,k->kyi", cv[:, mode], inverse[mode], w).real
+    with np.errstate(over="ignore", invalid="ignore"):  # an unstable A may overflow: refused below
+        powers = values[None, :] ** np.arange(samples)[:, None]  # (N, n) modal free responses
+        free = np.einsum("yl,kl,li->kyi", cv, powers, inverse).real
+        forced = np.zeros((samples, C.shape[0], n, n_u))
+        for mode in range(n):
+            for j in range(n_u):
+                w = np.zeros(samples, dtype=complex)
+                w[1:] = lfilter([1.0], [1.0, -values[mode]], u[:-1, j].astype(complex))
+                forced[:, :, :, j] += np.einsum("y,i,k->kyi", cv[:, mode], inverse[mode], w).real
+    if not (np.all(np.isfinite(free)) and np.all(np.isfinite(forced))):
+        # never hand LAPACK non-finite numbers: besides a wrong answer it prints to standard output
+        raise InputError(f"the identified A has a mode growing by {np.max(np.abs(values)):.4g} per sample: its "
+                         "responses over the record overflow, so B and D cannot be estimated (try another order)")
     return free, forced
 
 

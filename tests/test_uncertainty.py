@@ -183,3 +183,32 @@ def test_spline_bands_match_monte_carlo_sampling():
     sigmas = np.array([model.coefficient("sigma1", amplitudes) for model in sampled])
     np.testing.assert_allclose(sigma_std, sigmas.std(axis=0), rtol=0.06)
     assert SplineModalModel.from_dict(spline.to_dict()).parameter_covariance is not None
+
+
+def test_identify_bootstrap_option_sets_n4sid_replicates_and_stdout_stays_one_json_object(tmp_path):
+    """--bootstrap 0 leaves N4SID without a covariance (its replicates are its whole cost); with replicates the
+    standard deviations are finite, and a replicate whose A overflows is left out without LAPACK writing to stdout."""
+    import json
+    import subprocess
+    import sys
+
+    from scenarios.linear_example import make_data
+
+    data, _ = make_data(1, outputs=(0,), duration=20.0)
+    record = tmp_path / "one.csv"
+    np.savetxt(record, np.column_stack([data.t, data.u[:, :1], data.y[:, :1]]), delimiter=",", header="t,u1,y1",
+               comments="")
+    command = [sys.executable, "-m", "scenarios.cli", "identify", str(record), "--inputs", "u1", "--outputs", "y1",
+               "--order", "4", "--json", "--quiet"]
+
+    def summary(*extra):
+        done = subprocess.run([*command, *extra], capture_output=True, text=True, check=False)
+        return done.returncode, json.loads(done.stdout)  # the whole of stdout: one JSON object
+
+    status, none = summary("--method", "n4sid", "--bootstrap", "0")
+    assert status == 0 and all(mode["frequency_hz_std"] is None for mode in none["modes"])
+    status, some = summary("--method", "n4sid", "--bootstrap", "4")
+    assert status == 0 and all(np.isfinite(mode["frequency_hz_std"]) and mode["frequency_hz_std"] > 0
+                               for mode in some["modes"])
+    status, refused = summary("--method", "arx", "--bootstrap", "3")
+    assert status == 2 and "n4sid" in refused["error"]

@@ -52,6 +52,7 @@ import numpy as np
 from identification.archive import (open_archive, read_records, run_group, update_archive, write_archive,
                                     write_record, write_run)
 from identification.archive_safety import archive_lock, check_output_target
+from identification.comparators import N4SID_BOOTSTRAP
 from identification.errors import InputError
 from identification.filter_models import DISCRETIZATIONS
 from identification.iekf import identify_iekf
@@ -94,6 +95,9 @@ def register(parser: argparse.ArgumentParser) -> None:
                         help="let --out replace an existing file that is not a workbench archive")
     parser.add_argument("--resume", metavar="ARCHIVE",
                         help="continue the run checkpointed in ARCHIVE (its data and settings; --passes counts all passes)")
+    parser.add_argument("--bootstrap", type=int, metavar="N",
+                        help=f"with --method n4sid: residual-bootstrap replicates for its parameter covariance "
+                             f"(default {N4SID_BOOTSTRAP}, each one subspace fit; 0 for none)")
     register_data_options(parser)
     workflow.register_options(parser)
     parser.set_defaults(handler=run)
@@ -285,8 +289,12 @@ def _run_comparator(args: argparse.Namespace, plan) -> tuple[dict, str]:
 
     outcomes = {}
 
+    if args.bootstrap is not None and args.method != "n4sid":
+        raise InputError("--bootstrap applies to --method n4sid (the other methods' covariances cost no refits)")
+    options = {"bootstrap": args.bootstrap} if args.bootstrap is not None else {}
+
     def fit_one(order):
-        outcome = identify_with(plan.estimation, method=args.method, order=order)
+        outcome = identify_with(plan.estimation, method=args.method, order=order, **options)
         outcomes[order] = outcome
         return outcome.model, {"fit_percent": outcome.metrics.percentage_explanation}
 
