@@ -52,7 +52,7 @@ from .errors import DivergenceError, ExcitationError, InputError
 from .filter_models import LinearModalFilterModel, check_discretization
 from .iekf_pass import COVARIANCE_FORMS, compiled_pass, pack_covariance, unpack_covariance
 from .modal import ModalModel, ModalStructure
-from .multirecord import pooled_percentage_explanation
+from .multirecord import pooled_simulation_fit
 from .start import DATA_STARTS, data_start
 from .uncertainty import iekf_parameter_covariance
 
@@ -364,13 +364,6 @@ def _time_weights(structure: ModalStructure, ratio: float) -> np.ndarray:
     return weights
 
 
-def _pooled_fit(records: tuple[IOData, ...], model: ModalModel, dt: float, method: str) -> np.ndarray:
-    """R per output pooled over the records, one simulation at a time; -inf where an (allowed) unstable model overflowed."""
-    with np.errstate(all="ignore"):
-        fit = pooled_percentage_explanation((rec.y, model.simulate(rec.u, dt, method=method)) for rec in records)
-    return np.where(np.isfinite(fit), fit, -np.inf)
-
-
 def identify_iekf(
     data: IOData,
     structure: ModalStructure,
@@ -579,8 +572,8 @@ def identify_iekf(
                 "allow unstable modes: --allow-unstable)",
                 last_good=result(f"diverged at pass {pass_index}") if history else None,
             )
-        fit_filter = _pooled_fit(records, model, dt, options.simulation_method)
-        fit_exact = fit_filter if options.simulation_method == "foh" else _pooled_fit(records, model, dt, "foh")
+        fit_filter = pooled_simulation_fit(model, records, options.simulation_method)
+        fit_exact = fit_filter if options.simulation_method == "foh" else pooled_simulation_fit(model, records)
         previous = history[-1] if history else None
         record = PassRecord(
             index=pass_index,

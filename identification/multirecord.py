@@ -17,7 +17,7 @@ from .data import IOData, as_records
 from .errors import InputError
 from .metrics import FitMetrics, nrmse_fit, percentage_explanation, r_squared
 
-__all__ = ["RecordFit", "MultiRecordFit", "score_records", "pooled_percentage_explanation"]
+__all__ = ["RecordFit", "MultiRecordFit", "score_records", "pooled_percentage_explanation", "pooled_simulation_fit"]
 
 
 def pooled_percentage_explanation(pairs: Iterable[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
@@ -30,6 +30,17 @@ def pooled_percentage_explanation(pairs: Iterable[tuple[np.ndarray, np.ndarray]]
     if np.any(energy == 0):
         raise InputError("an output is identically zero over all records: R (eq. 17) is undefined")
     return (1.0 - error / energy) * 100.0
+
+
+def pooled_simulation_fit(model: Any, records: Sequence[IOData], method: str = "foh") -> np.ndarray:
+    """R per output of ``model`` simulated from rest over each record in turn, pooled.
+
+    ``-inf`` where a simulation overflowed (an unstable model, where one is allowed).
+    """
+    with np.errstate(all="ignore"):
+        fit = pooled_percentage_explanation((record.y, model.simulate(record.u, record.dt, method=method))
+                                            for record in records)
+    return np.where(np.isfinite(fit), fit, -np.inf)
 
 
 def _defined(metric: Any, y: np.ndarray, y_hat: np.ndarray) -> np.ndarray:

@@ -456,6 +456,7 @@ class NonlinearOutcome:
 
     result: Any
     summary: dict[str, Any] = field(default_factory=dict)
+    scores: Any = None  # NonlinearScores of the chosen model, so that nothing simulates it again
 
 
 def identify_nonlinear(linear: ModalModel, plan: Plan, args: argparse.Namespace) -> NonlinearOutcome:
@@ -493,7 +494,7 @@ def identify_nonlinear(linear: ModalModel, plan: Plan, args: argparse.Namespace)
         "estimation_fit_percent": scores.estimation.fit, "validation_fit_percent": scores.validation_fit,
         "validation_R": scores.validation_R, "start_fit_percent": result.start_fit, "seconds": result.seconds,
     }
-    return NonlinearOutcome(result, summary)
+    return NonlinearOutcome(result, summary, scores)
 
 
 class NonlinearScores:
@@ -527,13 +528,12 @@ def start_of(result: Any, records: tuple[IOData, ...]) -> tuple[float | None, bo
     model = ModalModel.from_parameters(result.structure, theta)
     start_modes, final_modes = model.mode_eigenvalues(), result.model.mode_eigenvalues()
     moved = bool(np.max(np.abs(final_modes - start_modes) / np.maximum(np.abs(start_modes), 1e-300)) > MOVED)
-    with np.errstate(all="ignore"):
-        simulated = [model.simulate(data.u, data.dt) for data in records]
-    if not all(np.all(np.isfinite(y_hat)) for y_hat in simulated):
-        return None, moved
-    from identification.multirecord import pooled_percentage_explanation
+    from identification.multirecord import pooled_simulation_fit
 
-    return float(np.mean(pooled_percentage_explanation(zip((data.y for data in records), simulated)))), moved
+    fit = pooled_simulation_fit(model, records)
+    if not np.all(np.isfinite(fit)):  # the start overflows: no fit to compare with
+        return None, moved
+    return float(np.mean(fit)), moved
 
 
 def structure_for(args: argparse.Namespace, order: int, data: IOData) -> ModalStructure:

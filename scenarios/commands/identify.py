@@ -240,22 +240,25 @@ def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None)
                                    "since its simulation diverges (--horizon K to choose K)")
     if result is not None:
         summary["start"] = {k: v for k, v in result.meta.items() if k != "start_parameters"}
+    nonlinear = None
     if args.nonlinear:
         outcome = workflow.identify_nonlinear(model, plan, args)
+        nonlinear = outcome.result.model
         summary["nonlinear"] = outcome.summary
+        scores = outcome.scores
         warnings += workflow.run_warnings(
-            model=outcome.result.model, evaluation=workflow.Evaluation(
-                workflow.score(outcome.result.model, data, initial_state="zero"), outcome.summary["fit_percent"],
-                tuple(workflow.score(outcome.result.model, r, initial_state="zero") for r in plan.validation), None),
+            model=nonlinear, evaluation=workflow.Evaluation(
+                scores.estimation, scores.estimation.R, scores.validation, None),
             stop_reason=outcome.result.stop_reason, start_fit=float(np.mean(outcome.result.start_fit)),
             final_fit=float(np.mean(outcome.result.fit_percent)), allow_unstable=True, label="nonlinear")
-        if archive_path is not None:
-            with update_archive(archive_path) as archive:
-                write_run(archive, "nonlinear", model=outcome.result.model)
     if archive_path is not None:
-        if tests is not None:
+        if tests is not None or nonlinear is not None:  # one atomic update (each copies the archive)
             with update_archive(archive_path) as archive:
-                write_value(run_group(archive, RUN_NAME if result is not None else args.method), "residual_tests", tests)
+                if nonlinear is not None:
+                    write_run(archive, "nonlinear", model=nonlinear)
+                if tests is not None:
+                    write_value(run_group(archive, RUN_NAME if result is not None else args.method),
+                                "residual_tests", tests)
         summary["archive"] = str(archive_path)
     if args.save_model:
         summary["model_file"] = str(save_model(model, args.save_model, plan.preparation))
