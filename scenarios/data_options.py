@@ -14,7 +14,7 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Mapping, Sequence
 
 import h5py
 
@@ -27,7 +27,8 @@ from identification.storage import read_value, write_value
 from identification.timebase import JITTER_TOLERANCE
 
 __all__ = ["channel_names", "register_data_options", "settings_from_args", "read_from_args", "load_from_args", "records_summary", "record_names",
-           "archive_records", "archived_records", "archived_preparation", "save_model"]
+           "archive_records", "archived_records", "archived_preparation", "save_model", "RECORD_PREFIX",
+           "record_series", "record_series_name", "write_record_series"]
 
 PREPARATION_MEMBER = "preparation"
 RECORD_PREFIX = "identification"
@@ -112,23 +113,35 @@ def records_summary(model: Any, records: Sequence[IOData], preparation: Preparat
     return summary
 
 
+def record_series_name(prefix: str, index: int) -> str:
+    """The archive name of record ``index`` (0-based) of a series: ``prefix``, ``prefix_2``, ``prefix_3``, ..."""
+    return prefix if index == 0 else f"{prefix}_{index + 1}"
+
+
+def write_record_series(archive: h5py.File, records: Sequence[IOData], prefix: str) -> None:
+    """Store records as a series under ``prefix`` (:func:`record_series_name`), in order."""
+    for index, record in enumerate(records):
+        write_record(archive, record_series_name(prefix, index), record)
+
+
+def record_series(stored: Mapping[str, IOData], prefix: str) -> tuple[IOData, ...]:
+    """The series under ``prefix`` among an archive's records (:func:`read_records`), in order."""
+    found = []
+    while record_series_name(prefix, len(found)) in stored:
+        found.append(stored[record_series_name(prefix, len(found))])
+    return tuple(found)
+
+
 def archive_records(archive: h5py.File, records: Sequence[IOData], preparation: Preparation | None) -> None:
     """Store the prepared records (``data/identification``, ``data/identification_2``, ...) and the preparation."""
-    for index, record in enumerate(records):
-        write_record(archive, RECORD_PREFIX if index == 0 else f"{RECORD_PREFIX}_{index + 1}", record)
+    write_record_series(archive, records, RECORD_PREFIX)
     if preparation is not None:
         write_value(archive, PREPARATION_MEMBER, preparation)
 
 
 def archived_records(archive: h5py.File) -> tuple[IOData, ...]:
     """The prepared estimation records of an identification archive, in order."""
-    records = read_records(archive)
-    found = []
-    index = 1
-    while (RECORD_PREFIX if index == 1 else f"{RECORD_PREFIX}_{index}") in records:
-        found.append(records[RECORD_PREFIX if index == 1 else f"{RECORD_PREFIX}_{index}"])
-        index += 1
-    return tuple(found)
+    return record_series(read_records(archive), RECORD_PREFIX)
 
 
 def archived_preparation(archive: h5py.File) -> Preparation | None:

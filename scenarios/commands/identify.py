@@ -50,7 +50,7 @@ from pathlib import Path
 import numpy as np
 
 from identification.archive import (open_archive, read_records, run_group, update_archive, write_archive,
-                                    write_record, write_run)
+                                    write_run)
 from identification.archive_safety import archive_lock, check_output_target
 from identification.comparators import N4SID_BOOTSTRAP
 from identification.errors import InputError
@@ -62,8 +62,9 @@ from identification.modal import C_PATTERNS, ModalModel, ModalStructure
 from identification.preparation import prepare_validation, read_record
 from identification.storage import write_value
 from scenarios import identify_workflow as workflow
-from scenarios.data_options import (archive_records, archived_preparation, archived_records, records_summary,
-                                    register_data_options, save_model, settings_from_args)
+from scenarios.data_options import (RECORD_PREFIX, archive_records, archived_preparation, record_series,
+                                    records_summary, register_data_options, save_model, settings_from_args,
+                                    write_record_series)
 from scenarios.model_checks import uncertainty_lines, uncertainty_summary
 from scenarios.progress import Progress
 
@@ -114,13 +115,12 @@ def _resume(args: argparse.Namespace):
         raise InputError("--resume takes its data from the archive: give no DATA file")
     with open_archive(args.resume, kinds=["identification"]) as archive:
         previous = read_iekf_run(archive, RUN_NAME)
-        records = archived_records(archive)
         preparation = archived_preparation(archive)
         stored = read_records(archive)
+    records = record_series(stored, RECORD_PREFIX)
     if not records:
         raise InputError(f"{args.resume} holds no identification record to resume on")
-    held_out = tuple(stored[name] for name in sorted(stored, key=lambda name: (len(name), name))
-                     if name.startswith(VALIDATION_PREFIX))  # validation, validation_2, ..., validation_10
+    held_out = record_series(stored, VALIDATION_PREFIX)
     budget = previous.options.passes if args.passes is None else args.passes
     options = dataclasses.replace(previous.options, passes=max(budget, previous.passes_run))
     if preparation is not None:
@@ -146,8 +146,7 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
 def _archive_plan(archive, plan) -> None:
     """The prepared estimation records, the preparation and the held-out parts (what a resume needs)."""
     archive_records(archive, plan.records, plan.preparation)
-    for index, record in enumerate(plan.validation[:plan.held_out_count]):
-        write_record(archive, VALIDATION_PREFIX if index == 0 else f"{VALIDATION_PREFIX}_{index + 1}", record)
+    write_record_series(archive, plan.validation[:plan.held_out_count], VALIDATION_PREFIX)
 
 
 def _identify(args: argparse.Namespace) -> tuple[dict, str]:
