@@ -45,9 +45,7 @@ import math
 import os
 import socket
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
-from multiprocessing import get_context
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
@@ -65,6 +63,7 @@ from vehicle.parameters import VehicleParameters
 
 from .handling_study import COMPARED_MODES, OUTPUTS, _check_orders, _positive, _whole, identify_nonlinear, score
 from .paths import results_directory
+from .shutdown import run_in_workers
 
 __all__ = [
     "EXECUTORS",
@@ -433,21 +432,21 @@ def _job_cost(job: EnvelopeJob) -> float:
     return job.order * (20.0 if job.nonlinear else 1.0)
 
 
+def _job_in_worker(job: EnvelopeJob, report: Callable[[Any], None]) -> JobOutcome:
+    return run_job(job)
+
+
 def _run_process_pool(jobs: list[EnvelopeJob], workers: int, on_done: Callable[[JobOutcome], None]) -> None:
-    """Spawned processes (forking a process holding BLAS or CasADi threads is unsafe); one job each at a time."""
+    """Jobs in the study workers of :func:`scenarios.shutdown.run_in_workers`, one job each at a time.
+
+    Those workers are spawned (forking a process holding BLAS or CasADi threads is unsafe), stop on
+    SIGTERM, Ctrl-C or their parent's death, and are reaped before an error or interrupt is raised.
+    """
     if workers == 1:
         for job in jobs:
             on_done(run_job(job))
         return
-    with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
-        futures = [pool.submit(run_job, job) for job in jobs]
-        try:
-            for future in as_completed(futures):
-                on_done(future.result())
-        except BaseException:
-            for future in futures:
-                future.cancel()
-            raise
+    run_in_workers(_job_in_worker, jobs, workers, on_result=lambda job, outcome: on_done(outcome))
 
 
 def _run_dask(jobs: list[EnvelopeJob], on_done: Callable[[JobOutcome], None], *, scheduler: str | None,
