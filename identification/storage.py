@@ -13,23 +13,23 @@ tuple/list of str                              a dataset of UTF-8 strings, tagge
 any other tuple/list (of dataclasses, ...)     a group of numbered members ``0, 1, ...``
 dict whose JSON round trip is exact            a JSON attribute (tag ``json``)
 any other dict with str keys                   a group, one member per key (``vehid_encoding`` ``dict``)
-object with ``to_hdf5``/``from_hdf5``          a group it writes itself (``vehid_encoding`` ``hdf5``)
-object with ``to_dict``/``from_dict``          a group holding the dict as above (``vehid_encoding``
-                                               ``dict-codec``): matrices become datasets
-dataclass                                      a group with a ``dataclass`` attribute
-                                               ``module:QualName``, one member per init field
+registered type (:func:`register_codec`)       a group tagged with the type's schema name and version
+                                               (``vehid_schema``, ``vehid_schema_version``): members
+                                               as the type writes itself (``to_hdf5``), its
+                                               ``to_dict`` as a dict group, or one member per init field
 =============================================  =====================================================
 
-On reading, classes are imported only from the packages listed in
-:data:`TRUSTED_PACKAGES`; any other class name is refused with
-:class:`~identification.errors.ArchiveError`, and so is writing an instance
-of a class that could not be read back.
+No stored value names a Python class: the reader looks each schema up among
+the registered types, so an archive can only ever rebuild those. Archives
+written before schemas named classes (``module:QualName`` in ``dataclass`` or
+``vehid_class``); those names map to schemas through the fixed table
+:data:`LEGACY_CLASS_PATHS`, and any other name is refused with
+:class:`~identification.errors.ArchiveError`.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import json
 from typing import Any, Mapping
 
@@ -38,18 +38,17 @@ import numpy as np
 
 from .errors import ArchiveError
 
-__all__ = ["TRUSTED_PACKAGES", "write_value", "read_value", "write_group", "read_group"]
-
-#: Packages whose classes a stored value may name and :func:`read_value` may import.
-TRUSTED_PACKAGES = ("identification", "vehicle", "scenarios")
+__all__ = ["Codec", "LEGACY_CLASS_PATHS", "register_codec", "write_value", "read_value", "write_group", "read_group"]
 
 _TYPES = "vehid_types"  # parent attribute: JSON {attribute name: type tag}
 _ENCODING = "vehid_encoding"  # how a dataset or group encodes its value
 _LENGTH = "vehid_length"  # number of items of a sequence group
 _KEYS = "vehid_keys"  # key order of a dict group (JSON list)
-_CLASS = "vehid_class"  # module:QualName of a codec group
+_SCHEMA = "vehid_schema"  # schema name of a registered type's group
+_SCHEMA_VERSION = "vehid_schema_version"
+_LEGACY_CLASS = "vehid_class"  # module:QualName of a to_dict/to_hdf5 group, before schemas
 _UNITS = "vehid_units"  # dataclass group: JSON {field: unit} from field metadata
-_DATACLASS = "dataclass"
+_LEGACY_DATACLASS = "dataclass"  # module:QualName of a dataclass group, before schemas
 _RESERVED_PREFIX = "vehid_"
 
 def member_name(name: str, what: str) -> str:
@@ -97,40 +96,133 @@ def _json_exact(value: Mapping) -> str | None:
     return text if json.loads(text) == value else None
 
 
-def _class_path(value: Any) -> str:
-    cls = type(value)
-    path = f"{cls.__module__}:{cls.__qualname__}"
-    if cls.__module__.split(".")[0] not in TRUSTED_PACKAGES or "<locals>" in cls.__qualname__:
-        raise ArchiveError(
-            f"cannot archive a {path} value: only classes of the packages "
-            f"{', '.join(TRUSTED_PACKAGES)} can be read back"
-        )
-    return path
+@dataclasses.dataclass(frozen=True)
+class Codec:
+    """How a registered type is stored: its schema name and version, and how its members are laid out.
+
+    ``layout`` is ``hdf5`` (the type's ``to_hdf5``/``from_hdf5``), ``dict``
+    (its ``to_dict``/``from_dict``, the dict stored as a dict group) or
+    ``fields`` (a dataclass: one member per init field).
+    """
+
+    schema: str
+    version: int
+    cls: type
+    layout: str
 
 
-def _import_class(path: str) -> type:
-    """Import ``module:QualName`` from a trusted package, or refuse."""
-    module_name, _, qualname = str(path).partition(":")
-    if not module_name or not qualname or "<" in qualname:
-        raise ArchiveError(f"malformed class name {path!r} in archive")
-    if module_name.split(".")[0] not in TRUSTED_PACKAGES:
-        raise ArchiveError(
-            f"archive names class {path!r} outside the trusted packages "
-            f"({', '.join(TRUSTED_PACKAGES)}); refusing to import it"
-        )
-    try:
-        target: Any = importlib.import_module(module_name)
-        for part in qualname.split("."):
-            target = getattr(target, part)
-    except (ImportError, AttributeError):
-        raise ArchiveError(f"archive names class {path!r}, which this workbench does not have") from None
-    if not isinstance(target, type):
-        raise ArchiveError(f"archive names {path!r}, which is not a class")
-    return target
+_CODECS: dict[str, Codec] = {}
+_CODEC_OF_CLASS: dict[type, Codec] = {}
+
+#: The class names archives carried before schemas, and the schema each now reads as.
+LEGACY_CLASS_PATHS = {
+    "identification.data:IOData": "io_data",
+    "identification.iekf:FilterState": "iekf_filter_state",
+    "identification.iekf:IEKFOptions": "iekf_options",
+    "identification.metrics:FitMetrics": "fit_metrics",
+    "identification.modal:ModalModel": "modal_model",
+    "identification.modal:ModalStructure": "modal_structure",
+    "identification.preparation:Preparation": "preparation",
+    "identification.preparation:ReadSettings": "read_settings",
+    "identification.preparation:RecordOffsets": "record_offsets",
+    "identification.residuals:ResidualTests": "residual_tests",
+    "identification.scheduled:ScheduledModalModel": "scheduled_modal_model",
+    "identification.spline_iekf:SplineIEKFOptions": "spline_iekf_options",
+    "identification.spline_modal:SplineModalModel": "spline_modal_model",
+    "identification.spline_modal:SplineModalStructure": "spline_modal_structure",
+    "vehicle.linearize:Linearization": "vehicle_linearization",
+    "vehicle.linearize:Mode": "vehicle_mode",
+    "vehicle.parameters:ChassisParameters": "vehicle_chassis",
+    "vehicle.parameters:DriveParameters": "vehicle_drive",
+    "vehicle.parameters:SuspensionParameters": "vehicle_suspension",
+    "vehicle.parameters:TyreParameters": "vehicle_tyres",
+    "vehicle.parameters:VehicleParameters": "vehicle_parameters",
+}
+
+
+def register_codec(cls: type, schema: str, version: int = 1) -> Codec:
+    """Let values of ``cls`` be archived under ``schema`` (and read back from it).
+
+    Parameters
+    ----------
+    cls : type
+        A class with ``to_hdf5``/``from_hdf5``, with ``to_dict``/``from_dict``, or a dataclass.
+    schema : str
+        Its name in archives; stable for as long as archives of it exist.
+    version : int
+        Raised whenever the stored layout changes; archives of another version are refused.
+
+    Returns
+    -------
+    Codec
+    """
+    if hasattr(cls, "to_hdf5") and hasattr(cls, "from_hdf5"):
+        layout = "hdf5"
+    elif hasattr(cls, "to_dict") and hasattr(cls, "from_dict"):
+        layout = "dict"
+    elif dataclasses.is_dataclass(cls):
+        layout = "fields"
+    else:
+        raise TypeError(f"{cls.__qualname__} has no stored form: give it to_dict/from_dict or make it a dataclass")
+    known = _CODECS.get(schema)
+    if known is not None and known.cls is not cls:
+        raise ValueError(f"schema {schema!r} already stores {known.cls.__qualname__}")
+    codec = Codec(schema, int(version), cls, layout)
+    _CODECS[schema] = _CODEC_OF_CLASS[cls] = codec
+    return codec
+
+
+def _register_identification_types() -> None:
+    # On first use rather than at import: these modules load the numerics, which need not be loaded to store a dict.
+    from .data import IOData
+    from .iekf import FilterState, IEKFOptions
+    from .metrics import FitMetrics
+    from .modal import ModalModel, ModalStructure
+    from .preparation import Preparation, ReadSettings, RecordOffsets
+    from .residuals import ResidualTests
+    from .scheduled import ScheduledModalModel
+    from .spline_iekf import SplineIEKFOptions
+    from .spline_modal import SplineModalModel, SplineModalStructure
+
+    for cls, schema in ((IOData, "io_data"), (FilterState, "iekf_filter_state"), (IEKFOptions, "iekf_options"),
+                        (FitMetrics, "fit_metrics"), (ModalModel, "modal_model"), (ModalStructure, "modal_structure"),
+                        (Preparation, "preparation"), (ReadSettings, "read_settings"),
+                        (RecordOffsets, "record_offsets"), (ResidualTests, "residual_tests"),
+                        (ScheduledModalModel, "scheduled_modal_model"), (SplineIEKFOptions, "spline_iekf_options"),
+                        (SplineModalModel, "spline_modal_model"), (SplineModalStructure, "spline_modal_structure")):
+        register_codec(cls, schema)
+
+
+def _codec_for(value: Any) -> Codec | None:
+    if "io_data" not in _CODECS:
+        _register_identification_types()
+    return _CODEC_OF_CLASS.get(type(value))
+
+
+def _codec_named(group: h5py.Group) -> Codec:
+    """The codec of a registered type's group, by its schema or (older archives) by the class it names."""
+    if "io_data" not in _CODECS:
+        _register_identification_types()
+    attrs = group.attrs
+    if _SCHEMA in attrs:
+        schema, version = str(attrs[_SCHEMA]), int(attrs.get(_SCHEMA_VERSION, 0))
+    else:
+        path = str(attrs.get(_LEGACY_DATACLASS, attrs.get(_LEGACY_CLASS)))
+        if path not in LEGACY_CLASS_PATHS:
+            raise ArchiveError(f"{group.name} names class {path!r}, which archives of this workbench never held; "
+                               "refusing to read it")
+        schema, version = LEGACY_CLASS_PATHS[path], 1
+    codec = _CODECS.get(schema)
+    if codec is None:
+        raise ArchiveError(f"{group.name} is stored with schema {schema!r}, which this workbench does not know")
+    if codec.version != version:
+        raise ArchiveError(f"{group.name} is stored with schema {schema!r} version {version}; "
+                           f"this workbench reads version {codec.version}")
+    return codec
 
 
 def _check_reserved(name: str) -> None:
-    if name == _DATACLASS or name.startswith(_RESERVED_PREFIX):
+    if name == _LEGACY_DATACLASS or name.startswith(_RESERVED_PREFIX):
         raise ArchiveError(f"{name!r} is reserved by the archive format and cannot name a value")
 
 
@@ -170,8 +262,7 @@ def write_value(group: h5py.Group, name: str, value: Any, *, units: str | None =
     Raises
     ------
     ArchiveError
-        For a value of an unsupported type, or a class outside
-        :data:`TRUSTED_PACKAGES`.
+        For a value of an unsupported type, or of a class without a registered schema.
     """
     member_name(name, "value")
     _check_reserved(name)
@@ -245,35 +336,24 @@ def write_group(group: h5py.Group, value: Any) -> None:
     ----------
     group : h5py.Group
         Empty; receives the value's members and its tags.
-    value : dataclass, dict, tuple, list, or object with ``to_hdf5``/``to_dict``
+    value : registered type, dict, tuple or list
         Scalars and arrays cannot fill a group; store them with :func:`write_value`.
 
     Raises
     ------
     ArchiveError
-        For an unsupported value or a class outside :data:`TRUSTED_PACKAGES`.
+        For an unsupported value or a class without a registered schema.
     """
-    if hasattr(value, "to_hdf5") and hasattr(type(value), "from_hdf5"):
-        group.attrs[_CLASS] = _class_path(value)
-        value.to_hdf5(group)
-        group.attrs[_ENCODING] = "hdf5"
-        return
-    if hasattr(value, "to_dict") and hasattr(type(value), "from_dict"):
-        group.attrs[_CLASS] = _class_path(value)
-        group.attrs[_ENCODING] = "dict-codec"
-        _write_mapping(group, value.to_dict())
-        return
-    if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        group.attrs[_DATACLASS] = _class_path(value)
-        units = {}
-        for item in dataclasses.fields(value):
-            if not item.init:
-                continue
-            write_value(group, item.name, getattr(value, item.name))
-            if "unit" in item.metadata:
-                units[item.name] = str(item.metadata["unit"])
-        if units:
-            group.attrs[_UNITS] = json.dumps(units, sort_keys=True)
+    codec = _codec_for(value)
+    if codec is not None:
+        group.attrs[_SCHEMA] = codec.schema
+        group.attrs[_SCHEMA_VERSION] = np.int64(codec.version)
+        if codec.layout == "hdf5":
+            value.to_hdf5(group)
+        elif codec.layout == "dict":
+            _write_mapping(group, value.to_dict())
+        else:
+            _write_fields(group, value)
         return
     if isinstance(value, Mapping):
         group.attrs[_ENCODING] = "dict"
@@ -285,7 +365,22 @@ def write_group(group: h5py.Group, value: Any) -> None:
         for index, item in enumerate(value):
             write_value(group, str(index), item)
         return
+    if dataclasses.is_dataclass(value) or hasattr(value, "to_dict"):
+        raise ArchiveError(f"cannot archive a {type(value).__qualname__}: it has no registered schema "
+                           "(identification.storage.register_codec)")
     raise ArchiveError(f"cannot archive a value of type {type(value).__module__}.{type(value).__qualname__}")
+
+
+def _write_fields(group: h5py.Group, value: Any) -> None:
+    units = {}
+    for item in dataclasses.fields(value):
+        if not item.init:
+            continue
+        write_value(group, item.name, getattr(value, item.name))
+        if "unit" in item.metadata:
+            units[item.name] = str(item.metadata["unit"])
+    if units:
+        group.attrs[_UNITS] = json.dumps(units, sort_keys=True)
 
 
 def _write_mapping(group: h5py.Group, mapping: Mapping) -> None:
@@ -308,8 +403,7 @@ def read_value(group: h5py.Group, name: str) -> Any:
     Raises
     ------
     ArchiveError
-        When there is no such member, or it names a class outside
-        :data:`TRUSTED_PACKAGES`, or it cannot be rebuilt.
+        When there is no such member, or it names an unknown schema or class, or it cannot be rebuilt.
     """
     if name in group:
         member = group[name]
@@ -356,21 +450,9 @@ def _tuples(value: Any) -> Any:
 def read_group(group: h5py.Group) -> Any:
     """Read a group written by :func:`write_group` (or by :func:`write_value`) back into its value."""
     attrs = group.attrs
-    if _DATACLASS in attrs:
-        cls = _import_class(attrs[_DATACLASS])
-        if not dataclasses.is_dataclass(cls):
-            raise ArchiveError(f"{group.name} names {attrs[_DATACLASS]!r}, which is not a dataclass")
-        present = set(group.keys()) | set(attrs.keys())
-        kwargs = {f.name: read_value(group, f.name) for f in dataclasses.fields(cls) if f.init and f.name in present}
-        return _construct(group, cls, lambda: cls(**kwargs))
+    if _SCHEMA in attrs or _LEGACY_DATACLASS in attrs or _LEGACY_CLASS in attrs:
+        return _read_registered(group, _codec_named(group))
     encoding = attrs.get(_ENCODING)
-    if encoding == "hdf5":
-        cls = _import_class(attrs[_CLASS])
-        return _construct(group, cls, lambda: cls.from_hdf5(group))
-    if encoding == "dict-codec":
-        cls = _import_class(attrs[_CLASS])
-        mapping = _read_mapping(group)
-        return _construct(group, cls, lambda: cls.from_dict(mapping))
     if encoding == "dict":
         return _read_mapping(group)
     if encoding in ("tuple", "list"):
@@ -384,8 +466,14 @@ def _read_mapping(group: h5py.Group) -> dict[str, Any]:
     return {key: read_value(group, key) for key in keys}
 
 
-def _construct(group: h5py.Group, cls: type, build: Any) -> Any:
+def _read_registered(group: h5py.Group, codec: Codec) -> Any:
+    cls = codec.cls
     try:
-        return build()
+        if codec.layout == "hdf5":
+            return cls.from_hdf5(group)
+        if codec.layout == "dict":
+            return cls.from_dict(_read_mapping(group))
+        present = set(group.keys()) | set(group.attrs.keys())
+        return cls(**{f.name: read_value(group, f.name) for f in dataclasses.fields(cls) if f.init and f.name in present})
     except (TypeError, ValueError, KeyError) as exc:
-        raise ArchiveError(f"{group.name} does not rebuild a {cls.__qualname__}: {exc}") from None
+        raise ArchiveError(f"{group.name} does not rebuild a {codec.schema}: {exc}") from None
