@@ -3,6 +3,7 @@
 from .archive import (
     SCHEMA_VERSION,
     Archive,
+    RunName,
     RunRecord,
     append_history,
     open_archive,
@@ -90,6 +91,7 @@ __all__ = [
     "resample",
     "SCHEMA_VERSION",
     "Archive",
+    "RunName",
     "RunRecord",
     "write_archive",
     "update_archive",
