@@ -1,30 +1,14 @@
-"""Safe HDF5 storage of frozen values: arrays, scalars, sequences, dicts, dataclasses.
+"""Safe HDF5 storage of frozen values: scalars, arrays, sequences, dicts and registered types.
 
-Nothing is pickled. Values are stored with :func:`write_value` and read with :func:`read_value`:
-
-=============================================  =====================================================
-value                                          stored as
-=============================================  =====================================================
-``None``, bool, int, float, complex, str       an attribute of the parent group; its Python type is
-(Python or NumPy scalars)                      recorded in the parent's ``vehid_types`` attribute
-``numpy.ndarray`` (numeric, bool)              a dataset, bit for bit; optional ``units`` attribute
-tuple/list of numbers (nested, rectangular)    a dataset with ``vehid_encoding`` ``tuple``/``list``
-tuple/list of str                              a dataset of UTF-8 strings, tagged the same way
-any other tuple/list (of dataclasses, ...)     a group of numbered members ``0, 1, ...``
-dict whose JSON round trip is exact            a JSON attribute (tag ``json``)
-any other dict with str keys                   a group, one member per key (``vehid_encoding`` ``dict``)
-registered type (:func:`register_codec`)       a group tagged with the type's schema name and version
-                                               (``vehid_schema``, ``vehid_schema_version``): members
-                                               as the type writes itself (``to_hdf5``), its
-                                               ``to_dict`` as a dict group, or one member per init field
-=============================================  =====================================================
-
-No stored value names a Python class: the reader looks each schema up among
-the registered types, so an archive can only ever rebuild those. Archives
-written before schemas named classes (``module:QualName`` in ``dataclass`` or
-``vehid_class``); those names map to schemas through the fixed table
-:data:`LEGACY_CLASS_PATHS`, and any other name is refused with
-:class:`~identification.errors.ArchiveError`.
+Nothing is pickled, and no stored value names a Python class. :func:`write_value`
+stores a scalar as an attribute (its type in the parent's ``vehid_types``), an
+array or a rectangular sequence as a dataset, other sequences and dicts as
+groups, and a value of a type registered with :func:`register_codec` as a group
+tagged with the type's schema name and version; :func:`read_value` rebuilds
+them, and only registered types. The layout is in ``results/RESULTS_LAYOUT.md``
+(Values). Archives written before schemas named classes (``module:QualName``);
+those names map to schemas through the fixed table :data:`LEGACY_CLASS_PATHS`,
+and any other name is refused with :class:`~identification.errors.ArchiveError`.
 """
 
 from __future__ import annotations
@@ -38,7 +22,7 @@ import numpy as np
 
 from .errors import ArchiveError
 
-__all__ = ["Codec", "LEGACY_CLASS_PATHS", "register_codec", "write_value", "read_value", "write_group", "read_group"]
+__all__ = ["LEGACY_CLASS_PATHS", "register_codec", "write_value", "read_value", "write_group", "read_group"]
 
 _TYPES = "vehid_types"  # parent attribute: JSON {attribute name: type tag}
 _ENCODING = "vehid_encoding"  # how a dataset or group encodes its value
@@ -96,112 +80,61 @@ def _json_exact(value: Mapping) -> str | None:
     return text if json.loads(text) == value else None
 
 
-@dataclasses.dataclass(frozen=True)
-class Codec:
-    """How a registered type is stored: its schema name and version, and how its members are laid out.
-
-    ``layout`` is ``hdf5`` (the type's ``to_hdf5``/``from_hdf5``), ``dict``
-    (its ``to_dict``/``from_dict``, the dict stored as a dict group) or
-    ``fields`` (a dataclass: one member per init field).
-    """
-
-    schema: str
-    version: int
-    cls: type
-    layout: str
-
-
-_CODECS: dict[str, Codec] = {}
-_CODEC_OF_CLASS: dict[type, Codec] = {}
+_SCHEMAS: dict[str, tuple[type, int]] = {}  # schema name: (class, version)
+_SCHEMA_OF: dict[type, str] = {}
 
 #: The class names archives carried before schemas, and the schema each now reads as.
 LEGACY_CLASS_PATHS = {
-    "identification.data:IOData": "io_data",
-    "identification.iekf:FilterState": "iekf_filter_state",
-    "identification.iekf:IEKFOptions": "iekf_options",
-    "identification.metrics:FitMetrics": "fit_metrics",
-    "identification.modal:ModalModel": "modal_model",
-    "identification.modal:ModalStructure": "modal_structure",
-    "identification.preparation:Preparation": "preparation",
+    "identification.data:IOData": "io_data", "identification.metrics:FitMetrics": "fit_metrics",
+    "identification.iekf:FilterState": "iekf_filter_state", "identification.iekf:IEKFOptions": "iekf_options",
+    "identification.modal:ModalModel": "modal_model", "identification.modal:ModalStructure": "modal_structure",
+    "identification.preparation:Preparation": "preparation", "identification.residuals:ResidualTests": "residual_tests",
     "identification.preparation:ReadSettings": "read_settings",
     "identification.preparation:RecordOffsets": "record_offsets",
-    "identification.residuals:ResidualTests": "residual_tests",
     "identification.scheduled:ScheduledModalModel": "scheduled_modal_model",
     "identification.spline_iekf:SplineIEKFOptions": "spline_iekf_options",
     "identification.spline_modal:SplineModalModel": "spline_modal_model",
     "identification.spline_modal:SplineModalStructure": "spline_modal_structure",
-    "vehicle.linearize:Linearization": "vehicle_linearization",
-    "vehicle.linearize:Mode": "vehicle_mode",
-    "vehicle.parameters:ChassisParameters": "vehicle_chassis",
-    "vehicle.parameters:DriveParameters": "vehicle_drive",
+    "vehicle.linearize:Linearization": "vehicle_linearization", "vehicle.linearize:Mode": "vehicle_mode",
+    "vehicle.parameters:ChassisParameters": "vehicle_chassis", "vehicle.parameters:DriveParameters": "vehicle_drive",
     "vehicle.parameters:SuspensionParameters": "vehicle_suspension",
-    "vehicle.parameters:TyreParameters": "vehicle_tyres",
-    "vehicle.parameters:VehicleParameters": "vehicle_parameters",
+    "vehicle.parameters:TyreParameters": "vehicle_tyres", "vehicle.parameters:VehicleParameters": "vehicle_parameters",
 }
 
 
-def register_codec(cls: type, schema: str, version: int = 1) -> Codec:
-    """Let values of ``cls`` be archived under ``schema`` (and read back from it).
+def register_codec(cls: type, schema: str, version: int = 1) -> None:
+    """Archive values of ``cls`` under the name ``schema``, which stays as long as such archives exist.
 
-    Parameters
-    ----------
-    cls : type
-        A class with ``to_hdf5``/``from_hdf5``, with ``to_dict``/``from_dict``, or a dataclass.
-    schema : str
-        Its name in archives; stable for as long as archives of it exist.
-    version : int
-        Raised whenever the stored layout changes; archives of another version are refused.
-
-    Returns
-    -------
-    Codec
+    ``cls`` writes itself (``to_hdf5``/``from_hdf5``), converts to a dict
+    (``to_dict``/``from_dict``) or is a dataclass (one member per init field).
+    Raise ``version`` whenever the stored layout changes: archives of another version are refused.
     """
-    if hasattr(cls, "to_hdf5") and hasattr(cls, "from_hdf5"):
-        layout = "hdf5"
-    elif hasattr(cls, "to_dict") and hasattr(cls, "from_dict"):
-        layout = "dict"
-    elif dataclasses.is_dataclass(cls):
-        layout = "fields"
-    else:
+    if not (hasattr(cls, "from_hdf5") or hasattr(cls, "from_dict") or dataclasses.is_dataclass(cls)):
         raise TypeError(f"{cls.__qualname__} has no stored form: give it to_dict/from_dict or make it a dataclass")
-    known = _CODECS.get(schema)
-    if known is not None and known.cls is not cls:
-        raise ValueError(f"schema {schema!r} already stores {known.cls.__qualname__}")
-    codec = Codec(schema, int(version), cls, layout)
-    _CODECS[schema] = _CODEC_OF_CLASS[cls] = codec
-    return codec
+    if _SCHEMAS.get(schema, (cls,))[0] is not cls:
+        raise ValueError(f"schema {schema!r} already stores {_SCHEMAS[schema][0].__qualname__}")
+    _SCHEMAS[schema], _SCHEMA_OF[cls] = (cls, int(version)), schema
 
 
 def _register_identification_types() -> None:
-    # On first use rather than at import: these modules load the numerics, which need not be loaded to store a dict.
-    from .data import IOData
-    from .iekf import FilterState, IEKFOptions
-    from .metrics import FitMetrics
-    from .modal import ModalModel, ModalStructure
-    from .preparation import Preparation, ReadSettings, RecordOffsets
-    from .residuals import ResidualTests
-    from .scheduled import ScheduledModalModel
-    from .spline_iekf import SplineIEKFOptions
-    from .spline_modal import SplineModalModel, SplineModalStructure
+    # On first use, not at import: these modules load the numerics, which storing a dict does not need.
+    from . import data, iekf, metrics, modal, preparation, residuals, scheduled, spline_iekf, spline_modal
 
-    for cls, schema in ((IOData, "io_data"), (FilterState, "iekf_filter_state"), (IEKFOptions, "iekf_options"),
-                        (FitMetrics, "fit_metrics"), (ModalModel, "modal_model"), (ModalStructure, "modal_structure"),
-                        (Preparation, "preparation"), (ReadSettings, "read_settings"),
-                        (RecordOffsets, "record_offsets"), (ResidualTests, "residual_tests"),
-                        (ScheduledModalModel, "scheduled_modal_model"), (SplineIEKFOptions, "spline_iekf_options"),
-                        (SplineModalModel, "spline_modal_model"), (SplineModalStructure, "spline_modal_structure")):
+    for cls, schema in ((data.IOData, "io_data"), (metrics.FitMetrics, "fit_metrics"),
+                        (iekf.FilterState, "iekf_filter_state"), (iekf.IEKFOptions, "iekf_options"),
+                        (modal.ModalModel, "modal_model"), (modal.ModalStructure, "modal_structure"),
+                        (preparation.Preparation, "preparation"), (preparation.ReadSettings, "read_settings"),
+                        (preparation.RecordOffsets, "record_offsets"), (residuals.ResidualTests, "residual_tests"),
+                        (scheduled.ScheduledModalModel, "scheduled_modal_model"),
+                        (spline_iekf.SplineIEKFOptions, "spline_iekf_options"),
+                        (spline_modal.SplineModalModel, "spline_modal_model"),
+                        (spline_modal.SplineModalStructure, "spline_modal_structure")):
         register_codec(cls, schema)
 
 
-def _codec_for(value: Any) -> Codec | None:
-    if "io_data" not in _CODECS:
-        _register_identification_types()
-    return _CODEC_OF_CLASS.get(type(value))
-
-
-def _codec_named(group: h5py.Group) -> Codec:
-    """The codec of a registered type's group, by its schema or (older archives) by the class it names."""
-    if "io_data" not in _CODECS:
+def _registered(group: h5py.Group) -> tuple[str, type]:
+    """The schema and class of a registered type's group, by its schema or (older archives) by the class it names."""
+    if "io_data" not in _SCHEMAS:
         _register_identification_types()
     attrs = group.attrs
     if _SCHEMA in attrs:
@@ -212,13 +145,13 @@ def _codec_named(group: h5py.Group) -> Codec:
             raise ArchiveError(f"{group.name} names class {path!r}, which archives of this workbench never held; "
                                "refusing to read it")
         schema, version = LEGACY_CLASS_PATHS[path], 1
-    codec = _CODECS.get(schema)
-    if codec is None:
+    if schema not in _SCHEMAS:
         raise ArchiveError(f"{group.name} is stored with schema {schema!r}, which this workbench does not know")
-    if codec.version != version:
+    cls, known = _SCHEMAS[schema]
+    if version != known:
         raise ArchiveError(f"{group.name} is stored with schema {schema!r} version {version}; "
-                           f"this workbench reads version {codec.version}")
-    return codec
+                           f"this workbench reads version {known}")
+    return schema, cls
 
 
 def _check_reserved(name: str) -> None:
@@ -344,13 +277,14 @@ def write_group(group: h5py.Group, value: Any) -> None:
     ArchiveError
         For an unsupported value or a class without a registered schema.
     """
-    codec = _codec_for(value)
-    if codec is not None:
-        group.attrs[_SCHEMA] = codec.schema
-        group.attrs[_SCHEMA_VERSION] = np.int64(codec.version)
-        if codec.layout == "hdf5":
+    if "io_data" not in _SCHEMAS:
+        _register_identification_types()
+    if type(value) in _SCHEMA_OF:
+        schema = _SCHEMA_OF[type(value)]
+        group.attrs[_SCHEMA], group.attrs[_SCHEMA_VERSION] = schema, np.int64(_SCHEMAS[schema][1])
+        if hasattr(value, "from_hdf5"):  # the same choice as the reader's
             value.to_hdf5(group)
-        elif codec.layout == "dict":
+        elif hasattr(value, "from_dict"):
             _write_mapping(group, value.to_dict())
         else:
             _write_fields(group, value)
@@ -451,7 +385,7 @@ def read_group(group: h5py.Group) -> Any:
     """Read a group written by :func:`write_group` (or by :func:`write_value`) back into its value."""
     attrs = group.attrs
     if _SCHEMA in attrs or _LEGACY_DATACLASS in attrs or _LEGACY_CLASS in attrs:
-        return _read_registered(group, _codec_named(group))
+        return _read_registered(group, *_registered(group))
     encoding = attrs.get(_ENCODING)
     if encoding == "dict":
         return _read_mapping(group)
@@ -466,14 +400,13 @@ def _read_mapping(group: h5py.Group) -> dict[str, Any]:
     return {key: read_value(group, key) for key in keys}
 
 
-def _read_registered(group: h5py.Group, codec: Codec) -> Any:
-    cls = codec.cls
+def _read_registered(group: h5py.Group, schema: str, cls: type) -> Any:
     try:
-        if codec.layout == "hdf5":
+        if hasattr(cls, "from_hdf5"):
             return cls.from_hdf5(group)
-        if codec.layout == "dict":
+        if hasattr(cls, "from_dict"):
             return cls.from_dict(_read_mapping(group))
         present = set(group.keys()) | set(group.attrs.keys())
         return cls(**{f.name: read_value(group, f.name) for f in dataclasses.fields(cls) if f.init and f.name in present})
     except (TypeError, ValueError, KeyError) as exc:
-        raise ArchiveError(f"{group.name} does not rebuild a {codec.schema}: {exc}") from None
+        raise ArchiveError(f"{group.name} does not rebuild a {schema}: {exc}") from None

@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from identification.archive import Archive, RunName, RunRecord, read_archive
+from identification.archive import Archive, RunName, read_archive
 from identification.errors import InputError
 from identification.residuals import residual_tests
 from identification.uncertainty import normal_quantile
@@ -69,14 +69,11 @@ def _study(archive: Archive | str | Path) -> Archive:
     return archive
 
 
-def _runs(archive: Archive, kind: str) -> dict[int, RunRecord]:
-    """The runs of one kind (``linear``, ``nonlinear``) that hold a model, by order."""
-    runs = {}
-    for name, run in archive.runs.items():
-        parsed = RunName.parse(name)
-        if parsed is not None and parsed.kind == kind and run.model is not None:
-            runs[parsed.order] = run
-    return runs
+def _models(archive: Archive, kind: str) -> dict[int, Any]:
+    """The models of one kind of run (``linear``, ``nonlinear``), by order."""
+    orders = {name: RunName.parse(name) for name in archive.runs}
+    return {parsed.order: archive.runs[name].model for name, parsed in orders.items()
+            if parsed is not None and parsed.kind == kind and archive.runs[name].model is not None}
 
 
 def handling_table(summary: dict[str, Any]) -> str:
@@ -94,8 +91,7 @@ def handling_figures(archive: Archive | str | Path) -> dict[str, Figure]:
     """Every figure of the handling report, from the study's archive (read, or its path)."""
     archive = _study(archive)
     summary, records = archive.summary, archive.records
-    linear = {order: run.model for order, run in _runs(archive, "linear").items()}
-    nonlinear = {order: run.model for order, run in _runs(archive, "nonlinear").items()}
+    linear, nonlinear = _models(archive, "linear"), _models(archive, "nonlinear")
     chosen = summary["chosen_order"]
     figures: dict[str, Figure] = {}
     names = list(records["identification"].output_names)
@@ -260,10 +256,9 @@ def write_handling_report(archive: Archive | str | Path, out_dir: str | Path) ->
     table_path.write_text("# Handling study (Table 5 style)\n\n" + handling_table(archive.summary))
     written.append(table_path)
     chosen = archive.summary["chosen_order"]
-    nonlinear = _runs(archive, "nonlinear")
+    nonlinear = _models(archive, "nonlinear")
     if chosen in nonlinear:
-        n = archive.records["identification"].n_samples
         export = out_dir / f"nonlinear_n{chosen}.casadi"
-        nonlinear[chosen].model.to_casadi_function(n).save(str(export))
+        nonlinear[chosen].to_casadi_function(archive.records["identification"].n_samples).save(str(export))
         written.append(export)
     return written

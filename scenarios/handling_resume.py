@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from identification.archive import RunName, open_archive, read_history, read_records, update_archive
+from identification.archive import RunName, open_archive, read_records, read_run, update_archive
 from identification.errors import ArchiveError, InputError
 from identification.iekf_archive import read_iekf_run
 from identification.storage import read_group, read_value
@@ -71,15 +71,15 @@ def _config(stored: Any, path: Path, workers: int | None) -> HandlingConfig:
 
 
 def _nonlinear(run: Any) -> NonlinearOutcome:
-    history = read_history(run)
-    metrics = read_group(run["metrics"])
+    stored = read_run(run)
+    history, metrics = stored.history, stored.metrics
     curves = {}
     mode = 0
     while f"mode{mode}_frequency" in run:
         curves[mode] = (read_value(run, f"mode{mode}_frequency"), read_value(run, f"mode{mode}_damping"))
         mode += 1
     return NonlinearOutcome(
-        model=read_group(run["model"]),
+        model=stored.model,
         fit_identification=np.asarray(metrics["identification_R"]),
         fit_validation=np.asarray(metrics["validation_R"]),
         fit_filter=history.get("fit_filter", np.zeros((0, 0))),

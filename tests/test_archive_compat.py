@@ -115,12 +115,22 @@ def test_every_registered_type_round_trips(tmp_path):
     })
     linearisation = linearize(vehicle, speed=20.0)
     values.update({"vehicle_linearization": linearisation, "vehicle_mode": linearisation.modes[0]})
-    assert set(values) == set(storage._CODECS)  # a type registered later needs an example here
+    assert set(values) == set(storage._SCHEMAS)  # a type registered later needs an example here
     with h5py.File(tmp_path / "all.h5", "w") as handle:
         for schema, value in values.items():
-            assert storage._CODECS[schema].cls is type(value)
+            assert storage._SCHEMAS[schema][0] is type(value)
             write_value(handle, schema, value)
             assert handle[schema].attrs["vehid_schema"] == schema
     with h5py.File(tmp_path / "all.h5", "r") as handle:
         for schema, value in values.items():
             assert _same(read_value(handle, schema), value), schema
+
+
+def test_the_stored_nonlinear_history_is_the_series_the_summary_once_carried():
+    # The report now draws the nonlinear convergence from runs/nonlinear-n<n>/history; a study
+    # written before it carried the same series in its JSON summary, so both must agree exactly.
+    archive = read_archive(ARCHIVES / "handling_study.h5")
+    (run,) = archive.summary["nonlinear_runs"]
+    history = archive.runs[f"nonlinear-n{run['order']}"].history
+    assert np.array_equal(history["fit_filter"], np.array(run["fit_filter_by_pass"]))
+    assert np.array_equal(history["trace_p"], np.array(run["trace_p_by_pass"]))
