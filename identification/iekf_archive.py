@@ -106,16 +106,11 @@ def read_iekf_run(archive: h5py.File, name: str) -> IEKFResult:
     if not isinstance(model, ModalModel) or not isinstance(state, FilterState) or not isinstance(options, IEKFOptions):
         raise ArchiveError(f"run {name!r} does not hold an IEKF model, state and options")
     records = tuple(
-        PassRecord(
-            index=int(history["index"][k]),
-            parameters=history["parameters"][k],
-            fit_filter=history["fit_filter"][k],
-            fit_continuous=history["fit_continuous"][k],
-            trace_p=float(history["trace_p"][k]),
-            min_eig_p=float(history["min_eig_p"][k]),
-            seconds=float(history["seconds"][k]),
-            nis=float(history["nis"][k]) if "nis" in history else float("nan"),
-        )
+        PassRecord(index=int(history["index"][k]), parameters=history["parameters"][k],
+                   fit_filter=history["fit_filter"][k], fit_continuous=history["fit_continuous"][k],
+                   trace_p=float(history["trace_p"][k]), min_eig_p=float(history["min_eig_p"][k]),
+                   seconds=float(history["seconds"][k]),
+                   nis=float(history["nis"][k]) if "nis" in history else float("nan"))
         for k in range(len(history.get("index", ())))
     )
     return IEKFResult(

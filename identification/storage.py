@@ -14,6 +14,7 @@ and any other name is refused with :class:`~identification.errors.ArchiveError`.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 from typing import Any, Mapping
 
@@ -53,20 +54,14 @@ def _number_tree(value: Any, container: type) -> bool:
     return False
 
 
+_SCALAR_TAGS = (((bool, np.bool_), "bool"), ((int, np.integer), "int"), ((float, np.floating), "float"),
+                ((complex, np.complexfloating), "complex"), ((str,), "str"))  # bool before int: it is one
+
+
 def _scalar_tag(value: Any) -> str | None:
     if value is None:
         return "none"
-    if isinstance(value, (bool, np.bool_)):
-        return "bool"
-    if isinstance(value, (int, np.integer)):
-        return "int"
-    if isinstance(value, (float, np.floating)):
-        return "float"
-    if isinstance(value, (complex, np.complexfloating)):
-        return "complex"
-    if isinstance(value, str):
-        return "str"
-    return None
+    return next((tag for types, tag in _SCALAR_TAGS if isinstance(value, types)), None)
 
 
 def _json_exact(value: Mapping) -> str | None:
@@ -116,6 +111,7 @@ def register_codec(cls: type, schema: str, version: int = 1) -> None:
     _SCHEMAS[schema], _SCHEMA_OF[cls] = (cls, int(version)), schema
 
 
+@functools.cache
 def _register_identification_types() -> None:
     # On first use, not at import: these modules load the numerics, which storing a dict does not need.
     from . import data, iekf, metrics, modal, preparation, residuals, scheduled, spline_iekf, spline_modal
@@ -134,8 +130,7 @@ def _register_identification_types() -> None:
 
 def _registered(group: h5py.Group) -> tuple[str, type]:
     """The schema and class of a registered type's group, by its schema or (older archives) by the class it names."""
-    if "io_data" not in _SCHEMAS:
-        _register_identification_types()
+    _register_identification_types()
     attrs = group.attrs
     if _SCHEMA in attrs:
         schema, version = str(attrs[_SCHEMA]), int(attrs.get(_SCHEMA_VERSION, 0))
@@ -188,7 +183,7 @@ def write_value(group: h5py.Group, name: str, value: Any, *, units: str | None =
     name : str
         Member name: no ``/``, not ``dataclass`` and not starting ``vehid_``.
     value : object
-        Any of the supported values (see the module docstring).
+        Any of the supported values (``results/RESULTS_LAYOUT.md``, Values).
     units : str, optional
         The ``units`` attribute of an array or numeric-sequence dataset.
 
@@ -240,9 +235,7 @@ def _write_dataset(group: h5py.Group, name: str, value: Any) -> h5py.Dataset | N
     """Write arrays and flat/nested sequences of numbers or strings; None for other values."""
     if isinstance(value, np.ndarray):
         if value.dtype.kind not in "biufc":
-            raise ArchiveError(
-                f"cannot archive array {name!r} of dtype {value.dtype}: use numbers, or a tuple of str"
-            )
+            raise ArchiveError(f"cannot archive array {name!r} of dtype {value.dtype}: use numbers, or a tuple of str")
         return group.create_dataset(name, data=value)
     for container in (tuple, list):
         if _number_tree(value, container):
@@ -277,8 +270,7 @@ def write_group(group: h5py.Group, value: Any) -> None:
     ArchiveError
         For an unsupported value or a class without a registered schema.
     """
-    if "io_data" not in _SCHEMAS:
-        _register_identification_types()
+    _register_identification_types()
     if type(value) in _SCHEMA_OF:
         schema = _SCHEMA_OF[type(value)]
         group.attrs[_SCHEMA], group.attrs[_SCHEMA_VERSION] = schema, np.int64(_SCHEMAS[schema][1])
