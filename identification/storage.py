@@ -6,9 +6,10 @@ array or a rectangular sequence as a dataset, other sequences and dicts as
 groups, and a value of a type registered with :func:`register_codec` as a group
 tagged with the type's schema name and version; :func:`read_value` rebuilds
 them, and only registered types. The layout is in ``results/RESULTS_LAYOUT.md``
-(Values). Archives written before schemas named classes (``module:QualName``);
-those names map to schemas through the fixed table :data:`LEGACY_CLASS_PATHS`,
-and any other name is refused with :class:`~identification.errors.ArchiveError`.
+(Values). Archives written before schemas named classes (``module:QualName``):
+each type is registered with the fixed name it had then (together the table
+:data:`LEGACY_CLASS_PATHS`), and any other name is refused with
+:class:`~identification.errors.ArchiveError`.
 """
 
 from __future__ import annotations
@@ -78,37 +79,26 @@ def _json_exact(value: Mapping) -> str | None:
 _SCHEMAS: dict[str, tuple[type, int]] = {}  # schema name: (class, version)
 _SCHEMA_OF: dict[type, str] = {}
 
-#: The class names archives carried before schemas, and the schema each now reads as.
-LEGACY_CLASS_PATHS = {
-    "identification.data:IOData": "io_data", "identification.metrics:FitMetrics": "fit_metrics",
-    "identification.iekf:FilterState": "iekf_filter_state", "identification.iekf:IEKFOptions": "iekf_options",
-    "identification.modal:ModalModel": "modal_model", "identification.modal:ModalStructure": "modal_structure",
-    "identification.preparation:Preparation": "preparation", "identification.residuals:ResidualTests": "residual_tests",
-    "identification.preparation:ReadSettings": "read_settings",
-    "identification.preparation:RecordOffsets": "record_offsets",
-    "identification.scheduled:ScheduledModalModel": "scheduled_modal_model",
-    "identification.spline_iekf:SplineIEKFOptions": "spline_iekf_options",
-    "identification.spline_modal:SplineModalModel": "spline_modal_model",
-    "identification.spline_modal:SplineModalStructure": "spline_modal_structure",
-    "vehicle.linearize:Linearization": "vehicle_linearization", "vehicle.linearize:Mode": "vehicle_mode",
-    "vehicle.parameters:ChassisParameters": "vehicle_chassis", "vehicle.parameters:DriveParameters": "vehicle_drive",
-    "vehicle.parameters:SuspensionParameters": "vehicle_suspension",
-    "vehicle.parameters:TyreParameters": "vehicle_tyres", "vehicle.parameters:VehicleParameters": "vehicle_parameters",
-}
+#: The class names (``module:QualName``) archives carried before schemas, and the schema each now reads as.
+LEGACY_CLASS_PATHS: dict[str, str] = {}
 
 
-def register_codec(cls: type, schema: str, version: int = 1) -> None:
+def register_codec(cls: type, schema: str, version: int = 1, *, legacy_path: str | None = None) -> None:
     """Archive values of ``cls`` under the name ``schema``, which stays as long as such archives exist.
 
     ``cls`` writes itself (``to_hdf5``/``from_hdf5``), converts to a dict
     (``to_dict``/``from_dict``) or is a dataclass (one member per init field).
-    Raise ``version`` whenever the stored layout changes: archives of another version are refused.
+    Raise ``version`` whenever the stored layout changes: archives of another
+    version are refused. ``legacy_path`` is the class name archives stored
+    before schemas, when there are such archives; they read as version 1.
     """
     if not (hasattr(cls, "from_hdf5") or hasattr(cls, "from_dict") or dataclasses.is_dataclass(cls)):
         raise TypeError(f"{cls.__qualname__} has no stored form: give it to_dict/from_dict or make it a dataclass")
     if _SCHEMAS.get(schema, (cls,))[0] is not cls:
         raise ValueError(f"schema {schema!r} already stores {_SCHEMAS[schema][0].__qualname__}")
     _SCHEMAS[schema], _SCHEMA_OF[cls] = (cls, int(version)), schema
+    if legacy_path is not None:
+        LEGACY_CLASS_PATHS[legacy_path] = schema
 
 
 @functools.cache
@@ -116,16 +106,24 @@ def _register_identification_types() -> None:
     # On first use, not at import: these modules load the numerics, which storing a dict does not need.
     from . import data, iekf, metrics, modal, preparation, residuals, scheduled, spline_iekf, spline_modal
 
-    for cls, schema in ((data.IOData, "io_data"), (metrics.FitMetrics, "fit_metrics"),
-                        (iekf.FilterState, "iekf_filter_state"), (iekf.IEKFOptions, "iekf_options"),
-                        (modal.ModalModel, "modal_model"), (modal.ModalStructure, "modal_structure"),
-                        (preparation.Preparation, "preparation"), (preparation.ReadSettings, "read_settings"),
-                        (preparation.RecordOffsets, "record_offsets"), (residuals.ResidualTests, "residual_tests"),
-                        (scheduled.ScheduledModalModel, "scheduled_modal_model"),
-                        (spline_iekf.SplineIEKFOptions, "spline_iekf_options"),
-                        (spline_modal.SplineModalModel, "spline_modal_model"),
-                        (spline_modal.SplineModalStructure, "spline_modal_structure")):
-        register_codec(cls, schema)
+    for cls, schema, legacy_path in (
+        (data.IOData, "io_data", "identification.data:IOData"),
+        (metrics.FitMetrics, "fit_metrics", "identification.metrics:FitMetrics"),
+        (iekf.FilterState, "iekf_filter_state", "identification.iekf:FilterState"),
+        (iekf.IEKFOptions, "iekf_options", "identification.iekf:IEKFOptions"),
+        (modal.ModalModel, "modal_model", "identification.modal:ModalModel"),
+        (modal.ModalStructure, "modal_structure", "identification.modal:ModalStructure"),
+        (preparation.Preparation, "preparation", "identification.preparation:Preparation"),
+        (preparation.ReadSettings, "read_settings", "identification.preparation:ReadSettings"),
+        (preparation.RecordOffsets, "record_offsets", "identification.preparation:RecordOffsets"),
+        (residuals.ResidualTests, "residual_tests", "identification.residuals:ResidualTests"),
+        (scheduled.ScheduledModalModel, "scheduled_modal_model", "identification.scheduled:ScheduledModalModel"),
+        (spline_iekf.SplineIEKFOptions, "spline_iekf_options", "identification.spline_iekf:SplineIEKFOptions"),
+        (spline_modal.SplineModalModel, "spline_modal_model", "identification.spline_modal:SplineModalModel"),
+        (spline_modal.SplineModalStructure, "spline_modal_structure",
+         "identification.spline_modal:SplineModalStructure"),
+    ):
+        register_codec(cls, schema, legacy_path=legacy_path)
 
 
 def _registered(group: h5py.Group) -> tuple[str, type]:
@@ -137,7 +135,7 @@ def _registered(group: h5py.Group) -> tuple[str, type]:
     else:
         path = str(attrs.get(_LEGACY_DATACLASS, attrs.get(_LEGACY_CLASS)))
         if path not in LEGACY_CLASS_PATHS:
-            raise ArchiveError(f"{group.name} names class {path!r}, which archives of this workbench never held; "
+            raise ArchiveError(f"{group.name} names class {path!r}, which no registered type was stored as; "
                                "refusing to read it")
         schema, version = LEGACY_CLASS_PATHS[path], 1
     if schema not in _SCHEMAS:

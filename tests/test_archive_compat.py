@@ -76,8 +76,8 @@ def _legacy_values():
                 path_attr = member.attrs.get("dataclass", member.attrs.get("vehid_class"))
                 if isinstance(member, h5py.Group) and path_attr is not None:
                     parent, _, leaf = name.rpartition("/")
-                    values.setdefault(storage.LEGACY_CLASS_PATHS[str(path_attr)],
-                                      read_value(handle[parent] if parent else handle, leaf))
+                    value = read_value(handle[parent] if parent else handle, leaf)
+                    values.setdefault(storage.LEGACY_CLASS_PATHS[str(path_attr)], value)
             handle.visititems(visit)
     return values
 

@@ -163,5 +163,5 @@ def linearize(
     )
 
 
-register_codec(Mode, "vehicle_mode")
-register_codec(Linearization, "vehicle_linearization")
+register_codec(Mode, "vehicle_mode", legacy_path="vehicle.linearize:Mode")
+register_codec(Linearization, "vehicle_linearization", legacy_path="vehicle.linearize:Linearization")

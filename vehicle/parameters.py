@@ -392,8 +392,8 @@ def static_axle_loads(params: VehicleParameters) -> tuple[float, float]:
 
 
 # Parameter sets are stored in archives (study configurations) under these schemas.
-register_codec(ChassisParameters, "vehicle_chassis")
-register_codec(SuspensionParameters, "vehicle_suspension")
-register_codec(TyreParameters, "vehicle_tyres")
-register_codec(DriveParameters, "vehicle_drive")
-register_codec(VehicleParameters, "vehicle_parameters")
+register_codec(ChassisParameters, "vehicle_chassis", legacy_path="vehicle.parameters:ChassisParameters")
+register_codec(SuspensionParameters, "vehicle_suspension", legacy_path="vehicle.parameters:SuspensionParameters")
+register_codec(TyreParameters, "vehicle_tyres", legacy_path="vehicle.parameters:TyreParameters")
+register_codec(DriveParameters, "vehicle_drive", legacy_path="vehicle.parameters:DriveParameters")
+register_codec(VehicleParameters, "vehicle_parameters", legacy_path="vehicle.parameters:VehicleParameters")
