@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import re
+import shutil
 from pathlib import Path
 
 import h5py
@@ -18,6 +20,7 @@ import pytest
 
 from identification import storage
 from identification.archive import read_archive
+from identification.archive_safety import write_checksums
 from identification.scheduled import schedule_models
 from identification.spline_iekf import SplineIEKFOptions
 from identification.storage import read_value, write_value
@@ -134,3 +137,21 @@ def test_the_stored_nonlinear_history_is_the_series_the_summary_once_carried():
     history = archive.runs[f"nonlinear-n{run['order']}"].history
     assert np.array_equal(history["fit_filter"], np.array(run["fit_filter_by_pass"]))
     assert np.array_equal(history["trace_p"], np.array(run["trace_p_by_pass"]))
+
+
+@pytest.mark.parametrize("attribute, value, message", [
+    ("vehid_schema", "popen", "schema 'popen', which this workbench does not know"),
+    ("dataclass", "subprocess:Popen", "names class 'subprocess:Popen'.*refusing"),
+], ids=["unknown-schema", "foreign-class-path"])
+def test_report_refuses_a_value_it_cannot_rebuild_with_exit_2(attribute, value, message, tmp_path, capsys):
+    path = tmp_path / "tampered.h5"
+    shutil.copyfile(ARCHIVES / "identify_n4sid.h5", path)
+    with h5py.File(path, "r+") as handle:  # a consistent archive (checksums rewritten) that names a stranger
+        model = handle["runs/n4sid/model"]
+        for key in ("vehid_class", "vehid_schema"):
+            model.attrs.pop(key, None)
+        model.attrs[attribute] = value
+        write_checksums(handle)
+    assert main(["report", str(path), "--out", str(tmp_path / "report")]) == 2
+    assert re.search(message, capsys.readouterr().err)
+    assert not (tmp_path / "report").exists()
