@@ -126,27 +126,6 @@ def _register_identification_types() -> None:
         register_codec(cls, schema, legacy_path=legacy_path)
 
 
-def _registered(group: h5py.Group) -> tuple[str, type]:
-    """The schema and class of a registered type's group, by its schema or (older archives) by the class it names."""
-    _register_identification_types()
-    attrs = group.attrs
-    if _SCHEMA in attrs:
-        schema, version = str(attrs[_SCHEMA]), int(attrs.get(_SCHEMA_VERSION, 0))
-    else:
-        path = str(attrs.get(_LEGACY_DATACLASS, attrs.get(_LEGACY_CLASS)))
-        if path not in LEGACY_CLASS_PATHS:
-            raise ArchiveError(f"{group.name} names class {path!r}, which no registered type was stored as; "
-                               "refusing to read it")
-        schema, version = LEGACY_CLASS_PATHS[path], 1
-    if schema not in _SCHEMAS:
-        raise ArchiveError(f"{group.name} is stored with schema {schema!r}, which this workbench does not know")
-    cls, known = _SCHEMAS[schema]
-    if version != known:
-        raise ArchiveError(f"{group.name} is stored with schema {schema!r} version {version}; "
-                           f"this workbench reads version {known}")
-    return schema, cls
-
-
 def _check_reserved(name: str) -> None:
     if name == _LEGACY_DATACLASS or name.startswith(_RESERVED_PREFIX):
         raise ArchiveError(f"{name!r} is reserved by the archive format and cannot name a value")
@@ -277,7 +256,12 @@ def write_group(group: h5py.Group, value: Any) -> None:
         elif hasattr(value, "from_dict"):
             _write_mapping(group, value.to_dict())
         else:
-            _write_fields(group, value)
+            fields = [f for f in dataclasses.fields(value) if f.init]
+            units = {f.name: str(f.metadata["unit"]) for f in fields if "unit" in f.metadata}
+            for item in fields:
+                write_value(group, item.name, getattr(value, item.name))
+            if units:
+                group.attrs[_UNITS] = json.dumps(units, sort_keys=True)
         return
     if isinstance(value, Mapping):
         group.attrs[_ENCODING] = "dict"
@@ -293,18 +277,6 @@ def write_group(group: h5py.Group, value: Any) -> None:
         raise ArchiveError(f"cannot archive a {type(value).__qualname__}: it has no registered schema "
                            "(identification.storage.register_codec)")
     raise ArchiveError(f"cannot archive a value of type {type(value).__module__}.{type(value).__qualname__}")
-
-
-def _write_fields(group: h5py.Group, value: Any) -> None:
-    units = {}
-    for item in dataclasses.fields(value):
-        if not item.init:
-            continue
-        write_value(group, item.name, getattr(value, item.name))
-        if "unit" in item.metadata:
-            units[item.name] = str(item.metadata["unit"])
-    if units:
-        group.attrs[_UNITS] = json.dumps(units, sort_keys=True)
 
 
 def _write_mapping(group: h5py.Group, mapping: Mapping) -> None:
@@ -375,7 +347,7 @@ def read_group(group: h5py.Group) -> Any:
     """Read a group written by :func:`write_group` (or by :func:`write_value`) back into its value."""
     attrs = group.attrs
     if _SCHEMA in attrs or _LEGACY_DATACLASS in attrs or _LEGACY_CLASS in attrs:
-        return _read_registered(group, *_registered(group))
+        return _read_registered(group)
     encoding = attrs.get(_ENCODING)
     if encoding == "dict":
         return _read_mapping(group)
@@ -390,13 +362,31 @@ def _read_mapping(group: h5py.Group) -> dict[str, Any]:
     return {key: read_value(group, key) for key in keys}
 
 
-def _read_registered(group: h5py.Group, schema: str, cls: type) -> Any:
+def _read_registered(group: h5py.Group) -> Any:
+    """A registered type's value, by the schema its group names or (older archives) by the class it names."""
+    _register_identification_types()
+    attrs = group.attrs
+    if _SCHEMA in attrs:
+        schema, version = str(attrs[_SCHEMA]), int(attrs.get(_SCHEMA_VERSION, 0))
+    else:
+        path = str(attrs.get(_LEGACY_DATACLASS, attrs.get(_LEGACY_CLASS)))
+        if path not in LEGACY_CLASS_PATHS:
+            raise ArchiveError(f"{group.name} names class {path!r}, which no registered type was stored as; "
+                               "refusing to read it")
+        schema, version = LEGACY_CLASS_PATHS[path], 1
+    if schema not in _SCHEMAS:
+        raise ArchiveError(f"{group.name} is stored with schema {schema!r}, which this workbench does not know")
+    cls, known = _SCHEMAS[schema]
+    if version != known:
+        raise ArchiveError(f"{group.name} is stored with schema {schema!r} version {version}; "
+                           f"this workbench reads version {known}")
     try:
         if hasattr(cls, "from_hdf5"):
             return cls.from_hdf5(group)
         if hasattr(cls, "from_dict"):
             return cls.from_dict(_read_mapping(group))
-        present = set(group.keys()) | set(group.attrs.keys())
-        return cls(**{f.name: read_value(group, f.name) for f in dataclasses.fields(cls) if f.init and f.name in present})
+        present = set(group.keys()) | set(attrs.keys())
+        fields = [f.name for f in dataclasses.fields(cls) if f.init and f.name in present]
+        return cls(**{name: read_value(group, name) for name in fields})
     except (TypeError, ValueError, KeyError) as exc:
         raise ArchiveError(f"{group.name} does not rebuild a {schema}: {exc}") from None
