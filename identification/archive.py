@@ -339,6 +339,7 @@ def update_archive(path: str | Path, *, kinds: Sequence[str] | None = None) -> I
         open_archive(path, kinds).close()
         with _atomic(path, lambda temporary: shutil.copyfile(path, temporary), "r+") as handle:
             handle.attrs["updated"] = datetime.now(timezone.utc).isoformat(timespec="seconds")
+            handle.attrs["schema_version"] = np.int64(SCHEMA_VERSION)  # what is added now is in this layout
             yield handle
 
 

@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 
 from identification import storage
+from identification import archive as archive_module
 from identification.archive import read_archive
 from identification.archive_safety import write_checksums
 from identification.scheduled import schedule_models
@@ -155,3 +156,14 @@ def test_report_refuses_a_value_it_cannot_rebuild_with_exit_2(attribute, value, 
     assert main(["report", str(path), "--out", str(tmp_path / "report")]) == 2
     assert re.search(message, capsys.readouterr().err)
     assert not (tmp_path / "report").exists()
+
+
+def test_an_old_identification_run_resumes_and_its_archive_is_marked_with_the_new_layout(tmp_path, capsys):
+    path = tmp_path / "run.h5"
+    shutil.copyfile(ARCHIVES / "identify_iekf.h5", path)
+    status = main(["identify", "--resume", str(path), "--passes", "4", "--json", "--quiet"])
+    assert status == 0, capsys.readouterr().err
+    archive = read_archive(path)
+    assert archive.runs["iekf"].n_pass == 4 and archive.schema_version == archive_module.SCHEMA_VERSION
+    with h5py.File(path, "r") as handle:
+        assert handle["runs/iekf/model"].attrs["vehid_schema"] == "modal_model"
