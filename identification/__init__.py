@@ -3,6 +3,7 @@
 from .archive import (
     SCHEMA_VERSION,
     Archive,
+    RunName,
     RunRecord,
     append_history,
     open_archive,
@@ -27,7 +28,7 @@ from .metrics import FitMetrics, fit_metrics, nrmse_fit, percentage_explanation,
 from .modal import C_PATTERNS, ModalModel, ModalStructure
 from .order import OrderAssessment, assess_orders
 from .spline import SplineBasis, covering_basis, resample
-from .storage import TRUSTED_PACKAGES, read_group, read_value, write_group, write_value
+from .storage import read_group, read_value, write_group, write_value
 from .comparators import (COMPARATORS, ComparatorResult, identify_with, register_comparator)
 from .ekf import EkfResult, NonlinearModel, ekf_joint
 from .gls import GlsResult, estimate_gls
@@ -90,6 +91,7 @@ __all__ = [
     "resample",
     "SCHEMA_VERSION",
     "Archive",
+    "RunName",
     "RunRecord",
     "write_archive",
     "update_archive",
@@ -102,7 +104,6 @@ __all__ = [
     "read_run",
     "append_history",
     "read_history",
-    "TRUSTED_PACKAGES",
     "write_value",
     "read_value",
     "write_group",

@@ -46,6 +46,7 @@ __all__ = [
     "REQUIRED_ATTRIBUTES",
     "Archive",
     "RunRecord",
+    "RunName",
     "write_archive",
     "update_archive",
     "open_archive",
@@ -60,7 +61,8 @@ __all__ = [
 ]
 
 #: The layout version this module writes; archives with a larger one are refused.
-SCHEMA_VERSION = 1
+#: Version 2 stores values under registered schemas where 1 named their classes; both read.
+SCHEMA_VERSION = 2
 
 #: Groups every archive holds (possibly empty).
 REQUIRED_GROUPS = ("config", "data", "runs")
@@ -81,6 +83,23 @@ _RUN_MEMBERS = ("model", "metrics", "state")
 
 
 # --------------------------------------------------------------- archive files
+@dataclass(frozen=True)
+class RunName:
+    """The name of a run of one kind of model at one order: ``<kind>-n<order>``, e.g. ``linear-n4``."""
+
+    kind: str
+    order: int
+
+    def __str__(self) -> str:
+        return f"{self.kind}-n{self.order}"
+
+    @classmethod
+    def parse(cls, name: str) -> "RunName | None":
+        """The kind and order a run name states, or None for a name of another form."""
+        kind, separator, order = str(name).rpartition("-n")
+        return cls(kind, int(order)) if separator and kind and order.isdigit() else None
+
+
 @dataclass(frozen=True, eq=False)
 class RunRecord:
     """One run of an archive, read into memory.
@@ -131,6 +150,8 @@ class Archive:
         The ``data/<record>`` groups.
     runs : dict of str to RunRecord
         The ``runs/<name>`` groups.
+    summary : object or None
+        The study's summary (root attribute ``summary_json``, decoded), written once a study finishes.
     """
 
     kind: str
@@ -143,6 +164,7 @@ class Archive:
     config: Any
     records: dict[str, IOData] = field(default_factory=dict)
     runs: dict[str, RunRecord] = field(default_factory=dict)
+    summary: Any = None
 
 
 def _package_version(name: str) -> str:
@@ -317,6 +339,7 @@ def update_archive(path: str | Path, *, kinds: Sequence[str] | None = None) -> I
         open_archive(path, kinds).close()
         with _atomic(path, lambda temporary: shutil.copyfile(path, temporary), "r+") as handle:
             handle.attrs["updated"] = datetime.now(timezone.utc).isoformat(timespec="seconds")
+            handle.attrs["schema_version"] = np.int64(SCHEMA_VERSION)  # what is added now is in this layout
             yield handle
 
 
@@ -425,6 +448,7 @@ def read_archive(path: str | Path, kinds: Sequence[str] | None = None) -> Archiv
                 config=read_group(handle["config"]),
                 records=read_records(handle),
                 runs={name: read_run(group) for name, group in handle["runs"].items()},
+                summary=json.loads(attrs["summary_json"]) if "summary_json" in attrs else None,
             )
         except (OSError, RuntimeError, KeyError) as exc:
             raise ArchiveError(f"{path} is truncated or corrupt: reading it failed ({exc})") from None

@@ -24,11 +24,11 @@ from typing import Any
 import h5py
 import numpy as np
 
-from .archive import append_history, read_history, run_group, update_archive, write_run
+from .archive import append_history, read_run, run_group, update_archive, write_run
 from .errors import ArchiveError
 from .iekf import FilterState, IEKFOptions, IEKFResult, PassRecord
 from .modal import ModalModel
-from .storage import read_group, read_value, write_value
+from .storage import read_value, write_value
 
 __all__ = ["HISTORY_UNITS", "write_iekf_run", "append_iekf_pass", "read_iekf_run", "Checkpointer"]
 
@@ -96,29 +96,21 @@ def read_iekf_run(archive: h5py.File, name: str) -> IEKFResult:
     if runs is None or name not in runs:
         raise ArchiveError(f"the archive has no run {name!r}")
     run = runs[name]
+    stored = read_run(run)
+    history, model, state = stored.history, stored.model, stored.state
     try:
-        history = read_history(run)
-        model = read_group(run["model"])
-        state = read_group(run["state"])
         options = read_value(run, "options")
-        dt = float(run.attrs["dt"])
-        stop_reason = str(run.attrs["stop_reason"])
-        seconds = float(run.attrs["seconds"])
-    except KeyError as missing:
+        dt, stop_reason, seconds = float(run.attrs["dt"]), str(run.attrs["stop_reason"]), float(run.attrs["seconds"])
+    except (KeyError, ArchiveError) as missing:
         raise ArchiveError(f"run {name!r} is incomplete: missing {missing}") from None
     if not isinstance(model, ModalModel) or not isinstance(state, FilterState) or not isinstance(options, IEKFOptions):
         raise ArchiveError(f"run {name!r} does not hold an IEKF model, state and options")
     records = tuple(
-        PassRecord(
-            index=int(history["index"][k]),
-            parameters=history["parameters"][k],
-            fit_filter=history["fit_filter"][k],
-            fit_continuous=history["fit_continuous"][k],
-            trace_p=float(history["trace_p"][k]),
-            min_eig_p=float(history["min_eig_p"][k]),
-            seconds=float(history["seconds"][k]),
-            nis=float(history["nis"][k]) if "nis" in history else float("nan"),
-        )
+        PassRecord(index=int(history["index"][k]), parameters=history["parameters"][k],
+                   fit_filter=history["fit_filter"][k], fit_continuous=history["fit_continuous"][k],
+                   trace_p=float(history["trace_p"][k]), min_eig_p=float(history["min_eig_p"][k]),
+                   seconds=float(history["seconds"][k]),
+                   nis=float(history["nis"][k]) if "nis" in history else float("nan"))
         for k in range(len(history.get("index", ())))
     )
     return IEKFResult(

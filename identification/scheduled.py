@@ -264,14 +264,17 @@ class ScheduledModalModel:
             "structure": self.structure.to_dict(), "grid": self.grid, "modal": self.modal, "B": self.B, "C": self.C,
             "D": self.D, "variable": self.variable,
             "matching": [{"value": m.value, "order": list(m.order), "cost": m.cost} for m in self.matching],
+            "input_names": self.input_names, "output_names": self.output_names, "meta": self.meta,
         }
 
     @classmethod
     def from_dict(cls, values: Mapping[str, Any]) -> "ScheduledModalModel":
         matching = tuple(ModeMatch(float(m["value"]), tuple(int(o) for o in m["order"]), float(m["cost"]))
                          for m in values["matching"])
+        names = {key: tuple(values[key]) if values.get(key) is not None else None
+                 for key in ("input_names", "output_names")}
         return cls(ModalStructure.from_dict(values["structure"]), *(np.asarray(values[k]) for k in ("grid", "modal", "B", "C", "D")),
-                   matching, str(values["variable"]))
+                   matching, str(values["variable"]), **names, meta=dict(values.get("meta") or {}))
 
 
 def schedule_models(models: Mapping[float, ModalModel], *, variable: str = "speed") -> ScheduledModalModel:

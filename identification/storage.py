@@ -1,35 +1,21 @@
-"""Safe HDF5 storage of frozen values: arrays, scalars, sequences, dicts, dataclasses.
+"""Safe HDF5 storage of frozen values: scalars, arrays, sequences, dicts and registered types.
 
-Nothing is pickled. Values are stored with :func:`write_value` and read with :func:`read_value`:
-
-=============================================  =====================================================
-value                                          stored as
-=============================================  =====================================================
-``None``, bool, int, float, complex, str       an attribute of the parent group; its Python type is
-(Python or NumPy scalars)                      recorded in the parent's ``vehid_types`` attribute
-``numpy.ndarray`` (numeric, bool)              a dataset, bit for bit; optional ``units`` attribute
-tuple/list of numbers (nested, rectangular)    a dataset with ``vehid_encoding`` ``tuple``/``list``
-tuple/list of str                              a dataset of UTF-8 strings, tagged the same way
-any other tuple/list (of dataclasses, ...)     a group of numbered members ``0, 1, ...``
-dict whose JSON round trip is exact            a JSON attribute (tag ``json``)
-any other dict with str keys                   a group, one member per key (``vehid_encoding`` ``dict``)
-object with ``to_hdf5``/``from_hdf5``          a group it writes itself (``vehid_encoding`` ``hdf5``)
-object with ``to_dict``/``from_dict``          a group holding the dict as above (``vehid_encoding``
-                                               ``dict-codec``): matrices become datasets
-dataclass                                      a group with a ``dataclass`` attribute
-                                               ``module:QualName``, one member per init field
-=============================================  =====================================================
-
-On reading, classes are imported only from the packages listed in
-:data:`TRUSTED_PACKAGES`; any other class name is refused with
-:class:`~identification.errors.ArchiveError`, and so is writing an instance
-of a class that could not be read back.
+Nothing is pickled, and no stored value names a Python class. :func:`write_value`
+stores a scalar as an attribute (its type in the parent's ``vehid_types``), an
+array or a rectangular sequence as a dataset, other sequences and dicts as
+groups, and a value of a type registered with :func:`register_codec` as a group
+tagged with the type's schema name and version; :func:`read_value` rebuilds
+them, and only registered types. The layout is in ``results/RESULTS_LAYOUT.md``
+(Values). Archives written before schemas named classes (``module:QualName``):
+each type is registered with the fixed name it had then (together the table
+:data:`LEGACY_CLASS_PATHS`), and any other name is refused with
+:class:`~identification.errors.ArchiveError`.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import importlib
+import functools
 import json
 from typing import Any, Mapping
 
@@ -38,18 +24,17 @@ import numpy as np
 
 from .errors import ArchiveError
 
-__all__ = ["TRUSTED_PACKAGES", "write_value", "read_value", "write_group", "read_group"]
-
-#: Packages whose classes a stored value may name and :func:`read_value` may import.
-TRUSTED_PACKAGES = ("identification", "vehicle", "scenarios")
+__all__ = ["LEGACY_CLASS_PATHS", "register_codec", "write_value", "read_value", "write_group", "read_group"]
 
 _TYPES = "vehid_types"  # parent attribute: JSON {attribute name: type tag}
 _ENCODING = "vehid_encoding"  # how a dataset or group encodes its value
 _LENGTH = "vehid_length"  # number of items of a sequence group
 _KEYS = "vehid_keys"  # key order of a dict group (JSON list)
-_CLASS = "vehid_class"  # module:QualName of a codec group
+_SCHEMA = "vehid_schema"  # schema name of a registered type's group
+_SCHEMA_VERSION = "vehid_schema_version"
+_LEGACY_CLASS = "vehid_class"  # module:QualName of a to_dict/to_hdf5 group, before schemas
 _UNITS = "vehid_units"  # dataclass group: JSON {field: unit} from field metadata
-_DATACLASS = "dataclass"
+_LEGACY_DATACLASS = "dataclass"  # module:QualName of a dataclass group, before schemas
 _RESERVED_PREFIX = "vehid_"
 
 def member_name(name: str, what: str) -> str:
@@ -70,20 +55,14 @@ def _number_tree(value: Any, container: type) -> bool:
     return False
 
 
+_SCALAR_TAGS = (((bool, np.bool_), "bool"), ((int, np.integer), "int"), ((float, np.floating), "float"),
+                ((complex, np.complexfloating), "complex"), ((str,), "str"))  # bool before int: it is one
+
+
 def _scalar_tag(value: Any) -> str | None:
     if value is None:
         return "none"
-    if isinstance(value, (bool, np.bool_)):
-        return "bool"
-    if isinstance(value, (int, np.integer)):
-        return "int"
-    if isinstance(value, (float, np.floating)):
-        return "float"
-    if isinstance(value, (complex, np.complexfloating)):
-        return "complex"
-    if isinstance(value, str):
-        return "str"
-    return None
+    return next((tag for types, tag in _SCALAR_TAGS if isinstance(value, types)), None)
 
 
 def _json_exact(value: Mapping) -> str | None:
@@ -97,40 +76,58 @@ def _json_exact(value: Mapping) -> str | None:
     return text if json.loads(text) == value else None
 
 
-def _class_path(value: Any) -> str:
-    cls = type(value)
-    path = f"{cls.__module__}:{cls.__qualname__}"
-    if cls.__module__.split(".")[0] not in TRUSTED_PACKAGES or "<locals>" in cls.__qualname__:
-        raise ArchiveError(
-            f"cannot archive a {path} value: only classes of the packages "
-            f"{', '.join(TRUSTED_PACKAGES)} can be read back"
-        )
-    return path
+_SCHEMAS: dict[str, tuple[type, int]] = {}  # schema name: (class, version)
+_SCHEMA_OF: dict[type, str] = {}
+
+#: The class names (``module:QualName``) archives carried before schemas, and the schema each now reads as.
+LEGACY_CLASS_PATHS: dict[str, str] = {}
 
 
-def _import_class(path: str) -> type:
-    """Import ``module:QualName`` from a trusted package, or refuse."""
-    module_name, _, qualname = str(path).partition(":")
-    if not module_name or not qualname or "<" in qualname:
-        raise ArchiveError(f"malformed class name {path!r} in archive")
-    if module_name.split(".")[0] not in TRUSTED_PACKAGES:
-        raise ArchiveError(
-            f"archive names class {path!r} outside the trusted packages "
-            f"({', '.join(TRUSTED_PACKAGES)}); refusing to import it"
-        )
-    try:
-        target: Any = importlib.import_module(module_name)
-        for part in qualname.split("."):
-            target = getattr(target, part)
-    except (ImportError, AttributeError):
-        raise ArchiveError(f"archive names class {path!r}, which this workbench does not have") from None
-    if not isinstance(target, type):
-        raise ArchiveError(f"archive names {path!r}, which is not a class")
-    return target
+def register_codec(cls: type, schema: str, version: int = 1, *, legacy_path: str | None = None) -> None:
+    """Archive values of ``cls`` under the name ``schema``, which stays as long as such archives exist.
+
+    ``cls`` writes itself (``to_hdf5``/``from_hdf5``), converts to a dict
+    (``to_dict``/``from_dict``) or is a dataclass (one member per init field).
+    Raise ``version`` whenever the stored layout changes: archives of another
+    version are refused. ``legacy_path`` is the class name archives stored
+    before schemas, when there are such archives; they read as version 1.
+    """
+    if not (hasattr(cls, "from_hdf5") or hasattr(cls, "from_dict") or dataclasses.is_dataclass(cls)):
+        raise TypeError(f"{cls.__qualname__} has no stored form: give it to_dict/from_dict or make it a dataclass")
+    if _SCHEMAS.get(schema, (cls,))[0] is not cls:
+        raise ValueError(f"schema {schema!r} already stores {_SCHEMAS[schema][0].__qualname__}")
+    _SCHEMAS[schema], _SCHEMA_OF[cls] = (cls, int(version)), schema
+    if legacy_path is not None:
+        LEGACY_CLASS_PATHS[legacy_path] = schema
+
+
+@functools.cache
+def _register_identification_types() -> None:
+    # On first use, not at import: these modules load the numerics, which storing a dict does not need.
+    from . import data, iekf, metrics, modal, preparation, residuals, scheduled, spline_iekf, spline_modal
+
+    for cls, schema, legacy_path in (
+        (data.IOData, "io_data", "identification.data:IOData"),
+        (metrics.FitMetrics, "fit_metrics", "identification.metrics:FitMetrics"),
+        (iekf.FilterState, "iekf_filter_state", "identification.iekf:FilterState"),
+        (iekf.IEKFOptions, "iekf_options", "identification.iekf:IEKFOptions"),
+        (modal.ModalModel, "modal_model", "identification.modal:ModalModel"),
+        (modal.ModalStructure, "modal_structure", "identification.modal:ModalStructure"),
+        (preparation.Preparation, "preparation", "identification.preparation:Preparation"),
+        (preparation.ReadSettings, "read_settings", "identification.preparation:ReadSettings"),
+        (preparation.RecordOffsets, "record_offsets", "identification.preparation:RecordOffsets"),
+        (residuals.ResidualTests, "residual_tests", "identification.residuals:ResidualTests"),
+        (scheduled.ScheduledModalModel, "scheduled_modal_model", "identification.scheduled:ScheduledModalModel"),
+        (spline_iekf.SplineIEKFOptions, "spline_iekf_options", "identification.spline_iekf:SplineIEKFOptions"),
+        (spline_modal.SplineModalModel, "spline_modal_model", "identification.spline_modal:SplineModalModel"),
+        (spline_modal.SplineModalStructure, "spline_modal_structure",
+         "identification.spline_modal:SplineModalStructure"),
+    ):
+        register_codec(cls, schema, legacy_path=legacy_path)
 
 
 def _check_reserved(name: str) -> None:
-    if name == _DATACLASS or name.startswith(_RESERVED_PREFIX):
+    if name == _LEGACY_DATACLASS or name.startswith(_RESERVED_PREFIX):
         raise ArchiveError(f"{name!r} is reserved by the archive format and cannot name a value")
 
 
@@ -163,15 +160,14 @@ def write_value(group: h5py.Group, name: str, value: Any, *, units: str | None =
     name : str
         Member name: no ``/``, not ``dataclass`` and not starting ``vehid_``.
     value : object
-        Any of the supported values (see the module docstring).
+        Any of the supported values (``results/RESULTS_LAYOUT.md``, Values).
     units : str, optional
         The ``units`` attribute of an array or numeric-sequence dataset.
 
     Raises
     ------
     ArchiveError
-        For a value of an unsupported type, or a class outside
-        :data:`TRUSTED_PACKAGES`.
+        For a value of an unsupported type, or of a class without a registered schema.
     """
     member_name(name, "value")
     _check_reserved(name)
@@ -216,9 +212,7 @@ def _write_dataset(group: h5py.Group, name: str, value: Any) -> h5py.Dataset | N
     """Write arrays and flat/nested sequences of numbers or strings; None for other values."""
     if isinstance(value, np.ndarray):
         if value.dtype.kind not in "biufc":
-            raise ArchiveError(
-                f"cannot archive array {name!r} of dtype {value.dtype}: use numbers, or a tuple of str"
-            )
+            raise ArchiveError(f"cannot archive array {name!r} of dtype {value.dtype}: use numbers, or a tuple of str")
         return group.create_dataset(name, data=value)
     for container in (tuple, list):
         if _number_tree(value, container):
@@ -245,35 +239,29 @@ def write_group(group: h5py.Group, value: Any) -> None:
     ----------
     group : h5py.Group
         Empty; receives the value's members and its tags.
-    value : dataclass, dict, tuple, list, or object with ``to_hdf5``/``to_dict``
+    value : registered type, dict, tuple or list
         Scalars and arrays cannot fill a group; store them with :func:`write_value`.
 
     Raises
     ------
     ArchiveError
-        For an unsupported value or a class outside :data:`TRUSTED_PACKAGES`.
+        For an unsupported value or a class without a registered schema.
     """
-    if hasattr(value, "to_hdf5") and hasattr(type(value), "from_hdf5"):
-        group.attrs[_CLASS] = _class_path(value)
-        value.to_hdf5(group)
-        group.attrs[_ENCODING] = "hdf5"
-        return
-    if hasattr(value, "to_dict") and hasattr(type(value), "from_dict"):
-        group.attrs[_CLASS] = _class_path(value)
-        group.attrs[_ENCODING] = "dict-codec"
-        _write_mapping(group, value.to_dict())
-        return
-    if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        group.attrs[_DATACLASS] = _class_path(value)
-        units = {}
-        for item in dataclasses.fields(value):
-            if not item.init:
-                continue
-            write_value(group, item.name, getattr(value, item.name))
-            if "unit" in item.metadata:
-                units[item.name] = str(item.metadata["unit"])
-        if units:
-            group.attrs[_UNITS] = json.dumps(units, sort_keys=True)
+    _register_identification_types()
+    if type(value) in _SCHEMA_OF:
+        schema = _SCHEMA_OF[type(value)]
+        group.attrs[_SCHEMA], group.attrs[_SCHEMA_VERSION] = schema, np.int64(_SCHEMAS[schema][1])
+        if hasattr(value, "from_hdf5"):  # the same choice as the reader's
+            value.to_hdf5(group)
+        elif hasattr(value, "from_dict"):
+            _write_mapping(group, value.to_dict())
+        else:
+            fields = [f for f in dataclasses.fields(value) if f.init]
+            units = {f.name: str(f.metadata["unit"]) for f in fields if "unit" in f.metadata}
+            for item in fields:
+                write_value(group, item.name, getattr(value, item.name))
+            if units:
+                group.attrs[_UNITS] = json.dumps(units, sort_keys=True)
         return
     if isinstance(value, Mapping):
         group.attrs[_ENCODING] = "dict"
@@ -285,6 +273,9 @@ def write_group(group: h5py.Group, value: Any) -> None:
         for index, item in enumerate(value):
             write_value(group, str(index), item)
         return
+    if dataclasses.is_dataclass(value) or hasattr(value, "to_dict"):
+        raise ArchiveError(f"cannot archive a {type(value).__qualname__}: it has no registered schema "
+                           "(identification.storage.register_codec)")
     raise ArchiveError(f"cannot archive a value of type {type(value).__module__}.{type(value).__qualname__}")
 
 
@@ -308,8 +299,7 @@ def read_value(group: h5py.Group, name: str) -> Any:
     Raises
     ------
     ArchiveError
-        When there is no such member, or it names a class outside
-        :data:`TRUSTED_PACKAGES`, or it cannot be rebuilt.
+        When there is no such member, or it names an unknown schema or class, or it cannot be rebuilt.
     """
     if name in group:
         member = group[name]
@@ -356,21 +346,9 @@ def _tuples(value: Any) -> Any:
 def read_group(group: h5py.Group) -> Any:
     """Read a group written by :func:`write_group` (or by :func:`write_value`) back into its value."""
     attrs = group.attrs
-    if _DATACLASS in attrs:
-        cls = _import_class(attrs[_DATACLASS])
-        if not dataclasses.is_dataclass(cls):
-            raise ArchiveError(f"{group.name} names {attrs[_DATACLASS]!r}, which is not a dataclass")
-        present = set(group.keys()) | set(attrs.keys())
-        kwargs = {f.name: read_value(group, f.name) for f in dataclasses.fields(cls) if f.init and f.name in present}
-        return _construct(group, cls, lambda: cls(**kwargs))
+    if _SCHEMA in attrs or _LEGACY_DATACLASS in attrs or _LEGACY_CLASS in attrs:
+        return _read_registered(group)
     encoding = attrs.get(_ENCODING)
-    if encoding == "hdf5":
-        cls = _import_class(attrs[_CLASS])
-        return _construct(group, cls, lambda: cls.from_hdf5(group))
-    if encoding == "dict-codec":
-        cls = _import_class(attrs[_CLASS])
-        mapping = _read_mapping(group)
-        return _construct(group, cls, lambda: cls.from_dict(mapping))
     if encoding == "dict":
         return _read_mapping(group)
     if encoding in ("tuple", "list"):
@@ -384,8 +362,31 @@ def _read_mapping(group: h5py.Group) -> dict[str, Any]:
     return {key: read_value(group, key) for key in keys}
 
 
-def _construct(group: h5py.Group, cls: type, build: Any) -> Any:
+def _read_registered(group: h5py.Group) -> Any:
+    """A registered type's value, by the schema its group names or (older archives) by the class it names."""
+    _register_identification_types()
+    attrs = group.attrs
+    if _SCHEMA in attrs:
+        schema, version = str(attrs[_SCHEMA]), int(attrs.get(_SCHEMA_VERSION, 0))
+    else:
+        path = str(attrs.get(_LEGACY_DATACLASS, attrs.get(_LEGACY_CLASS)))
+        if path not in LEGACY_CLASS_PATHS:
+            raise ArchiveError(f"{group.name} names class {path!r}, which no registered type was stored as; "
+                               "refusing to read it")
+        schema, version = LEGACY_CLASS_PATHS[path], 1
+    if schema not in _SCHEMAS:
+        raise ArchiveError(f"{group.name} is stored with schema {schema!r}, which this workbench does not know")
+    cls, known = _SCHEMAS[schema]
+    if version != known:
+        raise ArchiveError(f"{group.name} is stored with schema {schema!r} version {version}; "
+                           f"this workbench reads version {known}")
     try:
-        return build()
+        if hasattr(cls, "from_hdf5"):
+            return cls.from_hdf5(group)
+        if hasattr(cls, "from_dict"):
+            return cls.from_dict(_read_mapping(group))
+        present = set(group.keys()) | set(attrs.keys())
+        fields = [f.name for f in dataclasses.fields(cls) if f.init and f.name in present]
+        return cls(**{name: read_value(group, name) for name in fields})
     except (TypeError, ValueError, KeyError) as exc:
-        raise ArchiveError(f"{group.name} does not rebuild a {cls.__qualname__}: {exc}") from None
+        raise ArchiveError(f"{group.name} does not rebuild a {schema}: {exc}") from None

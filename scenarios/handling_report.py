@@ -33,18 +33,15 @@ Besides the figures, ``table.md`` holds the Table-5 style table and
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from matplotlib.figure import Figure
 
-from identification.archive import open_archive, read_records
+from identification.archive import Archive, RunName, read_archive
 from identification.errors import InputError
-from identification.iekf_archive import read_iekf_run
 from identification.residuals import residual_tests
-from identification.storage import read_group
 from identification.uncertainty import normal_quantile
 
 from . import plots
@@ -62,20 +59,21 @@ TABLE_HEADERS = {
 }
 
 
-def _load(path: str | Path) -> dict[str, Any]:
-    with open_archive(path, kinds=["handling-study"]) as archive:
-        if "summary_json" not in archive.attrs:
-            raise InputError(f"{path} is an unfinished handling study (no summary yet): "
-                             f"finish it with vehid study handling --resume {path}")
-        summary = json.loads(archive.attrs["summary_json"])
-        records = read_records(archive)
-        linear, nonlinear = {}, {}
-        for name in archive["runs"]:
-            if name.startswith("linear-n"):
-                linear[int(name[8:])] = read_iekf_run(archive, name)
-            elif name.startswith("nonlinear-n") and "model" in archive["runs"][name]:
-                nonlinear[int(name[11:])] = read_group(archive["runs"][name]["model"])
-    return {"summary": summary, "records": records, "linear": linear, "nonlinear": nonlinear}
+def _study(archive: Archive | str | Path) -> Archive:
+    """A finished study's archive, read whole (a path is read here, once)."""
+    if not isinstance(archive, Archive):
+        archive = read_archive(archive, kinds=["handling-study"])
+    if archive.summary is None:
+        raise InputError("the archive holds an unfinished handling study (no summary yet): "
+                         "finish it with vehid study handling --resume ARCHIVE")
+    return archive
+
+
+def _models(archive: Archive, kind: str) -> dict[int, Any]:
+    """The models of one kind of run (``linear``, ``nonlinear``), by order."""
+    orders = {name: RunName.parse(name) for name in archive.runs}
+    return {parsed.order: archive.runs[name].model for name, parsed in orders.items()
+            if parsed is not None and parsed.kind == kind and archive.runs[name].model is not None}
 
 
 def handling_table(summary: dict[str, Any]) -> str:
@@ -89,11 +87,11 @@ def handling_table(summary: dict[str, Any]) -> str:
     return text + f"\nChosen order: {summary['chosen_order']}.\n"
 
 
-def handling_figures(path: str | Path) -> dict[str, Figure]:
-    """Every figure of the handling report, from the study's archive."""
-    loaded = _load(path)
-    summary, records = loaded["summary"], loaded["records"]
-    linear, nonlinear = loaded["linear"], loaded["nonlinear"]
+def handling_figures(archive: Archive | str | Path) -> dict[str, Figure]:
+    """Every figure of the handling report, from the study's archive (read, or its path)."""
+    archive = _study(archive)
+    summary, records = archive.summary, archive.records
+    linear, nonlinear = _models(archive, "linear"), _models(archive, "nonlinear")
     chosen = summary["chosen_order"]
     figures: dict[str, Figure] = {}
     names = list(records["identification"].output_names)
@@ -103,7 +101,7 @@ def handling_figures(path: str | Path) -> dict[str, Figure]:
         data = records[record_name]
         predictions = {}
         if chosen in linear:
-            predictions[f"linear n = {chosen}"] = linear[chosen].model.simulate(data.u, data.dt)
+            predictions[f"linear n = {chosen}"] = linear[chosen].simulate(data.u, data.dt)
         if chosen in nonlinear:
             predictions[f"nonlinear n = {chosen}"] = nonlinear[chosen].simulate(data.u, data.dt)
         figures[f"fits_{record_name}"] = plots.plot_time_fits(
@@ -181,20 +179,19 @@ def handling_figures(path: str | Path) -> dict[str, Figure]:
     figures["orders"] = figure
 
     if chosen in linear:
-        run = linear[chosen]
-        history = run.parameter_history()
+        history = archive.runs[str(RunName("linear", chosen))].history
         figures["linear_parameters"] = plots.plot_parameter_history(
-            history, run.structure.parameter_names(), title=f"Linear model parameters over the passes (n = {chosen})",
+            history["parameters"], linear[chosen].structure.parameter_names(),
+            title=f"Linear model parameters over the passes (n = {chosen})",
         )
         figures["linear_convergence"] = plots.plot_convergence(
-            np.array([r.fit_filter for r in run.history]), np.array([r.trace_p for r in run.history]),
-            min_eig_p=np.array([r.min_eig_p for r in run.history]), output_names=names,
+            history["fit_filter"], history["trace_p"], min_eig_p=history["min_eig_p"], output_names=names,
             title=f"Linear IEKF: R and trace(P) per pass (n = {chosen})",
         )
-    nonlinear_run = next((r for r in summary.get("nonlinear_runs", []) if r["order"] == chosen), None)
-    if nonlinear_run and nonlinear_run.get("fit_filter_by_pass"):
+    nonlinear_run = archive.runs.get(str(RunName("nonlinear", chosen)))
+    if nonlinear_run is not None and len(nonlinear_run.history.get("fit_filter", ())):
         figures["nonlinear_convergence"] = plots.plot_convergence(
-            np.array(nonlinear_run["fit_filter_by_pass"]), np.array(nonlinear_run["trace_p_by_pass"]),
+            nonlinear_run.history["fit_filter"], nonlinear_run.history["trace_p"],
             output_names=names, title=f"Nonlinear IEKF: R and trace(P) per pass (n = {chosen})",
         )
 
@@ -205,7 +202,7 @@ def handling_figures(path: str | Path) -> dict[str, Figure]:
         reference = tuple(np.array(vehicle[key]) for key in ("A", "B", "C", "D"))
         reference_eigenvalues = np.linalg.eigvals(reference[0])
         reference_eigenvalues = reference_eigenvalues[np.abs(reference_eigenvalues) < 60]  # the handling band
-    models = {f"n = {order}": run.model for order, run in sorted(linear.items())}
+    models = {f"n = {order}": model for order, model in sorted(linear.items())}
     if models:
         figures["eigenvalues"] = plots.plot_eigenvalue_map(
             models, reference_eigenvalues, title="Identified linear models and the vehicle's modes (x)",
@@ -223,7 +220,7 @@ def handling_figures(path: str | Path) -> dict[str, Figure]:
             title=f"Residual autocorrelation, nonlinear n = {chosen}, validation data",
         )
     data = records["identification"]
-    for kind, model in (("linear", linear[chosen].model if chosen in linear else None), ("nonlinear", nonlinear.get(chosen))):
+    for kind, model in (("linear", linear.get(chosen)), ("nonlinear", nonlinear.get(chosen))):
         if model is not None:
             tests = residual_tests(data.u, data.y - model.simulate(data.u, data.dt), input_names=data.input_names,
                                    output_names=names)
@@ -243,23 +240,25 @@ def _shade(axes: Any, xs: Any, values: Any, spreads: Any, color: Any = "tab:blue
                               label="95 % band")
 
 
-def write_handling_report(path: str | Path, out_dir: str | Path) -> list[Path]:
-    """Write the report beside the archive: PNGs, ``report.pdf``, ``table.md`` and the CasADi export."""
+def write_handling_report(archive: Archive | str | Path, out_dir: str | Path) -> list[Path]:
+    """Write the report beside the archive: PNGs, ``report.pdf``, ``table.md`` and the CasADi export.
+
+    ``archive`` is the study's archive as :func:`~identification.archive.read_archive` returns it, or its path.
+    """
+    archive = _study(archive)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    figures = handling_figures(path)
+    figures = handling_figures(archive)
     written = write_report(figures, out_dir, title="vehid handling study")
     for figure in figures.values():
         figure.clear()
-    loaded = _load(path)
     table_path = out_dir / "table.md"
-    table_path.write_text("# Handling study (Table 5 style)\n\n" + handling_table(loaded["summary"]))
+    table_path.write_text("# Handling study (Table 5 style)\n\n" + handling_table(archive.summary))
     written.append(table_path)
-    chosen = loaded["summary"]["chosen_order"]
-    if chosen in loaded["nonlinear"]:
-        model = loaded["nonlinear"][chosen]
-        n = loaded["records"]["identification"].n_samples
+    chosen = archive.summary["chosen_order"]
+    nonlinear = _models(archive, "nonlinear")
+    if chosen in nonlinear:
         export = out_dir / f"nonlinear_n{chosen}.casadi"
-        model.to_casadi_function(n).save(str(export))
+        nonlinear[chosen].to_casadi_function(archive.records["identification"].n_samples).save(str(export))
         written.append(export)
     return written

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from identification.archive import open_archive, read_history, read_records, update_archive
+from identification.archive import RunName, open_archive, read_records, read_run, update_archive
 from identification.errors import ArchiveError, InputError
 from identification.iekf_archive import read_iekf_run
 from identification.storage import read_group, read_value
@@ -71,15 +71,15 @@ def _config(stored: Any, path: Path, workers: int | None) -> HandlingConfig:
 
 
 def _nonlinear(run: Any) -> NonlinearOutcome:
-    history = read_history(run)
-    metrics = read_group(run["metrics"])
+    stored = read_run(run)
+    history, metrics = stored.history, stored.metrics
     curves = {}
     mode = 0
     while f"mode{mode}_frequency" in run:
         curves[mode] = (read_value(run, f"mode{mode}_frequency"), read_value(run, f"mode{mode}_damping"))
         mode += 1
     return NonlinearOutcome(
-        model=read_group(run["model"]),
+        model=stored.model,
         fit_identification=np.asarray(metrics["identification_R"]),
         fit_validation=np.asarray(metrics["validation_R"]),
         fit_filter=history.get("fit_filter", np.zeros((0, 0))),
@@ -93,14 +93,15 @@ def _nonlinear(run: Any) -> NonlinearOutcome:
 
 def _outcome(archive: Any, order: int, status: dict) -> OrderOutcome:
     runs = archive["runs"]
+    linear_name, nonlinear_name = str(RunName("linear", order)), str(RunName("nonlinear", order))
     linear = fit_identification = fit_validation = nonlinear = None
-    if f"linear-n{order}" in runs:
-        linear = read_iekf_run(archive, f"linear-n{order}")
-        metrics = read_group(runs[f"linear-n{order}"]["metrics"])
+    if linear_name in runs:
+        linear = read_iekf_run(archive, linear_name)
+        metrics = read_group(runs[linear_name]["metrics"])
         fit_identification = np.asarray(metrics["identification_R"])
         fit_validation = np.asarray(metrics["validation_R"])
-    if f"nonlinear-n{order}" in runs:
-        nonlinear = _nonlinear(runs[f"nonlinear-n{order}"])
+    if nonlinear_name in runs:
+        nonlinear = _nonlinear(runs[nonlinear_name])
     return OrderOutcome(order, linear, fit_identification, fit_validation, status.get("linear_error"), nonlinear,
                         status.get("nonlinear_error"), float(status.get("seconds", 0.0)))
 

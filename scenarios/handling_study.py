@@ -75,7 +75,7 @@ from typing import Any, Callable, Iterator, Mapping, NamedTuple
 
 import numpy as np
 
-from identification.archive import append_history, run_group, write_archive, write_record, write_run
+from identification.archive import RunName, append_history, run_group, write_archive, write_record, write_run
 from identification.data import IOData
 from identification.errors import DivergenceError, InputError
 from identification.iekf import IEKFOptions, IEKFResult, identify_iekf
@@ -738,11 +738,11 @@ def archive_path(out: str | Path | None = None) -> Path:
 def write_order(archive: Any, order: int, outcome: OrderOutcome) -> None:
     """Store one finished order: its runs and its entry in the root attribute ``orders_done_json``."""
     if outcome.linear is not None:
-        write_iekf_run(archive, f"linear-n{order}", outcome.linear)
-        write_run(archive, f"linear-n{order}", metrics={"identification_R": outcome.linear_fit_identification,
+        write_iekf_run(archive, str(RunName("linear", order)), outcome.linear)
+        write_run(archive, str(RunName("linear", order)), metrics={"identification_R": outcome.linear_fit_identification,
                                                        "validation_R": outcome.linear_fit_validation})
     if outcome.nonlinear is not None:
-        _write_nonlinear_run(archive, f"nonlinear-n{order}", outcome.nonlinear)
+        _write_nonlinear_run(archive, str(RunName("nonlinear", order)), outcome.nonlinear)
     done = json.loads(archive.attrs.get(ORDERS_DONE, "{}"))
     done[str(order)] = {"linear_error": outcome.linear_error, "nonlinear_error": outcome.nonlinear_error,
                         "seconds": outcome.seconds}

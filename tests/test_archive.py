@@ -204,21 +204,41 @@ class _Foreign:
     value: float = 1.0
 
 
-def test_refuses_classes_outside_the_trusted_packages(tmp_path):
+def test_refuses_unregistered_classes_foreign_class_paths_and_unknown_schemas(tmp_path):
     path = tmp_path / "foreign.h5"
     with h5py.File(path, "w") as handle:
-        with pytest.raises(ArchiveError, match="only classes of the packages"):
+        with pytest.raises(ArchiveError, match="no registered schema"):
             write_value(handle, "x", _Foreign())
         assert "x" not in handle
-        for name, target in (("os", "os:system"), ("popen", "subprocess:Popen"), ("test", f"{__name__}:_Foreign")):
+        # Class paths as archives once stored them: only the fixed table of known ones may be read.
+        foreign = {"os": "os:system", "popen": "subprocess:Popen", "test": f"{__name__}:_Foreign",
+                   "lookalike": "vehicle.evil:Payload", "missing": "identification.modal:NoSuchClass"}
+        for name, target in foreign.items():
             handle.create_group(name).attrs["dataclass"] = target
-        handle.create_group("missing").attrs["dataclass"] = "identification.modal:NoSuchClass"
+        handle.create_group("codec").attrs["vehid_class"] = "subprocess:Popen"
+        handle.create_group("unknown").attrs["vehid_schema"] = "popen"
+        newer = handle.create_group("newer")
+        newer.attrs.update({"vehid_schema": "fit_metrics", "vehid_schema_version": 2})
     with h5py.File(path, "r") as handle:
-        for name in ("os", "popen", "test"):
-            with pytest.raises(ArchiveError, match="outside the trusted packages"):
+        for name, target in [*foreign.items(), ("codec", "subprocess:Popen")]:
+            with pytest.raises(ArchiveError, match=f"names class '{target}'.*refusing"):
                 read_value(handle, name)
-        with pytest.raises(ArchiveError, match="does not have"):
-            read_value(handle, "missing")
+        with pytest.raises(ArchiveError, match="schema 'popen', which this workbench does not know"):
+            read_value(handle, "unknown")
+        with pytest.raises(ArchiveError, match="version 2; this workbench reads version 1"):
+            read_value(handle, "newer")
+
+
+def test_stored_values_name_schemas_not_classes(tmp_path):
+    with h5py.File(tmp_path / "schemas.h5", "w") as handle:
+        write_value(handle, "model", _modal_model())
+        write_value(handle, "vehicle", baseline())
+        model, vehicle = handle["model"].attrs, handle["vehicle"].attrs
+        assert (model["vehid_schema"], model["vehid_schema_version"]) == ("modal_model", 1)
+        assert vehicle["vehid_schema"] == "vehicle_parameters"
+        assert handle["vehicle/chassis"].attrs["vehid_schema"] == "vehicle_chassis"
+        assert not any(key in group.attrs for group in (handle["model"], handle["vehicle"])
+                       for key in ("dataclass", "vehid_class"))
 
 
 @pytest.mark.parametrize(

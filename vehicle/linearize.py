@@ -20,6 +20,8 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from identification.storage import register_codec
+
 from .model import DEFAULT_SPEED, VehicleModel, build_vehicle_model, check_speed
 from .parameters import VehicleParameters, named_vehicle
 
@@ -159,3 +161,7 @@ def linearize(
         state_names=model.state_names, input_names=model.input_names, output_names=model.output_names,
         modes=modes_of(A, model.state_names), vehicle=params.name,
     )
+
+
+register_codec(Mode, "vehicle_mode", legacy_path="vehicle.linearize:Mode")
+register_codec(Linearization, "vehicle_linearization", legacy_path="vehicle.linearize:Linearization")

@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from identification.errors import InputError
+from identification.storage import register_codec
 
 __all__ = [
     "ChassisParameters",
@@ -388,3 +389,11 @@ def static_axle_loads(params: VehicleParameters) -> tuple[float, float]:
     c = params.chassis
     weight = c.mass * GRAVITY
     return weight * c.cg_to_rear_axle / c.wheelbase, weight * c.cg_to_front_axle / c.wheelbase
+
+
+# Parameter sets are stored in archives (study configurations) under these schemas.
+register_codec(ChassisParameters, "vehicle_chassis", legacy_path="vehicle.parameters:ChassisParameters")
+register_codec(SuspensionParameters, "vehicle_suspension", legacy_path="vehicle.parameters:SuspensionParameters")
+register_codec(TyreParameters, "vehicle_tyres", legacy_path="vehicle.parameters:TyreParameters")
+register_codec(DriveParameters, "vehicle_drive", legacy_path="vehicle.parameters:DriveParameters")
+register_codec(VehicleParameters, "vehicle_parameters", legacy_path="vehicle.parameters:VehicleParameters")

@@ -62,7 +62,7 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
 
         folder = _output_folder(path, args.out)
         with replacing_directory(folder) as partial:
-            files = [folder / f.relative_to(partial) for f in write_handling_report(path, partial)]
+            files = [folder / f.relative_to(partial) for f in write_handling_report(archive, partial)]
         summary = {"archive": str(path), "kind": archive.kind, "out": str(folder), "files": [str(f) for f in files]}
         return summary, f"{path.name} (handling study): wrote {len(files)} files to {folder}"
     figures = archive_figures(archive, window=tuple(args.window) if args.window else None, max_lag=args.max_lag)

@@ -1,0 +1,169 @@
+"""Archives written before the codec registry still read and report; every registered type round-trips.
+
+The fixtures in tests/data/archives were written by the workbench while
+stored values named their Python classes (README.md there names the
+commands). The expected report files are those the reader of that time drew
+from them: a reader that loses a run, a record or a model loses a figure.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import re
+import shutil
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from identification import storage
+from identification import archive as archive_module
+from identification.archive import read_archive
+from identification.archive_safety import write_checksums
+from identification.scheduled import schedule_models
+from identification.spline_iekf import SplineIEKFOptions
+from identification.storage import read_value, write_value
+from scenarios.cli import main
+from vehicle.linearize import linearize
+from vehicle.parameters import baseline
+
+ARCHIVES = Path(__file__).parent / "data" / "archives"
+
+IDENTIFY_FIGURES = {"bode", "eigenvalues", "fits_identification"}
+EXPECTED_FILES = {
+    "identify_iekf.h5": IDENTIFY_FIGURES | {
+        "convergence_iekf", "innovation_consistency_iekf", "parameters_iekf", "residual_tests_identification_iekf",
+        "residual_tests_identification_nonlinear", "residuals_identification_iekf",
+        "residuals_identification_nonlinear", "report.pdf", "summary.md"},
+    "identify_n4sid.h5": IDENTIFY_FIGURES | {
+        "residual_tests_identification_n4sid", "residuals_identification_n4sid", "report.pdf", "summary.md"},
+    "envelope.h5": {"bode", "eigenvalues", "report.pdf", "summary.md"},
+    "handling_study.h5": {
+        "bode", "eigenvalues", "fits_identification", "fits_validation", "linear_convergence", "linear_parameters",
+        "mode_amplitude", "nonlinear_convergence", "orders", "residual_tests_linear", "residual_tests_nonlinear",
+        "residuals", "splines", "nonlinear_n2.casadi", "report.pdf", "table.md"},
+}
+
+
+def _stems(files):
+    return {Path(f).stem if f.endswith(".png") else Path(f).name for f in files}
+
+
+@pytest.mark.parametrize("name", sorted(EXPECTED_FILES))
+def test_an_archive_written_before_schemas_reports(name, tmp_path, capsys):
+    out = tmp_path / "report"
+    status = main(["report", str(ARCHIVES / name), "--out", str(out), "--dpi", "30", "--json"])
+    captured = capsys.readouterr()
+    assert status == 0, captured.err
+    summary = json.loads(captured.out)
+    assert _stems(summary["files"]) == EXPECTED_FILES[name]
+    assert all(Path(f).stat().st_size > 0 for f in summary["files"])
+
+
+def test_old_models_read_back_as_they_were_stored():
+    archive = read_archive(ARCHIVES / "identify_iekf.h5")
+    model = archive.runs["iekf"].model
+    with h5py.File(ARCHIVES / "identify_iekf.h5", "r") as handle:  # the stored matrices, read without any codec
+        assert handle["runs/iekf/model"].attrs["vehid_class"] == "identification.modal:ModalModel"
+        assert np.array_equal(model.A, np.asarray(handle["runs/iekf/model/A"][...]))
+    assert archive.config.passes == 3 and archive.runs["nonlinear"].model.structure.linear.n == 2
+
+
+def _legacy_values():
+    """Every value stored in the fixtures under a class path, read back, by schema."""
+    values = {}
+    for path in sorted(ARCHIVES.glob("*.h5")):
+        with h5py.File(path, "r") as handle:
+            def visit(name, member):
+                path_attr = member.attrs.get("dataclass", member.attrs.get("vehid_class"))
+                if isinstance(member, h5py.Group) and path_attr is not None:
+                    parent, _, leaf = name.rpartition("/")
+                    value = read_value(handle[parent] if parent else handle, leaf)
+                    values.setdefault(storage.LEGACY_CLASS_PATHS[str(path_attr)], value)
+            handle.visititems(visit)
+    return values
+
+
+def _same(a, b) -> bool:
+    if isinstance(a, (np.generic, int, float, complex)) and not isinstance(a, np.ndarray):
+        return a == b or (a != a and b != b)  # NumPy scalars come back as Python numbers, by design
+    if type(a) is not type(b):
+        return False
+    if isinstance(a, np.ndarray):
+        return a.dtype == b.dtype and a.shape == b.shape and np.array_equal(a, b, equal_nan=a.dtype.kind in "fc")
+    if dataclasses.is_dataclass(a):
+        return all(_same(getattr(a, f.name), getattr(b, f.name)) for f in dataclasses.fields(a) if f.init)
+    if hasattr(a, "to_dict"):
+        return _same(a.to_dict(), b.to_dict())
+    if isinstance(a, dict):
+        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
+    if isinstance(a, (tuple, list)):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
+    return a == b or (a != a and b != b)
+
+
+def test_every_registered_type_round_trips(tmp_path):
+    values = _legacy_values()
+    vehicle = baseline()
+    linear = values["modal_model"]
+    values.update({
+        "modal_structure": linear.structure,
+        "spline_modal_structure": values["spline_modal_model"].structure,
+        "scheduled_modal_model": schedule_models({10.0: linear, 20.0: linear}),
+        "spline_iekf_options": SplineIEKFOptions(),
+        "io_data": read_archive(ARCHIVES / "identify_n4sid.h5").records["identification"],
+        "vehicle_parameters": vehicle, "vehicle_chassis": vehicle.chassis, "vehicle_suspension": vehicle.suspension,
+        "vehicle_tyres": vehicle.tyre, "vehicle_drive": vehicle.drive,
+    })
+    linearisation = linearize(vehicle, speed=20.0)
+    values.update({"vehicle_linearization": linearisation, "vehicle_mode": linearisation.modes[0]})
+    assert set(values) == set(storage._SCHEMAS)  # a type registered later needs an example here
+    with h5py.File(tmp_path / "all.h5", "w") as handle:
+        for schema, value in values.items():
+            assert storage._SCHEMAS[schema][0] is type(value)
+            write_value(handle, schema, value)
+            assert handle[schema].attrs["vehid_schema"] == schema
+    with h5py.File(tmp_path / "all.h5", "r") as handle:
+        for schema, value in values.items():
+            assert _same(read_value(handle, schema), value), schema
+
+
+def test_the_stored_nonlinear_history_is_the_series_the_summary_once_carried():
+    # The report now draws the nonlinear convergence from runs/nonlinear-n<n>/history; a study
+    # written before it carried the same series in its JSON summary, so both must agree exactly.
+    archive = read_archive(ARCHIVES / "handling_study.h5")
+    (run,) = archive.summary["nonlinear_runs"]
+    history = archive.runs[f"nonlinear-n{run['order']}"].history
+    assert np.array_equal(history["fit_filter"], np.array(run["fit_filter_by_pass"]))
+    assert np.array_equal(history["trace_p"], np.array(run["trace_p_by_pass"]))
+
+
+@pytest.mark.parametrize("attribute, value, message", [
+    ("vehid_schema", "popen", "schema 'popen', which this workbench does not know"),
+    ("dataclass", "subprocess:Popen", "names class 'subprocess:Popen'.*refusing"),
+], ids=["unknown-schema", "foreign-class-path"])
+def test_report_refuses_a_value_it_cannot_rebuild_with_exit_2(attribute, value, message, tmp_path, capsys):
+    path = tmp_path / "tampered.h5"
+    shutil.copyfile(ARCHIVES / "identify_n4sid.h5", path)
+    with h5py.File(path, "r+") as handle:  # a consistent archive (checksums rewritten) that names a stranger
+        model = handle["runs/n4sid/model"]
+        for key in ("vehid_class", "vehid_schema"):
+            model.attrs.pop(key, None)
+        model.attrs[attribute] = value
+        write_checksums(handle)
+    assert main(["report", str(path), "--out", str(tmp_path / "report")]) == 2
+    assert re.search(message, capsys.readouterr().err)
+    assert not (tmp_path / "report").exists()
+
+
+def test_an_old_identification_run_resumes_and_its_archive_is_marked_with_the_new_layout(tmp_path, capsys):
+    path = tmp_path / "run.h5"
+    shutil.copyfile(ARCHIVES / "identify_iekf.h5", path)
+    status = main(["identify", "--resume", str(path), "--passes", "4", "--json", "--quiet"])
+    assert status == 0, capsys.readouterr().err
+    archive = read_archive(path)
+    assert archive.runs["iekf"].n_pass == 4 and archive.schema_version == archive_module.SCHEMA_VERSION
+    with h5py.File(path, "r") as handle:
+        assert handle["runs/iekf/model"].attrs["vehid_schema"] == "modal_model"
