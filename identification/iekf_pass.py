@@ -37,14 +37,14 @@ import functools
 import hashlib
 import warnings
 from dataclasses import dataclass
-from typing import Any
+from typing import Callable
 
 import casadi as ca
 import numpy as np
 
 from .compiled import NoCompilerWarning, compile_driver, find_c_compiler
 from .errors import DivergenceError
-from .filter_models import check_discretization
+from .filter_models import FilterModel, check_discretization
 from .iekf_kernel import structured_pass_source
 
 __all__ = [
@@ -116,13 +116,13 @@ class FilterStep:
         return self.n_z + self.n_z * (self.n_z + 1) // 2
 
 
-def build_filter_step(filter_model: Any, dt: float, discretization: str, covariance: str) -> FilterStep:
+def build_filter_step(filter_model: FilterModel, dt: float, discretization: str, covariance: str) -> FilterStep:
     """Build the SX filter step for a filter model (see :mod:`identification.filter_models`)."""
     check_discretization(discretization)
     if covariance not in COVARIANCE_FORMS:
         raise ValueError(f"unknown covariance form {covariance!r}; use one of {', '.join(COVARIANCE_FORMS)}")
     n_x, n_theta, n_u, n_y = filter_model.n_x, filter_model.n_theta, filter_model.n_u, filter_model.n_y
-    n_c = getattr(filter_model, "n_constants", 0)
+    n_c = filter_model.n_constants
     m = n_x + n_theta
 
     # The model and its Jacobians, as a function of a free augmented state.
@@ -231,7 +231,7 @@ def _constants(filter_step: FilterStep, c: np.ndarray | None) -> np.ndarray:
 class _CompiledPass:
     """A loaded pass library: ``run(state, u, y, q, r, c=None) -> (state, innovations)``."""
 
-    def __init__(self, function: Any, filter_step: FilterStep):
+    def __init__(self, function: Callable[..., int], filter_step: FilterStep):
         self._function = function
         self.filter_step = filter_step
 
@@ -274,7 +274,7 @@ class _VirtualMachinePass:
 
 
 @functools.lru_cache(maxsize=32)
-def _pass_for(filter_model: Any, dt: float, discretization: str, covariance: str, kernel: str):
+def _pass_for(filter_model: FilterModel, dt: float, discretization: str, covariance: str, kernel: str):
     filter_step = build_filter_step(filter_model, dt, discretization, covariance)
     if find_c_compiler() is None:
         warnings.warn(
@@ -300,7 +300,7 @@ def _pass_for(filter_model: Any, dt: float, discretization: str, covariance: str
     return _CompiledPass(function, filter_step)
 
 
-def compiled_pass(filter_model: Any, dt: float, discretization: str, covariance: str, kernel: str = "auto"):
+def compiled_pass(filter_model: FilterModel, dt: float, discretization: str, covariance: str, kernel: str = "auto"):
     """The pass function for a filter model, built and compiled once (cached in memory and on disk).
 
     ``kernel`` chooses the compiled code: ``structured`` generates only the

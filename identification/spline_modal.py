@@ -41,7 +41,7 @@ import numpy as np
 
 from .compiled import CompiledRecursion
 from .errors import InputError
-from .filter_models import check_discretization, modal_transition
+from .filter_models import FilterModel, check_discretization, modal_transition
 from .modal import ModalModel, ModalStructure
 from .spline import MAX_NODES, MIN_NODES, SplineBasis, resample
 
@@ -157,7 +157,7 @@ class SplineModalStructure:
 
 
 @dataclass(frozen=True)
-class SplineModalFilterModel:
+class SplineModalFilterModel(FilterModel):
     """The spline-modal model as a filter model (normalised units); constants are the node ranges."""
 
     structure: SplineModalStructure
@@ -212,7 +212,8 @@ class SplineModalFilterModel:
         b = self.coefficients(x, theta, u, constants, self.structure.linear.slices()["B"])
         return [sum(b[i * s.n_u + j] * u[j] for j in range(s.n_u)) for i in range(s.n)]
 
-    def transition(self, x: Any, theta: Any, u0: Any, u1: Any, dt: float, discretization: str, constants: Any = None) -> Any:
+    def transition(self, x: ca.SX, theta: ca.SX, u0: ca.SX, u1: ca.SX, dt: float, discretization: str,
+                   constants: ca.SX) -> ca.SX:
         check_discretization(discretization)
         s = self.structure.linear
         modal = self.coefficients(x, theta, u0, constants, s.slices()["modal"])
@@ -220,7 +221,7 @@ class SplineModalFilterModel:
         drive1 = self._input_drive(x, theta, u1, constants)
         return modal_transition(s, modal, x, drive0, drive1, dt, discretization)
 
-    def output(self, x: Any, theta: Any, u: Any, constants: Any = None) -> Any:
+    def output(self, x: ca.SX, theta: ca.SX, u: ca.SX, constants: ca.SX) -> ca.SX:
         s = self.structure.linear
         sl = s.slices()
         c_free = self.coefficients(x, theta, u, constants, sl["C"])
