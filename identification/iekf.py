@@ -52,6 +52,7 @@ from .errors import DivergenceError, ExcitationError, InputError
 from .filter_models import LinearModalFilterModel, check_discretization
 from .iekf_pass import COVARIANCE_FORMS, compiled_pass, pack_covariance, unpack_covariance
 from .modal import ModalModel, ModalStructure
+from .modal_scaling import denormalize, normalize_parameters, rescale_time, time_weights
 from .multirecord import pooled_simulation_fit
 from .start import DATA_STARTS, data_start
 from .uncertainty import iekf_parameter_covariance
@@ -322,48 +323,6 @@ def _settle_states(state, u, y, structure: ModalStructure, run_pass, q, r, dt: f
     return settled, u[head:], y[head:]
 
 
-def denormalize(structure: ModalStructure, theta: np.ndarray, input_scale: np.ndarray, output_scale: np.ndarray) -> np.ndarray:
-    """Parameters in original units from those identified on scaled data.
-
-    With ``u = Su u_n`` and ``y = Sy y_n`` and the state basis rescaled by the
-    scale of the output each state is tied to, ``A`` is unchanged, the fixed
-    C entries stay 1, ``B -> S B Su^-1``, ``C -> Sy C S^-1``, ``D -> Sy D Su^-1``.
-    """
-    A, B, C, D = structure.matrices(theta)
-    state_scale = np.array([output_scale[structure.output_of_state(j)] for j in range(structure.n)])
-    B = state_scale[:, None] * B / input_scale[None, :]
-    C = output_scale[:, None] * C / state_scale[None, :]
-    D = output_scale[:, None] * D / input_scale[None, :]
-    return structure.pack(A, B, C, D)
-
-
-def normalize_parameters(structure: ModalStructure, theta: np.ndarray, input_scale: np.ndarray, output_scale: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`denormalize`."""
-    return denormalize(structure, theta, 1.0 / input_scale, 1.0 / output_scale)
-
-
-def rescale_time(structure: ModalStructure, theta: np.ndarray, factor: float) -> np.ndarray:
-    """Parameters in a time unit ``factor`` times the present one: sigma, omega and B times ``factor``.
-
-    ``xdot = A x + B u`` in time ``t' = t / factor`` reads ``dx/dt' = factor A x + factor B u``;
-    C and D are unchanged.
-    """
-    theta = np.array(theta, dtype=float)
-    slices = structure.slices()
-    theta[slices["modal"]] *= factor
-    theta[slices["B"]] *= factor
-    return theta
-
-
-def _time_weights(structure: ModalStructure, ratio: float) -> np.ndarray:
-    """Per parameter: ``ratio`` for sigma, omega and B, 1 for C and D (the change of time unit)."""
-    weights = np.ones(structure.n_parameters)
-    slices = structure.slices()
-    weights[slices["modal"]] = ratio
-    weights[slices["B"]] = ratio
-    return weights
-
-
 def identify_iekf(
     data: IOData,
     structure: ModalStructure,
@@ -468,7 +427,7 @@ def identify_iekf(
     # Q = p I and P0 = p I on the parameters in time unit time_constant (module docstring), carried to
     # the filter's time unit by the congruence of that change of parameters.
     ratio = time_unit / time_constant
-    weights = _time_weights(structure, ratio)
+    weights = time_weights(structure, ratio)
     q = np.concatenate([np.zeros(n), weights**2 * ratio * options.p])
     if P is None:
         P = np.diag(np.concatenate([np.zeros(n), weights**2 * options.p]))

@@ -43,6 +43,7 @@ from .compiled import CompiledRecursion
 from .errors import InputError
 from .filter_models import FilterModel, check_discretization, modal_transition
 from .modal import ModalModel, ModalStructure
+from .modal_scaling import denormalize, normalize_parameters
 from .spline import MAX_NODES, MIN_NODES, SplineBasis, resample
 
 __all__ = [
@@ -318,8 +319,6 @@ class SplineModalModel:
         discretization: str = "exact", ranges: np.ndarray | None = None,
     ) -> "SplineModalModel":
         """The nonlinear model equal to ``linear``: every node at its (normalised) value."""
-        from .iekf import normalize_parameters
-
         structure = SplineModalStructure(linear.structure, nodes)
         theta_linear = normalize_parameters(linear.structure, linear.parameters, np.asarray(input_scale, float), np.asarray(output_scale, float))
         return cls(
@@ -451,8 +450,6 @@ class SplineModalModel:
 
     def linear_model(self, at: float = 0.0) -> ModalModel:
         """The linear model of the splines' values at zero input, states and amplitude ``at``."""
-        from .iekf import denormalize
-
         st = self.structure
         values = []
         follows = st.coefficient_variables()

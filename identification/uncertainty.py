@@ -59,6 +59,7 @@ import scipy.linalg
 from scipy.stats import norm
 
 from .errors import InputError
+from .modal_scaling import denormalize, rescale_time
 
 __all__ = [
     "ModeEstimate",
@@ -401,12 +402,10 @@ def iekf_parameter_covariance(
     converged on a long record; the ratio therefore errs on the wide side.
 
     The map to original units is the Jacobian of
-    :func:`identification.iekf.rescale_time` and
-    :func:`identification.iekf.denormalize`, a diagonal matrix since both
+    :func:`identification.modal_scaling.rescale_time` and
+    :func:`identification.modal_scaling.denormalize`, a diagonal matrix since both
     scale each parameter alone: ``cov = J P J'``.
     """
-    from .iekf import denormalize, rescale_time
-
     if not (np.isfinite(noise_ratio) and noise_ratio > 0):
         raise InputError(f"the measured noise ratio must be positive; got {noise_ratio!r}")
     n_theta = structure.n_parameters
