@@ -49,11 +49,12 @@ import numpy as np
 
 from .data import IOData, as_records
 from .errors import DivergenceError, ExcitationError, InputError
-from .filter_models import LinearModalFilterModel, check_discretization
-from .iekf_pass import COVARIANCE_FORMS, compiled_pass, pack_covariance, unpack_covariance
+from .filter_models import LinearModalFilterModel
+from .iekf_pass import compiled_pass, pack_covariance, unpack_covariance
 from .modal import ModalModel, ModalStructure
 from .modal_scaling import denormalize, normalize_parameters, rescale_time, time_weights
 from .multirecord import pooled_simulation_fit
+from .rinse import Assessment, PassRecord, RinseHooks, check_filter_options, parameters_settled, rinse
 from .start import DATA_STARTS, data_start
 from .uncertainty import iekf_parameter_covariance
 
@@ -89,17 +90,6 @@ TIMESCALES = ("seconds", "auto")
 #: 76.8 / 78.4 / 78.1 / 76.6 and 68.9 / 68.8 / 68.4 / 66.8 %. 1e-4 is within 2.3 points of
 #: the best on each and stops in 11-16 passes where 1e-5 needs 29-46.
 INVARIANT_P = 1e-4
-
-
-def check_filter_options(p: Any, passes: Any, discretization: str, covariance: str) -> None:
-    """The checks every IEKF's options share: a positive p, a whole number of passes, known forms."""
-    if not (isinstance(p, (int, float)) and math.isfinite(p) and p > 0):
-        raise InputError(f"the tuning parameter p must be a positive number; got {p!r}")
-    if isinstance(passes, bool) or int(passes) != passes or passes < 1:
-        raise InputError(f"passes must be a whole number >= 1; got {passes!r}")
-    check_discretization(discretization)
-    if covariance not in COVARIANCE_FORMS:
-        raise InputError(f"unknown covariance form {covariance!r}; use one of {', '.join(COVARIANCE_FORMS)}")
 
 
 @dataclass(frozen=True)
@@ -175,35 +165,6 @@ class IEKFOptions:
     def simulation_method(self) -> str:
         """How the frozen model is simulated to score it "with the filter's discretisation"."""
         return {"euler": "euler", "exact": "foh", "exact-zoh": "zoh"}[self.discretization]
-
-
-@dataclass(frozen=True, eq=False)
-class PassRecord:
-    """What one pass left: parameters (original units), fits, and the covariance's state.
-
-    ``fit_filter``: R per output of the frozen model simulated with the
-    filter's own discretisation; ``fit_continuous``: R per output of the
-    continuous model simulated exactly (inputs linear between samples);
-    ``nis``: the pass's mean normalised innovation squared ``e' R^-1 e``
-    (n_y for innovations as large as the filter assumes; NaN where unknown).
-    """
-
-    index: int
-    parameters: np.ndarray
-    fit_filter: np.ndarray
-    fit_continuous: np.ndarray
-    trace_p: float
-    min_eig_p: float
-    seconds: float
-    nis: float = float("nan")
-
-    @property
-    def mean_fit_filter(self) -> float:
-        return float(np.mean(self.fit_filter))
-
-    @property
-    def mean_fit_continuous(self) -> float:
-        return float(np.mean(self.fit_continuous))
 
 
 @dataclass(frozen=True, eq=False)
@@ -381,8 +342,7 @@ def identify_iekf(
     settle = len(records) > 1 if settle_start is None else bool(settle_start)
     started = time.perf_counter()
     dt = data.dt
-    n, m_theta = structure.n, structure.n_parameters
-    m = n + m_theta
+    n = structure.n
 
     start_meta: dict[str, Any] = {}
     if resume is not None:
@@ -453,7 +413,7 @@ def identify_iekf(
     if resume is None:
         start_meta["start_parameters"] = original_units(theta)
 
-    def result(stop_reason: str) -> IEKFResult:
+    def result(stop_reason: str, history: tuple[PassRecord, ...], theta: np.ndarray, P: np.ndarray) -> IEKFResult:
         last = history[-1].parameters if history else original_units(theta)
         covariance = None
         if history and np.isfinite(history[-1].nis):
@@ -467,7 +427,7 @@ def identify_iekf(
             ),
             structure=structure,
             options=options,
-            history=tuple(history),
+            history=history,
             state=FilterState(theta.copy(), P.copy(), input_scale.copy(), output_scale.copy(), time_unit, time_constant),
             dt=dt,
             stop_reason=stop_reason,
@@ -475,91 +435,29 @@ def identify_iekf(
             meta=dict(start_meta),
         )
 
-    if len(history) >= max(2, options.min_passes) and _settled(
-            relative_units(history[-2].parameters), relative_units(history[-1].parameters), history[-2].trace_p,
-            history[-1].trace_p, options):
-        return result("converged")  # a resumed run had met its stop rule (perhaps killed before it said so)
-    stop_reason = "passes"
-    while len(history) < options.passes:
-        pass_index = len(history) + 1
-        pass_start = time.perf_counter()
-        state = np.concatenate([np.zeros(n), theta, pack_covariance(P)])
-        where = None
-        nis_sum, nis_count = 0.0, 0
-        for experiment, u_k, y_k in zip(records, u_scaled, y_scaled):
-            state[:n] = 0.0  # each record starts from its own rest state; parameters and P carry on
-            try:
-                if settle:
-                    state, u_k, y_k = _settle_states(state, u_k, y_k, structure, run_pass, q, r, dt / time_unit)
-                state, innovations = run_pass(state, u_k, y_k, q, r)
-            except DivergenceError as exc:
-                raise DivergenceError(
-                    f"pass {pass_index}: {exc}", last_good=result(f"diverged at pass {pass_index}") if history else None
-                ) from exc
-            if not (np.all(np.isfinite(state)) and np.all(np.isfinite(innovations))):
-                bad = np.flatnonzero(~np.all(np.isfinite(innovations), axis=1))
-                head = experiment.n_samples - y_k.shape[0]  # samples used to settle the start state
-                where = f" from t = {experiment.t[head + bad[0]]:.3f} s" if bad.size else ""
-                if len(records) > 1:
-                    where += f" of record {experiment.meta.get('source', records.index(experiment) + 1)}"
-                break
-            nis_sum += float(np.sum(innovations * np.linalg.solve(r, innovations.T).T))
-            nis_count += innovations.shape[0]
-        del innovations  # (N, n_y): not kept while the model is scored
-        new_theta = state[n:m]
-        new_P = unpack_covariance(state[m:], m)
-        if where is not None:
-            raise DivergenceError(
-                f"pass {pass_index}: the filter produced non-finite values{where} "
-                f"(try a lower p, the joseph covariance form, or a lower order)",
-                last_good=result(f"diverged at pass {pass_index}") if history else None,
-            )
-        min_eig = float(np.linalg.eigvalsh(new_P)[0])
-        trace = float(np.trace(new_P))
-        if options.covariance != "paper" and min_eig < -1e-9 * max(trace, 1.0):
-            raise DivergenceError(
-                f"pass {pass_index}: the covariance P lost positive definiteness "
-                f"(smallest eigenvalue {min_eig:.3g}, trace {trace:.3g})",
-                last_good=result(f"diverged at pass {pass_index}") if history else None,
-            )
-        theta_original = original_units(new_theta)
+    def run_record(state: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+        u_k, y_k = u_scaled[k], y_scaled[k]
+        if settle:
+            state, u_k, y_k = _settle_states(state, u_k, y_k, structure, run_pass, q, r, dt / time_unit)
+        return run_pass(state, u_k, y_k, q, r)
+
+    def assess(theta_filter: np.ndarray, P_filter: np.ndarray) -> Assessment:
+        theta_original = original_units(theta_filter)
         model = ModalModel.from_parameters(structure, theta_original)
         if not options.allow_unstable and not model.is_stable():
             raise DivergenceError(
-                f"pass {pass_index}: the identified model is unstable "
-                f"(eigenvalues {np.round(model.eigenvalues(), 4).tolist()}; for an open-loop unstable plant "
-                "allow unstable modes: --allow-unstable)",
-                last_good=result(f"diverged at pass {pass_index}") if history else None,
-            )
+                f"the identified model is unstable (eigenvalues {np.round(model.eigenvalues(), 4).tolist()}; "
+                "for an open-loop unstable plant allow unstable modes: --allow-unstable)")
         fit_filter = pooled_simulation_fit(model, records, options.simulation_method)
         fit_exact = fit_filter if options.simulation_method == "foh" else pooled_simulation_fit(model, records)
-        previous = history[-1] if history else None
-        record = PassRecord(
-            index=pass_index,
-            parameters=theta_original,
-            fit_filter=fit_filter,
-            fit_continuous=fit_exact,
-            trace_p=trace,
-            min_eig_p=min_eig,
-            seconds=time.perf_counter() - pass_start,
-            nis=nis_sum / max(nis_count, 1),
-        )
-        theta, P = new_theta, new_P
-        history.append(record)
-        if on_pass is not None:
-            on_pass(record, result("running"))
-        if previous is not None and len(history) >= options.min_passes and _settled(
-                relative_units(previous.parameters), relative_units(record.parameters), previous.trace_p, record.trace_p,
-                options):
-            stop_reason = "converged"
-            break
-    return result(stop_reason)
+        return Assessment(theta_original, fit_filter, fit_exact, theta_filter, P_filter)
 
+    def settled(previous: PassRecord, current: PassRecord) -> bool:
+        return parameters_settled(relative_units(previous.parameters), relative_units(current.parameters),
+                                  previous.trace_p, current.trace_p, options.parameter_tolerance,
+                                  options.trace_tolerance)
 
-def _settled(previous: np.ndarray, current: np.ndarray, previous_trace: float, current_trace: float,
-             options: IEKFOptions) -> bool:
-    """Parameter change relative to each parameter (floor 1e-3 in the compared units) and trace(P)'s relative change."""
-    scale = np.maximum(np.abs(current), 1e-3)
-    parameter_change = float(np.max(np.abs(current - previous) / scale))
-    trace_change = abs(current_trace - previous_trace) / max(abs(previous_trace), 1e-300)
-    return parameter_change < options.parameter_tolerance and trace_change < options.trace_tolerance
+    hooks = RinseHooks(records, run_record, lambda: r, assess, settled, result, n,
+                       hint="try a lower p, the joseph covariance form, or a lower order")
+    return rinse(hooks, theta, P, tuple(history), passes=options.passes, min_passes=options.min_passes,
+                 check_covariance=options.covariance != "paper", on_pass=on_pass)

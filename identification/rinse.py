@@ -1,0 +1,237 @@
+"""The rinse: the IEKF's passes over the record, one loop for the linear and the spline filter.
+
+Best & Bogdanski 2017, sections 2-5: each pass starts the true states of every
+record at zero and carries the parameters and the covariance ``P`` on; after
+the pass the parameters are frozen and the model is scored. The loop owns
+what every IEKF does alike: the compiled pass over each record, a
+:class:`~identification.errors.DivergenceError` carrying the result up to
+the last good pass (non-finite values, with the time they first appear; a
+``P`` no longer positive definite; a model the filter refuses), one
+:class:`PassRecord` per pass, the ``on_pass`` callback and the stop rule. A
+filter supplies :class:`RinseHooks`: how a record is filtered, how a pass's
+parameters are assessed (and carried to the next pass), its stop rule, its
+``R`` and its result type.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Callable, Generic, TypeVar
+
+import numpy as np
+
+from .data import IOData
+from .errors import DivergenceError, InputError
+from .filter_models import check_discretization
+from .iekf_pass import COVARIANCE_FORMS, pack_covariance, unpack_covariance
+
+__all__ = ["PassRecord", "Assessment", "RinseHooks", "rinse", "check_filter_options", "parameters_settled"]
+
+ResultT = TypeVar("ResultT")
+
+
+def check_filter_options(p: float, passes: int, discretization: str, covariance: str) -> None:
+    """The checks every IEKF's options share: a positive p, a whole number of passes, known forms."""
+    if not (isinstance(p, (int, float)) and math.isfinite(p) and p > 0):
+        raise InputError(f"the tuning parameter p must be a positive number; got {p!r}")
+    if isinstance(passes, bool) or int(passes) != passes or passes < 1:
+        raise InputError(f"passes must be a whole number >= 1; got {passes!r}")
+    check_discretization(discretization)
+    if covariance not in COVARIANCE_FORMS:
+        raise InputError(f"unknown covariance form {covariance!r}; use one of {', '.join(COVARIANCE_FORMS)}")
+
+
+@dataclass(frozen=True, eq=False)
+class PassRecord:
+    """What one pass left: parameters, fits, the covariance's state and the innovations' size.
+
+    ``parameters``: the linear filter's in original units, the spline
+    filter's node ordinates (normalised units, on the ranges after the pass).
+    ``fit_filter``: R per output of the frozen model simulated with the
+    filter's own discretisation; ``fit_continuous``: R per output of the
+    continuous model simulated exactly (inputs linear between samples; the
+    spline model is defined by its discretisation, so there the same).
+    ``nis``: the pass's mean normalised innovation squared ``e' R^-1 e``
+    (n_y for innovations as large as the filter assumes; NaN where unknown).
+    """
+
+    index: int
+    parameters: np.ndarray
+    fit_filter: np.ndarray
+    fit_continuous: np.ndarray
+    trace_p: float
+    min_eig_p: float
+    seconds: float
+    nis: float = float("nan")
+
+    @property
+    def mean_fit_filter(self) -> float:
+        return float(np.mean(self.fit_filter))
+
+    @property
+    def mean_fit_continuous(self) -> float:
+        return float(np.mean(self.fit_continuous))
+
+
+@dataclass(frozen=True, eq=False)
+class Assessment:
+    """A filter's verdict on a pass: the record's parameters and fits, and the theta and P the next pass starts from."""
+
+    parameters: np.ndarray
+    fit_filter: np.ndarray
+    fit_continuous: np.ndarray
+    theta: np.ndarray
+    P: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class RinseHooks(Generic[ResultT]):
+    """What a filter supplies to :func:`rinse`.
+
+    Parameters
+    ----------
+    records : tuple of IOData
+        The records a pass runs over, in turn (for times and names in messages).
+    run_record : callable
+        ``(state, k) -> (state, innovations)``: the filter over record ``k``
+        from the packed state ``[x; theta; upper(P)]``; the innovations
+        ``(N_k, n_y)`` are those of the record's last ``N_k`` samples.
+    measurement_covariance : callable
+        ``() -> R`` of the coming pass (for the NIS).
+    assess : callable
+        ``(theta, P) -> Assessment`` after a pass; raises DivergenceError
+        (without the pass's name) for a model the filter refuses.
+    settled : callable
+        ``(previous, current) -> bool``: the stop rule on two pass records.
+    result : callable
+        ``(stop_reason, history, theta, P) -> result``.
+    n_x : int
+        Number of true states (reset to zero at the start of each record).
+    label : str
+        The pass's name in messages.
+    hint : str
+        What to try when the filter produces non-finite values.
+    """
+
+    records: tuple[IOData, ...]
+    run_record: Callable[[np.ndarray, int], tuple[np.ndarray, np.ndarray]]
+    measurement_covariance: Callable[[], np.ndarray]
+    assess: Callable[[np.ndarray, np.ndarray], Assessment]
+    settled: Callable[[PassRecord, PassRecord], bool]
+    result: Callable[[str, tuple[PassRecord, ...], np.ndarray, np.ndarray], ResultT]
+    n_x: int
+    label: str = "pass"
+    hint: str = "try a lower p"
+
+
+def parameters_settled(previous: np.ndarray, current: np.ndarray, previous_trace: float, current_trace: float,
+                       parameter_tolerance: float, trace_tolerance: float) -> bool:
+    """Parameter change relative to each parameter (floor 1e-3 in the compared units) and trace(P)'s relative change."""
+    scale = np.maximum(np.abs(current), 1e-3)
+    parameter_change = float(np.max(np.abs(current - previous) / scale))
+    trace_change = abs(current_trace - previous_trace) / max(abs(previous_trace), 1e-300)
+    return parameter_change < parameter_tolerance and trace_change < trace_tolerance
+
+
+def rinse(
+    hooks: RinseHooks[ResultT],
+    theta: np.ndarray,
+    P: np.ndarray,
+    history: tuple[PassRecord, ...] = (),
+    *,
+    passes: int,
+    min_passes: int,
+    check_covariance: bool = True,
+    on_pass: Callable[[PassRecord, ResultT], None] | None = None,
+) -> ResultT:
+    """Pass over the records until the stop rule holds or ``passes`` passes are on record.
+
+    Parameters
+    ----------
+    hooks : RinseHooks
+    theta : ndarray (n_theta,)
+        Parameters the next pass starts from (the filter's units).
+    P : ndarray (n_x + n_theta, n_x + n_theta)
+        Covariance the next pass starts from.
+    history : tuple of PassRecord
+        Passes already run (a resumed run); ``passes`` counts them too. A
+        history whose last two passes meet the stop rule returns at once.
+    passes, min_passes : int
+        Largest number of passes; never stop early before ``min_passes``.
+    check_covariance : bool
+        Stop when P loses positive definiteness (off for the paper's
+        covariance form, which may lose it by design).
+    on_pass : callable, optional
+        Called after every pass with its record and the result so far.
+
+    Returns
+    -------
+    The hooks' result, with stop reason ``"converged"`` or ``"passes"``.
+
+    Raises
+    ------
+    DivergenceError
+        Named by the pass; ``last_good`` is the result up to the last good
+        pass (None before the first).
+    """
+    history = list(history)
+    n = hooks.n_x
+    m = n + theta.size
+
+    def diverged(index: int, message: str) -> DivergenceError:
+        last_good = hooks.result(f"diverged at pass {index}", tuple(history), theta, P) if history else None
+        return DivergenceError(f"{hooks.label} {index}: {message}", last_good=last_good)
+
+    if len(history) >= max(2, min_passes) and hooks.settled(history[-2], history[-1]):
+        return hooks.result("converged", tuple(history), theta, P)  # a resumed run had met its stop rule
+    stop_reason = "passes"
+    while len(history) < passes:
+        index = len(history) + 1
+        pass_start = time.perf_counter()
+        r = hooks.measurement_covariance()
+        state = np.concatenate([np.zeros(n), theta, pack_covariance(P)])
+        nis_sum, nis_count = 0.0, 0
+        for k, record in enumerate(hooks.records):
+            state[:n] = 0.0  # each record starts from its own rest state; parameters and P carry on
+            try:
+                state, innovations = hooks.run_record(state, k)
+            except DivergenceError as exc:
+                raise diverged(index, str(exc)) from exc
+            if not (np.all(np.isfinite(state)) and np.all(np.isfinite(innovations))):
+                bad = np.flatnonzero(~np.all(np.isfinite(innovations), axis=1))
+                head = record.n_samples - innovations.shape[0]  # samples the filter used before its innovations
+                where = f" from t = {record.t[head + bad[0]]:.3f} s" if bad.size else ""
+                if len(hooks.records) > 1:
+                    where += f" of record {record.meta.get('source', k + 1)}"
+                raise diverged(index, f"the filter produced non-finite values{where} ({hooks.hint})")
+            nis_sum += float(np.sum(innovations * np.linalg.solve(r, innovations.T).T))
+            nis_count += innovations.shape[0]
+            del innovations  # (N, n_y): not kept while the model is scored
+        filtered_theta, filtered_P = state[n:m], unpack_covariance(state[m:], m)
+        min_eig = float(np.linalg.eigvalsh(filtered_P)[0])
+        trace = float(np.trace(filtered_P))
+        if check_covariance and min_eig < -1e-9 * max(trace, 1.0):
+            raise diverged(index, f"the covariance P lost positive definiteness (smallest eigenvalue {min_eig:.3g}, "
+                                  f"trace {trace:.3g})")
+        try:
+            assessment = hooks.assess(filtered_theta, filtered_P)
+        except DivergenceError as exc:
+            raise diverged(index, str(exc)) from exc
+        if assessment.P is not filtered_P:  # the filter moved P (a change of parameters)
+            min_eig, trace = float(np.linalg.eigvalsh(assessment.P)[0]), float(np.trace(assessment.P))
+        record = PassRecord(
+            index=index, parameters=assessment.parameters, fit_filter=assessment.fit_filter,
+            fit_continuous=assessment.fit_continuous, trace_p=trace, min_eig_p=min_eig,
+            seconds=time.perf_counter() - pass_start, nis=nis_sum / max(nis_count, 1),
+        )
+        theta, P = assessment.theta, assessment.P
+        previous = history[-1] if history else None
+        history.append(record)
+        if on_pass is not None:
+            on_pass(record, hooks.result("running", tuple(history), theta, P))
+        if previous is not None and len(history) >= min_passes and hooks.settled(previous, record):
+            stop_reason = "converged"
+            break
+    return hooks.result(stop_reason, tuple(history), theta, P)
