@@ -174,32 +174,21 @@ def modal_transition(
 
 
 class FilterModel(Protocol):
-    """What the IEKF needs of a model (module docstring): sizes, transition, output and a cache key.
-
-    ``n_constants`` is explicit (0 where the model takes none), so that the
-    compiled filter's argument list never depends on a guess.
-    """
+    """What the IEKF needs of a model (module docstring); ``n_constants`` is explicit, 0 where there are none."""
 
     @property
     def n_x(self) -> int: ...
-
     @property
     def n_theta(self) -> int: ...
-
     @property
     def n_u(self) -> int: ...
-
     @property
     def n_y(self) -> int: ...
-
     @property
     def n_constants(self) -> int: ...
-
     def transition(self, x: ca.SX, theta: ca.SX, u0: ca.SX, u1: ca.SX, dt: float, discretization: str,
                    constants: ca.SX) -> ca.SX: ...
-
     def output(self, x: ca.SX, theta: ca.SX, u: ca.SX, constants: ca.SX) -> ca.SX: ...
-
     def cache_key(self) -> str: ...
 
 
@@ -225,9 +214,7 @@ class LinearModalFilterModel(FilterModel):
     def n_y(self) -> int:
         return self.structure.n_y
 
-    @property
-    def n_constants(self) -> int:
-        return 0
+    n_constants = 0
 
     def transition(self, x: ca.SX, theta: ca.SX, u0: ca.SX, u1: ca.SX, dt: float, discretization: str,
                    constants: ca.SX | None = None) -> ca.SX:

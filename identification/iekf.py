@@ -52,7 +52,6 @@ from .errors import DivergenceError, ExcitationError, InputError
 from .filter_models import LinearModalFilterModel
 from .iekf_pass import compiled_pass, pack_covariance, unpack_covariance
 from .modal import ModalModel, ModalStructure
-from .modal_scaling import denormalize, normalize_parameters, rescale_time, time_weights
 from .multirecord import pooled_simulation_fit
 from .rinse import Assessment, PassRecord, RinseHooks, check_filter_options, parameters_settled, rinse
 from .start import DATA_STARTS, data_start
@@ -362,12 +361,12 @@ def identify_iekf(
         if initial_model is not None:
             if initial_model.structure != structure:
                 raise InputError("the initial model has a different structure")
-            theta_seconds = normalize_parameters(structure, initial_model.parameters, input_scale, output_scale)
+            theta_seconds = structure.normalize_parameters(initial_model.parameters, input_scale, output_scale)
             start_meta = {"start": "given model"}
         elif options.start in DATA_STARTS:
             found = data_start(data.u / input_scale, data.y / output_scale, structure, method=options.start,
                                stable=not options.allow_unstable)
-            theta_seconds = rescale_time(structure, found.model.parameters, 1.0 / dt)
+            theta_seconds = structure.rescale_time(found.model.parameters, 1.0 / dt)
             start_meta = {"start": found.source, **({"start_note": found.note} if found.note else {})}
         else:
             sigma, omega, spread = START_VALUES[options.start]
@@ -379,7 +378,7 @@ def identify_iekf(
             # the start's dominant time constant, each mode's rate clipped to the band a sampled record
             # shows well (up to a quarter of the Nyquist frequency), so that a spurious fast mode does not set it
             time_constant = float(1.0 / np.median(np.clip(rates, 1e-6 / dt, (np.pi / 4) / dt)))
-        theta = rescale_time(structure, theta_seconds, time_unit)
+        theta = structure.rescale_time(theta_seconds, time_unit)
         P = None
         history = []
     start_meta.update(time_unit=time_unit, time_constant=time_constant)
@@ -387,7 +386,7 @@ def identify_iekf(
     # Q = p I and P0 = p I on the parameters in time unit time_constant (module docstring), carried to
     # the filter's time unit by the congruence of that change of parameters.
     ratio = time_unit / time_constant
-    weights = time_weights(structure, ratio)
+    weights = structure.time_weights(ratio)
     q = np.concatenate([np.zeros(n), weights**2 * ratio * options.p])
     if P is None:
         P = np.diag(np.concatenate([np.zeros(n), weights**2 * options.p]))
@@ -398,7 +397,7 @@ def identify_iekf(
     run_pass = compiled_pass(LinearModalFilterModel(structure), dt / time_unit, options.discretization, options.covariance)
 
     def original_units(theta_filter: np.ndarray) -> np.ndarray:
-        return denormalize(structure, rescale_time(structure, theta_filter, 1.0 / time_unit), input_scale, output_scale)
+        return structure.denormalize(structure.rescale_time(theta_filter, 1.0 / time_unit), input_scale, output_scale)
 
     def relative_units(theta_original: np.ndarray) -> np.ndarray:
         """Parameters in the units the stop rule compares: normalised signals, time in time_constant.
@@ -407,7 +406,7 @@ def identify_iekf(
         """
         if options.timescale == "seconds":
             return theta_original
-        return rescale_time(structure, normalize_parameters(structure, theta_original, input_scale, output_scale),
+        return structure.rescale_time(structure.normalize_parameters(theta_original, input_scale, output_scale),
                             time_constant)
 
     if resume is None:

@@ -88,40 +88,17 @@ class Assessment:
 
 @dataclass(frozen=True, eq=False)
 class RinseHooks(Generic[ResultT]):
-    """What a filter supplies to :func:`rinse`.
+    """What a filter supplies to :func:`rinse`; ``label`` names its passes and ``hint`` the cure for non-finite values."""
 
-    Parameters
-    ----------
-    records : tuple of IOData
-        The records a pass runs over, in turn (for times and names in messages).
-    run_record : callable
-        ``(state, k) -> (state, innovations)``: the filter over record ``k``
-        from the packed state ``[x; theta; upper(P)]``; the innovations
-        ``(N_k, n_y)`` are those of the record's last ``N_k`` samples.
-    measurement_covariance : callable
-        ``() -> R`` of the coming pass (for the NIS).
-    assess : callable
-        ``(theta, P) -> Assessment`` after a pass; raises DivergenceError
-        (without the pass's name) for a model the filter refuses.
-    settled : callable
-        ``(previous, current) -> bool``: the stop rule on two pass records.
-    result : callable
-        ``(stop_reason, history, theta, P) -> result``.
-    n_x : int
-        Number of true states (reset to zero at the start of each record).
-    label : str
-        The pass's name in messages.
-    hint : str
-        What to try when the filter produces non-finite values.
-    """
-
-    records: tuple[IOData, ...]
+    records: tuple[IOData, ...]  # what a pass runs over, in turn (times and names for messages)
+    # (state [x; theta; upper(P)], record k) -> (state, innovations of the record's last N_k samples (N_k, n_y))
     run_record: Callable[[np.ndarray, int], tuple[np.ndarray, np.ndarray]]
-    measurement_covariance: Callable[[], np.ndarray]
+    measurement_covariance: Callable[[], np.ndarray]  # R of the coming pass
+    # (theta, P) after a pass -> Assessment; raises DivergenceError (unnamed) for a model the filter refuses
     assess: Callable[[np.ndarray, np.ndarray], Assessment]
-    settled: Callable[[PassRecord, PassRecord], bool]
-    result: Callable[[str, tuple[PassRecord, ...], np.ndarray, np.ndarray], ResultT]
-    n_x: int
+    settled: Callable[[PassRecord, PassRecord], bool]  # the stop rule on the last two passes
+    result: Callable[[str, tuple[PassRecord, ...], np.ndarray, np.ndarray], ResultT]  # (stop reason, history, theta, P)
+    n_x: int  # true states, reset to zero at the start of each record
     label: str = "pass"
     hint: str = "try a lower p"
 
@@ -146,35 +123,16 @@ def rinse(
     check_covariance: bool = True,
     on_pass: Callable[[PassRecord, ResultT], None] | None = None,
 ) -> ResultT:
-    """Pass over the records until the stop rule holds or ``passes`` passes are on record.
+    """Pass over the records until ``hooks.settled`` or ``passes`` passes are on record.
 
-    Parameters
-    ----------
-    hooks : RinseHooks
-    theta : ndarray (n_theta,)
-        Parameters the next pass starts from (the filter's units).
-    P : ndarray (n_x + n_theta, n_x + n_theta)
-        Covariance the next pass starts from.
-    history : tuple of PassRecord
-        Passes already run (a resumed run); ``passes`` counts them too. A
-        history whose last two passes meet the stop rule returns at once.
-    passes, min_passes : int
-        Largest number of passes; never stop early before ``min_passes``.
-    check_covariance : bool
-        Stop when P loses positive definiteness (off for the paper's
-        covariance form, which may lose it by design).
-    on_pass : callable, optional
-        Called after every pass with its record and the result so far.
-
-    Returns
-    -------
-    The hooks' result, with stop reason ``"converged"`` or ``"passes"``.
-
-    Raises
-    ------
-    DivergenceError
-        Named by the pass; ``last_good`` is the result up to the last good
-        pass (None before the first).
+    ``theta`` and ``P`` (the filter's units) start the next pass; ``history``
+    holds passes already run (a resumed run, counted in ``passes``; one whose
+    last two passes are settled returns at once). ``check_covariance`` stops
+    when P loses positive definiteness (off for the paper's form, which may
+    lose it); ``on_pass`` is called after every pass with its record and the
+    result so far. Returns the hooks' result, stopped ``"converged"`` or
+    ``"passes"``; raises DivergenceError named by the pass, its ``last_good``
+    the result up to the last good pass (None before the first).
     """
     history = list(history)
     n = hooks.n_x

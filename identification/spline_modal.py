@@ -43,7 +43,6 @@ from .compiled import CompiledRecursion
 from .errors import InputError
 from .filter_models import FilterModel, check_discretization, modal_transition
 from .modal import ModalModel, ModalStructure
-from .modal_scaling import denormalize, normalize_parameters
 from .spline import MAX_NODES, MIN_NODES, SplineBasis, resample
 
 __all__ = [
@@ -320,7 +319,7 @@ class SplineModalModel:
     ) -> "SplineModalModel":
         """The nonlinear model equal to ``linear``: every node at its (normalised) value."""
         structure = SplineModalStructure(linear.structure, nodes)
-        theta_linear = normalize_parameters(linear.structure, linear.parameters, np.asarray(input_scale, float), np.asarray(output_scale, float))
+        theta_linear = linear.structure.normalize_parameters(linear.parameters, np.asarray(input_scale, float), np.asarray(output_scale, float))
         return cls(
             structure, structure.from_linear(theta_linear),
             structure.default_ranges() if ranges is None else ranges,
@@ -456,7 +455,7 @@ class SplineModalModel:
         for index, name in enumerate(st.coefficient_names()):
             point = at if follows[index] < st.linear.n_complex_pairs else 0.0
             values.append(float(self.coefficient(name, [point])[0]))
-        theta = denormalize(st.linear, np.array(values), self.input_scale, self.output_scale)
+        theta = st.linear.denormalize(np.array(values), self.input_scale, self.output_scale)
         return ModalModel.from_parameters(st.linear, theta, input_names=self.input_names, output_names=self.output_names)
 
     def resampled(self, ranges: np.ndarray) -> tuple["SplineModalModel", np.ndarray]:
