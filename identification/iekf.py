@@ -11,14 +11,10 @@ Tuning (section 3): ``Q = p I'`` with ``I'`` the identity with zeros for the
 true states (the fixed C entries are not in the state at all), ``R = I``
 unless given, ``P0 = Q``.
 
-Start values. The paper starts every sigma at -1 (omega likewise). Measured
-on the three-output, eq. 18 case of the linear example (exact
-discretisation, 30 passes, seeds 0-4): that start found all five
-eigenvalues within 2 % on 1 of 5 seeds, while faster oscillatory start modes
-(sigma = -10, omega = 10, the pairs' omegas spread apart so that the filter
-does not start symmetric in them) found them on 5 of 5, by pass 4 or 5. The
-workbench's fixed start is therefore ``sigma = -10, omega = 10 (1 + 0.5 i)``
-for pair i (``start="default"``); the paper's start is ``start="paper"``.
+Start values. The paper starts every sigma at -1; faster oscillatory start
+modes find the eigenvalues far more often (docs/iekf_tuning.md), so the
+workbench's fixed start is ``sigma = -10, omega = 10 (1 + 0.5 i)`` for pair i
+(``start="default"``); the paper's start is ``start="paper"``.
 
 Units. Those fixed starts, ``p`` and ``R = I`` are absolute: they suit
 records like the paper's (T = 2 ms, signals of order 1) and fail on others.
@@ -48,12 +44,12 @@ from typing import Any, Callable
 import numpy as np
 
 from .data import IOData, as_records
-from .errors import DivergenceError, ExcitationError, InputError
+from .errors import DivergenceError, InputError
 from .filter_models import LinearModalFilterModel
 from .iekf_pass import compiled_pass, pack_covariance, unpack_covariance
 from .modal import ModalModel, ModalStructure
 from .multirecord import pooled_simulation_fit
-from .rinse import Assessment, PassRecord, RinseHooks, check_filter_options, parameters_settled, rinse
+from .rinse import Assessment, PassHistory, PassRecord, RinseHooks, check_filter_options, check_records, parameters_settled, rinse
 from .start import DATA_STARTS, data_start
 from .uncertainty import iekf_parameter_covariance
 
@@ -82,12 +78,7 @@ START_CHOICES = (*DATA_STARTS, *START_VALUES)
 TIMESCALES = ("seconds", "auto")
 
 #: The relative tuning parameter of :meth:`IEKFOptions.invariant`: Q = p I per dominant time
-#: constant of the start model, on parameters of order 1. Measured on four 200 s / 20 s records
-#: (3 states with a cubic or a quadratic output nonlinearity or 30 % output noise; the linear
-#: example's three outputs with 30 % noise), mean NRMSE fit on the last 30 % held out, for
-#: p = 1e-5 / 1e-4 / 1e-3 / 1e-2: 84.2 / 82.0 / 79.4 / 78.9, 71.3 / 71.0 / 69.5 / 68.1,
-#: 76.8 / 78.4 / 78.1 / 76.6 and 68.9 / 68.8 / 68.4 / 66.8 %. 1e-4 is within 2.3 points of
-#: the best on each and stops in 11-16 passes where 1e-5 needs 29-46.
+#: constant of the start model, on parameters of order 1 (chosen by measurement: docs/iekf_tuning.md).
 INVARIANT_P = 1e-4
 
 
@@ -184,7 +175,7 @@ class FilterState:
 
 
 @dataclass(frozen=True, eq=False)
-class IEKFResult:
+class IEKFResult(PassHistory):
     """An IEKF identification: the final model, one record per pass, and the filter state.
 
     ``stop_reason`` is ``"converged"``, ``"passes"`` (the pass limit) or
@@ -202,42 +193,9 @@ class IEKFResult:
     meta: dict[str, Any] = field(default_factory=dict)
 
     @property
-    def passes_run(self) -> int:
-        return len(self.history)
-
-    @property
     def fit_percent(self) -> np.ndarray:
         """R per output of the final continuous model simulated exactly."""
         return self.history[-1].fit_continuous
-
-    def parameter_history(self) -> np.ndarray:
-        """Parameters after each pass, shape (passes, n_theta)."""
-        return np.array([record.parameters for record in self.history])
-
-
-def _check_data(data: IOData | tuple[IOData, ...], structure: ModalStructure) -> None:
-    records = as_records(data)
-    data = records[0]
-    if data.n_u != structure.n_u or data.n_y != structure.n_y:
-        raise InputError(
-            f"the structure has {structure.n_u} inputs and {structure.n_y} outputs; "
-            f"the data have {data.n_u} and {data.n_y}"
-        )
-    samples = sum(record.n_samples for record in records)
-    if samples <= structure.n_parameters:
-        raise InputError(
-            f"{samples} samples cannot identify {structure.n_parameters} parameters: "
-            "give more data or a lower order"
-        )
-    spread = np.max([record.u.std(axis=0) for record in records], axis=0)
-    largest = max(float(np.abs(record.u).max()) for record in records)
-    for name, value in zip(data.input_names, spread):
-        if not value > 1e-12 * max(1.0, largest):
-            raise ExcitationError(f"input {name!r} is constant: nothing is excited, the model cannot be identified")
-    energy = np.sum([np.sum(record.y**2, axis=0) for record in records], axis=0)
-    for name, value in zip(data.output_names, energy):
-        if value == 0:
-            raise ExcitationError(f"output {name!r} is identically zero: nothing to identify")
 
 
 def _scales(data: IOData | tuple[IOData, ...], normalize: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -337,7 +295,7 @@ def identify_iekf(
     options = options or IEKFOptions()
     records = as_records(data)
     data = records[0]
-    _check_data(records, structure)
+    check_records(records, structure.n_u, structure.n_y, structure.n_parameters)
     settle = len(records) > 1 if settle_start is None else bool(settle_start)
     started = time.perf_counter()
     dt = data.dt

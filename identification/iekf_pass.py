@@ -61,11 +61,8 @@ __all__ = [
 COVARIANCE_FORMS = ("joseph", "paper")
 KERNELS = ("auto", "structured", "generated")
 
-# Measured on the single-output pass (m = 22): -O3 -march=native runs in about
-# 0.6 of the -O2 time; the library is cached per CPU (see build_shared_library).
+# Flags and threshold chosen by measurement (docs/iekf_tuning.md); the library is cached per CPU.
 PASS_COMPILE_FLAGS = "-O3 -march=native"
-# Spline-nonlinear steps reach 1e5 instructions: -O1 compiles those in a fraction of
-# the -O3 time (about 27 s for 118k instructions) and runs them nearly as fast.
 LARGE_STEP_INSTRUCTIONS = 30_000
 LARGE_STEP_COMPILE_FLAGS = "-O1"
 
@@ -308,10 +305,7 @@ def compiled_pass(filter_model: FilterModel, dt: float, discretization: str, cov
     the low-rank prediction (:mod:`identification.iekf_kernel`);
     ``generated`` compiles the whole SX step; ``auto`` (default) takes the
     loops where the generated step is large (above
-    ``LARGE_STEP_INSTRUCTIONS``). Measured (n = 4, three outputs, 15,001
-    samples, same run): the spline model's pass (99 filter states) runs
-    2.7x faster on the loops, the linear one's (23 states) 1.3x slower, its
-    unrolled step being small enough to stay in cache.
+    ``LARGE_STEP_INSTRUCTIONS``), which pays only for large steps (docs/iekf_tuning.md).
 
     Returns a callable ``run(state, u, y, q, r, c=None) -> (state, innovations)`` with
     ``state = [z; upper(P)]`` (see :func:`pack_covariance`), ``u`` (N, n_u),

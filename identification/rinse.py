@@ -1,16 +1,10 @@
 """The rinse: the IEKF's passes over the record, one loop for the linear and the spline filter.
 
 Best & Bogdanski 2017, sections 2-5: each pass starts the true states of every
-record at zero and carries the parameters and the covariance ``P`` on; after
-the pass the parameters are frozen and the model is scored. The loop owns
-what every IEKF does alike: the compiled pass over each record, a
-:class:`~identification.errors.DivergenceError` carrying the result up to
-the last good pass (non-finite values, with the time they first appear; a
-``P`` no longer positive definite; a model the filter refuses), one
-:class:`PassRecord` per pass, the ``on_pass`` callback and the stop rule. A
-filter supplies :class:`RinseHooks`: how a record is filtered, how a pass's
-parameters are assessed (and carried to the next pass), its stop rule, its
-``R`` and its result type.
+record at zero and carries the parameters and ``P`` on; after it the model is
+frozen and scored. The loop owns what every IEKF does alike (divergence with
+the last good result, one :class:`PassRecord` per pass, callback, stop rule);
+a filter supplies :class:`RinseHooks`.
 """
 
 from __future__ import annotations
@@ -23,11 +17,12 @@ from typing import Callable, Generic, TypeVar
 import numpy as np
 
 from .data import IOData
-from .errors import DivergenceError, InputError
+from .errors import DivergenceError, ExcitationError, InputError
 from .filter_models import check_discretization
 from .iekf_pass import COVARIANCE_FORMS, pack_covariance, unpack_covariance
 
-__all__ = ["PassRecord", "Assessment", "RinseHooks", "rinse", "check_filter_options", "parameters_settled"]
+__all__ = ["PassRecord", "PassHistory", "Assessment", "RinseHooks", "rinse", "check_filter_options",
+           "check_records", "parameters_settled"]
 
 ResultT = TypeVar("ResultT")
 
@@ -75,6 +70,20 @@ class PassRecord:
         return float(np.mean(self.fit_continuous))
 
 
+class PassHistory:
+    """What every IEKF result offers on its ``history`` of passes."""
+
+    history: tuple[PassRecord, ...]
+
+    @property
+    def passes_run(self) -> int:
+        return len(self.history)
+
+    def parameter_history(self) -> np.ndarray:
+        """Parameters after each pass, shape (passes, n_theta)."""
+        return np.array([record.parameters for record in self.history])
+
+
 @dataclass(frozen=True, eq=False)
 class Assessment:
     """A filter's verdict on a pass: the record's parameters and fits, and the theta and P the next pass starts from."""
@@ -103,6 +112,25 @@ class RinseHooks(Generic[ResultT]):
     hint: str = "try a lower p"
 
 
+def check_records(records: tuple[IOData, ...], n_u: int, n_y: int, n_parameters: int, model: str = "the structure") -> None:
+    """Refuse records a filter cannot identify from: other sizes than ``model``'s, too few samples, nothing excited."""
+    data = records[0]
+    if data.n_u != n_u or data.n_y != n_y:
+        raise InputError(f"{model} has {n_u} inputs and {n_y} outputs; the data have {data.n_u} and {data.n_y}")
+    samples = sum(record.n_samples for record in records)
+    if samples <= n_parameters:
+        raise InputError(f"{samples} samples cannot identify {n_parameters} parameters: give more data or a lower order")
+    spread = np.max([record.u.std(axis=0) for record in records], axis=0)
+    largest = max(float(np.abs(record.u).max()) for record in records)
+    for name, value in zip(data.input_names, spread):
+        if not value > 1e-12 * max(1.0, largest):
+            raise ExcitationError(f"input {name!r} is constant: nothing is excited, the model cannot be identified")
+    energy = np.sum([np.sum(record.y**2, axis=0) for record in records], axis=0)
+    for name, value in zip(data.output_names, energy):
+        if value == 0:
+            raise ExcitationError(f"output {name!r} is identically zero: nothing to identify")
+
+
 def parameters_settled(previous: np.ndarray, current: np.ndarray, previous_trace: float, current_trace: float,
                        parameter_tolerance: float, trace_tolerance: float) -> bool:
     """Parameter change relative to each parameter (floor 1e-3 in the compared units) and trace(P)'s relative change."""
@@ -112,17 +140,9 @@ def parameters_settled(previous: np.ndarray, current: np.ndarray, previous_trace
     return parameter_change < parameter_tolerance and trace_change < trace_tolerance
 
 
-def rinse(
-    hooks: RinseHooks[ResultT],
-    theta: np.ndarray,
-    P: np.ndarray,
-    history: tuple[PassRecord, ...] = (),
-    *,
-    passes: int,
-    min_passes: int,
-    check_covariance: bool = True,
-    on_pass: Callable[[PassRecord, ResultT], None] | None = None,
-) -> ResultT:
+def rinse(hooks: RinseHooks[ResultT], theta: np.ndarray, P: np.ndarray, history: tuple[PassRecord, ...] = (), *,
+          passes: int, min_passes: int, check_covariance: bool = True,
+          on_pass: Callable[[PassRecord, ResultT], None] | None = None) -> ResultT:
     """Pass over the records until ``hooks.settled`` or ``passes`` passes are on record.
 
     ``theta`` and ``P`` (the filter's units) start the next pass; ``history``

@@ -34,7 +34,7 @@ from .errors import DivergenceError, InputError
 from .iekf_pass import compiled_pass
 from .metrics import percentage_explanation
 from .modal import ModalModel
-from .rinse import Assessment, PassRecord, RinseHooks, check_filter_options, rinse
+from .rinse import Assessment, PassHistory, PassRecord, RinseHooks, check_filter_options, check_records, rinse
 from .spline import MAX_NODES, MIN_NODES
 from .spline_modal import SplineModalFilterModel, SplineModalModel, SplineModalStructure
 
@@ -60,12 +60,10 @@ class SplineIEKFOptions:
     nodes : int
         Nodes per spline, 3..9 (paper: 5).
     p : float
-        Tuning parameter: ``Q = p I'`` on the node ordinates, ``P0 = Q``. The
-        default, 1e-7, is chosen by measurement on the handling study (n = 4,
-        60 passes, validation mean R): 1e-5 98.56 %, 3e-6 99.15 %, 1e-6 99.41 %,
-        1e-7 99.59 %, against 98.85 % for the linear start. The filter
-        minimises one-step prediction errors; a larger p lets the ordinates
-        follow them away from the model that simulates best.
+        Tuning parameter: ``Q = p I'`` on the node ordinates, ``P0 = Q``; the
+        default is measured best on the handling study (docs/iekf_tuning.md).
+        The filter minimises one-step prediction errors; a larger p lets the
+        ordinates follow them away from the model that simulates best.
     passes : int
         Largest number of passes.
     discretization, covariance : str
@@ -94,7 +92,7 @@ class SplineIEKFOptions:
 
 
 @dataclass(frozen=True, eq=False)
-class SplineIEKFResult:
+class SplineIEKFResult(PassHistory):
     """The identified nonlinear model, one record per pass, the filter state and the start."""
 
     model: SplineModalModel
@@ -107,10 +105,6 @@ class SplineIEKFResult:
     stop_reason: str
     seconds: float
     meta: dict[str, Any] = field(default_factory=dict)
-
-    @property
-    def passes_run(self) -> int:
-        return len(self.history)
 
     @property
     def fit_percent(self) -> np.ndarray:
@@ -176,18 +170,10 @@ def identify_spline_iekf(
     """
     options = options or SplineIEKFOptions()
     structure = SplineModalStructure(linear.structure, options.nodes)
-    if data.n_u != linear.structure.n_u or data.n_y != linear.structure.n_y:
-        raise InputError(
-            f"the linear model has {linear.structure.n_u} inputs and {linear.structure.n_y} outputs; "
-            f"the data have {data.n_u} and {data.n_y}"
-        )
-    if data.n_samples <= structure.n_parameters:
-        raise InputError(f"{data.n_samples} samples cannot identify {structure.n_parameters} spline ordinates")
+    check_records((data,), linear.structure.n_u, linear.structure.n_y, structure.n_parameters, "the linear model")
     started = time.perf_counter()
     input_scale = np.abs(data.u).max(axis=0)
     output_scale = np.abs(data.y).max(axis=0)
-    if np.any(input_scale == 0) or np.any(output_scale == 0):
-        raise InputError("an input or output is identically zero: nothing to identify")
     u_n = data.u / input_scale
     y_n = data.y / output_scale
 

@@ -110,10 +110,6 @@ class SplineModalStructure:
         follows += [self.input_variable(j) for _ in range(s.n_y) for j in range(s.n_u)]
         return tuple(follows)
 
-    def moving_variables(self) -> tuple[int, ...]:
-        """Variables whose node ranges follow the data (amplitudes and states); inputs stay on -1..1."""
-        return tuple(range(self.linear.n_complex_pairs + self.linear.n))
-
     # parameters --------------------------------------------------------------
     @property
     def n_parameters(self) -> int:
