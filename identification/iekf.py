@@ -2,10 +2,8 @@
 
 The parameters of a modal state-space model join its states in the filter's
 state vector (eq. 7-8); the filter passes over the record again and again
-("rinsing"): at the start of each pass the true states are reset to zero and
-the parameters and the covariance ``P`` are carried over. After each pass the
-parameters are frozen, the model is simulated from rest over the record and
-scored by the percentage explanation R (eq. 17).
+(:mod:`identification.rinse`), and after each pass the frozen model,
+simulated from rest, is scored by the percentage explanation R (eq. 17).
 
 Tuning (section 3): ``Q = p I'`` with ``I'`` the identity with zeros for the
 true states (the fixed C entries are not in the state at all), ``R = I``
@@ -20,18 +18,16 @@ Units. Those fixed starts, ``p`` and ``R = I`` are absolute: they suit
 records like the paper's (T = 2 ms, signals of order 1) and fail on others.
 :meth:`IEKFOptions.invariant` gives settings that do not depend on the units
 of time or of the signals, on the sample interval or on the record length:
-signals divided by their RMS; the start taken from the data
-(:mod:`identification.start`); time counted in samples inside the filter
-(``timescale="auto"``: the compiled filter then has T = 1 whatever the
-record's sample interval), and ``p`` stated in the unit of the start
-model's dominant time constant ``tau``. That is, the filter runs as if its
-parameters were ``sigma tau``, ``omega tau``, ``B tau``, C and D (all of
-order 1 for normalised signals) with ``Q = p I`` per time unit ``tau`` and
-``P0 = p I``; in the sample-time parameters actually filtered this is the
-congruent ``Q`` and ``P0`` (a linear change of parameters, under which the
-Kalman filter is exact). The stop rule compares parameters in those same
-relative units. The library's field defaults stay the paper-compatible
-absolute ones, so that stored runs and the paper's studies are unchanged.
+signals divided by their RMS, the start from the data
+(:mod:`identification.start`), time in samples inside the filter
+(``timescale="auto"``: T = 1 whatever the sample interval), and ``p`` per
+dominant time constant ``tau`` of the start: the filter runs as if its
+parameters were ``sigma tau``, ``omega tau``, ``B tau``, C and D (order 1
+for normalised signals) with ``Q = P0 = p I`` per ``tau``, carried to the
+filtered parameters by congruence (a linear change of parameters, under
+which the Kalman filter is exact); the stop rule compares those relative
+units. The field defaults stay the paper's absolute ones, so that stored
+runs and the paper's studies are unchanged.
 """
 
 from __future__ import annotations
@@ -358,10 +354,7 @@ def identify_iekf(
         return structure.denormalize(structure.rescale_time(theta_filter, 1.0 / time_unit), input_scale, output_scale)
 
     def relative_units(theta_original: np.ndarray) -> np.ndarray:
-        """Parameters in the units the stop rule compares: normalised signals, time in time_constant.
-
-        The absolute settings keep the original units, as they always have (stored runs stop alike).
-        """
+        """Parameters as the stop rule compares them (absolute settings: original units, as stored runs did)."""
         if options.timescale == "seconds":
             return theta_original
         return structure.rescale_time(structure.normalize_parameters(theta_original, input_scale, output_scale),
@@ -382,14 +375,9 @@ def identify_iekf(
                 meta={"estimator": "iekf", "discretization": options.discretization, "passes": len(history)},
                 parameter_covariance=covariance,
             ),
-            structure=structure,
-            options=options,
-            history=history,
+            structure=structure, options=options, history=history,
             state=FilterState(theta.copy(), P.copy(), input_scale.copy(), output_scale.copy(), time_unit, time_constant),
-            dt=dt,
-            stop_reason=stop_reason,
-            seconds=time.perf_counter() - started,
-            meta=dict(start_meta),
+            dt=dt, stop_reason=stop_reason, seconds=time.perf_counter() - started, meta=dict(start_meta),
         )
 
     def run_record(state: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:

@@ -42,14 +42,12 @@ def check_filter_options(p: float, passes: int, discretization: str, covariance:
 class PassRecord:
     """What one pass left: parameters, fits, the covariance's state and the innovations' size.
 
-    ``parameters``: the linear filter's in original units, the spline
-    filter's node ordinates (normalised units, on the ranges after the pass).
-    ``fit_filter``: R per output of the frozen model simulated with the
-    filter's own discretisation; ``fit_continuous``: R per output of the
-    continuous model simulated exactly (inputs linear between samples; the
-    spline model is defined by its discretisation, so there the same).
-    ``nis``: the pass's mean normalised innovation squared ``e' R^-1 e``
-    (n_y for innovations as large as the filter assumes; NaN where unknown).
+    ``parameters``: the linear filter's in original units, the spline filter's
+    node ordinates (normalised, on the ranges after the pass). ``fit_filter``:
+    R per output of the frozen model simulated with the filter's discretisation;
+    ``fit_continuous``: of the continuous model simulated exactly (the spline
+    model is its discretisation: the same). ``nis``: mean ``e' R^-1 e`` over
+    the pass (n_y where innovations are as large as assumed; NaN if unknown).
     """
 
     index: int
@@ -100,11 +98,10 @@ class RinseHooks(Generic[ResultT]):
     """What a filter supplies to :func:`rinse`; ``label`` names its passes and ``hint`` the cure for non-finite values."""
 
     records: tuple[IOData, ...]  # what a pass runs over, in turn (times and names for messages)
-    # (state [x; theta; upper(P)], record k) -> (state, innovations of the record's last N_k samples (N_k, n_y))
+    # (state [x; theta; upper(P)], k) -> (state, innovations (N_k, n_y) of record k's last N_k samples)
     run_record: Callable[[np.ndarray, int], tuple[np.ndarray, np.ndarray]]
     measurement_covariance: Callable[[], np.ndarray]  # R of the coming pass
-    # (theta, P) after a pass -> Assessment; raises DivergenceError (unnamed) for a model the filter refuses
-    assess: Callable[[np.ndarray, np.ndarray], Assessment]
+    assess: Callable[[np.ndarray, np.ndarray], Assessment]  # may refuse the model: DivergenceError
     settled: Callable[[PassRecord, PassRecord], bool]  # the stop rule on the last two passes
     result: Callable[[str, tuple[PassRecord, ...], np.ndarray, np.ndarray], ResultT]  # (stop reason, history, theta, P)
     n_x: int  # true states, reset to zero at the start of each record
@@ -158,32 +155,22 @@ def rinse(hooks: RinseHooks[ResultT], theta: np.ndarray, P: np.ndarray, history:
     n = hooks.n_x
     m = n + theta.size
 
-    def diverged(index: int, message: str) -> DivergenceError:
-        last_good = hooks.result(f"diverged at pass {index}", tuple(history), theta, P) if history else None
-        return DivergenceError(f"{hooks.label} {index}: {message}", last_good=last_good)
-
-    if len(history) >= max(2, min_passes) and hooks.settled(history[-2], history[-1]):
-        return hooks.result("converged", tuple(history), theta, P)  # a resumed run had met its stop rule
-    stop_reason = "passes"
-    while len(history) < passes:
-        index = len(history) + 1
+    def one_pass(index: int) -> tuple[PassRecord, np.ndarray, np.ndarray]:
+        """A pass from (theta, P): its record, and the theta and P the next pass starts from."""
         pass_start = time.perf_counter()
         r = hooks.measurement_covariance()
         state = np.concatenate([np.zeros(n), theta, pack_covariance(P)])
         nis_sum, nis_count = 0.0, 0
-        for k, record in enumerate(hooks.records):
+        for k, experiment in enumerate(hooks.records):
             state[:n] = 0.0  # each record starts from its own rest state; parameters and P carry on
-            try:
-                state, innovations = hooks.run_record(state, k)
-            except DivergenceError as exc:
-                raise diverged(index, str(exc)) from exc
+            state, innovations = hooks.run_record(state, k)
             if not (np.all(np.isfinite(state)) and np.all(np.isfinite(innovations))):
                 bad = np.flatnonzero(~np.all(np.isfinite(innovations), axis=1))
-                head = record.n_samples - innovations.shape[0]  # samples the filter used before its innovations
-                where = f" from t = {record.t[head + bad[0]]:.3f} s" if bad.size else ""
+                head = experiment.n_samples - innovations.shape[0]  # samples the filter used before its innovations
+                where = f" from t = {experiment.t[head + bad[0]]:.3f} s" if bad.size else ""
                 if len(hooks.records) > 1:
-                    where += f" of record {record.meta.get('source', k + 1)}"
-                raise diverged(index, f"the filter produced non-finite values{where} ({hooks.hint})")
+                    where += f" of record {experiment.meta.get('source', k + 1)}"
+                raise DivergenceError(f"the filter produced non-finite values{where} ({hooks.hint})")
             nis_sum += float(np.sum(innovations * np.linalg.solve(r, innovations.T).T))
             nis_count += innovations.shape[0]
             del innovations  # (N, n_y): not kept while the model is scored
@@ -191,12 +178,9 @@ def rinse(hooks: RinseHooks[ResultT], theta: np.ndarray, P: np.ndarray, history:
         min_eig = float(np.linalg.eigvalsh(filtered_P)[0])
         trace = float(np.trace(filtered_P))
         if check_covariance and min_eig < -1e-9 * max(trace, 1.0):
-            raise diverged(index, f"the covariance P lost positive definiteness (smallest eigenvalue {min_eig:.3g}, "
+            raise DivergenceError(f"the covariance P lost positive definiteness (smallest eigenvalue {min_eig:.3g}, "
                                   f"trace {trace:.3g})")
-        try:
-            assessment = hooks.assess(filtered_theta, filtered_P)
-        except DivergenceError as exc:
-            raise diverged(index, str(exc)) from exc
+        assessment = hooks.assess(filtered_theta, filtered_P)
         if assessment.P is not filtered_P:  # the filter moved P (a change of parameters)
             min_eig, trace = float(np.linalg.eigvalsh(assessment.P)[0]), float(np.trace(assessment.P))
         record = PassRecord(
@@ -204,7 +188,18 @@ def rinse(hooks: RinseHooks[ResultT], theta: np.ndarray, P: np.ndarray, history:
             fit_continuous=assessment.fit_continuous, trace_p=trace, min_eig_p=min_eig,
             seconds=time.perf_counter() - pass_start, nis=nis_sum / max(nis_count, 1),
         )
-        theta, P = assessment.theta, assessment.P
+        return record, assessment.theta, assessment.P
+
+    if len(history) >= max(2, min_passes) and hooks.settled(history[-2], history[-1]):
+        return hooks.result("converged", tuple(history), theta, P)  # a resumed run had met its stop rule
+    stop_reason = "passes"
+    while len(history) < passes:
+        index = len(history) + 1
+        try:
+            record, theta, P = one_pass(index)
+        except DivergenceError as exc:
+            last_good = hooks.result(f"diverged at pass {index}", tuple(history), theta, P) if history else None
+            raise DivergenceError(f"{hooks.label} {index}: {exc}", last_good=last_good) from exc
         previous = history[-1] if history else None
         history.append(record)
         if on_pass is not None:

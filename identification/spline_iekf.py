@@ -187,7 +187,6 @@ def identify_spline_iekf(
     R = residual_covariance(y_n, y_hat)
 
     n = structure.linear.n
-    m = n + structure.n_parameters
     q = np.concatenate([np.zeros(n), np.full(structure.n_parameters, options.p)])
     run_pass = compiled_pass(SplineModalFilterModel(structure), data.dt, options.discretization, options.covariance)
 
@@ -210,7 +209,7 @@ def identify_spline_iekf(
         model, R = candidate, residual_covariance(y_n, y_hat)
         if options.redistribute:
             model, transform = model.resampled(covering_ranges(structure, states, model.ranges))
-            full = np.eye(m)
+            full = np.eye(P.shape[0])
             full[n:, n:] = transform
             P = full @ P @ full.T
         return Assessment(model.theta, fit, fit, model.theta, P)
