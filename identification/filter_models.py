@@ -30,14 +30,14 @@ Two discretisations of ``xdot = A x + B u`` over a sample ``T``:
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 import casadi as ca
 
 from .errors import InputError
 from .modal import ModalStructure
 
-__all__ = ["DISCRETIZATIONS", "LinearModalFilterModel", "mode_transition", "modal_transition"]
+__all__ = ["DISCRETIZATIONS", "FilterModel", "LinearModalFilterModel", "mode_transition", "modal_transition"]
 
 DISCRETIZATIONS = ("euler", "exact", "exact-zoh")
 
@@ -173,8 +173,27 @@ def modal_transition(
     return ca.vertcat(*rows)
 
 
+class FilterModel(Protocol):
+    """What the IEKF needs of a model (module docstring); ``n_constants`` is explicit, 0 where there are none."""
+
+    @property
+    def n_x(self) -> int: ...
+    @property
+    def n_theta(self) -> int: ...
+    @property
+    def n_u(self) -> int: ...
+    @property
+    def n_y(self) -> int: ...
+    @property
+    def n_constants(self) -> int: ...
+    def transition(self, x: ca.SX, theta: ca.SX, u0: ca.SX, u1: ca.SX, dt: float, discretization: str,
+                   constants: ca.SX) -> ca.SX: ...
+    def output(self, x: ca.SX, theta: ca.SX, u: ca.SX, constants: ca.SX) -> ca.SX: ...
+    def cache_key(self) -> str: ...
+
+
 @dataclass(frozen=True)
-class LinearModalFilterModel:
+class LinearModalFilterModel(FilterModel):
     """The linear modal model of :class:`ModalStructure` as a filter model."""
 
     structure: ModalStructure
@@ -197,7 +216,8 @@ class LinearModalFilterModel:
 
     n_constants = 0
 
-    def transition(self, x: Any, theta: Any, u0: Any, u1: Any, dt: float, discretization: str, constants: Any = None) -> Any:
+    def transition(self, x: ca.SX, theta: ca.SX, u0: ca.SX, u1: ca.SX, dt: float, discretization: str,
+                   constants: ca.SX | None = None) -> ca.SX:
         """``x_next`` (SX, n_x) under the given discretisation."""
         check_discretization(discretization)
         s = self.structure
@@ -206,7 +226,7 @@ class LinearModalFilterModel:
         drive1 = ca.mtimes(B, u1)
         return modal_transition(s, theta[: s.n_modal], x, drive0, drive1, dt, discretization)
 
-    def output(self, x: Any, theta: Any, u: Any, constants: Any = None) -> Any:
+    def output(self, x: ca.SX, theta: ca.SX, u: ca.SX, constants: ca.SX | None = None) -> ca.SX:
         """``y = C x + D u`` (SX, n_y)."""
         _, _, C, D = self.structure.matrices(theta, backend=ca.SX)
         return ca.mtimes(C, x) + ca.mtimes(D, u)

@@ -2,40 +2,32 @@
 
 The parameters of a modal state-space model join its states in the filter's
 state vector (eq. 7-8); the filter passes over the record again and again
-("rinsing"): at the start of each pass the true states are reset to zero and
-the parameters and the covariance ``P`` are carried over. After each pass the
-parameters are frozen, the model is simulated from rest over the record and
-scored by the percentage explanation R (eq. 17).
+(:mod:`identification.rinse`), and after each pass the frozen model,
+simulated from rest, is scored by the percentage explanation R (eq. 17).
 
 Tuning (section 3): ``Q = p I'`` with ``I'`` the identity with zeros for the
 true states (the fixed C entries are not in the state at all), ``R = I``
 unless given, ``P0 = Q``.
 
-Start values. The paper starts every sigma at -1 (omega likewise). Measured
-on the three-output, eq. 18 case of the linear example (exact
-discretisation, 30 passes, seeds 0-4): that start found all five
-eigenvalues within 2 % on 1 of 5 seeds, while faster oscillatory start modes
-(sigma = -10, omega = 10, the pairs' omegas spread apart so that the filter
-does not start symmetric in them) found them on 5 of 5, by pass 4 or 5. The
-workbench's fixed start is therefore ``sigma = -10, omega = 10 (1 + 0.5 i)``
-for pair i (``start="default"``); the paper's start is ``start="paper"``.
+Start values. The paper starts every sigma at -1; faster oscillatory start
+modes find the eigenvalues far more often (docs/iekf_tuning.md), so the
+workbench's fixed start is ``sigma = -10, omega = 10 (1 + 0.5 i)`` for pair i
+(``start="default"``); the paper's start is ``start="paper"``.
 
 Units. Those fixed starts, ``p`` and ``R = I`` are absolute: they suit
 records like the paper's (T = 2 ms, signals of order 1) and fail on others.
 :meth:`IEKFOptions.invariant` gives settings that do not depend on the units
 of time or of the signals, on the sample interval or on the record length:
-signals divided by their RMS; the start taken from the data
-(:mod:`identification.start`); time counted in samples inside the filter
-(``timescale="auto"``: the compiled filter then has T = 1 whatever the
-record's sample interval), and ``p`` stated in the unit of the start
-model's dominant time constant ``tau``. That is, the filter runs as if its
-parameters were ``sigma tau``, ``omega tau``, ``B tau``, C and D (all of
-order 1 for normalised signals) with ``Q = p I`` per time unit ``tau`` and
-``P0 = p I``; in the sample-time parameters actually filtered this is the
-congruent ``Q`` and ``P0`` (a linear change of parameters, under which the
-Kalman filter is exact). The stop rule compares parameters in those same
-relative units. The library's field defaults stay the paper-compatible
-absolute ones, so that stored runs and the paper's studies are unchanged.
+signals divided by their RMS, the start from the data
+(:mod:`identification.start`), time in samples inside the filter
+(``timescale="auto"``: T = 1 whatever the sample interval), and ``p`` per
+dominant time constant ``tau`` of the start: the filter runs as if its
+parameters were ``sigma tau``, ``omega tau``, ``B tau``, C and D (order 1
+for normalised signals) with ``Q = P0 = p I`` per ``tau``, carried to the
+filtered parameters by congruence (a linear change of parameters, under
+which the Kalman filter is exact); the stop rule compares those relative
+units. The field defaults stay the paper's absolute ones, so that stored
+runs and the paper's studies are unchanged.
 """
 
 from __future__ import annotations
@@ -48,11 +40,12 @@ from typing import Any, Callable
 import numpy as np
 
 from .data import IOData, as_records
-from .errors import DivergenceError, ExcitationError, InputError
-from .filter_models import LinearModalFilterModel, check_discretization
-from .iekf_pass import COVARIANCE_FORMS, compiled_pass, pack_covariance, unpack_covariance
+from .errors import DivergenceError, InputError
+from .filter_models import LinearModalFilterModel
+from .iekf_pass import compiled_pass, pack_covariance, unpack_covariance
 from .modal import ModalModel, ModalStructure
 from .multirecord import pooled_simulation_fit
+from .rinse import Assessment, PassHistory, PassRecord, RinseHooks, check_filter_options, check_records, parameters_settled, rinse
 from .start import DATA_STARTS, data_start
 from .uncertainty import iekf_parameter_covariance
 
@@ -81,24 +74,8 @@ START_CHOICES = (*DATA_STARTS, *START_VALUES)
 TIMESCALES = ("seconds", "auto")
 
 #: The relative tuning parameter of :meth:`IEKFOptions.invariant`: Q = p I per dominant time
-#: constant of the start model, on parameters of order 1. Measured on four 200 s / 20 s records
-#: (3 states with a cubic or a quadratic output nonlinearity or 30 % output noise; the linear
-#: example's three outputs with 30 % noise), mean NRMSE fit on the last 30 % held out, for
-#: p = 1e-5 / 1e-4 / 1e-3 / 1e-2: 84.2 / 82.0 / 79.4 / 78.9, 71.3 / 71.0 / 69.5 / 68.1,
-#: 76.8 / 78.4 / 78.1 / 76.6 and 68.9 / 68.8 / 68.4 / 66.8 %. 1e-4 is within 2.3 points of
-#: the best on each and stops in 11-16 passes where 1e-5 needs 29-46.
+#: constant of the start model, on parameters of order 1 (chosen by measurement: docs/iekf_tuning.md).
 INVARIANT_P = 1e-4
-
-
-def check_filter_options(p: Any, passes: Any, discretization: str, covariance: str) -> None:
-    """The checks every IEKF's options share: a positive p, a whole number of passes, known forms."""
-    if not (isinstance(p, (int, float)) and math.isfinite(p) and p > 0):
-        raise InputError(f"the tuning parameter p must be a positive number; got {p!r}")
-    if isinstance(passes, bool) or int(passes) != passes or passes < 1:
-        raise InputError(f"passes must be a whole number >= 1; got {passes!r}")
-    check_discretization(discretization)
-    if covariance not in COVARIANCE_FORMS:
-        raise InputError(f"unknown covariance form {covariance!r}; use one of {', '.join(COVARIANCE_FORMS)}")
 
 
 @dataclass(frozen=True)
@@ -177,35 +154,6 @@ class IEKFOptions:
 
 
 @dataclass(frozen=True, eq=False)
-class PassRecord:
-    """What one pass left: parameters (original units), fits, and the covariance's state.
-
-    ``fit_filter``: R per output of the frozen model simulated with the
-    filter's own discretisation; ``fit_continuous``: R per output of the
-    continuous model simulated exactly (inputs linear between samples);
-    ``nis``: the pass's mean normalised innovation squared ``e' R^-1 e``
-    (n_y for innovations as large as the filter assumes; NaN where unknown).
-    """
-
-    index: int
-    parameters: np.ndarray
-    fit_filter: np.ndarray
-    fit_continuous: np.ndarray
-    trace_p: float
-    min_eig_p: float
-    seconds: float
-    nis: float = float("nan")
-
-    @property
-    def mean_fit_filter(self) -> float:
-        return float(np.mean(self.fit_filter))
-
-    @property
-    def mean_fit_continuous(self) -> float:
-        return float(np.mean(self.fit_continuous))
-
-
-@dataclass(frozen=True, eq=False)
 class FilterState:
     """The filter's state between passes, in normalised units: parameters and P (what a resume needs).
 
@@ -223,7 +171,7 @@ class FilterState:
 
 
 @dataclass(frozen=True, eq=False)
-class IEKFResult:
+class IEKFResult(PassHistory):
     """An IEKF identification: the final model, one record per pass, and the filter state.
 
     ``stop_reason`` is ``"converged"``, ``"passes"`` (the pass limit) or
@@ -241,42 +189,9 @@ class IEKFResult:
     meta: dict[str, Any] = field(default_factory=dict)
 
     @property
-    def passes_run(self) -> int:
-        return len(self.history)
-
-    @property
     def fit_percent(self) -> np.ndarray:
         """R per output of the final continuous model simulated exactly."""
         return self.history[-1].fit_continuous
-
-    def parameter_history(self) -> np.ndarray:
-        """Parameters after each pass, shape (passes, n_theta)."""
-        return np.array([record.parameters for record in self.history])
-
-
-def _check_data(data: IOData | tuple[IOData, ...], structure: ModalStructure) -> None:
-    records = as_records(data)
-    data = records[0]
-    if data.n_u != structure.n_u or data.n_y != structure.n_y:
-        raise InputError(
-            f"the structure has {structure.n_u} inputs and {structure.n_y} outputs; "
-            f"the data have {data.n_u} and {data.n_y}"
-        )
-    samples = sum(record.n_samples for record in records)
-    if samples <= structure.n_parameters:
-        raise InputError(
-            f"{samples} samples cannot identify {structure.n_parameters} parameters: "
-            "give more data or a lower order"
-        )
-    spread = np.max([record.u.std(axis=0) for record in records], axis=0)
-    largest = max(float(np.abs(record.u).max()) for record in records)
-    for name, value in zip(data.input_names, spread):
-        if not value > 1e-12 * max(1.0, largest):
-            raise ExcitationError(f"input {name!r} is constant: nothing is excited, the model cannot be identified")
-    energy = np.sum([np.sum(record.y**2, axis=0) for record in records], axis=0)
-    for name, value in zip(data.output_names, energy):
-        if value == 0:
-            raise ExcitationError(f"output {name!r} is identically zero: nothing to identify")
 
 
 def _scales(data: IOData | tuple[IOData, ...], normalize: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -320,48 +235,6 @@ def _settle_states(state, u, y, structure: ModalStructure, run_pass, q, r, dt: f
     P_next[:n, :n] = unpack_covariance(settled[m:], m)[:n, :n]
     settled[m:] = pack_covariance(P_next)
     return settled, u[head:], y[head:]
-
-
-def denormalize(structure: ModalStructure, theta: np.ndarray, input_scale: np.ndarray, output_scale: np.ndarray) -> np.ndarray:
-    """Parameters in original units from those identified on scaled data.
-
-    With ``u = Su u_n`` and ``y = Sy y_n`` and the state basis rescaled by the
-    scale of the output each state is tied to, ``A`` is unchanged, the fixed
-    C entries stay 1, ``B -> S B Su^-1``, ``C -> Sy C S^-1``, ``D -> Sy D Su^-1``.
-    """
-    A, B, C, D = structure.matrices(theta)
-    state_scale = np.array([output_scale[structure.output_of_state(j)] for j in range(structure.n)])
-    B = state_scale[:, None] * B / input_scale[None, :]
-    C = output_scale[:, None] * C / state_scale[None, :]
-    D = output_scale[:, None] * D / input_scale[None, :]
-    return structure.pack(A, B, C, D)
-
-
-def normalize_parameters(structure: ModalStructure, theta: np.ndarray, input_scale: np.ndarray, output_scale: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`denormalize`."""
-    return denormalize(structure, theta, 1.0 / input_scale, 1.0 / output_scale)
-
-
-def rescale_time(structure: ModalStructure, theta: np.ndarray, factor: float) -> np.ndarray:
-    """Parameters in a time unit ``factor`` times the present one: sigma, omega and B times ``factor``.
-
-    ``xdot = A x + B u`` in time ``t' = t / factor`` reads ``dx/dt' = factor A x + factor B u``;
-    C and D are unchanged.
-    """
-    theta = np.array(theta, dtype=float)
-    slices = structure.slices()
-    theta[slices["modal"]] *= factor
-    theta[slices["B"]] *= factor
-    return theta
-
-
-def _time_weights(structure: ModalStructure, ratio: float) -> np.ndarray:
-    """Per parameter: ``ratio`` for sigma, omega and B, 1 for C and D (the change of time unit)."""
-    weights = np.ones(structure.n_parameters)
-    slices = structure.slices()
-    weights[slices["modal"]] = ratio
-    weights[slices["B"]] = ratio
-    return weights
 
 
 def identify_iekf(
@@ -418,12 +291,11 @@ def identify_iekf(
     options = options or IEKFOptions()
     records = as_records(data)
     data = records[0]
-    _check_data(records, structure)
+    check_records(records, structure.n_u, structure.n_y, structure.n_parameters)
     settle = len(records) > 1 if settle_start is None else bool(settle_start)
     started = time.perf_counter()
     dt = data.dt
-    n, m_theta = structure.n, structure.n_parameters
-    m = n + m_theta
+    n = structure.n
 
     start_meta: dict[str, Any] = {}
     if resume is not None:
@@ -443,12 +315,12 @@ def identify_iekf(
         if initial_model is not None:
             if initial_model.structure != structure:
                 raise InputError("the initial model has a different structure")
-            theta_seconds = normalize_parameters(structure, initial_model.parameters, input_scale, output_scale)
+            theta_seconds = structure.normalize_parameters(initial_model.parameters, input_scale, output_scale)
             start_meta = {"start": "given model"}
         elif options.start in DATA_STARTS:
             found = data_start(data.u / input_scale, data.y / output_scale, structure, method=options.start,
                                stable=not options.allow_unstable)
-            theta_seconds = rescale_time(structure, found.model.parameters, 1.0 / dt)
+            theta_seconds = structure.rescale_time(found.model.parameters, 1.0 / dt)
             start_meta = {"start": found.source, **({"start_note": found.note} if found.note else {})}
         else:
             sigma, omega, spread = START_VALUES[options.start]
@@ -460,7 +332,7 @@ def identify_iekf(
             # the start's dominant time constant, each mode's rate clipped to the band a sampled record
             # shows well (up to a quarter of the Nyquist frequency), so that a spurious fast mode does not set it
             time_constant = float(1.0 / np.median(np.clip(rates, 1e-6 / dt, (np.pi / 4) / dt)))
-        theta = rescale_time(structure, theta_seconds, time_unit)
+        theta = structure.rescale_time(theta_seconds, time_unit)
         P = None
         history = []
     start_meta.update(time_unit=time_unit, time_constant=time_constant)
@@ -468,7 +340,7 @@ def identify_iekf(
     # Q = p I and P0 = p I on the parameters in time unit time_constant (module docstring), carried to
     # the filter's time unit by the congruence of that change of parameters.
     ratio = time_unit / time_constant
-    weights = _time_weights(structure, ratio)
+    weights = structure.time_weights(ratio)
     q = np.concatenate([np.zeros(n), weights**2 * ratio * options.p])
     if P is None:
         P = np.diag(np.concatenate([np.zeros(n), weights**2 * options.p]))
@@ -479,22 +351,19 @@ def identify_iekf(
     run_pass = compiled_pass(LinearModalFilterModel(structure), dt / time_unit, options.discretization, options.covariance)
 
     def original_units(theta_filter: np.ndarray) -> np.ndarray:
-        return denormalize(structure, rescale_time(structure, theta_filter, 1.0 / time_unit), input_scale, output_scale)
+        return structure.denormalize(structure.rescale_time(theta_filter, 1.0 / time_unit), input_scale, output_scale)
 
     def relative_units(theta_original: np.ndarray) -> np.ndarray:
-        """Parameters in the units the stop rule compares: normalised signals, time in time_constant.
-
-        The absolute settings keep the original units, as they always have (stored runs stop alike).
-        """
+        """Parameters as the stop rule compares them (absolute settings: original units, as stored runs did)."""
         if options.timescale == "seconds":
             return theta_original
-        return rescale_time(structure, normalize_parameters(structure, theta_original, input_scale, output_scale),
+        return structure.rescale_time(structure.normalize_parameters(theta_original, input_scale, output_scale),
                             time_constant)
 
     if resume is None:
         start_meta["start_parameters"] = original_units(theta)
 
-    def result(stop_reason: str) -> IEKFResult:
+    def result(stop_reason: str, history: tuple[PassRecord, ...], theta: np.ndarray, P: np.ndarray) -> IEKFResult:
         last = history[-1].parameters if history else original_units(theta)
         covariance = None
         if history and np.isfinite(history[-1].nis):
@@ -506,101 +375,34 @@ def identify_iekf(
                 meta={"estimator": "iekf", "discretization": options.discretization, "passes": len(history)},
                 parameter_covariance=covariance,
             ),
-            structure=structure,
-            options=options,
-            history=tuple(history),
+            structure=structure, options=options, history=history,
             state=FilterState(theta.copy(), P.copy(), input_scale.copy(), output_scale.copy(), time_unit, time_constant),
-            dt=dt,
-            stop_reason=stop_reason,
-            seconds=time.perf_counter() - started,
-            meta=dict(start_meta),
+            dt=dt, stop_reason=stop_reason, seconds=time.perf_counter() - started, meta=dict(start_meta),
         )
 
-    if len(history) >= max(2, options.min_passes) and _settled(
-            relative_units(history[-2].parameters), relative_units(history[-1].parameters), history[-2].trace_p,
-            history[-1].trace_p, options):
-        return result("converged")  # a resumed run had met its stop rule (perhaps killed before it said so)
-    stop_reason = "passes"
-    while len(history) < options.passes:
-        pass_index = len(history) + 1
-        pass_start = time.perf_counter()
-        state = np.concatenate([np.zeros(n), theta, pack_covariance(P)])
-        where = None
-        nis_sum, nis_count = 0.0, 0
-        for experiment, u_k, y_k in zip(records, u_scaled, y_scaled):
-            state[:n] = 0.0  # each record starts from its own rest state; parameters and P carry on
-            try:
-                if settle:
-                    state, u_k, y_k = _settle_states(state, u_k, y_k, structure, run_pass, q, r, dt / time_unit)
-                state, innovations = run_pass(state, u_k, y_k, q, r)
-            except DivergenceError as exc:
-                raise DivergenceError(
-                    f"pass {pass_index}: {exc}", last_good=result(f"diverged at pass {pass_index}") if history else None
-                ) from exc
-            if not (np.all(np.isfinite(state)) and np.all(np.isfinite(innovations))):
-                bad = np.flatnonzero(~np.all(np.isfinite(innovations), axis=1))
-                head = experiment.n_samples - y_k.shape[0]  # samples used to settle the start state
-                where = f" from t = {experiment.t[head + bad[0]]:.3f} s" if bad.size else ""
-                if len(records) > 1:
-                    where += f" of record {experiment.meta.get('source', records.index(experiment) + 1)}"
-                break
-            nis_sum += float(np.sum(innovations * np.linalg.solve(r, innovations.T).T))
-            nis_count += innovations.shape[0]
-        del innovations  # (N, n_y): not kept while the model is scored
-        new_theta = state[n:m]
-        new_P = unpack_covariance(state[m:], m)
-        if where is not None:
-            raise DivergenceError(
-                f"pass {pass_index}: the filter produced non-finite values{where} "
-                f"(try a lower p, the joseph covariance form, or a lower order)",
-                last_good=result(f"diverged at pass {pass_index}") if history else None,
-            )
-        min_eig = float(np.linalg.eigvalsh(new_P)[0])
-        trace = float(np.trace(new_P))
-        if options.covariance != "paper" and min_eig < -1e-9 * max(trace, 1.0):
-            raise DivergenceError(
-                f"pass {pass_index}: the covariance P lost positive definiteness "
-                f"(smallest eigenvalue {min_eig:.3g}, trace {trace:.3g})",
-                last_good=result(f"diverged at pass {pass_index}") if history else None,
-            )
-        theta_original = original_units(new_theta)
+    def run_record(state: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+        u_k, y_k = u_scaled[k], y_scaled[k]
+        if settle:
+            state, u_k, y_k = _settle_states(state, u_k, y_k, structure, run_pass, q, r, dt / time_unit)
+        return run_pass(state, u_k, y_k, q, r)
+
+    def assess(theta_filter: np.ndarray, P_filter: np.ndarray) -> Assessment:
+        theta_original = original_units(theta_filter)
         model = ModalModel.from_parameters(structure, theta_original)
         if not options.allow_unstable and not model.is_stable():
             raise DivergenceError(
-                f"pass {pass_index}: the identified model is unstable "
-                f"(eigenvalues {np.round(model.eigenvalues(), 4).tolist()}; for an open-loop unstable plant "
-                "allow unstable modes: --allow-unstable)",
-                last_good=result(f"diverged at pass {pass_index}") if history else None,
-            )
+                f"the identified model is unstable (eigenvalues {np.round(model.eigenvalues(), 4).tolist()}; "
+                "for an open-loop unstable plant allow unstable modes: --allow-unstable)")
         fit_filter = pooled_simulation_fit(model, records, options.simulation_method)
         fit_exact = fit_filter if options.simulation_method == "foh" else pooled_simulation_fit(model, records)
-        previous = history[-1] if history else None
-        record = PassRecord(
-            index=pass_index,
-            parameters=theta_original,
-            fit_filter=fit_filter,
-            fit_continuous=fit_exact,
-            trace_p=trace,
-            min_eig_p=min_eig,
-            seconds=time.perf_counter() - pass_start,
-            nis=nis_sum / max(nis_count, 1),
-        )
-        theta, P = new_theta, new_P
-        history.append(record)
-        if on_pass is not None:
-            on_pass(record, result("running"))
-        if previous is not None and len(history) >= options.min_passes and _settled(
-                relative_units(previous.parameters), relative_units(record.parameters), previous.trace_p, record.trace_p,
-                options):
-            stop_reason = "converged"
-            break
-    return result(stop_reason)
+        return Assessment(theta_original, fit_filter, fit_exact, theta_filter, P_filter)
 
+    def settled(previous: PassRecord, current: PassRecord) -> bool:
+        return parameters_settled(relative_units(previous.parameters), relative_units(current.parameters),
+                                  previous.trace_p, current.trace_p, options.parameter_tolerance,
+                                  options.trace_tolerance)
 
-def _settled(previous: np.ndarray, current: np.ndarray, previous_trace: float, current_trace: float,
-             options: IEKFOptions) -> bool:
-    """Parameter change relative to each parameter (floor 1e-3 in the compared units) and trace(P)'s relative change."""
-    scale = np.maximum(np.abs(current), 1e-3)
-    parameter_change = float(np.max(np.abs(current - previous) / scale))
-    trace_change = abs(current_trace - previous_trace) / max(abs(previous_trace), 1e-300)
-    return parameter_change < options.parameter_tolerance and trace_change < options.trace_tolerance
+    hooks = RinseHooks(records, run_record, lambda: r, assess, settled, result, n,
+                       hint="try a lower p, the joseph covariance form, or a lower order")
+    return rinse(hooks, theta, P, tuple(history), passes=options.passes, min_passes=options.min_passes,
+                 check_covariance=options.covariance != "paper", on_pass=on_pass)

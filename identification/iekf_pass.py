@@ -37,14 +37,14 @@ import functools
 import hashlib
 import warnings
 from dataclasses import dataclass
-from typing import Any
+from typing import Callable
 
 import casadi as ca
 import numpy as np
 
 from .compiled import NoCompilerWarning, compile_driver, find_c_compiler
 from .errors import DivergenceError
-from .filter_models import check_discretization
+from .filter_models import FilterModel, check_discretization
 from .iekf_kernel import structured_pass_source
 
 __all__ = [
@@ -61,11 +61,8 @@ __all__ = [
 COVARIANCE_FORMS = ("joseph", "paper")
 KERNELS = ("auto", "structured", "generated")
 
-# Measured on the single-output pass (m = 22): -O3 -march=native runs in about
-# 0.6 of the -O2 time; the library is cached per CPU (see build_shared_library).
+# Flags and threshold chosen by measurement (docs/iekf_tuning.md); the library is cached per CPU.
 PASS_COMPILE_FLAGS = "-O3 -march=native"
-# Spline-nonlinear steps reach 1e5 instructions: -O1 compiles those in a fraction of
-# the -O3 time (about 27 s for 118k instructions) and runs them nearly as fast.
 LARGE_STEP_INSTRUCTIONS = 30_000
 LARGE_STEP_COMPILE_FLAGS = "-O1"
 
@@ -116,13 +113,13 @@ class FilterStep:
         return self.n_z + self.n_z * (self.n_z + 1) // 2
 
 
-def build_filter_step(filter_model: Any, dt: float, discretization: str, covariance: str) -> FilterStep:
+def build_filter_step(filter_model: FilterModel, dt: float, discretization: str, covariance: str) -> FilterStep:
     """Build the SX filter step for a filter model (see :mod:`identification.filter_models`)."""
     check_discretization(discretization)
     if covariance not in COVARIANCE_FORMS:
         raise ValueError(f"unknown covariance form {covariance!r}; use one of {', '.join(COVARIANCE_FORMS)}")
     n_x, n_theta, n_u, n_y = filter_model.n_x, filter_model.n_theta, filter_model.n_u, filter_model.n_y
-    n_c = getattr(filter_model, "n_constants", 0)
+    n_c = filter_model.n_constants
     m = n_x + n_theta
 
     # The model and its Jacobians, as a function of a free augmented state.
@@ -231,7 +228,7 @@ def _constants(filter_step: FilterStep, c: np.ndarray | None) -> np.ndarray:
 class _CompiledPass:
     """A loaded pass library: ``run(state, u, y, q, r, c=None) -> (state, innovations)``."""
 
-    def __init__(self, function: Any, filter_step: FilterStep):
+    def __init__(self, function: Callable[..., int], filter_step: FilterStep):
         self._function = function
         self.filter_step = filter_step
 
@@ -274,7 +271,7 @@ class _VirtualMachinePass:
 
 
 @functools.lru_cache(maxsize=32)
-def _pass_for(filter_model: Any, dt: float, discretization: str, covariance: str, kernel: str):
+def _pass_for(filter_model: FilterModel, dt: float, discretization: str, covariance: str, kernel: str):
     filter_step = build_filter_step(filter_model, dt, discretization, covariance)
     if find_c_compiler() is None:
         warnings.warn(
@@ -300,7 +297,7 @@ def _pass_for(filter_model: Any, dt: float, discretization: str, covariance: str
     return _CompiledPass(function, filter_step)
 
 
-def compiled_pass(filter_model: Any, dt: float, discretization: str, covariance: str, kernel: str = "auto"):
+def compiled_pass(filter_model: FilterModel, dt: float, discretization: str, covariance: str, kernel: str = "auto"):
     """The pass function for a filter model, built and compiled once (cached in memory and on disk).
 
     ``kernel`` chooses the compiled code: ``structured`` generates only the
@@ -308,10 +305,7 @@ def compiled_pass(filter_model: Any, dt: float, discretization: str, covariance:
     the low-rank prediction (:mod:`identification.iekf_kernel`);
     ``generated`` compiles the whole SX step; ``auto`` (default) takes the
     loops where the generated step is large (above
-    ``LARGE_STEP_INSTRUCTIONS``). Measured (n = 4, three outputs, 15,001
-    samples, same run): the spline model's pass (99 filter states) runs
-    2.7x faster on the loops, the linear one's (23 states) 1.3x slower, its
-    unrolled step being small enough to stay in cache.
+    ``LARGE_STEP_INSTRUCTIONS``), which pays only for large steps (docs/iekf_tuning.md).
 
     Returns a callable ``run(state, u, y, q, r, c=None) -> (state, innovations)`` with
     ``state = [z; upper(P)]`` (see :func:`pack_covariance`), ``u`` (N, n_u),

@@ -304,6 +304,40 @@ class ModalStructure:
             theta[2 * self.n_complex_pairs + pole] = sigma
         return theta
 
+    def denormalize(self, theta: np.ndarray, input_scale: np.ndarray, output_scale: np.ndarray) -> np.ndarray:
+        """Parameters in original units from those identified on scaled data.
+
+        With ``u = Su u_n`` and ``y = Sy y_n`` and the state basis rescaled by the
+        scale of the output each state is tied to, ``A`` is unchanged, the fixed
+        C entries stay 1, ``B -> S B Su^-1``, ``C -> Sy C S^-1``, ``D -> Sy D Su^-1``.
+        """
+        A, B, C, D = self.matrices(theta)
+        state_scale = np.array([output_scale[self.output_of_state(j)] for j in range(self.n)])
+        B = state_scale[:, None] * B / input_scale[None, :]
+        C = output_scale[:, None] * C / state_scale[None, :]
+        D = output_scale[:, None] * D / input_scale[None, :]
+        return self.pack(A, B, C, D)
+
+    def normalize_parameters(self, theta: np.ndarray, input_scale: np.ndarray, output_scale: np.ndarray) -> np.ndarray:
+        """Inverse of :meth:`denormalize`."""
+        return self.denormalize(theta, 1.0 / input_scale, 1.0 / output_scale)
+
+    def rescale_time(self, theta: np.ndarray, factor: float) -> np.ndarray:
+        """Parameters in a time unit ``factor`` times the present one: sigma, omega and B times ``factor``.
+
+        ``xdot = A x + B u`` in time ``t' = t / factor`` reads ``dx/dt' = factor A x + factor B u``;
+        C and D are unchanged.
+        """
+        return np.array(theta, dtype=float) * self.time_weights(factor)
+
+    def time_weights(self, ratio: float) -> np.ndarray:
+        """Per parameter: ``ratio`` for sigma, omega and B, 1 for C and D (the change of time unit)."""
+        weights = np.ones(self.n_parameters)
+        slices = self.slices()
+        weights[slices["modal"]] = ratio
+        weights[slices["B"]] = ratio
+        return weights
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready description."""
         return {

@@ -1,15 +1,18 @@
 """The spline-nonlinear IEKF (Best & Bogdanski 2017, section 5).
 
-The filter machinery and compiled pass of the linear IEKF run on the
-spline-modal model of :mod:`identification.spline_modal`, with the
-differences the paper gives:
+The rinse of the linear IEKF (:mod:`identification.rinse`) and its compiled
+pass run on the spline-modal model of :mod:`identification.spline_modal`,
+with the differences the paper gives:
 
 * the start is the linear model identified on the same data, every node at
   its linear value, so the first nonlinear model equals the linear one;
 * ``R`` is the residual covariance of the frozen model simulated over the
   record, recomputed after every pass (normalised units);
 * ``p`` is much lower, so that ``P`` and ``K`` adapt slowly over the record;
-* inputs and outputs are normalised by their largest magnitude;
+* inputs and outputs are normalised by their largest magnitude, where the
+  linear filter's ``normalize`` divides by the RMS: the B and D splines
+  place their nodes evenly over -1..1, a range that must hold every input
+  sample, so the spline model keeps its own scaling;
 * after each pass the node ranges of the A and C splines move to cover the
   range their variable reached (0.5 to 99.5 percentiles of the frozen
   model's states; amplitudes from zero), the splines re-sampled so that
@@ -28,16 +31,15 @@ import numpy as np
 
 from .data import IOData
 from .errors import DivergenceError, InputError
-from .iekf import check_filter_options
-from .iekf_pass import compiled_pass, pack_covariance, unpack_covariance
+from .iekf_pass import compiled_pass
 from .metrics import percentage_explanation
 from .modal import ModalModel
+from .rinse import Assessment, PassHistory, PassRecord, RinseHooks, check_filter_options, check_records, rinse
 from .spline import MAX_NODES, MIN_NODES
 from .spline_modal import SplineModalFilterModel, SplineModalModel, SplineModalStructure
 
 __all__ = [
     "SplineIEKFOptions",
-    "SplinePassRecord",
     "SplineIEKFResult",
     "identify_spline_iekf",
     "covering_ranges",
@@ -58,12 +60,10 @@ class SplineIEKFOptions:
     nodes : int
         Nodes per spline, 3..9 (paper: 5).
     p : float
-        Tuning parameter: ``Q = p I'`` on the node ordinates, ``P0 = Q``. The
-        default, 1e-7, is chosen by measurement on the handling study (n = 4,
-        60 passes, validation mean R): 1e-5 98.56 %, 3e-6 99.15 %, 1e-6 99.41 %,
-        1e-7 99.59 %, against 98.85 % for the linear start. The filter
-        minimises one-step prediction errors; a larger p lets the ordinates
-        follow them away from the model that simulates best.
+        Tuning parameter: ``Q = p I'`` on the node ordinates, ``P0 = Q``; the
+        default is measured best on the handling study (docs/iekf_tuning.md).
+        The filter minimises one-step prediction errors; a larger p lets the
+        ordinates follow them away from the model that simulates best.
     passes : int
         Largest number of passes.
     discretization, covariance : str
@@ -92,39 +92,19 @@ class SplineIEKFOptions:
 
 
 @dataclass(frozen=True, eq=False)
-class SplinePassRecord:
-    """What one pass left: R per output of the frozen model, trace and smallest eigenvalue of P, ranges."""
-
-    index: int
-    fit_filter: np.ndarray
-    trace_p: float
-    min_eig_p: float
-    seconds: float
-    ranges: np.ndarray
-
-    @property
-    def mean_fit_filter(self) -> float:
-        return float(np.mean(self.fit_filter))
-
-
-@dataclass(frozen=True, eq=False)
-class SplineIEKFResult:
+class SplineIEKFResult(PassHistory):
     """The identified nonlinear model, one record per pass, the filter state and the start."""
 
     model: SplineModalModel
     start: SplineModalModel
     options: SplineIEKFOptions
-    history: tuple[SplinePassRecord, ...]
+    history: tuple[PassRecord, ...]
     P: np.ndarray
     R: np.ndarray
     start_fit: np.ndarray
     stop_reason: str
     seconds: float
     meta: dict[str, Any] = field(default_factory=dict)
-
-    @property
-    def passes_run(self) -> int:
-        return len(self.history)
 
     @property
     def fit_percent(self) -> np.ndarray:
@@ -161,7 +141,7 @@ def identify_spline_iekf(
     linear: ModalModel,
     *,
     options: SplineIEKFOptions | None = None,
-    on_pass: Callable[[SplinePassRecord, SplineIEKFResult], None] | None = None,
+    on_pass: Callable[[PassRecord, SplineIEKFResult], None] | None = None,
 ) -> SplineIEKFResult:
     """Identify a spline-nonlinear modal model, starting from a linear one identified on the same data.
 
@@ -184,23 +164,16 @@ def identify_spline_iekf(
     InputError
         On data that do not match the linear model's inputs and outputs.
     DivergenceError
-        On non-finite values or a model whose simulation blows up; ``last_good``
-        holds the result up to the last good pass.
+        On non-finite values, a P no longer positive definite or a model whose
+        simulation blows up; ``last_good`` holds the result up to the last
+        good pass (None before the first).
     """
     options = options or SplineIEKFOptions()
     structure = SplineModalStructure(linear.structure, options.nodes)
-    if data.n_u != linear.structure.n_u or data.n_y != linear.structure.n_y:
-        raise InputError(
-            f"the linear model has {linear.structure.n_u} inputs and {linear.structure.n_y} outputs; "
-            f"the data have {data.n_u} and {data.n_y}"
-        )
-    if data.n_samples <= structure.n_parameters:
-        raise InputError(f"{data.n_samples} samples cannot identify {structure.n_parameters} spline ordinates")
+    check_records((data,), linear.structure.n_u, linear.structure.n_y, structure.n_parameters, "the linear model")
     started = time.perf_counter()
     input_scale = np.abs(data.u).max(axis=0)
     output_scale = np.abs(data.y).max(axis=0)
-    if np.any(input_scale == 0) or np.any(output_scale == 0):
-        raise InputError("an input or output is identically zero: nothing to identify")
     u_n = data.u / input_scale
     y_n = data.y / output_scale
 
@@ -214,63 +187,37 @@ def identify_spline_iekf(
     R = residual_covariance(y_n, y_hat)
 
     n = structure.linear.n
-    m = n + structure.n_parameters
     q = np.concatenate([np.zeros(n), np.full(structure.n_parameters, options.p)])
-    P = np.diag(q)
     run_pass = compiled_pass(SplineModalFilterModel(structure), data.dt, options.discretization, options.covariance)
-    history: list[SplinePassRecord] = []
 
-    def result(stop_reason: str) -> SplineIEKFResult:
+    def result(stop_reason: str, history: tuple[PassRecord, ...], theta: np.ndarray, P: np.ndarray) -> SplineIEKFResult:
         # R is the measured residual covariance, so P needs no rescaling (see identification.uncertainty)
         return SplineIEKFResult(
-            model=dataclasses.replace(model, parameter_covariance=P[n:, n:]) if history else model, start=start, options=options, history=tuple(history), P=P.copy(), R=R.copy(),
-            start_fit=start_fit, stop_reason=stop_reason, seconds=time.perf_counter() - started,
+            model=dataclasses.replace(model, parameter_covariance=P[n:, n:]) if history else model, start=start,
+            options=options, history=history, P=P.copy(), R=R.copy(), start_fit=start_fit, stop_reason=stop_reason,
+            seconds=time.perf_counter() - started,
         )
 
-    stop_reason = "passes"
-    while len(history) < options.passes:
-        index = len(history) + 1
-        pass_start = time.perf_counter()
-        state = np.concatenate([np.zeros(n), model.theta, pack_covariance(P)])
-        try:
-            state, innovations = run_pass(state, u_n, y_n, q, R, model.constants)
-        except DivergenceError as exc:
-            raise DivergenceError(f"nonlinear pass {index}: {exc}", last_good=result(f"diverged at pass {index}")) from exc
-        if not (np.all(np.isfinite(state)) and np.all(np.isfinite(innovations))):
-            raise DivergenceError(
-                f"nonlinear pass {index}: the filter produced non-finite values (try a lower p)",
-                last_good=result(f"diverged at pass {index}"),
-            )
-        candidate = model.with_parameters(state[n:m])
-        new_P = unpack_covariance(state[m:], m)
+    def assess(theta: np.ndarray, P: np.ndarray) -> Assessment:
+        """Score the frozen model, take R from its residuals and move the node ranges (module docstring)."""
+        nonlocal model, R
+        candidate = model.with_parameters(theta)
         y_hat, states = candidate.simulate_normalised(u_n)
         if not (np.all(np.isfinite(y_hat)) and np.max(np.abs(y_hat)) < 1e6):
-            raise DivergenceError(
-                f"nonlinear pass {index}: the identified model's simulation blows up (try a lower p)",
-                last_good=result(f"diverged at pass {index}"),
-            )
+            raise DivergenceError("the identified model's simulation blows up (try a lower p)")
         fit = percentage_explanation(y_n, y_hat)
-        R = residual_covariance(y_n, y_hat)
-        model, P = candidate, new_P
+        model, R = candidate, residual_covariance(y_n, y_hat)
         if options.redistribute:
             model, transform = model.resampled(covering_ranges(structure, states, model.ranges))
-            full = np.eye(m)
+            full = np.eye(P.shape[0])
             full[n:, n:] = transform
             P = full @ P @ full.T
-        eigenvalues = np.linalg.eigvalsh(P)
-        previous = history[-1] if history else None
-        record = SplinePassRecord(
-            index=index, fit_filter=fit, trace_p=float(np.trace(P)), min_eig_p=float(eigenvalues[0]),
-            seconds=time.perf_counter() - pass_start, ranges=model.ranges.copy(),
-        )
-        history.append(record)
-        if on_pass is not None:
-            on_pass(record, result("running"))
-        if (
-            previous is not None
-            and len(history) >= options.min_passes
-            and abs(record.mean_fit_filter - previous.mean_fit_filter) < options.fit_tolerance
-        ):
-            stop_reason = "converged"
-            break
-    return result(stop_reason)
+        return Assessment(model.theta, fit, fit, model.theta, P)
+
+    hooks = RinseHooks(
+        (data,), lambda state, _: run_pass(state, u_n, y_n, q, R, model.constants), lambda: R, assess,
+        lambda previous, current: abs(current.mean_fit_filter - previous.mean_fit_filter) < options.fit_tolerance,
+        result, n, label="nonlinear pass",
+    )
+    return rinse(hooks, model.theta, np.diag(q), passes=options.passes, min_passes=options.min_passes,
+                 check_covariance=options.covariance != "paper", on_pass=on_pass)

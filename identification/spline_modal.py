@@ -41,7 +41,7 @@ import numpy as np
 
 from .compiled import CompiledRecursion
 from .errors import InputError
-from .filter_models import check_discretization, modal_transition
+from .filter_models import FilterModel, check_discretization, modal_transition
 from .modal import ModalModel, ModalStructure
 from .spline import MAX_NODES, MIN_NODES, SplineBasis, resample
 
@@ -110,10 +110,6 @@ class SplineModalStructure:
         follows += [self.input_variable(j) for _ in range(s.n_y) for j in range(s.n_u)]
         return tuple(follows)
 
-    def moving_variables(self) -> tuple[int, ...]:
-        """Variables whose node ranges follow the data (amplitudes and states); inputs stay on -1..1."""
-        return tuple(range(self.linear.n_complex_pairs + self.linear.n))
-
     # parameters --------------------------------------------------------------
     @property
     def n_parameters(self) -> int:
@@ -157,7 +153,7 @@ class SplineModalStructure:
 
 
 @dataclass(frozen=True)
-class SplineModalFilterModel:
+class SplineModalFilterModel(FilterModel):
     """The spline-modal model as a filter model (normalised units); constants are the node ranges."""
 
     structure: SplineModalStructure
@@ -212,7 +208,8 @@ class SplineModalFilterModel:
         b = self.coefficients(x, theta, u, constants, self.structure.linear.slices()["B"])
         return [sum(b[i * s.n_u + j] * u[j] for j in range(s.n_u)) for i in range(s.n)]
 
-    def transition(self, x: Any, theta: Any, u0: Any, u1: Any, dt: float, discretization: str, constants: Any = None) -> Any:
+    def transition(self, x: ca.SX, theta: ca.SX, u0: ca.SX, u1: ca.SX, dt: float, discretization: str,
+                   constants: ca.SX) -> ca.SX:
         check_discretization(discretization)
         s = self.structure.linear
         modal = self.coefficients(x, theta, u0, constants, s.slices()["modal"])
@@ -220,7 +217,7 @@ class SplineModalFilterModel:
         drive1 = self._input_drive(x, theta, u1, constants)
         return modal_transition(s, modal, x, drive0, drive1, dt, discretization)
 
-    def output(self, x: Any, theta: Any, u: Any, constants: Any = None) -> Any:
+    def output(self, x: ca.SX, theta: ca.SX, u: ca.SX, constants: ca.SX) -> ca.SX:
         s = self.structure.linear
         sl = s.slices()
         c_free = self.coefficients(x, theta, u, constants, sl["C"])
@@ -317,10 +314,8 @@ class SplineModalModel:
         discretization: str = "exact", ranges: np.ndarray | None = None,
     ) -> "SplineModalModel":
         """The nonlinear model equal to ``linear``: every node at its (normalised) value."""
-        from .iekf import normalize_parameters
-
         structure = SplineModalStructure(linear.structure, nodes)
-        theta_linear = normalize_parameters(linear.structure, linear.parameters, np.asarray(input_scale, float), np.asarray(output_scale, float))
+        theta_linear = linear.structure.normalize_parameters(linear.parameters, np.asarray(input_scale, float), np.asarray(output_scale, float))
         return cls(
             structure, structure.from_linear(theta_linear),
             structure.default_ranges() if ranges is None else ranges,
@@ -450,15 +445,13 @@ class SplineModalModel:
 
     def linear_model(self, at: float = 0.0) -> ModalModel:
         """The linear model of the splines' values at zero input, states and amplitude ``at``."""
-        from .iekf import denormalize
-
         st = self.structure
         values = []
         follows = st.coefficient_variables()
         for index, name in enumerate(st.coefficient_names()):
             point = at if follows[index] < st.linear.n_complex_pairs else 0.0
             values.append(float(self.coefficient(name, [point])[0]))
-        theta = denormalize(st.linear, np.array(values), self.input_scale, self.output_scale)
+        theta = st.linear.denormalize(np.array(values), self.input_scale, self.output_scale)
         return ModalModel.from_parameters(st.linear, theta, input_names=self.input_names, output_names=self.output_names)
 
     def resampled(self, ranges: np.ndarray) -> tuple["SplineModalModel", np.ndarray]:

@@ -401,17 +401,15 @@ def iekf_parameter_covariance(
     converged on a long record; the ratio therefore errs on the wide side.
 
     The map to original units is the Jacobian of
-    :func:`identification.iekf.rescale_time` and
-    :func:`identification.iekf.denormalize`, a diagonal matrix since both
+    :meth:`~identification.modal.ModalStructure.rescale_time` and
+    :meth:`~identification.modal.ModalStructure.denormalize`, a diagonal matrix since both
     scale each parameter alone: ``cov = J P J'``.
     """
-    from .iekf import denormalize, rescale_time
-
     if not (np.isfinite(noise_ratio) and noise_ratio > 0):
         raise InputError(f"the measured noise ratio must be positive; got {noise_ratio!r}")
     n_theta = structure.n_parameters
     jacobian = np.column_stack([
-        denormalize(structure, rescale_time(structure, unit, 1.0 / time_unit), input_scale, output_scale)
+        structure.denormalize(structure.rescale_time(unit, 1.0 / time_unit), input_scale, output_scale)
         for unit in np.eye(n_theta)
     ])
     P_parameters = np.asarray(P_parameters, dtype=float)
