@@ -103,9 +103,9 @@ def handling_figures(path: str | Path) -> dict[str, Figure]:
         data = records[record_name]
         predictions = {}
         if chosen in linear:
-            predictions[f"linear n = {chosen}"] = linear[chosen].model.simulate(data.u, data.dt)
+            predictions[f"linear n = {chosen}"] = linear[chosen].model.simulate_outputs(data.u, data.dt)
         if chosen in nonlinear:
-            predictions[f"nonlinear n = {chosen}"] = nonlinear[chosen].simulate(data.u, data.dt)
+            predictions[f"nonlinear n = {chosen}"] = nonlinear[chosen].simulate_outputs(data.u, data.dt)
         figures[f"fits_{record_name}"] = plots.plot_time_fits(
             data.t, data.y, predictions, names, units,
             title=f"Handling model fits on the {label} manoeuvre (n = {chosen})",
@@ -217,7 +217,7 @@ def handling_figures(path: str | Path) -> dict[str, Figure]:
         )
     if chosen in nonlinear:
         data = records["validation"]
-        residuals = data.y - nonlinear[chosen].simulate(data.u, data.dt)
+        residuals = data.y - nonlinear[chosen].simulate_outputs(data.u, data.dt)
         figures["residuals"] = plots.plot_residual_autocorrelation(
             residuals, 100, names, dt=data.dt,
             title=f"Residual autocorrelation, nonlinear n = {chosen}, validation data",
@@ -225,7 +225,7 @@ def handling_figures(path: str | Path) -> dict[str, Figure]:
     data = records["identification"]
     for kind, model in (("linear", linear[chosen].model if chosen in linear else None), ("nonlinear", nonlinear.get(chosen))):
         if model is not None:
-            tests = residual_tests(data.u, data.y - model.simulate(data.u, data.dt), input_names=data.input_names,
+            tests = residual_tests(data.u, data.y - model.simulate_outputs(data.u, data.dt), input_names=data.input_names,
                                    output_names=names)
             figures[f"residual_tests_{kind}"] = plots.plot_residual_tests(
                 tests, dt=data.dt, title=f"Residual tests, {kind} n = {chosen}, identification data")
@@ -260,6 +260,6 @@ def write_handling_report(path: str | Path, out_dir: str | Path) -> list[Path]:
         model = loaded["nonlinear"][chosen]
         n = loaded["records"]["identification"].n_samples
         export = out_dir / f"nonlinear_n{chosen}.casadi"
-        model.to_casadi_function(n).save(str(export))
+        model.to_casadi(n).save(str(export))
         written.append(export)
     return written

@@ -317,7 +317,7 @@ def make_records(config: HandlingConfig) -> dict[str, IOData]:
 
 def score(model: Any, data: IOData) -> np.ndarray:
     """R (eq. 17, percent) per output of ``model`` simulated from rest over ``data``, in original units."""
-    return percentage_explanation(data.y, model.simulate(data.u, data.dt))
+    return percentage_explanation(data.y, model.simulate_outputs(data.u, data.dt))
 
 
 # ------------------------------------------------------------ one order
@@ -401,9 +401,9 @@ def identify_nonlinear(
 def _nonlinear_outcome(result: Any, identification: IOData, validation: IOData, n_pairs: int) -> NonlinearOutcome:
     model = result.model
     curves = {}
+    modes = [model.modes(amplitude)[:n_pairs] for amplitude in MODE_AMPLITUDES]
     for mode in range(n_pairs):  # frequency and damping curves exist for the complex pairs
-        frequency, damping = model.mode_frequency_damping(mode, MODE_AMPLITUDES)
-        curves[mode] = (np.asarray(frequency, dtype=float), np.asarray(damping, dtype=float))
+        curves[mode] = (np.array([at[mode].frequency_hz for at in modes]), np.array([at[mode].damping for at in modes]))
     tables = {name: {key: value if isinstance(value, str) else np.asarray(value, dtype=float)
                      for key, value in table.items()}
               for name, table in model.spline_tables().items()}
