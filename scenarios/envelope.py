@@ -62,8 +62,8 @@ from identification.storage import read_value, write_value
 from vehicle import DEFAULT_DT, linearize, make_manoeuvre, named_vehicle, simulate
 from vehicle.parameters import VehicleParameters
 
-from .handling_study import (COMPARED_MODES, OUTPUTS, check_orders, positive_number, score, study_linear_options,
-                             whole_number)
+from .handling_study import (COMPARED_MODES, OUTPUTS, check_orders, positive_number, score, spline_options,
+                             study_linear_options, whole_number)
 from .paths import results_directory
 from .shutdown import run_in_workers
 
@@ -193,9 +193,7 @@ class EnvelopeConfig:
     @property
     def spline_options(self) -> SplineIEKFOptions:
         """The spline IEKF's options: settings left at None take its defaults."""
-        return SplineIEKFOptions(
-            nodes=self.nodes, passes=SplineIEKFOptions.passes if self.nonlinear_passes is None else self.nonlinear_passes,
-            p=SplineIEKFOptions.p if self.nonlinear_p is None else self.nonlinear_p)
+        return spline_options(self.nodes, self.nonlinear_passes, self.nonlinear_p)
 
     def job_settings(self) -> dict[str, Any]:
         """The settings every job shares: an archive resumed must have been written with the same."""

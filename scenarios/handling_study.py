@@ -82,9 +82,8 @@ from identification.iekf_archive import write_iekf_run
 from identification.spline_iekf import SplineIEKFOptions, identify_spline_iekf
 from identification.metrics import percentage_explanation
 from identification.modal import ModalStructure
-from identification.order import OrderRow
 from identification.protocol import Mode as ModelMode
-from identification.order import OrderAssessment, assess_orders
+from identification.order import OrderAssessment, OrderRow, assess_orders
 from identification.storage import write_value
 from vehicle import DEFAULT_DT, DEFAULT_SPEED, linearize, make_manoeuvre, named_vehicle, simulate
 from vehicle.linearize import Mode
@@ -99,6 +98,7 @@ __all__ = [
     "PAPER",
     "HandlingConfig",
     "study_linear_options",
+    "spline_options",
     "check_orders",
     "positive_number",
     "whole_number",
@@ -212,6 +212,13 @@ def study_linear_options(p: float = 1e-5, passes: int = 100) -> IEKFOptions:
     return IEKFOptions(p=p, passes=passes, normalize=True, discretization="exact")
 
 
+def spline_options(nodes: int = SplineIEKFOptions.nodes, passes: int | None = None,
+                   p: float | None = None) -> SplineIEKFOptions:
+    """The spline IEKF's options; ``passes`` and ``p`` left at None take its defaults."""
+    return SplineIEKFOptions(nodes=nodes, passes=SplineIEKFOptions.passes if passes is None else passes,
+                             p=SplineIEKFOptions.p if p is None else p)
+
+
 @dataclass(frozen=True)
 class HandlingConfig:
     """Settings of the handling study; every field is checked on construction (InputError).
@@ -291,10 +298,8 @@ class HandlingConfig:
         """Inverse of :meth:`as_dict`; spline settings stored as None take the spline IEKF's defaults."""
         spline = None
         if stored.get("nonlinear", True):
-            spline = SplineIEKFOptions(
-                nodes=_stored(stored, "nodes", SplineIEKFOptions.nodes),
-                passes=_stored(stored, "nonlinear_passes", SplineIEKFOptions.passes),
-                p=_stored(stored, "nonlinear_p", SplineIEKFOptions.p))
+            spline = spline_options(_stored(stored, "nodes", SplineIEKFOptions.nodes), stored.get("nonlinear_passes"),
+                                    stored.get("nonlinear_p"))
         return cls(orders=tuple(stored["orders"]), seed=stored["seed"], duration=stored["duration"],
                    amplitude_scale=stored["amplitude_scale"], vehicle=stored["vehicle"], speed=stored["speed"],
                    dt=stored["dt"], linear_options=study_linear_options(stored["p"], stored["passes"]),

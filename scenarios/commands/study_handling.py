@@ -25,10 +25,11 @@ from typing import Any
 from identification.archive import open_archive
 from identification.archive_safety import archive_lock, check_output_folder, check_output_target, replacing_directory
 from identification.errors import InputError
+from identification.iekf import IEKFOptions
 from identification.spline_iekf import SplineIEKFOptions
 from scenarios.handling_resume import StudyCheckpoint, read_progress
 from scenarios.handling_study import (OUTPUTS, PAPER, HandlingConfig, HandlingResult, archive_path, make_records,
-                                      parse_orders, planned_passes, run_study, study_linear_options,
+                                      parse_orders, planned_passes, run_study, spline_options, study_linear_options,
                                       write_study_archive)
 from scenarios.progress import Progress
 
@@ -37,25 +38,29 @@ GROUP = "study"
 HELP = "the paper's handling study: Table 5, linear and nonlinear models of orders 2-6"
 
 _DEFAULTS = HandlingConfig()
-_LINEAR = _DEFAULTS.linear_options
-_SPLINE = SplineIEKFOptions()
+
+
+def add_filter_options(parser: argparse.ArgumentParser, linear: IEKFOptions) -> None:
+    """The filters' options the studies share: ``--passes`` and ``--p`` of the linear IEKF (defaults
+    from ``linear``), ``--nodes``, ``--nonlinear-passes`` and ``--nonlinear-p`` of the spline IEKF."""
+    parser.add_argument("--passes", type=int, default=linear.passes,
+                        help=f"passes of each linear identification (default {linear.passes})")
+    parser.add_argument("--p", type=float, default=linear.p,
+                        help=f"tuning parameter p of the linear identifications (default {linear.p:g})")
+    parser.add_argument("--nodes", type=int, default=SplineIEKFOptions.nodes,
+                        help=f"spline nodes per coefficient of the nonlinear models (default {SplineIEKFOptions.nodes})")
+    parser.add_argument("--nonlinear-passes", type=int, default=None,
+                        help=f"passes of each nonlinear identification (default {SplineIEKFOptions.passes})")
+    parser.add_argument("--nonlinear-p", type=float, default=None,
+                        help=f"tuning parameter p of the nonlinear identifications (default {SplineIEKFOptions.p:g})")
 
 
 def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--orders", default="2-6", help="model orders, e.g. 2-6, 4 or 2,4-6 (default 2-6)")
-    parser.add_argument("--nodes", type=int, default=_SPLINE.nodes,
-                        help=f"spline nodes per coefficient of the nonlinear models (default {_SPLINE.nodes})")
     parser.add_argument("--workers", type=int, default=None,
                         help="processes running orders at once (default: as many as orders, at most the cores)")
     parser.add_argument("--seed", type=int, default=_DEFAULTS.seed, help="seed of both steer inputs (default 0)")
-    parser.add_argument("--passes", type=int, default=_LINEAR.passes,
-                        help=f"passes of each linear identification (default {_LINEAR.passes})")
-    parser.add_argument("--p", type=float, default=_LINEAR.p,
-                        help=f"tuning parameter p of the linear identifications (default {_LINEAR.p:g})")
-    parser.add_argument("--nonlinear-passes", type=int, default=_SPLINE.passes,
-                        help=f"passes of each nonlinear identification (default {_SPLINE.passes})")
-    parser.add_argument("--nonlinear-p", type=float, default=_SPLINE.p,
-                        help=f"tuning parameter p of the nonlinear identifications (default {_SPLINE.p:g})")
+    add_filter_options(parser, _DEFAULTS.linear_options)
     parser.add_argument("--linear-only", action="store_true", help="skip the nonlinear identifications")
     parser.add_argument("--duration", type=float, default=_DEFAULTS.duration,
                         help=f"length of each record in s (default {_DEFAULTS.duration:g})")
@@ -91,7 +96,7 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
         open_archive(path, kinds=["handling-study"]).close()  # missing, foreign or corrupt: said before anything else
     else:
         orders = parse_orders(args.orders)
-        spline = SplineIEKFOptions(nodes=args.nodes, p=args.nonlinear_p, passes=args.nonlinear_passes)  # checked even if unused
+        spline = spline_options(args.nodes, args.nonlinear_passes, args.nonlinear_p)  # checked even if unused
         config = HandlingConfig(
             orders=orders, seed=args.seed, duration=args.duration, amplitude_scale=args.amplitude_scale,
             vehicle=args.vehicle, speed=args.speed, linear_options=study_linear_options(args.p, args.passes),
