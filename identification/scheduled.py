@@ -146,6 +146,10 @@ def _block_eigenvalues(structure: ModalStructure, A: np.ndarray) -> np.ndarray:
                      for s in structure.mode_states()])
 
 
+def _mode_eigenvalues(model: ModalModel) -> np.ndarray:
+    return _block_eigenvalues(model.structure, model.A)
+
+
 def _match(reference: np.ndarray, candidate: np.ndarray, n_pairs: int) -> tuple[list[int], float]:
     """Assign candidate modes to reference slots (pairs among pairs, reals among reals), least relative distance."""
     order: list[int] = []
@@ -296,7 +300,7 @@ def schedule_models(models: Mapping[float, ModalModel], *, variable: str = "spee
     gauged = [_input_gauge(ordered[0], identity)]
     matching = [ModeMatch(values[0], tuple(identity), 0.0)]
     for value, model in zip(values[1:], ordered[1:]):
-        order, cost = _match(_block_eigenvalues(structure, gauged[-1][0]), model.mode_eigenvalues(), structure.n_complex_pairs)
+        order, cost = _match(_block_eigenvalues(structure, gauged[-1][0]), _mode_eigenvalues(model), structure.n_complex_pairs)
         gauged.append(_input_gauge(model, order))
         matching.append(ModeMatch(value, tuple(order), cost))
     modal = np.array([[A[s[0], s[0]] if k == 0 else A[s[0], s[1]] for s in structure.mode_states() for k in range(len(s))]
