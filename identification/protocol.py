@@ -23,7 +23,7 @@ import numpy as np
 from .data import IOData
 from .errors import InputError
 
-__all__ = ["Mode", "IdentifiedModel", "StateSpaceModel", "continuous_eigenvalues"]
+__all__ = ["Mode", "IdentifiedModel", "StateSpaceModel", "sample_interval"]
 
 
 @dataclass(frozen=True)
@@ -52,11 +52,6 @@ class Mode:
         damping = -value.real / natural if natural > 0 else 1.0
         return cls(value, natural / (2 * np.pi), float(damping))
 
-    @property
-    def is_oscillatory(self) -> bool:
-        """A complex pair rather than a real pole."""
-        return self.eigenvalue.imag > 0
-
 
 @runtime_checkable
 class IdentifiedModel(Protocol):
@@ -81,15 +76,6 @@ class IdentifiedModel(Protocol):
     def save_mat(self, path: str | Path) -> Path: ...
 
     def save_json(self, path: str | Path) -> Path: ...
-
-
-def continuous_eigenvalues(values: Any, dt: float | None) -> np.ndarray:
-    """Eigenvalues in continuous time: unchanged for ``dt`` None, ``log(z) / dt`` for discrete ones."""
-    values = np.asarray(values, dtype=complex)
-    if dt is None:
-        return values
-    with np.errstate(divide="ignore"):
-        return np.log(values) / dt
 
 
 class StateSpaceModel:
@@ -149,7 +135,10 @@ class StateSpaceModel:
 
     def modes(self) -> tuple[Mode, ...]:
         """One :class:`Mode` per complex pair (positive imaginary part) and per real pole, pairs first."""
-        values = continuous_eigenvalues(self.eigenvalues(), self.to_statespace()[4])
+        values, dt = np.asarray(self.eigenvalues(), dtype=complex), self.to_statespace()[4]
+        if dt is not None:
+            with np.errstate(divide="ignore"):
+                values = np.log(values) / dt
         scale = max(1.0, float(np.max(np.abs(values), initial=0.0)))
         pairs = sorted((v for v in values if v.imag > 1e-9 * scale), key=lambda v: (abs(v), v.real))
         real = sorted((v for v in values if abs(v.imag) <= 1e-9 * scale), key=lambda v: v.real)
