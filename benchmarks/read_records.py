@@ -45,7 +45,7 @@ def _write_record(path: Path, rows: int) -> None:
     t = np.arange(rows) * DT
     u = np.column_stack([np.convolve(rng.standard_normal(rows), np.ones(25) / 25, mode="same"),
                          np.zeros(rows)])
-    y = true_model().simulate(u, DT)[:, :2]
+    y = true_model().simulate_outputs(u, DT)[:, :2]
     table = np.column_stack([t, u[:, 0], y])
     np.savetxt(path, table, delimiter=",", header="t,u1,y1,y2", comments="", fmt="%.9g")
 

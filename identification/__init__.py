@@ -26,6 +26,10 @@ from .errors import ArchiveError, DivergenceError, ExcitationError, InputError, 
 from .iekf import START_VALUES, FilterState, IEKFOptions, IEKFResult, PassRecord, identify_iekf
 from .metrics import FitMetrics, fit_metrics, nrmse_fit, percentage_explanation, r_squared
 from .modal import C_PATTERNS, ModalModel, ModalStructure
+from .protocol import IdentifiedModel, Mode
+from .discrete import DiscreteModel
+from .spline_iekf import SplineIEKFOptions, SplineIEKFResult, identify_spline_iekf
+from .spline_modal import SplineModalModel, SplineModalStructure
 from .order import OrderAssessment, assess_orders
 from .spline import SplineBasis, covering_basis, resample
 from .storage import read_group, read_value, write_group, write_value
@@ -78,6 +82,14 @@ __all__ = [
     "C_PATTERNS",
     "ModalModel",
     "ModalStructure",
+    "IdentifiedModel",
+    "Mode",
+    "DiscreteModel",
+    "SplineModalModel",
+    "SplineModalStructure",
+    "SplineIEKFOptions",
+    "SplineIEKFResult",
+    "identify_spline_iekf",
     "START_VALUES",
     "FilterState",
     "IEKFOptions",

@@ -5,7 +5,7 @@ model order and returns a continuous-time
 :class:`~identification.modal.ModalModel` of the workbench's modal structure
 (:func:`~identification.statespace.to_modal`), so that all methods are scored
 alike: :func:`identify_with` times the method, simulates its model exactly
-(``ModalModel.simulate(u, dt, method="foh")``, inputs linear between samples)
+(``ModalModel.simulate_outputs(u, dt, method="foh")``, inputs linear between samples)
 and computes :func:`~identification.metrics.fit_metrics` against the record.
 
 Methods (:data:`COMPARATORS`, a registry ``name -> function``):
@@ -204,7 +204,7 @@ def _arx_modal(data: IOData, order: int, thetas: list[np.ndarray], covariances: 
     na, nb, nk = orders
 
     def modal(theta: np.ndarray, structure: ModalStructure | None = None) -> ModalModel | DiscreteModel:
-        realisations = [model_from_theta(piece, data.n_u, 1, na, nb, nk, data.dt).to_state_space()
+        realisations = [model_from_theta(piece, data.n_u, 1, na, nb, nk, data.dt).to_statespace()
                         for piece in np.split(theta, data.n_y)]
         Ad, Bd, Cd, Dd = _stack_and_reduce(realisations, order)
         if structure is None:
@@ -340,7 +340,7 @@ def output_error_comparator(data: IOData, *, order: int, **options: Any) -> Moda
         A, B, C, D = structure.matrices(theta)
         try:  # each record simulated from rest
             model = ModalModel(structure, A, B, C, D)
-            error = np.concatenate([((model.simulate(record.u, dt, method="foh") - record.y) * weights).ravel()
+            error = np.concatenate([((model.simulate_outputs(record.u, dt, method="foh") - record.y) * weights).ravel()
                                     for record in records])
         except InputError:
             return np.full(size, limit)
@@ -433,8 +433,8 @@ def identify_with(data: IOData, *, method: str, order: int, **options: Any) -> C
     model = COMPARATORS[method](data if isinstance(data, IOData) else records, order=order, **options)
     seconds = time.perf_counter() - start
     if len(records) == 1:
-        metrics = fit_metrics(records[0].y, model.simulate(records[0].u, records[0].dt, method="foh"))
+        metrics = fit_metrics(records[0].y, model.simulate_outputs(records[0].u, records[0].dt, method="foh"))
     else:  # each record from rest, all records scored together
-        simulated = [model.simulate(record.u, record.dt, method="foh") for record in records]
+        simulated = [model.simulate_outputs(record.u, record.dt, method="foh") for record in records]
         metrics = fit_metrics(np.vstack([record.y for record in records]), np.vstack(simulated))
     return ComparatorResult(method, model, metrics, seconds, {"order": order, "records": len(records)})

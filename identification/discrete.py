@@ -10,15 +10,13 @@ with the record's sample interval.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.signal import dlsim
 
 from .errors import InputError
+from .protocol import StateSpaceModel
 
 __all__ = ["DiscreteModel", "has_no_continuous_equivalent"]
 
@@ -30,7 +28,7 @@ def has_no_continuous_equivalent(Ad: np.ndarray) -> bool:
 
 
 @dataclass(frozen=True, eq=False)
-class DiscreteModel:
+class DiscreteModel(StateSpaceModel):
     """A discrete-time state-space model with its sample interval: a frozen value."""
 
     A: np.ndarray
@@ -67,44 +65,15 @@ class DiscreteModel:
     def n_y(self) -> int:
         return int(self.C.shape[0])
 
-    def eigenvalues(self) -> np.ndarray:
-        """The discrete eigenvalues (z-plane)."""
-        return np.linalg.eigvals(self.A)
+    def to_statespace(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+        """``(A, B, C, D, dt)``."""
+        return self.A, self.B, self.C, self.D, self.dt
 
     def is_stable(self) -> bool:
         """Every eigenvalue strictly inside the unit circle."""
         return bool(np.all(np.abs(self.eigenvalues()) < 1))
 
-    def simulate(self, u: Any, dt: float | None = None, *, method: str | None = None, x0: Any = None) -> np.ndarray:
-        """Outputs (N, n_y) driven by ``u`` (N, n_u) from ``x0`` (default zero); ``dt`` must be the model's."""
-        u = np.asarray(u, dtype=float)
-        if u.ndim == 1:
-            u = u[:, None]
-        if u.ndim != 2 or u.shape[1] != self.n_u:
-            raise InputError(f"u must have shape (N, {self.n_u}); got {u.shape}")
-        if dt is not None and not np.isclose(dt, self.dt, rtol=1e-6):
-            raise InputError(f"this discrete model has dt = {self.dt} s; the record has {dt} s")
-        x0 = np.zeros(self.n_states) if x0 is None else np.asarray(x0, dtype=float).ravel()
-        if u.shape[0] == 1:
-            return (self.C @ x0 + self.D @ u[0])[None, :]
-        _, y, _ = dlsim((self.A, self.B, self.C, self.D, self.dt), u, x0=x0)
-        return np.asarray(y).reshape(u.shape[0], self.n_y)
-
     def to_dict(self) -> dict[str, Any]:
-        return {"time_domain": "discrete", "dt": self.dt, "A": self.A.tolist(), "B": self.B.tolist(),
-                "C": self.C.tolist(), "D": self.D.tolist(),
-                "eigenvalues": [[float(v.real), float(v.imag)] for v in self.eigenvalues()],
-                "input_names": list(self.input_names or ()), "output_names": list(self.output_names or ()),
-                "meta": self.meta}
-
-    def save_json(self, path: str | Path) -> Path:
-        path = Path(path)
-        path.write_text(json.dumps(self.to_dict(), indent=2, default=str) + "\n")
-        return path
-
-    def save_mat(self, path: str | Path) -> Path:
-        from scipy.io import savemat
-
-        path = Path(path)
-        savemat(path, {"A": self.A, "B": self.B, "C": self.C, "D": self.D, "Ts": self.dt})
-        return path
+        """JSON-ready form: the state-space form with names and meta."""
+        return {**super().to_dict(), "input_names": list(self.input_names or ()),
+                "output_names": list(self.output_names or ()), "meta": self.meta}

@@ -35,6 +35,7 @@ import scipy.linalg
 
 from ._checks import finite_matrix, io_arrays, non_negative_int, per_input
 from .errors import ExcitationError, InputError
+from .protocol import StateSpaceModel, sample_interval
 
 __all__ = [
     "CONDITION_LIMIT",
@@ -189,7 +190,7 @@ def observer_form(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray,
 
 
 @dataclass(frozen=True, eq=False)
-class ArxModel:
+class ArxModel(StateSpaceModel):
     """ARX polynomials ``A(q) y = B(q) u`` (eq. A.38), time-major coefficient stacks.
 
     Attributes
@@ -225,9 +226,9 @@ class ArxModel:
         b[: self.b.shape[0]] = self.b
         return a, b
 
-    def to_state_space(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Discrete ``(Ad, Bd, Cd, Dd)`` in block observer form; see :func:`observer_form`."""
-        return observer_form(*self.padded())
+    def to_statespace(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+        """Discrete ``(Ad, Bd, Cd, Dd, dt)`` in block observer form; see :func:`observer_form`."""
+        return (*observer_form(*self.padded()), sample_interval(self.dt, "ARX model"))
 
     def predict(self, u: Any, y: Any) -> np.ndarray:
         """One-step-ahead predictions ``yhat(k) = y(k) - A(q) y(k) + B(q) u(k)``; early samples use zero history."""

@@ -28,15 +28,14 @@ reports a model.
 from __future__ import annotations
 
 import dataclasses
-import json
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
 from scipy.signal import lfilter
 
 from .errors import InputError
+from .protocol import Mode, StateSpaceModel
 
 __all__ = [
     "ModalStructure",
@@ -387,7 +386,7 @@ SIMULATION_METHODS = ("foh", "zoh", "euler")
 
 
 @dataclass(frozen=True, eq=False)
-class ModalModel:
+class ModalModel(StateSpaceModel):
     """An identified modal state-space model: a frozen value.
 
     Parameters
@@ -488,20 +487,16 @@ class ModalModel:
         values += list(self.mode_eigenvalues()[self.structure.n_complex_pairs:])
         return np.array(values)
 
-    def frequencies_damping(self) -> tuple[np.ndarray, np.ndarray]:
-        """Natural frequency (rad/s) and damping ratio of each mode (real poles: |sigma| and 1, or -1 if unstable)."""
-        modes = self.mode_eigenvalues()
-        natural = np.abs(modes)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            damping = np.where(natural > 0, -modes.real / np.where(natural > 0, natural, 1.0), 1.0)
-        return natural, damping
+    def modes(self) -> tuple[Mode, ...]:
+        """One :class:`Mode` per mode, in the structure's order (pairs first)."""
+        return tuple(Mode.of(value) for value in self.mode_eigenvalues())
 
     def is_stable(self) -> bool:
         """Every eigenvalue in the open left half-plane."""
         return bool(np.all(self.mode_eigenvalues().real < 0))
 
     # ---------------------------------------------------------- simulation
-    def simulate(self, u: Any, dt: float, *, method: str = "foh", x0: Any = None, return_states: bool = False) -> Any:
+    def simulate_outputs(self, u: Any, dt: float, *, method: str = "foh", x0: Any = None, return_states: bool = False) -> Any:
         """Output of the model driven by ``u`` from state ``x0`` (default zero).
 
         Parameters
@@ -571,13 +566,9 @@ class ModalModel:
         return x @ self.C.T + u @ self.D.T, x
 
     # -------------------------------------------------------------- export
-    def to_control(self) -> Any:
-        """A ``control.StateSpace`` (python-control, imported only here)."""
-        try:
-            import control
-        except ImportError:  # pragma: no cover - optional dependency
-            raise ImportError("python-control is not installed: pip install control") from None
-        return control.ss(self.A, self.B, self.C, self.D)
+    def to_statespace(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
+        """``(A, B, C, D, None)``: continuous time."""
+        return self.A, self.B, self.C, self.D, None
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready form: structure, matrices, names, eigenvalues as [re, im], meta."""
@@ -610,22 +601,12 @@ class ModalModel:
             parameter_covariance=None if covariance is None else np.array(covariance, dtype=float),
         )
 
-    def save_json(self, path: str | Path) -> Path:
-        """Write :meth:`to_dict` as JSON."""
-        path = Path(path)
-        path.write_text(json.dumps(self.to_dict(), indent=2, default=str) + "\n")
-        return path
-
-    def save_mat(self, path: str | Path) -> Path:
-        """Write A, B, C, D (and the fixed-C mask) to a MATLAB ``.mat`` file."""
-        from scipy.io import savemat
-
+    def mat_fields(self) -> dict[str, Any]:
+        """A, B, C, D and ``C_fixed``, the mask of output-matrix entries the structure fixes."""
         mask = np.zeros((self.structure.n_y, self.structure.n))
         for i, j in self.structure.fixed_c:
             mask[i, j] = 1
-        path = Path(path)
-        savemat(path, {"A": self.A, "B": self.B, "C": self.C, "D": self.D, "C_fixed": mask})
-        return path
+        return {**super().mat_fields(), "C_fixed": mask}
 
 
 def _first_order_recursion(lam: complex, drive: np.ndarray, dt: float, method: str, start: complex) -> np.ndarray:

@@ -38,7 +38,7 @@ def pooled_simulation_fit(model: Any, records: Sequence[IOData], method: str = "
     ``-inf`` where a simulation overflowed (an unstable model, where one is allowed).
     """
     with np.errstate(all="ignore"):
-        fit = pooled_percentage_explanation((record.y, model.simulate(record.u, record.dt, method=method))
+        fit = pooled_percentage_explanation((record.y, model.simulate_outputs(record.u, record.dt, method=method))
                                             for record in records)
     return np.where(np.isfinite(fit), fit, -np.inf)
 
@@ -92,7 +92,7 @@ def score_records(model: Any, data: IOData | Sequence[IOData], *, method: str = 
     records = as_records(data)
     fits, pairs = [], []
     for index, record in enumerate(records):
-        simulated = model.simulate(record.u, record.dt, method=method)
+        simulated = model.simulate_outputs(record.u, record.dt, method=method)
         name = names[index] if names is not None else str(record.meta.get("source", f"record {index + 1}"))
         fits.append(RecordFit(name, record.n_samples, FitMetrics(
             *(_defined(metric, record.y, simulated) for metric in (percentage_explanation, nrmse_fit, r_squared)))))

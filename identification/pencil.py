@@ -42,13 +42,14 @@ from scipy.signal import ss2tf
 from ._checks import finite_matrix, io_arrays, non_negative_int, per_input
 from .errors import InputError
 from .kalman import KalmanResult, kalman_filter
-from .least_squares import ArxModel
+from .least_squares import ArxModel, observer_form
+from .protocol import StateSpaceModel, sample_interval
 
 __all__ = ["PencilModel", "PencilEstimate", "estimate_pencil"]
 
 
 @dataclass(frozen=True, eq=False)
-class PencilModel:
+class PencilModel(StateSpaceModel):
     """``E x(k+1) = F x(k) + G [u(k); y(k)]``.
 
     Attributes
@@ -56,6 +57,8 @@ class PencilModel:
     E, F : ndarray, shape (n + n_y, n)
     G : ndarray, shape (n + n_y, n_u + n_y)
     n_u, n_y : int
+    dt : float or None
+        Sample interval (s), if known.
     """
 
     E: np.ndarray
@@ -63,6 +66,7 @@ class PencilModel:
     G: np.ndarray
     n_u: int
     n_y: int
+    dt: float | None = None
 
     def __post_init__(self) -> None:
         E, F, G = (finite_matrix(name, getattr(self, name)) for name in "EFG")
@@ -82,22 +86,22 @@ class PencilModel:
         return int(self.E.shape[1])
 
     @classmethod
-    def from_state_space(cls, A: Any, B: Any, C: Any, D: Any) -> "PencilModel":
+    def from_state_space(cls, A: Any, B: Any, C: Any, D: Any, dt: float | None = None) -> "PencilModel":
         """The SP form of ``x(k+1) = A x + B u``, ``y = C x + D u`` (appendix eq. A.102-A.103)."""
         A, B, C, D = (finite_matrix(name, m) for name, m in zip("ABCD", (A, B, C, D)))
         n, n_u, n_y = A.shape[0], B.shape[1], C.shape[0]
         E = np.vstack([np.eye(n), np.zeros((n_y, n))])
         F = np.vstack([A, C])
         G = np.block([[B, np.zeros((n, n_y))], [D, -np.eye(n_y)]])
-        return cls(E, F, G, n_u, n_y)
+        return cls(E, F, G, n_u, n_y, dt)
 
     @classmethod
     def from_arx(cls, model: ArxModel) -> "PencilModel":
         """The observer-form SP model of an ARX model (appendix eq. A.104-A.105)."""
-        return cls.from_state_space(*model.to_state_space())
+        return cls.from_state_space(*observer_form(*model.padded()), dt=model.dt)
 
-    def to_state_space(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """``(A, B, C, D)`` of this pencil.
+    def to_statespace(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+        """``(A, B, C, D, dt)`` of this pencil.
 
         A row transformation ``T`` (from the QR factorisation of E) brings E
         to ``[I; 0]``; the last ``n_y`` rows then read
@@ -105,6 +109,7 @@ class PencilModel:
         the first n rows. Needs E of full column rank and ``G2y`` invertible
         (y determined by x and u).
         """
+        dt = sample_interval(self.dt, "pencil model")
         n, n_u, n_y = self.n, self.n_u, self.n_y
         q, r = scipy.linalg.qr(self.E)
         top = r[:n, :n]
@@ -119,15 +124,15 @@ class PencilModel:
             raise InputError("the outputs are not determined by the pencil's algebraic rows (G2y singular)")
         C = -np.linalg.solve(G2y, F2)
         D = -np.linalg.solve(G2y, G2u)
-        return F1 + G1y @ C, G1u + G1y @ D, C, D
+        return F1 + G1y @ C, G1u + G1y @ D, C, D, dt
 
-    def to_arx(self, dt: float | None = None) -> ArxModel:
+    def to_arx(self) -> ArxModel:
         """An ARX model ``a(q) y = B(q) u`` with the scalar denominator ``a(q) = det(I - q^-1 A)``.
 
         Exact for any number of outputs (for several outputs the common
         scalar denominator is not the smallest MIMO ARX form).
         """
-        A, B, C, D = self.to_state_space()
+        A, B, C, D, dt = self.to_statespace()
         n = A.shape[0]
         b = np.zeros((n + 1, self.n_y, self.n_u))
         a_poly = np.poly(A) if n else np.ones(1)

@@ -292,7 +292,7 @@ class Preparation:
     def simulate(self, model: Any, data: IOData, record: int | None = None, method: str = "foh") -> np.ndarray:
         """The model's outputs on a raw record, in raw units: prepare the inputs, simulate, restore."""
         prepared = self.apply(data, record)
-        return self.restore_outputs(model.simulate(prepared.u, prepared.dt, method=method), data.t, record)
+        return self.restore_outputs(model.simulate_outputs(prepared.u, prepared.dt, method=method), data.t, record)
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready form (saved beside a model)."""

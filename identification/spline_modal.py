@@ -43,6 +43,7 @@ from .compiled import CompiledRecursion
 from .errors import InputError
 from .filter_models import FilterModel, check_discretization, modal_transition
 from .modal import ModalModel, ModalStructure
+from .protocol import Mode, StateSpaceModel
 from .spline import MAX_NODES, MIN_NODES, SplineBasis, resample
 
 __all__ = [
@@ -254,7 +255,7 @@ def _simulator(structure: SplineModalStructure, dt: float, discretization: str) 
 
 
 @dataclass(frozen=True, eq=False)
-class SplineModalModel:
+class SplineModalModel(StateSpaceModel):
     """An identified spline-nonlinear modal model: a frozen value.
 
     Parameters
@@ -338,7 +339,7 @@ class SplineModalModel:
         x0 = np.zeros(self.structure.linear.n) if x0 is None else x0
         return sim(x0, u_normalised, np.concatenate([self.theta, self.constants]))
 
-    def simulate(self, u: Any, dt: float | None = None, *, return_states: bool = False) -> Any:
+    def simulate_outputs(self, u: Any, dt: float | None = None, *, return_states: bool = False) -> Any:
         """Outputs (N, n_y) in original units from rest, for inputs (N, n_u) in original units.
 
         ``dt`` must equal the sample interval the model was identified at
@@ -382,17 +383,23 @@ class SplineModalModel:
             tables[name] = {"variable": variables[follows[index]], "nodes": basis.nodes.copy(), "values": gamma.copy()}
         return tables
 
-    def mode_frequency_damping(self, mode: int, amplitudes: Any) -> tuple[np.ndarray, np.ndarray]:
-        """Natural frequency (Hz) and damping ratio of a complex pair at given amplitudes (normalised).
+    # the linear face -----------------------------------------------------------
+    def to_statespace(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
+        """The continuous state-space form of :meth:`linear_model` at zero amplitude."""
+        return self.linear_model().to_statespace()
 
-        ``mode`` counts the pairs from 0 (pairs come first in the structure).
-        """
-        if not 0 <= mode < self.structure.linear.n_complex_pairs:
-            raise InputError(f"mode {mode} is not a complex pair of this model")
-        sigma = self.coefficient(f"sigma{mode + 1}", amplitudes)
-        omega = self.coefficient(f"omega{mode + 1}", amplitudes)
-        natural = np.hypot(sigma, omega)
-        return natural / (2 * np.pi), -sigma / natural
+    def eigenvalues(self) -> np.ndarray:
+        """Eigenvalues of :meth:`linear_model` at zero amplitude."""
+        return self.linear_model().eigenvalues()
+
+    def modes(self, amplitude: float = 0.0) -> tuple[Mode, ...]:
+        """The modes of :meth:`linear_model` at ``amplitude`` (normalised): each pair where its own amplitude is that."""
+        return self.linear_model(amplitude).modes()
+
+    def mat_fields(self) -> dict[str, Any]:
+        """The linearisation's A, B, C, D with the splines' ordinates, node ranges, scales and Ts."""
+        return {**super().mat_fields(), "theta": self.theta, "ranges": self.ranges, "input_scale": self.input_scale,
+                "output_scale": self.output_scale, "Ts": self.dt}
 
     def _block(self, index: int) -> np.ndarray | None:
         """The covariance of one coefficient's node ordinates (p, p), or None."""
@@ -416,7 +423,8 @@ class SplineModalModel:
         return np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", rows, block, rows), 0.0))
 
     def mode_frequency_damping_std(self, mode: int, amplitudes: Any) -> tuple[np.ndarray, np.ndarray]:
-        """Standard deviations of :meth:`mode_frequency_damping` by the delta method (NaN without a covariance).
+        """Standard deviations of a pair's frequency (Hz) and damping at ``amplitudes`` by the delta method
+        (NaN without a covariance); the values are those of :meth:`modes`.
 
         With ``sigma = phi' g_s``, ``omega = phi' g_w`` and ``r = |sigma + j omega|``:
         ``df = (sigma ds + omega dw) / (2 pi r)``, ``dzeta = (-omega^2 ds + sigma omega dw) / r^3``;
@@ -481,13 +489,13 @@ class SplineModalModel:
             self.input_names, self.output_names, {**self.meta, **meta},
         )
 
-    def to_casadi_function(self, n_samples: int) -> ca.Function:
-        """A self-contained CasADi Function simulating the model over ``n_samples`` from rest.
+    def to_casadi(self, n_samples: int | None = None) -> ca.Function:
+        """A self-contained CasADi Function in original units, splines, ranges and scales embedded.
 
-        ``vehid_spline_model(u (n_u, N)) -> y (n_y, N)`` in original units,
-        with the splines, node ranges and scales embedded: save it with
-        ``Function.save(path)`` and load it with ``casadi.Function.load`` where
-        the workbench is not installed.
+        Without ``n_samples``: one step ``vehid_spline_step(x, u0, u1) -> (x_next, y)``;
+        with it: ``vehid_spline_model(u (n_u, N)) -> y (n_y, N)``, the
+        simulation from rest. Save it with ``Function.save(path)`` and load it
+        with ``casadi.Function.load`` where the workbench is not installed.
         """
         model = SplineModalFilterModel(self.structure)
         x = ca.SX.sym("x", model.n_x)
@@ -503,6 +511,8 @@ class SplineModalModel:
              model.output(x, theta, u0n, constants) * ca.DM(self.output_scale)],
             ["x", "u0", "u1"], ["x_next", "y"],
         )
+        if n_samples is None:
+            return step
         lifted = step.mapaccum("vehid_spline_steps", n_samples)
         u = ca.MX.sym("u", model.n_u, n_samples)
         u_next = ca.horzcat(u[:, 1:], u[:, n_samples - 1])

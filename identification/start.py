@@ -156,7 +156,7 @@ def fit_input_gains(structure: ModalStructure, modes: np.ndarray, u: np.ndarray,
         trial = theta.copy()
         trial[slices["B"].start + k] = 1.0
         with np.errstate(over="ignore", invalid="ignore"):
-            columns.append(ModalModel.from_parameters(structure, trial).simulate(u, 1.0).ravel())
+            columns.append(ModalModel.from_parameters(structure, trial).simulate_outputs(u, 1.0).ravel())
     for i in range(n_y):
         for j in range(n_u):
             column = np.zeros_like(y)
@@ -176,7 +176,7 @@ def _simulation_fit(model: ModalModel, u: np.ndarray, y: np.ndarray) -> float:
     from .metrics import percentage_explanation
 
     with np.errstate(all="ignore"):
-        simulated = model.simulate(u, 1.0)
+        simulated = model.simulate_outputs(u, 1.0)
         if not np.all(np.isfinite(simulated)):
             return -np.inf
         return float(np.mean(percentage_explanation(y, simulated)))

@@ -34,12 +34,13 @@ from scipy.signal import lfilter
 
 from ._checks import io_arrays, positive_int
 from .errors import ExcitationError, InputError
+from .protocol import StateSpaceModel, sample_interval
 
 __all__ = ["SubspaceResult", "estimate_subspace"]
 
 
 @dataclass(frozen=True, eq=False)
-class SubspaceResult:
+class SubspaceResult(StateSpaceModel):
     """A discrete state-space model identified by PO-MOESP.
 
     Attributes
@@ -65,6 +66,10 @@ class SubspaceResult:
     residuals: np.ndarray
     block_rows: int
     dt: float | None
+
+    def to_statespace(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+        """Discrete ``(A, B, C, D, dt)``."""
+        return self.A, self.B, self.C, self.D, sample_interval(self.dt, "subspace model")
 
 
 def _hankel(signal: np.ndarray, rows: int, columns: int) -> np.ndarray:

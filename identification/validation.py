@@ -122,10 +122,10 @@ def estimate_initial_state(model: ModalModel | DiscreteModel, data: IOData, *, m
     window = _free_response_samples(model, data)
     u, y = data.u[:window], data.y[:window]
     with np.errstate(all="ignore"):
-        forced = model.simulate(u, data.dt, method=method)
+        forced = model.simulate_outputs(u, data.dt, method=method)
         zero = np.zeros_like(u)
         free = np.column_stack([
-            (model.simulate(zero, data.dt, method=method, x0=np.eye(n)[i]) * weights).ravel() for i in range(n)
+            (model.simulate_outputs(zero, data.dt, method=method, x0=np.eye(n)[i]) * weights).ravel() for i in range(n)
         ])
     target = ((y - forced) * weights).ravel()
     if not (np.all(np.isfinite(free)) and np.all(np.isfinite(target))):
@@ -205,7 +205,7 @@ def _k_step(model: ModalModel, data: IOData, horizon: int) -> np.ndarray:
         ahead = ahead @ Ad.T + u[j: j + ahead.shape[0]] @ Bd.T
     predicted = np.empty_like(data.y)
     with np.errstate(all="ignore"):
-        predicted[:horizon] = model.simulate(u[:horizon], data.dt)
+        predicted[:horizon] = model.simulate_outputs(u[:horizon], data.dt)
         if horizon < N:
             predicted[horizon:] = ahead @ Cd.T + u[horizon:] @ Dd.T
     return predicted
@@ -228,14 +228,14 @@ def predict(model: Any, data: IOData, *, initial_state: str = "estimate", horizo
     if initial_state not in INITIAL_STATES:
         raise InputError(f"unknown initial state {initial_state!r}; use one of {', '.join(INITIAL_STATES)}")
     if not _linear(model):
-        return model.simulate(data.u)
+        return model.simulate_outputs(data.u)
     if horizon is not None:
         if isinstance(horizon, bool) or int(horizon) != horizon or horizon < 1:
             raise InputError(f"the prediction horizon must be a whole number of samples >= 1; got {horizon!r}")
         return _k_step(model, data, int(horizon))
     x0 = estimate_initial_state(model, data) if initial_state == "estimate" else None
     with np.errstate(all="ignore"):
-        return model.simulate(data.u, data.dt, x0=x0)
+        return model.simulate_outputs(data.u, data.dt, x0=x0)
 
 
 def score(model: Any, data: IOData, *, initial_state: str = "estimate", horizon: int | None = None) -> Scores:

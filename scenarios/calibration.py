@@ -52,7 +52,7 @@ def make_record(seed: int, noise_ratio: float, *, duration: float = DURATION) ->
     t = np.arange(int(round(duration / DT))) * DT
     coarse_t = np.arange(0.0, duration + 0.1, 0.1)
     u = np.interp(t, coarse_t, rng.standard_normal(coarse_t.size))[:, None]
-    clean = true_model().simulate(u, DT)
+    clean = true_model().simulate_outputs(u, DT)
     rms = np.sqrt(np.mean(clean**2, axis=0))
     y = clean + noise_ratio * rms * rng.standard_normal(clean.shape)
     return IOData(t=t, u=u, y=y, input_names=("u",), output_names=("y",)), clean
@@ -103,9 +103,9 @@ def coverage(realisations: list[Realisation], *, z: float = 1.959963984540054) -
     the empirical standard deviation.
     """
     truth = true_model()
-    natural, damping = truth.frequencies_damping()
-    natural, damping = natural[:2], damping[:2]
-    true = {"frequency_hz": natural / (2 * np.pi), "damping": damping}
+    modes = truth.modes()[:2]
+    true = {"frequency_hz": np.array([mode.frequency_hz for mode in modes]),
+            "damping": np.array([mode.damping for mode in modes])}
     result: dict[str, Any] = {}
     for name in ("frequency_hz", "damping"):
         values = np.array([getattr(r, name) for r in realisations])

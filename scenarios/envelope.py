@@ -55,13 +55,15 @@ from identification.archive import open_archive, read_run, update_archive, write
 from identification.archive_safety import archive_lock
 from identification.errors import DivergenceError, InputError, SimulationError
 from identification.iekf import IEKFOptions, identify_iekf
+from identification.spline_iekf import SplineIEKFOptions, identify_spline_iekf
 from identification.modal import ModalModel, ModalStructure
 from identification.scheduled import ScheduledModalModel, schedule_models
 from identification.storage import read_value, write_value
 from vehicle import DEFAULT_DT, linearize, make_manoeuvre, named_vehicle, simulate
 from vehicle.parameters import VehicleParameters
 
-from .handling_study import COMPARED_MODES, OUTPUTS, _check_orders, _positive, _whole, identify_nonlinear, score
+from .handling_study import (COMPARED_MODES, OUTPUTS, check_orders, positive_number, score, spline_options,
+                             study_linear_options, whole_number)
 from .paths import results_directory
 from .shutdown import run_in_workers
 
@@ -104,7 +106,7 @@ def _check_speeds(values: Sequence[Any], name: str, minimum: int = 1) -> tuple[f
     if len(values) < minimum:
         raise InputError(f"give at least {minimum} {name}")
     for value in values:
-        _positive(value, name[:-1] if name.endswith("s") else name, " (m/s)")
+        positive_number(value, name[:-1] if name.endswith("s") else name, " (m/s)")
     values = tuple(float(v) for v in values)
     if list(values) != sorted(set(values)):
         raise InputError(f"{name} must increase without repeats; got {list(values)}")
@@ -159,14 +161,14 @@ class EnvelopeConfig:
             raise InputError(f"vehicles must be distinct names or files; got {list(vehicles)}")
         object.__setattr__(self, "vehicles", vehicles)
         object.__setattr__(self, "speeds", _check_speeds(self.speeds, "speeds"))
-        fraction = _positive(self.amplitude_fraction, "amplitude_fraction")
+        fraction = positive_number(self.amplitude_fraction, "amplitude_fraction")
         if fraction > 1.0:
             raise InputError(f"amplitude_fraction above 1 drives the car beyond its grip limit; got {fraction!r}")
-        object.__setattr__(self, "orders", _check_orders(self.orders))
+        object.__setattr__(self, "orders", check_orders(self.orders))
         seeds = tuple(self.seeds)
         if not seeds or len(set(seeds)) < len(seeds):
             raise InputError(f"seeds must be distinct whole numbers; got {list(seeds)}")
-        object.__setattr__(self, "seeds", tuple(_whole(s, "seed", 0) for s in seeds))
+        object.__setattr__(self, "seeds", tuple(whole_number(s, "seed", 0) for s in seeds))
         if self.off_grid is None:
             off = tuple((a + b) / 2 for a, b in zip(self.speeds, self.speeds[1:]))
         else:
@@ -176,20 +178,22 @@ class EnvelopeConfig:
                 raise InputError(f"off-grid speed {speed:g} must lie strictly between grid speeds "
                                  f"{self.speeds[0]:g}..{self.speeds[-1]:g}")
         object.__setattr__(self, "off_grid", off)
-        if _positive(self.duration, "duration", " of seconds") < 5.0:
+        if positive_number(self.duration, "duration", " of seconds") < 5.0:
             raise InputError(f"duration must be at least 5 s; got {self.duration!r}")
-        _positive(self.dt, "dt", " of seconds")
-        _positive(self.p, "p")
-        _whole(self.passes, "passes", 2)
-        _whole(self.nodes, "nodes", 3, 15)
-        if self.nonlinear_passes is not None:
-            _whole(self.nonlinear_passes, "nonlinear_passes", 1)
-        if self.nonlinear_p is not None:
-            _positive(self.nonlinear_p, "nonlinear_p")
+        positive_number(self.dt, "dt", " of seconds")
+        positive_number(self.p, "p")
+        whole_number(self.passes, "passes", 2)
+        self.spline_options  # checked by its own class, whether or not the campaign runs it
 
     @property
     def linear_options(self) -> IEKFOptions:
-        return IEKFOptions(p=self.p, passes=self.passes, normalize=True, discretization="exact")
+        """The linear IEKF's options (the handling study's, at this campaign's p and passes)."""
+        return study_linear_options(self.p, self.passes)
+
+    @property
+    def spline_options(self) -> SplineIEKFOptions:
+        """The spline IEKF's options: settings left at None take its defaults."""
+        return spline_options(self.nodes, self.nonlinear_passes, self.nonlinear_p)
 
     def job_settings(self) -> dict[str, Any]:
         """The settings every job shares: an archive resumed must have been written with the same."""
@@ -278,10 +282,7 @@ class EnvelopeJob:
     duration: float
     dt: float
     linear_options: IEKFOptions
-    nonlinear: bool
-    nodes: int
-    nonlinear_passes: int | None = None
-    nonlinear_p: float | None = None
+    spline_options: SplineIEKFOptions | None  # None: linear only
 
     @property
     def key(self) -> str:
@@ -333,12 +334,8 @@ class JobOutcome:
         return cls(**values, linear_model=linear_model, nonlinear_model=nonlinear_model)
 
 
-def _mode_pairs(eigenvalues: Sequence[complex]) -> tuple[tuple[float, float], ...]:
-    values = []
-    for value in eigenvalues:
-        magnitude = abs(complex(value))
-        values.append((magnitude / (2 * math.pi), -complex(value).real / magnitude if magnitude > 0 else math.nan))
-    return tuple(values)
+def _mode_pairs(model: Any) -> tuple[tuple[float, float], ...]:
+    return tuple((mode.frequency_hz, mode.damping) for mode in model.modes())
 
 
 def job_records(params: VehicleParameters, speed: float, seed: int, fraction: float, duration: float, dt: float,
@@ -378,10 +375,9 @@ def run_job(job: EnvelopeJob) -> JobOutcome:
             linear_model = exc.last_good.model
     if linear_model is not None:
         fits["li"], fits["lv"] = (float(np.mean(score(linear_model, r))) for r in (identification, validation))
-        if job.nonlinear:
+        if job.spline_options is not None:
             try:
-                result = identify_nonlinear(identification, linear_model, nodes=job.nodes,
-                                            passes=job.nonlinear_passes, p=job.nonlinear_p)
+                result = identify_spline_iekf(identification, linear_model, options=job.spline_options)
                 nonlinear_model = result.model
             except DivergenceError as exc:
                 errors.append(f"nonlinear: {exc}")
@@ -394,7 +390,7 @@ def run_job(job: EnvelopeJob) -> JobOutcome:
         amplitude=grip.amplitude(job.amplitude_fraction), grip_lateral_acceleration=grip.lateral_acceleration,
         linear_model=linear_model, linear_identification_R=fits["li"], linear_validation_R=fits["lv"],
         nonlinear_identification_R=fits["ni"], nonlinear_validation_R=fits["nv"],
-        modes=() if linear_model is None else _mode_pairs(linear_model.mode_eigenvalues()),
+        modes=() if linear_model is None else _mode_pairs(linear_model),
         vehicle_modes=vehicle_modes, error="; ".join(errors) or None, seconds=time.perf_counter() - started,
         host=socket.gethostname(), nonlinear_model=nonlinear_model,
     )
@@ -421,15 +417,15 @@ def plan_jobs(config: EnvelopeConfig) -> list[EnvelopeJob]:
                 for order in config.orders:
                     for seed in config.seeds:
                         jobs.append(EnvelopeJob(label, params, speed, order, seed, grid, config.amplitude_fraction,
-                                                config.duration, config.dt, config.linear_options, config.nonlinear,
-                                                config.nodes, config.nonlinear_passes, config.nonlinear_p))
+                                                config.duration, config.dt, config.linear_options,
+                                                config.spline_options if config.nonlinear else None))
     return jobs
 
 
 # -------------------------------------------------------------- executors
 def _job_cost(job: EnvelopeJob) -> float:
     """Relative expected run time, to start the longest jobs first."""
-    return job.order * (20.0 if job.nonlinear else 1.0)
+    return job.order * (1.0 if job.spline_options is None else 20.0)
 
 
 def _job_in_worker(job: EnvelopeJob, report: Callable[[Any], None]) -> JobOutcome:
@@ -551,7 +547,7 @@ def _schedule(config: EnvelopeConfig, outcomes: dict[str, JobOutcome], jobs: lis
                         "validation_R": float(np.mean(score(model, records["validation"]))),
                         "identification_R": float(np.mean(score(model, records["identification"]))),
                         "direct_validation_R": None if direct is None else direct.linear_validation_R,
-                        "modes": [{"frequency_hz": f, "damping": d} for f, d in _mode_pairs(model.mode_eigenvalues())],
+                        "modes": [{"frequency_hz": f, "damping": d} for f, d in _mode_pairs(model)],
                     })
     return families, off_grid
 
@@ -677,7 +673,7 @@ def run_campaign(
     if scheduler and executor != "dask":
         raise InputError("a scheduler address needs --executor dask")
     if workers is not None:
-        _whole(workers, "workers", 1)
+        whole_number(workers, "workers", 1)
     started = time.perf_counter()
     jobs = plan_jobs(config)
     path = Path(out) if out else results_directory() / "envelope.h5"

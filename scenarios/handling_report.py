@@ -101,9 +101,9 @@ def handling_figures(archive: Archive | str | Path) -> dict[str, Figure]:
         data = records[record_name]
         predictions = {}
         if chosen in linear:
-            predictions[f"linear n = {chosen}"] = linear[chosen].simulate(data.u, data.dt)
+            predictions[f"linear n = {chosen}"] = linear[chosen].simulate_outputs(data.u, data.dt)
         if chosen in nonlinear:
-            predictions[f"nonlinear n = {chosen}"] = nonlinear[chosen].simulate(data.u, data.dt)
+            predictions[f"nonlinear n = {chosen}"] = nonlinear[chosen].simulate_outputs(data.u, data.dt)
         figures[f"fits_{record_name}"] = plots.plot_time_fits(
             data.t, data.y, predictions, names, units,
             title=f"Handling model fits on the {label} manoeuvre (n = {chosen})",
@@ -214,7 +214,7 @@ def handling_figures(archive: Archive | str | Path) -> dict[str, Figure]:
         )
     if chosen in nonlinear:
         data = records["validation"]
-        residuals = data.y - nonlinear[chosen].simulate(data.u, data.dt)
+        residuals = data.y - nonlinear[chosen].simulate_outputs(data.u, data.dt)
         figures["residuals"] = plots.plot_residual_autocorrelation(
             residuals, 100, names, dt=data.dt,
             title=f"Residual autocorrelation, nonlinear n = {chosen}, validation data",
@@ -222,7 +222,7 @@ def handling_figures(archive: Archive | str | Path) -> dict[str, Figure]:
     data = records["identification"]
     for kind, model in (("linear", linear.get(chosen)), ("nonlinear", nonlinear.get(chosen))):
         if model is not None:
-            tests = residual_tests(data.u, data.y - model.simulate(data.u, data.dt), input_names=data.input_names,
+            tests = residual_tests(data.u, data.y - model.simulate_outputs(data.u, data.dt), input_names=data.input_names,
                                    output_names=names)
             figures[f"residual_tests_{kind}"] = plots.plot_residual_tests(
                 tests, dt=data.dt, title=f"Residual tests, {kind} n = {chosen}, identification data")
@@ -259,6 +259,6 @@ def write_handling_report(archive: Archive | str | Path, out_dir: str | Path) ->
     nonlinear = _models(archive, "nonlinear")
     if chosen in nonlinear:
         export = out_dir / f"nonlinear_n{chosen}.casadi"
-        nonlinear[chosen].to_casadi_function(archive.records["identification"].n_samples).save(str(export))
+        nonlinear[chosen].to_casadi(archive.records["identification"].n_samples).save(str(export))
         written.append(export)
     return written

@@ -65,8 +65,8 @@ def _config(stored: Any, path: Path, workers: int | None) -> HandlingConfig:
     if not isinstance(stored, dict) or "orders" not in stored:
         raise ArchiveError(f"{path} holds no handling-study settings to resume with")
     try:
-        return HandlingConfig(**{**stored, "orders": tuple(stored["orders"]), "workers": workers})
-    except TypeError as exc:
+        return HandlingConfig.from_dict(stored, workers)
+    except KeyError as exc:
         raise ArchiveError(f"{path} holds settings this workbench does not know ({exc})") from None
 
 

@@ -62,7 +62,6 @@ the nonlinear model beats the linear one on identification and validation.
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 import os
@@ -83,7 +82,8 @@ from identification.iekf_archive import write_iekf_run
 from identification.spline_iekf import SplineIEKFOptions, identify_spline_iekf
 from identification.metrics import percentage_explanation
 from identification.modal import ModalStructure
-from identification.order import OrderAssessment, assess_orders
+from identification.protocol import Mode as ModelMode
+from identification.order import OrderAssessment, OrderRow, assess_orders
 from identification.storage import write_value
 from vehicle import DEFAULT_DT, DEFAULT_SPEED, linearize, make_manoeuvre, named_vehicle, simulate
 from vehicle.linearize import Mode
@@ -97,15 +97,24 @@ __all__ = [
     "COMPARED_MODES",
     "PAPER",
     "HandlingConfig",
+    "study_linear_options",
+    "spline_options",
+    "check_orders",
+    "positive_number",
+    "whole_number",
     "RecordArrays",
     "OrderJob",
     "OrderOutcome",
     "NonlinearOutcome",
+    "TableRow",
+    "LinearRun",
+    "NonlinearRun",
+    "ModeComparison",
     "HandlingResult",
+    "compare_modes",
     "parse_orders",
     "planned_passes",
     "make_records",
-    "identify_nonlinear",
     "run_order",
     "run_study",
     "archive_path",
@@ -120,7 +129,6 @@ __all__ = [
 OUTPUTS = ("lateral_acceleration", "yaw_rate", "roll_angle")
 COMPARED_MODES = ("yaw-sideslip", "roll")
 MIN_ORDER, MAX_ORDER = 2, 8  # a handling model needs one oscillatory mode; above 8 the spline filter grows unwieldy
-MIN_NODES, MAX_NODES = 3, 15  # a cubic spline with linear ends needs 3 nodes; the paper used 5 (up to 9)
 MIN_DURATION = 5.0  # [s] the validation input's steps need a few seconds per half
 MODE_AMPLITUDES = np.linspace(0.0, 1.0, 11)  # normalised state amplitude for the nonlinear mode curves (Figure 8)
 
@@ -141,10 +149,8 @@ PAPER: dict[int, dict[str, Any]] = {
 
 def planned_passes(config: "HandlingConfig") -> int:
     """The most passes the study can run in all, linear and nonlinear (for progress displays)."""
-    per_order = config.passes
-    if config.nonlinear:
-        per_order += config.nonlinear_passes or SplineIEKFOptions(nodes=config.nodes).passes
-    return per_order * len(config.orders)
+    spline = config.spline_options
+    return (config.linear_options.passes + (0 if spline is None else spline.passes)) * len(config.orders)
 
 
 def parse_orders(text: str) -> tuple[int, ...]:
@@ -165,10 +171,11 @@ def parse_orders(text: str) -> tuple[int, ...]:
         if last < first:
             raise InputError(f"the order range {part.strip()} runs backwards; write {last}-{first}")
         orders.extend(range(first, last + 1))
-    return _check_orders(orders)
+    return check_orders(orders)
 
 
-def _check_orders(orders: Any) -> tuple[int, ...]:
+def check_orders(orders: Any) -> tuple[int, ...]:
+    """``orders`` as a tuple of whole numbers from 2 to 8, increasing without repeats (else InputError)."""
     values = tuple(orders)
     if not values:
         raise InputError("give at least one model order")
@@ -180,19 +187,36 @@ def _check_orders(orders: Any) -> tuple[int, ...]:
     return tuple(int(value) for value in values)
 
 
-def _positive(value: Any, name: str, unit: str = "") -> float:
+def positive_number(value: Any, name: str, unit: str = "") -> float:
+    """``value`` as a float if it is a finite positive number (else an InputError naming ``name``)."""
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not (math.isfinite(value) and value > 0):
         raise InputError(f"{name} must be a positive number{unit}; got {value!r}")
     return float(value)
 
 
-def _whole(value: Any, name: str, minimum: int, maximum: int | None = None) -> int:
+def whole_number(value: Any, name: str, minimum: int, maximum: int | None = None) -> int:
+    """``value`` as an int if it is a whole number within the bounds (else an InputError naming ``name``)."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum or (
         maximum is not None and value > maximum
     ):
         bound = f"from {minimum} to {maximum}" if maximum is not None else f">= {minimum}"
         raise InputError(f"{name} must be a whole number {bound}; got {value!r}")
     return int(value)
+
+
+def study_linear_options(p: float = 1e-5, passes: int = 100) -> IEKFOptions:
+    """The study's linear IEKF options: normalised data, exact (first-order-hold) discretisation.
+
+    The defaults are measured (module notes).
+    """
+    return IEKFOptions(p=p, passes=passes, normalize=True, discretization="exact")
+
+
+def spline_options(nodes: int = SplineIEKFOptions.nodes, passes: int | None = None,
+                   p: float | None = None) -> SplineIEKFOptions:
+    """The spline IEKF's options; ``passes`` and ``p`` left at None take its defaults."""
+    return SplineIEKFOptions(nodes=nodes, passes=SplineIEKFOptions.passes if passes is None else passes,
+                             p=SplineIEKFOptions.p if p is None else p)
 
 
 @dataclass(frozen=True)
@@ -216,14 +240,13 @@ class HandlingConfig:
         Trim and reference speed (m/s).
     dt : float
         Sample interval (s).
-    p, passes : float, int
-        Linear IEKF tuning parameter and pass count (measured; module notes).
-    nodes : int
-        Spline nodes per coefficient of the nonlinear model (paper: 5).
-    nonlinear : bool
-        Identify the nonlinear models too (when the spline IEKF is available).
-    nonlinear_passes, nonlinear_p : int or float, optional
-        Override the spline IEKF's own defaults.
+    linear_options : IEKFOptions
+        The linear IEKF's (:func:`study_linear_options`); at least 2 passes,
+        from which the order choice judges convergence. An archive keeps its
+        ``p`` and ``passes``.
+    spline_options : SplineIEKFOptions or None
+        The spline IEKF's, started from each linear model (paper: 5 nodes);
+        None: linear models only.
     workers : int, optional
         Processes running orders at once; default ``min(len(orders), cpu_count)``.
     """
@@ -235,45 +258,57 @@ class HandlingConfig:
     vehicle: str = "baseline"
     speed: float = DEFAULT_SPEED  # [m/s]
     dt: float = DEFAULT_DT  # [s]
-    p: float = 1e-5  # [-] Q = p I' on normalised data
-    passes: int = 100
-    nodes: int = 5
-    nonlinear: bool = True
-    nonlinear_passes: int | None = None
-    nonlinear_p: float | None = None
+    linear_options: IEKFOptions = study_linear_options()
+    spline_options: SplineIEKFOptions | None = SplineIEKFOptions()
     workers: int | None = None
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "orders", _check_orders(self.orders))
-        _whole(self.seed, "seed", 0)
-        if _positive(self.duration, "duration", " of seconds") < MIN_DURATION:
+        object.__setattr__(self, "orders", check_orders(self.orders))
+        whole_number(self.seed, "seed", 0)
+        if positive_number(self.duration, "duration", " of seconds") < MIN_DURATION:
             raise InputError(f"duration must be at least {MIN_DURATION:g} s; got {self.duration!r}")
-        if _positive(self.amplitude_scale, "amplitude_scale") > 1.5:
+        if positive_number(self.amplitude_scale, "amplitude_scale") > 1.5:
             raise InputError(f"amplitude_scale above 1.5 takes the car beyond its grip; got {self.amplitude_scale!r}")
         if not isinstance(self.vehicle, str) or not self.vehicle:
             raise InputError(f"vehicle must be a name or a file; got {self.vehicle!r}")
-        _positive(self.speed, "speed", " (m/s)")
-        _positive(self.dt, "dt", " of seconds")
-        _positive(self.p, "p")
-        _whole(self.passes, "passes", 2)  # the order choice judges convergence from two passes on
-        _whole(self.nodes, "nodes", MIN_NODES, MAX_NODES)
-        if self.nonlinear_passes is not None:
-            _whole(self.nonlinear_passes, "nonlinear_passes", 1)
-        if self.nonlinear_p is not None:
-            _positive(self.nonlinear_p, "nonlinear_p")
+        positive_number(self.speed, "speed", " (m/s)")
+        positive_number(self.dt, "dt", " of seconds")
+        if not isinstance(self.linear_options, IEKFOptions):
+            raise InputError(f"linear_options must be IEKFOptions; got {type(self.linear_options).__name__}")
+        whole_number(self.linear_options.passes, "passes", 2)  # the order choice judges convergence from two passes on
+        if self.spline_options is not None and not isinstance(self.spline_options, SplineIEKFOptions):
+            raise InputError(f"spline_options must be SplineIEKFOptions or None; got {type(self.spline_options).__name__}")
         if self.workers is not None:
-            _whole(self.workers, "workers", 1)
-
-    @property
-    def linear_options(self) -> IEKFOptions:
-        """The linear IEKF's options: normalised data, exact (first-order-hold) discretisation."""
-        return IEKFOptions(p=self.p, passes=self.passes, normalize=True, discretization="exact")
+            whole_number(self.workers, "workers", 1)
 
     def worker_count(self) -> int:
         return self.workers or max(1, min(len(self.orders), os.cpu_count() or 1))
 
     def as_dict(self) -> dict[str, Any]:
-        return {**dataclasses.asdict(self), "orders": list(self.orders)}
+        """The settings as an archive keeps them: flat, the spline ones None for a linear-only study."""
+        linear, spline = self.linear_options, self.spline_options
+        return {"orders": list(self.orders), "seed": self.seed, "duration": self.duration,
+                "amplitude_scale": self.amplitude_scale, "vehicle": self.vehicle, "speed": self.speed, "dt": self.dt,
+                "p": linear.p, "passes": linear.passes, "nodes": None if spline is None else spline.nodes,
+                "nonlinear": spline is not None, "nonlinear_passes": None if spline is None else spline.passes,
+                "nonlinear_p": None if spline is None else spline.p, "workers": self.workers}
+
+    @classmethod
+    def from_dict(cls, stored: Mapping[str, Any], workers: int | None = None) -> "HandlingConfig":
+        """Inverse of :meth:`as_dict`; spline settings stored as None take the spline IEKF's defaults."""
+        spline = None
+        if stored.get("nonlinear", True):
+            spline = spline_options(_stored(stored, "nodes", SplineIEKFOptions.nodes), stored.get("nonlinear_passes"),
+                                    stored.get("nonlinear_p"))
+        return cls(orders=tuple(stored["orders"]), seed=stored["seed"], duration=stored["duration"],
+                   amplitude_scale=stored["amplitude_scale"], vehicle=stored["vehicle"], speed=stored["speed"],
+                   dt=stored["dt"], linear_options=study_linear_options(stored["p"], stored["passes"]),
+                   spline_options=spline, workers=workers)
+
+
+def _stored(stored: Mapping[str, Any], key: str, default: Any) -> Any:
+    value = stored.get(key)
+    return default if value is None else value
 
 
 # ------------------------------------------------------------------ data
@@ -317,7 +352,7 @@ def make_records(config: HandlingConfig) -> dict[str, IOData]:
 
 def score(model: Any, data: IOData) -> np.ndarray:
     """R (eq. 17, percent) per output of ``model`` simulated from rest over ``data``, in original units."""
-    return percentage_explanation(data.y, model.simulate(data.u, data.dt))
+    return percentage_explanation(data.y, model.simulate_outputs(data.u, data.dt))
 
 
 # ------------------------------------------------------------ one order
@@ -332,16 +367,13 @@ class PassEvent(NamedTuple):
 
 @dataclass(frozen=True)
 class OrderJob:
-    """Everything one order needs, as plain picklable values."""
+    """Everything one order needs, as picklable values; no spline options: linear only."""
 
     order: int
     identification: RecordArrays
     validation: RecordArrays
     linear_options: IEKFOptions
-    nonlinear: bool
-    nodes: int
-    nonlinear_passes: int | None = None
-    nonlinear_p: float | None = None
+    spline_options: SplineIEKFOptions | None
 
 
 @dataclass(frozen=True, eq=False)
@@ -377,33 +409,12 @@ class OrderOutcome:
     seconds: float
 
 
-def identify_nonlinear(
-    data: IOData,
-    linear_model: Any,
-    *,
-    nodes: int,
-    passes: int | None = None,
-    p: float | None = None,
-    on_pass: Callable[..., None] | None = None,
-) -> Any:
-    """The spline-nonlinear IEKF (paper section 5) started from ``linear_model``: the study's one call site.
-
-    ``passes`` and ``p`` left at None take the spline IEKF's own defaults.
-    """
-    settings: dict[str, Any] = {"nodes": nodes}
-    if passes is not None:
-        settings["passes"] = passes
-    if p is not None:
-        settings["p"] = p
-    return identify_spline_iekf(data, linear_model, options=SplineIEKFOptions(**settings), on_pass=on_pass)
-
-
 def _nonlinear_outcome(result: Any, identification: IOData, validation: IOData, n_pairs: int) -> NonlinearOutcome:
     model = result.model
     curves = {}
+    modes = [model.modes(amplitude)[:n_pairs] for amplitude in MODE_AMPLITUDES]
     for mode in range(n_pairs):  # frequency and damping curves exist for the complex pairs
-        frequency, damping = model.mode_frequency_damping(mode, MODE_AMPLITUDES)
-        curves[mode] = (np.asarray(frequency, dtype=float), np.asarray(damping, dtype=float))
+        curves[mode] = (np.array([at[mode].frequency_hz for at in modes]), np.array([at[mode].damping for at in modes]))
     tables = {name: {key: value if isinstance(value, str) else np.asarray(value, dtype=float)
                      for key, value in table.items()}
               for name, table in model.spline_tables().items()}
@@ -449,12 +460,12 @@ def run_order(job: OrderJob, report: Callable[[PassEvent], None] | None = None) 
     fit_identification, fit_validation = score(linear.model, identification), score(linear.model, validation)
 
     nonlinear, nonlinear_error = None, None
-    if not job.nonlinear:
+    if job.spline_options is None:
         nonlinear_error = "not asked for"
     else:
         try:
-            result = identify_nonlinear(identification, linear.model, nodes=job.nodes, passes=job.nonlinear_passes,
-                                        p=job.nonlinear_p, on_pass=reporter("nonlinear"))
+            result = identify_spline_iekf(identification, linear.model, options=job.spline_options,
+                                          on_pass=reporter("nonlinear"))
             nonlinear = _nonlinear_outcome(result, identification, validation, linear.model.structure.n_complex_pairs)
         except DivergenceError as exc:
             nonlinear_error = f"diverged: {exc}"
@@ -488,157 +499,135 @@ def _run_orders(jobs: list[OrderJob], workers: int, on_event: Callable[[PassEven
     return {outcome.order: outcome for outcome in done}
 
 
+@dataclass(frozen=True)
+class TableRow:
+    """One order's line of Table 5: linear eigenvalues and mean R (%) of both models on both records."""
+
+    order: int
+    linear_eigenvalues: tuple[complex, ...]
+    linear_identification_R: float | None
+    nonlinear_identification_R: float | None
+    linear_validation_R: float | None
+    nonlinear_validation_R: float | None
+
+
+@dataclass(frozen=True, eq=False)
+class LinearRun:
+    """One order's linear run: R per output on both records, how it ran and its convergence (order choice)."""
+
+    order: int
+    identification_R: np.ndarray | None
+    validation_R: np.ndarray | None
+    passes_run: int | None
+    stop_reason: str | None
+    trace_p: float | None
+    trace_growth: float | None
+    drift: float | None
+    converged: bool | None
+    seconds: float | None
+    error: str | None
+
+
+@dataclass(frozen=True, eq=False)
+class NonlinearRun:
+    """One order's nonlinear run: R per output, per-pass history, mode curves over the amplitudes, or why missing."""
+
+    order: int
+    identification_R: np.ndarray | None
+    validation_R: np.ndarray | None
+    passes_run: int | None
+    stop_reason: str | None
+    seconds: float | None
+    mode_amplitudes: np.ndarray
+    mode_frequency_hz: tuple[np.ndarray, ...] | None
+    mode_damping: tuple[np.ndarray, ...] | None
+    fit_filter_by_pass: np.ndarray | None
+    trace_p_by_pass: np.ndarray | None
+    missing: str | None
+
+
+@dataclass(frozen=True)
+class ModeComparison:
+    """A vehicle mode beside the identified mode of one order nearest to it in the complex plane."""
+
+    order: int
+    mode: str
+    vehicle_eigenvalue: complex
+    vehicle_frequency_hz: float
+    vehicle_damping: float
+    identified_eigenvalue: complex
+    identified_frequency_hz: float
+    identified_damping: float
+    frequency_ratio: float
+
+
 @dataclass(frozen=True, eq=False)
 class HandlingResult:
-    """The study: its records, each order's outcome, the vehicle's modes, the order choice, summary and text."""
+    """The study: its records, each order's outcome and rows, the vehicle's modes and the order choice.
+
+    ``vehicle_linearization`` holds the vehicle's A, B and its C, D rows of
+    :data:`OUTPUTS`. JSON and text are rendered from these values by the
+    ``study handling`` command.
+    """
 
     config: HandlingConfig
     records: dict[str, IOData]
     outcomes: dict[int, OrderOutcome]
     vehicle_modes: dict[str, Mode]
+    vehicle_linearization: dict[str, np.ndarray]
     assessment: OrderAssessment
     nonlinear_status: str
-    summary: dict[str, Any]
-    text: str
+    table: tuple[TableRow, ...]
+    linear_runs: tuple[LinearRun, ...]
+    nonlinear_runs: tuple[NonlinearRun, ...]
+    mode_comparison: tuple[ModeComparison, ...]
     seconds: float
     workers: int
 
 
-def _mode_values(mode: Any) -> dict[str, Any]:
-    value = complex(mode)
-    magnitude = abs(value)
-    return {"eigenvalue": value, "frequency_hz": magnitude / (2 * math.pi),
-            "damping": -value.real / magnitude if magnitude > 0 else math.nan}
+def compare_modes(order: int, eigenvalues: Any, vehicle_modes: Mapping[str, Mode]) -> tuple[ModeComparison, ...]:
+    """For each vehicle mode, the identified mode of ``order`` nearest to it in the complex plane.
 
-
-def compare_modes(eigenvalues: Any, vehicle_modes: Mapping[str, Mode]) -> dict[str, dict[str, Any]]:
-    """For each vehicle mode, the identified mode nearest to it in the complex plane, side by side.
-
-    ``eigenvalues``: one per identified mode (upper half-plane), e.g. ``ModalModel.mode_eigenvalues()``.
+    ``eigenvalues``: one per identified mode (a conjugate counts as its pair).
     """
     candidates = np.asarray(eigenvalues, dtype=complex)
     candidates = np.where(candidates.imag < 0, candidates.conj(), candidates)
-    comparison = {}
+    comparison = []
     for label, mode in vehicle_modes.items():
-        nearest = candidates[int(np.argmin(np.abs(candidates - mode.eigenvalue)))]
-        found = _mode_values(nearest)
-        comparison[label] = {
-            "vehicle_eigenvalue": mode.eigenvalue,
-            "vehicle_frequency_hz": mode.frequency_hz,
-            "vehicle_damping": mode.damping,
-            "identified_eigenvalue": found["eigenvalue"],
-            "identified_frequency_hz": found["frequency_hz"],
-            "identified_damping": found["damping"],
-            "frequency_ratio": found["frequency_hz"] / mode.frequency_hz,
-        }
-    return comparison
+        found = ModelMode.of(candidates[int(np.argmin(np.abs(candidates - mode.eigenvalue)))])
+        comparison.append(ModeComparison(order, label, mode.eigenvalue, mode.frequency_hz, mode.damping,
+                                         found.eigenvalue, found.frequency_hz, found.damping,
+                                         found.frequency_hz / mode.frequency_hz))
+    return tuple(comparison)
 
 
 def _mean(values: np.ndarray | None) -> float | None:
     return None if values is None else float(np.mean(values))
 
 
-def _summary(config: HandlingConfig, outcomes: dict[int, OrderOutcome], vehicle_modes: dict[str, Mode],
-             assessment: OrderAssessment, nonlinear_status: str, seconds: float, workers: int,
-             vehicle_linearization: dict[str, Any] | None = None) -> dict[str, Any]:
-    table, linear_runs, nonlinear_runs, comparison = [], [], [], []
-    assessed = {row.order: row for row in assessment.rows}
-    for order in config.orders:
-        outcome = outcomes[order]
-        linear, nonlinear = outcome.linear, outcome.nonlinear
-        table.append({
-            "order": order,
-            "linear_eigenvalues": [] if linear is None else list(linear.model.eigenvalues()),
-            "linear_identification_R": _mean(outcome.linear_fit_identification),
-            "nonlinear_identification_R": None if nonlinear is None else _mean(nonlinear.fit_identification),
-            "linear_validation_R": _mean(outcome.linear_fit_validation),
-            "nonlinear_validation_R": None if nonlinear is None else _mean(nonlinear.fit_validation),
-        })
-        row = assessed.get(order)
-        linear_runs.append({
-            "order": order,
-            "identification_R": outcome.linear_fit_identification,
-            "validation_R": outcome.linear_fit_validation,
-            "passes_run": None if linear is None else linear.passes_run,
-            "stop_reason": None if linear is None else linear.stop_reason,
-            "trace_p": None if row is None else row.trace_p,
-            "trace_growth": None if row is None else row.trace_growth,
-            "drift": None if row is None else row.drift,
-            "converged": None if row is None else row.converged,
-            "seconds": None if linear is None else linear.seconds,
-            "error": outcome.linear_error,
-        })
-        nonlinear_runs.append({
-            "order": order,
-            "identification_R": None if nonlinear is None else nonlinear.fit_identification,
-            "validation_R": None if nonlinear is None else nonlinear.fit_validation,
-            "passes_run": None if nonlinear is None else len(nonlinear.trace_p),
-            "stop_reason": None if nonlinear is None else nonlinear.stop_reason,
-            "seconds": None if nonlinear is None else nonlinear.seconds,
-            "mode_amplitudes": MODE_AMPLITUDES,
-            "mode_frequency_hz": None if nonlinear is None else [c[0] for c in nonlinear.mode_curves.values()],
-            "mode_damping": None if nonlinear is None else [c[1] for c in nonlinear.mode_curves.values()],
-            "fit_filter_by_pass": None if nonlinear is None else nonlinear.fit_filter,
-            "trace_p_by_pass": None if nonlinear is None else nonlinear.trace_p,
-            "missing": outcome.nonlinear_error,
-        })
-        if linear is not None:
-            for label, values in compare_modes(linear.model.mode_eigenvalues(), vehicle_modes).items():
-                comparison.append({"order": order, "mode": label, **values})
-    return {
-        "table": table,
-        "chosen_order": assessment.chosen_order,
-        "seconds": seconds,
-        "vehicle_modes": {label: {**_mode_values(mode.eigenvalue), "label": mode.label} for label, mode in vehicle_modes.items()},
-        "vehicle_linearization": vehicle_linearization,
-        "mode_comparison": comparison,
-        "linear_runs": linear_runs,
-        "nonlinear_runs": nonlinear_runs,
-        "nonlinear": nonlinear_status,
-        "order_assessment": [row.as_dict() for row in assessment.rows],
-        "outputs": list(OUTPUTS),
-        "config": config.as_dict(),
-        "workers": workers,
-        "paper": {str(order): values for order, values in PAPER.items()},
-    }
-
-
-def _percent(value: float | None) -> str:
-    return "-" if value is None else f"{value:.2f}"
-
-
-def _text(config: HandlingConfig, summary: dict[str, Any]) -> str:
-    from .report import format_eigenvalues
-
-    lines = [
-        f"Handling study (Best & Bogdanski 2017, section 6, Table 5): {config.vehicle} at {config.speed:g} m/s, "
-        f"seed {config.seed}, {config.duration:g} s records, steer x{config.amplitude_scale:g}, "
-        f"p = {config.p:g}, {config.passes} passes",
-        f"{'n':>2}  {'linear eigenvalues (1/s)':<44} {'R identification %':>19} {'R validation %':>19}",
-        f"{'':>2}  {'':<44} {'linear':>9} {'nonlin.':>9} {'linear':>9} {'nonlin.':>9}",
-    ]
-    for row in summary["table"]:
-        eigen = format_eigenvalues(row["linear_eigenvalues"]) if row["linear_eigenvalues"] else "(failed)"
-        lines.append(
-            f"{row['order']:>2}  {eigen:<44} {_percent(row['linear_identification_R']):>9} "
-            f"{_percent(row['nonlinear_identification_R']):>9} {_percent(row['linear_validation_R']):>9} "
-            f"{_percent(row['nonlinear_validation_R']):>9}"
-        )
-    converged = [run["order"] for run in summary["linear_runs"] if run["converged"]]
-    lines.append(f"chosen order: {summary['chosen_order']} (linear runs settled: "
-                 f"{', '.join(map(str, converged)) or 'none'}; paper: 4)")
-    modes = summary["vehicle_modes"]
-    lines.append("modes beside the vehicle's linearisation (nearest identified mode: frequency Hz / damping)")
-    lines.append("    " + "   ".join(f"{label}: vehicle {m['frequency_hz']:.2f} / {m['damping']:.2f}" for label, m in modes.items()))
-    by_order: dict[int, list[str]] = {}
-    for item in summary["mode_comparison"]:
-        by_order.setdefault(item["order"], []).append(
-            f"{item['mode']}: {item['identified_frequency_hz']:.2f} / {item['identified_damping']:.2f}")
-    for order, parts in by_order.items():
-        lines.append(f"{order:>2}  " + "   ".join(parts))
-    lines.append(f"nonlinear models: {summary['nonlinear']}")
-    lines.append(f"{summary['seconds']:.1f} s on {summary['workers']} worker(s)")
-    return "\n".join(lines)
+def _rows(outcome: OrderOutcome, assessed: OrderRow | None, vehicle_modes: Mapping[str, Mode]
+          ) -> tuple[TableRow, LinearRun, NonlinearRun, tuple[ModeComparison, ...]]:
+    """One order's rows of the study's table, runs and mode comparison."""
+    order, linear, nonlinear = outcome.order, outcome.linear, outcome.nonlinear
+    table = TableRow(order, () if linear is None else tuple(linear.model.eigenvalues()),
+                     _mean(outcome.linear_fit_identification), None if nonlinear is None else _mean(nonlinear.fit_identification),
+                     _mean(outcome.linear_fit_validation), None if nonlinear is None else _mean(nonlinear.fit_validation))
+    linear_run = LinearRun(
+        order, outcome.linear_fit_identification, outcome.linear_fit_validation,
+        None if linear is None else linear.passes_run, None if linear is None else linear.stop_reason,
+        None if assessed is None else assessed.trace_p, None if assessed is None else assessed.trace_growth,
+        None if assessed is None else assessed.drift, None if assessed is None else assessed.converged,
+        None if linear is None else linear.seconds, outcome.linear_error)
+    curves = None if nonlinear is None else tuple(nonlinear.mode_curves.values())
+    nonlinear_run = NonlinearRun(
+        order, None if nonlinear is None else nonlinear.fit_identification,
+        None if nonlinear is None else nonlinear.fit_validation, None if nonlinear is None else len(nonlinear.trace_p),
+        None if nonlinear is None else nonlinear.stop_reason, None if nonlinear is None else nonlinear.seconds,
+        MODE_AMPLITUDES, None if curves is None else tuple(c[0] for c in curves),
+        None if curves is None else tuple(c[1] for c in curves), None if nonlinear is None else nonlinear.fit_filter,
+        None if nonlinear is None else nonlinear.trace_p, outcome.nonlinear_error)
+    modes = () if linear is None else compare_modes(order, linear.model.mode_eigenvalues(), vehicle_modes)
+    return table, linear_run, nonlinear_run, modes
 
 
 def run_study(
@@ -675,15 +664,15 @@ def run_study(
     """
     config = config or HandlingConfig()
     started = time.perf_counter()
-    nonlinear_status = f"spline IEKF, {config.nodes} nodes" if config.nonlinear else "not asked for (linear only)"
+    spline = config.spline_options
+    nonlinear_status = "not asked for (linear only)" if spline is None else f"spline IEKF, {spline.nodes} nodes"
     records = dict(records) if records is not None else make_records(config)
     finished = dict(finished or {})
     linearisation = linearize(named_vehicle(config.vehicle), speed=config.speed)
     vehicle_modes = {label: linearisation.modes_labelled(label)[0] for label in COMPARED_MODES}
     arrays = {name: RecordArrays.from_iodata(record) for name, record in records.items()}
     jobs = [
-        OrderJob(order, arrays["identification"], arrays["validation"], config.linear_options, config.nonlinear,
-                 config.nodes, config.nonlinear_passes, config.nonlinear_p)
+        OrderJob(order, arrays["identification"], arrays["validation"], config.linear_options, spline)
         for order in config.orders if order not in finished
     ]
     workers = max(1, min(config.worker_count(), len(jobs)))
@@ -697,9 +686,12 @@ def run_study(
     seconds = time.perf_counter() - started
     rows = [list(linearisation.output_names).index(name) for name in OUTPUTS]
     steer_to_outputs = {"A": linearisation.A, "B": linearisation.B, "C": linearisation.C[rows], "D": linearisation.D[rows]}
-    summary = _summary(config, outcomes, vehicle_modes, assessment, nonlinear_status, seconds, workers, steer_to_outputs)
-    return HandlingResult(config, records, outcomes, vehicle_modes, assessment, nonlinear_status, summary,
-                          _text(config, summary), seconds, workers)
+    assessed = {row.order: row for row in assessment.rows}
+    table, linear_runs, nonlinear_runs, comparison = zip(*(
+        _rows(outcome, assessed.get(order), vehicle_modes) for order, outcome in outcomes.items()))
+    return HandlingResult(config, records, outcomes, vehicle_modes, steer_to_outputs, assessment, nonlinear_status,
+                          table, linear_runs, nonlinear_runs, tuple(item for items in comparison for item in items),
+                          seconds, workers)
 
 
 # --------------------------------------------------------------- archive
@@ -771,12 +763,13 @@ def write_archive_for(result: HandlingResult, out: str | Path | None = None) -> 
 def write_study_archive(result: HandlingResult, path: str | Path) -> Path:
     """Write the study's archive to exactly ``path`` (see :func:`write_archive_for`)."""
     from .cli import to_jsonable
+    from .commands.study_handling import summary_of
 
     path = Path(path)
     with start_archive(path, result.config, result.records) as archive:
         for order, outcome in result.outcomes.items():
             write_order(archive, order, outcome)
-        archive.attrs["summary_json"] = json.dumps(to_jsonable(result.summary), allow_nan=False)
+        archive.attrs["summary_json"] = json.dumps(to_jsonable(summary_of(result)), allow_nan=False)
     return path
 
 

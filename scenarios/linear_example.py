@@ -167,7 +167,7 @@ def make_data(
     if not 0.0 <= noise_ratio < 10.0:
         raise InputError(f"noise_ratio must lie in [0, 10); got {noise_ratio}")
     t, u = identification_input(seed, duration=duration)
-    clean = true_model().simulate(u, DT)[:, list(outputs)]
+    clean = true_model().simulate_outputs(u, DT)[:, list(outputs)]
     y = clean
     if noise_ratio > 0:
         rms = np.sqrt(np.mean(clean**2, axis=0))
@@ -316,8 +316,8 @@ def _noise_case(settings, options, callback, started) -> CaseResult:
         result = identify_iekf(data, structure, options=options, on_pass=callback(label))
         runs[label] = result
         method = options.simulation_method
-        predicted = result.model.simulate(data.u, data.dt, method=method)
-        true_on_noisy = percentage_explanation(data.y, truth.simulate(data.u, data.dt)[:, :1])[0]
+        predicted = result.model.simulate_outputs(data.u, data.dt, method=method)
+        true_on_noisy = percentage_explanation(data.y, truth.simulate_outputs(data.u, data.dt)[:, :1])[0]
         row = {
             "noise": f"{int(round(ratio * 100))} %",
             "R_noisy": float(percentage_explanation(data.y, predicted)[0]),

@@ -37,7 +37,7 @@ __all__ = ["model_residual_tests", "uncertainty_summary", "uncertainty_lines"]
 
 def model_residual_tests(model: Any, data: IOData) -> ResidualTests:
     """The residual tests of ``model`` simulated exactly (first-order hold) from rest over ``data``."""
-    residuals = data.y - model.simulate(data.u, data.dt)
+    residuals = data.y - model.simulate_outputs(data.u, data.dt)
     return residual_tests(data.u, residuals, input_names=data.input_names, output_names=data.output_names,
                           output_scale=np.sqrt(np.mean(data.y**2, axis=0)))
 

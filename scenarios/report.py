@@ -206,7 +206,7 @@ def _parameter_names(model: Any, n_theta: int) -> Sequence[str] | None:
 
 def _model_prediction(model: Any, record: Any) -> tuple[Any, np.ndarray] | None:
     """The record restricted to the model's inputs and outputs, and the model's simulated outputs."""
-    if not hasattr(model, "simulate"):
+    if not hasattr(model, "simulate_outputs"):
         return None
     inputs = tuple(getattr(model, "input_names", ()) or ())
     outputs = tuple(getattr(model, "output_names", ()) or ())
@@ -216,7 +216,7 @@ def _model_prediction(model: Any, record: Any) -> tuple[Any, np.ndarray] | None:
     sizes = getattr(structure, "linear", structure)  # a spline-modal structure keeps its sizes on its linear one
     if sizes is None or (record.n_u, record.n_y) != (sizes.n_u, sizes.n_y):
         return None
-    predicted = np.asarray(model.simulate(record.u, record.dt), dtype=float)
+    predicted = np.asarray(model.simulate_outputs(record.u, record.dt), dtype=float)
     if not np.all(np.isfinite(predicted)):
         return None
     return record, predicted

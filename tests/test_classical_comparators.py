@@ -40,7 +40,7 @@ def test_output_error_improves_a_poor_start(data):
     rng = np.random.default_rng(0)
     theta = truth.parameters * (1.0 + 0.1 * rng.standard_normal(truth.parameters.size))
     start = ModalModel.from_parameters(truth.structure, theta)
-    start_fit = fit_metrics(short.y, start.simulate(short.u, short.dt)).percentage_explanation[0]
+    start_fit = fit_metrics(short.y, start.simulate_outputs(short.u, short.dt)).percentage_explanation[0]
     result = identify_with(short, method="output-error", order=5, start=start)
     assert start_fit < 99.0
     assert result.metrics.percentage_explanation[0] > REQUIRED_FIT

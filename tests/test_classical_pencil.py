@@ -29,10 +29,14 @@ def _random_system(seed=0, n=3, n_u=2, n_y=2):
 
 def test_state_space_round_trip_is_exact():
     system = _random_system()
-    pencil = PencilModel.from_state_space(*system)
+    pencil = PencilModel.from_state_space(*system, dt=0.01)
     assert pencil.E.shape == (5, 3) and pencil.G.shape == (5, 4)
-    for original, back in zip(system, pencil.to_state_space()):
+    *matrices, dt = pencil.to_statespace()
+    assert dt == 0.01
+    for original, back in zip(system, matrices):
         np.testing.assert_allclose(back, original, atol=ALGEBRA)
+    with pytest.raises(InputError, match="no sample interval"):
+        PencilModel.from_state_space(*system).to_statespace()
 
 
 def test_pencil_in_other_coordinates_converts_to_an_equivalent_system():
@@ -42,8 +46,8 @@ def test_pencil_in_other_coordinates_converts_to_an_equivalent_system():
     rng = np.random.default_rng(2)
     rows = rng.standard_normal((5, 5)) + 3 * np.eye(5)
     basis = rng.standard_normal((3, 3)) + 3 * np.eye(3)
-    mixed = PencilModel(rows @ pencil.E @ basis, rows @ pencil.F @ basis, rows @ pencil.G, 2, 2)
-    np.testing.assert_allclose(_markov(*mixed.to_state_space()), _markov(*system), atol=1e-9)
+    mixed = PencilModel(rows @ pencil.E @ basis, rows @ pencil.F @ basis, rows @ pencil.G, 2, 2, dt=1.0)
+    np.testing.assert_allclose(_markov(*mixed.to_statespace()[:4]), _markov(*system), atol=1e-9)
 
 
 @pytest.mark.parametrize("n_u", [1, 2])
@@ -53,8 +57,9 @@ def test_arx_round_trip(n_u):
     b[:, 0, 0] = [0.2, 1.0, 0.5]
     if n_u == 2:
         b[:, 0, 1] = [0.0, -0.3, 0.1]
-    pencil = PencilModel.from_arx(ArxModel(a, b))
+    pencil = PencilModel.from_arx(ArxModel(a, b, dt=0.01))
     back = pencil.to_arx()
+    assert back.dt == 0.01
     np.testing.assert_allclose(back.a, a, atol=ALGEBRA)
     np.testing.assert_allclose(back.b, b, atol=ALGEBRA)
 
@@ -62,9 +67,9 @@ def test_arx_round_trip(n_u):
 def test_bad_pencils_are_rejected():
     with pytest.raises(InputError, match="E has shape"):
         PencilModel(np.zeros((3, 2)), np.zeros((4, 2)), np.zeros((4, 3)), 1, 2)
-    singular = PencilModel(np.zeros((3, 2)), np.ones((3, 2)), np.ones((3, 2)), 1, 1)
+    singular = PencilModel(np.zeros((3, 2)), np.ones((3, 2)), np.ones((3, 2)), 1, 1, dt=1.0)
     with pytest.raises(InputError, match="rank deficient"):
-        singular.to_state_space()
+        singular.to_statespace()
 
 
 def _armax(seed, n=3000, c1=0.5, sigma=0.1):

@@ -27,7 +27,7 @@ def test_hold_equivalent_round_trip(hold):
 
 
 def test_first_order_hold_equivalent_equals_the_exact_simulation():
-    """The discrete FOH model reproduces ModalModel.simulate(method='foh') sample by sample.
+    """The discrete FOH model reproduces ModalModel.simulate_outputs(method='foh') sample by sample.
 
     Its state is xi = x - G2 u, so from rest it starts at -G2 u(0): the input starts at 0 here.
     """
@@ -40,7 +40,7 @@ def test_first_order_hold_equivalent_equals_the_exact_simulation():
     for k in range(u.shape[0]):
         y[k] = Cd @ x + Dd @ u[k]
         x = Ad @ x + Bd @ u[k]
-    np.testing.assert_allclose(y, model.simulate(u, 0.002, method="foh"), atol=ALGEBRA)
+    np.testing.assert_allclose(y, model.simulate_outputs(u, 0.002, method="foh"), atol=ALGEBRA)
 
 
 def _random_continuous(seed, n_y=3):
@@ -106,7 +106,7 @@ def test_balanced_truncation_removes_duplicated_states():
 def test_subspace_rejects_too_high_an_order_and_too_short_records():
     model = true_model(1)
     _, u = identification_input(2, duration=4.0)
-    y = model.simulate(u, 0.002)
+    y = model.simulate_outputs(u, 0.002)
     fit = estimate_subspace((u, y), order=5)
     assert fit.singular_values[5] < 1e-9 * fit.singular_values[0]  # five states, no more
     with pytest.raises(ExcitationError, match="fewer than 7 states"):

@@ -18,8 +18,10 @@ import pytest
 
 from identification.archive import read_archive
 from identification.errors import DivergenceError, InputError
+from identification.spline_iekf import SplineIEKFOptions
 from scenarios import handling_study
 from scenarios.cli import main
+from scenarios.commands.study_handling import text_of
 from scenarios.handling_study import (
     OUTPUTS,
     HandlingConfig,
@@ -27,6 +29,7 @@ from scenarios.handling_study import (
     make_records,
     parse_orders,
     run_study,
+    study_linear_options,
     write_archive_for,
 )
 
@@ -129,26 +132,27 @@ def test_linear_modes_near_the_vehicle_modes():
     and a double pole at -8.6). Its nearest identified mode is asserted only
     to be well damped and slower: measured damping 1.0, 0.96-1.07 Hz.
     """
-    result = run_study(HandlingConfig(orders=(3,), duration=10.0, amplitude_scale=0.1, p=1e-3, passes=30,
-                                      nonlinear=False, workers=1))
-    assert result.summary["table"][0]["linear_identification_R"] > 99.5  # measured 99.57 %
-    modes = {item["mode"]: item for item in result.summary["mode_comparison"]}
+    result = run_study(HandlingConfig(orders=(3,), duration=10.0, amplitude_scale=0.1,
+                                      linear_options=study_linear_options(1e-3, 30), spline_options=None, workers=1))
+    assert result.table[0].linear_identification_R > 99.5  # measured 99.57 %
+    modes = {item.mode: item for item in result.mode_comparison}
     roll = modes["roll"]
-    assert roll["vehicle_frequency_hz"] == pytest.approx(1.447, abs=1e-3)
-    assert abs(roll["frequency_ratio"] - 1.0) < 0.10
-    assert abs(roll["identified_damping"] - roll["vehicle_damping"]) < 0.10
+    assert roll.vehicle_frequency_hz == pytest.approx(1.447, abs=1e-3)
+    assert abs(roll.frequency_ratio - 1.0) < 0.10
+    assert abs(roll.identified_damping - roll.vehicle_damping) < 0.10
     yaw = modes["yaw-sideslip"]
-    assert yaw["identified_damping"] > 0.75
-    assert 0.3 < yaw["frequency_ratio"] < 1.0
+    assert yaw.identified_damping > 0.75
+    assert 0.3 < yaw.frequency_ratio < 1.0
 
 
 def test_compare_modes_picks_the_nearest_mode():
     from vehicle.linearize import Mode
 
     roll = Mode(complex(-5, 7), abs(complex(-5, 7)) / (2 * np.pi), 5 / abs(complex(-5, 7)), "roll", ("phi",))
-    found = compare_modes([complex(-20, 0), complex(-4, -6.5)], {"roll": roll})["roll"]  # a conjugate counts as its pair
-    assert found["identified_eigenvalue"] == complex(-4, 6.5)
-    assert found["identified_damping"] == pytest.approx(4 / abs(complex(-4, 6.5)), rel=1e-12)
+    (found,) = compare_modes(3, [complex(-20, 0), complex(-4, -6.5)], {"roll": roll})  # a conjugate counts as its pair
+    assert (found.order, found.mode) == (3, "roll")
+    assert found.identified_eigenvalue == complex(-4, 6.5)
+    assert found.identified_damping == pytest.approx(4 / abs(complex(-4, 6.5)), rel=1e-12)
 
 
 def test_pool_and_single_process_agree(study):
@@ -158,10 +162,11 @@ def test_pool_and_single_process_agree(study):
     a BLAS that sums in another order in another process; measured: identical).
     """
     summary, _, _ = study
-    single = run_study(HandlingConfig(orders=(2, 3), duration=10.0, passes=20, p=1e-3, nonlinear=False, workers=1))
-    for pooled, alone in zip(summary["table"], single.summary["table"]):
-        assert pooled["linear_identification_R"] == pytest.approx(alone["linear_identification_R"], abs=1e-9)
-        assert pooled["linear_validation_R"] == pytest.approx(alone["linear_validation_R"], abs=1e-9)
+    single = run_study(HandlingConfig(orders=(2, 3), duration=10.0, linear_options=study_linear_options(1e-3, 20),
+                                      spline_options=None, workers=1))
+    for pooled, alone in zip(summary["table"], single.table):
+        assert pooled["linear_identification_R"] == pytest.approx(alone.linear_identification_R, abs=1e-9)
+        assert pooled["linear_validation_R"] == pytest.approx(alone.linear_validation_R, abs=1e-9)
 
 
 def test_a_diverged_order_leaves_the_others_standing(monkeypatch, tmp_path):
@@ -173,12 +178,13 @@ def test_a_diverged_order_leaves_the_others_standing(monkeypatch, tmp_path):
         return real(data, structure, **options)
 
     monkeypatch.setattr(handling_study, "identify_iekf", diverge_at_three)
-    result = run_study(HandlingConfig(orders=(2, 3), duration=5.0, passes=3, p=1e-3, nonlinear=False, workers=1))
-    failed = result.summary["table"][1]
-    assert failed["linear_eigenvalues"] == [] and failed["linear_identification_R"] is None
-    assert "unstable" in result.summary["linear_runs"][1]["error"]
-    assert result.summary["chosen_order"] == 2
-    assert "(failed)" in result.text
+    result = run_study(HandlingConfig(orders=(2, 3), duration=5.0, linear_options=study_linear_options(1e-3, 3),
+                                      spline_options=None, workers=1))
+    failed = result.table[1]
+    assert failed.linear_eigenvalues == () and failed.linear_identification_R is None
+    assert "unstable" in result.linear_runs[1].error
+    assert result.assessment.chosen_order == 2
+    assert "(failed)" in text_of(result)
     assert set(read_archive(write_archive_for(result, tmp_path / "h.h5")).runs) == {"linear-n2"}
 
     def always_diverge(data, structure, **options):
@@ -186,7 +192,8 @@ def test_a_diverged_order_leaves_the_others_standing(monkeypatch, tmp_path):
 
     monkeypatch.setattr(handling_study, "identify_iekf", always_diverge)
     with pytest.raises(DivergenceError, match="no order gave a linear model"):
-        run_study(HandlingConfig(orders=(2,), duration=5.0, passes=3, nonlinear=False, workers=1))
+        run_study(HandlingConfig(orders=(2,), duration=5.0, linear_options=study_linear_options(passes=3),
+                                 spline_options=None, workers=1))
 
 
 @pytest.mark.parametrize(
@@ -197,6 +204,8 @@ def test_a_diverged_order_leaves_the_others_standing(monkeypatch, tmp_path):
         (["--orders", "2-9"], "from 2 to 8"),
         (["--orders", "four"], "orders must look like"),
         (["--nodes", "2"], "nodes must be a whole number from 3"),
+        (["--nodes", "12"], "nodes must be a whole number from 3 to 9"),
+        (["--nodes", "12", "--linear-only"], "nodes must be a whole number from 3 to 9"),
         (["--passes", "1"], "passes must be"),
         (["--workers", "0"], "workers must be"),
         (["--duration", "2"], "duration must be at least"),
@@ -221,13 +230,6 @@ def test_parse_orders():
 
 
 # ----------------------------------------------------------------- the nonlinear call site
-@dataclass(frozen=True)
-class _StandInOptions:
-    nodes: int = 5
-    passes: int = 3
-    p: float = 1e-6
-
-
 @dataclass(frozen=True, eq=False)
 class _StandInRecord:  # only what the announced interface promises: no pass index
     fit_filter: np.ndarray
@@ -268,21 +270,21 @@ def test_nonlinear_call_site_with_a_stand_in(monkeypatch, tmp_path):
         return _StandInResult(_stand_in_model(linear_model, data, options.nodes), tuple(history))
 
     monkeypatch.setattr(handling_study, "identify_spline_iekf", identify)
-    monkeypatch.setattr(handling_study, "SplineIEKFOptions", _StandInOptions)
     events = []
-    result = run_study(HandlingConfig(orders=(2,), duration=5.0, passes=3, p=1e-3, nodes=7, workers=1),
-                       on_event=events.append)
-    assert calls == [_StandInOptions(nodes=7)]  # passes and p left to the identifier's own defaults
+    spline = SplineIEKFOptions(nodes=7, passes=3)
+    result = run_study(HandlingConfig(orders=(2,), duration=5.0, linear_options=study_linear_options(1e-3, 3),
+                                      spline_options=spline, workers=1), on_event=events.append)
+    assert calls == [spline]  # the configuration's own options, passed on whole
     assert [(e.stage, e.index) for e in events] == [("linear", 1), ("linear", 2), ("linear", 3),
                                                     ("nonlinear", 1), ("nonlinear", 2), ("nonlinear", 3)]
-    row = result.summary["table"][0]
+    row = result.table[0]
     outcome = result.outcomes[2]
-    assert row["nonlinear_identification_R"] == pytest.approx(np.mean(handling_study.score(
+    assert row.nonlinear_identification_R == pytest.approx(np.mean(handling_study.score(
         outcome.nonlinear.model, result.records["identification"])), abs=1e-12)
-    assert row["nonlinear_validation_R"] is not None
-    run = result.summary["nonlinear_runs"][0]
-    assert run["passes_run"] == 3 and run["missing"] is None
-    assert run["mode_frequency_hz"][0][-1] < run["mode_frequency_hz"][0][0]
+    assert row.nonlinear_validation_R is not None
+    run = result.nonlinear_runs[0]
+    assert run.passes_run == 3 and run.missing is None
+    assert run.mode_frequency_hz[0][-1] < run.mode_frequency_hz[0][0]
     path = write_archive_for(result, tmp_path / "handling.h5")
     stored = read_archive(path).runs["nonlinear-n2"]
     assert stored.n_pass == 3 and np.allclose(stored.history["trace_p"], [1e-3, 2e-3, 3e-3])
@@ -299,12 +301,12 @@ def test_nonlinear_beats_linear_and_reaches_the_target_at_order_four():
     The paper's vehicle: 99.79 / 99.37 % linear, 99.96 / 99.80 % nonlinear (Table 5).
     """
     result = run_study(HandlingConfig(orders=(4,), workers=1))
-    row = result.summary["table"][0]
-    assert row["nonlinear_identification_R"] > row["linear_identification_R"]
-    assert row["nonlinear_validation_R"] > row["linear_validation_R"]
-    assert row["nonlinear_validation_R"] >= 99.5
+    row = result.table[0]
+    assert row.nonlinear_identification_R > row.linear_identification_R
+    assert row.nonlinear_validation_R > row.linear_validation_R
+    assert row.nonlinear_validation_R >= 99.5
     # the first mode's frequency falls as its amplitude grows (the paper's Figure 8 reading)
-    frequency = result.summary["nonlinear_runs"][0]["mode_frequency_hz"][0]
+    frequency = result.nonlinear_runs[0].mode_frequency_hz[0]
     assert frequency[-1] < frequency[0]
 
 
@@ -453,3 +455,23 @@ def test_a_signal_stops_every_worker_and_leaves_a_readable_archive(stop, study, 
         for row, whole in zip(resumed["table"], summary["table"]):
             for key in ("order", "linear_eigenvalues", "linear_identification_R", "linear_validation_R"):
                 assert row[key] == whole[key]
+
+
+def test_config_holds_the_options_of_both_filters_and_archives_flat():
+    """The options are validated by their own classes; the archive's flat settings (a public
+    contract: the ``config`` key of the JSON summary) read back to the same configuration."""
+    with pytest.raises(InputError, match="from 3 to 9"):
+        HandlingConfig(spline_options=SplineIEKFOptions(nodes=12))
+    with pytest.raises(InputError, match="passes must be a whole number >= 2"):
+        HandlingConfig(linear_options=study_linear_options(passes=1))
+    config = HandlingConfig(orders=(2, 4), linear_options=study_linear_options(1e-3, 20),
+                            spline_options=SplineIEKFOptions(nodes=7, passes=4))
+    stored = config.as_dict()
+    assert list(stored) == ["orders", "seed", "duration", "amplitude_scale", "vehicle", "speed", "dt", "p", "passes",
+                            "nodes", "nonlinear", "nonlinear_passes", "nonlinear_p", "workers"]
+    assert HandlingConfig.from_dict(json.loads(json.dumps(stored))) == config
+    linear_only = HandlingConfig(spline_options=None)
+    assert HandlingConfig.from_dict(linear_only.as_dict()) == linear_only
+    # an archive written before the options were composed: spline settings None meant the filter's defaults
+    assert HandlingConfig.from_dict({**stored, "nonlinear_passes": None, "nonlinear_p": None}).spline_options == \
+        SplineIEKFOptions(nodes=7)

@@ -32,7 +32,7 @@ def _record(duration: float, *, seed: int = 0, noise: float = 0.0) -> IOData:
     t = np.arange(int(round(duration / DT))) * DT
     points = rng.standard_normal(int(duration / 0.5) + 2)
     u = np.interp(t, np.arange(points.size) * 0.5, points)[:, None]
-    y = TRUTH.simulate(u, DT)
+    y = TRUTH.simulate_outputs(u, DT)
     if noise:
         y = y + noise * np.sqrt(np.mean(y**2)) * np.random.default_rng(seed + 1).standard_normal(y.shape)
     return IOData(t=t, u=u, y=y)
@@ -88,7 +88,7 @@ def test_initial_state_estimate_explains_a_record_that_starts_mid_motion():
     light = ModalModel(ModalStructure.default(2, 1, 1), [[-0.05, 3.0], [-3.0, -0.05]], [[0.2], [0.0]],
                        [[1.0, 1.0]], [[0.0]])
     data = _record(60.0, seed=5)
-    y = light.simulate(data.u, DT, x0=[2.0, -1.0])
+    y = light.simulate_outputs(data.u, DT, x0=[2.0, -1.0])
     record = IOData(t=data.t, u=data.u, y=y)
     from_rest = score(light, record, initial_state="zero")
     estimated = score(light, record, initial_state="estimate")
@@ -102,7 +102,7 @@ def test_an_unstable_plant_is_kept_and_scored_by_prediction():
     unstable = ModalModel(ModalStructure.default(2, 1, 1), [[0.1, 1.5], [-1.5, 0.1]], [[0.5], [0.2]],
                           [[1.0, 1.0]], [[0.0]])
     data = _record(40.0, seed=6)
-    record = IOData(t=data.t, u=data.u, y=unstable.simulate(data.u, DT))
+    record = IOData(t=data.t, u=data.u, y=unstable.simulate_outputs(data.u, DT))
     result = identify_iekf(record, unstable.structure, options=IEKFOptions.invariant(allow_unstable=True))
     assert _relative_gap(result.model.eigenvalues(), unstable.eigenvalues()) < 1e-3
     assert score(result.model, record, horizon=10).fit[0] > 99

@@ -63,4 +63,4 @@ def test_spline_model_round_trips_through_an_archive(tmp_path):
     assert isinstance(again, SplineModalModel) and again.structure == model.structure
     assert np.array_equal(again.theta, model.theta) and np.array_equal(again.ranges, model.ranges)
     u = np.sin(np.linspace(0, 30, 600))[:, None] * np.array([1.0, -0.5])
-    assert np.array_equal(again.simulate(u), model.simulate(u))
+    assert np.array_equal(again.simulate_outputs(u), model.simulate_outputs(u))

@@ -74,9 +74,10 @@ def test_eigenvalues_frequency_and_damping_of_eq15():
     model = true_model()
     expected = np.array([-15 + 10j, -15 - 10j, -8 + 40j, -8 - 40j, -4])
     assert np.allclose(model.eigenvalues(), expected, atol=0)
-    natural, damping = model.frequencies_damping()
-    assert np.allclose(natural, [np.hypot(15, 10), np.hypot(8, 40), 4.0], rtol=1e-14)
-    assert np.allclose(damping, [15 / np.hypot(15, 10), 8 / np.hypot(8, 40), 1.0], rtol=1e-14)
+    modes = model.modes()
+    natural = np.array([np.hypot(15, 10), np.hypot(8, 40), 4.0])
+    assert np.allclose([mode.frequency_hz for mode in modes], natural / (2 * np.pi), rtol=1e-14)
+    assert np.allclose([mode.damping for mode in modes], [15 / np.hypot(15, 10), 8 / np.hypot(8, 40), 1.0], rtol=1e-14)
 
 
 def test_foh_simulation_equals_scipy_lsim():
@@ -88,7 +89,7 @@ def test_foh_simulation_equals_scipy_lsim():
     x0 = rng.standard_normal(5)
     t = np.arange(n) * dt
     _, y_ref, _ = lsim((model.A, model.B, model.C, model.D), u, t, X0=x0)
-    y = model.simulate(u, dt, method="foh", x0=x0)
+    y = model.simulate_outputs(u, dt, method="foh", x0=x0)
     assert np.max(np.abs(y - y_ref)) < 1e-11 * np.max(np.abs(y_ref))
 
 
@@ -109,8 +110,8 @@ def test_zoh_and_euler_simulation_equal_their_recursions():
         y_eul[k] = model.C @ x_eul + model.D @ u[k]
         x_zoh = block[:5, :5] @ x_zoh + block[:5, 5:] @ u[k]
         x_eul = x_eul + dt * (model.A @ x_eul + model.B @ u[k])
-    assert np.allclose(model.simulate(u, dt, method="zoh"), y_zoh, rtol=0, atol=1e-11)
-    assert np.allclose(model.simulate(u, dt, method="euler"), y_eul, rtol=0, atol=1e-11)
+    assert np.allclose(model.simulate_outputs(u, dt, method="zoh"), y_zoh, rtol=0, atol=1e-11)
+    assert np.allclose(model.simulate_outputs(u, dt, method="euler"), y_eul, rtol=0, atol=1e-11)
 
 
 def test_phi_functions_series_and_closed_forms_meet():
@@ -135,8 +136,8 @@ def test_model_exports_round_trip(tmp_path):
 def test_model_rejects_bad_input():
     model = true_model()
     with pytest.raises(InputError, match=r"u must have shape \(N, 2\)"):
-        model.simulate(np.zeros((10, 3)), 0.01)
+        model.simulate_outputs(np.zeros((10, 3)), 0.01)
     with pytest.raises(InputError, match="non-finite"):
-        model.simulate(np.full((10, 2), np.nan), 0.01)
+        model.simulate_outputs(np.full((10, 2), np.nan), 0.01)
     with pytest.raises(InputError, match="B has shape"):
         ModalModel(model.structure, model.A, model.B[:, :1], model.C, model.D)

@@ -174,6 +174,6 @@ def test_a_constant_output_record_has_undefined_fits_not_a_failed_summary(record
     scored = score_records(model, [record[:3000], constant])
     assert np.isnan(scored.records[1].metrics.nrmse_fit[0])  # NRMSE needs a varying output
     # R (eq. 17) needs only energy: 1 - sum (2 - y_hat)^2 / sum 2^2, in closed form from the simulation
-    y_hat = model.simulate(constant.u, constant.dt)
+    y_hat = model.simulate_outputs(constant.u, constant.dt)
     expected = 100 * (1 - np.sum((2.0 - y_hat) ** 2) / (500 * 4.0))
     assert scored.records[1].metrics.percentage_explanation[0] == pytest.approx(expected, rel=1e-12)

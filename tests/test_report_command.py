@@ -31,7 +31,7 @@ def _small_archive(path):
     t = np.arange(400) * dt
     steer = np.sin(2 * np.pi * 0.7 * t) + 0.3 * np.sin(2 * np.pi * 2.1 * t)
     source = _model(4)
-    y = source.simulate(steer, dt) + 1e-3 * np.random.default_rng(0).normal(size=(t.size, 2))
+    y = source.simulate_outputs(steer, dt) + 1e-3 * np.random.default_rng(0).normal(size=(t.size, 2))
     data = IOData(t, steer, y, input_names=("steer",), output_names=OUTPUTS, output_units=UNITS)
     with write_archive(path, kind="identification", config={"orders": [2, 4]}, seeds=[0]) as handle:
         write_record(handle, "identification", data)
@@ -47,7 +47,7 @@ def _small_archive(path):
                     "min_eig_p": 10.0 ** (-2 - k),
                     "seconds": 0.1,
                 }, units={"fit_filter": "%", "fit_continuous": "%", "seconds": "s"})
-            write_run(handle, f"n{n}", model=model, metrics=fit_metrics(y, model.simulate(steer, dt)))
+            write_run(handle, f"n{n}", model=model, metrics=fit_metrics(y, model.simulate_outputs(steer, dt)))
     return path
 
 

@@ -161,4 +161,4 @@ def test_an_exact_fit_is_not_called_coloured():
     tests = model_residual_tests(calibration.true_model(), data)
     assert tests.exact[0] and tests.adequate
     with pytest.raises(InputError, match="constant"):  # without the outputs' scale, as any residual
-        residual_tests(data.u, data.y - calibration.true_model().simulate(data.u, data.dt))
+        residual_tests(data.u, data.y - calibration.true_model().simulate_outputs(data.u, data.dt))

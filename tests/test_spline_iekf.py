@@ -26,13 +26,14 @@ def test_constant_splines_equal_the_linear_model():
     linear = true_model()
     data, _ = make_data(0, duration=6.0)
     model = SplineModalModel.from_linear(linear, 5, np.abs(data.u).max(0), np.abs(data.y).max(0), DT)
-    y = model.simulate(data.u)
-    assert np.max(np.abs(y - linear.simulate(data.u, DT))) < 1e-12 * np.max(np.abs(y))
+    y = model.simulate_outputs(data.u)
+    assert np.max(np.abs(y - linear.simulate_outputs(data.u, DT))) < 1e-12 * np.max(np.abs(y))
     back = model.linear_model()
     for name in "ABCD":
         assert np.allclose(getattr(back, name), getattr(linear, name), rtol=0, atol=1e-12)
-    frequency, damping = model.mode_frequency_damping(0, [0.0, 0.5, 2.0])
-    assert np.allclose(frequency, np.hypot(15, 10) / (2 * np.pi)) and np.allclose(damping, 15 / np.hypot(15, 10))
+    pair = [model.modes(amplitude)[0] for amplitude in (0.0, 0.5, 2.0)]
+    assert np.allclose([mode.frequency_hz for mode in pair], np.hypot(15, 10) / (2 * np.pi))
+    assert np.allclose([mode.damping for mode in pair], 15 / np.hypot(15, 10))
 
 
 def _small_linear_system():
@@ -49,7 +50,7 @@ def test_constant_splines_reduce_the_filter_to_the_linear_filter():
     structure = linear.structure
     rng = np.random.default_rng(3)
     u = np.interp(np.arange(1500) / 10, np.arange(151), rng.standard_normal(151))[:, None]
-    y = linear.simulate(u, DT)
+    y = linear.simulate_outputs(u, DT)
     spline = SplineModalStructure(structure, 4)
     theta = linear.parameters + 0.05  # off the truth, so that the filter moves the parameters
     n, k, p = structure.n, structure.n_parameters, spline.nodes
@@ -90,7 +91,7 @@ def test_recovers_a_known_spline_nonlinear_system():
     n = 10_000
     coarse = rng.standard_normal(n // 10 + 1)
     u = np.interp(np.arange(n) / 10, np.arange(coarse.size), coarse)[:, None] * 5.0
-    y = truth.simulate(u)
+    y = truth.simulate_outputs(u)
     data = IOData(t=np.arange(n) * DT, u=u, y=y)
     linear = identify_iekf(data, truth.structure.linear, options=IEKFOptions(passes=30, p=0.1)).model
     result = identify_spline_iekf(data, linear, options=SplineIEKFOptions(nodes=5, p=1e-3, passes=25, fit_tolerance=0))
@@ -99,7 +100,7 @@ def test_recovers_a_known_spline_nonlinear_system():
     # sigma and omega as functions of amplitude where the data lie densely (10th to 90th percentile),
     # compared in the true model's state units (the identified model's states are scaled by max |y|):
     # within 5 % of the true variation plus 2 % of the value (a stated, measured tolerance)
-    _, states = truth.simulate(u, return_states=True)
+    _, states = truth.simulate_outputs(u, return_states=True)
     amplitude = np.hypot(states[:, 0], states[:, 1])
     grid = np.linspace(*np.percentile(amplitude, [10, 90]), 9)
     scale = result.model.state_scale()[0]
@@ -113,12 +114,12 @@ def test_recovers_a_known_spline_nonlinear_system():
 def test_export_as_a_casadi_function_simulates_the_same(tmp_path):
     truth = _true_nonlinear_system()
     u = np.sin(np.linspace(0, 20, 800))[:, None]
-    function = truth.to_casadi_function(u.shape[0])
+    function = truth.to_casadi(u.shape[0])
     path = tmp_path / "model.casadi"
     function.save(str(path))
     loaded = ca.Function.load(str(path))
     y = np.asarray(loaded(u.T)).T
-    assert np.max(np.abs(y - truth.simulate(u))) < 1e-12
+    assert np.max(np.abs(y - truth.simulate_outputs(u))) < 1e-12
 
 
 def test_spline_tables_and_bad_input():
@@ -130,6 +131,6 @@ def test_spline_tables_and_bad_input():
     with pytest.raises(InputError, match="nodes must be a whole number"):
         SplineIEKFOptions(nodes=2)
     with pytest.raises(InputError, match="identified at dt"):
-        truth.simulate(np.zeros((10, 1)), 0.01)
+        truth.simulate_outputs(np.zeros((10, 1)), 0.01)
     with pytest.raises(InputError, match="u must have shape"):
-        truth.simulate(np.zeros((10, 2)))
+        truth.simulate_outputs(np.zeros((10, 2)))

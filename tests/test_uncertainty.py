@@ -52,9 +52,8 @@ def test_delta_method_matches_monte_carlo_sampling_of_the_covariance():
     probe = np.array([0.5, 1.1, 4.0])
     for theta in samples:
         drawn = ModalModel.from_parameters(model.structure, theta)
-        natural, damping = drawn.frequencies_damping()
-        frequencies.append(natural / (2 * np.pi))
-        dampings.append(damping)
+        frequencies.append([mode.frequency_hz for mode in drawn.modes()])
+        dampings.append([mode.damping for mode in drawn.modes()])
         gains.append(drawn.D - drawn.C @ np.linalg.solve(drawn.A, drawn.B))
         response = np.array([drawn.C @ np.linalg.solve(2j * np.pi * f * np.eye(5) - drawn.A, drawn.B) + drawn.D
                              for f in probe])
@@ -126,7 +125,7 @@ def _arx_record(seed: int):
 def test_every_comparator_leaves_a_covariance_that_covers_the_truth():
     """ARX and RLS on data with ARX noise, N4SID (bootstrap) on the same: each mode's frequency within 4 std of the truth."""
     data = _arx_record(4)
-    truth = calibration.true_model().frequencies_damping()[0][:2] / (2 * np.pi)
+    truth = np.array([mode.frequency_hz for mode in calibration.true_model().modes()[:2]])
     for method, options in (("arx", {}), ("rls", {}), ("n4sid", {"bootstrap": 10, "block_rows": 20})):
         model = identify_with(data, method=method, order=4, **options).model
         assert model.parameter_covariance is not None, method
@@ -147,8 +146,8 @@ def test_intervals_are_calibrated_on_the_known_system_lean():
     0.25 or 4. The full table (2 noise levels x 60 realisations) is
     benchmarks/uncertainty_calibration.py.
     """
-    natural, damping = calibration.true_model().frequencies_damping()
-    truth = {"frequency_hz": natural / (2 * np.pi), "damping": damping}
+    modes = calibration.true_model().modes()
+    truth = {name: np.array([getattr(mode, name) for mode in modes]) for name in ("frequency_hz", "damping")}
     scores: dict[str, list] = {"iekf": [], "output-error": []}
     for seed in range(100, 112):
         data, _ = calibration.make_record(seed, 0.3, duration=30.0)
@@ -177,7 +176,8 @@ def test_spline_bands_match_monte_carlo_sampling():
     sigma_std = spline.coefficient_std("sigma1", amplitudes)
     draws = theta + rng.standard_normal((1500, theta.size)) * std
     sampled = [spline.with_parameters(draw) for draw in draws]
-    curves = np.array([model.mode_frequency_damping(0, amplitudes) for model in sampled])
+    curves = np.array([[[(mode := model.modes(a)[0]).frequency_hz, mode.damping] for a in amplitudes]
+                       for model in sampled]).transpose(0, 2, 1)
     np.testing.assert_allclose(frequency_std, curves[:, 0].std(axis=0), rtol=0.06)
     np.testing.assert_allclose(damping_std, curves[:, 1].std(axis=0), rtol=0.06)
     sigmas = np.array([model.coefficient("sigma1", amplitudes) for model in sampled])

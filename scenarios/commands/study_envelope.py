@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 
 from scenarios.envelope import EXECUTORS, EnvelopeConfig, parse_speeds, run_campaign
+from scenarios.commands.study_handling import add_filter_options
 from scenarios.handling_study import parse_orders
 from scenarios.progress import Progress
 from identification.errors import InputError
@@ -49,15 +50,7 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--linear-only", action="store_true", help="skip the spline-nonlinear models")
     parser.add_argument("--duration", type=float, default=_DEFAULTS.duration,
                         help=f"length of each record in s (default {_DEFAULTS.duration:g})")
-    parser.add_argument("--passes", type=int, default=_DEFAULTS.passes,
-                        help=f"passes of each linear identification (default {_DEFAULTS.passes})")
-    parser.add_argument("--p", type=float, default=_DEFAULTS.p,
-                        help=f"tuning parameter p of the linear identifications (default {_DEFAULTS.p:g})")
-    parser.add_argument("--nodes", type=int, default=_DEFAULTS.nodes, help="spline nodes per coefficient (default 5)")
-    parser.add_argument("--nonlinear-passes", type=int, default=None,
-                        help="passes of each nonlinear identification (default: the spline IEKF's own)")
-    parser.add_argument("--nonlinear-p", type=float, default=None,
-                        help="tuning parameter p of the nonlinear identifications (default: the spline IEKF's own)")
+    add_filter_options(parser, _DEFAULTS.linear_options)
     parser.add_argument("--executor", choices=EXECUTORS, default="process",
                         help="local process pool (default) or Dask distributed")
     parser.add_argument("--workers", type=int, default=None,

@@ -20,13 +20,17 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 from identification.archive import open_archive
 from identification.archive_safety import archive_lock, check_output_folder, check_output_target, replacing_directory
 from identification.errors import InputError
+from identification.iekf import IEKFOptions
+from identification.spline_iekf import SplineIEKFOptions
 from scenarios.handling_resume import StudyCheckpoint, read_progress
-from scenarios.handling_study import (HandlingConfig, archive_path, make_records, parse_orders, planned_passes,
-                                      run_study, write_study_archive)
+from scenarios.handling_study import (OUTPUTS, PAPER, HandlingConfig, HandlingResult, archive_path, make_records,
+                                      parse_orders, planned_passes, run_study, spline_options, study_linear_options,
+                                      write_study_archive)
 from scenarios.progress import Progress
 
 NAME = "handling"
@@ -36,21 +40,27 @@ HELP = "the paper's handling study: Table 5, linear and nonlinear models of orde
 _DEFAULTS = HandlingConfig()
 
 
+def add_filter_options(parser: argparse.ArgumentParser, linear: IEKFOptions) -> None:
+    """The filters' options the studies share: ``--passes`` and ``--p`` of the linear IEKF (defaults
+    from ``linear``), ``--nodes``, ``--nonlinear-passes`` and ``--nonlinear-p`` of the spline IEKF."""
+    parser.add_argument("--passes", type=int, default=linear.passes,
+                        help=f"passes of each linear identification (default {linear.passes})")
+    parser.add_argument("--p", type=float, default=linear.p,
+                        help=f"tuning parameter p of the linear identifications (default {linear.p:g})")
+    parser.add_argument("--nodes", type=int, default=SplineIEKFOptions.nodes,
+                        help=f"spline nodes per coefficient of the nonlinear models (default {SplineIEKFOptions.nodes})")
+    parser.add_argument("--nonlinear-passes", type=int, default=None,
+                        help=f"passes of each nonlinear identification (default {SplineIEKFOptions.passes})")
+    parser.add_argument("--nonlinear-p", type=float, default=None,
+                        help=f"tuning parameter p of the nonlinear identifications (default {SplineIEKFOptions.p:g})")
+
+
 def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--orders", default="2-6", help="model orders, e.g. 2-6, 4 or 2,4-6 (default 2-6)")
-    parser.add_argument("--nodes", type=int, default=_DEFAULTS.nodes,
-                        help=f"spline nodes per coefficient of the nonlinear models (default {_DEFAULTS.nodes})")
     parser.add_argument("--workers", type=int, default=None,
                         help="processes running orders at once (default: as many as orders, at most the cores)")
     parser.add_argument("--seed", type=int, default=_DEFAULTS.seed, help="seed of both steer inputs (default 0)")
-    parser.add_argument("--passes", type=int, default=_DEFAULTS.passes,
-                        help=f"passes of each linear identification (default {_DEFAULTS.passes})")
-    parser.add_argument("--p", type=float, default=_DEFAULTS.p,
-                        help=f"tuning parameter p of the linear identifications (default {_DEFAULTS.p:g})")
-    parser.add_argument("--nonlinear-passes", type=int, default=None,
-                        help="passes of each nonlinear identification (default: the spline IEKF's own)")
-    parser.add_argument("--nonlinear-p", type=float, default=None,
-                        help="tuning parameter p of the nonlinear identifications (default: the spline IEKF's own)")
+    add_filter_options(parser, _DEFAULTS.linear_options)
     parser.add_argument("--linear-only", action="store_true", help="skip the nonlinear identifications")
     parser.add_argument("--duration", type=float, default=_DEFAULTS.duration,
                         help=f"length of each record in s (default {_DEFAULTS.duration:g})")
@@ -85,11 +95,12 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
         path = Path(args.resume)
         open_archive(path, kinds=["handling-study"]).close()  # missing, foreign or corrupt: said before anything else
     else:
+        orders = parse_orders(args.orders)
+        spline = spline_options(args.nodes, args.nonlinear_passes, args.nonlinear_p)  # checked even if unused
         config = HandlingConfig(
-            orders=parse_orders(args.orders), seed=args.seed, duration=args.duration,
-            amplitude_scale=args.amplitude_scale, vehicle=args.vehicle, speed=args.speed, p=args.p,
-            passes=args.passes, nodes=args.nodes, nonlinear=not args.linear_only,
-            nonlinear_passes=args.nonlinear_passes, nonlinear_p=args.nonlinear_p, workers=args.workers,
+            orders=orders, seed=args.seed, duration=args.duration, amplitude_scale=args.amplitude_scale,
+            vehicle=args.vehicle, speed=args.speed, linear_options=study_linear_options(args.p, args.passes),
+            spline_options=None if args.linear_only else spline, workers=args.workers,
         )
         path = check_output_target(archive_path(args.out), inputs=[args.vehicle], force=args.force)  # before any work
     if not args.no_report:
@@ -120,10 +131,10 @@ def _study(args, config, path, records, finished, checkpoint) -> tuple[dict, str
         for progress in shown:
             progress.close()
     path = write_study_archive(result, path)
-    summary = {**result.summary, "archive": str(path)}
+    summary = {**summary_of(result), "archive": str(path)}
     if finished:
         summary["resumed_orders"] = sorted(finished)
-    text = result.text + f"\nwrote {path}"
+    text = text_of(result) + f"\nwrote {path}"
     if not args.no_report:
         from scenarios.handling_report import write_handling_report
 
@@ -134,3 +145,65 @@ def _study(args, config, path, records, finished, checkpoint) -> tuple[dict, str
         summary["report"] = str(folder)
         text += f"\nwrote {len(files)} report files to {folder}"
     return summary, text
+
+
+def summary_of(result: HandlingResult) -> dict[str, Any]:
+    """The study's JSON summary (before :func:`scenarios.cli.to_jsonable`): its keys are a public contract."""
+    return {
+        "table": list(result.table),
+        "chosen_order": result.assessment.chosen_order,
+        "seconds": result.seconds,
+        "vehicle_modes": {label: {"eigenvalue": mode.eigenvalue, "frequency_hz": mode.frequency_hz,
+                                  "damping": mode.damping, "label": mode.label}
+                          for label, mode in result.vehicle_modes.items()},
+        "vehicle_linearization": result.vehicle_linearization,
+        "mode_comparison": list(result.mode_comparison),
+        "linear_runs": list(result.linear_runs),
+        "nonlinear_runs": list(result.nonlinear_runs),
+        "nonlinear": result.nonlinear_status,
+        "order_assessment": [row.as_dict() for row in result.assessment.rows],
+        "outputs": list(OUTPUTS),
+        "config": result.config.as_dict(),
+        "workers": result.workers,
+        "paper": {str(order): values for order, values in PAPER.items()},
+    }
+
+
+def _percent(value: float | None) -> str:
+    return "-" if value is None else f"{value:.2f}"
+
+
+def text_of(result: HandlingResult) -> str:
+    """The study's text summary: Table 5, the order chosen, the modes beside the vehicle's."""
+    from scenarios.report import format_eigenvalues
+
+    config, linear = result.config, result.config.linear_options
+    lines = [
+        f"Handling study (Best & Bogdanski 2017, section 6, Table 5): {config.vehicle} at {config.speed:g} m/s, "
+        f"seed {config.seed}, {config.duration:g} s records, steer x{config.amplitude_scale:g}, "
+        f"p = {linear.p:g}, {linear.passes} passes",
+        f"{'n':>2}  {'linear eigenvalues (1/s)':<44} {'R identification %':>19} {'R validation %':>19}",
+        f"{'':>2}  {'':<44} {'linear':>9} {'nonlin.':>9} {'linear':>9} {'nonlin.':>9}",
+    ]
+    for row in result.table:
+        eigen = format_eigenvalues(list(row.linear_eigenvalues)) if row.linear_eigenvalues else "(failed)"
+        lines.append(
+            f"{row.order:>2}  {eigen:<44} {_percent(row.linear_identification_R):>9} "
+            f"{_percent(row.nonlinear_identification_R):>9} {_percent(row.linear_validation_R):>9} "
+            f"{_percent(row.nonlinear_validation_R):>9}"
+        )
+    converged = [run.order for run in result.linear_runs if run.converged]
+    lines.append(f"chosen order: {result.assessment.chosen_order} (linear runs settled: "
+                 f"{', '.join(map(str, converged)) or 'none'}; paper: 4)")
+    lines.append("modes beside the vehicle's linearisation (nearest identified mode: frequency Hz / damping)")
+    lines.append("    " + "   ".join(f"{label}: vehicle {m.frequency_hz:.2f} / {m.damping:.2f}"
+                                     for label, m in result.vehicle_modes.items()))
+    by_order: dict[int, list[str]] = {}
+    for item in result.mode_comparison:
+        by_order.setdefault(item.order, []).append(
+            f"{item.mode}: {item.identified_frequency_hz:.2f} / {item.identified_damping:.2f}")
+    for order, parts in by_order.items():
+        lines.append(f"{order:>2}  " + "   ".join(parts))
+    lines.append(f"nonlinear models: {result.nonlinear_status}")
+    lines.append(f"{result.seconds:.1f} s on {result.workers} worker(s)")
+    return "\n".join(lines)
