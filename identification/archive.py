@@ -1,20 +1,10 @@
 """Durable, versioned HDF5 results archives.
 
-An archive is one HDF5 file whose layout is documented in
-``results/RESULTS_LAYOUT.md`` (schema version :data:`SCHEMA_VERSION`). This
-module knows the layout and nothing of vehicles: records are
-:class:`~identification.data.IOData`, runs are named groups of per-pass
-histories and arbitrary frozen values (a model, metrics, a resume state).
-
-Writing is atomic. :func:`write_archive` builds the file under a temporary
-name in the target's directory and renames it over the final name only when
-the ``with`` block ends without an exception; :func:`update_archive` does the
-same for an existing archive (copy, append, rename), which is how a long
-identification checkpoints after every pass. A crash therefore never leaves a
-half-written archive under the final name.
-
-Frozen values (models, metrics, resume states, the configuration) are
-stored with :mod:`identification.storage`, never pickled.
+One HDF5 file laid out as ``results/RESULTS_LAYOUT.md`` documents (schema version
+:data:`SCHEMA_VERSION`): records are :class:`~identification.data.IOData`, runs are named groups of
+per-pass histories and frozen values stored by :mod:`identification.storage`, never pickled. Writing is
+atomic: the file is built under a temporary name beside the target and renamed over it only when the
+``with`` block ends without an exception, so a crash never leaves a half-written archive.
 """
 
 from __future__ import annotations

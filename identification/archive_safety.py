@@ -1,26 +1,10 @@
 """Safe output files: writer locks, checks of a target before any work, checksums, whole-folder swaps.
 
-Four guards for the files the workbench writes:
-
-* :func:`archive_lock` holds an exclusive lock on an archive for as long as
-  one process writes it (a whole identification, a whole study). A second
-  writer is refused at once with :class:`ArchiveLockedError`, which names
-  the holder (process id and host). The lock is an ``flock`` on a hidden
-  file beside the archive, so the operating system releases it when the
-  holder dies, even by ``SIGKILL``: no stale lock survives a crash.
-* :func:`check_output_target` runs before any work: it refuses a target that
-  is a directory, an input of the same run, or an existing file that is not
-  a workbench archive (unless forced), and proves the directory writable by
-  creating and removing a file there. Each refusal is one line naming the
-  path and the operating system's cause.
-* :func:`write_checksums` and :func:`verify_checksums` keep a digest of every
-  dataset's bytes and every object's attributes in the archive (attribute
-  ``vehid_digest``); a reader finds any value changed on disk behind the
-  workbench's back and names the dataset or group. Archives written before
-  checksums existed carry none and still read.
-* :func:`replacing_directory` writes a folder (a report) under a hidden name
-  beside its final place and swaps it in whole when it is complete, so an
-  interrupted writer leaves either the old folder or the new one.
+:func:`archive_lock` is an ``flock`` on a hidden file beside the archive, so that the system releases it
+when the holder dies, even by ``SIGKILL``; :func:`check_output_target` refuses a bad target before any
+work; :func:`write_checksums` and :func:`verify_checksums` find values changed on disk behind the
+workbench's back (archives written without digests still read); :func:`replacing_directory` swaps a
+finished folder in whole, so an interrupted writer leaves the old folder or the new one.
 """
 
 from __future__ import annotations
