@@ -72,7 +72,6 @@ REQUIRED_ATTRIBUTES = (
 _RUN_MEMBERS = ("model", "metrics", "state")
 
 
-# --------------------------------------------------------------- archive files
 @dataclass(frozen=True)
 class RunName:
     """The name of a run of one kind of model at one order: ``<kind>-n<order>``, e.g. ``linear-n4``."""
@@ -262,13 +261,6 @@ def write_archive(
         already written. Fill it with :func:`write_record`, :func:`write_run`,
         :func:`append_history` and :func:`~identification.storage.write_value`.
 
-    Notes
-    -----
-    The temporary file lies in the same directory and is renamed over
-    ``path`` (``os.replace``) only when the block ends normally; on an
-    exception it is removed and any archive already under ``path`` is left
-    as it was.
-
     Examples
     --------
     >>> import tempfile, pathlib
@@ -444,7 +436,6 @@ def read_archive(path: str | Path, kinds: Sequence[str] | None = None) -> Archiv
             raise ArchiveError(f"{path} is truncated or corrupt: reading it failed ({exc})") from None
 
 
-# ------------------------------------------------------------ records and runs
 def write_record(archive: h5py.File, name: str, data: IOData) -> h5py.Group:
     """Store a record as ``data/<name>`` (replacing one of that name).
 

@@ -60,7 +60,6 @@ def os_error_text(exc: OSError, path: str | Path | None = None) -> str:
     return f"{name}: {cause}" if name is not None else cause
 
 
-# ----------------------------------------------------------------- locking
 _HELD: dict[str, tuple[int, int]] = {}  # lock-file path -> (file descriptor, nesting depth) held by this process
 
 
@@ -161,7 +160,6 @@ def _acquire(lock_file: Path, path: Path) -> int:
     return fd
 
 
-# ------------------------------------------------------------ target checks
 def is_workbench_archive(path: str | Path) -> bool:
     """True when ``path`` is an HDF5 file with the workbench's ``schema_version`` root attribute."""
     try:
@@ -257,7 +255,6 @@ def check_output_folder(folder: str | Path, *, what: str = "report folder") -> P
     return folder
 
 
-# --------------------------------------------------------------- checksums
 def _value_bytes(value: Any) -> bytes:
     if isinstance(value, h5py.Empty):
         return b"<empty>"
@@ -334,7 +331,6 @@ def verify_checksums(handle: h5py.File, path: str | Path) -> None:
             )
 
 
-# ---------------------------------------------------------- whole folders
 _RENAME_EXCHANGE = 2  # renameat2 flag (Linux): swap two names atomically
 _AT_FDCWD = -100
 

@@ -66,11 +66,6 @@ class LeastSquaresResult:
     condition_number: float
     gram_inverse: np.ndarray
 
-    @property
-    def standard_errors(self) -> np.ndarray:
-        """Square roots of the covariance diagonals, shape (n_p, n_y)."""
-        return np.sqrt(np.einsum("kii->ik", self.covariance))
-
 
 def least_squares(phi: Any, y: Any, *, names: tuple[str, ...] | None = None,
                   condition_limit: float = CONDITION_LIMIT) -> LeastSquaresResult:

@@ -147,7 +147,6 @@ def _as_raw(data: IOData) -> RawRecord:
                      (data.t,) * len(values), data.input_units + data.output_units, "t")
 
 
-# --------------------------------------------------------------------- preparation
 @dataclass(frozen=True, eq=False)
 class RecordOffsets:
     """The offsets removed from one estimation record (in scaled units).

@@ -96,7 +96,6 @@ def _float(cell: str, decimal_comma: bool = False) -> float | None:
         return None
 
 
-# ------------------------------------------------------------------- text tables
 def _text_lines(path: Path) -> tuple[list[str], str]:
     """The file's first lines (enough to find its header) and the encoding that reads it."""
     for encoding in ("utf-8-sig", "latin-1"):
@@ -328,7 +327,6 @@ def _existing(path: str | Path) -> Path:
     return path
 
 
-# ------------------------------------------------------------------- MATLAB files
 def _mat_variables(path: Path) -> tuple[Callable[[str], Any], list[str]]:
     """A lookup ``name -> array`` for a .mat file (v4-v7 by scipy.io, v7.3 by h5py) and its variable names."""
     import scipy.io
@@ -438,7 +436,6 @@ def read_mat(
     return RawRecord(path.name, tuple(names), tuple(values), (t,) * len(names), ("-",) * len(names), time_name)
 
 
-# --------------------------------------------------------------------- MDF4 files
 def read_mdf(
     path: str | Path,
     *,
@@ -493,7 +490,6 @@ def read_mdf(
     return RawRecord(path.name, tuple(names), tuple(values), tuple(times), tuple(units), "time stamps")
 
 
-# ---------------------------------------------------------------------- dispatch
 def _is_mdf(path: Path) -> bool:
     """An ASAM MDF file by its identification block ("MDF     " or "UnFinMF ")."""
     try:

@@ -259,28 +259,11 @@ def _natural_moments(width: np.ndarray) -> np.ndarray:
 def resample(basis: SplineBasis, gamma: Any, new_basis: SplineBasis) -> np.ndarray:
     """Move a spline onto new nodes: new ordinates are the old spline at the new nodes.
 
-    This is the node redistribution of the paper's section 5 ("periodically as
-    the filter iterates"): ordinates that keep the spline's shape when the
-    range its variable reaches has changed.
-
-    The new spline equals the old one exactly at the new nodes; everywhere if
-    the old spline is a straight line (the basis reproduces linear functions);
-    and everywhere if the new nodes contain the old ones and share their ends
-    (the old spline is then itself the natural spline on the finer nodes).
-    Otherwise it only interpolates the old spline, with a cubic-interpolation
-    error, and imposes zero curvature at the new end nodes. Measured on the
-    spline through ``tanh(2 x)`` at 5 nodes on ``[-1, 1]`` (a range of 1.93),
-    the largest change over ``[-1, 1]`` when moving to
-
-    * 5 nodes on ``[-1.5, 1.5]``: 0.085 (4.4 % of the range),
-    * 5 nodes on ``[-1.2, 1.2]``: 0.031 (1.6 %),
-    * 5 nodes on ``[-0.8, 0.8]``: 0.018 inside the new nodes, 0.060 including
-      the now linear ends,
-    * 7 nodes on ``[-1, 1]``: 0.0057 (0.3 %),
-    * 9 nodes on ``[-1, 1]`` (old nodes kept): rounding only.
-
-    So each redistribution perturbs a strongly curved coefficient by a few
-    percent; the filter's following passes have to absorb that.
+    The node redistribution of the paper's section 5. The new spline equals
+    the old one at the new nodes, and everywhere when the old one is straight
+    or the new nodes contain the old ones and share their ends; otherwise a
+    strongly curved coefficient moves by a few percent of its range
+    (docs/identification_notes.md), which the following passes absorb.
 
     Parameters
     ----------

@@ -60,7 +60,6 @@ class SplineModalStructure:
         if isinstance(self.nodes, bool) or int(self.nodes) != self.nodes or not MIN_NODES <= self.nodes <= MAX_NODES:
             raise InputError(f"nodes must be a whole number from {MIN_NODES} to {MAX_NODES}; got {self.nodes!r}")
 
-    # variables -------------------------------------------------------------
     @property
     def n_variables(self) -> int:
         s = self.linear
@@ -96,7 +95,6 @@ class SplineModalStructure:
         follows += [self.input_variable(j) for _ in range(s.n_y) for j in range(s.n_u)]
         return tuple(follows)
 
-    # parameters --------------------------------------------------------------
     @property
     def n_parameters(self) -> int:
         return self.nodes * self.linear.n_parameters
@@ -115,7 +113,6 @@ class SplineModalStructure:
         """theta as (n_coefficients, p): the node ordinates of each coefficient's spline."""
         return np.asarray(theta, dtype=float).reshape(self.linear.n_parameters, self.nodes)
 
-    # node ranges -------------------------------------------------------------
     def default_ranges(self) -> np.ndarray:
         """(n_variables, 2) of (lower, upper): amplitudes 0..1, states and inputs -1..1."""
         ranges = np.tile([-1.0, 1.0], (self.n_variables, 1))
@@ -343,7 +340,6 @@ class SplineModalModel(StateSpaceModel):
         y = y * self.output_scale
         return (y, x * self.state_scale()) if return_states else y
 
-    # splines -----------------------------------------------------------------
     def spline(self, coefficient: int | str) -> tuple[SplineBasis, np.ndarray]:
         """(basis, ordinates) of one coefficient, by index or name (e.g. ``"sigma1"``, ``"b21"``)."""
         names = self.structure.coefficient_names()
@@ -368,7 +364,6 @@ class SplineModalModel(StateSpaceModel):
             tables[name] = {"variable": variables[follows[index]], "nodes": basis.nodes.copy(), "values": gamma.copy()}
         return tables
 
-    # the linear face -----------------------------------------------------------
     def to_statespace(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
         """The continuous state-space form of :meth:`linear_model` at zero amplitude."""
         return self.linear_model().to_statespace()
