@@ -1,20 +1,10 @@
 """Durable, versioned HDF5 results archives.
 
-An archive is one HDF5 file whose layout is documented in
-``results/RESULTS_LAYOUT.md`` (schema version :data:`SCHEMA_VERSION`). This
-module knows the layout and nothing of vehicles: records are
-:class:`~identification.data.IOData`, runs are named groups of per-pass
-histories and arbitrary frozen values (a model, metrics, a resume state).
-
-Writing is atomic. :func:`write_archive` builds the file under a temporary
-name in the target's directory and renames it over the final name only when
-the ``with`` block ends without an exception; :func:`update_archive` does the
-same for an existing archive (copy, append, rename), which is how a long
-identification checkpoints after every pass. A crash therefore never leaves a
-half-written archive under the final name.
-
-Frozen values (models, metrics, resume states, the configuration) are
-stored with :mod:`identification.storage`, never pickled.
+One HDF5 file laid out as ``results/RESULTS_LAYOUT.md`` documents (schema version
+:data:`SCHEMA_VERSION`): records are :class:`~identification.data.IOData`, runs are named groups of
+per-pass histories and frozen values stored by :mod:`identification.storage`, never pickled. Writing is
+atomic: the file is built under a temporary name beside the target and renamed over it only when the
+``with`` block ends without an exception, so a crash never leaves a half-written archive.
 """
 
 from __future__ import annotations
@@ -82,7 +72,6 @@ REQUIRED_ATTRIBUTES = (
 _RUN_MEMBERS = ("model", "metrics", "state")
 
 
-# --------------------------------------------------------------- archive files
 @dataclass(frozen=True)
 class RunName:
     """The name of a run of one kind of model at one order: ``<kind>-n<order>``, e.g. ``linear-n4``."""
@@ -272,13 +261,6 @@ def write_archive(
         already written. Fill it with :func:`write_record`, :func:`write_run`,
         :func:`append_history` and :func:`~identification.storage.write_value`.
 
-    Notes
-    -----
-    The temporary file lies in the same directory and is renamed over
-    ``path`` (``os.replace``) only when the block ends normally; on an
-    exception it is removed and any archive already under ``path`` is left
-    as it was.
-
     Examples
     --------
     >>> import tempfile, pathlib
@@ -454,7 +436,6 @@ def read_archive(path: str | Path, kinds: Sequence[str] | None = None) -> Archiv
             raise ArchiveError(f"{path} is truncated or corrupt: reading it failed ({exc})") from None
 
 
-# ------------------------------------------------------------ records and runs
 def write_record(archive: h5py.File, name: str, data: IOData) -> h5py.Group:
     """Store a record as ``data/<name>`` (replacing one of that name).
 

@@ -1,26 +1,10 @@
 """Safe output files: writer locks, checks of a target before any work, checksums, whole-folder swaps.
 
-Four guards for the files the workbench writes:
-
-* :func:`archive_lock` holds an exclusive lock on an archive for as long as
-  one process writes it (a whole identification, a whole study). A second
-  writer is refused at once with :class:`ArchiveLockedError`, which names
-  the holder (process id and host). The lock is an ``flock`` on a hidden
-  file beside the archive, so the operating system releases it when the
-  holder dies, even by ``SIGKILL``: no stale lock survives a crash.
-* :func:`check_output_target` runs before any work: it refuses a target that
-  is a directory, an input of the same run, or an existing file that is not
-  a workbench archive (unless forced), and proves the directory writable by
-  creating and removing a file there. Each refusal is one line naming the
-  path and the operating system's cause.
-* :func:`write_checksums` and :func:`verify_checksums` keep a digest of every
-  dataset's bytes and every object's attributes in the archive (attribute
-  ``vehid_digest``); a reader finds any value changed on disk behind the
-  workbench's back and names the dataset or group. Archives written before
-  checksums existed carry none and still read.
-* :func:`replacing_directory` writes a folder (a report) under a hidden name
-  beside its final place and swaps it in whole when it is complete, so an
-  interrupted writer leaves either the old folder or the new one.
+:func:`archive_lock` is an ``flock`` on a hidden file beside the archive, so that the system releases it
+when the holder dies, even by ``SIGKILL``; :func:`check_output_target` refuses a bad target before any
+work; :func:`write_checksums` and :func:`verify_checksums` find values changed on disk behind the
+workbench's back (archives written without digests still read); :func:`replacing_directory` swaps a
+finished folder in whole, so an interrupted writer leaves the old folder or the new one.
 """
 
 from __future__ import annotations
@@ -76,7 +60,6 @@ def os_error_text(exc: OSError, path: str | Path | None = None) -> str:
     return f"{name}: {cause}" if name is not None else cause
 
 
-# ----------------------------------------------------------------- locking
 _HELD: dict[str, tuple[int, int]] = {}  # lock-file path -> (file descriptor, nesting depth) held by this process
 
 
@@ -177,7 +160,6 @@ def _acquire(lock_file: Path, path: Path) -> int:
     return fd
 
 
-# ------------------------------------------------------------ target checks
 def is_workbench_archive(path: str | Path) -> bool:
     """True when ``path`` is an HDF5 file with the workbench's ``schema_version`` root attribute."""
     try:
@@ -273,7 +255,6 @@ def check_output_folder(folder: str | Path, *, what: str = "report folder") -> P
     return folder
 
 
-# --------------------------------------------------------------- checksums
 def _value_bytes(value: Any) -> bytes:
     if isinstance(value, h5py.Empty):
         return b"<empty>"
@@ -350,7 +331,6 @@ def verify_checksums(handle: h5py.File, path: str | Path) -> None:
             )
 
 
-# ---------------------------------------------------------- whole folders
 _RENAME_EXCHANGE = 2  # renameat2 flag (Linux): swap two names atomically
 _AT_FDCWD = -100
 

@@ -1,17 +1,10 @@
 """Compile CasADi functions to native code, cached on disk.
 
-A function is generated to C, hashed (generated source, compiler flags and
-CasADi version), compiled once with the system C compiler into a shared
-library under the cache directory and loaded with ``casadi.external``. A
-second run with the same function finds the library and does not compile.
-Where no C compiler is found, the function runs in CasADi's virtual machine
-and a warning says so.
-
-The cache directory is ``$VEHID_CACHE_DIR`` if set, else
-``$XDG_CACHE_HOME/vehid`` or ``~/.cache/vehid``. The key holds no path or
-host name, so a cache shared between machines works: each library is built
-once per CPU type (native code is keyed by the CPU), and processes on one
-host wait for each other's build (a file lock) instead of compiling twice.
+A function is generated to C, hashed (source, compiler flags, CasADi version), compiled once into a
+shared library under the cache directory (``$VEHID_CACHE_DIR``, else ``$XDG_CACHE_HOME/vehid`` or
+``~/.cache/vehid``) and loaded with ``casadi.external``; without a C compiler it runs in CasADi's
+virtual machine and a warning says so. The key holds no path or host name, so a shared cache works:
+native code is keyed by CPU type, and processes on one host wait for each other's build (a file lock).
 """
 
 from __future__ import annotations

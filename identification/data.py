@@ -135,7 +135,6 @@ class IOData:
             set_(self, "state_units", None)
         set_(self, "meta", MappingProxyType(dict(self.meta)))
 
-    # ------------------------------------------------------------------ shape
     @property
     def n_samples(self) -> int:
         """Number of samples N."""
@@ -161,7 +160,6 @@ class IOData:
         """Length of the record in seconds."""
         return float(self.t[-1] - self.t[0])
 
-    # ------------------------------------------------------------ selections
     def __getitem__(self, index: slice) -> "IOData":
         """Slice in time: ``data[1000:2000]``."""
         if not isinstance(index, slice):
@@ -221,7 +219,6 @@ class IOData:
         """A copy with some fields changed (validated again)."""
         return dataclasses.replace(self, **changes)
 
-    # -------------------------------------------------------------- storage
     def to_hdf5(self, group: Any) -> None:
         """Write into an open ``h5py.Group`` (time-first datasets, units as attributes)."""
         _write_iodata(group, self)

@@ -1,30 +1,15 @@
 """Symbolic models the Identifying EKF runs on: state transition and output in CasADi SX.
 
-A filter model gives, for states ``x`` (n_x), parameters ``theta`` (n_theta)
-and inputs at the two ends of a sample ``u0, u1`` (n_u each):
-
-* ``transition(x, theta, u0, u1, dt, discretization, constants) -> x_next`` and
-* ``output(x, theta, u0, constants) -> y``,
-
-where ``constants`` (``n_constants`` of them) are numbers that may change
-between passes without rebuilding the compiled filter,
-
-as SX expressions, so that the filter's Jacobians are exact
-(Best & Bogdanski 2017, eq. 7-10: the parameters join the state and have no
-dynamics of their own).
-
-Two discretisations of ``xdot = A x + B u`` over a sample ``T``:
+A filter model gives ``transition(x, theta, u0, u1, dt, discretization, constants) -> x_next`` and
+``output(x, theta, u0, constants) -> y`` as SX expressions, so that the filter's Jacobians are exact
+(Best & Bogdanski 2017, eq. 7-10); ``constants`` may change between passes without rebuilding the
+compiled filter. Two discretisations of ``xdot = A x + B u`` over a sample ``T``:
 
 ``euler``
-    ``x + T (A x + B u0)``: the paper's. A filter built on it converges to
-    the Euler equivalent of the true system, eigenvalues ``(e^{lambda T}-1)/T``.
+    ``x + T (A x + B u0)``, the paper's; a filter on it converges to the Euler equivalent of the system.
 ``exact``
-    The exact discretisation of the current model, inputs linear between
-    samples (first-order hold, the default) or held (``zoh``):
-    ``x_next = e^{A T} x + T (phi1 - phi2)(A T) B u0 + T phi2(A T) B u1``
-    with ``phi1(z) = (e^z - 1)/z``, ``phi2(z) = (e^z - 1 - z)/z^2``. For a
-    modal ``A`` each block is a complex (or real) scalar, so these are closed
-    forms; near ``z = 0`` a Taylor series replaces them.
+    ``x_next = e^{A T} x + T (phi1 - phi2)(A T) B u0 + T phi2(A T) B u1`` (first-order hold, the
+    default; ``zoh`` holds the input), in closed form per modal block, by a Taylor series near ``z = 0``.
 """
 
 from __future__ import annotations

@@ -1,19 +1,8 @@
 """IEKF runs in results archives: per-pass history, final model, resume state, checkpoints.
 
-A run ``runs/<name>`` holds (see ``results/RESULTS_LAYOUT.md``):
-
-* ``history/``: ``index``, ``parameters (n_pass, n_theta)``,
-  ``fit_filter`` and ``fit_continuous (n_pass, n_y)`` in percent,
-  ``trace_p``, ``min_eig_p``, ``seconds``;
-* ``model``: the model after the last recorded pass;
-* ``state``: the filter state (parameters and P in normalised units, the
-  scales) that a resume continues from;
-* ``options``: the :class:`~identification.iekf.IEKFOptions`;
-* attributes ``dt``, ``stop_reason``, ``seconds``.
-
-Because a pass depends only on the parameters and P it starts from and on
-the data, a run resumed from its checkpoint reaches the same parameters as
-one that was never interrupted.
+A run ``runs/<name>`` holds its history, model, resume state and options (``results/RESULTS_LAYOUT.md``).
+A pass depends only on the parameters and P it starts from and on the data, so a run resumed from its
+checkpoint reaches the same parameters as one that was never interrupted.
 """
 
 from __future__ import annotations

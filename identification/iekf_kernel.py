@@ -1,29 +1,13 @@
 """The IEKF pass with the covariance algebra written as C loops around two small generated functions.
 
-The filter step of :mod:`identification.iekf_pass` is one CasADi SX
-expression: model, Jacobians and the covariance algebra unrolled into
-scalar instructions (118k for the spline-nonlinear model at n = 4 with 99
-filter states, nearly all of them the ``m^2`` covariance terms). Here CasADi
-generates only what is model-specific, evaluated where the step needs it:
-
-* ``measure(z, u0, c) -> (h, H)`` with ``H`` as its nonzeros, row by row;
-* ``predict(z, u0, u1, c) -> (x_next, E)`` with ``E = Phi[:n_x, :] - [I 0]``
-  as its nonzeros, row by row.
-
-The transition Jacobian ``Phi = I + E`` differs from the identity only in
-the rows of the ``n_x`` true states (the parameters have no dynamics), so
-the congruence ``Phi P Phi'`` is the low-rank update
-``P + G + G' + E G'`` with ``G = E P`` (``n_x`` rows): ``O(n_x m nnz(E))``
-work instead of the ``O(m^3)`` of a dense product. The measurement update is
-the same Joseph identity as the generated step
-(``P - K V' - V K'``, ``V = P H' - K S / 2``), computed on the packed upper
-triangle column by column (contiguous, so the compiler vectorises it);
-``S`` is inverted by Gauss-Jordan elimination with partial pivoting. The
-``paper`` form (eq. 11-14) is ``P - K W'`` then ``P + G + G'``.
-
-The sparsity patterns of ``H`` and ``E`` are written into the C source as
-constant tables, so that the library's cache key (a hash of the source)
-names the model exactly.
+Unrolled, the ``m^2`` covariance terms dominate a large filter step. Here CasADi generates only the
+model-specific ``measure(z, u0, c) -> (h, H)`` and ``predict(z, u0, u1, c) -> (x_next, E)``,
+``E = Phi[:n_x, :] - [I 0]``, both as nonzeros row by row. The parameters have no dynamics, so the
+congruence is the low-rank update ``Phi P Phi' = P + G + G' + E G'``, ``G = E P``: ``O(n_x m nnz(E))``
+work instead of ``O(m^3)``. The update is the Joseph identity of :mod:`identification.iekf_pass` on the
+packed upper triangle, column by column (contiguous, so vectorised); ``S`` is inverted by Gauss-Jordan
+elimination with partial pivoting. The sparsity patterns are constant tables in the C source, so the
+library's cache key names the model exactly.
 """
 
 from __future__ import annotations

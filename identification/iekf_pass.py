@@ -1,33 +1,16 @@
 """One pass of the Identifying EKF over a record: the filter step in CasADi and its compiled loop.
 
-The augmented state is ``z = [x; theta]`` (Best & Bogdanski 2017, eq. 7-8);
-``P`` is carried as the nonzeros of its upper triangle (column-major, the
-order of ``casadi.Sparsity.upper``), so that symmetry holds by construction
-and only half the covariance arithmetic is generated.
+The augmented state is ``z = [x; theta]`` (Best & Bogdanski 2017, eq. 7-8); ``P`` is carried as the
+nonzeros of its upper triangle (``casadi.Sparsity.upper`` order), symmetric by construction. The
+``paper`` covariance form (eq. 11-14) can lose positive definiteness and is kept to reproduce the paper;
+``joseph`` (default) updates with ``P - K V' - V K'``, ``V = P H' - K S / 2`` (the Joseph form at a third
+of its cost) and predicts with ``Phi P Phi' + T Q``, ``Phi`` the exact transition Jacobian, which keeps
+``P`` positive definite.
 
-Two covariance forms:
-
-``paper`` (eq. 11-14)
-    ``K = P H' (H P H' + R)^-1``, ``P <- (I - K H) P``,
-    ``P <- P + T (F P + P F' + Q)``, ``z <- z + T f(z, u) + K (y - h)``,
-    with ``F = (Phi - I)/T`` where ``Phi`` is the Jacobian of the discrete
-    transition (for ``euler`` exactly the continuous Jacobian of eq. 9).
-    It can lose positive definiteness; kept to reproduce the paper.
-``joseph`` (default)
-    Update then predict: ``P+ = (I - K H) P (I - K H)' + K R K'``, computed as
-    ``P - K V' - V K'`` with ``V = P H' - K S / 2`` (an identity for any
-    ``K``, so errors in ``K`` still enter to second order, at a third of the
-    product form's cost); ``z+ = z + K e``; ``z <- phi(z+)``,
-    ``P <- Phi P+ Phi' + T Q`` with ``Phi`` the exact Jacobian of the
-    discrete transition at ``z+``. A congruence plus a positive term keeps
-    ``P`` positive definite.
-
-The pass runs as CasADi-generated C called in a loop by a small C driver
-compiled into the same library: no Python per sample. Where the step is
-large (the spline-nonlinear model), only the model and its Jacobians are
-generated and the covariance algebra runs as C loops with the low-rank
-prediction instead (:mod:`identification.iekf_kernel`, ``kernel``). Without a C compiler
-the step runs under CasADi's virtual machine, lifted with ``mapaccum``.
+The pass is CasADi-generated C looped by a small C driver in the same library. A large step (the
+spline-nonlinear model) generates only the model and its Jacobians, the covariance algebra running as
+C loops (:mod:`identification.iekf_kernel`). Without a C compiler the step runs in CasADi's virtual
+machine under ``mapaccum``.
 """
 
 from __future__ import annotations

@@ -1,28 +1,13 @@
 """Batch least squares and ARX models (seed appendix A.2.1-A.2.2; Ljung 1987, ch. 7.3).
 
-An ARX model with ``n_y`` outputs and ``n_u`` inputs is (appendix eq. A.38)
+An ARX model (appendix eq. A.38) ``y(k) + A_1 y(k-1) + ... + A_na y(k-na) = sum_j sum_i
+b_{j,i} u_j(k - nk_j - i) + e(k)`` has full ``A_i`` (MIMO). All outputs share the regressor
+(eq. A.52-A.55), so one QR factorisation of ``Phi`` gives every column of ``Theta`` (eq. A.51).
 
-    y(k) + A_1 y(k-1) + ... + A_na y(k-na)
-        = sum_j sum_{i=0}^{nb_j - 1} b_{j,i} u_j(k - nk_j - i) + e(k),
-
-with ``A_i`` (n_y, n_y) matrices (full: MIMO) and ``e`` white. Every output
-shares the regressor ``phi(k) = [-y(k-1)', ..., -y(k-na)', u_1(k-nk_1), ...,
-u_1(k-nk_1-nb_1+1), u_2(...), ...]`` (eq. A.52-A.55), so the parameters of
-all outputs come from one QR factorisation of ``Phi``: ``Theta = (Phi'Phi)^-1
-Phi'Y`` (eq. A.51), column by column.
-
-Excitation. The estimate is unique only when ``Phi'Phi`` is non-singular
-(persistent excitation, appendix A.2.2 example). The test is done on ``Phi``
-with its columns scaled to unit norm (so that units do not matter), by its
-condition number from the singular values: above :data:`CONDITION_LIMIT`
-(1e10 for ``Phi``, i.e. 1e20 for ``Phi'Phi``) an :class:`ExcitationError`
-is raised. The limit is set so high because the solution comes from a QR
-factorisation of ``Phi``, never from ``Phi'Phi``: its relative error is
-about ``cond(Phi) * eps``, so at the limit some six significant digits
-remain. Well-posed problems sampled fast sit far below the limit but above
-the naive ``1/eps`` for ``Phi'Phi``: the paper's linear example at 500 Hz
-(na = 5) has ``cond(Phi) = 3e8``. A singular ``Phi`` (a constant input with
-two input lags, a zero input) reaches 1e15 or more.
+Excitation is tested on ``Phi`` with unit-norm columns (units do not matter): a condition number above
+:data:`CONDITION_LIMIT` raises :class:`ExcitationError`. The limit is high because the solution comes
+from the QR factor of ``Phi``, never from ``Phi'Phi``: its relative error is about ``cond(Phi) * eps``,
+leaving some six significant digits at the limit.
 """
 
 from __future__ import annotations
@@ -80,11 +65,6 @@ class LeastSquaresResult:
     residuals: np.ndarray
     condition_number: float
     gram_inverse: np.ndarray
-
-    @property
-    def standard_errors(self) -> np.ndarray:
-        """Square roots of the covariance diagonals, shape (n_p, n_y)."""
-        return np.sqrt(np.einsum("kii->ik", self.covariance))
 
 
 def least_squares(phi: Any, y: Any, *, names: tuple[str, ...] | None = None,

@@ -1,12 +1,8 @@
 """Fit metrics, per output and averaged over outputs.
 
-* ``percentage_explanation`` is the paper's R (Best & Bogdanski, eq. 17):
-  ``R = (1 - sum (y - yhat)^2 / sum y^2) * 100``. It measures the residual
-  against the signal's raw energy, mean included.
-* ``nrmse_fit`` is the fit of MATLAB's ``compare``:
-  ``100 * (1 - ||y - yhat|| / ||y - mean(y)||)``.
-* ``r_squared`` is the coefficient of determination
-  ``1 - sum (y - yhat)^2 / sum (y - mean(y))^2``.
+``percentage_explanation`` is the paper's R (Best & Bogdanski, eq. 17), ``100 (1 - sum (y - yhat)^2 / sum y^2)``:
+the residual against the signal's raw energy, mean included. ``nrmse_fit`` is MATLAB ``compare``'s
+``100 (1 - ||y - yhat|| / ||y - mean(y)||)``; ``r_squared`` is ``1 - sum (y - yhat)^2 / sum (y - mean(y))^2``.
 """
 
 from __future__ import annotations

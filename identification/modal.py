@@ -115,7 +115,6 @@ class ModalStructure:
                     f"complex pair {pair + 1} must be tied to one output by both its fixed C entries"
                 )
 
-    # ------------------------------------------------------------ builders
     @classmethod
     def default(cls, n: int, n_u: int, n_y: int) -> "ModalStructure":
         """Pairs first as far as possible, each mode tied to the next output in turn.
@@ -156,7 +155,6 @@ class ModalStructure:
             fixed.extend((output, state) for state in states)
         return cls(pairs, real, n_u, n_y, tuple(fixed))
 
-    # --------------------------------------------------------------- sizes
     @property
     def n(self) -> int:
         """Model order (number of states)."""
@@ -222,7 +220,6 @@ class ModalStructure:
         modes += [(2 * self.n_complex_pairs + r,) for r in range(self.n_real)]
         return modes
 
-    # ----------------------------------------------------- pack and unpack
     def matrices(self, theta: Any, backend: Any = np) -> tuple[Any, Any, Any, Any]:
         """A, B, C, D from theta, as NumPy arrays or (``backend=casadi.SX``) symbolic matrices.
 
@@ -468,7 +465,6 @@ class ModalModel(StateSpaceModel):
 
         return frequency_response(self, frequencies_hz, level=level)
 
-    # --------------------------------------------------------------- modes
     def mode_eigenvalues(self) -> np.ndarray:
         """One eigenvalue per mode, ``sigma + j|omega|`` for pairs, real for poles (pairs first)."""
         theta = self.parameters
@@ -495,7 +491,6 @@ class ModalModel(StateSpaceModel):
         """Every eigenvalue in the open left half-plane."""
         return bool(np.all(self.mode_eigenvalues().real < 0))
 
-    # ---------------------------------------------------------- simulation
     def simulate_outputs(self, u: Any, dt: float, *, method: str = "foh", x0: Any = None, return_states: bool = False) -> Any:
         """Output of the model driven by ``u`` from state ``x0`` (default zero).
 
@@ -565,7 +560,6 @@ class ModalModel(StateSpaceModel):
             return y
         return x @ self.C.T + u @ self.D.T, x
 
-    # -------------------------------------------------------------- export
     def to_statespace(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
         """``(A, B, C, D, None)``: continuous time."""
         return self.A, self.B, self.C, self.D, None

@@ -1,24 +1,13 @@
 """Model-order selection from a series of IEKF identifications (Best & Bogdanski 2017, section 4.3).
 
-The paper prefers the lowest order that explains the outputs very well and
-whose identification is well conditioned: trace(P) settles and the
-parameters stop moving. Orders with more parameters than the data need fit
-marginally better while trace(P) grows and parameters drift.
-
-Measures, over the last ``window`` passes of each run:
-
-``trace_growth``
-    relative change of trace(P), per ``window`` passes (0.11 = grew 11 %);
-``drift``
-    the largest relative change of any parameter, per ``window`` passes
-    (relative to max(|value|, 0.01 x the largest parameter), so that a
-    parameter passing through zero does not count as infinite drift).
-
-An order converges when its run stopped on the IEKF's own settling test,
-or when both measures are below their tolerances. The chosen order is
-the lowest converged order whose mean R is within ``fit_margin`` points of
-the best mean R of all orders; when no order converges, the lowest order
-within the margin.
+The paper prefers the lowest order that explains the outputs very well and whose identification is well
+conditioned: trace(P) settles and the parameters stop moving, where an order with more parameters than
+the data need fits marginally better while trace(P) grows and parameters drift. Over the last ``window``
+passes, ``trace_growth`` is the relative change of trace(P) and ``drift`` the largest relative change of
+a parameter (relative to max(|value|, 0.01 x the largest parameter), so that a zero crossing is not
+infinite drift). An order converges when its run stopped on the IEKF's settling test or both measures
+are within tolerance; the choice is the lowest converged order whose mean R is within ``fit_margin``
+points of the best (with none converged, the lowest order within the margin).
 """
 
 from __future__ import annotations

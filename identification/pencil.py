@@ -1,33 +1,12 @@
 """Singular pencil (SP) models and their joint state and parameter estimation (seed appendix A.4.2).
 
-An SP model (Salut, Aguilar-Martin & Lefebvre 1979, 1980; Aplevich 1981,
-1991; Chen, Aplevich & Wilson 1986) relates an internal variable
-``x (n)`` and the external variables ``w = [u; y]`` (``n_u + n_y``) by
-
-    E x(k+1) = F x(k) + G w(k),
-
-``E``, ``F`` of shape ``(n + n_y, n)`` and ``G`` of shape
-``(n + n_y, n_u + n_y)``: the appendix's ``[DE - F, -G] [x; w] = 0`` (eq. A.101)
-with ``D`` the forward shift. Two special cases (eq. A.102-A.105):
-
-* state space: ``E = [I; 0]``, ``F = [A; C]``, ``G = [[B, 0], [D, -I]]``;
-* ARX (and ARMAX): the observer form ``y(k) = x_1(k) + B_0 u(k)``,
-  ``x_i(k+1) = x_{i+1}(k) - A_i y(k) + B_i u(k)``, whose parameters appear
-  only in G, multiplying the measured ``w``.
-
-Because the parameters of the ARX form multiply measured signals, the state
-and the parameters ``gamma`` evolve *linearly* with known, time-varying
-matrices (eq. A.106-A.109)::
-
-    x(k+1) = S x(k) + Psi(k) gamma + c e(k)      (S the block shift)
-    y(k)   = x_1(k) + psi_0(k)' gamma + e(k)
-
-so an ordinary Kalman filter on ``z = [x; gamma]`` estimates both at once,
-with no linearisation. The noise ``e`` enters both equations (``c`` are
-the ARMAX noise parameters ``C*``, taken as known); substituting
-``e(k) = y(k) - H(k) z(k)`` decorrelates them:
-``z(k+1) = (F(k) - G_e H(k)) z(k) + G_e y(k)`` with no process noise,
-``G_e = [c; 0]`` (Anderson & Moore 1979, sec. 5.5).
+An SP model (Aplevich 1981, 1991) relates an internal variable ``x (n)`` and the external variables
+``w = [u; y]`` by ``E x(k+1) = F x(k) + G w(k)`` (eq. A.101); state space and ARX are special cases
+(eq. A.102-A.105). In the ARX observer form the parameters ``gamma`` multiply measured signals only, so
+state and parameters evolve linearly with known time-varying matrices (eq. A.106-A.109) and an
+ordinary Kalman filter on ``z = [x; gamma]`` estimates both, with no linearisation. The noise entering
+both equations is decorrelated by substituting ``e(k) = y(k) - H(k) z(k)`` (Anderson & Moore 1979,
+sec. 5.5).
 """
 
 from __future__ import annotations

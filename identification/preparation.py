@@ -1,26 +1,11 @@
 """Reading settings and data preparation, kept with the model so that it can be applied to raw files again.
 
-A model identified from measured data is a model of *prepared* signals:
-each chosen channel multiplied by its scale factor (a steering ratio, a unit
-conversion), then its offset removed. The offsets are estimated on the
-estimation records, by default each record's mean (``detrend="mean"``),
-optionally a straight line through each record (``detrend="linear"``), or
-not at all (``detrend="none"``). Each estimation record keeps its own
-offsets (different runs of a campaign sit at different operating points and
-sensor offsets), and the sample-weighted mean of them is the model's
-operating point, applied to any other data (validation records, new files).
-
-A :class:`Preparation` is a frozen value holding the reading settings
-(:class:`ReadSettings`), the scale factors and the estimated offsets. It is
-archived with an identification run, so that an archived model can be
-re-applied to the raw files: ``prepare_validation(path, preparation)``.
-
-Workflow::
-
-    estimation, preparation = load_records(["run1.csv", "run2.mat"], inputs=["steer"],
-                                           outputs=["yaw_rate"], scale={"steer": 1 / 16})
-    model = identify_iekf(estimation, structure).model
-    validation = prepare_validation("run3.csv", preparation)   # estimation offsets applied
+A model identified from measured data is a model of prepared signals: each channel multiplied by its
+scale factor, then its offset removed, per estimation record (runs of a campaign sit at different
+operating points); the sample-weighted mean of the offsets is the model's operating point for any
+other data. A :class:`Preparation` (frozen) holds the :class:`ReadSettings`, the factors and the offsets
+and is archived with a run, so that ``prepare_validation(path, preparation)`` re-applies it.
+docs/measured_data.md ("Preparation") shows the workflow.
 """
 
 from __future__ import annotations
@@ -162,7 +147,6 @@ def _as_raw(data: IOData) -> RawRecord:
                      (data.t,) * len(values), data.input_units + data.output_units, "t")
 
 
-# --------------------------------------------------------------------- preparation
 @dataclass(frozen=True, eq=False)
 class RecordOffsets:
     """The offsets removed from one estimation record (in scaled units).

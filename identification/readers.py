@@ -1,27 +1,11 @@
 """Readers of measurement files: tolerant CSV, whitespace tables, MATLAB .mat, ASAM MDF4.
 
-Every reader returns a :class:`RawRecord`: the chosen channels as they are in
-the file, each with the time it was sampled at (or none, when time comes from
-``dt``), and a way to name a sample's place in the file ("line 57" in a text
-file, "sample 57" elsewhere) for error messages. :mod:`identification.timebase`
-turns a raw record into a uniformly sampled :class:`~identification.data.IOData`.
-
-Channels are chosen by name; in text tables also by 1-based column number
-(a file without a header row has only numbers), in MATLAB files as a variable,
-a struct field ``run.steer``, or one column of a matrix ``y:2``.
-
-Text tables (``.csv``, ``.dat``, ``.txt``)
-    Lines starting with ``#``, ``%`` or ``//`` before the data are comments.
-    The first other line is a header if any of its cells is not a number; a
-    second line with no number at all is taken as a units row. The delimiter
-    is the one of ``,``, ``;``, tab found most in the first line of a
-    ``.csv`` (a ``.dat``/``.txt`` is whitespace-separated unless its first line
-    holds one of them). Only the chosen columns must hold numbers: text,
-    blank cells and trailing delimiters elsewhere are ignored. The columns are
-    parsed by NumPy's C reader (a decimal comma, ``0,5``, is read where the
-    delimiter is not a comma); on any irregularity (a blank line of spaces, a
-    ``%`` comment, a short row, a text cell) a careful line-by-line pass reads the file again
-    and either parses it or names the column and line at fault.
+Every reader returns a :class:`RawRecord`: the chosen channels as they are in the file, each with the
+time it was sampled at (none when time comes from ``dt``), and a way to name a sample's place ("line
+57", "sample 57") for error messages; :mod:`identification.timebase` makes it uniformly sampled. The
+files and channel names accepted are in docs/measured_data.md ("Files"). Text tables are parsed by
+NumPy's C reader; on any irregularity a careful line-by-line pass reads the file again and either
+parses it or names the column and line at fault.
 """
 
 from __future__ import annotations
@@ -112,7 +96,6 @@ def _float(cell: str, decimal_comma: bool = False) -> float | None:
         return None
 
 
-# ------------------------------------------------------------------- text tables
 def _text_lines(path: Path) -> tuple[list[str], str]:
     """The file's first lines (enough to find its header) and the encoding that reads it."""
     for encoding in ("utf-8-sig", "latin-1"):
@@ -344,7 +327,6 @@ def _existing(path: str | Path) -> Path:
     return path
 
 
-# ------------------------------------------------------------------- MATLAB files
 def _mat_variables(path: Path) -> tuple[Callable[[str], Any], list[str]]:
     """A lookup ``name -> array`` for a .mat file (v4-v7 by scipy.io, v7.3 by h5py) and its variable names."""
     import scipy.io
@@ -454,7 +436,6 @@ def read_mat(
     return RawRecord(path.name, tuple(names), tuple(values), (t,) * len(names), ("-",) * len(names), time_name)
 
 
-# --------------------------------------------------------------------- MDF4 files
 def read_mdf(
     path: str | Path,
     *,
@@ -509,7 +490,6 @@ def read_mdf(
     return RawRecord(path.name, tuple(names), tuple(values), tuple(times), tuple(units), "time stamps")
 
 
-# ---------------------------------------------------------------------- dispatch
 def _is_mdf(path: Path) -> bool:
     """An ASAM MDF file by its identification block ("MDF     " or "UnFinMF ")."""
     try:

@@ -6,19 +6,10 @@ Plain form with a forgetting factor ``lambda`` (appendix eq. A.76-A.78)::
     theta(k) = theta(k-1) + K(k) (y(k) - phi(k)' theta(k-1))
     P(k)     = (P(k-1) - K(k) phi(k)' P(k-1)) / lambda
 
-``lambda = 1`` is ordinary RLS (A.69-A.71), which reproduces batch least
-squares when started from a batch fit ``theta0``, ``P0 = (Phi0'Phi0)^-1`` of
-the first samples (appendix Remark 2). A rectangular (sliding) window of
-``L`` samples (appendix A.2.4; Goodwin & Payne 1977) adds the newest sample
-as above and then removes the one ``L`` samples back by the down-date
-``P <- P + P phi phi' P / (1 - phi' P phi)``,
-``theta <- theta - P phi (y - phi' theta)`` (with the new P), so that the
-estimate is the least-squares fit of the last ``L`` samples.
-
-``form="sqrt"`` and ``form="ud"`` propagate factors of P instead
-(:mod:`identification.factorised`); they equal the plain form in exact
-arithmetic and keep P positive definite under rounding.
-Several outputs share one regressor and one P (one column of theta each).
+``lambda = 1`` started from a batch fit reproduces batch least squares (appendix Remark 2). A
+rectangular window of ``L`` samples (appendix A.2.4; Goodwin & Payne 1977) also removes the sample
+``L`` back by a down-date. ``form="sqrt"`` and ``form="ud"`` propagate factors of P
+(:mod:`identification.factorised`). Several outputs share one regressor and one P.
 """
 
 from __future__ import annotations

@@ -1,34 +1,16 @@
 """Residual analysis: is what the model leaves unexplained white and independent of the input?
 
-For a model that captures the system, the residuals ``e = y - y_hat`` of an
-output-error model (simulated from rest) are the measurement noise: white
-and uncorrelated with the input. An under-modelled system leaves dynamics
-in them, seen as autocorrelation and as correlation with past inputs
-(Ljung 1999, sec. 16.6; MATLAB's ``resid``).
+The output-error residuals ``e = y - y_hat`` of a model that captures the system are the measurement
+noise: white and uncorrelated with the input (Ljung 1999, sec. 16.6; MATLAB's ``resid``).
 
-* Whiteness: the normalised autocorrelation ``r_e(k)`` at lags 1..L against
-  the band ``+/- z / sqrt(N)`` of white noise, and the Ljung-Box
-  portmanteau statistic ``Q = N (N + 2) sum_k r_e(k)^2 / (N - k)``,
-  chi-square with L degrees of freedom for white residuals; its p-value
-  is ``residual_whiteness_p``.
-* Independence: the normalised cross-correlation ``r_ue(k)`` of each input
-  with the residual at lags -L..L; for white residuals each value has
-  standard deviation ``1 / sqrt(N)`` whatever the input's colour, so the
-  band is the same ``+/- z / sqrt(N)``. Its largest magnitude over inputs
-  and lags is ``input_correlation_max``.
-  The values at neighbouring lags are correlated (as the input's own
-  autocorrelation ``R_u`` says), so the per-lag band does not make a test
-  at its level over all lags; the verdict uses the portmanteau
-  ``N r' R_u^-1 r`` over the 2L + 1 lags, chi-square with as many degrees of
-  freedom for white residuals (Ljung 1999, eq. 16.68), per input, with a
-  Bonferroni correction over the inputs: ``input_correlation_p``.
-* Innovation consistency of a Kalman filter: the mean normalised
-  innovation squared over a pass against the chi-square band of
-  ``N n_y`` degrees of freedom divided by N (Bar-Shalom et al. 2001,
-  sec. 5.4): above the band the filter's assumed noise is too small (its
-  p too large for its R), below it too large.
-
-The bands are at 99 % by default, as the workbench's residual page draws them.
+* Whiteness: the autocorrelation at lags 1..L against the band ``+/- z / sqrt(N)`` and the Ljung-Box
+  statistic, chi-square with L degrees of freedom: ``residual_whiteness_p``.
+* Independence: the input-residual cross-correlation at lags -L..L against the same band
+  (``input_correlation_max``). Neighbouring lags are correlated, so the verdict is the portmanteau
+  ``N r' R_u^-1 r`` over the 2L + 1 lags (Ljung 1999, eq. 16.68) per input, Bonferroni-corrected over
+  the inputs: ``input_correlation_p``.
+* Innovation consistency of a Kalman filter: the mean normalised innovation squared against the
+  chi-square band of ``N n_y`` degrees of freedom over N (Bar-Shalom et al. 2001, sec. 5.4).
 """
 
 from __future__ import annotations

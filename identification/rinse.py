@@ -77,10 +77,6 @@ class PassHistory:
     def passes_run(self) -> int:
         return len(self.history)
 
-    def parameter_history(self) -> np.ndarray:
-        """Parameters after each pass, shape (passes, n_theta)."""
-        return np.array([record.parameters for record in self.history])
-
 
 @dataclass(frozen=True, eq=False)
 class Assessment:

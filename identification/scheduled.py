@@ -1,36 +1,17 @@
 """Scheduled (linear-parameter-varying) modal models: one family from models identified at grid points.
 
-Models of one :class:`~identification.modal.ModalStructure` identified at
-several values of a scheduling variable (for a car: its speed) become one
-family whose modal parameters (sigma, omega, B, C, D) are interpolated
-piecewise linearly in that variable. Interpolating entry by entry is only
-meaningful when every grid model labels its modes alike and fixes each
-mode's state coordinates alike, so before interpolating:
+Models of one :class:`~identification.modal.ModalStructure` identified at several values of a
+scheduling variable (for a car: its speed) become one family whose modal parameters (sigma, omega,
+B, C, D) are interpolated piecewise linearly in that variable; outside the grid the family is not
+defined. Entry-by-entry interpolation needs every grid model in the same coordinates, so first
 
-* **gauge.** A complex pair's block ``[[s, w], [-w, s]]`` commutes with
-  every scaled rotation ``T = [[p, q], [-q, p]]``, so ``x -> T x`` leaves A
-  unchanged and moves only B and C; and ``w < 0`` is the same mode as
-  ``w > 0`` seen through the reflection ``diag(1, -1)``. Each model is
-  brought to the **input gauge**: pairs reflected to ``w > 0``, each pair's
-  first-input B entries made ``(1, 0)`` and each real pole's 1, so that a
-  mode's C columns are its residues for that input, input-output quantities
-  independent of how the identification happened to scale the states. These
-  are what is interpolated. (Interpolating in the structure's own gauge,
-  fixed C entries 1, was measured worse: for the order-2 handling model
-  identified at 15 and 25 m/s, validation R at 20 m/s was 97.4 % against
-  99.4 % in the input gauge and 99.5 % for the model identified at 20 m/s;
-  there the pair's B and C entries run into the hundreds and their products,
-  not the entries, vary smoothly.) :meth:`ScheduledModalModel.model_at`
-  returns the **canonical form**: the structure's fixed C entries 1 again.
-* **mode matching**, made explicit: walking the grid in increasing order,
-  the modes of each model are assigned to those of its neighbour by the
-  least total relative eigenvalue distance (pairs among pairs, real poles
-  among real poles; the assignment problem, solved exactly) and permuted
-  into the neighbour's slots. The permutation and its cost at every grid
-  point are kept (:attr:`ScheduledModalModel.matching`).
-
-Between grid points the parameters are interpolated linearly; outside the
-grid the family is not defined (an error names the range).
+* **gauge**: each model is brought to the input gauge (pairs reflected to ``w > 0``, each pair's
+  first-input B entries made ``(1, 0)`` and each real pole's 1), where a mode's C columns are its
+  residues for that input and independent of how identification scaled the states;
+  :meth:`ScheduledModalModel.model_at` returns the canonical form (fixed C entries 1) again;
+* **mode matching**: walking the grid upwards, each model's modes are assigned to its neighbour's by
+  the least total relative eigenvalue distance (pairs among pairs, real poles among real poles),
+  kept in :attr:`ScheduledModalModel.matching`.
 """
 
 from __future__ import annotations

@@ -1,67 +1,11 @@
 """Cubic-spline basis for the spline-nonlinear IEKF (Best & Bogdanski, section 5, eq. 20-22).
 
-Each scalar coefficient of a modal model's A, B, C, D may vary with the state
-or input it multiplies, as a cubic spline through ``p`` nodes whose ordinates
-``gamma`` are the parameters. The spline is linear in ``gamma``, so it is
-written with fixed basis functions::
-
-    c(x) = sum_i gamma_i * phi_i(x)
-
-where ``phi_i`` is the spline through the unit vector ``e_i`` at the nodes.
-
-End conditions
---------------
-The spline is the *natural* cubic spline: continuous in value, slope and
-curvature (C2) at every interior node, zero curvature at the two end nodes, and
-continued beyond the end nodes by the straight line with the end node's value
-and slope. Zero curvature at the ends is what makes that continuation C2 as
-well, so the whole function is C2 and extrapolates predictably, which is what
-eq. 20's linear outer regions are for.
-
-The paper's variant (eq. 21-22) differs at its central node, which is
-"constrained by value and with zero curvature" instead of being C2, and eq. 22
-gives the coefficients for negative ``x`` from nodes 1-3 alone. Read literally,
-each half is then a separate natural spline, the two meeting at the central
-node in value and (zero) curvature but not necessarily in slope. That variant
-is not used here because
-
-* a slope jump at ``x = 0``, where states spend most of their time, would make
-  the filter's Jacobian jump each time a state changes sign;
-* it pins the curvature to zero at the centre, where a coefficient that varies
-  with the magnitude of its variable (Figure 6) has its turning point;
-* it is undefined for an even ``p``, which has no central node; and the text
-  is ambiguous enough that the reading above is itself a guess.
-
-The natural spline has the same number of parameters (``p``), the same linear
-outer regions and a single definition for every ``p``.
-
-How it is evaluated
--------------------
-On interval ``k`` (``x_k <= x < x_k+1``, width ``h``) with ``tau = (x - x_k)/h``
-the spline is the classic moment form::
-
-    s = (1 - tau) g_k + tau g_k+1 + h^2/6 [(b^3 - (1 - tau)) M_k + (a^3 - tau) M_k+1]
-
-with ``a = clip(tau, 0, 1)``, ``b = 1 - a`` and ``M`` the curvatures at the nodes,
-``M = moments @ gamma`` by a matrix computed once in NumPy (``M_0 = M_p-1 = 0``).
-Inside an interval ``a = tau`` and this is the cubic; below the first node the
-first interval is used with ``tau < 0``, above the last the last one with
-``tau > 1``, and the clip turns the cubic terms into the linear continuation
-(their cubic part meets a zero end curvature). So the same few operations serve
-all ``p + 1`` regions of eq. 20.
-
-``symbolic`` builds this as a CasADi graph in which ``p`` comparisons of ``x``
-with the nodes (``p - 2`` choose the interval, two do the clip) are made once
-and shared by all ``p`` basis functions. Comparisons have zero derivative, so
-Jacobians and Hessians with respect to ``x`` and ``gamma`` are exact (the
-clip uses these flags too: CasADi's ``fmin``/``fmax`` would halve the slope at
-a node, where their arguments tie). Precomputing the four cubic coefficients of every
-interval would be equivalent, but combine ``4 (p - 1)`` coefficients from
-``gamma`` where this needs ``p - 2`` curvatures (a trial of that form took 224
-instructions for ``p = 5`` before handling the linear ends). With evenly spaced nodes the
-width is one number and ``tau`` comes from the count of nodes passed. For
-``p = 5`` the graph of ``symbolic_value`` has 105 instructions
-(``casadi.Function.n_instructions``, CasADi 3.8), that of ``symbolic`` 95.
+A coefficient of a modal model that varies with the state or input it multiplies is a cubic spline
+through ``p`` nodes whose ordinates ``gamma`` are parameters. The spline is linear in ``gamma``, so it
+is written with fixed basis functions, ``c(x) = sum_i gamma_i * phi_i(x)``, ``phi_i`` the spline through
+the unit vector ``e_i``. It is the natural cubic spline (C2, zero curvature at the end nodes, continued
+linearly beyond them: eq. 20's outer regions) rather than the paper's variant split at a central node;
+docs/identification_notes.md says why and how :meth:`SplineBasis.symbolic` keeps its graph small.
 """
 
 from __future__ import annotations
@@ -315,28 +259,11 @@ def _natural_moments(width: np.ndarray) -> np.ndarray:
 def resample(basis: SplineBasis, gamma: Any, new_basis: SplineBasis) -> np.ndarray:
     """Move a spline onto new nodes: new ordinates are the old spline at the new nodes.
 
-    This is the node redistribution of the paper's section 5 ("periodically as
-    the filter iterates"): ordinates that keep the spline's shape when the
-    range its variable reaches has changed.
-
-    The new spline equals the old one exactly at the new nodes; everywhere if
-    the old spline is a straight line (the basis reproduces linear functions);
-    and everywhere if the new nodes contain the old ones and share their ends
-    (the old spline is then itself the natural spline on the finer nodes).
-    Otherwise it only interpolates the old spline, with a cubic-interpolation
-    error, and imposes zero curvature at the new end nodes. Measured on the
-    spline through ``tanh(2 x)`` at 5 nodes on ``[-1, 1]`` (a range of 1.93),
-    the largest change over ``[-1, 1]`` when moving to
-
-    * 5 nodes on ``[-1.5, 1.5]``: 0.085 (4.4 % of the range),
-    * 5 nodes on ``[-1.2, 1.2]``: 0.031 (1.6 %),
-    * 5 nodes on ``[-0.8, 0.8]``: 0.018 inside the new nodes, 0.060 including
-      the now linear ends,
-    * 7 nodes on ``[-1, 1]``: 0.0057 (0.3 %),
-    * 9 nodes on ``[-1, 1]`` (old nodes kept): rounding only.
-
-    So each redistribution perturbs a strongly curved coefficient by a few
-    percent; the filter's following passes have to absorb that.
+    The node redistribution of the paper's section 5. The new spline equals
+    the old one at the new nodes, and everywhere when the old one is straight
+    or the new nodes contain the old ones and share their ends; otherwise a
+    strongly curved coefficient moves by a few percent of its range
+    (docs/identification_notes.md), which the following passes absorb.
 
     Parameters
     ----------

@@ -1,23 +1,12 @@
 """The spline-nonlinear IEKF (Best & Bogdanski 2017, section 5).
 
-The rinse of the linear IEKF (:mod:`identification.rinse`) and its compiled
-pass run on the spline-modal model of :mod:`identification.spline_modal`,
-with the differences the paper gives:
-
-* the start is the linear model identified on the same data, every node at
-  its linear value, so the first nonlinear model equals the linear one;
-* ``R`` is the residual covariance of the frozen model simulated over the
-  record, recomputed after every pass (normalised units);
-* ``p`` is much lower, so that ``P`` and ``K`` adapt slowly over the record;
-* inputs and outputs are normalised by their largest magnitude, where the
-  linear filter's ``normalize`` divides by the RMS: the B and D splines
-  place their nodes evenly over -1..1, a range that must hold every input
-  sample, so the spline model keeps its own scaling;
-* after each pass the node ranges of the A and C splines move to cover the
-  range their variable reached (0.5 to 99.5 percentiles of the frozen
-  model's states; amplitudes from zero), the splines re-sampled so that
-  their values at the new nodes are kept and ``P`` mapped by the same linear
-  map; B and D nodes stay evenly over -1..1.
+The rinse (:mod:`identification.rinse`) and the compiled pass run on the spline-modal model of
+:mod:`identification.spline_modal`, with the paper's differences: the start is the linear model
+identified on the same data (every node at its linear value); ``R`` is the residual covariance of the
+frozen model, recomputed after every pass; ``p`` is much lower, so that ``P`` and ``K`` adapt slowly.
+Signals are normalised by their largest magnitude (not the RMS of the linear filter), because the B and
+D nodes over -1..1 must hold every input sample. After each pass the A and C node ranges move to the
+range their variable reached, the splines re-sampled at the new nodes and ``P`` mapped alike.
 """
 
 from __future__ import annotations

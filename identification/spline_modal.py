@@ -1,33 +1,18 @@
 """Spline-nonlinear modal models (Best & Bogdanski 2017, section 5, eq. 20-22).
 
-Every coefficient of a linear modal model (:mod:`identification.modal`)
-becomes a cubic spline (:mod:`identification.spline`) of the variable it
-multiplies, through ``p`` evenly spaced nodes whose ordinates are the
-parameters. Which variable each coefficient follows:
+Every coefficient of a linear modal model becomes a cubic spline (:mod:`identification.spline`) of the
+variable it multiplies, through ``p`` evenly spaced nodes whose ordinates are the parameters:
 
-* a complex pair's sigma and omega follow the pair's **amplitude**
-  ``rho = sqrt(x_a^2 + x_b^2 + eps^2)`` (``eps`` a thousandth of a
-  normalised unit keeps its slope finite at rest). Both entries of the pair
-  share one value at each instant, so the block stays a scaled rotation, its
-  eigenvalues are ``sigma(rho) +/- j omega(rho)`` and the mode's frequency and
-  damping are functions of its amplitude: the paper's Figure 8 reading;
-* a real pole's sigma follows its state;
-* ``B_ij`` follows input ``u_j``, ``D_ij`` input ``u_j``;
-* a free ``C_ij`` follows state ``x_j``. The entries fixed to 1 stay fixed:
-  they set the scale of the states, on which the node ranges are placed.
+* a complex pair's sigma and omega follow the pair's amplitude ``rho = sqrt(x_a^2 + x_b^2 + eps^2)``
+  (``eps`` keeps its slope finite at rest), so the block stays a scaled rotation and the mode's
+  frequency and damping are functions of its amplitude (the paper's Figure 8);
+* a real pole's sigma follows its state; ``B_ij`` and ``D_ij`` follow input ``u_j``;
+* a free ``C_ij`` follows state ``x_j``; the entries fixed to 1 set the states' scale.
 
-The model works in normalised units: inputs and outputs divided by their
-largest magnitude on the identification record, so that B and D nodes sit
-evenly over -1..1, and states in the units of the output each is tied to.
-
-Node ranges are constants of the compiled filter (see
-:mod:`identification.iekf_pass`), so they can move between passes: A and C
-nodes follow the range their variable reaches, B and D nodes stay on -1..1.
-
-Time discretisation: as in the linear filter, ``exact`` advances each mode
-exactly over a sample with its coefficients frozen at the sample's start (an
-exponential integrator; exact for the linear model) and the input terms
-``B(u) u`` linear between samples; ``euler`` is the paper's.
+Inputs and outputs are divided by their largest magnitude on the identification record, so that B and D
+nodes sit evenly over -1..1. Node ranges are constants of the compiled filter, so A and C nodes can move
+between passes to the range their variable reaches. ``exact`` advances each mode exactly over a sample
+with its coefficients frozen at the sample's start; ``euler`` is the paper's.
 """
 
 from __future__ import annotations
@@ -75,7 +60,6 @@ class SplineModalStructure:
         if isinstance(self.nodes, bool) or int(self.nodes) != self.nodes or not MIN_NODES <= self.nodes <= MAX_NODES:
             raise InputError(f"nodes must be a whole number from {MIN_NODES} to {MAX_NODES}; got {self.nodes!r}")
 
-    # variables -------------------------------------------------------------
     @property
     def n_variables(self) -> int:
         s = self.linear
@@ -111,7 +95,6 @@ class SplineModalStructure:
         follows += [self.input_variable(j) for _ in range(s.n_y) for j in range(s.n_u)]
         return tuple(follows)
 
-    # parameters --------------------------------------------------------------
     @property
     def n_parameters(self) -> int:
         return self.nodes * self.linear.n_parameters
@@ -130,7 +113,6 @@ class SplineModalStructure:
         """theta as (n_coefficients, p): the node ordinates of each coefficient's spline."""
         return np.asarray(theta, dtype=float).reshape(self.linear.n_parameters, self.nodes)
 
-    # node ranges -------------------------------------------------------------
     def default_ranges(self) -> np.ndarray:
         """(n_variables, 2) of (lower, upper): amplitudes 0..1, states and inputs -1..1."""
         ranges = np.tile([-1.0, 1.0], (self.n_variables, 1))
@@ -358,7 +340,6 @@ class SplineModalModel(StateSpaceModel):
         y = y * self.output_scale
         return (y, x * self.state_scale()) if return_states else y
 
-    # splines -----------------------------------------------------------------
     def spline(self, coefficient: int | str) -> tuple[SplineBasis, np.ndarray]:
         """(basis, ordinates) of one coefficient, by index or name (e.g. ``"sigma1"``, ``"b21"``)."""
         names = self.structure.coefficient_names()
@@ -383,7 +364,6 @@ class SplineModalModel(StateSpaceModel):
             tables[name] = {"variable": variables[follows[index]], "nodes": basis.nodes.copy(), "values": gamma.copy()}
         return tables
 
-    # the linear face -----------------------------------------------------------
     def to_statespace(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
         """The continuous state-space form of :meth:`linear_model` at zero amplitude."""
         return self.linear_model().to_statespace()

@@ -1,21 +1,12 @@
 """State-space conversions: hold equivalents, discrete to continuous, modal form, reduction.
 
-* :func:`continuous_to_discrete` and :func:`discrete_to_continuous` for a
-  zero-order hold (inputs held between samples) and a first-order hold
-  (inputs linear between samples, as the paper's eq. 16 input is). With a
-  first-order hold the exact discrete model ``x(k+1) = Phi x(k) + G1 u(k) +
-  G2 u(k+1)`` is brought to standard form by the state ``xi = x - G2 u``:
-  ``Bd = G1 + Phi G2``, ``Cd = C``, ``Dd = D + C G2`` (from rest, ``xi``
-  starts at ``-G2 u(0)``), with
-  ``G1 = T (phi1 - phi2)(AT) B`` and ``G2 = T phi2(AT) B`` (the phi-functions
-  of :func:`identification.modal.phi_functions`; Franklin, Powell & Workman,
-  *Digital Control of Dynamic Systems*, 3rd ed., sec. 6.3.2).
-* :func:`to_modal` brings a diagonalisable continuous model to the
-  real block-diagonal modal form of :class:`~identification.modal.ModalStructure`,
-  scaled so that the structure's fixed C entries are 1.
-* :func:`balanced_truncation` reduces a stable discrete model (Moore 1981,
-  square-root form of Laub et al. 1987, with eigenvalue-based factors
-  of the Gramians so that non-minimal models reduce too).
+With a first-order hold (inputs linear between samples, as the paper's eq. 16 input is) the exact
+discrete model ``x(k+1) = Phi x(k) + G1 u(k) + G2 u(k+1)`` is brought to standard form by the state
+``xi = x - G2 u``: ``Bd = G1 + Phi G2``, ``Cd = C``, ``Dd = D + C G2``, with ``G1 = T (phi1 - phi2)(AT) B``
+and ``G2 = T phi2(AT) B`` (Franklin, Powell & Workman, *Digital Control of Dynamic Systems*, 3rd ed.,
+sec. 6.3.2). :func:`to_modal` brings a diagonalisable model to the form of
+:class:`~identification.modal.ModalStructure`; :func:`balanced_truncation` reduces a stable discrete
+model (Moore 1981; square-root form of Laub et al. 1987).
 """
 
 from __future__ import annotations

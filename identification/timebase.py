@@ -1,28 +1,9 @@
 """From raw sample times to one uniform time base: segment, jitter, gaps, resampling, decimation.
 
-Order of operations on a :class:`~identification.readers.RawRecord`:
-
-1. ``segment=(T0, T1)`` keeps the samples with ``T0 <= t <= T1`` (in the
-   file's own time), so that a bad stretch elsewhere in the file does not matter.
-2. Time must increase; a step longer than :data:`GAP_FACTOR` times the
-   median step is a gap. Both are errors naming the first offending row.
-3. Without resampling, channels sharing one time base whose sample times stray
-   from the uniform grid through their first and last samples by at most
-   ``jitter_tolerance`` of a step (default :data:`JITTER_TOLERANCE`) are put on
-   that grid; the largest stray, as a fraction of a step, is reported as
-   ``sample_jitter``. Beyond the tolerance it is an error that names the row
-   and suggests ``resample``.
-4. ``resample=HZ`` (and, for channels sampled at different times such as
-   MDF4 channels, by default the rate of the fastest chosen channel) puts each
-   channel on a uniform grid at HZ over the span all channels cover, by linear
-   interpolation. A channel sampled faster than HZ is first low-passed: it is
-   interpolated onto a uniform grid at its own median rate and filtered by an
-   8th-order Butterworth low-pass at 0.8 of the new Nyquist frequency, run
-   forwards and backwards (zero phase).
-5. ``decimate=K`` keeps every K-th sample after a zero-phase FIR anti-aliasing
-   filter (``scipy.signal.decimate``, Hamming window, order 20 K).
-
-The report of what was done goes into the record's ``meta["time_base"]``.
+Applied to a :class:`~identification.readers.RawRecord` in this order: ``segment``; the checks that time
+increases with no gap (:data:`GAP_FACTOR`); sample times within ``jitter_tolerance`` of the uniform grid
+put on it; ``resample`` (linear interpolation, a faster channel low-passed first); ``decimate``. The
+rules are in docs/measured_data.md ("Time base"); what was done goes into ``meta["time_base"]``.
 """
 
 from __future__ import annotations

@@ -1,22 +1,11 @@
 """Scoring a model on estimation and held-out data: simulation, initial state, k-step prediction.
 
-Each function takes a model and an :class:`~identification.data.IOData`
-record, so that any preparation of the record (offsets, scaling, resampling)
-happens before and outside.
-
-* :func:`estimate_initial_state`: the initial state of a linear model by
-  linear least squares. A record that starts mid-motion is not explained by
-  a simulation from rest, however good the model: the output is
-  ``y = y_forced + O x0`` with ``O`` the free responses of the states, linear
-  in ``x0``.
-* :func:`predict` with a horizon ``K``: the output ``K`` samples ahead of a
-  state estimated by a steady-state Kalman filter on the model; for models
-  whose simulation diverges (unstable plants) this is the score that means
-  something. ``K`` large approaches simulation.
-* :func:`score`: NRMSE fit in percent (MATLAB's ``compare``:
-  ``100 (1 - ||y - yhat|| / ||y - mean(y)||)``) and the paper's R (eq. 17)
-  per output.
-* :func:`split_holdout`: the last fraction of a record held out.
+Each function takes a model and an :class:`~identification.data.IOData` record, so that any preparation
+of the record happens before and outside. :func:`estimate_initial_state` explains a record that starts
+mid-motion (``y = y_forced + O x0`` is linear in ``x0``); :func:`predict` with a horizon ``K`` (from a
+steady-state Kalman filter's state) is the score that means something for a model whose simulation
+diverges; :func:`score` gives NRMSE fit and the paper's R (eq. 17) per output; :func:`split_holdout`
+holds out the last fraction of a record.
 """
 
 from __future__ import annotations
