@@ -11,6 +11,12 @@
   improve on the best). Parsimony rule: the smallest order whose mean
   validation fit is within :data:`ORDER_TOLERANCE` points of the best order's;
   models that diverged or are unstable where stability was asked take no part.
+* The IEKF's p (unless ``--p`` is given, or ``--timescale seconds``): each of
+  :data:`P_GRID` identifies on one half of the estimation data and is
+  scored on the other, both ways (two-fold cross-validation); the largest
+  p within :data:`P_TOLERANCE` points of the best mean fit is taken (a
+  larger p converges in fewer passes). Its cost is two half-record runs per
+  candidate, JSON ``tuning_seconds``.
 * Warnings: a model no better than its start (R not above the start's, or
   modes that stayed within :data:`MOVED` of their start values, while it
   explains less than :data:`NOTHING_TO_GAIN` percent) or worse than it by
@@ -60,6 +66,12 @@ __all__ = [
     "choose_order",
     "evaluate",
     "run_warnings",
+    "PTuning",
+    "tune_p",
+    "tunes_p",
+    "given_p",
+    "P_GRID",
+    "P_TOLERANCE",
 ]
 
 AUTO_MAX_ORDER = 8
@@ -72,6 +84,8 @@ NO_BETTER_MARGIN = 0.01  # points: a final fit within this of the start's counts
 MOVED = 1e-3  # relative change of a mode's eigenvalue below which it stayed at its start
 NOTHING_TO_GAIN = 99.0  # percent R: a model this good is no warning for staying at its start
 WORSE_MARGIN = 0.5  # points of R below the start's: the filter made the model worse
+P_GRID = (1e-4, 1e-5, 1e-6)  # p per dominant time constant tried by cross-validation, largest first
+P_TOLERANCE = 0.1  # points of cross-validated fit within which the largest p is taken
 
 
 def register_options(parser: argparse.ArgumentParser) -> None:
@@ -235,6 +249,78 @@ def make_plan(args: argparse.Namespace, records: tuple[IOData, ...], load: Calla
                 preparation, len(held_out))
 
 
+@dataclass(frozen=True)
+class PTuning:
+    """The filter's p chosen by two-fold cross-validation, with each candidate's score and cost."""
+
+    p: float
+    tried: tuple[dict[str, Any], ...]
+    seconds: float
+
+    def summary(self) -> dict[str, Any]:
+        """The public JSON keys ``p``, ``p_tried`` and ``tuning_seconds``."""
+        return {"p": self.p, "p_tried": [dict(row) for row in self.tried], "tuning_seconds": self.seconds}
+
+
+def given_p(options: IEKFOptions) -> PTuning:
+    """No tuning: the p the user gave (or the settings fixed)."""
+    return PTuning(options.p, (), 0.0)
+
+
+def tunes_p(args: argparse.Namespace) -> bool:
+    """Whether the IEKF's p is chosen by cross-validation: no --p given, on the unit-free time scale."""
+    return args.p is None and args.timescale == "auto"
+
+
+def _halves(records: tuple[IOData, ...]) -> tuple[tuple[IOData, ...], tuple[IOData, ...]]:
+    parts = [split_holdout(record, 0.5) for record in records]
+    return tuple(part[0] for part in parts), tuple(part[1] for part in parts)
+
+
+def tune_p(args: argparse.Namespace, plan: Plan, options: IEKFOptions, structure: ModalStructure) -> PTuning:
+    """The IEKF's p by two-fold cross-validation on the estimation records (module docstring).
+
+    Each record is cut in halves; a model identified on the first halves is scored on the second and
+    the reverse, and the two NRMSE fits averaged. Of the grid :data:`P_GRID`, the largest p whose
+    fit is within :data:`P_TOLERANCE` points of the best wins: a larger p moves the parameters
+    faster, so the run converges in fewer passes, and the difference below the tolerance is noise.
+    """
+    started = time.perf_counter()
+    try:
+        first, second = _halves(plan.records)
+    except InputError:  # too short to halve: the run itself names what the record lacks
+        return given_p(options)
+    rows = []
+    for p in P_GRID:
+        trial = dataclasses.replace(options, p=p)
+        began = time.perf_counter()
+        fits, errors = [], []
+        for fit_on, score_on in ((first, second), (second, first)):
+            data = fit_on[0] if len(fit_on) == 1 else fit_on
+            try:
+                result, _ = last_good_on_divergence(
+                    lambda: identify_iekf(data, structure, options=trial, settle_start=plan.settle_start))
+            except WorkbenchError as exc:
+                errors.append(str(exc))
+                continue
+            horizon = args.horizon if args.horizon is not None else default_horizon(result.model)
+            fits.append(float(np.mean(_mean_scores(result.model, score_on, initial_state=args.initial_state,
+                                                   horizon=horizon).fit)))
+        row: dict[str, Any] = {"p": p, "seconds": time.perf_counter() - began}
+        if errors:
+            row.update(cv_fit_percent=None, error="; ".join(errors))
+        else:
+            row["cv_fit_percent"] = float(np.mean(fits)) if np.all(np.isfinite(fits)) else None
+        rows.append(row)
+    scored = [row for row in rows if row["cv_fit_percent"] is not None]
+    if scored:
+        best = max(row["cv_fit_percent"] for row in scored)
+        chosen = max(row["p"] for row in scored if row["cv_fit_percent"] >= best - P_TOLERANCE)
+    else:  # no candidate scored on the other half: the default, whose own run then says what went wrong
+        chosen = options.p
+    return PTuning(chosen, tuple(rows), time.perf_counter() - started)
+
+
 def iekf_options(args: argparse.Namespace, default_passes: int) -> IEKFOptions:
     """IEKF settings of the command line: the unit-invariant ones unless asked otherwise."""
     p = args.p if args.p is not None else (INVARIANT_P if args.timescale == "auto" else 1.0)
@@ -376,6 +462,7 @@ def search_orders(plan: Plan, fit_one: Callable[[int], tuple[Any, dict[str, Any]
             validation_fit_percent=evaluation.validation_fit,
             ranking_fit=evaluation.ranking_fit(),
             stop_reason=extra.get("stop_reason"),
+            **({"p": extra["p"]} if "p" in extra else {}),
             seconds=time.perf_counter() - started,
             eligible=bool(stable_enough and np.isfinite(evaluation.ranking_fit())),
         )
@@ -429,6 +516,11 @@ def text_summary(summary: dict[str, Any], data: IOData, plan: Plan) -> str:
         lines.append(f"{name:<14} {est:>28.2f} {('-' if val is None else f'{val:.2f}'):>28}")
     if plan.validation:
         lines.append("validation on: " + "; ".join(plan.validation_names))
+    if summary.get("p_tried"):
+        tried = ", ".join(f"{row['p']:g}: " + ("failed" if row["cv_fit_percent"] is None else f"{row['cv_fit_percent']:.2f}")
+                          for row in summary["p_tried"])
+        lines.append(f"p {summary['p']:g} by two-fold cross-validation (fit %: {tried}; the largest p within "
+                     f"{P_TOLERANCE} points of the best), {summary['tuning_seconds']:.1f} s")
     if summary.get("scoring_note"):
         lines.append(f"note: {summary['scoring_note']}")
     for note in plan.notes:
@@ -556,9 +648,12 @@ def last_good_on_divergence(run: Callable[[], Any]) -> tuple[Any, str | None]:
 
 def run_iekf_order(args: argparse.Namespace, plan: Plan, options: IEKFOptions, order: int
                    ) -> tuple[ModalModel, dict[str, Any]]:
-    """One IEKF run of an order search (no checkpoints): its model and what the summary needs."""
+    """One IEKF run of an order search (no checkpoints, p tuned per order): its model and what the summary needs."""
+    structure = structure_for(args, order, plan.records[0])
+    tuning = tune_p(args, plan, options, structure) if tunes_p(args) else given_p(options)
+    options = dataclasses.replace(options, p=tuning.p)
     result, divergence = last_good_on_divergence(
-        lambda: identify_iekf(plan.estimation, structure_for(args, order, plan.records[0]), options=options,
-                              settle_start=plan.settle_start))
+        lambda: identify_iekf(plan.estimation, structure, options=options, settle_start=plan.settle_start))
     stop_reason = f"{result.stop_reason}: {divergence}" if divergence else result.stop_reason
-    return result.model, {"fit_percent": result.fit_percent, "stop_reason": stop_reason, "result": result}
+    return result.model, {"fit_percent": result.fit_percent, "stop_reason": stop_reason, "result": result,
+                          "tuning": tuning, "p": tuning.p}

@@ -153,6 +153,7 @@ def _identify(args: argparse.Namespace) -> tuple[dict, str]:
     previous = None
     if args.resume:
         plan, structure, options, previous = _resume(args)
+        tuning = workflow.given_p(options)  # the run's own p, as archived
         archive_path = Path(args.resume)
     else:
         if not args.data:
@@ -165,6 +166,8 @@ def _identify(args: argparse.Namespace) -> tuple[dict, str]:
             return _run_order_search(args, plan, options)
         first = plan.records[0]
         structure = ModalStructure.from_pattern(args.pattern, plan.orders[0], first.n_u, first.n_y)
+        tuning = workflow.tune_p(args, plan, options, structure) if workflow.tunes_p(args) else workflow.given_p(options)
+        options = dataclasses.replace(options, p=tuning.p)
         archive_path = Path(args.out) if args.out else None
         if archive_path is not None:
             with write_archive(archive_path, kind="identification", config=options, seeds=[]) as archive:
@@ -184,7 +187,7 @@ def _identify(args: argparse.Namespace) -> tuple[dict, str]:
                                   settle_start=plan.settle_start))
     if checkpoint is not None:
         checkpoint.finish(result)  # the archive says how the run ended: converged, passes or diverged at pass k
-    summary = _iekf_summary(result)
+    summary = {**_iekf_summary(result), **tuning.summary()}
     if divergence:
         summary["divergence"] = divergence
     return _finish(args, plan, summary, result.model, result=result, archive_path=archive_path)
@@ -275,7 +278,8 @@ def _run_order_search(args, plan, options) -> tuple[dict, str]:
     chosen = workflow.choose_order(rows)
     model, extra, _ = kept[chosen]
     result = extra["result"]
-    summary = {**_iekf_summary(result), "orders_tried": rows, "seconds": sum(row["seconds"] for row in rows)}
+    summary = {**_iekf_summary(result), **extra["tuning"].summary(), "orders_tried": rows,
+               "seconds": sum(row["seconds"] for row in rows)}
     archive_path = Path(args.out) if args.out else None
     if archive_path is not None:
         from identification.iekf_archive import write_iekf_run
