@@ -281,3 +281,25 @@ def test_a_divergence_after_good_passes_reports_the_last_good_one_with_a_warning
     lines = run_warnings(model=good.model, evaluation=evaluation, stop_reason=f"diverged at pass 3: {message}",
                          start_fit=None, final_fit=None, allow_unstable=False)
     assert len(lines) == 1 and "diverged" in lines[0] and "last good pass" in lines[0]
+
+
+def test_a_spline_model_that_validates_worse_than_its_linear_start_is_warned_about():
+    """The warning compares the two models' mean validation fits; no validation data, no comparison."""
+    from types import SimpleNamespace
+
+    from scenarios.identify_workflow import Evaluation, nonlinear_warnings
+
+    record = _record(20.0, seed=3)
+    linear = identify_iekf(record, STRUCTURE, options=IEKFOptions.invariant(passes=2)).model
+    held_out = score(linear, record)  # a validation record scored by the linear model
+    evaluation = Evaluation(held_out, held_out.R, (held_out,), None)
+    linear_fit = float(np.mean(held_out.fit))
+
+    def spline(fit):
+        return SimpleNamespace(scores=SimpleNamespace(validation_fit=None if fit is None else np.array([fit])))
+
+    lines = nonlinear_warnings(spline(linear_fit - 1.0), evaluation)
+    assert len(lines) == 1 and "validates worse than its linear start" in lines[0]
+    assert nonlinear_warnings(spline(linear_fit), evaluation) == []  # as good: the spline model may stand
+    assert nonlinear_warnings(spline(None), evaluation) == []
+    assert nonlinear_warnings(spline(linear_fit - 1.0), Evaluation(held_out, held_out.R, (), None)) == []

@@ -253,6 +253,7 @@ def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None)
                 scores.estimation, scores.estimation.R, scores.validation, None),
             stop_reason=outcome.result.stop_reason, start_fit=float(np.mean(outcome.result.start_fit)),
             final_fit=float(np.mean(outcome.result.fit_percent)), allow_unstable=True, label="nonlinear")
+        warnings += workflow.nonlinear_warnings(outcome, evaluation)
     if archive_path is not None:
         if tests is not None or nonlinear is not None:  # one atomic update (each copies the archive)
             with update_archive(archive_path) as archive:
