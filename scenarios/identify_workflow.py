@@ -16,7 +16,10 @@
   scored on the other, both ways (two-fold cross-validation); the largest
   p within :data:`P_TOLERANCE` points of the best mean fit is taken (a
   larger p converges in fewer passes). Its cost is two half-record runs per
-  candidate, JSON ``tuning_seconds``.
+  candidate, JSON ``tuning_seconds``. The data start is scored on the same
+  halves (``start_cv_fit_percent``); where it beats every p by more than
+  the tolerance, the filter made the model worse and the start model is
+  returned, with a warning.
 * Warnings: a model no better than its start (R not above the start's, or
   modes that stayed within :data:`MOVED` of their start values, while it
   explains less than :data:`NOTHING_TO_GAIN` percent) or worse than it by
@@ -73,6 +76,8 @@ __all__ = [
     "P_GRID",
     "P_TOLERANCE",
     "NONLINEAR_P",
+    "START_RETURNED",
+    "start_model",
     "NONLINEAR_P_GRID",
     "nonlinear_warnings",
 ]
@@ -263,10 +268,27 @@ class PTuning:
     p: float
     tried: tuple[dict[str, Any], ...]
     seconds: float
+    start_fit: float | None = None  # the data start's cross-validated fit, on the same halves
 
     def summary(self) -> dict[str, Any]:
-        """The public JSON keys ``p``, ``p_tried`` and ``tuning_seconds``."""
-        return {"p": self.p, "p_tried": [dict(row) for row in self.tried], "tuning_seconds": self.seconds}
+        """The public JSON keys ``p``, ``p_tried``, ``tuning_seconds`` and ``start_cv_fit_percent``."""
+        return {"p": self.p, "p_tried": [dict(row) for row in self.tried], "tuning_seconds": self.seconds,
+                "start_cv_fit_percent": self.start_fit}
+
+    @property
+    def start_wins(self) -> bool:
+        """Whether the data start beat every p by more than :data:`P_TOLERANCE` in cross-validation."""
+        fits = [row["cv_fit_percent"] for row in self.tried if row.get("cv_fit_percent") is not None]
+        return self.start_fit is not None and (not fits or self.start_fit > max(fits) + P_TOLERANCE)
+
+
+START_RETURNED = "the filter did not improve on its start; the start model is returned"
+
+
+def start_model(result: Any) -> ModalModel:
+    """The IEKF run's start model, in the record's units (from its ``start_parameters``)."""
+    return ModalModel.from_parameters(result.structure, result.meta["start_parameters"],
+                                      meta={"start": result.meta.get("start")})
 
 
 def given_p(options: IEKFOptions) -> PTuning:
@@ -297,12 +319,17 @@ def tune_p(args: argparse.Namespace, plan: Plan, options: IEKFOptions, structure
         first, second = _halves(plan.records)
     except InputError:  # too short to halve: the run itself names what the record lacks
         return given_p(options)
+    def held_out_fit(model: ModalModel, records: tuple[IOData, ...]) -> float:
+        horizon = args.horizon if args.horizon is not None else default_horizon(model)
+        return float(np.mean(_mean_scores(model, records, initial_state=args.initial_state, horizon=horizon).fit))
+
     rows = []
+    start_fits: dict[int, float] = {}  # per fold: the data start does not depend on p
     for p in P_GRID:
         trial = dataclasses.replace(options, p=p)
         began = time.perf_counter()
         fits, errors = [], []
-        for fit_on, score_on in ((first, second), (second, first)):
+        for fold, (fit_on, score_on) in enumerate(((first, second), (second, first))):
             data = fit_on[0] if len(fit_on) == 1 else fit_on
             try:
                 result, _ = last_good_on_divergence(
@@ -310,9 +337,10 @@ def tune_p(args: argparse.Namespace, plan: Plan, options: IEKFOptions, structure
             except WorkbenchError as exc:
                 errors.append(str(exc))
                 continue
-            horizon = args.horizon if args.horizon is not None else default_horizon(result.model)
-            fits.append(float(np.mean(_mean_scores(result.model, score_on, initial_state=args.initial_state,
-                                                   horizon=horizon).fit)))
+            fits.append(held_out_fit(result.model, score_on))
+            if fold not in start_fits and result.meta.get("start_parameters") is not None:
+                start_fits[fold] = held_out_fit(
+                    ModalModel.from_parameters(structure, result.meta["start_parameters"]), score_on)
         row: dict[str, Any] = {"p": p, "seconds": time.perf_counter() - began}
         if errors:
             row.update(cv_fit_percent=None, error="; ".join(errors))
@@ -325,7 +353,9 @@ def tune_p(args: argparse.Namespace, plan: Plan, options: IEKFOptions, structure
         chosen = max(row["p"] for row in scored if row["cv_fit_percent"] >= best - P_TOLERANCE)
     else:  # no candidate scored on the other half: the default, whose own run then says what went wrong
         chosen = options.p
-    return PTuning(chosen, tuple(rows), time.perf_counter() - started)
+    start_fit = float(np.mean(list(start_fits.values()))) if len(start_fits) == 2 else None
+    return PTuning(chosen, tuple(rows), time.perf_counter() - started,
+                   start_fit if start_fit is not None and np.isfinite(start_fit) else None)
 
 
 def iekf_options(args: argparse.Namespace, default_passes: int) -> IEKFOptions:
@@ -523,6 +553,9 @@ def text_summary(summary: dict[str, Any], data: IOData, plan: Plan) -> str:
         lines.append(f"{name:<14} {est:>28.2f} {('-' if val is None else f'{val:.2f}'):>28}")
     if plan.validation:
         lines.append("validation on: " + "; ".join(plan.validation_names))
+    if summary.get("model_returned") == "start":
+        lines.append(f"note: {START_RETURNED} (cross-validated fit {summary['start_cv_fit_percent']:.2f} % "
+                     "against the filter's best p); the matrices and scores are the start model's")
     if summary.get("p_tried"):
         tried = ", ".join(f"{row['p']:g}: " + ("failed" if row["cv_fit_percent"] is None else f"{row['cv_fit_percent']:.2f}")
                           for row in summary["p_tried"])
@@ -675,5 +708,6 @@ def run_iekf_order(args: argparse.Namespace, plan: Plan, options: IEKFOptions, o
     result, divergence = last_good_on_divergence(
         lambda: identify_iekf(plan.estimation, structure, options=options, settle_start=plan.settle_start))
     stop_reason = f"{result.stop_reason}: {divergence}" if divergence else result.stop_reason
-    return result.model, {"fit_percent": result.fit_percent, "stop_reason": stop_reason, "result": result,
-                          "tuning": tuning, "p": tuning.p}
+    model = start_model(result) if tuning.start_wins else result.model
+    return model, {"fit_percent": result.fit_percent, "stop_reason": stop_reason, "result": result,
+                   "tuning": tuning, "p": tuning.p}

@@ -59,6 +59,7 @@ from identification.iekf import identify_iekf
 from identification.iekf_archive import Checkpointer, read_iekf_run
 from identification.iekf_pass import COVARIANCE_FORMS
 from identification.modal import C_PATTERNS, ModalModel, ModalStructure
+from identification.multirecord import pooled_simulation_fit
 from identification.preparation import prepare_validation, read_record
 from identification.storage import write_value
 from scenarios import identify_workflow as workflow
@@ -190,7 +191,8 @@ def _identify(args: argparse.Namespace) -> tuple[dict, str]:
     summary = {**_iekf_summary(result), **tuning.summary()}
     if divergence:
         summary["divergence"] = divergence
-    return _finish(args, plan, summary, result.model, result=result, archive_path=archive_path)
+    model = workflow.start_model(result) if tuning.start_wins else result.model
+    return _finish(args, plan, summary, model, result=result, archive_path=archive_path)
 
 
 def _iekf_summary(result) -> dict:
@@ -216,6 +218,10 @@ def _iekf_summary(result) -> dict:
 def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None) -> tuple[dict, str]:
     """Scores, warnings, the nonlinear model, archive and model file: the common end of every identify run."""
     data = plan.records[0]
+    start_returned = result is not None and model is not result.model
+    if start_returned:  # the summary describes the model returned
+        summary.update(eigenvalues=model.eigenvalues(), A=model.A, B=model.B, C=model.C, D=model.D,
+                       fit_percent=pooled_simulation_fit(model, plan.records), model_returned="start")
     evaluation = workflow.evaluate(model, plan, args)
     summary.update(workflow.scores_summary(evaluation, summary["fit_percent"]))
     summary.update(records_summary(model, plan.records, plan.preparation))
@@ -229,12 +235,14 @@ def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None)
                                          "seconds": summary["seconds"]}])
     allow_unstable = bool(getattr(args, "allow_unstable", False)) or (
         result is not None and result.options.allow_unstable)
-    start_fit, start_moved = workflow.start_of(result, plan.records) if result is not None else (None, None)
-    warnings = workflow.run_warnings(
+    start_fit, start_moved = workflow.start_of(result, plan.records) if result is not None and not start_returned \
+        else (None, None)
+    warnings = [workflow.START_RETURNED] if start_returned else []
+    warnings += workflow.run_warnings(
         model=model, evaluation=evaluation, start_fit=start_fit,
-        stop_reason=(f"{summary['stop_reason']}: {summary['divergence']}" if "divergence" in summary
-                     else summary.get("stop_reason")),
-        final_fit=float(summary["fit_percent"].mean()) if result is not None else None,
+        stop_reason=None if start_returned else (f"{summary['stop_reason']}: {summary['divergence']}"
+                                                 if "divergence" in summary else summary.get("stop_reason")),
+        final_fit=float(np.mean(summary["fit_percent"])) if result is not None else None,
         allow_unstable=allow_unstable, start_moved=start_moved,
     )
     if evaluation.horizon is not None and args.horizon is None:
@@ -255,10 +263,12 @@ def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None)
             final_fit=float(np.mean(outcome.result.fit_percent)), allow_unstable=True, label="nonlinear")
         warnings += workflow.nonlinear_warnings(outcome, evaluation)
     if archive_path is not None:
-        if tests is not None or nonlinear is not None:  # one atomic update (each copies the archive)
+        if tests is not None or nonlinear is not None or start_returned:  # one atomic update (each copies the archive)
             with update_archive(archive_path) as archive:
                 if nonlinear is not None:
                     write_run(archive, "nonlinear", model=nonlinear)
+                if start_returned:
+                    write_run(archive, "start", model=model)
                 if tests is not None:
                     write_value(run_group(archive, RUN_NAME if result is not None else args.method),
                                 "residual_tests", tests)
