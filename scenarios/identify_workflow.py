@@ -329,11 +329,12 @@ def tune_p(args: argparse.Namespace, plan: Plan, options: IEKFOptions, structure
         trial = dataclasses.replace(options, p=p)
         began = time.perf_counter()
         fits, errors = [], []
-        for fold, (fit_on, score_on) in enumerate(((first, second), (second, first))):
+        # the second halves start mid-motion: their start state is unknown, whatever the record's is
+        for fold, (fit_on, score_on, settle) in enumerate(((first, second, plan.settle_start), (second, first, True))):
             data = fit_on[0] if len(fit_on) == 1 else fit_on
             try:
                 result, _ = last_good_on_divergence(
-                    lambda: identify_iekf(data, structure, options=trial, settle_start=plan.settle_start))
+                    lambda: identify_iekf(data, structure, options=trial, settle_start=settle))
             except WorkbenchError as exc:
                 errors.append(str(exc))
                 continue
