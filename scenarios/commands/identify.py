@@ -17,7 +17,9 @@ filter. The defaults do not depend on the units of time or of the signals:
 signals normalised (--no-normalize to switch off), start values from a
 subspace model of the record (--start paper for the paper's), time counted
 in samples inside the filter and p per dominant time constant (--timescale
-seconds for the absolute behaviour). The summary gives the eigenvalues, the
+seconds for the absolute behaviour), p chosen by cross-validation on the
+estimation data unless --p is given (the data start returned where it
+beats every p). The summary gives the eigenvalues, the
 fit R (eq. 17) per output of the continuous model simulated exactly, NRMSE
 fits on estimation and validation data (--validation, --validation-file),
 whether the run converged, any warnings (--strict: exit status 3), the
@@ -85,7 +87,8 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--passes", type=int, default=None,
                         help=f"largest number of passes (default {DEFAULT_PASSES}; with --resume, the run's own)")
     parser.add_argument("--p", type=float, default=None,
-                        help="tuning parameter p: Q = p I' (default 1e-4 per dominant time constant; 1 with --timescale seconds)")
+                        help="tuning parameter p: Q = p I' (default: 1e-4, 1e-5 or 1e-6 per dominant time constant, chosen by "
+                             "two-fold cross-validation on the estimation data; 1 with --timescale seconds)")
     parser.add_argument("--discretization", default="exact", choices=DISCRETIZATIONS, help="filter discretisation (default exact)")
     parser.add_argument("--covariance", default="joseph", choices=COVARIANCE_FORMS, help="covariance numerics (default joseph)")
     parser.add_argument("--start", default="data", choices=workflow.START_CHOICES, help=workflow.START_HELP)
