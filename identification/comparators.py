@@ -41,7 +41,9 @@ method then returns the discrete model itself as a
     model (several outputs, where the per-output ARX realisations reduced
     by balanced truncation are only approximate: from that start the
     three-output linear example was still at R = 99.997 % after 50
-    iterations and 210 s, from the N4SID start exact after 2).
+    iterations and 210 s, from the N4SID start exact after 2). Where that
+    start is discrete-time (a negative real pole), the other of the two
+    starts, or else the start with each such pole ``z`` moved to ``|z|``.
 
 Every method leaves a parameter covariance on its model
 (:mod:`identification.uncertainty`): ``arx`` and ``rls`` the least-squares
@@ -76,7 +78,7 @@ from scipy.special import comb
 from ._checks import non_negative_int, positive_int
 from .data import IOData, as_records
 from .discrete import DiscreteModel, has_no_continuous_equivalent
-from .errors import ConversionError, ExcitationError, InputError
+from .errors import ConversionError, ExcitationError, InputError, WorkbenchError
 from .least_squares import estimate_arx, least_squares, model_from_theta, stacked_arx_regressors
 from .metrics import FitMetrics, fit_metrics
 from .modal import ModalModel, ModalStructure
@@ -322,10 +324,9 @@ def output_error_comparator(data: IOData, *, order: int, **options: Any) -> Moda
     if isinstance(start, ModalModel):
         initial = start
     elif start in ("arx", "n4sid"):
-        initial = COMPARATORS[start](records, order=order)
+        initial = _start_model(start, records, order)
         if isinstance(initial, DiscreteModel):
-            raise InputError(f"the {start} start model has no continuous-time equivalent (a discrete pole on the "
-                             "negative real axis): output-error needs a continuous start; give start as a ModalModel")
+            initial = _continuous_start(initial, start, records, order)
     else:
         raise InputError(f"start must be 'arx', 'n4sid' or a ModalModel; got {start!r}")
     if initial.structure.n != order or (initial.structure.n_u, initial.structure.n_y) != (data.n_u, data.n_y):
@@ -355,6 +356,39 @@ def output_error_comparator(data: IOData, *, order: int, **options: Any) -> Moda
             "evaluations": int(solution.nfev), "cost": float(solution.cost), "status": int(solution.status)}
     covariance = gauss_newton_covariance(solution.jac, solution.fun.reshape(-1, data.n_y))
     return ModalModel.from_parameters(structure, solution.x, meta=meta, parameter_covariance=covariance)
+
+
+def _start_model(method: str, records: list[IOData], order: int) -> ModalModel | DiscreteModel:
+    """The ``arx`` or ``n4sid`` model that starts output-error (no bootstrap: a start needs no covariance)."""
+    options = {"bootstrap": 0} if method == "n4sid" else {}
+    return COMPARATORS[method](records, order=order, **options)
+
+
+def _continuous_start(discrete: DiscreteModel, method: str, records: list[IOData], order: int) -> ModalModel:
+    """A continuous start where ``method``'s model has a discrete pole on the negative real axis.
+
+    The other linear method's model, if it is continuous; else ``method``'s
+    model with each negative real pole ``z`` moved to ``|z|``: the same
+    decay per sample without the sign flip, which a continuous mode can
+    represent (such a pole mostly fits noise; the fit moves B, C, D and the
+    modes from there).
+    """
+    other = "n4sid" if method == "arx" else "arx"
+    try:
+        alternative = _start_model(other, records, order)
+    except WorkbenchError:
+        alternative = None
+    if isinstance(alternative, ModalModel):
+        return alternative
+    values, vectors = np.linalg.eig(discrete.A)
+    negative = (np.abs(values.imag) <= 1e-9 * np.abs(values)) & (values.real < 0)
+    moved = (vectors @ np.diag(np.where(negative, np.abs(values), values)) @ np.linalg.inv(vectors)).real
+    model = _discrete_to_modal(moved, discrete.B, discrete.C, discrete.D, discrete.dt,
+                               {"method": f"{method}, negative real poles moved to the positive axis"})
+    if isinstance(model, DiscreteModel):  # a pole at zero: no continuous mode decays that fast
+        raise ConversionError(f"the {method} and {other} start models have no continuous-time equivalent: "
+                              "give output-error a start ModalModel, or another order")
+    return model
 
 
 def iekf_comparator(data: IOData, *, order: int, **options: Any) -> ModalModel:

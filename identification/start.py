@@ -18,7 +18,9 @@ same start, bit for bit up to rounding.
     onto the structure's modes (see :func:`place_eigenvalues`) and B and D
     fitted by linear least squares with the fixed C entries. Subspace models
     with 2n, 10 and 25 block rows and the ``band`` start are all tried; the
-    one whose simulation explains the record best (R, eq. 17) is the start.
+    one whose simulation explains the record best (R, eq. 17) is the start,
+    simulated from rest, or where unstable modes are allowed from the
+    least-squares initial state.
 ``band``
     Modes spread log-evenly over the record's band, from ten periods per
     record to a quarter of the Nyquist frequency, damping 0.5; B and D by
@@ -171,12 +173,22 @@ def fit_input_gains(structure: ModalStructure, modes: np.ndarray, u: np.ndarray,
     return ModalModel.from_parameters(structure, theta)
 
 
-def _simulation_fit(model: ModalModel, u: np.ndarray, y: np.ndarray) -> float:
-    """Mean R (eq. 17) of the model simulated from rest (time in samples); -inf where it overflows."""
+def _simulation_fit(model: ModalModel, u: np.ndarray, y: np.ndarray, *, estimate_state: bool = False) -> float:
+    """Mean R (eq. 17) of the model simulated (time in samples); -inf where it overflows.
+
+    From rest, or with ``estimate_state`` from the least-squares initial state: an unstable model
+    (allowed for an open-loop unstable plant) simulated from rest grows without bound even when
+    its dynamics are right, and would lose to any stable candidate.
+    """
+    from .data import IOData
     from .metrics import percentage_explanation
+    from .validation import estimate_initial_state
 
     with np.errstate(all="ignore"):
-        simulated = model.simulate_outputs(u, 1.0)
+        x0 = None
+        if estimate_state:
+            x0 = estimate_initial_state(model, IOData(t=np.arange(u.shape[0], dtype=float), u=u, y=y))
+        simulated = model.simulate_outputs(u, 1.0, x0=x0)
         if not np.all(np.isfinite(simulated)):
             return -np.inf
         return float(np.mean(percentage_explanation(y, simulated)))
@@ -248,7 +260,7 @@ def data_start(u: np.ndarray, y: np.ndarray, structure: ModalStructure, *, metho
             candidates.append(_subspace_start(u, y, structure, stable, block_rows=rows))
         except (WorkbenchError, np.linalg.LinAlgError) as exc:
             notes.append(f"subspace with {rows} block rows failed ({exc})")
-    fits = [_simulation_fit(candidate.model, u, y) for candidate in candidates]
+    fits = [_simulation_fit(candidate.model, u, y, estimate_state=not stable) for candidate in candidates]
     best = candidates[int(np.argmax(fits))]
     note = "; ".join(filter(None, [best.note, *notes]))
     return DataStart(best.model, best.source, note)

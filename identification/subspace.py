@@ -17,6 +17,12 @@ found in three linear-algebra steps, without iterations:
    them once ``A`` and ``C`` are fixed. The regressors come from per-mode
    first-order recursions (``scipy.signal.lfilter``) in the eigenbasis of A.
 
+All three steps run on signals divided column by column by their RMS, and
+the model is scaled back (``B / s_u``, ``s_y C``, ``s_y D / s_u``): a
+channel in microvolts next to one in kilonewtons would otherwise dominate
+the SVD and the regressions, so the model would depend on the units. The
+eigenvalues do not change under the scaling.
+
 This replaces the ``nfoursid`` package (PyPI), which installs cleanly but
 forms a full SVD of a matrix with one column per sample: on the 50,000-sample
 linear example it needs 20 GB and is killed.
@@ -50,7 +56,8 @@ class SubspaceResult(StateSpaceModel):
     x0 : ndarray, shape (n,)
         Initial state estimated with B and D.
     singular_values : ndarray
-        Of ``L_32``: a gap after the ``order``-th suggests the order.
+        Of ``L_32`` of the RMS-scaled signals: a gap after the ``order``-th
+        suggests the order.
     residuals : ndarray, shape (N, n_y)
         Measured minus simulated outputs (from x0).
     block_rows : int
@@ -135,6 +142,9 @@ def estimate_subspace(data_or_arrays: Any, *, order: int, block_rows: int | None
     """
     experiments = [io_arrays(item) for item in data_or_arrays] if isinstance(data_or_arrays, list) \
         else [io_arrays(data_or_arrays)]
+    input_scale = _column_rms([e[0] for e in experiments])
+    output_scale = _column_rms([e[1] for e in experiments])
+    experiments = [(u_e / input_scale, y_e / output_scale, dt_e) for u_e, y_e, dt_e in experiments]
     u, y, dt = experiments[0]
     n = positive_int(order, "order")
     s = max(2 * n, n + 1) if block_rows is None else positive_int(block_rows, "block_rows")
@@ -188,5 +198,12 @@ def estimate_subspace(data_or_arrays: Any, *, order: int, block_rows: int | None
     B = solution[: n * n_u].reshape(n, n_u)
     D = solution[n * n_u: n * n_u + n_y * n_u].reshape(n_y, n_u)
     x0 = solution[n * n_u + n_y * n_u: n * n_u + n_y * n_u + n] if estimate_x0 else np.zeros(n)
-    residuals = (target - regressors @ solution).reshape(-1, n_y)
-    return SubspaceResult(A, B, C, D, x0, singular, residuals, s, dt)
+    residuals = (target - regressors @ solution).reshape(-1, n_y) * output_scale
+    return SubspaceResult(A, B / input_scale, output_scale[:, None] * C,
+                          output_scale[:, None] * D / input_scale, x0, singular, residuals, s, dt)
+
+
+def _column_rms(signals: list[np.ndarray]) -> np.ndarray:
+    """RMS of each column over all experiments; 1 for an all-zero column (nothing to scale)."""
+    rms = np.sqrt(np.mean(np.vstack(signals) ** 2, axis=0))
+    return np.where(rms > 0, rms, 1.0)

@@ -11,6 +11,15 @@
   improve on the best). Parsimony rule: the smallest order whose mean
   validation fit is within :data:`ORDER_TOLERANCE` points of the best order's;
   models that diverged or are unstable where stability was asked take no part.
+* The IEKF's p (unless ``--p`` is given, or ``--timescale seconds``): each of
+  :data:`P_GRID` identifies on one half of the estimation data and is
+  scored on the other, both ways (two-fold cross-validation); the largest
+  p within :data:`P_TOLERANCE` points of the best mean fit is taken (a
+  larger p converges in fewer passes). Its cost is two half-record runs per
+  candidate, JSON ``tuning_seconds``. The data start is scored on the same
+  halves (``start_cv_fit_percent``); where it beats every p by more than
+  the tolerance, the filter made the model worse and the start model is
+  returned, with a warning.
 * Warnings: a model no better than its start (R not above the start's, or
   modes that stayed within :data:`MOVED` of their start values, while it
   explains less than :data:`NOTHING_TO_GAIN` percent) or worse than it by
@@ -60,6 +69,17 @@ __all__ = [
     "choose_order",
     "evaluate",
     "run_warnings",
+    "PTuning",
+    "tune_p",
+    "tunes_p",
+    "given_p",
+    "P_GRID",
+    "P_TOLERANCE",
+    "NONLINEAR_P",
+    "START_RETURNED",
+    "start_model",
+    "NONLINEAR_P_GRID",
+    "nonlinear_warnings",
 ]
 
 AUTO_MAX_ORDER = 8
@@ -72,6 +92,12 @@ NO_BETTER_MARGIN = 0.01  # points: a final fit within this of the start's counts
 MOVED = 1e-3  # relative change of a mode's eigenvalue below which it stayed at its start
 NOTHING_TO_GAIN = 99.0  # percent R: a model this good is no warning for staying at its start
 WORSE_MARGIN = 0.5  # points of R below the start's: the filter made the model worse
+P_GRID = (1e-4, 1e-5, 1e-6)  # p per dominant time constant tried by cross-validation, largest first
+P_TOLERANCE = 0.1  # points of cross-validated fit within which the largest p is taken
+NONLINEAR_P = 1e-7  # the spline model's p without validation data
+# With validation data its p is chosen from NONLINEAR_P times 1, 0.1 and 0.01: on 4 s samples (the
+# cascaded tanks) 1e-7 blows up and 1e-9 fits, on 1 s samples (the heat exchanger) 1e-7 fits best.
+NONLINEAR_P_GRID = (1e-7, 1e-8, 1e-9)
 
 
 def register_options(parser: argparse.ArgumentParser) -> None:
@@ -97,7 +123,7 @@ def register_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--nodes", type=int, default=5, help="nodes per spline with --nonlinear (default 5)")
     parser.add_argument("--nonlinear-p", type=float, action="append", metavar="P",
                         help="tuning parameter(s) of the spline model; several are tried and one chosen on "
-                             "validation data (default 1e-7, or 1e-7, 1e-6 with validation data)")
+                             "validation data (default 1e-7, or 1e-7, 1e-8, 1e-9 with validation data)")
     parser.add_argument("--nonlinear-passes", type=int, default=30, help="largest number of nonlinear passes (default 30)")
     parser.add_argument("--strict", action="store_true", help="exit with status 3 when the run ends with warnings")
 
@@ -233,6 +259,104 @@ def make_plan(args: argparse.Namespace, records: tuple[IOData, ...], load: Calla
         raise InputError(f"--horizon must be >= 1 sample; got {args.horizon}")
     return Plan(tuple(records), tuple(validation), tuple(names), tuple(orders), auto, (note,) if note else (),
                 preparation, len(held_out))
+
+
+@dataclass(frozen=True)
+class PTuning:
+    """The filter's p chosen by two-fold cross-validation, with each candidate's score and cost."""
+
+    p: float
+    tried: tuple[dict[str, Any], ...]
+    seconds: float
+    start_fit: float | None = None  # the data start's cross-validated fit, on the same halves
+
+    def summary(self) -> dict[str, Any]:
+        """The public JSON keys ``p``, ``p_tried``, ``tuning_seconds`` and ``start_cv_fit_percent``."""
+        return {"p": self.p, "p_tried": [dict(row) for row in self.tried], "tuning_seconds": self.seconds,
+                "start_cv_fit_percent": self.start_fit}
+
+    @property
+    def start_wins(self) -> bool:
+        """Whether the data start beat every p by more than :data:`P_TOLERANCE` in cross-validation."""
+        fits = [row["cv_fit_percent"] for row in self.tried if row.get("cv_fit_percent") is not None]
+        return self.start_fit is not None and (not fits or self.start_fit > max(fits) + P_TOLERANCE)
+
+
+START_RETURNED = "the filter did not improve on its start; the start model is returned"
+
+
+def start_model(result: Any) -> ModalModel:
+    """The IEKF run's start model, in the record's units (from its ``start_parameters``)."""
+    return ModalModel.from_parameters(result.structure, result.meta["start_parameters"],
+                                      meta={"start": result.meta.get("start")})
+
+
+def given_p(options: IEKFOptions) -> PTuning:
+    """No tuning: the p the user gave (or the settings fixed)."""
+    return PTuning(options.p, (), 0.0)
+
+
+def tunes_p(args: argparse.Namespace) -> bool:
+    """Whether the IEKF's p is chosen by cross-validation: no --p given, on the unit-free time scale."""
+    return args.p is None and args.timescale == "auto"
+
+
+def _halves(records: tuple[IOData, ...]) -> tuple[tuple[IOData, ...], tuple[IOData, ...]]:
+    parts = [split_holdout(record, 0.5) for record in records]
+    return tuple(part[0] for part in parts), tuple(part[1] for part in parts)
+
+
+def tune_p(args: argparse.Namespace, plan: Plan, options: IEKFOptions, structure: ModalStructure) -> PTuning:
+    """The IEKF's p by two-fold cross-validation on the estimation records (module docstring).
+
+    Each record is cut in halves; a model identified on the first halves is scored on the second and
+    the reverse, and the two NRMSE fits averaged. Of the grid :data:`P_GRID`, the largest p whose
+    fit is within :data:`P_TOLERANCE` points of the best wins: a larger p moves the parameters
+    faster, so the run converges in fewer passes, and the difference below the tolerance is noise.
+    """
+    started = time.perf_counter()
+    try:
+        first, second = _halves(plan.records)
+    except InputError:  # too short to halve: the run itself names what the record lacks
+        return given_p(options)
+    def held_out_fit(model: ModalModel, records: tuple[IOData, ...]) -> float:
+        horizon = args.horizon if args.horizon is not None else default_horizon(model)
+        return float(np.mean(_mean_scores(model, records, initial_state=args.initial_state, horizon=horizon).fit))
+
+    rows = []
+    start_fits: dict[int, float] = {}  # per fold: the data start does not depend on p
+    for p in P_GRID:
+        trial = dataclasses.replace(options, p=p)
+        began = time.perf_counter()
+        fits, errors = [], []
+        # the second halves start mid-motion: their start state is unknown, whatever the record's is
+        for fold, (fit_on, score_on, settle) in enumerate(((first, second, plan.settle_start), (second, first, True))):
+            data = fit_on[0] if len(fit_on) == 1 else fit_on
+            try:
+                result, _ = last_good_on_divergence(
+                    lambda: identify_iekf(data, structure, options=trial, settle_start=settle))
+            except WorkbenchError as exc:
+                errors.append(str(exc))
+                continue
+            fits.append(held_out_fit(result.model, score_on))
+            if fold not in start_fits and result.meta.get("start_parameters") is not None:
+                start_fits[fold] = held_out_fit(
+                    ModalModel.from_parameters(structure, result.meta["start_parameters"]), score_on)
+        row: dict[str, Any] = {"p": p, "seconds": time.perf_counter() - began}
+        if errors:
+            row.update(cv_fit_percent=None, error="; ".join(errors))
+        else:
+            row["cv_fit_percent"] = float(np.mean(fits)) if np.all(np.isfinite(fits)) else None
+        rows.append(row)
+    scored = [row for row in rows if row["cv_fit_percent"] is not None]
+    if scored:
+        best = max(row["cv_fit_percent"] for row in scored)
+        chosen = max(row["p"] for row in scored if row["cv_fit_percent"] >= best - P_TOLERANCE)
+    else:  # no candidate scored on the other half: the default, whose own run then says what went wrong
+        chosen = options.p
+    start_fit = float(np.mean(list(start_fits.values()))) if len(start_fits) == 2 else None
+    return PTuning(chosen, tuple(rows), time.perf_counter() - started,
+                   start_fit if start_fit is not None and np.isfinite(start_fit) else None)
 
 
 def iekf_options(args: argparse.Namespace, default_passes: int) -> IEKFOptions:
@@ -376,6 +500,7 @@ def search_orders(plan: Plan, fit_one: Callable[[int], tuple[Any, dict[str, Any]
             validation_fit_percent=evaluation.validation_fit,
             ranking_fit=evaluation.ranking_fit(),
             stop_reason=extra.get("stop_reason"),
+            **({"p": extra["p"]} if "p" in extra else {}),
             seconds=time.perf_counter() - started,
             eligible=bool(stable_enough and np.isfinite(evaluation.ranking_fit())),
         )
@@ -429,6 +554,14 @@ def text_summary(summary: dict[str, Any], data: IOData, plan: Plan) -> str:
         lines.append(f"{name:<14} {est:>28.2f} {('-' if val is None else f'{val:.2f}'):>28}")
     if plan.validation:
         lines.append("validation on: " + "; ".join(plan.validation_names))
+    if summary.get("model_returned") == "start":
+        lines.append(f"note: {START_RETURNED} (cross-validated fit {summary['start_cv_fit_percent']:.2f} % "
+                     "against the filter's best p); the matrices and scores are the start model's")
+    if summary.get("p_tried"):
+        tried = ", ".join(f"{row['p']:g}: " + ("failed" if row["cv_fit_percent"] is None else f"{row['cv_fit_percent']:.2f}")
+                          for row in summary["p_tried"])
+        lines.append(f"p {summary['p']:g} by two-fold cross-validation (fit %: {tried}; the largest p within "
+                     f"{P_TOLERANCE} points of the best), {summary['tuning_seconds']:.1f} s")
     if summary.get("scoring_note"):
         lines.append(f"note: {summary['scoring_note']}")
     for note in plan.notes:
@@ -459,6 +592,16 @@ class NonlinearOutcome:
     scores: Any = None  # NonlinearScores of the chosen model, so that nothing simulates it again
 
 
+def nonlinear_warnings(outcome: NonlinearOutcome, linear: Evaluation) -> list[str]:
+    """A warning where the spline model validates worse than the linear model it started from."""
+    spline, start = outcome.scores.validation_fit, linear.validation_fit
+    if spline is None or start is None or not np.mean(spline) < np.mean(start):
+        return []
+    return [f"nonlinear: the spline model validates worse than its linear start (mean fit {np.mean(spline):.2f} % "
+            f"against {np.mean(start):.2f} %): the linear model is the better one here; try a smaller "
+            "--nonlinear-p or fewer --nodes"]
+
+
 def identify_nonlinear(linear: ModalModel, plan: Plan, args: argparse.Namespace) -> NonlinearOutcome:
     """The spline-nonlinear model started from ``linear``, its p chosen on validation data from a small grid."""
     from identification.spline_iekf import SplineIEKFOptions, identify_spline_iekf
@@ -468,8 +611,8 @@ def identify_nonlinear(linear: ModalModel, plan: Plan, args: argparse.Namespace)
                          "(a pole on the negative real axis): use --method iekf or another order")
     if len(plan.records) > 1:
         raise InputError("--nonlinear identifies the spline model from one record; give one data file")
-    grid = args.nonlinear_p or ([1e-7, 1e-6] if plan.validation else [1e-7])
-    tried, best = [], None
+    grid = args.nonlinear_p or (list(NONLINEAR_P_GRID) if plan.validation else [NONLINEAR_P])
+    tried, candidates = [], []
     for p in grid:
         options = SplineIEKFOptions(nodes=args.nodes, p=p, passes=args.nonlinear_passes)
         started = time.perf_counter()
@@ -482,12 +625,15 @@ def identify_nonlinear(linear: ModalModel, plan: Plan, args: argparse.Namespace)
         row = {"p": p, "estimation_fit_percent": scores.estimation.fit, "validation_fit_percent": scores.validation_fit,
                "seconds": time.perf_counter() - started, "ranking_fit": scores.ranking_fit()}
         tried.append(row)
-        if np.isfinite(row["ranking_fit"]) and (best is None or row["ranking_fit"] > best[1]["ranking_fit"]):
-            best = (result, row, scores)
-    if best is None:
+        if np.isfinite(row["ranking_fit"]):
+            candidates.append((result, row, scores))
+    if not candidates:
         raise DivergenceError("the spline-nonlinear model diverged at every p tried: " +
-                              "; ".join(f"p = {row['p']:g}: {row['error']}" for row in tried))
-    result, row, scores = best
+                              "; ".join(f"p = {row['p']:g}: {row.get('error', 'no finite fit')}" for row in tried))
+    # as for the IEKF's p: the largest within the tolerance of the best (it converges in fewer passes)
+    top = max(row["ranking_fit"] for _, row, _ in candidates)
+    result, row, scores = max((c for c in candidates if c[1]["ranking_fit"] >= top - P_TOLERANCE),
+                              key=lambda c: c[1]["p"])
     summary = {
         "nodes": args.nodes, "p": row["p"], "p_tried": tried, "passes_run": result.passes_run,
         "stop_reason": result.stop_reason, "fit_percent": scores.estimation.R,
@@ -556,9 +702,13 @@ def last_good_on_divergence(run: Callable[[], Any]) -> tuple[Any, str | None]:
 
 def run_iekf_order(args: argparse.Namespace, plan: Plan, options: IEKFOptions, order: int
                    ) -> tuple[ModalModel, dict[str, Any]]:
-    """One IEKF run of an order search (no checkpoints): its model and what the summary needs."""
+    """One IEKF run of an order search (no checkpoints, p tuned per order): its model and what the summary needs."""
+    structure = structure_for(args, order, plan.records[0])
+    tuning = tune_p(args, plan, options, structure) if tunes_p(args) else given_p(options)
+    options = dataclasses.replace(options, p=tuning.p)
     result, divergence = last_good_on_divergence(
-        lambda: identify_iekf(plan.estimation, structure_for(args, order, plan.records[0]), options=options,
-                              settle_start=plan.settle_start))
+        lambda: identify_iekf(plan.estimation, structure, options=options, settle_start=plan.settle_start))
     stop_reason = f"{result.stop_reason}: {divergence}" if divergence else result.stop_reason
-    return result.model, {"fit_percent": result.fit_percent, "stop_reason": stop_reason, "result": result}
+    model = start_model(result) if tuning.start_wins else result.model
+    return model, {"fit_percent": result.fit_percent, "stop_reason": stop_reason, "result": result,
+                   "tuning": tuning, "p": tuning.p}

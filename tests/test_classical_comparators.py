@@ -7,8 +7,8 @@ outputs by exact simulation of the pairs-first modal form (ModalModel.simulate, 
 import numpy as np
 import pytest
 
-from identification import ExcitationError, InputError, fit_metrics
-from identification.comparators import COMPARATORS, identify_with, register_comparator
+from identification import ExcitationError, InputError, IOData, fit_metrics
+from identification.comparators import COMPARATORS, _continuous_start, identify_with, register_comparator
 from identification.modal import ModalModel, ModalStructure
 from scenarios.linear_example import make_data, true_model
 
@@ -68,3 +68,29 @@ def test_comparators_name_bad_requests(data):
         identify_with(still[:3000], method="arx", order=5)
     with pytest.raises(InputError, match="start must be"):
         identify_with(data[:3000], method="output-error", order=5, start="iekf")
+
+
+def test_output_error_starts_where_arx_and_n4sid_have_a_negative_real_pole():
+    """y(k) = -0.5 y(k-1) + u(k-1): both linear starts are discrete-time; output-error used to exit with no model.
+
+    Its start is then the ARX model with the pole moved to +0.5; the trust-region fit accepts only steps that
+    lower the cost, so its simulation error cannot exceed the start's.
+    """
+    rng = np.random.default_rng(0)
+    u = rng.normal(size=(2000, 1))
+    y = np.zeros((2000, 1))
+    for k in range(1, 2000):
+        y[k] = -0.5 * y[k - 1] + u[k - 1]
+    record = IOData(t=np.arange(2000) * 0.01, u=u, y=y)
+    discrete = identify_with(record, method="arx", order=1).model
+    assert discrete.eigenvalues()[0].real == pytest.approx(-0.5, abs=1e-9)  # noise-free: the true pole
+    result = identify_with(record, method="output-error", order=1)
+    assert isinstance(result.model, ModalModel)
+    assert result.model.meta["start"] == "arx, negative real poles moved to the positive axis"
+    start = _continuous_start(discrete, "arx", [record], 1)
+    assert start.eigenvalues()[0].real == pytest.approx(np.log(0.5) / 0.01, rel=1e-9)  # |z| = 0.5 per sample
+
+    def squared_error(model):
+        return np.sum((model.simulate_outputs(u, 0.01) - y) ** 2)
+
+    assert squared_error(result.model) <= squared_error(start)

@@ -113,3 +113,28 @@ def test_subspace_rejects_too_high_an_order_and_too_short_records():
         estimate_subspace((u, y), order=7)
     with pytest.raises(InputError, match="too few"):
         estimate_subspace((u[:30], y[:30]), order=5)
+
+
+def test_subspace_model_does_not_depend_on_signal_units():
+    """Channels rescaled by 1e-6 ... 1e6 give the same eigenvalues and the model's gains scaled by the factors.
+
+    Each column is divided by its RMS before the subspace steps, so the scaled and unscaled problems are the
+    same numbers up to rounding: 1e-8 relative leaves room for its amplification through the SVD and the
+    least-squares solves (about the condition number of the B, D regression times 1e-16).
+    """
+    model = true_model(3)
+    _, u = identification_input(3, duration=4.0)
+    y = model.simulate_outputs(u, 0.002)
+    y = y + 1e-3 * np.std(y, axis=0) * np.random.default_rng(0).standard_normal(y.shape)
+    input_factor = np.geomspace(1e-6, 1e6, u.shape[1])
+    output_factor = np.geomspace(1e6, 1e-6, y.shape[1])
+    plain = estimate_subspace((u, y), order=5)
+    scaled = estimate_subspace((u * input_factor, y * output_factor), order=5)
+    np.testing.assert_allclose(np.sort_complex(np.linalg.eigvals(scaled.A)),
+                               np.sort_complex(np.linalg.eigvals(plain.A)), rtol=1e-8)
+    np.testing.assert_allclose(scaled.A, plain.A, rtol=1e-8, atol=1e-8)
+    np.testing.assert_allclose(scaled.B * input_factor, plain.B, rtol=1e-8, atol=1e-8 * np.abs(plain.B).max())
+    np.testing.assert_allclose(scaled.C / output_factor[:, None], plain.C, rtol=1e-8,
+                               atol=1e-8 * np.abs(plain.C).max())
+    np.testing.assert_allclose(scaled.residuals / output_factor, plain.residuals, rtol=1e-6,
+                               atol=1e-8 * np.abs(plain.residuals).max())

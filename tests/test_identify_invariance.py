@@ -281,3 +281,66 @@ def test_a_divergence_after_good_passes_reports_the_last_good_one_with_a_warning
     lines = run_warnings(model=good.model, evaluation=evaluation, stop_reason=f"diverged at pass 3: {message}",
                          start_fit=None, final_fit=None, allow_unstable=False)
     assert len(lines) == 1 and "diverged" in lines[0] and "last good pass" in lines[0]
+
+
+def test_a_spline_model_that_validates_worse_than_its_linear_start_is_warned_about():
+    """The warning compares the two models' mean validation fits; no validation data, no comparison."""
+    from types import SimpleNamespace
+
+    from scenarios.identify_workflow import Evaluation, nonlinear_warnings
+
+    record = _record(20.0, seed=3)
+    linear = identify_iekf(record, STRUCTURE, options=IEKFOptions.invariant(passes=2)).model
+    held_out = score(linear, record)  # a validation record scored by the linear model
+    evaluation = Evaluation(held_out, held_out.R, (held_out,), None)
+    linear_fit = float(np.mean(held_out.fit))
+
+    def spline(fit):
+        return SimpleNamespace(scores=SimpleNamespace(validation_fit=None if fit is None else np.array([fit])))
+
+    lines = nonlinear_warnings(spline(linear_fit - 1.0), evaluation)
+    assert len(lines) == 1 and "validates worse than its linear start" in lines[0]
+    assert nonlinear_warnings(spline(linear_fit), evaluation) == []  # as good: the spline model may stand
+    assert nonlinear_warnings(spline(None), evaluation) == []
+    assert nonlinear_warnings(spline(linear_fit - 1.0), Evaluation(held_out, held_out.R, (), None)) == []
+
+
+def test_the_start_is_returned_only_where_it_beats_every_p_in_cross_validation():
+    from scenarios.identify_workflow import P_TOLERANCE, PTuning
+
+    rows = ({"p": 1e-4, "cv_fit_percent": 70.0, "seconds": 1.0}, {"p": 1e-5, "cv_fit_percent": 72.0, "seconds": 1.0},
+            {"p": 1e-6, "cv_fit_percent": None, "error": "diverged", "seconds": 1.0})
+    assert not PTuning(1e-5, rows, 3.0, 72.0 + P_TOLERANCE / 2).start_wins  # within the tolerance: the filter's
+    assert PTuning(1e-5, rows, 3.0, 72.0 + 2 * P_TOLERANCE).start_wins
+    assert not PTuning(1e-5, rows, 3.0, None).start_wins  # the start could not be scored
+    assert PTuning(1e-4, (rows[2],), 1.0, 10.0).start_wins  # every p failed on the halves
+
+
+def test_a_returned_start_is_what_the_summary_and_the_archive_describe(tmp_path, capsys, monkeypatch):
+    """Where cross-validation prefers the start, the command returns it, says so once, and archives it."""
+    from identification.archive import read_archive
+    from scenarios import identify_workflow
+    from scenarios.cli import main
+
+    real_tune = identify_workflow.tune_p
+
+    def start_preferred(*args, **kwargs):
+        tuning = real_tune(*args, **kwargs)
+        return identify_workflow.PTuning(tuning.p, tuning.tried, tuning.seconds, 200.0)  # beyond any fit
+
+    monkeypatch.setattr(identify_workflow, "tune_p", start_preferred)
+    record = _write_csv(tmp_path / "r.csv", _record(30.0, seed=21, noise=0.05))
+    out = tmp_path / "run.h5"
+    assert main(["identify", str(record), "--inputs", "u1", "--outputs", "y1", "--order", "3", "--passes", "5",
+                 "--out", str(out), "--json"]) == 0
+    captured = capsys.readouterr()
+    summary = json.loads(captured.out)
+    assert summary["model_returned"] == "start"
+    assert summary["warnings"][0] == identify_workflow.START_RETURNED
+    assert captured.err.count("the start model is returned") == 1
+    archived = read_archive(out).runs["start"].model
+    np.testing.assert_allclose(np.sort_complex(archived.eigenvalues()),
+                               np.sort_complex([complex(*v) for v in summary["eigenvalues"]]), rtol=1e-12)
+    filtered = read_archive(out).runs["iekf"].model  # the filter's own model stays in the archive, apart
+    assert not np.allclose(np.sort_complex(filtered.eigenvalues()), np.sort_complex(archived.eigenvalues()),
+                           rtol=1e-9)

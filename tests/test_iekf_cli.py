@@ -13,6 +13,7 @@ import pytest
 
 from identification.archive import open_archive
 from identification.iekf_archive import read_iekf_run
+from scenarios.identify_workflow import P_GRID, P_TOLERANCE
 from scenarios.linear_example import make_data
 
 VEHID = [sys.executable, "-m", "scenarios.cli"]
@@ -49,6 +50,12 @@ def test_identify_json_summary(short_record, tmp_path):
         assert min(abs(f - truth) for f in found) / abs(truth) < 0.02
     assert summary["fit_percent"][0] > 99.9
     assert json.loads((tmp_path / "model.json").read_text())["structure"]["n"] == 5
+    # no --p: each p of the grid cross-validated on the halves; the largest within the tolerance of the best taken
+    tried = summary["p_tried"]
+    assert [row["p"] for row in tried] == list(P_GRID)
+    fits = {row["p"]: row["cv_fit_percent"] for row in tried}
+    assert summary["p"] == max(p for p, fit in fits.items() if fit >= max(fits.values()) - P_TOLERANCE)
+    assert summary["tuning_seconds"] >= sum(row["seconds"] for row in tried) > 0
 
 
 @pytest.mark.parametrize(
@@ -123,6 +130,9 @@ def test_a_killed_run_resumes_to_the_same_parameters(tmp_path):
     resumed = _vehid("identify", "--resume", str(archive), "--passes", "12", "--json")
     assert resumed.returncode == 0, resumed.stderr
     assert json.loads(resumed.stdout)["passes_run"] == json.loads(whole.stdout)["passes_run"]
+    # a given p is used as given, and the resumed run keeps it
+    assert [json.loads(run.stdout)["p"] for run in (whole, resumed)] == [0.5, 0.5]
+    assert json.loads(whole.stdout)["p_tried"] == [] and json.loads(whole.stdout)["tuning_seconds"] == 0
     with open_archive(archive) as a, open_archive(tmp_path / "whole.h5") as b:
         final_resumed, final_whole = read_iekf_run(a, "iekf"), read_iekf_run(b, "iekf")
     # the same arithmetic from the same checkpointed state: equal to rounding of the archive (exact)

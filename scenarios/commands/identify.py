@@ -17,7 +17,9 @@ filter. The defaults do not depend on the units of time or of the signals:
 signals normalised (--no-normalize to switch off), start values from a
 subspace model of the record (--start paper for the paper's), time counted
 in samples inside the filter and p per dominant time constant (--timescale
-seconds for the absolute behaviour). The summary gives the eigenvalues, the
+seconds for the absolute behaviour), p chosen by cross-validation on the
+estimation data unless --p is given (the data start returned where it
+beats every p). The summary gives the eigenvalues, the
 fit R (eq. 17) per output of the continuous model simulated exactly, NRMSE
 fits on estimation and validation data (--validation, --validation-file),
 whether the run converged, any warnings (--strict: exit status 3), the
@@ -59,6 +61,7 @@ from identification.iekf import identify_iekf
 from identification.iekf_archive import Checkpointer, read_iekf_run
 from identification.iekf_pass import COVARIANCE_FORMS
 from identification.modal import C_PATTERNS, ModalModel, ModalStructure
+from identification.multirecord import pooled_simulation_fit
 from identification.preparation import prepare_validation, read_record
 from identification.storage import write_value
 from scenarios import identify_workflow as workflow
@@ -84,7 +87,8 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--passes", type=int, default=None,
                         help=f"largest number of passes (default {DEFAULT_PASSES}; with --resume, the run's own)")
     parser.add_argument("--p", type=float, default=None,
-                        help="tuning parameter p: Q = p I' (default 1e-4 per dominant time constant; 1 with --timescale seconds)")
+                        help="tuning parameter p: Q = p I' (default: 1e-4, 1e-5 or 1e-6 per dominant time constant, chosen by "
+                             "two-fold cross-validation on the estimation data; 1 with --timescale seconds)")
     parser.add_argument("--discretization", default="exact", choices=DISCRETIZATIONS, help="filter discretisation (default exact)")
     parser.add_argument("--covariance", default="joseph", choices=COVARIANCE_FORMS, help="covariance numerics (default joseph)")
     parser.add_argument("--start", default="data", choices=workflow.START_CHOICES, help=workflow.START_HELP)
@@ -153,6 +157,7 @@ def _identify(args: argparse.Namespace) -> tuple[dict, str]:
     previous = None
     if args.resume:
         plan, structure, options, previous = _resume(args)
+        tuning = workflow.given_p(options)  # the run's own p, as archived
         archive_path = Path(args.resume)
     else:
         if not args.data:
@@ -165,6 +170,8 @@ def _identify(args: argparse.Namespace) -> tuple[dict, str]:
             return _run_order_search(args, plan, options)
         first = plan.records[0]
         structure = ModalStructure.from_pattern(args.pattern, plan.orders[0], first.n_u, first.n_y)
+        tuning = workflow.tune_p(args, plan, options, structure) if workflow.tunes_p(args) else workflow.given_p(options)
+        options = dataclasses.replace(options, p=tuning.p)
         archive_path = Path(args.out) if args.out else None
         if archive_path is not None:
             with write_archive(archive_path, kind="identification", config=options, seeds=[]) as archive:
@@ -184,10 +191,11 @@ def _identify(args: argparse.Namespace) -> tuple[dict, str]:
                                   settle_start=plan.settle_start))
     if checkpoint is not None:
         checkpoint.finish(result)  # the archive says how the run ended: converged, passes or diverged at pass k
-    summary = _iekf_summary(result)
+    summary = {**_iekf_summary(result), **tuning.summary()}
     if divergence:
         summary["divergence"] = divergence
-    return _finish(args, plan, summary, result.model, result=result, archive_path=archive_path)
+    model = workflow.start_model(result) if tuning.start_wins else result.model
+    return _finish(args, plan, summary, model, result=result, archive_path=archive_path)
 
 
 def _iekf_summary(result) -> dict:
@@ -213,6 +221,10 @@ def _iekf_summary(result) -> dict:
 def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None) -> tuple[dict, str]:
     """Scores, warnings, the nonlinear model, archive and model file: the common end of every identify run."""
     data = plan.records[0]
+    start_returned = result is not None and model is not result.model
+    if start_returned:  # the summary describes the model returned
+        summary.update(eigenvalues=model.eigenvalues(), A=model.A, B=model.B, C=model.C, D=model.D,
+                       fit_percent=pooled_simulation_fit(model, plan.records), model_returned="start")
     evaluation = workflow.evaluate(model, plan, args)
     summary.update(workflow.scores_summary(evaluation, summary["fit_percent"]))
     summary.update(records_summary(model, plan.records, plan.preparation))
@@ -226,12 +238,14 @@ def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None)
                                          "seconds": summary["seconds"]}])
     allow_unstable = bool(getattr(args, "allow_unstable", False)) or (
         result is not None and result.options.allow_unstable)
-    start_fit, start_moved = workflow.start_of(result, plan.records) if result is not None else (None, None)
-    warnings = workflow.run_warnings(
+    start_fit, start_moved = workflow.start_of(result, plan.records) if result is not None and not start_returned \
+        else (None, None)
+    warnings = [workflow.START_RETURNED] if start_returned else []
+    warnings += workflow.run_warnings(
         model=model, evaluation=evaluation, start_fit=start_fit,
-        stop_reason=(f"{summary['stop_reason']}: {summary['divergence']}" if "divergence" in summary
-                     else summary.get("stop_reason")),
-        final_fit=float(summary["fit_percent"].mean()) if result is not None else None,
+        stop_reason=None if start_returned else (f"{summary['stop_reason']}: {summary['divergence']}"
+                                                 if "divergence" in summary else summary.get("stop_reason")),
+        final_fit=float(np.mean(summary["fit_percent"])) if result is not None else None,
         allow_unstable=allow_unstable, start_moved=start_moved,
     )
     if evaluation.horizon is not None and args.horizon is None:
@@ -250,11 +264,14 @@ def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None)
                 scores.estimation, scores.estimation.R, scores.validation, None),
             stop_reason=outcome.result.stop_reason, start_fit=float(np.mean(outcome.result.start_fit)),
             final_fit=float(np.mean(outcome.result.fit_percent)), allow_unstable=True, label="nonlinear")
+        warnings += workflow.nonlinear_warnings(outcome, evaluation)
     if archive_path is not None:
-        if tests is not None or nonlinear is not None:  # one atomic update (each copies the archive)
+        if tests is not None or nonlinear is not None or start_returned:  # one atomic update (each copies the archive)
             with update_archive(archive_path) as archive:
                 if nonlinear is not None:
                     write_run(archive, "nonlinear", model=nonlinear)
+                if start_returned:
+                    write_run(archive, "start", model=model)
                 if tests is not None:
                     write_value(run_group(archive, RUN_NAME if result is not None else args.method),
                                 "residual_tests", tests)
@@ -275,7 +292,8 @@ def _run_order_search(args, plan, options) -> tuple[dict, str]:
     chosen = workflow.choose_order(rows)
     model, extra, _ = kept[chosen]
     result = extra["result"]
-    summary = {**_iekf_summary(result), "orders_tried": rows, "seconds": sum(row["seconds"] for row in rows)}
+    summary = {**_iekf_summary(result), **extra["tuning"].summary(), "orders_tried": rows,
+               "seconds": sum(row["seconds"] for row in rows)}
     archive_path = Path(args.out) if args.out else None
     if archive_path is not None:
         from identification.iekf_archive import write_iekf_run
