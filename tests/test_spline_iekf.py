@@ -13,7 +13,7 @@ import pytest
 from identification import IEKFOptions, IOData, ModalModel, ModalStructure, identify_iekf
 from identification.errors import InputError
 from identification.filter_models import LinearModalFilterModel
-from identification.iekf_pass import compiled_pass, pack_covariance, unpack_covariance
+from identification.iekf_pass import compiled_pass, pack_covariance
 from identification.spline_iekf import SplineIEKFOptions, identify_spline_iekf
 from identification.spline_modal import SplineModalFilterModel, SplineModalModel, SplineModalStructure
 from scenarios.linear_example import make_data, true_model
