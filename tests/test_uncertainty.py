@@ -157,26 +157,33 @@ def test_n4sid_asymptotic_covariance_agrees_with_its_residual_bootstrap():
 
 
 def test_intervals_are_calibrated_on_the_known_system_lean():
-    """The z-scores (estimate - truth) / std of frequency and damping have mean square near 1.
+    """Coverage and z-scores of the 95 % intervals at the IEKF's command-line defaults and of output error.
 
-    12 realisations x 2 modes x 2 quantities = 48 z-scores per method. For
-    calibrated intervals the mean of z^2 is 1 with a standard deviation of
-    sqrt(2 / 48) = 0.20 if independent (0.29 if frequency and damping of a
-    mode were fully dependent); [0.35, 2.2] is beyond 2 sigma below and 4
-    sigma above even then, while intervals off by a factor of 2 in std give
-    0.25 or 4. The full table (2 noise levels x 60 realisations) is
+    20 realisations (30 % noise, 30 s) x 2 modes x 2 quantities = 80
+    intervals per method. Coverage: a calibrated method covers 76 on
+    average; even if the four intervals of a realisation were one trial,
+    the binomial 99 % range of 20 trials at 95 % is 16-20, so at least 80 %.
+    z-scores (estimate - truth) / std: the mean of z^2 is 1 with a standard
+    deviation of sqrt(2 / 80) = 0.16 if independent (0.32 if the four of a
+    realisation were fully dependent); [0.4, 2.2] lies beyond 1.8 of those
+    below and 3.7 above, while intervals too wide by a factor of 1.6 (as
+    the filter's P alone gave) have 0.4 and too narrow by 1.5 have 2.25.
+    The full table (2 noise levels x 50 realisations and a p sweep) is
     benchmarks/uncertainty_calibration.py.
     """
     natural, damping = calibration.true_model().frequencies_damping()
-    truth = {"frequency_hz": natural / (2 * np.pi), "damping": damping}
+    truth = {"frequency_hz": natural[:2] / (2 * np.pi), "damping": damping[:2]}
     scores: dict[str, list] = {"iekf": [], "output-error": []}
-    for seed in range(100, 112):
+    for seed in range(100, 120):
         data, _ = calibration.make_record(seed, 0.3, duration=30.0)
         for method, realisation in calibration.identify_realisation(data).items():
             for name in ("frequency_hz", "damping"):
-                scores[method].extend((getattr(realisation, name) - truth[name]) / getattr(realisation, f"{name}_std"))
+                if method in scores:
+                    scores[method].extend((getattr(realisation, name) - truth[name]) / getattr(realisation, f"{name}_std"))
     for method, z in scores.items():
-        assert 0.35 < np.mean(np.square(z)) < 2.2, (method, np.mean(np.square(z)))
+        z = np.asarray(z)
+        assert np.mean(np.abs(z) <= 1.96) >= 0.8, (method, np.mean(np.abs(z) <= 1.96))
+        assert 0.4 < np.mean(np.square(z)) < 2.2, (method, np.mean(np.square(z)))
 
 
 def test_spline_bands_match_monte_carlo_sampling():
