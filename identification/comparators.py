@@ -47,9 +47,9 @@ method then returns the discrete model itself as a
 
 Every method leaves a parameter covariance on its model
 (:mod:`identification.uncertainty`): ``arx`` and ``rls`` the least-squares
-covariance carried through the conversion, ``n4sid`` a residual bootstrap
-(options ``bootstrap`` replicates, default 30, each one subspace fit, 0 for
-none; and ``seed``),
+covariance carried through the conversion, ``n4sid`` the asymptotic
+covariance of its simulation errors (a residual bootstrap on request:
+option ``bootstrap``),
 ``output-error`` the Gauss-Newton covariance of its fit.
 
 Other methods join with :func:`register_comparator` (the IEKF, for one):
@@ -85,7 +85,12 @@ from .modal import ModalModel, ModalStructure
 from .recursive import recursive_least_squares
 from .statespace import balanced_truncation, discrete_to_continuous, modal_structure_for, to_modal
 from .subspace import estimate_subspace
-from .uncertainty import bootstrap_covariance, gauss_newton_covariance, propagate_by_differences
+from .uncertainty import (
+    bootstrap_covariance,
+    gauss_newton_covariance,
+    propagate_by_differences,
+    simulation_error_covariance,
+)
 
 __all__ = [
     "ComparatorResult",
@@ -100,9 +105,6 @@ __all__ = [
 ]
 
 Comparator = Callable[..., ModalModel]
-
-#: Bootstrap replicates of the n4sid parameter covariance (option ``bootstrap``).
-N4SID_BOOTSTRAP = 30
 
 
 @dataclass(frozen=True, eq=False)
@@ -267,17 +269,29 @@ def rls_comparator(data: IOData, *, order: int, **options: Any) -> ModalModel:
 
 
 def n4sid_comparator(data: IOData, *, order: int, **options: Any) -> ModalModel:
-    """Subspace identification (PO-MOESP), to modal form. Option: ``block_rows``."""
+    """Subspace identification (PO-MOESP), to modal form.
+
+    Options: ``block_rows``; ``bootstrap`` (None, the default: the asymptotic
+    covariance of the simulation errors at the estimate,
+    :func:`~identification.uncertainty.simulation_error_covariance`; N > 0:
+    a residual bootstrap of N replicates, one subspace fit each; 0: no
+    covariance) and ``seed`` (of the bootstrap).
+    """
     records = _check_data(data)
     data = records[0]
     order = positive_int(order, "order")
     block_rows = options.pop("block_rows", None)
-    replicates = non_negative_int(options.pop("bootstrap", N4SID_BOOTSTRAP), "bootstrap")
+    replicates = options.pop("bootstrap", None)
+    replicates = None if replicates is None else non_negative_int(replicates, "bootstrap")
     seed = options.pop("seed", 0)
     _reject_unknown(options, "n4sid")
     fit = estimate_subspace(data if len(records) == 1 else list(records), order=order, block_rows=block_rows)
     model = _discrete_to_modal(fit.A, fit.B, fit.C, fit.D, data.dt,
                                {"method": "n4sid (PO-MOESP)", "block_rows": fit.block_rows})
+    if replicates == 0 or isinstance(model, DiscreteModel):  # asked for none, or no modal parameters to cover
+        return model
+    if replicates is None:
+        return model.with_parameter_covariance(simulation_error_covariance(model, records))
 
     def replicate(y: np.ndarray) -> np.ndarray | None:
         try:
@@ -289,10 +303,8 @@ def n4sid_comparator(data: IOData, *, order: int, **options: Any) -> ModalModel:
         except (InputError, ExcitationError, np.linalg.LinAlgError):  # left out, and counted
             return None
 
-    # no covariance when asked for none (each replicate costs one subspace fit), for a discrete-time model,
-    # or for several records (the residual bootstrap resamples one record's residuals)
-    if replicates == 0 or isinstance(model, DiscreteModel) or len(records) > 1:
-        return model
+    if len(records) > 1:  # the residual bootstrap resamples one record's residuals
+        raise InputError("the n4sid residual bootstrap takes one record; leave bootstrap unset for several")
     try:
         covariance, used = bootstrap_covariance(replicate, data.y - fit.residuals, fit.residuals,
                                                 samples=replicates, rng=np.random.default_rng(seed))

@@ -5,8 +5,10 @@ Every estimator leaves a covariance of the modal parameter vector
 :class:`~identification.modal.ModalStructure` describes ``theta``):
 
 IEKF
-    The parameter block of the filter's final ``P``, scaled by the measured
-    innovations and mapped to original units, :func:`iekf_parameter_covariance`.
+    The upper envelope of the filter's steady-state error covariance (half
+    its final ``P``, scaled by the measured innovations) and the asymptotic
+    covariance of the simulation-error fit at its estimate, mapped to
+    original units, :func:`iekf_parameter_covariance`.
 output error
     The Gauss-Newton covariance ``(J' W J)^-1`` of the simulation errors'
     Jacobian with each output weighted by its residual variance,
@@ -17,10 +19,14 @@ ARX
     parameters through the ARX-to-modal conversion by central differences,
     :func:`propagate_by_differences`.
 N4SID
-    A residual (moving-block) bootstrap, :func:`bootstrap_covariance`: the
-    subspace estimate is not the minimiser of a criterion whose curvature
-    could be used, so its spread is measured by re-identifying from the
-    model's simulated output plus resampled blocks of its own residuals.
+    The asymptotic covariance of the simulation-error fit at its estimate,
+    :func:`simulation_error_covariance`: the efficient bound, which a
+    consistent subspace estimate approaches where its block rows span the
+    slow modes; where they do not, it is inefficient and these intervals
+    are too narrow. On request a residual (moving-block) bootstrap,
+    :func:`bootstrap_covariance`, measures the spread itself by
+    re-identifying from the model's output plus resampled blocks of its
+    own residuals, at one subspace fit per replicate.
 
 spline IEKF
     The parameter block of its final ``P`` as it stands: that filter's R is
@@ -37,13 +43,9 @@ them; the steady-state gain is ``D - C A^-1 B``; the frequency response
 ``C (j w I - A)^-1 B + D`` in magnitude and phase. Intervals are
 ``value +/- z sigma`` with ``z`` the normal quantile of the level.
 
-Calibration, measured (``benchmarks/uncertainty_calibration.py``): on a
-known two-mode system with 10 % and 30 % output noise the 95 % intervals of
-frequency and damping cover the truth in 90-98 % of 60 realisations for the
-IEKF at p = 0.001 and for output error. At p = 1 the IEKF's ``P`` is the
-covariance of a random walk of the parameters that the data do not have,
-and the intervals come out 1.8-2.4 times too wide. Every interval here
-assumes white residuals: where :mod:`identification.residuals` rejects
+Calibration is measured by ``benchmarks/uncertainty_calibration.py`` (the
+coverage table is in the README, "How sure is the model?"). Every interval
+here assumes white residuals: where :mod:`identification.residuals` rejects
 whiteness, model error dominates and the intervals are formal.
 """
 
@@ -70,6 +72,8 @@ __all__ = [
     "frequency_response",
     "iekf_parameter_covariance",
     "gauss_newton_covariance",
+    "simulation_error_covariance",
+    "upper_envelope",
     "propagate_by_differences",
     "bootstrap_covariance",
     "sample_parameters",
@@ -368,8 +372,10 @@ def iekf_parameter_covariance(
     noise_ratio: float,
     *,
     time_unit: float = 1.0,
+    parameters: np.ndarray | None = None,
+    records: Any = None,
 ) -> np.ndarray:
-    """The IEKF's parameter covariance in original units from its final ``P``.
+    """The IEKF's parameter covariance in original units from its final ``P`` and its estimate's sensitivity.
 
     Parameters
     ----------
@@ -386,19 +392,39 @@ def iekf_parameter_covariance(
     time_unit : float
         The filter's unit of time in seconds (the sample interval when it
         counts time in samples): sigma, omega and B are rescaled to 1/s.
+    parameters : ndarray, optional
+        The estimate in original units; with ``records``, the covariance is
+        the larger of the filter's and the fit's (Notes).
+    records : sequence of IOData, optional
+        The records the filter ran over.
 
     Notes
     -----
-    Why the scaling: the filter's ``P`` is a covariance only under the noise
-    model it was given, ``R`` (by default ``I`` in normalised units, the
-    paper's choice, which is a tuning choice and not a measurement). The
-    gain, and so the estimate, is computed with that ``R``; the estimate's
-    actual error is driven by the actual noise, whose variance is
-    ``noise_ratio`` times ``R``. The noise-driven part of the error is
-    linear in the noise, so its covariance scales with the noise variance:
-    ``P`` is multiplied by the measured ratio. The innovations also carry
-    ``H P H'``, which is small against ``R`` once the parameters have
-    converged on a long record; the ratio therefore errs on the wide side.
+    Two mechanisms leave error in the estimate, and the covariance is the
+    upper envelope of the two (in the basis that diagonalises both, the
+    larger variance in each direction; their sum would count the one noise
+    twice):
+
+    * The filter's own fluctuation. ``P`` is a covariance under the noise
+      model the filter was given, ``R`` (by default ``I`` in normalised
+      units, a tuning choice): the noise-driven error scales with the
+      actual noise variance, ``noise_ratio`` times ``R``. And ``P`` is that
+      of parameters taking a random walk of covariance ``Q`` per step,
+      which they do not: for a constant parameter tracked by a filter at
+      its steady state, the error covariance ``V`` solves
+      ``V M P + P M V = P M P`` (``M = H' R^-1 H``, the Lyapunov equation of
+      the error recursion with gain ``P H' R^-1``, to first order in ``M P``),
+      i.e. ``V = P / 2``. So ``noise_ratio P / 2``.
+    * The error of the point the filter settles on, the minimiser of the
+      simulation error (the states carry no process noise, so the filter
+      predicts by simulation): :func:`simulation_error_covariance` at the
+      estimate. After many passes at a small ``p`` the estimate is that
+      minimiser and its error this bound; at larger ``p`` the filter
+      tracks over a memory shorter than the record and its fluctuation
+      dominates.
+
+    The coverage this gives across p is measured by
+    ``benchmarks/uncertainty_calibration.py`` (README, "How sure is the model?").
 
     The map to original units is the Jacobian of
     :meth:`~identification.modal.ModalStructure.rescale_time` and
@@ -413,8 +439,30 @@ def iekf_parameter_covariance(
         for unit in np.eye(n_theta)
     ])
     P_parameters = np.asarray(P_parameters, dtype=float)
-    covariance = noise_ratio * jacobian @ P_parameters @ jacobian.T
-    return 0.5 * (covariance + covariance.T)
+    covariance = 0.5 * noise_ratio * jacobian @ P_parameters @ jacobian.T
+    covariance = 0.5 * (covariance + covariance.T)
+    if parameters is None or records is None:
+        return covariance
+    from .modal import ModalModel
+
+    fit = simulation_error_covariance(ModalModel.from_parameters(structure, parameters), records)
+    return covariance if fit is None else upper_envelope(covariance, fit)
+
+
+def upper_envelope(first: np.ndarray, second: np.ndarray) -> np.ndarray:
+    """The covariance at least as large as each of two, and no larger than it must be, direction by direction.
+
+    With ``W`` such that ``W' first W = I`` and ``W' second W = diag(d)``
+    (the generalised eigenvectors), it is ``W^-T diag(max(1, d)) W^-1``.
+    ``first`` must be positive definite; where it is not, the sum stands in.
+    """
+    try:
+        values, vectors = scipy.linalg.eigh(second, first)
+    except (np.linalg.LinAlgError, ValueError):
+        return first + second
+    back = first @ vectors  # W^-T, since W' first W = I
+    envelope = back @ np.diag(np.maximum(values, 1.0)) @ back.T
+    return 0.5 * (envelope + envelope.T)
 
 
 def gauss_newton_covariance(jacobian: np.ndarray, residuals: np.ndarray) -> np.ndarray:
@@ -447,6 +495,63 @@ def gauss_newton_covariance(jacobian: np.ndarray, residuals: np.ndarray) -> np.n
     inverse = scipy.linalg.pinv(upper)
     covariance = inverse @ inverse.T
     return 0.5 * (covariance + covariance.T)
+
+
+def simulation_error_covariance(model: Any, records: Any, *, relative_step: float = 1e-6) -> np.ndarray | None:
+    """The asymptotic covariance of a modal model's parameters as a fit of its simulation errors.
+
+    Parameters
+    ----------
+    model : ModalModel
+        The estimate; its parameters need not minimise the simulation error
+        (an N4SID estimate does not).
+    records : sequence of IOData
+        The records it was identified from, each simulated from rest
+        (first-order hold), as output error fits them.
+    relative_step : float
+        Forward-difference step of each parameter, relative to its size
+        (floored at that fraction of the largest parameter for parameters near 0).
+
+    Returns
+    -------
+    ndarray, shape (n_theta, n_theta), or None
+        :func:`gauss_newton_covariance` of the errors' Jacobian (one
+        simulation per parameter); None where a perturbed model cannot be
+        simulated to finite values (an unstable estimate).
+
+    Notes
+    -----
+    This is the covariance a prediction-error (output-error) estimate would
+    have at this point with white output noise of the measured variance
+    (Ljung 1999, eq. 9.17). For a consistent estimator that is not a
+    minimiser of that criterion (subspace methods) it is the efficient
+    bound its spread approaches on well-excited records; the residual
+    bootstrap, which measures the spread itself, costs one identification
+    per replicate where this costs one simulation per parameter.
+    """
+    from .modal import ModalModel
+
+    structure = model.structure
+    theta = np.asarray(model.parameters, dtype=float)
+
+    def errors(values: np.ndarray) -> np.ndarray:
+        trial = ModalModel.from_parameters(structure, values)
+        return np.concatenate([(trial.simulate(record.u, record.dt, method="foh") - record.y).ravel()
+                               for record in records])
+
+    with np.errstate(all="ignore"):
+        base = errors(theta)
+        floor = relative_step * max(float(np.max(np.abs(theta))), 1e-12)
+        columns = []
+        for index in range(theta.size):
+            step = max(relative_step * abs(theta[index]), floor)
+            moved = theta.copy()
+            moved[index] += step
+            columns.append((errors(moved) - base) / step)
+    jacobian = np.column_stack(columns)
+    if not (np.all(np.isfinite(jacobian)) and np.all(np.isfinite(base))):
+        return None
+    return gauss_newton_covariance(jacobian, base.reshape(-1, structure.n_y))
 
 
 def propagate_by_differences(

@@ -54,7 +54,6 @@ import numpy as np
 from identification.archive import (open_archive, read_records, run_group, update_archive, write_archive,
                                     write_run)
 from identification.archive_safety import archive_lock, check_output_target
-from identification.comparators import N4SID_BOOTSTRAP
 from identification.errors import InputError
 from identification.filter_models import DISCRETIZATIONS
 from identification.iekf import identify_iekf
@@ -101,8 +100,9 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--resume", metavar="ARCHIVE",
                         help="continue the run checkpointed in ARCHIVE (its data and settings; --passes counts all passes)")
     parser.add_argument("--bootstrap", type=int, metavar="N",
-                        help=f"with --method n4sid: residual-bootstrap replicates for its parameter covariance "
-                             f"(default {N4SID_BOOTSTRAP}, each one subspace fit; 0 for none)")
+                        help="with --method n4sid: residual-bootstrap replicates for its parameter covariance, each "
+                             "one subspace fit (default: none, the asymptotic covariance of its simulation errors; "
+                             "0 for no covariance)")
     register_data_options(parser)
     workflow.register_options(parser)
     parser.set_defaults(handler=run)
