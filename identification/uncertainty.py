@@ -536,7 +536,7 @@ def simulation_error_covariance(model: Any, records: Any, *, relative_step: floa
 
     def errors(values: np.ndarray) -> np.ndarray:
         trial = ModalModel.from_parameters(structure, values)
-        return np.concatenate([(trial.simulate(record.u, record.dt, method="foh") - record.y).ravel()
+        return np.concatenate([(trial.simulate_outputs(record.u, record.dt, method="foh") - record.y).ravel()
                                for record in records])
 
     with np.errstate(all="ignore"):
