@@ -18,7 +18,7 @@ from identification.uncertainty import (
 from scenarios import calibration
 
 
-def _model_with_covariance() -> ModalModel:
+def _model_with_covariance(spread: float = 0.02) -> ModalModel:
     """Two pairs and a real pole, two inputs, two outputs; 2 % standard deviation on every parameter."""
     structure = ModalStructure.default(5, 2, 2)
     rng = np.random.default_rng(3)
@@ -32,7 +32,7 @@ def _model_with_covariance() -> ModalModel:
         C[i, j] = 1.0
     D = rng.normal(size=(2, 2))
     model = ModalModel(structure, A, B, C, D)
-    std = 0.02 * np.maximum(np.abs(model.parameters), 0.1)
+    std = spread * np.maximum(np.abs(model.parameters), 0.1)
     correlation = np.full((std.size, std.size), 0.2) + 0.8 * np.eye(std.size)
     return model.with_parameter_covariance(correlation * np.outer(std, std))
 
@@ -41,11 +41,13 @@ def test_delta_method_matches_monte_carlo_sampling_of_the_covariance():
     """Mode frequencies and damping, steady-state gains and the frequency response, against 4000 samples.
 
     The sample standard deviation of 4000 draws has a relative standard error
-    of 1/sqrt(2 x 4000) = 1.1 %; the delta method is exact to first order and
-    the parameters' spread is 2 %, so second-order terms are of order 2 % of
-    the std as well: 6 % covers both with margin (seeded).
+    of 1/sqrt(2 x 4000) = 1.1 %; the delta method is exact to first order, so
+    its error grows with the parameters' spread. At a 2 % spread the phase at
+    4 Hz, just above the 3.2 Hz mode, is curved enough that 16,000 draws put
+    the first-order std 6.3 % low; at the 1 % spread used here that error is
+    2-3 % (measured over seeds), and 6 % covers it and the sampling error.
     """
-    model = _model_with_covariance()
+    model = _model_with_covariance(spread=0.01)
     samples = sample_parameters(model, 4000, np.random.default_rng(0))
     predicted = model_uncertainty(model)
     frequencies, dampings, gains, magnitudes, phases = [], [], [], [], []
