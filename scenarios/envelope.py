@@ -64,7 +64,7 @@ from vehicle.parameters import VehicleParameters
 
 from .handling_study import (COMPARED_MODES, OUTPUTS, check_orders, positive_number, score, spline_options,
                              study_linear_options, whole_number)
-from .paths import results_directory
+from .paths import results_path
 from .shutdown import run_in_workers
 
 __all__ = [
@@ -88,7 +88,6 @@ _DEG = math.pi / 180
 _RAMP_DURATION = 20.0  # [s] slow enough to be quasi-steady (1 deg/s at 20 m/s)
 _RAMP_DT = 0.005  # [s] the ramp only needs the handling curve, not the identification's 500 Hz
 _MAX_STEER = 30 * _DEG  # the vehicle model's trim range
-_GAIN_SHARE = 0.2  # the small-steer gain is fitted where |a_y| < this share of the grip limit
 _VALIDATION_RATIO = 3.5 / 4.0  # validation to identification amplitude, as the manoeuvres' defaults
 
 
@@ -676,9 +675,7 @@ def run_campaign(
         whole_number(workers, "workers", 1)
     started = time.perf_counter()
     jobs = plan_jobs(config)
-    path = Path(out) if out else results_directory() / "envelope.h5"
-    if out and not path.is_absolute():
-        path = results_directory() / path
+    path = results_path(out, "envelope.h5")
     if path.is_dir():
         raise InputError(f"{path} is a directory: --out names the campaign's archive file")
     with archive_lock(path):  # one writer per campaign archive: a second campaign on it is refused, naming the holder

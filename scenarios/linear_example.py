@@ -45,11 +45,12 @@ from identification.data import IOData
 from identification.errors import InputError
 from identification.iekf import IEKFOptions, IEKFResult, identify_iekf
 from identification.iekf_archive import write_iekf_run
+from identification.jsonable import to_jsonable
 from identification.metrics import percentage_explanation
 from identification.modal import ModalModel, ModalStructure
 from identification.order import OrderAssessment, assess_orders
 
-from .paths import results_directory
+from .paths import results_path
 
 __all__ = [
     "CASES",
@@ -382,11 +383,7 @@ def write_archive_for(result: CaseResult, out: str | Path | None = None) -> Path
 
     The default file is ``linear_example_<case>.h5`` under the results folder.
     """
-    from .cli import to_jsonable
-
-    path = Path(out) if out else results_directory() / f"linear_example_{result.case}.h5"
-    if not path.is_absolute() and out:
-        path = results_directory() / path
+    path = results_path(out, f"linear_example_{result.case}.h5")
     settings = to_jsonable(result.settings)
     with write_archive(path, kind="linear-example", config=settings, seeds=[result.settings["seed"]]) as archive:
         for name, data in result.data.items():

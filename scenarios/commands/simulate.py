@@ -19,7 +19,7 @@ import numpy as np
 
 from identification.archive_safety import check_output_target
 from identification.errors import InputError, SimulationError
-from scenarios.paths import results_directory
+from scenarios.paths import results_path
 from vehicle import MANOEUVRES, make_manoeuvre, named_vehicle, simulate
 
 NAME = "simulate"
@@ -61,16 +61,11 @@ def step_gains(data, amplitude: float, window: float = _STEADY_WINDOW) -> dict[s
     }
 
 
-def _output_path(out: str) -> Path:
-    path = Path(out)
-    return path if path.is_absolute() else results_directory() / path
-
-
 def _write_record(data, args: argparse.Namespace) -> Path:
     import casadi
     import h5py
 
-    path = _output_path(args.out)
+    path = results_path(args.out, args.out)
     path.parent.mkdir(parents=True, exist_ok=True)
     with h5py.File(path, "w") as handle:
         handle.attrs["casadi_version"] = casadi.__version__
@@ -90,7 +85,7 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
         options["duration"] = args.duration
     manoeuvre = make_manoeuvre(args.manoeuvre, **options)
     if args.out:  # before the simulation: no directory, no input file, a writable place
-        check_output_target(_output_path(args.out), inputs=[args.vehicle], force=True, what="record")
+        check_output_target(results_path(args.out, args.out), inputs=[args.vehicle], force=True, what="record")
     try:
         data = simulate(params, manoeuvre, speed=args.speed, method=args.method)
     except SimulationError as exc:

@@ -148,7 +148,7 @@ def _study(args, config, path, records, finished, checkpoint) -> tuple[dict, str
 
 
 def summary_of(result: HandlingResult) -> dict[str, Any]:
-    """The study's JSON summary (before :func:`scenarios.cli.to_jsonable`): its keys are a public contract."""
+    """The study's JSON summary (before :func:`identification.jsonable.to_jsonable`): its keys are a public contract."""
     return {
         "table": list(result.table),
         "chosen_order": result.assessment.chosen_order,
