@@ -1,63 +1,22 @@
 """The handling study of Best & Bogdanski 2017, section 6 (Table 5).
 
 The full-vehicle model (:mod:`vehicle`, 23 states, 20 m/s) is driven by the
-``identification`` steer input (band-limited noise plus a sweep, reaching
-about +/-7 m/s^2, 90 % of the grip limit) and, for validation, by the
-``validation`` input (steps on a sweep, then larger steps). Outputs: lateral
-acceleration, yaw rate and roll angle; 500 Hz, 30 s each. For each model
-order ``n`` a linear modal model is identified by the IEKF, then a
+``identification`` steer input (band-limited noise plus a sweep, to about 90 %
+of the grip limit) and, for validation, by the ``validation`` input. Outputs:
+lateral acceleration, yaw rate and roll angle; 500 Hz, 30 s each. For each
+model order a linear modal model is identified by the IEKF, then a
 spline-nonlinear one started from it (paper section 5, eq. 20-22). Every
-model is simulated from rest over both records and scored by the mean over
-the three outputs of R (eq. 17). The identified linear modes are set beside
-the vehicle's own linearisation (its yaw-sideslip and roll modes).
+model is simulated from rest over both records and scored by the mean R
+(eq. 17) over the outputs; the identified linear modes are set beside the
+vehicle's own linearisation.
 
-No trim is removed from the data. The record starts at the straight-running
-trim (zero steer): all three outputs are zero there to ~1e-33 and the models
-start from rest, which is the same state. The outputs are absolute values
-and are deviations from that trim alike.
+No trim is removed: the records start at the straight-running trim, where all
+three outputs are zero, which is the models' rest state too. The order is
+chosen by :func:`identification.order.assess_orders` on the linear runs.
 
-Linear settings (measured; seeds 0 and 1, 30 s records, orders 2-6). With
-model and data as here, every order explains the data better the lower p
-is, because the linear model is the wrong structure for data reaching 90 %
-of grip: a large p lets the parameters chase the local behaviour of the
-record (after 100 passes at p = 1 the fit is 60 % for n = 2, and n = 3 turns
-unstable in the first pass), a small p makes every pass average over the
-whole record. The limit (p = 1e-6, 250 passes) is mean R = 98.9, 99.1,
-99.3, 99.35, 99.4 % for n = 2..6. p = 1e-5 with 100 passes (the defaults)
-comes within 0.2 points of it for every order (98.70, 99.03, 99.28, 99.29,
-99.32 %; validation 98.47, 98.60, 98.85, 98.72, 98.87 %); seeds 0 and 1
-differ by under 0.05 points. After 20 passes p = 1e-4 is 0.3-1.3 points
-below the limit and p = 1e-3 0.9-2.5 points. Convergence in the paper's
-sense is not reached at these settings: at pass 100 trace(P) still grows
-5-14 % per 20 passes and the least constrained parameters still move
-(n = 2 settles at p >= 1e-3, at a fit 2.5 points lower). So the order
-choice below falls back on the fit.
-
-Order choice: :func:`identification.order.assess_orders` on the linear runs
-(the lowest converged order within 0.05 points of the best fit, else the
-lowest order within 0.05 points; 0.05 points is the seed-to-seed spread).
-The nonlinear runs cannot be assessed that way: their records carry no
-parameter vector. They start from the linear model of their order, so a
-well-conditioned linear run is their prerequisite.
-
-Modes. In the linear regime (a tenth of the steer amplitude) the order-3
-model finds the roll mode (1.40-1.48 Hz, damping 0.59-0.61; vehicle 1.45 Hz,
-0.575). The yaw-sideslip mode (2.14 Hz, damping 0.98) is not pinned down by
-the data: it is nearly critically damped and lies close to the tyre lags,
-and a model with two pairs and two real poles explains 99.997 % with it
-placed elsewhere. At full amplitude the identified modes are those of an
-equivalent linear model of a saturating car: a well-damped mode near
-0.9 Hz (paper: 0.4 Hz) and a 2.8 Hz one for n = 4.
-
-Nonlinear settings: the spline IEKF's defaults (5 nodes, p = 1e-7, 60
-passes; see :class:`identification.spline_iekf.SplineIEKFOptions` for the
-measurement behind p). Measured, seed 0: nonlinear R on identification
-99.34, 99.51, 99.65, 99.81, 99.74 % and on validation 99.19, 98.89, 99.59,
-99.66, 99.63 % for n = 2..6.
-
-What to expect (paper, Table 5; our vehicle is our own, so the numbers
-differ): R rises with the order, linear 99.60-99.82 % on identification;
-the nonlinear model beats the linear one on identification and validation.
+What to expect (paper, Table 5): R rises with the order and the nonlinear
+model beats the linear one. The measured results are in the README, the
+measurements behind the settings in ``docs/study_measurements.md``.
 """
 
 from __future__ import annotations
@@ -79,6 +38,7 @@ from identification.data import IOData
 from identification.errors import DivergenceError, InputError
 from identification.iekf import IEKFOptions, IEKFResult, identify_iekf
 from identification.iekf_archive import write_iekf_run
+from identification.jsonable import to_jsonable
 from identification.spline_iekf import SplineIEKFOptions, identify_spline_iekf
 from identification.metrics import percentage_explanation
 from identification.modal import ModalStructure
@@ -88,7 +48,7 @@ from identification.storage import write_value
 from vehicle import DEFAULT_DT, DEFAULT_SPEED, linearize, make_manoeuvre, named_vehicle, simulate
 from vehicle.linearize import Mode
 
-from .paths import results_directory
+from .paths import results_path
 from .shutdown import run_in_workers
 
 
@@ -205,10 +165,7 @@ def whole_number(value: Any, name: str, minimum: int, maximum: int | None = None
 
 
 def study_linear_options(p: float = 1e-5, passes: int = 100) -> IEKFOptions:
-    """The study's linear IEKF options: normalised data, exact (first-order-hold) discretisation.
-
-    The defaults are measured (module notes).
-    """
+    """The study's linear IEKF options: normalised data, exact (first-order-hold) discretisation."""
     return IEKFOptions(p=p, passes=passes, normalize=True, discretization="exact")
 
 
@@ -721,10 +678,7 @@ ORDERS_DONE = "orders_done_json"
 
 def archive_path(out: str | Path | None = None) -> Path:
     """The archive file of ``--out``: ``handling_study.h5`` under the results folder by default, relative names there too."""
-    path = Path(out) if out else results_directory() / "handling_study.h5"
-    if out and not path.is_absolute():
-        path = results_directory() / path
-    return path
+    return results_path(out, "handling_study.h5")
 
 
 def write_order(archive: Any, order: int, outcome: OrderOutcome) -> None:
@@ -762,7 +716,6 @@ def write_archive_for(result: HandlingResult, out: str | Path | None = None) -> 
 
 def write_study_archive(result: HandlingResult, path: str | Path) -> Path:
     """Write the study's archive to exactly ``path`` (see :func:`write_archive_for`)."""
-    from .cli import to_jsonable
     from .commands.study_handling import summary_of
 
     path = Path(path)
