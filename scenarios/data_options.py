@@ -1,12 +1,9 @@
 """The command line's data options: reading, time base and preparation of one or several records.
 
-``vehid identify`` (and any command that reads measured data) registers them
-with :func:`register_data_options` and loads its records with
-:func:`load_from_args`; :func:`records_summary` adds the public JSON keys
-``records`` (name, samples, fits per record), ``sample_jitter`` and
-``preparation``; :func:`archive_records` and :func:`archived_records` keep
-the prepared records and the :class:`~identification.preparation.Preparation`
-in a results archive.
+Commands that read measured data register them (:func:`register_data_options`),
+load with :func:`load_from_args`, report with :func:`records_summary` (public
+JSON keys ``records``, ``sample_jitter``, ``preparation``) and keep the
+prepared records and their preparation in an archive (:func:`archive_records`).
 """
 
 from __future__ import annotations

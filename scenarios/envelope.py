@@ -1,39 +1,22 @@
 """The operating envelope: models across speeds and a speed-scheduled family, on a process pool or Dask.
 
-A campaign is a set of jobs, one per vehicle, speed, model order and seed.
-Each job is a pure function of its settings (:func:`run_job`): it measures
-the vehicle's grip limit at its speed, simulates the identification and
-validation manoeuvres with the steer amplitude set to a fraction of that
-limit, linearises the vehicle there, identifies a linear modal model by the
-IEKF (and optionally a spline-nonlinear one started from it) and scores
-both on both records. Results go to one campaign archive, one group per job,
-written as jobs finish, so that ``--resume`` skips the jobs already there.
+A campaign is a set of jobs, one per vehicle, speed, model order and seed,
+each a pure function of its settings (:func:`run_job`): it measures the
+vehicle's grip limit at its speed on a slow steer ramp, simulates the
+identification and validation manoeuvres with the steer that would reach
+``amplitude_fraction`` of that limit in steady state if the car stayed
+linear (so that every speed is driven equally hard), identifies a linear
+modal model by the IEKF (and optionally a spline-nonlinear one started from
+it) and scores both on both records. Results go to one archive, one group
+per job, written as jobs finish, so that ``--resume`` skips the jobs done.
 
-Amplitude. The grip limit at a speed is the largest lateral acceleration
-on a slow steer ramp (quasi-steady, 20 s to 20 deg x (20/v)^2, at most
-30 deg): 7.72-7.76 m/s^2 for the baseline at 10-30 m/s, the same as the
-steady states found by trim to 0.1 %. The steer amplitude at
-``amplitude_fraction`` f is ``f a_grip / G`` with ``G`` the steady-state
-gain of lateral acceleration from the vehicle's linearisation at that
-speed (the ramp's own start is not steady enough: it gives 28 % less at
-20 m/s), that is the steer that would
-reach f of the grip limit in steady state if the car stayed linear; so
-every speed is driven equally hard. The validation input has the same
-ratio to it as in the handling study (3.5 : 4 deg).
+Speeds between grid speeds (by default the midpoints) are identified too:
+there the speed-scheduled model (:mod:`identification.scheduled`) is
+validated beside the model identified directly.
 
-Speeds between grid speeds (by default the midpoints) are identified too,
-as references: the speed-scheduled model
-(:mod:`identification.scheduled`, built from the grid models of each
-vehicle, order and seed) is validated there against the vehicle simulated
-at that speed and set beside the model identified directly there.
-
-Executors: a local process pool (spawned processes), or Dask distributed
-(an existing scheduler, or a local cluster of ``workers`` processes). Dask
-reschedules the jobs of a lost worker on the others; a job that raised is
-retried once. Workers of a remote scheduler need the workbench installed
-(jobs travel as its own classes). Compiled filters are cached on disk under
-a hash of their generated source, compiler, flags, CasADi version and (for
-native code) the CPU, so each worker host compiles each filter once.
+Dask reschedules the jobs of a lost worker and a job that raised is retried
+once; workers of a remote scheduler need the workbench installed. The
+grip-limit measurements are in ``docs/study_measurements.md``.
 """
 
 from __future__ import annotations
@@ -432,11 +415,7 @@ def _job_in_worker(job: EnvelopeJob, report: Callable[[Any], None]) -> JobOutcom
 
 
 def _run_process_pool(jobs: list[EnvelopeJob], workers: int, on_done: Callable[[JobOutcome], None]) -> None:
-    """Jobs in the study workers of :func:`scenarios.shutdown.run_in_workers`, one job each at a time.
-
-    Those workers are spawned (forking a process holding BLAS or CasADi threads is unsafe), stop on
-    SIGTERM, Ctrl-C or their parent's death, and are reaped before an error or interrupt is raised.
-    """
+    """Jobs in the study workers of :func:`scenarios.shutdown.run_in_workers`, one job each at a time."""
     if workers == 1:
         for job in jobs:
             on_done(run_job(job))

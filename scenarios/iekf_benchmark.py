@@ -23,7 +23,7 @@ from .linear_example import make_data
 
 __all__ = ["measure_iekf"]
 
-# The forms the issue names: (label, outputs, C pattern, discretisation, covariance).
+# The forms measured: label to (outputs, C pattern, discretisation, covariance).
 _FORMS = {
     "paper_single": ((0,), "all-ones", "euler", "paper"),
     "default_single": ((0,), "all-ones", "exact", "joseph"),
