@@ -37,16 +37,16 @@ import numpy as np
 from identification.archive import open_archive, read_run, update_archive, write_archive, write_run
 from identification.archive_safety import archive_lock
 from identification.errors import DivergenceError, InputError, SimulationError
-from identification.iekf import IEKFOptions, identify_iekf
-from identification.spline_iekf import SplineIEKFOptions, identify_spline_iekf
-from identification.modal import ModalModel, ModalStructure
+from identification.iekf import IEKFOptions
+from identification.spline_iekf import SplineIEKFOptions
+from identification.modal import ModalModel
 from identification.scheduled import ScheduledModalModel, schedule_models
 from identification.storage import read_value, write_value
 from vehicle import DEFAULT_DT, linearize, make_manoeuvre, named_vehicle, simulate
 from vehicle.parameters import VehicleParameters
 
-from .handling_study import (COMPARED_MODES, OUTPUTS, check_orders, positive_number, score, spline_options,
-                             study_linear_options, whole_number)
+from .handling_study import (COMPARED_MODES, OUTPUTS, check_orders, identify_order, positive_number, score,
+                             spline_options, study_linear_options, whole_number)
 from .paths import results_path
 from .shutdown import run_in_workers
 
@@ -107,7 +107,6 @@ class EnvelopeConfig:
         Grid speeds (m/s), increasing.
     amplitude_fraction : float
         Steer amplitude as a fraction of each speed's grip limit (module notes).
-    orders, seeds : tuple of int
     nonlinear : bool
         Identify spline-nonlinear models too.
     off_grid : tuple of float or None
@@ -345,28 +344,17 @@ def run_job(job: EnvelopeJob) -> JobOutcome:
         found = linearisation.modes_labelled(label)
         if found:
             vehicle_modes[label] = (float(found[0].frequency_hz), float(found[0].damping))
-    structure = ModalStructure.default(job.order, identification.n_u, identification.n_y)
-    errors = []
-    linear_model = nonlinear_model = None
+    linear, linear_error, nonlinear, nonlinear_error = identify_order(identification, job.order, job.linear_options,
+                                                                      job.spline_options)
+    errors = [f"{stage}: {error}" for stage, error in (("linear", linear_error), ("nonlinear", nonlinear_error))
+              if error is not None]
+    linear_model = None if linear is None else linear.model
+    nonlinear_model = None if nonlinear is None else nonlinear.model
     fits: dict[str, float | None] = dict.fromkeys(("li", "lv", "ni", "nv"))
-    try:
-        linear_model = identify_iekf(identification, structure, options=job.linear_options).model
-    except DivergenceError as exc:
-        errors.append(f"linear: {exc}")
-        if exc.last_good is not None:
-            linear_model = exc.last_good.model
     if linear_model is not None:
         fits["li"], fits["lv"] = (float(np.mean(score(linear_model, r))) for r in (identification, validation))
-        if job.spline_options is not None:
-            try:
-                result = identify_spline_iekf(identification, linear_model, options=job.spline_options)
-                nonlinear_model = result.model
-            except DivergenceError as exc:
-                errors.append(f"nonlinear: {exc}")
-                if exc.last_good is not None and exc.last_good.history:
-                    nonlinear_model = exc.last_good.model
-            if nonlinear_model is not None:
-                fits["ni"], fits["nv"] = (float(np.mean(score(nonlinear_model, r))) for r in (identification, validation))
+    if nonlinear_model is not None:
+        fits["ni"], fits["nv"] = (float(np.mean(score(nonlinear_model, r))) for r in (identification, validation))
     return JobOutcome(
         key=job.key, vehicle=job.vehicle, speed=job.speed, order=job.order, seed=job.seed, grid=job.grid,
         amplitude=grip.amplitude(job.amplitude_fraction), grip_lateral_acceleration=grip.lateral_acceleration,
@@ -630,7 +618,6 @@ def run_campaign(
 
     Parameters
     ----------
-    config : EnvelopeConfig, optional
     out : str or Path, optional
         The archive (default ``envelope.h5`` under the results folder).
     resume : bool

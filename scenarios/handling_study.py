@@ -75,6 +75,7 @@ __all__ = [
     "parse_orders",
     "planned_passes",
     "make_records",
+    "identify_order",
     "run_order",
     "run_study",
     "archive_path",
@@ -388,6 +389,31 @@ def _nonlinear_outcome(result: Any, identification: IOData, validation: IOData, 
     )
 
 
+def identify_order(data: IOData, order: int, linear_options: IEKFOptions, spline_options: SplineIEKFOptions | None,
+                   on_pass: Callable[[str], Any] | None = None) -> tuple[Any, str | None, Any, str | None]:
+    """The linear IEKF of ``order`` and, started from its model, the spline IEKF (unless ``spline_options`` is None).
+
+    A divergence keeps what finished before it (the filter's ``last_good``) and is returned as text:
+    ``(linear, linear_error, nonlinear, nonlinear_error)``. ``on_pass(stage)``, stage ``linear`` or
+    ``nonlinear``, gives each filter's ``on_pass``.
+    """
+    callback = on_pass or (lambda stage: None)
+    structure = ModalStructure.default(order, data.n_u, data.n_y)
+    linear = nonlinear = linear_error = nonlinear_error = None
+    try:
+        linear = identify_iekf(data, structure, options=linear_options, on_pass=callback("linear"))
+    except DivergenceError as exc:
+        linear, linear_error = exc.last_good, str(exc)
+    if linear is not None and spline_options is not None:
+        try:
+            nonlinear = identify_spline_iekf(data, linear.model, options=spline_options, on_pass=callback("nonlinear"))
+        except DivergenceError as exc:
+            nonlinear_error = str(exc)
+            if exc.last_good is not None and exc.last_good.history:  # keep the passes that finished
+                nonlinear = exc.last_good
+    return linear, linear_error, nonlinear, nonlinear_error
+
+
 def run_order(job: OrderJob, report: Callable[[PassEvent], None] | None = None) -> OrderOutcome:
     """Identify one order, linear then nonlinear, and score both on both records.
 
@@ -405,31 +431,18 @@ def run_order(job: OrderJob, report: Callable[[PassEvent], None] | None = None) 
         count = iter(range(1, 1 << 62))
         return lambda record, _: report(PassEvent(job.order, stage, next(count), float(record.mean_fit_filter)))
 
-    structure = ModalStructure.default(job.order, identification.n_u, identification.n_y)
-    linear_error = None
-    try:
-        linear = identify_iekf(identification, structure, options=job.linear_options, on_pass=reporter("linear"))
-    except DivergenceError as exc:
-        linear, linear_error = exc.last_good, str(exc)
+    linear, linear_error, result, nonlinear_error = identify_order(identification, job.order, job.linear_options,
+                                                                   job.spline_options, reporter)
     if linear is None:
         return OrderOutcome(job.order, None, None, None, linear_error, None, "no linear model to start from",
                             time.perf_counter() - started)
     fit_identification, fit_validation = score(linear.model, identification), score(linear.model, validation)
-
-    nonlinear, nonlinear_error = None, None
     if job.spline_options is None:
         nonlinear_error = "not asked for"
-    else:
-        try:
-            result = identify_spline_iekf(identification, linear.model, options=job.spline_options,
-                                          on_pass=reporter("nonlinear"))
-            nonlinear = _nonlinear_outcome(result, identification, validation, linear.model.structure.n_complex_pairs)
-        except DivergenceError as exc:
-            nonlinear_error = f"diverged: {exc}"
-            last_good = exc.last_good
-            if last_good is not None and last_good.history:  # keep the passes that finished
-                nonlinear = _nonlinear_outcome(last_good, identification, validation,
-                                               linear.model.structure.n_complex_pairs)
+    elif nonlinear_error is not None:
+        nonlinear_error = f"diverged: {nonlinear_error}"
+    nonlinear = None if result is None else _nonlinear_outcome(result, identification, validation,
+                                                                linear.model.structure.n_complex_pairs)
     return OrderOutcome(job.order, linear, fit_identification, fit_validation, linear_error, nonlinear,
                         nonlinear_error, time.perf_counter() - started)
 
@@ -599,7 +612,6 @@ def run_study(
 
     Parameters
     ----------
-    config : HandlingConfig, optional
     on_event : callable, optional
         Called in this process with each :class:`PassEvent` (progress displays).
     records : mapping, optional
@@ -609,10 +621,6 @@ def run_study(
         Orders already done (a resumed study): they are not run again.
     on_outcome : callable, optional
         Called with each order's outcome as it finishes (checkpoints).
-
-    Returns
-    -------
-    HandlingResult
 
     Raises
     ------
