@@ -39,8 +39,6 @@ class StudyCheckpoint:
     ----------
     path : Path
         The archive; the caller holds its writer's lock for the whole study.
-    config : HandlingConfig
-    records : mapping of str to IOData
     fresh : bool
         Start a new archive (True) or add to a resumed one (False).
     """

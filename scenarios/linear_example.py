@@ -253,10 +253,6 @@ def run_case(
         See :class:`identification.iekf.IEKFOptions`.
     on_pass : callable, optional
         ``on_pass(run_label, record, result)`` after every pass.
-
-    Returns
-    -------
-    CaseResult
     """
     if case not in CASES:
         raise InputError(f"unknown case {case!r}; use one of {', '.join(CASES)}")

@@ -1,11 +1,4 @@
-"""Write report figures to disk and tables to markdown.
-
-:func:`write_report` saves each figure as a PNG and all of them, one per
-page, in a single PDF. :func:`markdown_table` turns rows of results (a list
-of dicts, as in the paper's Table 5) into a markdown table.
-:func:`archive_figures` and :func:`archive_table` draw and tabulate whatever
-a results archive holds (records, run histories, models), for ``vehid report``.
-"""
+"""Write report figures to disk and tables to markdown; draw and tabulate whatever an archive holds."""
 
 from __future__ import annotations
 
@@ -54,8 +47,6 @@ def write_report(
         Created if missing.
     dpi : int
         Resolution of the PNGs (the PDF is vector).
-    pdf_name : str
-        File name of the PDF.
     title : str
         The PDF's title metadata.
 

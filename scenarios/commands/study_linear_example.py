@@ -17,7 +17,7 @@ from identification.archive_safety import archive_lock, check_output_target
 from identification.filter_models import DISCRETIZATIONS
 from identification.iekf_pass import COVARIANCE_FORMS
 from scenarios.linear_example import CASES, planned_passes, run_case, write_archive_for
-from scenarios.paths import results_directory
+from scenarios.paths import results_path
 from scenarios.progress import Progress
 
 NAME = "linear-example"
@@ -40,8 +40,7 @@ def register(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> tuple[dict, str]:
-    target = Path(args.out) if args.out else Path(f"linear_example_{args.case}.h5")
-    target = (target if target.is_absolute() else results_directory() / target).absolute()
+    target = results_path(args.out, f"linear_example_{args.case}.h5").absolute()
     check_output_target(target, force=args.force)  # before any work
     with archive_lock(target):
         return _run(args, target)
