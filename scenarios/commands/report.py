@@ -1,14 +1,9 @@
 """Draw the figures and the summary table of a results archive.
 
-Opens an HDF5 archive written by the workbench (its layout is in
-results/RESULTS_LAYOUT.md), finds its records (data/*) and runs (runs/*:
-per-pass history, final model) and draws what is present: parameter
-development and convergence per run, the order study across runs, an
-eigenvalue map and Bode plots of the models, time fits and residual
-autocorrelation on each record. Writes one PNG per figure, a PDF of them all
-and summary.md (one table row per run) to the output folder, which is
-written under a hidden name beside it and swapped in whole (an interrupted
-report leaves the previous one, never a mixture of old and new files).
+Draws whatever the archive (layout: results/RESULTS_LAYOUT.md) holds: parameter
+development and convergence per run, the order study, eigenvalues, Bode plots,
+time fits and residual tests per record. Writes the PNGs, a PDF and summary.md;
+the folder is replaced whole, so an interrupted report leaves the previous one.
 """
 
 from __future__ import annotations

@@ -1,12 +1,9 @@
 """Simulate the 23-state full-vehicle model under a steer manoeuvre.
 
-Runs the compiled RK4 simulator (500 Hz) from the trim at the given speed and
-prints a summary: peak lateral acceleration, speed range and the wall time of
-the simulation; for a step, also the steady-state gains. With --out, the
-record (steer, all outputs and all 23 states) is written to an HDF5 file
-under the results folder. A run that leaves the model's physical envelope
-fails (exit status 1) naming the quantity and the time; with --out, the record
-up to that sample is still written.
+Prints peak lateral acceleration, speed range, wall time and, for a step, the
+steady-state gains; --out writes the record to HDF5. A run that leaves the
+model's physical envelope fails (exit status 1), writing with --out the record
+up to that sample.
 """
 
 from __future__ import annotations

@@ -1,19 +1,12 @@
 """The handling study of Best & Bogdanski 2017, section 6 (Table 5).
 
-The full-vehicle model at 20 m/s is driven by the identification steer input
-(noise plus a sweep, up to about 7 m/s^2) and by a different validation input
-(steps on a sweep, then larger steps); outputs are lateral acceleration, yaw
-rate and roll angle. For each order a linear modal model is identified by the
-IEKF and a spline-nonlinear one is started from it; every model is scored by
-the mean R (eq. 17) on both records. Orders run in parallel processes. Prints
-the Table-5 style table, the chosen order and the identified modes beside the
-vehicle's own yaw-sideslip and roll modes, and writes an HDF5 archive
-(results/handling_study.h5 by default), checkpointed as each order finishes.
---resume ARCHIVE continues an interrupted study from its archive: its own
-settings and records, only the orders still missing, to the same numbers as
-an uninterrupted run. SIGTERM or Ctrl-C stop every worker within seconds and
-leave the archive of the orders finished so far. The report folder beside
-the archive is written under a hidden name and swapped in whole.
+For each model order a linear modal model of the full vehicle (steer to
+lateral acceleration, yaw rate and roll angle) is identified by the IEKF and a
+spline-nonlinear one started from it, both scored on identification and
+validation records; orders run in parallel processes. Prints the Table-5 style
+table, the chosen order and the modes beside the vehicle's, and writes an HDF5
+archive, checkpointed as each order finishes, and a report folder beside it.
+--resume ARCHIVE runs only the orders an interrupted study's archive lacks.
 """
 
 from __future__ import annotations
