@@ -72,6 +72,7 @@ _RAMP_DURATION = 20.0  # [s] slow enough to be quasi-steady (1 deg/s at 20 m/s)
 _RAMP_DT = 0.005  # [s] the ramp only needs the handling curve, not the identification's 500 Hz
 _MAX_STEER = 30 * _DEG  # the vehicle model's trim range
 _VALIDATION_RATIO = 3.5 / 4.0  # validation to identification amplitude, as the manoeuvres' defaults
+_PER_JOB = ("vehicles", "speeds", "orders", "seeds", "off_grid")  # the settings that tell jobs apart
 
 
 def parse_speeds(text: str, name: str = "speeds") -> tuple[float, ...]:
@@ -176,19 +177,18 @@ class EnvelopeConfig:
         """The spline IEKF's options: settings left at None take its defaults."""
         return spline_options(self.nodes, self.nonlinear_passes, self.nonlinear_p)
 
-    def job_settings(self) -> dict[str, Any]:
-        """The settings every job shares: an archive resumed must have been written with the same."""
-        return {key: value for key, value in self.as_dict().items()
-                if key not in ("vehicles", "speeds", "orders", "seeds", "off_grid")}
-
     def as_dict(self) -> dict[str, Any]:
         values = dataclasses.asdict(self)
-        for key in ("vehicles", "speeds", "orders", "seeds", "off_grid"):
+        for key in _PER_JOB:
             values[key] = list(values[key])
         return values
 
 
-# ------------------------------------------------------------------ one job
+def _job_settings(settings: dict[str, Any]) -> dict[str, Any]:
+    """The settings every job shares: an archive resumed must have been written with the same."""
+    return {key: value for key, value in settings.items() if key not in _PER_JOB}
+
+
 @dataclass(frozen=True)
 class GripLimit:
     """A vehicle's grip limit at one speed, measured on a slow steer ramp.
@@ -392,7 +392,6 @@ def plan_jobs(config: EnvelopeConfig) -> list[EnvelopeJob]:
     return jobs
 
 
-# -------------------------------------------------------------- executors
 def _job_cost(job: EnvelopeJob) -> float:
     """Relative expected run time, to start the longest jobs first."""
     return job.order * (1.0 if job.spline_options is None else 20.0)
@@ -444,7 +443,6 @@ def _run_dask(jobs: list[EnvelopeJob], on_done: Callable[[JobOutcome], None], *,
             cluster.close()
 
 
-# -------------------------------------------------------------- campaign
 @dataclass(frozen=True, eq=False)
 class EnvelopeResult:
     """A campaign: its outcomes, the scheduled families, the summary and text."""
@@ -465,9 +463,8 @@ def _read_done(path: Path, config: EnvelopeConfig) -> dict[str, JobOutcome]:
     """The jobs already in an archive of a campaign with the same job settings (for --resume)."""
     with open_archive(path, kinds=[ARCHIVE_KIND]) as archive:
         stored = json.loads(archive.attrs["config_json"])
-        stored_settings = {key: value for key, value in stored.items()
-                           if key not in ("vehicles", "speeds", "orders", "seeds", "off_grid")}
-        settings = json.loads(json.dumps(config.job_settings()))
+        stored_settings = _job_settings(stored)
+        settings = json.loads(json.dumps(_job_settings(config.as_dict())))
         if stored_settings != settings:
             differ = sorted(key for key in settings if stored_settings.get(key) != settings[key])
             raise InputError(f"{path} was written with other job settings ({', '.join(differ)}); "

@@ -170,10 +170,9 @@ def study_linear_options(p: float = 1e-5, passes: int = 100) -> IEKFOptions:
     return IEKFOptions(p=p, passes=passes, normalize=True, discretization="exact")
 
 
-def spline_options(nodes: int = SplineIEKFOptions.nodes, passes: int | None = None,
-                   p: float | None = None) -> SplineIEKFOptions:
-    """The spline IEKF's options; ``passes`` and ``p`` left at None take its defaults."""
-    return SplineIEKFOptions(nodes=nodes, passes=SplineIEKFOptions.passes if passes is None else passes,
+def spline_options(nodes: int | None = None, passes: int | None = None, p: float | None = None) -> SplineIEKFOptions:
+    """The spline IEKF's options; settings left at None take its defaults."""
+    return SplineIEKFOptions(nodes=SplineIEKFOptions.nodes if nodes is None else nodes, passes=SplineIEKFOptions.passes if passes is None else passes,
                              p=SplineIEKFOptions.p if p is None else p)
 
 
@@ -256,20 +255,13 @@ class HandlingConfig:
         """Inverse of :meth:`as_dict`; spline settings stored as None take the spline IEKF's defaults."""
         spline = None
         if stored.get("nonlinear", True):
-            spline = spline_options(_stored(stored, "nodes", SplineIEKFOptions.nodes), stored.get("nonlinear_passes"),
-                                    stored.get("nonlinear_p"))
+            spline = spline_options(stored.get("nodes"), stored.get("nonlinear_passes"), stored.get("nonlinear_p"))
         return cls(orders=tuple(stored["orders"]), seed=stored["seed"], duration=stored["duration"],
                    amplitude_scale=stored["amplitude_scale"], vehicle=stored["vehicle"], speed=stored["speed"],
                    dt=stored["dt"], linear_options=study_linear_options(stored["p"], stored["passes"]),
                    spline_options=spline, workers=workers)
 
 
-def _stored(stored: Mapping[str, Any], key: str, default: Any) -> Any:
-    value = stored.get(key)
-    return default if value is None else value
-
-
-# ------------------------------------------------------------------ data
 @dataclass(frozen=True, eq=False)
 class RecordArrays:
     """An IOData as plain arrays and strings, to cross a process boundary (IOData's metadata does not pickle)."""
@@ -313,7 +305,6 @@ def score(model: Any, data: IOData) -> np.ndarray:
     return percentage_explanation(data.y, model.simulate_outputs(data.u, data.dt))
 
 
-# ------------------------------------------------------------ one order
 class PassEvent(NamedTuple):
     """One finished pass, as a worker reports it: order, ``linear``/``nonlinear``, pass index, mean R (%)."""
 
@@ -447,7 +438,6 @@ def run_order(job: OrderJob, report: Callable[[PassEvent], None] | None = None) 
                         nonlinear_error, time.perf_counter() - started)
 
 
-# -------------------------------------------------------- all the orders
 def _run_orders(jobs: list[OrderJob], workers: int, on_event: Callable[[PassEvent], None] | None,
                 on_outcome: Callable[[OrderOutcome], None] | None = None) -> dict[int, OrderOutcome]:
     """Run the jobs: in this process with one worker (or one job), else in spawned worker processes.
@@ -659,7 +649,6 @@ def run_study(
                           seconds, workers)
 
 
-# --------------------------------------------------------------- archive
 NONLINEAR_HISTORY_UNITS = {"fit_filter": "%", "trace_p": "normalised units"}
 
 
@@ -713,12 +702,7 @@ def start_archive(path: str | Path, config: HandlingConfig, records: Mapping[str
 
 
 def write_archive_for(result: HandlingResult, out: str | Path | None = None) -> Path:
-    """Write the study's archive (kind ``handling-study``): both records, every run, the summary.
-
-    Runs: ``linear-n<n>`` (IEKF history, model, resume state, and ``metrics``:
-    R per output on both records) and ``nonlinear-n<n>``. The default file
-    is ``handling_study.h5`` under the results folder.
-    """
+    """Write the study's archive (kind ``handling-study``, layout in results/RESULTS_LAYOUT.md) under ``--out``."""
     return write_study_archive(result, archive_path(out))
 
 

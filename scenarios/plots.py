@@ -60,7 +60,6 @@ _GROUP_LABELS = {
 _GROUP_PATTERNS = (("modal", r"(sigma|omega)\d+"), ("B", r"b\d+"), ("C", r"c\d+"), ("D", r"d\d+"))
 
 
-# ------------------------------------------------------------------ helpers
 def new_figure(size: tuple[float, float] = REPORT_SIZE) -> Figure:
     """An empty figure with an Agg canvas and constrained layout (no pyplot)."""
     fig = Figure(figsize=size, layout="constrained")
@@ -117,7 +116,6 @@ def _pass_axis(passes: Any, count: int) -> np.ndarray:
     return passes
 
 
-# ------------------------------------------------------- Figure 1: parameters
 def parameter_groups(names: Sequence[str]) -> dict[str, list[int]]:
     """Indices of theta by group (``modal``, ``B``, ``C``, ``D``, ``other``) from parameter names.
 
@@ -191,7 +189,6 @@ def plot_parameter_history(
     return fig
 
 
-# --------------------------------------------------- Figures 2-4: convergence
 def plot_convergence(
     fit_filter: Any,
     trace_p: Any,
@@ -261,7 +258,6 @@ def plot_convergence(
     return fig
 
 
-# --------------------------------------------------------- Figure 5: orders
 def plot_order_study(
     orders: Sequence[int],
     mean_r: Sequence[Any],
@@ -320,7 +316,6 @@ def plot_order_study(
     return fig
 
 
-# --------------------------------------------------- Figures 7, 9: time fits
 def plot_time_fits(
     t: Any,
     y_measured: Any,
@@ -383,7 +378,6 @@ def plot_time_fits(
     return fig
 
 
-# ------------------------------------------------------- Figure 8: splines
 def plot_splines(
     x: Any,
     values: Any,
@@ -452,7 +446,6 @@ def plot_splines(
     return fig
 
 
-# ------------------------------------------------------ eigenvalues and Bode
 def _eigenvalues(model: Any) -> np.ndarray:
     if hasattr(model, "eigenvalues"):
         return np.asarray(model.eigenvalues(), dtype=complex)
@@ -659,7 +652,6 @@ def plot_bode(
     return fig
 
 
-# --------------------------------------------------- residual whiteness
 def autocorrelation(residuals: Any, max_lag: int) -> np.ndarray:
     """Normalised autocorrelation of each residual column at lags 0..max_lag, shape (max_lag + 1, n_y).
 

@@ -176,7 +176,6 @@ def markdown_table(
     return "\n".join(lines) + "\n"
 
 
-# ---------------------------------------------------------- from an archive
 def _stem(*parts: str) -> str:
     return "_".join(re.sub(r"[^A-Za-z0-9_.-]", "_", part) for part in parts)
 

@@ -86,8 +86,6 @@ def stopping_on_signals() -> Iterator[None]:
             signal.signal(signum, handler)
 
 
-# --------------------------------------------------------------- workers
-
 
 def _portable(exc: BaseException) -> BaseException:
     try:
