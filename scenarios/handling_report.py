@@ -79,7 +79,7 @@ def handling_figures(archive: Archive | str | Path) -> dict[str, Figure]:
     names = list(records["identification"].output_names)
     units = list(records["identification"].output_units)
 
-    for record_name, label in (("identification", "identification"), ("validation", "validation")):
+    for record_name in ("identification", "validation"):
         data = records[record_name]
         predictions = {}
         if chosen in linear:
@@ -88,7 +88,7 @@ def handling_figures(archive: Archive | str | Path) -> dict[str, Figure]:
             predictions[f"nonlinear n = {chosen}"] = nonlinear[chosen].simulate_outputs(data.u, data.dt)
         figures[f"fits_{record_name}"] = plots.plot_time_fits(
             data.t, data.y, predictions, names, units,
-            title=f"Handling model fits on the {label} manoeuvre (n = {chosen})",
+            title=f"Handling model fits on the {record_name} manoeuvre (n = {chosen})",
         )
 
     if chosen in nonlinear:

@@ -406,11 +406,9 @@ def identify_order(data: IOData, order: int, linear_options: IEKFOptions, spline
 
 
 def run_order(job: OrderJob, report: Callable[[PassEvent], None] | None = None) -> OrderOutcome:
-    """Identify one order, linear then nonlinear, and score both on both records.
+    """Identify one order (:func:`identify_order`) and score both models on both records.
 
     A top-level function of plain values, so that a process pool can run it.
-    A divergence does not stop the study: the order keeps what finished
-    before it (the IEKF's ``last_good``) and says what went wrong.
     """
     started = time.perf_counter()
     identification, validation = job.identification.to_iodata(), job.validation.to_iodata()
@@ -443,8 +441,7 @@ def _run_orders(jobs: list[OrderJob], workers: int, on_event: Callable[[PassEven
     """Run the jobs: in this process with one worker (or one job), else in spawned worker processes.
 
     Workers send their PassEvents as they go; ``on_outcome`` is called here
-    with each order's outcome as it arrives (checkpoints). An interrupt or a
-    failed order stops every worker at once (:func:`scenarios.shutdown.run_in_workers`).
+    with each order's outcome as it arrives (checkpoints).
     """
     if workers == 1 or len(jobs) == 1:
         outcomes = {}
@@ -525,9 +522,7 @@ class ModeComparison:
 class HandlingResult:
     """The study: its records, each order's outcome and rows, the vehicle's modes and the order choice.
 
-    ``vehicle_linearization`` holds the vehicle's A, B and its C, D rows of
-    :data:`OUTPUTS`. JSON and text are rendered from these values by the
-    ``study handling`` command.
+    ``vehicle_linearization`` holds the vehicle's A, B and its C, D rows of :data:`OUTPUTS`.
     """
 
     config: HandlingConfig

@@ -11,10 +11,7 @@ images in our copy; every number here is recomputed from the stated data.
   least squares (A.2.3); expected differences near 1e-15.
 * ``gls_example``: least squares is biased under AR(1) equation error
   (a1 near -0.98 for -0.8) and GLS (A.2.5) is not.
-* ``positivity_example``: the single-parameter example of A.5 in single
-  precision: the plain update's P turns negative and the estimate blows out;
-  the square-root and UD forms stay positive.
-* ``ud_example``: one UDU' step (A.5.2) with givens of our own.
+* ``positivity_example`` and ``ud_example``: the covariance forms of A.5.
 * ``ekf_bicycle_example``: the joint EKF of A.4.1 on a bicycle model recovers
   both cornering stiffnesses within 0.2 %.
 * ``pencil_example``: joint Kalman estimation of an ARMAX model in singular
