@@ -45,8 +45,8 @@ from identification.storage import read_value, write_value
 from vehicle import DEFAULT_DT, linearize, make_manoeuvre, named_vehicle, simulate
 from vehicle.parameters import VehicleParameters
 
-from .handling_study import (COMPARED_MODES, OUTPUTS, check_orders, identify_order, positive_number, score,
-                             spline_options, study_linear_options, whole_number)
+from .handling_study import (COMPARED_MODES, OUTPUTS, check_orders, identify_order, percent_text, positive_number,
+                             score, spline_options, study_linear_options, whole_number)
 from .paths import results_path
 from .shutdown import run_in_workers
 
@@ -570,10 +570,6 @@ def _rows(config: EnvelopeConfig, outcomes: dict[str, JobOutcome]) -> list[dict[
     return rows
 
 
-def _cell(value: float | None) -> str:
-    return "-" if value is None else f"{value:.2f}"
-
-
 def _text(config: EnvelopeConfig, summary: dict[str, Any], result_line: str) -> str:
     lines = [f"Envelope campaign: steer at {config.amplitude_fraction:g} of the grip limit, orders "
              f"{', '.join(map(str, config.orders))}, seeds {', '.join(map(str, config.seeds))}, "
@@ -588,15 +584,15 @@ def _text(config: EnvelopeConfig, summary: dict[str, Any], result_line: str) -> 
             modes = ", ".join(f"{m['frequency_hz']:.2f}/{m['damping']:.2f}" for m in row["modes"]) or "(failed)"
             own = ", ".join(f"{m['frequency_hz']:.2f}/{m['damping']:.2f}" for m in row["vehicle_modes"])
             mark = "" if row["grid"] else " (off-grid)"
-            lines.append(f"{row['speed']:>6g} {row['order']:>2} {_cell(row['linear_validation_R']):>9} "
-                         f"{_cell(row['nonlinear_validation_R']):>9}  {modes:<40} {own}{mark}")
+            lines.append(f"{row['speed']:>6g} {row['order']:>2} {percent_text(row['linear_validation_R']):>9} "
+                         f"{percent_text(row['nonlinear_validation_R']):>9}  {modes:<40} {own}{mark}")
     scheduled = summary["scheduled"]
     if scheduled["off_grid"]:
         lines.append(f"\nscheduled models (grid {', '.join(f'{v:g}' for v in scheduled['grid_speeds'])} m/s) "
                      "at off-grid speeds: validation R, scheduled against identified there")
         for item in scheduled["off_grid"]:
             lines.append(f"  {item['vehicle']} n = {item['order']} seed {item['seed']} at {item['speed']:g} m/s: "
-                         f"{_cell(item['validation_R'])} against {_cell(item['direct_validation_R'])}")
+                         f"{percent_text(item['validation_R'])} against {percent_text(item['direct_validation_R'])}")
     lines.append(result_line)
     return "\n".join(lines)
 

@@ -178,8 +178,7 @@ def handling_figures(archive: Archive | str | Path) -> dict[str, Figure]:
         )
 
     vehicle = summary.get("vehicle_linearization")
-    reference_eigenvalues = None
-    reference = None
+    reference = reference_eigenvalues = None
     if vehicle:
         reference = tuple(np.array(vehicle[key]) for key in ("A", "B", "C", "D"))
         reference_eigenvalues = np.linalg.eigvals(reference[0])

@@ -72,6 +72,7 @@ __all__ = [
     "ModeComparison",
     "HandlingResult",
     "compare_modes",
+    "percent_text",
     "parse_orders",
     "planned_passes",
     "make_records",
@@ -195,8 +196,6 @@ class HandlingConfig:
         A named vehicle or a vehicle file (:func:`vehicle.named_vehicle`).
     speed : float
         Trim and reference speed (m/s).
-    dt : float
-        Sample interval (s).
     linear_options : IEKFOptions
         The linear IEKF's (:func:`study_linear_options`); at least 2 passes,
         from which the order choice judges convergence. An archive keeps its
@@ -554,6 +553,11 @@ def compare_modes(order: int, eigenvalues: Any, vehicle_modes: Mapping[str, Mode
                                          found.eigenvalue, found.frequency_hz, found.damping,
                                          found.frequency_hz / mode.frequency_hz))
     return tuple(comparison)
+
+
+def percent_text(value: float | None) -> str:
+    """A percentage for the text tables: two decimals, ``-`` where there is none."""
+    return "-" if value is None else f"{value:.2f}"
 
 
 def _mean(values: np.ndarray | None) -> float | None:

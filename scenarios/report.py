@@ -242,9 +242,7 @@ def archive_figures(archive: Any, *, window: tuple[float, float] | None = None, 
         ``residuals_<record>_<run>`` and ``residual_tests_<record>_<run>``
         (whiteness and input cross-correlation with 99 % bands);
         ``innovation_consistency_<run>`` for IEKF runs that recorded their
-        NIS beside an ``identification`` record. Models
-        carrying a parameter covariance get confidence ellipses on the
-        eigenvalue map and bands on the Bode plot.
+        NIS beside an ``identification`` record.
     """
     figures: dict[str, Figure] = {}
     runs = archive.runs

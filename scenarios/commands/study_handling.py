@@ -22,8 +22,8 @@ from identification.iekf import IEKFOptions
 from identification.spline_iekf import SplineIEKFOptions
 from scenarios.handling_resume import StudyCheckpoint, read_progress
 from scenarios.handling_study import (OUTPUTS, PAPER, HandlingConfig, HandlingResult, archive_path, make_records,
-                                      parse_orders, planned_passes, run_study, spline_options, study_linear_options,
-                                      write_study_archive)
+                                      parse_orders, percent_text, planned_passes, run_study, spline_options,
+                                      study_linear_options, write_study_archive)
 from scenarios.progress import Progress
 
 NAME = "handling"
@@ -134,9 +134,8 @@ def _study(args, config, path, records, finished, checkpoint) -> tuple[dict, str
         folder = path.with_suffix("")
         with replacing_directory(folder) as partial:  # a kill leaves the old report or the new, never a mixture
             written = write_handling_report(path, partial)
-        files = [folder / file.relative_to(partial) for file in written]
         summary["report"] = str(folder)
-        text += f"\nwrote {len(files)} report files to {folder}"
+        text += f"\nwrote {len(written)} report files to {folder}"
     return summary, text
 
 
@@ -162,10 +161,6 @@ def summary_of(result: HandlingResult) -> dict[str, Any]:
     }
 
 
-def _percent(value: float | None) -> str:
-    return "-" if value is None else f"{value:.2f}"
-
-
 def text_of(result: HandlingResult) -> str:
     """The study's text summary: Table 5, the order chosen, the modes beside the vehicle's."""
     from scenarios.report import format_eigenvalues
@@ -181,9 +176,9 @@ def text_of(result: HandlingResult) -> str:
     for row in result.table:
         eigen = format_eigenvalues(list(row.linear_eigenvalues)) if row.linear_eigenvalues else "(failed)"
         lines.append(
-            f"{row.order:>2}  {eigen:<44} {_percent(row.linear_identification_R):>9} "
-            f"{_percent(row.nonlinear_identification_R):>9} {_percent(row.linear_validation_R):>9} "
-            f"{_percent(row.nonlinear_validation_R):>9}"
+            f"{row.order:>2}  {eigen:<44} {percent_text(row.linear_identification_R):>9} "
+            f"{percent_text(row.nonlinear_identification_R):>9} {percent_text(row.linear_validation_R):>9} "
+            f"{percent_text(row.nonlinear_validation_R):>9}"
         )
     converged = [run.order for run in result.linear_runs if run.converged]
     lines.append(f"chosen order: {result.assessment.chosen_order} (linear runs settled: "
