@@ -81,11 +81,8 @@ def handling_figures(archive: Archive | str | Path) -> dict[str, Figure]:
 
     for record_name in ("identification", "validation"):
         data = records[record_name]
-        predictions = {}
-        if chosen in linear:
-            predictions[f"linear n = {chosen}"] = linear[chosen].simulate_outputs(data.u, data.dt)
-        if chosen in nonlinear:
-            predictions[f"nonlinear n = {chosen}"] = nonlinear[chosen].simulate_outputs(data.u, data.dt)
+        predictions = {f"{kind} n = {chosen}": models[chosen].simulate_outputs(data.u, data.dt)
+                       for kind, models in (("linear", linear), ("nonlinear", nonlinear)) if chosen in models}
         figures[f"fits_{record_name}"] = plots.plot_time_fits(
             data.t, data.y, predictions, names, units,
             title=f"Handling model fits on the {record_name} manoeuvre (n = {chosen})",

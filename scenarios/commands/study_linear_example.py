@@ -7,7 +7,6 @@ each case's table beside the paper's numbers and writes an HDF5 archive.
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 from identification.archive_safety import archive_lock, check_output_target
 from identification.filter_models import DISCRETIZATIONS
@@ -39,16 +38,13 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     target = results_path(args.out, f"linear_example_{args.case}.h5").absolute()
     check_output_target(target, force=args.force)  # before any work
     with archive_lock(target):
-        return _run(args, target)
-
-
-def _run(args: argparse.Namespace, target: Path) -> tuple[dict, str]:
-    with Progress(planned_passes(args.case, args.passes), f"{args.case} passes", enabled=None if not args.quiet else False) as progress:
-        result = run_case(
-            args.case, seed=args.seed, passes=args.passes, discretization=args.discretization,
-            covariance=args.covariance, p=args.p,
-            on_pass=lambda label, record, _: progress.advance(note=f"{label} R {record.mean_fit_filter:.4f} %"),
-        )
-    path = write_archive_for(result, target)
+        with Progress(planned_passes(args.case, args.passes), f"{args.case} passes",
+                      enabled=None if not args.quiet else False) as progress:
+            result = run_case(
+                args.case, seed=args.seed, passes=args.passes, discretization=args.discretization,
+                covariance=args.covariance, p=args.p,
+                on_pass=lambda label, record, _: progress.advance(note=f"{label} R {record.mean_fit_filter:.4f} %"),
+            )
+        path = write_archive_for(result, target)
     summary = {**result.summary, "archive": str(path)}
     return summary, result.text + f"\nwrote {path}"
