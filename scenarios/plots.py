@@ -155,8 +155,6 @@ def plot_parameter_history(
         grouping by name.
     passes : array_like, shape (n_pass,), optional
         x values; default 1..n_pass.
-    fig : Figure, optional
-        An empty figure to draw into.
 
     Returns
     -------
@@ -272,7 +270,6 @@ def plot_order_study(
     Parameters
     ----------
     orders : sequence of int
-        The model orders n.
     mean_r : sequence of float or of arrays (n_pass,)
         Mean R (percent) per order: final values, or the per-pass history.
     trace_p : sequence of float or of arrays (n_pass,)
