@@ -14,6 +14,8 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
+from identification.jsonable import to_jsonable
+
 from .paths import results_directory
 
 __all__ = ["median_seconds", "record_figures"]
@@ -37,8 +39,6 @@ def record_figures(section: str, figures: dict[str, Any], path: Path | None = No
     Other sections already in the file are kept, so each benchmark script
     updates only its own figures.
     """
-    from .cli import to_jsonable
-
     path = path if path is not None else results_directory() / "benchmarks.json"
     existing: dict[str, Any] = {}
     if path.exists():

@@ -1,21 +1,12 @@
 """The ``vehid`` command line.
 
-Subcommands live one per module in :mod:`scenarios.commands`; each module
-defines ``NAME``, ``GROUP`` (``None`` for a top-level command, or ``"study"``
-or ``"bench"``), ``HELP`` and ``register(parser)``, which adds its arguments
-and sets ``handler``: a function ``(args) -> (summary: dict, text: str)``.
-
-Every subcommand accepts ``--json`` (exactly one JSON object on standard
-output: the summary, or on failure an object with ``error`` and
-``exit_status``), ``--quiet`` (no progress, warnings only) and ``--verbose``.
-Progress and logs go to standard error. Exit status: 0 on success, 2 on bad
-input, 1 on a failed computation, 3 on warnings under ``--strict``, with one
-clear line on standard error and no traceback for expected errors. An
-operating-system error names the file and the cause (exit 2 for a path that
-is missing, protected or of the wrong kind; 1 for others, such as a full
-disk). SIGTERM and SIGINT stop a command the same way (worker processes
-included, see :mod:`scenarios.shutdown`), with one line and the exit status
-128 + the signal's number.
+Subcommands live one per module in :mod:`scenarios.commands`; each defines
+``NAME``, ``GROUP`` (``None`` for a top-level command, else a key of
+:data:`GROUPS`), ``HELP`` and ``register(parser)``, which adds its arguments
+and sets ``handler``: ``(args) -> (summary: dict, text: str)``. Here the
+summary becomes the ``--json`` object, and every failure one line on standard
+error with the exit status of the README's contract (2 bad input, 1 failed
+computation, 3 warnings under ``--strict``, 128 + the signal's number).
 """
 
 from __future__ import annotations
@@ -27,8 +18,6 @@ import logging
 import pkgutil
 import sys
 from typing import Any, Callable, NoReturn, Sequence
-
-import numpy as np
 
 from identification.archive_safety import os_error_text
 from identification.errors import DivergenceError, StrictWarningsError, WorkbenchError

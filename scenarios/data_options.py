@@ -1,12 +1,9 @@
 """The command line's data options: reading, time base and preparation of one or several records.
 
-``vehid identify`` (and any command that reads measured data) registers them
-with :func:`register_data_options` and loads its records with
-:func:`load_from_args`; :func:`records_summary` adds the public JSON keys
-``records`` (name, samples, fits per record), ``sample_jitter`` and
-``preparation``; :func:`archive_records` and :func:`archived_records` keep
-the prepared records and the :class:`~identification.preparation.Preparation`
-in a results archive.
+Commands that read measured data register them (:func:`register_data_options`),
+read with :func:`read_from_args`, report with :func:`records_summary` (public
+JSON keys ``records``, ``sample_jitter``, ``preparation``) and keep the
+prepared records and their preparation in an archive (:func:`archive_records`).
 """
 
 from __future__ import annotations
@@ -18,16 +15,16 @@ from typing import Any, Mapping, Sequence
 
 import h5py
 
-from identification.archive import read_records, write_record
+from identification.archive import write_record
 from identification.data import IOData
 from identification.errors import InputError
 from identification.multirecord import score_records
-from identification.preparation import DETRENDS, Preparation, ReadSettings, prepare, read_raw_records
+from identification.preparation import DETRENDS, Preparation, ReadSettings, read_raw_records
 from identification.storage import read_value, write_value
 from identification.timebase import JITTER_TOLERANCE
 
-__all__ = ["channel_names", "register_data_options", "settings_from_args", "read_from_args", "load_from_args", "records_summary", "record_names",
-           "archive_records", "archived_records", "archived_preparation", "save_model", "RECORD_PREFIX",
+__all__ = ["channel_names", "register_data_options", "settings_from_args", "read_from_args", "records_summary", "record_names",
+           "archive_records", "archived_preparation", "save_model", "RECORD_PREFIX",
            "record_series", "record_series_name", "write_record_series"]
 
 PREPARATION_MEMBER = "preparation"
@@ -74,7 +71,7 @@ def settings_from_args(args: argparse.Namespace) -> ReadSettings:
 def read_from_args(args: argparse.Namespace, paths: Sequence[str]) -> tuple[tuple[IOData, ...], ReadSettings]:
     """The raw records of the data files named on the command line, and the settings they were read with.
 
-    For a hold-out split: split a raw record first, then :func:`prepare` the
+    For a hold-out split: split a raw record first, then :func:`~identification.preparation.prepare` the
     estimation part (``detrend=args.detrend, scale=args.scale, settings=settings``)
     and :func:`~identification.preparation.prepare_validation` the rest.
     """
@@ -83,12 +80,6 @@ def read_from_args(args: argparse.Namespace, paths: Sequence[str]) -> tuple[tupl
     if len(set(paths)) != len(paths):
         raise InputError("a data file is named twice")
     return read_raw_records(list(paths), settings_from_args(args))
-
-
-def load_from_args(args: argparse.Namespace, paths: Sequence[str]) -> tuple[tuple[IOData, ...], Preparation]:
-    """Read and prepare the data files named on the command line (each record with its own offsets)."""
-    raw, settings = read_from_args(args, paths)
-    return prepare(raw, detrend=args.detrend, scale=args.scale, settings=settings)
 
 
 def record_names(records: Sequence[IOData]) -> list[str]:
@@ -137,11 +128,6 @@ def archive_records(archive: h5py.File, records: Sequence[IOData], preparation: 
     write_record_series(archive, records, RECORD_PREFIX)
     if preparation is not None:
         write_value(archive, PREPARATION_MEMBER, preparation)
-
-
-def archived_records(archive: h5py.File) -> tuple[IOData, ...]:
-    """The prepared estimation records of an identification archive, in order."""
-    return record_series(read_records(archive), RECORD_PREFIX)
 
 
 def archived_preparation(archive: h5py.File) -> Preparation | None:

@@ -1,39 +1,22 @@
 """The operating envelope: models across speeds and a speed-scheduled family, on a process pool or Dask.
 
-A campaign is a set of jobs, one per vehicle, speed, model order and seed.
-Each job is a pure function of its settings (:func:`run_job`): it measures
-the vehicle's grip limit at its speed, simulates the identification and
-validation manoeuvres with the steer amplitude set to a fraction of that
-limit, linearises the vehicle there, identifies a linear modal model by the
-IEKF (and optionally a spline-nonlinear one started from it) and scores
-both on both records. Results go to one campaign archive, one group per job,
-written as jobs finish, so that ``--resume`` skips the jobs already there.
+A campaign is a set of jobs, one per vehicle, speed, model order and seed,
+each a pure function of its settings (:func:`run_job`): it measures the
+vehicle's grip limit at its speed on a slow steer ramp, simulates the
+identification and validation manoeuvres with the steer that would reach
+``amplitude_fraction`` of that limit in steady state if the car stayed
+linear (so that every speed is driven equally hard), identifies a linear
+modal model by the IEKF (and optionally a spline-nonlinear one started from
+it) and scores both on both records. Results go to one archive, one group
+per job, written as jobs finish, so that ``--resume`` skips the jobs done.
 
-Amplitude. The grip limit at a speed is the largest lateral acceleration
-on a slow steer ramp (quasi-steady, 20 s to 20 deg x (20/v)^2, at most
-30 deg): 7.72-7.76 m/s^2 for the baseline at 10-30 m/s, the same as the
-steady states found by trim to 0.1 %. The steer amplitude at
-``amplitude_fraction`` f is ``f a_grip / G`` with ``G`` the steady-state
-gain of lateral acceleration from the vehicle's linearisation at that
-speed (the ramp's own start is not steady enough: it gives 28 % less at
-20 m/s), that is the steer that would
-reach f of the grip limit in steady state if the car stayed linear; so
-every speed is driven equally hard. The validation input has the same
-ratio to it as in the handling study (3.5 : 4 deg).
+Speeds between grid speeds (by default the midpoints) are identified too:
+there the speed-scheduled model (:mod:`identification.scheduled`) is
+validated beside the model identified directly.
 
-Speeds between grid speeds (by default the midpoints) are identified too,
-as references: the speed-scheduled model
-(:mod:`identification.scheduled`, built from the grid models of each
-vehicle, order and seed) is validated there against the vehicle simulated
-at that speed and set beside the model identified directly there.
-
-Executors: a local process pool (spawned processes), or Dask distributed
-(an existing scheduler, or a local cluster of ``workers`` processes). Dask
-reschedules the jobs of a lost worker on the others; a job that raised is
-retried once. Workers of a remote scheduler need the workbench installed
-(jobs travel as its own classes). Compiled filters are cached on disk under
-a hash of their generated source, compiler, flags, CasADi version and (for
-native code) the CPU, so each worker host compiles each filter once.
+Dask reschedules the jobs of a lost worker and a job that raised is retried
+once; workers of a remote scheduler need the workbench installed. The
+grip-limit measurements are in ``docs/study_measurements.md``.
 """
 
 from __future__ import annotations
@@ -54,17 +37,17 @@ import numpy as np
 from identification.archive import open_archive, read_run, update_archive, write_archive, write_run
 from identification.archive_safety import archive_lock
 from identification.errors import DivergenceError, InputError, SimulationError
-from identification.iekf import IEKFOptions, identify_iekf
-from identification.spline_iekf import SplineIEKFOptions, identify_spline_iekf
-from identification.modal import ModalModel, ModalStructure
+from identification.iekf import IEKFOptions
+from identification.spline_iekf import SplineIEKFOptions
+from identification.modal import ModalModel
 from identification.scheduled import ScheduledModalModel, schedule_models
 from identification.storage import read_value, write_value
 from vehicle import DEFAULT_DT, linearize, make_manoeuvre, named_vehicle, simulate
 from vehicle.parameters import VehicleParameters
 
-from .handling_study import (COMPARED_MODES, OUTPUTS, check_orders, positive_number, score, spline_options,
-                             study_linear_options, whole_number)
-from .paths import results_directory
+from .handling_study import (COMPARED_MODES, OUTPUTS, check_orders, identify_order, percent_text, positive_number,
+                             score, spline_options, study_linear_options, whole_number)
+from .paths import results_path
 from .shutdown import run_in_workers
 
 __all__ = [
@@ -88,8 +71,8 @@ _DEG = math.pi / 180
 _RAMP_DURATION = 20.0  # [s] slow enough to be quasi-steady (1 deg/s at 20 m/s)
 _RAMP_DT = 0.005  # [s] the ramp only needs the handling curve, not the identification's 500 Hz
 _MAX_STEER = 30 * _DEG  # the vehicle model's trim range
-_GAIN_SHARE = 0.2  # the small-steer gain is fitted where |a_y| < this share of the grip limit
 _VALIDATION_RATIO = 3.5 / 4.0  # validation to identification amplitude, as the manoeuvres' defaults
+_PER_JOB = ("vehicles", "speeds", "orders", "seeds", "off_grid")  # the settings that tell jobs apart
 
 
 def parse_speeds(text: str, name: str = "speeds") -> tuple[float, ...]:
@@ -125,7 +108,6 @@ class EnvelopeConfig:
         Grid speeds (m/s), increasing.
     amplitude_fraction : float
         Steer amplitude as a fraction of each speed's grip limit (module notes).
-    orders, seeds : tuple of int
     nonlinear : bool
         Identify spline-nonlinear models too.
     off_grid : tuple of float or None
@@ -195,19 +177,18 @@ class EnvelopeConfig:
         """The spline IEKF's options: settings left at None take its defaults."""
         return spline_options(self.nodes, self.nonlinear_passes, self.nonlinear_p)
 
-    def job_settings(self) -> dict[str, Any]:
-        """The settings every job shares: an archive resumed must have been written with the same."""
-        return {key: value for key, value in self.as_dict().items()
-                if key not in ("vehicles", "speeds", "orders", "seeds", "off_grid")}
-
     def as_dict(self) -> dict[str, Any]:
         values = dataclasses.asdict(self)
-        for key in ("vehicles", "speeds", "orders", "seeds", "off_grid"):
+        for key in _PER_JOB:
             values[key] = list(values[key])
         return values
 
 
-# ------------------------------------------------------------------ one job
+def _job_settings(settings: dict[str, Any]) -> dict[str, Any]:
+    """The settings every job shares: an archive resumed must have been written with the same."""
+    return {key: value for key, value in settings.items() if key not in _PER_JOB}
+
+
 @dataclass(frozen=True)
 class GripLimit:
     """A vehicle's grip limit at one speed, measured on a slow steer ramp.
@@ -363,28 +344,17 @@ def run_job(job: EnvelopeJob) -> JobOutcome:
         found = linearisation.modes_labelled(label)
         if found:
             vehicle_modes[label] = (float(found[0].frequency_hz), float(found[0].damping))
-    structure = ModalStructure.default(job.order, identification.n_u, identification.n_y)
-    errors = []
-    linear_model = nonlinear_model = None
+    linear, linear_error, nonlinear, nonlinear_error = identify_order(identification, job.order, job.linear_options,
+                                                                      job.spline_options)
+    errors = [f"{stage}: {error}" for stage, error in (("linear", linear_error), ("nonlinear", nonlinear_error))
+              if error is not None]
+    linear_model = None if linear is None else linear.model
+    nonlinear_model = None if nonlinear is None else nonlinear.model
     fits: dict[str, float | None] = dict.fromkeys(("li", "lv", "ni", "nv"))
-    try:
-        linear_model = identify_iekf(identification, structure, options=job.linear_options).model
-    except DivergenceError as exc:
-        errors.append(f"linear: {exc}")
-        if exc.last_good is not None:
-            linear_model = exc.last_good.model
     if linear_model is not None:
         fits["li"], fits["lv"] = (float(np.mean(score(linear_model, r))) for r in (identification, validation))
-        if job.spline_options is not None:
-            try:
-                result = identify_spline_iekf(identification, linear_model, options=job.spline_options)
-                nonlinear_model = result.model
-            except DivergenceError as exc:
-                errors.append(f"nonlinear: {exc}")
-                if exc.last_good is not None and exc.last_good.history:
-                    nonlinear_model = exc.last_good.model
-            if nonlinear_model is not None:
-                fits["ni"], fits["nv"] = (float(np.mean(score(nonlinear_model, r))) for r in (identification, validation))
+    if nonlinear_model is not None:
+        fits["ni"], fits["nv"] = (float(np.mean(score(nonlinear_model, r))) for r in (identification, validation))
     return JobOutcome(
         key=job.key, vehicle=job.vehicle, speed=job.speed, order=job.order, seed=job.seed, grid=job.grid,
         amplitude=grip.amplitude(job.amplitude_fraction), grip_lateral_acceleration=grip.lateral_acceleration,
@@ -422,7 +392,6 @@ def plan_jobs(config: EnvelopeConfig) -> list[EnvelopeJob]:
     return jobs
 
 
-# -------------------------------------------------------------- executors
 def _job_cost(job: EnvelopeJob) -> float:
     """Relative expected run time, to start the longest jobs first."""
     return job.order * (1.0 if job.spline_options is None else 20.0)
@@ -433,11 +402,7 @@ def _job_in_worker(job: EnvelopeJob, report: Callable[[Any], None]) -> JobOutcom
 
 
 def _run_process_pool(jobs: list[EnvelopeJob], workers: int, on_done: Callable[[JobOutcome], None]) -> None:
-    """Jobs in the study workers of :func:`scenarios.shutdown.run_in_workers`, one job each at a time.
-
-    Those workers are spawned (forking a process holding BLAS or CasADi threads is unsafe), stop on
-    SIGTERM, Ctrl-C or their parent's death, and are reaped before an error or interrupt is raised.
-    """
+    """Jobs in the study workers of :func:`scenarios.shutdown.run_in_workers`, one job each at a time."""
     if workers == 1:
         for job in jobs:
             on_done(run_job(job))
@@ -478,7 +443,6 @@ def _run_dask(jobs: list[EnvelopeJob], on_done: Callable[[JobOutcome], None], *,
             cluster.close()
 
 
-# -------------------------------------------------------------- campaign
 @dataclass(frozen=True, eq=False)
 class EnvelopeResult:
     """A campaign: its outcomes, the scheduled families, the summary and text."""
@@ -499,9 +463,8 @@ def _read_done(path: Path, config: EnvelopeConfig) -> dict[str, JobOutcome]:
     """The jobs already in an archive of a campaign with the same job settings (for --resume)."""
     with open_archive(path, kinds=[ARCHIVE_KIND]) as archive:
         stored = json.loads(archive.attrs["config_json"])
-        stored_settings = {key: value for key, value in stored.items()
-                           if key not in ("vehicles", "speeds", "orders", "seeds", "off_grid")}
-        settings = json.loads(json.dumps(config.job_settings()))
+        stored_settings = _job_settings(stored)
+        settings = json.loads(json.dumps(_job_settings(config.as_dict())))
         if stored_settings != settings:
             differ = sorted(key for key in settings if stored_settings.get(key) != settings[key])
             raise InputError(f"{path} was written with other job settings ({', '.join(differ)}); "
@@ -607,10 +570,6 @@ def _rows(config: EnvelopeConfig, outcomes: dict[str, JobOutcome]) -> list[dict[
     return rows
 
 
-def _cell(value: float | None) -> str:
-    return "-" if value is None else f"{value:.2f}"
-
-
 def _text(config: EnvelopeConfig, summary: dict[str, Any], result_line: str) -> str:
     lines = [f"Envelope campaign: steer at {config.amplitude_fraction:g} of the grip limit, orders "
              f"{', '.join(map(str, config.orders))}, seeds {', '.join(map(str, config.seeds))}, "
@@ -625,15 +584,15 @@ def _text(config: EnvelopeConfig, summary: dict[str, Any], result_line: str) -> 
             modes = ", ".join(f"{m['frequency_hz']:.2f}/{m['damping']:.2f}" for m in row["modes"]) or "(failed)"
             own = ", ".join(f"{m['frequency_hz']:.2f}/{m['damping']:.2f}" for m in row["vehicle_modes"])
             mark = "" if row["grid"] else " (off-grid)"
-            lines.append(f"{row['speed']:>6g} {row['order']:>2} {_cell(row['linear_validation_R']):>9} "
-                         f"{_cell(row['nonlinear_validation_R']):>9}  {modes:<40} {own}{mark}")
+            lines.append(f"{row['speed']:>6g} {row['order']:>2} {percent_text(row['linear_validation_R']):>9} "
+                         f"{percent_text(row['nonlinear_validation_R']):>9}  {modes:<40} {own}{mark}")
     scheduled = summary["scheduled"]
     if scheduled["off_grid"]:
         lines.append(f"\nscheduled models (grid {', '.join(f'{v:g}' for v in scheduled['grid_speeds'])} m/s) "
                      "at off-grid speeds: validation R, scheduled against identified there")
         for item in scheduled["off_grid"]:
             lines.append(f"  {item['vehicle']} n = {item['order']} seed {item['seed']} at {item['speed']:g} m/s: "
-                         f"{_cell(item['validation_R'])} against {_cell(item['direct_validation_R'])}")
+                         f"{percent_text(item['validation_R'])} against {percent_text(item['direct_validation_R'])}")
     lines.append(result_line)
     return "\n".join(lines)
 
@@ -652,7 +611,6 @@ def run_campaign(
 
     Parameters
     ----------
-    config : EnvelopeConfig, optional
     out : str or Path, optional
         The archive (default ``envelope.h5`` under the results folder).
     resume : bool
@@ -676,9 +634,7 @@ def run_campaign(
         whole_number(workers, "workers", 1)
     started = time.perf_counter()
     jobs = plan_jobs(config)
-    path = Path(out) if out else results_directory() / "envelope.h5"
-    if out and not path.is_absolute():
-        path = results_directory() / path
+    path = results_path(out, "envelope.h5")
     if path.is_dir():
         raise InputError(f"{path} is a directory: --out names the campaign's archive file")
     with archive_lock(path):  # one writer per campaign archive: a second campaign on it is refused, naming the holder

@@ -1,15 +1,9 @@
 """The envelope campaign's report: modes and fits against speed, the scheduled model, a table per vehicle.
 
-Figures (one set per vehicle), side-effect free (Agg canvas, see :mod:`scenarios.plots`):
-
-* ``<vehicle>_modes.png``: frequency and damping of every identified mode
-  against speed (markers, one colour per order), the vehicle's own
-  linearised yaw-sideslip and roll modes at each speed (lines), and the
-  scheduled model's modes swept over the grid's range (thin lines);
-* ``<vehicle>_fits.png``: validation R per job against speed, linear and
-  nonlinear, and the scheduled model at the off-grid speeds;
-* ``tables.md``: the text table per vehicle, and ``<vehicle>_n<order>_scheduled.casadi``,
-  the scheduled family as one CasADi Function ``(x, u, speed) -> (xdot, y)``.
+Per vehicle ``<vehicle>_modes.png`` (identified modes, the vehicle's own and
+the scheduled model's against speed) and ``<vehicle>_fits.png`` (validation R
+against speed); ``tables.md``; and each scheduled family as one CasADi
+Function ``(x, u, speed) -> (xdot, y)``.
 """
 
 from __future__ import annotations

@@ -1,34 +1,16 @@
 """The handling study's report, drawn from its archive (``results/handling_study.h5``).
 
-Figures (names are the PNG files' stems):
-
-``fits_identification``, ``fits_validation``
-    Measured outputs and the chosen order's linear and nonlinear models
-    simulated from rest (the paper's Figures 7 and 9).
-``splines``
-    The chosen order's first-mode sigma and omega against the mode's
-    amplitude, and two typical coefficients, nodes marked (Figure 8).
-``mode_amplitude``
-    The first mode's frequency and damping against its amplitude, every
-    order (the Figure 8 finding: both fall as the state grows), with the
-    95 % band of each model that carries a parameter covariance (from the
-    spline IEKF's final P, delta method); ``splines`` shades the same band.
-``orders``
-    Mean R per order, linear and nonlinear, identification and validation (Table 5).
-``linear_parameters``, ``linear_convergence``, ``nonlinear_convergence``
-    The chosen order's parameter development and R, trace(P) per pass (Figures 1-4).
-``eigenvalues``, ``bode``
-    The identified linear models' eigenvalues and frequency responses beside
-    the vehicle's own linearisation.
-``residuals``
-    Residual autocorrelation of the chosen nonlinear model on the validation data.
-``residual_tests``
-    Whiteness and input cross-correlation tests (99 %) of the chosen
-    order's linear and nonlinear models on the identification data.
-
-Besides the figures, ``table.md`` holds the Table-5 style table and
-``nonlinear_n<order>.casadi`` the chosen nonlinear model as a CasADi Function
-(``casadi.Function.load``; input steer (1, N) in rad, outputs (3, N)).
+Figures by PNG stem: ``fits_identification`` and ``fits_validation`` (the
+chosen order's models simulated from rest; the paper's Figures 7 and 9),
+``splines`` (Figure 8), ``mode_amplitude`` (the first mode's frequency and
+damping against its amplitude, every order), ``orders`` (Table 5),
+``linear_parameters``, ``linear_convergence`` and ``nonlinear_convergence``
+(Figures 1-4), ``eigenvalues`` and ``bode`` (beside the vehicle's
+linearisation), ``residuals`` and ``residual_tests``. Models that carry a
+parameter covariance get 95 % bands. Besides the figures, ``table.md`` holds
+the Table-5 style table and ``nonlinear_n<order>.casadi`` the chosen
+nonlinear model as a CasADi Function (``casadi.Function.load``; input steer
+(1, N) in rad, outputs (3, N)).
 """
 
 from __future__ import annotations
@@ -97,16 +79,13 @@ def handling_figures(archive: Archive | str | Path) -> dict[str, Figure]:
     names = list(records["identification"].output_names)
     units = list(records["identification"].output_units)
 
-    for record_name, label in (("identification", "identification"), ("validation", "validation")):
+    for record_name in ("identification", "validation"):
         data = records[record_name]
-        predictions = {}
-        if chosen in linear:
-            predictions[f"linear n = {chosen}"] = linear[chosen].simulate_outputs(data.u, data.dt)
-        if chosen in nonlinear:
-            predictions[f"nonlinear n = {chosen}"] = nonlinear[chosen].simulate_outputs(data.u, data.dt)
+        predictions = {f"{kind} n = {chosen}": models[chosen].simulate_outputs(data.u, data.dt)
+                       for kind, models in (("linear", linear), ("nonlinear", nonlinear)) if chosen in models}
         figures[f"fits_{record_name}"] = plots.plot_time_fits(
             data.t, data.y, predictions, names, units,
-            title=f"Handling model fits on the {label} manoeuvre (n = {chosen})",
+            title=f"Handling model fits on the {record_name} manoeuvre (n = {chosen})",
         )
 
     if chosen in nonlinear:
@@ -196,8 +175,7 @@ def handling_figures(archive: Archive | str | Path) -> dict[str, Figure]:
         )
 
     vehicle = summary.get("vehicle_linearization")
-    reference_eigenvalues = None
-    reference = None
+    reference = reference_eigenvalues = None
     if vehicle:
         reference = tuple(np.array(vehicle[key]) for key in ("A", "B", "C", "D"))
         reference_eigenvalues = np.linalg.eigvals(reference[0])

@@ -1,15 +1,10 @@
 """Checkpoints and resume of the handling study.
 
-While the study runs, its archive is rewritten atomically (under the
-writer's lock) each time an order finishes: the records first, then each
-order's runs and its entry in the root attribute ``orders_done_json``. The
-finished archive adds the summary. ``vehid study handling --resume ARCHIVE``
-reads the settings, the records and every finished order back (bit for bit:
-HDF5 keeps float64 exactly) and runs only the orders that are missing, so
-its table equals that of a run that was never interrupted.
-
-The unit of work is one order (its linear and then its nonlinear
-identification): an order that was interrupted is run again from its start.
+The study's archive is rewritten atomically each time an order finishes (its
+runs and its entry in ``orders_done_json``). ``vehid study handling --resume``
+reads the settings, records and finished orders back bit for bit and runs
+only the missing orders, so its table equals that of an uninterrupted run.
+An interrupted order is run again from its start.
 """
 
 from __future__ import annotations
@@ -44,8 +39,6 @@ class StudyCheckpoint:
     ----------
     path : Path
         The archive; the caller holds its writer's lock for the whole study.
-    config : HandlingConfig
-    records : mapping of str to IOData
     fresh : bool
         Start a new archive (True) or add to a resumed one (False).
     """

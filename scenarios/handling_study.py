@@ -1,63 +1,22 @@
 """The handling study of Best & Bogdanski 2017, section 6 (Table 5).
 
 The full-vehicle model (:mod:`vehicle`, 23 states, 20 m/s) is driven by the
-``identification`` steer input (band-limited noise plus a sweep, reaching
-about +/-7 m/s^2, 90 % of the grip limit) and, for validation, by the
-``validation`` input (steps on a sweep, then larger steps). Outputs: lateral
-acceleration, yaw rate and roll angle; 500 Hz, 30 s each. For each model
-order ``n`` a linear modal model is identified by the IEKF, then a
+``identification`` steer input (band-limited noise plus a sweep, to about 90 %
+of the grip limit) and, for validation, by the ``validation`` input. Outputs:
+lateral acceleration, yaw rate and roll angle; 500 Hz, 30 s each. For each
+model order a linear modal model is identified by the IEKF, then a
 spline-nonlinear one started from it (paper section 5, eq. 20-22). Every
-model is simulated from rest over both records and scored by the mean over
-the three outputs of R (eq. 17). The identified linear modes are set beside
-the vehicle's own linearisation (its yaw-sideslip and roll modes).
+model is simulated from rest over both records and scored by the mean R
+(eq. 17) over the outputs; the identified linear modes are set beside the
+vehicle's own linearisation.
 
-No trim is removed from the data. The record starts at the straight-running
-trim (zero steer): all three outputs are zero there to ~1e-33 and the models
-start from rest, which is the same state. The outputs are absolute values
-and are deviations from that trim alike.
+No trim is removed: the records start at the straight-running trim, where all
+three outputs are zero, which is the models' rest state too. The order is
+chosen by :func:`identification.order.assess_orders` on the linear runs.
 
-Linear settings (measured; seeds 0 and 1, 30 s records, orders 2-6). With
-model and data as here, every order explains the data better the lower p
-is, because the linear model is the wrong structure for data reaching 90 %
-of grip: a large p lets the parameters chase the local behaviour of the
-record (after 100 passes at p = 1 the fit is 60 % for n = 2, and n = 3 turns
-unstable in the first pass), a small p makes every pass average over the
-whole record. The limit (p = 1e-6, 250 passes) is mean R = 98.9, 99.1,
-99.3, 99.35, 99.4 % for n = 2..6. p = 1e-5 with 100 passes (the defaults)
-comes within 0.2 points of it for every order (98.70, 99.03, 99.28, 99.29,
-99.32 %; validation 98.47, 98.60, 98.85, 98.72, 98.87 %); seeds 0 and 1
-differ by under 0.05 points. After 20 passes p = 1e-4 is 0.3-1.3 points
-below the limit and p = 1e-3 0.9-2.5 points. Convergence in the paper's
-sense is not reached at these settings: at pass 100 trace(P) still grows
-5-14 % per 20 passes and the least constrained parameters still move
-(n = 2 settles at p >= 1e-3, at a fit 2.5 points lower). So the order
-choice below falls back on the fit.
-
-Order choice: :func:`identification.order.assess_orders` on the linear runs
-(the lowest converged order within 0.05 points of the best fit, else the
-lowest order within 0.05 points; 0.05 points is the seed-to-seed spread).
-The nonlinear runs cannot be assessed that way: their records carry no
-parameter vector. They start from the linear model of their order, so a
-well-conditioned linear run is their prerequisite.
-
-Modes. In the linear regime (a tenth of the steer amplitude) the order-3
-model finds the roll mode (1.40-1.48 Hz, damping 0.59-0.61; vehicle 1.45 Hz,
-0.575). The yaw-sideslip mode (2.14 Hz, damping 0.98) is not pinned down by
-the data: it is nearly critically damped and lies close to the tyre lags,
-and a model with two pairs and two real poles explains 99.997 % with it
-placed elsewhere. At full amplitude the identified modes are those of an
-equivalent linear model of a saturating car: a well-damped mode near
-0.9 Hz (paper: 0.4 Hz) and a 2.8 Hz one for n = 4.
-
-Nonlinear settings: the spline IEKF's defaults (5 nodes, p = 1e-7, 60
-passes; see :class:`identification.spline_iekf.SplineIEKFOptions` for the
-measurement behind p). Measured, seed 0: nonlinear R on identification
-99.34, 99.51, 99.65, 99.81, 99.74 % and on validation 99.19, 98.89, 99.59,
-99.66, 99.63 % for n = 2..6.
-
-What to expect (paper, Table 5; our vehicle is our own, so the numbers
-differ): R rises with the order, linear 99.60-99.82 % on identification;
-the nonlinear model beats the linear one on identification and validation.
+What to expect (paper, Table 5): R rises with the order and the nonlinear
+model beats the linear one. The measured results are in the README, the
+measurements behind the settings in ``docs/study_measurements.md``.
 """
 
 from __future__ import annotations
@@ -79,6 +38,7 @@ from identification.data import IOData
 from identification.errors import DivergenceError, InputError
 from identification.iekf import IEKFOptions, IEKFResult, identify_iekf
 from identification.iekf_archive import write_iekf_run
+from identification.jsonable import to_jsonable
 from identification.spline_iekf import SplineIEKFOptions, identify_spline_iekf
 from identification.metrics import percentage_explanation
 from identification.modal import ModalStructure
@@ -88,7 +48,7 @@ from identification.storage import write_value
 from vehicle import DEFAULT_DT, DEFAULT_SPEED, linearize, make_manoeuvre, named_vehicle, simulate
 from vehicle.linearize import Mode
 
-from .paths import results_directory
+from .paths import results_path
 from .shutdown import run_in_workers
 
 
@@ -112,9 +72,11 @@ __all__ = [
     "ModeComparison",
     "HandlingResult",
     "compare_modes",
+    "percent_text",
     "parse_orders",
     "planned_passes",
     "make_records",
+    "identify_order",
     "run_order",
     "run_study",
     "archive_path",
@@ -205,17 +167,13 @@ def whole_number(value: Any, name: str, minimum: int, maximum: int | None = None
 
 
 def study_linear_options(p: float = 1e-5, passes: int = 100) -> IEKFOptions:
-    """The study's linear IEKF options: normalised data, exact (first-order-hold) discretisation.
-
-    The defaults are measured (module notes).
-    """
+    """The study's linear IEKF options: normalised data, exact (first-order-hold) discretisation."""
     return IEKFOptions(p=p, passes=passes, normalize=True, discretization="exact")
 
 
-def spline_options(nodes: int = SplineIEKFOptions.nodes, passes: int | None = None,
-                   p: float | None = None) -> SplineIEKFOptions:
-    """The spline IEKF's options; ``passes`` and ``p`` left at None take its defaults."""
-    return SplineIEKFOptions(nodes=nodes, passes=SplineIEKFOptions.passes if passes is None else passes,
+def spline_options(nodes: int | None = None, passes: int | None = None, p: float | None = None) -> SplineIEKFOptions:
+    """The spline IEKF's options; settings left at None take its defaults."""
+    return SplineIEKFOptions(nodes=SplineIEKFOptions.nodes if nodes is None else nodes, passes=SplineIEKFOptions.passes if passes is None else passes,
                              p=SplineIEKFOptions.p if p is None else p)
 
 
@@ -238,8 +196,6 @@ class HandlingConfig:
         A named vehicle or a vehicle file (:func:`vehicle.named_vehicle`).
     speed : float
         Trim and reference speed (m/s).
-    dt : float
-        Sample interval (s).
     linear_options : IEKFOptions
         The linear IEKF's (:func:`study_linear_options`); at least 2 passes,
         from which the order choice judges convergence. An archive keeps its
@@ -298,20 +254,13 @@ class HandlingConfig:
         """Inverse of :meth:`as_dict`; spline settings stored as None take the spline IEKF's defaults."""
         spline = None
         if stored.get("nonlinear", True):
-            spline = spline_options(_stored(stored, "nodes", SplineIEKFOptions.nodes), stored.get("nonlinear_passes"),
-                                    stored.get("nonlinear_p"))
+            spline = spline_options(stored.get("nodes"), stored.get("nonlinear_passes"), stored.get("nonlinear_p"))
         return cls(orders=tuple(stored["orders"]), seed=stored["seed"], duration=stored["duration"],
                    amplitude_scale=stored["amplitude_scale"], vehicle=stored["vehicle"], speed=stored["speed"],
                    dt=stored["dt"], linear_options=study_linear_options(stored["p"], stored["passes"]),
                    spline_options=spline, workers=workers)
 
 
-def _stored(stored: Mapping[str, Any], key: str, default: Any) -> Any:
-    value = stored.get(key)
-    return default if value is None else value
-
-
-# ------------------------------------------------------------------ data
 @dataclass(frozen=True, eq=False)
 class RecordArrays:
     """An IOData as plain arrays and strings, to cross a process boundary (IOData's metadata does not pickle)."""
@@ -355,7 +304,6 @@ def score(model: Any, data: IOData) -> np.ndarray:
     return percentage_explanation(data.y, model.simulate_outputs(data.u, data.dt))
 
 
-# ------------------------------------------------------------ one order
 class PassEvent(NamedTuple):
     """One finished pass, as a worker reports it: order, ``linear``/``nonlinear``, pass index, mean R (%)."""
 
@@ -431,12 +379,35 @@ def _nonlinear_outcome(result: Any, identification: IOData, validation: IOData, 
     )
 
 
+def identify_order(data: IOData, order: int, linear_options: IEKFOptions, spline_options: SplineIEKFOptions | None,
+                   on_pass: Callable[[str], Any] | None = None) -> tuple[Any, str | None, Any, str | None]:
+    """The linear IEKF of ``order`` and, started from its model, the spline IEKF (unless ``spline_options`` is None).
+
+    A divergence keeps what finished before it (the filter's ``last_good``) and is returned as text:
+    ``(linear, linear_error, nonlinear, nonlinear_error)``. ``on_pass(stage)``, stage ``linear`` or
+    ``nonlinear``, gives each filter's ``on_pass``.
+    """
+    callback = on_pass or (lambda stage: None)
+    structure = ModalStructure.default(order, data.n_u, data.n_y)
+    linear = nonlinear = linear_error = nonlinear_error = None
+    try:
+        linear = identify_iekf(data, structure, options=linear_options, on_pass=callback("linear"))
+    except DivergenceError as exc:
+        linear, linear_error = exc.last_good, str(exc)
+    if linear is not None and spline_options is not None:
+        try:
+            nonlinear = identify_spline_iekf(data, linear.model, options=spline_options, on_pass=callback("nonlinear"))
+        except DivergenceError as exc:
+            nonlinear_error = str(exc)
+            if exc.last_good is not None and exc.last_good.history:  # keep the passes that finished
+                nonlinear = exc.last_good
+    return linear, linear_error, nonlinear, nonlinear_error
+
+
 def run_order(job: OrderJob, report: Callable[[PassEvent], None] | None = None) -> OrderOutcome:
-    """Identify one order, linear then nonlinear, and score both on both records.
+    """Identify one order (:func:`identify_order`) and score both models on both records.
 
     A top-level function of plain values, so that a process pool can run it.
-    A divergence does not stop the study: the order keeps what finished
-    before it (the IEKF's ``last_good``) and says what went wrong.
     """
     started = time.perf_counter()
     identification, validation = job.identification.to_iodata(), job.validation.to_iodata()
@@ -448,43 +419,28 @@ def run_order(job: OrderJob, report: Callable[[PassEvent], None] | None = None) 
         count = iter(range(1, 1 << 62))
         return lambda record, _: report(PassEvent(job.order, stage, next(count), float(record.mean_fit_filter)))
 
-    structure = ModalStructure.default(job.order, identification.n_u, identification.n_y)
-    linear_error = None
-    try:
-        linear = identify_iekf(identification, structure, options=job.linear_options, on_pass=reporter("linear"))
-    except DivergenceError as exc:
-        linear, linear_error = exc.last_good, str(exc)
+    linear, linear_error, result, nonlinear_error = identify_order(identification, job.order, job.linear_options,
+                                                                   job.spline_options, reporter)
     if linear is None:
         return OrderOutcome(job.order, None, None, None, linear_error, None, "no linear model to start from",
                             time.perf_counter() - started)
     fit_identification, fit_validation = score(linear.model, identification), score(linear.model, validation)
-
-    nonlinear, nonlinear_error = None, None
     if job.spline_options is None:
         nonlinear_error = "not asked for"
-    else:
-        try:
-            result = identify_spline_iekf(identification, linear.model, options=job.spline_options,
-                                          on_pass=reporter("nonlinear"))
-            nonlinear = _nonlinear_outcome(result, identification, validation, linear.model.structure.n_complex_pairs)
-        except DivergenceError as exc:
-            nonlinear_error = f"diverged: {exc}"
-            last_good = exc.last_good
-            if last_good is not None and last_good.history:  # keep the passes that finished
-                nonlinear = _nonlinear_outcome(last_good, identification, validation,
-                                               linear.model.structure.n_complex_pairs)
+    elif nonlinear_error is not None:
+        nonlinear_error = f"diverged: {nonlinear_error}"
+    nonlinear = None if result is None else _nonlinear_outcome(result, identification, validation,
+                                                                linear.model.structure.n_complex_pairs)
     return OrderOutcome(job.order, linear, fit_identification, fit_validation, linear_error, nonlinear,
                         nonlinear_error, time.perf_counter() - started)
 
 
-# -------------------------------------------------------- all the orders
 def _run_orders(jobs: list[OrderJob], workers: int, on_event: Callable[[PassEvent], None] | None,
                 on_outcome: Callable[[OrderOutcome], None] | None = None) -> dict[int, OrderOutcome]:
     """Run the jobs: in this process with one worker (or one job), else in spawned worker processes.
 
     Workers send their PassEvents as they go; ``on_outcome`` is called here
-    with each order's outcome as it arrives (checkpoints). An interrupt or a
-    failed order stops every worker at once (:func:`scenarios.shutdown.run_in_workers`).
+    with each order's outcome as it arrives (checkpoints).
     """
     if workers == 1 or len(jobs) == 1:
         outcomes = {}
@@ -565,9 +521,7 @@ class ModeComparison:
 class HandlingResult:
     """The study: its records, each order's outcome and rows, the vehicle's modes and the order choice.
 
-    ``vehicle_linearization`` holds the vehicle's A, B and its C, D rows of
-    :data:`OUTPUTS`. JSON and text are rendered from these values by the
-    ``study handling`` command.
+    ``vehicle_linearization`` holds the vehicle's A, B and its C, D rows of :data:`OUTPUTS`.
     """
 
     config: HandlingConfig
@@ -599,6 +553,11 @@ def compare_modes(order: int, eigenvalues: Any, vehicle_modes: Mapping[str, Mode
                                          found.eigenvalue, found.frequency_hz, found.damping,
                                          found.frequency_hz / mode.frequency_hz))
     return tuple(comparison)
+
+
+def percent_text(value: float | None) -> str:
+    """A percentage for the text tables: two decimals, ``-`` where there is none."""
+    return "-" if value is None else f"{value:.2f}"
 
 
 def _mean(values: np.ndarray | None) -> float | None:
@@ -642,7 +601,6 @@ def run_study(
 
     Parameters
     ----------
-    config : HandlingConfig, optional
     on_event : callable, optional
         Called in this process with each :class:`PassEvent` (progress displays).
     records : mapping, optional
@@ -652,10 +610,6 @@ def run_study(
         Orders already done (a resumed study): they are not run again.
     on_outcome : callable, optional
         Called with each order's outcome as it finishes (checkpoints).
-
-    Returns
-    -------
-    HandlingResult
 
     Raises
     ------
@@ -694,7 +648,6 @@ def run_study(
                           seconds, workers)
 
 
-# --------------------------------------------------------------- archive
 NONLINEAR_HISTORY_UNITS = {"fit_filter": "%", "trace_p": "normalised units"}
 
 
@@ -721,10 +674,7 @@ ORDERS_DONE = "orders_done_json"
 
 def archive_path(out: str | Path | None = None) -> Path:
     """The archive file of ``--out``: ``handling_study.h5`` under the results folder by default, relative names there too."""
-    path = Path(out) if out else results_directory() / "handling_study.h5"
-    if out and not path.is_absolute():
-        path = results_directory() / path
-    return path
+    return results_path(out, "handling_study.h5")
 
 
 def write_order(archive: Any, order: int, outcome: OrderOutcome) -> None:
@@ -751,18 +701,12 @@ def start_archive(path: str | Path, config: HandlingConfig, records: Mapping[str
 
 
 def write_archive_for(result: HandlingResult, out: str | Path | None = None) -> Path:
-    """Write the study's archive (kind ``handling-study``): both records, every run, the summary.
-
-    Runs: ``linear-n<n>`` (IEKF history, model, resume state, and ``metrics``:
-    R per output on both records) and ``nonlinear-n<n>``. The default file
-    is ``handling_study.h5`` under the results folder.
-    """
+    """Write the study's archive (kind ``handling-study``, layout in results/RESULTS_LAYOUT.md) under ``--out``."""
     return write_study_archive(result, archive_path(out))
 
 
 def write_study_archive(result: HandlingResult, path: str | Path) -> Path:
     """Write the study's archive to exactly ``path`` (see :func:`write_archive_for`)."""
-    from .cli import to_jsonable
     from .commands.study_handling import summary_of
 
     path = Path(path)

@@ -1,10 +1,7 @@
 """Speed of one IEKF pass over the 50,000-sample linear example, compiled against the NumPy reference.
 
-Shared by ``benchmarks/iekf_linear.py`` and ``vehid bench iekf``. Every
-figure is a median over repeats measured in the same run; the NumPy
-reference is timed on a slice of the record and scaled to the full length,
-since its cost per sample is constant (a Python loop) and a full pass takes
-tens of seconds.
+Shared by ``benchmarks/iekf_linear.py`` and ``vehid bench iekf``. The NumPy
+reference costs the same per sample, so it is timed on a slice and scaled.
 """
 
 from __future__ import annotations
@@ -23,7 +20,7 @@ from .linear_example import make_data
 
 __all__ = ["measure_iekf"]
 
-# The forms the issue names: (label, outputs, C pattern, discretisation, covariance).
+# The forms measured: label to (outputs, C pattern, discretisation, covariance).
 _FORMS = {
     "paper_single": ((0,), "all-ones", "euler", "paper"),
     "default_single": ((0,), "all-ones", "exact", "joseph"),

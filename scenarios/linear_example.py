@@ -1,13 +1,8 @@
 """The linear example of Best & Bogdanski 2017, section 4: Tables 1-4 and the order study.
 
-The source system is eq. 15 (five states: a real pole at -4, pairs at
--15 +/- 10j and -8 +/- 40j; two inputs, three outputs). The data follow
-eq. 16: per input 5,000 N(0, 1) samples taken as 50 Hz points over 100 s,
-interpolated linearly to 500 Hz, plus offsets +0.1 and -0.1; the outputs are
-the system's exact response to these piecewise-linear inputs (50,000
-samples; the last nine, past the final 50 Hz point, hold its value).
-
-Cases and what to expect:
+The source system is eq. 15 (five states, two inputs, three outputs), the
+data its exact response to the piecewise-linear inputs of eq. 16. The cases
+run the Euler filter by default, as the paper does. Cases and what to expect:
 
 ``single-output`` (Table 1)
     Output 1, ``C = [1 1 1 1 1]``. With the paper's Euler filter the model
@@ -26,8 +21,6 @@ Cases and what to expect:
 ``orders`` (Figure 5)
     Three outputs, n = 3..7 with the eq. 19 patterns: R, the trend of
     trace(P), parameter drift and the chosen order (paper: n = 4).
-
-The paper's cases run the Euler filter by default, as the paper does.
 """
 
 from __future__ import annotations
@@ -45,11 +38,12 @@ from identification.data import IOData
 from identification.errors import InputError
 from identification.iekf import IEKFOptions, IEKFResult, identify_iekf
 from identification.iekf_archive import write_iekf_run
+from identification.jsonable import to_jsonable
 from identification.metrics import percentage_explanation
 from identification.modal import ModalModel, ModalStructure
 from identification.order import OrderAssessment, assess_orders
 
-from .paths import results_directory
+from .paths import results_path
 
 __all__ = [
     "CASES",
@@ -252,10 +246,6 @@ def run_case(
         See :class:`identification.iekf.IEKFOptions`.
     on_pass : callable, optional
         ``on_pass(run_label, record, result)`` after every pass.
-
-    Returns
-    -------
-    CaseResult
     """
     if case not in CASES:
         raise InputError(f"unknown case {case!r}; use one of {', '.join(CASES)}")
@@ -309,25 +299,21 @@ def run_case(
 def _noise_case(settings, options, callback, started) -> CaseResult:
     structure = ModalStructure.from_pattern(settings["pattern"], 5, 2, 1)
     truth = true_model()
-    runs, records, rows = {}, {}, []
+    runs, rows = {}, []
     for ratio in NOISE_RATIOS:
         data, clean = make_data(settings["seed"], outputs=(0,), noise_ratio=ratio)
         label = f"noise-{int(round(ratio * 100))}"
-        result = identify_iekf(data, structure, options=options, on_pass=callback(label))
-        runs[label] = result
-        method = options.simulation_method
-        predicted = result.model.simulate_outputs(data.u, data.dt, method=method)
+        runs[label] = identify_iekf(data, structure, options=options, on_pass=callback(label))
+        predicted = runs[label].model.simulate_outputs(data.u, data.dt, method=options.simulation_method)
         true_on_noisy = percentage_explanation(data.y, truth.simulate_outputs(data.u, data.dt)[:, :1])[0]
-        row = {
+        rows.append({
             "noise": f"{int(round(ratio * 100))} %",
             "R_noisy": float(percentage_explanation(data.y, predicted)[0]),
             "R_clean": float(percentage_explanation(clean, predicted)[0]),
             "R_noisy_true_model": float(true_on_noisy),
             "paper_R_noisy": PAPER["noise"]["R_noisy"][ratio],
             "paper_R_clean": PAPER["noise"]["R_clean"][ratio],
-        }
-        rows.append(row)
-        records[label] = row
+        })
     summary = {"case": "noise", "levels": rows, "p": options.p, "passes": options.passes,
                "discretization": options.discretization, "seed": settings["seed"],
                "seconds": time.perf_counter() - started}
@@ -382,11 +368,7 @@ def write_archive_for(result: CaseResult, out: str | Path | None = None) -> Path
 
     The default file is ``linear_example_<case>.h5`` under the results folder.
     """
-    from .cli import to_jsonable
-
-    path = Path(out) if out else results_directory() / f"linear_example_{result.case}.h5"
-    if not path.is_absolute() and out:
-        path = results_directory() / path
+    path = results_path(out, f"linear_example_{result.case}.h5")
     settings = to_jsonable(result.settings)
     with write_archive(path, kind="linear-example", config=settings, seeds=[result.settings["seed"]]) as archive:
         for name, data in result.data.items():

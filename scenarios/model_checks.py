@@ -1,8 +1,6 @@
 """What `vehid identify` adds to a model's summary about how sure it is: modes with standard deviations and residual tests.
 
-Kept apart from the command so that the command only calls
-:func:`uncertainty_summary` and :func:`uncertainty_lines`. Public JSON keys
-(a contract once released):
+Public JSON keys (a contract once released):
 
 ``modes``
     One object per mode (pairs first, then real poles): ``eigenvalue`` and

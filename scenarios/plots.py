@@ -1,18 +1,11 @@
 """Report figures: side-effect free functions from plain results to a matplotlib Figure.
 
-Every function takes arrays, :class:`~identification.modal.ModalModel` or
-:class:`~identification.data.IOData` values and an optional ``fig`` (or
-``ax``), and returns the :class:`matplotlib.figure.Figure`. Figures are built
-with the object-oriented API and an Agg canvas: nothing here imports
-``matplotlib.pyplot``, changes global state or opens a window, so the
-functions are safe in scripts, tests and servers alike. Save a figure with
-``fig.savefig(path)`` or :func:`scenarios.report.write_report`.
-
-The figures follow Best & Bogdanski (2017): parameter development over the
-passes (Figure 1), fit R and trace(P) per pass (Figures 2-4), the order study
-(Figure 5), time-history fits of linear and nonlinear models (Figures 7 and
-9) and splined coefficients (Figure 8); plus an eigenvalue map, Bode plots
-and residual autocorrelation for checking identified models.
+Every function takes arrays, models or :class:`~identification.data.IOData`
+values and an optional empty ``fig`` (or ``ax``) to draw into, and returns the
+Figure. Nothing here imports ``matplotlib.pyplot`` or changes global state
+(object-oriented API, Agg canvas), so the functions are safe in scripts,
+tests and servers alike. The figures follow Best & Bogdanski (2017), Figures
+1-5 and 7-9, plus an eigenvalue map, Bode plots and residual tests.
 """
 
 from __future__ import annotations
@@ -67,7 +60,6 @@ _GROUP_LABELS = {
 _GROUP_PATTERNS = (("modal", r"(sigma|omega)\d+"), ("B", r"b\d+"), ("C", r"c\d+"), ("D", r"d\d+"))
 
 
-# ------------------------------------------------------------------ helpers
 def new_figure(size: tuple[float, float] = REPORT_SIZE) -> Figure:
     """An empty figure with an Agg canvas and constrained layout (no pyplot)."""
     fig = Figure(figsize=size, layout="constrained")
@@ -124,7 +116,6 @@ def _pass_axis(passes: Any, count: int) -> np.ndarray:
     return passes
 
 
-# ------------------------------------------------------- Figure 1: parameters
 def parameter_groups(names: Sequence[str]) -> dict[str, list[int]]:
     """Indices of theta by group (``modal``, ``B``, ``C``, ``D``, ``other``) from parameter names.
 
@@ -164,9 +155,6 @@ def plot_parameter_history(
         grouping by name.
     passes : array_like, shape (n_pass,), optional
         x values; default 1..n_pass.
-    x_label, title : str
-    fig : Figure, optional
-        An empty figure to draw into.
 
     Returns
     -------
@@ -199,7 +187,6 @@ def plot_parameter_history(
     return fig
 
 
-# --------------------------------------------------- Figures 2-4: convergence
 def plot_convergence(
     fit_filter: Any,
     trace_p: Any,
@@ -227,9 +214,6 @@ def plot_convergence(
         Smallest eigenvalue of P, drawn on the trace axis.
     passes : array_like, optional
         x values; default 1..n_pass.
-    output_names : sequence of str, optional
-    title : str
-    fig : Figure, optional
 
     Returns
     -------
@@ -272,7 +256,6 @@ def plot_convergence(
     return fig
 
 
-# --------------------------------------------------------- Figure 5: orders
 def plot_order_study(
     orders: Sequence[int],
     mean_r: Sequence[Any],
@@ -287,15 +270,12 @@ def plot_order_study(
     Parameters
     ----------
     orders : sequence of int
-        The model orders n.
     mean_r : sequence of float or of arrays (n_pass,)
         Mean R (percent) per order: final values, or the per-pass history.
     trace_p : sequence of float or of arrays (n_pass,)
         trace(P) per order, final or per pass (log scale).
     drift : sequence of float or of arrays, optional
         The most divergent parameter per order (Figure 5b), final or per pass.
-    title : str
-    fig : Figure, optional
 
     Returns
     -------
@@ -333,7 +313,6 @@ def plot_order_study(
     return fig
 
 
-# --------------------------------------------------- Figures 7, 9: time fits
 def plot_time_fits(
     t: Any,
     y_measured: Any,
@@ -360,8 +339,6 @@ def plot_time_fits(
         Show only this time range (s), e.g. a stretch at high lateral
         acceleration; only its samples are drawn, but R in the legend is
         always over the whole record given.
-    title : str
-    fig : Figure, optional
 
     Returns
     -------
@@ -398,7 +375,6 @@ def plot_time_fits(
     return fig
 
 
-# ------------------------------------------------------- Figure 8: splines
 def plot_splines(
     x: Any,
     values: Any,
@@ -422,8 +398,6 @@ def plot_splines(
         Name of each coefficient (e.g. ``"sigma1"``), the y-axis label.
     x_labels : str or sequence of str, optional
         Name of the variable each depends on (e.g. ``"x1 (-)"``); default ``"x (-)"``.
-    title : str
-    fig : Figure, optional
 
     Returns
     -------
@@ -469,7 +443,6 @@ def plot_splines(
     return fig
 
 
-# ------------------------------------------------------ eigenvalues and Bode
 def _eigenvalues(model: Any) -> np.ndarray:
     if hasattr(model, "eigenvalues"):
         return np.asarray(model.eigenvalues(), dtype=complex)
@@ -502,12 +475,6 @@ def plot_eigenvalue_map(
     annotate : bool
         Label each eigenvalue with non-negative imaginary part by its natural
         frequency ``|lambda| / 2 pi`` (Hz) and damping ratio ``-Re(lambda)/|lambda|``.
-    title : str
-    ax : Axes, optional
-
-    Returns
-    -------
-    Figure
     """
     fig = new_figure(REPORT_SIZE) if ax is None else ax.figure
     ax = _style(fig.subplots() if ax is None else ax)
@@ -626,15 +593,12 @@ def plot_bode(
     models : mapping of str to ModalModel or (A, B, C, D)
     reference : ModalModel or (A, B, C, D), optional
         E.g. the linearised source model; drawn black dashed.
-    input_index : int
     output_names, output_units : sequence of str, optional
         Default: the first model's output names, units ``-``.
     input_name, input_unit : str
         For the title and the magnitude's unit.
     frequencies : array_like, optional
         In Hz; default 200 points from 0.05 to 25 Hz, log-spaced.
-    title : str, optional
-    fig : Figure, optional
 
     Returns
     -------
@@ -685,7 +649,6 @@ def plot_bode(
     return fig
 
 
-# --------------------------------------------------- residual whiteness
 def autocorrelation(residuals: Any, max_lag: int) -> np.ndarray:
     """Normalised autocorrelation of each residual column at lags 0..max_lag, shape (max_lag + 1, n_y).
 
@@ -711,11 +674,8 @@ def plot_residual_autocorrelation(
         Measured minus predicted outputs.
     max_lag : int
         Largest lag in samples.
-    output_names : sequence of str, optional
     dt : float, optional
         Sample interval (s); the lag axis is then in seconds.
-    title : str
-    fig : Figure, optional
 
     Returns
     -------
@@ -752,8 +712,6 @@ def plot_residual_tests(tests: Any, *, dt: float | None = None, title: str = "Re
     tests : identification.residuals.ResidualTests
     dt : float, optional
         Sample interval (s): lags in seconds.
-    title : str
-    fig : Figure, optional
 
     Returns
     -------
@@ -802,8 +760,6 @@ def plot_innovation_consistency(nis: Any, band: tuple[float, float], *, title: s
         Mean ``e' R^-1 e`` of each pass.
     band : (float, float)
         :func:`identification.residuals.nis_band` for the record.
-    title : str
-    fig : Figure, optional
 
     Returns
     -------

@@ -1,11 +1,4 @@
-"""Write report figures to disk and tables to markdown.
-
-:func:`write_report` saves each figure as a PNG and all of them, one per
-page, in a single PDF. :func:`markdown_table` turns rows of results (a list
-of dicts, as in the paper's Table 5) into a markdown table.
-:func:`archive_figures` and :func:`archive_table` draw and tabulate whatever
-a results archive holds (records, run histories, models), for ``vehid report``.
-"""
+"""Write report figures to disk and tables to markdown; draw and tabulate whatever an archive holds."""
 
 from __future__ import annotations
 
@@ -54,8 +47,6 @@ def write_report(
         Created if missing.
     dpi : int
         Resolution of the PNGs (the PDF is vector).
-    pdf_name : str
-        File name of the PDF.
     title : str
         The PDF's title metadata.
 
@@ -185,7 +176,6 @@ def markdown_table(
     return "\n".join(lines) + "\n"
 
 
-# ---------------------------------------------------------- from an archive
 def _stem(*parts: str) -> str:
     return "_".join(re.sub(r"[^A-Za-z0-9_.-]", "_", part) for part in parts)
 
@@ -252,9 +242,7 @@ def archive_figures(archive: Any, *, window: tuple[float, float] | None = None, 
         ``residuals_<record>_<run>`` and ``residual_tests_<record>_<run>``
         (whiteness and input cross-correlation with 99 % bands);
         ``innovation_consistency_<run>`` for IEKF runs that recorded their
-        NIS beside an ``identification`` record. Models
-        carrying a parameter covariance get confidence ellipses on the
-        eigenvalue map and bands on the Bode plot.
+        NIS beside an ``identification`` record.
     """
     figures: dict[str, Figure] = {}
     runs = archive.runs

@@ -1,21 +1,12 @@
 """Clean shutdown: signals stop a command and every worker process it started, with nothing left behind.
 
-* :func:`stopping_on_signals` makes SIGTERM (and SIGHUP) raise
-  :class:`Interrupted` in the main thread, as Ctrl-C (SIGINT) raises
-  :class:`KeyboardInterrupt`: the command unwinds through its ``finally``
-  blocks, so temporary files are removed, locks released and archives left
-  as their last complete checkpoint.
-* :func:`run_in_workers` runs jobs in spawned processes that the calling
-  process owns. On any exception in the caller (an interrupt, a failed job)
-  every worker is terminated at once, killed if it does not end within
-  :data:`GRACE` seconds, and reaped. Workers ignore SIGINT (a terminal sends
-  it to the whole process group; the parent decides) and die with their
-  parent: on Linux the kernel sends them SIGKILL when it dies
-  (``PR_SET_PDEATHSIG``), elsewhere a watchdog thread notices the new parent
-  within half a second. Both are set up by :mod:`scenarios._parent_watch`
-  as the worker's first import, before the seconds it spends importing the
-  workbench. So neither a signal nor ``kill -9`` of the parent leaves
-  workers running or blocked on their pipes.
+:func:`stopping_on_signals` makes SIGTERM and SIGHUP unwind the command as
+Ctrl-C does, through its ``finally`` blocks, so that temporary files are
+removed, locks released and archives left at their last checkpoint.
+:func:`run_in_workers` runs jobs in spawned processes owned by the caller:
+on any exception there every worker is terminated, killed after
+:data:`GRACE` seconds and reaped. Workers ignore SIGINT (the parent decides)
+and die with their parent even under ``kill -9`` (:mod:`scenarios._parent_watch`).
 """
 
 from __future__ import annotations
@@ -94,8 +85,6 @@ def stopping_on_signals() -> Iterator[None]:
         for signum, handler in previous.items():
             signal.signal(signum, handler)
 
-
-# --------------------------------------------------------------- workers
 
 
 def _portable(exc: BaseException) -> BaseException:

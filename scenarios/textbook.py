@@ -11,10 +11,7 @@ images in our copy; every number here is recomputed from the stated data.
   least squares (A.2.3); expected differences near 1e-15.
 * ``gls_example``: least squares is biased under AR(1) equation error
   (a1 near -0.98 for -0.8) and GLS (A.2.5) is not.
-* ``positivity_example``: the single-parameter example of A.5 in single
-  precision: the plain update's P turns negative and the estimate blows out;
-  the square-root and UD forms stay positive.
-* ``ud_example``: one UDU' step (A.5.2) with givens of our own.
+* ``positivity_example`` and ``ud_example``: the covariance forms of A.5.
 * ``ekf_bicycle_example``: the joint EKF of A.4.1 on a bicycle model recovers
   both cornering stiffnesses within 0.2 %.
 * ``pencil_example``: joint Kalman estimation of an ARMAX model in singular
@@ -68,7 +65,6 @@ def kalman_example(*, steps: int = 5, phi: float = 1.0, P0: float = 100.0, Q: fl
     ]
 
 
-# --------------------------------------------------------------------------- EKF: a bicycle model
 @dataclass(frozen=True)
 class BicycleParameters:
     """A linear single-track (bicycle) model; illustrative values of a mid-size car."""
@@ -166,7 +162,6 @@ def ekf_bicycle_example(*, seed: int = 0, compiled: bool = False) -> dict[str, A
     }
 
 
-# ------------------------------------------------- A.5: positivity of the covariance in single precision
 POSITIVITY_PHI = (1.7,) + (0.5,) * 9  # regressors of the single-parameter example
 POSITIVITY_P0 = 1e7
 POSITIVITY_THETA = 2.0
@@ -232,7 +227,6 @@ def ud_example(*, lam: float = 0.98) -> dict[str, Any]:
             "P_from_UD": ud_covariance(U1, d1).tolist(), "P_plain": P_plain.tolist()}
 
 
-# ------------------------------------------------------------------------ A.2: LS, RLS and GLS
 GLS_TRUE = (-0.8, 0.5)  # theta = [a1, b1] of y(k) = 0.8 y(k-1) + 0.5 u(k-1) + xi(k)
 
 
@@ -274,7 +268,6 @@ def rls_example(*, seed: int = 0) -> dict[str, Any]:
     return {"batch_theta": batch.theta[:, 0].tolist(), "max_difference_to_batch": differences}
 
 
-# ------------------------------------------------------------------------ A.4.2: singular pencil
 def pencil_example(*, seed: int = 1) -> dict[str, Any]:
     """Joint Kalman estimation of an ARMAX model in SP form: A = 1 - 1.5 q^-1 + 0.7 q^-2,
     B = q^-1 + 0.5 q^-2, C* = 1 + 0.5 q^-1 (known), e ~ N(0, 0.01), 3000 samples."""

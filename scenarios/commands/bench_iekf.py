@@ -1,10 +1,6 @@
-"""Measure one IEKF pass over the 50,000-sample linear example.
+"""Measure one IEKF pass over the 50,000-sample linear example, compiled against a NumPy reference.
 
-The compiled pass in the paper's form (Euler, paper covariance update) and in
-the default form (exact discretisation, Joseph update), each beside a plain
-NumPy reference of the same form measured in the same run, and the default
-three-output pass. Figures are medians; they are also written to
-results/benchmarks.json under "iekf_linear".
+Medians over repeats, also written to results/benchmarks.json under "iekf_linear".
 """
 
 from __future__ import annotations

@@ -1,14 +1,9 @@
 """Draw the figures and the summary table of a results archive.
 
-Opens an HDF5 archive written by the workbench (its layout is in
-results/RESULTS_LAYOUT.md), finds its records (data/*) and runs (runs/*:
-per-pass history, final model) and draws what is present: parameter
-development and convergence per run, the order study across runs, an
-eigenvalue map and Bode plots of the models, time fits and residual
-autocorrelation on each record. Writes one PNG per figure, a PDF of them all
-and summary.md (one table row per run) to the output folder, which is
-written under a hidden name beside it and swapped in whole (an interrupted
-report leaves the previous one, never a mixture of old and new files).
+Draws whatever the archive (layout: results/RESULTS_LAYOUT.md) holds: parameter
+development and convergence per run, the order study, eigenvalues, Bode plots,
+time fits and residual tests per record. Writes the PNGs, a PDF and summary.md;
+the folder is replaced whole, so an interrupted report leaves the previous one.
 """
 
 from __future__ import annotations
@@ -20,7 +15,7 @@ from pathlib import Path
 from identification.archive import read_archive
 from identification.archive_safety import check_output_folder, replacing_directory
 from identification.errors import InputError
-from scenarios.paths import results_directory
+from scenarios.paths import results_path
 from scenarios.report import archive_figures, archive_table, markdown_table, write_report
 
 NAME = "report"
@@ -40,13 +35,6 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.set_defaults(handler=run)
 
 
-def _output_folder(archive: Path, out: str | None) -> Path:
-    if out is None:
-        return results_directory() / f"{archive.stem}-report"
-    path = Path(out)
-    return path if path.is_absolute() else results_directory() / path
-
-
 def run(args: argparse.Namespace) -> tuple[dict, str]:
     if args.max_lag < 1:
         raise InputError(f"--max-lag must be at least 1; got {args.max_lag}")
@@ -56,11 +44,11 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
         raise InputError(f"--window needs two finite times T0 < T1; got {args.window}")
     path = Path(args.archive)
     archive = read_archive(path)
-    check_output_folder(_output_folder(path, args.out))  # before drawing: a file in its place, no permission
+    folder = results_path(args.out, f"{path.stem}-report")
+    check_output_folder(folder)  # before drawing: a file in its place, no permission
     if archive.kind == "handling-study":
         from scenarios.handling_report import write_handling_report
 
-        folder = _output_folder(path, args.out)
         with replacing_directory(folder) as partial:
             files = [folder / f.relative_to(partial) for f in write_handling_report(archive, partial)]
         summary = {"archive": str(path), "kind": archive.kind, "out": str(folder), "files": [str(f) for f in files]}
@@ -68,7 +56,6 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     figures = archive_figures(archive, window=tuple(args.window) if args.window else None, max_lag=args.max_lag)
     if not figures:
         raise InputError(f"nothing to draw in {path}: it holds no records and no runs with histories or models")
-    folder = _output_folder(path, args.out)
     rows = archive_table(archive)
     with replacing_directory(folder) as partial:
         files = write_report(figures, partial, dpi=args.dpi, title=f"vehid report: {path.name}")

@@ -1,12 +1,9 @@
 """Simulate the 23-state full-vehicle model under a steer manoeuvre.
 
-Runs the compiled RK4 simulator (500 Hz) from the trim at the given speed and
-prints a summary: peak lateral acceleration, speed range and the wall time of
-the simulation; for a step, also the steady-state gains. With --out, the
-record (steer, all outputs and all 23 states) is written to an HDF5 file
-under the results folder. A run that leaves the model's physical envelope
-fails (exit status 1) naming the quantity and the time; with --out, the record
-up to that sample is still written.
+Prints peak lateral acceleration, speed range, wall time and, for a step, the
+steady-state gains; --out writes the record to HDF5. A run that leaves the
+model's physical envelope fails (exit status 1), writing with --out the record
+up to that sample.
 """
 
 from __future__ import annotations
@@ -19,7 +16,7 @@ import numpy as np
 
 from identification.archive_safety import check_output_target
 from identification.errors import InputError, SimulationError
-from scenarios.paths import results_directory
+from scenarios.paths import results_path
 from vehicle import MANOEUVRES, make_manoeuvre, named_vehicle, simulate
 
 NAME = "simulate"
@@ -61,16 +58,11 @@ def step_gains(data, amplitude: float, window: float = _STEADY_WINDOW) -> dict[s
     }
 
 
-def _output_path(out: str) -> Path:
-    path = Path(out)
-    return path if path.is_absolute() else results_directory() / path
-
-
 def _write_record(data, args: argparse.Namespace) -> Path:
     import casadi
     import h5py
 
-    path = _output_path(args.out)
+    path = results_path(args.out, args.out)
     path.parent.mkdir(parents=True, exist_ok=True)
     with h5py.File(path, "w") as handle:
         handle.attrs["casadi_version"] = casadi.__version__
@@ -90,7 +82,7 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
         options["duration"] = args.duration
     manoeuvre = make_manoeuvre(args.manoeuvre, **options)
     if args.out:  # before the simulation: no directory, no input file, a writable place
-        check_output_target(_output_path(args.out), inputs=[args.vehicle], force=True, what="record")
+        check_output_target(results_path(args.out, args.out), inputs=[args.vehicle], force=True, what="record")
     try:
         data = simulate(params, manoeuvre, speed=args.speed, method=args.method)
     except SimulationError as exc:

@@ -1,16 +1,10 @@
 """The operating envelope: models across vehicles, speeds and orders, and a speed-scheduled family.
 
-Each job (vehicle, speed, order, seed) measures the vehicle's grip limit at
-its speed, simulates the identification and validation steer inputs at
---amplitude-fraction of it, identifies a linear modal model by the IEKF (and
-a spline-nonlinear one unless --linear-only) and scores both. Jobs run on a
-local process pool, or on Dask (--executor dask with --scheduler ADDRESS, or
---workers N for a local cluster); results go to one archive, one group per
-job, written as jobs finish (--resume skips those already there). The grid
-models of each vehicle and order become one speed-scheduled model, validated
-at the speeds between the grid speeds against a model identified there.
-Prints a table per vehicle: fits, identified modes beside the vehicle's
-linearised yaw-sideslip and roll modes, and the scheduled model's validation.
+Each job (vehicle, speed, order, seed) identifies a linear modal model (and a
+spline-nonlinear one unless --linear-only) from steer inputs at
+--amplitude-fraction of the grip limit at its speed. Jobs run on a process pool
+or Dask and are archived as they finish (--resume skips those done). The grid
+models become one speed-scheduled model, validated at the speeds between.
 """
 
 from __future__ import annotations

@@ -1,19 +1,12 @@
 """The handling study of Best & Bogdanski 2017, section 6 (Table 5).
 
-The full-vehicle model at 20 m/s is driven by the identification steer input
-(noise plus a sweep, up to about 7 m/s^2) and by a different validation input
-(steps on a sweep, then larger steps); outputs are lateral acceleration, yaw
-rate and roll angle. For each order a linear modal model is identified by the
-IEKF and a spline-nonlinear one is started from it; every model is scored by
-the mean R (eq. 17) on both records. Orders run in parallel processes. Prints
-the Table-5 style table, the chosen order and the identified modes beside the
-vehicle's own yaw-sideslip and roll modes, and writes an HDF5 archive
-(results/handling_study.h5 by default), checkpointed as each order finishes.
---resume ARCHIVE continues an interrupted study from its archive: its own
-settings and records, only the orders still missing, to the same numbers as
-an uninterrupted run. SIGTERM or Ctrl-C stop every worker within seconds and
-leave the archive of the orders finished so far. The report folder beside
-the archive is written under a hidden name and swapped in whole.
+For each model order a linear modal model of the full vehicle (steer to
+lateral acceleration, yaw rate and roll angle) is identified by the IEKF and a
+spline-nonlinear one started from it, both scored on identification and
+validation records; orders run in parallel processes. Prints the Table-5 style
+table, the chosen order and the modes beside the vehicle's, and writes an HDF5
+archive, checkpointed as each order finishes, and a report folder beside it.
+--resume ARCHIVE runs only the orders an interrupted study's archive lacks.
 """
 
 from __future__ import annotations
@@ -29,8 +22,8 @@ from identification.iekf import IEKFOptions
 from identification.spline_iekf import SplineIEKFOptions
 from scenarios.handling_resume import StudyCheckpoint, read_progress
 from scenarios.handling_study import (OUTPUTS, PAPER, HandlingConfig, HandlingResult, archive_path, make_records,
-                                      parse_orders, planned_passes, run_study, spline_options, study_linear_options,
-                                      write_study_archive)
+                                      parse_orders, percent_text, planned_passes, run_study, spline_options,
+                                      study_linear_options, write_study_archive)
 from scenarios.progress import Progress
 
 NAME = "handling"
@@ -141,14 +134,13 @@ def _study(args, config, path, records, finished, checkpoint) -> tuple[dict, str
         folder = path.with_suffix("")
         with replacing_directory(folder) as partial:  # a kill leaves the old report or the new, never a mixture
             written = write_handling_report(path, partial)
-        files = [folder / file.relative_to(partial) for file in written]
         summary["report"] = str(folder)
-        text += f"\nwrote {len(files)} report files to {folder}"
+        text += f"\nwrote {len(written)} report files to {folder}"
     return summary, text
 
 
 def summary_of(result: HandlingResult) -> dict[str, Any]:
-    """The study's JSON summary (before :func:`scenarios.cli.to_jsonable`): its keys are a public contract."""
+    """The study's JSON summary (before :func:`identification.jsonable.to_jsonable`): its keys are a public contract."""
     return {
         "table": list(result.table),
         "chosen_order": result.assessment.chosen_order,
@@ -169,10 +161,6 @@ def summary_of(result: HandlingResult) -> dict[str, Any]:
     }
 
 
-def _percent(value: float | None) -> str:
-    return "-" if value is None else f"{value:.2f}"
-
-
 def text_of(result: HandlingResult) -> str:
     """The study's text summary: Table 5, the order chosen, the modes beside the vehicle's."""
     from scenarios.report import format_eigenvalues
@@ -188,9 +176,9 @@ def text_of(result: HandlingResult) -> str:
     for row in result.table:
         eigen = format_eigenvalues(list(row.linear_eigenvalues)) if row.linear_eigenvalues else "(failed)"
         lines.append(
-            f"{row.order:>2}  {eigen:<44} {_percent(row.linear_identification_R):>9} "
-            f"{_percent(row.nonlinear_identification_R):>9} {_percent(row.linear_validation_R):>9} "
-            f"{_percent(row.nonlinear_validation_R):>9}"
+            f"{row.order:>2}  {eigen:<44} {percent_text(row.linear_identification_R):>9} "
+            f"{percent_text(row.nonlinear_identification_R):>9} {percent_text(row.linear_validation_R):>9} "
+            f"{percent_text(row.nonlinear_validation_R):>9}"
         )
     converged = [run.order for run in result.linear_runs if run.converged]
     lines.append(f"chosen order: {result.assessment.chosen_order} (linear runs settled: "

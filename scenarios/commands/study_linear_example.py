@@ -1,23 +1,18 @@
-"""Reproduce the linear example of Best & Bogdanski 2017 (section 4).
+"""Reproduce the linear example of Best & Bogdanski 2017 (section 4): Tables 1-4 and the order study.
 
-Cases: single-output (Table 1), three-output (Table 2),
-three-output-constrained (Table 3, the eq. 18 C pattern), noise (Table 4)
-and orders (the order study, Figure 5). The data follow eq. 16 from the
-given seed; the filter is the paper's Euler form unless --discretization
-exact is given. Each case prints its table beside the paper's numbers and
-writes an HDF5 archive under the results folder.
+Runs the paper's Euler filter unless --discretization exact is given; prints
+each case's table beside the paper's numbers and writes an HDF5 archive.
 """
 
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 from identification.archive_safety import archive_lock, check_output_target
 from identification.filter_models import DISCRETIZATIONS
 from identification.iekf_pass import COVARIANCE_FORMS
 from scenarios.linear_example import CASES, planned_passes, run_case, write_archive_for
-from scenarios.paths import results_directory
+from scenarios.paths import results_path
 from scenarios.progress import Progress
 
 NAME = "linear-example"
@@ -40,20 +35,16 @@ def register(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> tuple[dict, str]:
-    target = Path(args.out) if args.out else Path(f"linear_example_{args.case}.h5")
-    target = (target if target.is_absolute() else results_directory() / target).absolute()
+    target = results_path(args.out, f"linear_example_{args.case}.h5").absolute()
     check_output_target(target, force=args.force)  # before any work
     with archive_lock(target):
-        return _run(args, target)
-
-
-def _run(args: argparse.Namespace, target: Path) -> tuple[dict, str]:
-    with Progress(planned_passes(args.case, args.passes), f"{args.case} passes", enabled=None if not args.quiet else False) as progress:
-        result = run_case(
-            args.case, seed=args.seed, passes=args.passes, discretization=args.discretization,
-            covariance=args.covariance, p=args.p,
-            on_pass=lambda label, record, _: progress.advance(note=f"{label} R {record.mean_fit_filter:.4f} %"),
-        )
-    path = write_archive_for(result, target)
+        with Progress(planned_passes(args.case, args.passes), f"{args.case} passes",
+                      enabled=None if not args.quiet else False) as progress:
+            result = run_case(
+                args.case, seed=args.seed, passes=args.passes, discretization=args.discretization,
+                covariance=args.covariance, p=args.p,
+                on_pass=lambda label, record, _: progress.advance(note=f"{label} R {record.mean_fit_filter:.4f} %"),
+            )
+        path = write_archive_for(result, target)
     summary = {**result.summary, "archive": str(path)}
     return summary, result.text + f"\nwrote {path}"

@@ -1,11 +1,8 @@
 """Run the worked examples of the textbook appendix (sections A.2-A.5) with the classical estimators.
 
-Prints the scalar Kalman filter example (A.3: phi = 1, P0 = 100, Q = 25, R = 15) step by step,
-RLS against batch least squares, least squares against generalised least squares under coloured
-noise, the single-parameter positivity example in single precision (plain, square-root and UD'
-forms), one UD' step, the joint EKF on a bicycle model (front and rear cornering stiffness) and
-the joint Kalman estimation of an ARMAX model in singular pencil form. With --json the summary
-holds every figure; ``kalman_example`` is a list of {k, P_prior, K, P_post} for k = 1..5.
+Kalman filter, RLS and batch least squares, GLS under coloured noise, the
+positivity example in single precision, one UD' step, the joint EKF on a
+bicycle model and the singular pencil model; see :mod:`scenarios.textbook`.
 """
 
 from __future__ import annotations
