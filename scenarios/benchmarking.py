@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
-from identification.jsonable import to_jsonable
+from vehid.identification.jsonable import to_jsonable
 
 from .paths import results_directory
 

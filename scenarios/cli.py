@@ -1,6 +1,6 @@
 """The ``vehid`` command line.
 
-Subcommands live one per module in :mod:`scenarios.commands`; each defines
+Subcommands live one per module in :mod:`vehid.scenarios.commands`; each defines
 ``NAME``, ``GROUP`` (``None`` for a top-level command, else a key of
 :data:`GROUPS`), ``HELP`` and ``register(parser)``, which adds its arguments
 and sets ``handler``: ``(args) -> (summary: dict, text: str)``. Here the
@@ -19,10 +19,10 @@ import pkgutil
 import sys
 from typing import Any, Callable, NoReturn, Sequence
 
-from identification.archive_safety import os_error_text
-from identification.errors import DivergenceError, StrictWarningsError, WorkbenchError
-from identification.jsonable import to_jsonable
-from scenarios.shutdown import PATH_ERRNOS, signal_name, stopping_on_signals
+from vehid.identification.archive_safety import os_error_text
+from vehid.identification.errors import DivergenceError, StrictWarningsError, WorkbenchError
+from vehid.identification.jsonable import to_jsonable
+from vehid.scenarios.shutdown import PATH_ERRNOS, signal_name, stopping_on_signals
 
 __all__ = ["main", "build_parser", "to_jsonable"]
 
@@ -55,8 +55,7 @@ def _common_options() -> argparse.ArgumentParser:
 
 
 def _command_modules() -> list[Any]:
-    import scenarios.commands as package
-
+    import vehid.scenarios.commands as package
     modules = []
     for info in sorted(pkgutil.iter_modules(package.__path__), key=lambda m: m.name):
         if info.name.startswith("_"):

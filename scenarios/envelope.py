@@ -11,7 +11,7 @@ it) and scores both on both records. Results go to one archive, one group
 per job, written as jobs finish, so that ``--resume`` skips the jobs done.
 
 Speeds between grid speeds (by default the midpoints) are identified too:
-there the speed-scheduled model (:mod:`identification.scheduled`) is
+there the speed-scheduled model (:mod:`vehid.identification.scheduled`) is
 validated beside the model identified directly.
 
 Dask reschedules the jobs of a lost worker and a job that raised is retried
@@ -34,16 +34,16 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from identification.archive import open_archive, read_run, update_archive, write_archive, write_run
-from identification.archive_safety import archive_lock
-from identification.errors import DivergenceError, InputError, SimulationError
-from identification.iekf import IEKFOptions
-from identification.spline_iekf import SplineIEKFOptions
-from identification.modal import ModalModel
-from identification.scheduled import ScheduledModalModel, schedule_models
-from identification.storage import read_value, write_value
-from vehicle import DEFAULT_DT, linearize, make_manoeuvre, named_vehicle, simulate
-from vehicle.parameters import VehicleParameters
+from vehid.identification.archive import open_archive, read_run, update_archive, write_archive, write_run
+from vehid.identification.archive_safety import archive_lock
+from vehid.identification.errors import DivergenceError, InputError, SimulationError
+from vehid.identification.iekf import IEKFOptions
+from vehid.identification.spline_iekf import SplineIEKFOptions
+from vehid.identification.modal import ModalModel
+from vehid.identification.scheduled import ScheduledModalModel, schedule_models
+from vehid.identification.storage import read_value, write_value
+from vehid.vehicle import DEFAULT_DT, linearize, make_manoeuvre, named_vehicle, simulate
+from vehid.vehicle.parameters import VehicleParameters
 
 from .handling_study import (COMPARED_MODES, OUTPUTS, check_orders, identify_order, percent_text, positive_number,
                              score, spline_options, study_linear_options, whole_number)
@@ -402,7 +402,7 @@ def _job_in_worker(job: EnvelopeJob, report: Callable[[Any], None]) -> JobOutcom
 
 
 def _run_process_pool(jobs: list[EnvelopeJob], workers: int, on_done: Callable[[JobOutcome], None]) -> None:
-    """Jobs in the study workers of :func:`scenarios.shutdown.run_in_workers`, one job each at a time."""
+    """Jobs in the study workers of :func:`vehid.scenarios.shutdown.run_in_workers`, one job each at a time."""
     if workers == 1:
         for job in jobs:
             on_done(run_job(job))

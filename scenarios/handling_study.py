@@ -12,7 +12,7 @@ vehicle's own linearisation.
 
 No trim is removed: the records start at the straight-running trim, where all
 three outputs are zero, which is the models' rest state too. The order is
-chosen by :func:`identification.order.assess_orders` on the linear runs.
+chosen by :func:`vehid.identification.order.assess_orders` on the linear runs.
 
 What to expect (paper, Table 5): R rises with the order and the nonlinear
 model beats the linear one. The measured results are in the README, the
@@ -33,20 +33,20 @@ from typing import Any, Callable, Iterator, Mapping, NamedTuple
 
 import numpy as np
 
-from identification.archive import RunName, append_history, run_group, write_archive, write_record, write_run
-from identification.data import IOData
-from identification.errors import DivergenceError, InputError
-from identification.iekf import IEKFOptions, IEKFResult, identify_iekf
-from identification.iekf_archive import write_iekf_run
-from identification.jsonable import to_jsonable
-from identification.spline_iekf import SplineIEKFOptions, identify_spline_iekf
-from identification.metrics import percentage_explanation
-from identification.modal import ModalStructure
-from identification.protocol import Mode as ModelMode
-from identification.order import OrderAssessment, OrderRow, assess_orders
-from identification.storage import write_value
-from vehicle import DEFAULT_DT, DEFAULT_SPEED, linearize, make_manoeuvre, named_vehicle, simulate
-from vehicle.linearize import Mode
+from vehid.identification.archive import RunName, append_history, run_group, write_archive, write_record, write_run
+from vehid.identification.data import IOData
+from vehid.identification.errors import DivergenceError, InputError
+from vehid.identification.iekf import IEKFOptions, IEKFResult, identify_iekf
+from vehid.identification.iekf_archive import write_iekf_run
+from vehid.identification.jsonable import to_jsonable
+from vehid.identification.spline_iekf import SplineIEKFOptions, identify_spline_iekf
+from vehid.identification.metrics import percentage_explanation
+from vehid.identification.modal import ModalStructure
+from vehid.identification.protocol import Mode as ModelMode
+from vehid.identification.order import OrderAssessment, OrderRow, assess_orders
+from vehid.identification.storage import write_value
+from vehid.vehicle import DEFAULT_DT, DEFAULT_SPEED, linearize, make_manoeuvre, named_vehicle, simulate
+from vehid.vehicle.linearize import Mode
 
 from .paths import results_path
 from .shutdown import run_in_workers
@@ -193,7 +193,7 @@ class HandlingConfig:
         Steer amplitude as a fraction of the manoeuvres' defaults (1: the
         nonlinear range of the paper; 0.1 keeps the vehicle linear).
     vehicle : str
-        A named vehicle or a vehicle file (:func:`vehicle.named_vehicle`).
+        A named vehicle or a vehicle file (:func:`vehid.vehicle.named_vehicle`).
     speed : float
         Trim and reference speed (m/s).
     linear_options : IEKFOptions

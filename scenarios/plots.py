@@ -20,10 +20,10 @@ from matplotlib.figure import Figure
 import scipy.linalg
 from scipy.stats import chi2
 
-from identification.errors import InputError
-from identification.metrics import percentage_explanation
-from identification.residuals import autocorrelation as residual_autocorrelation
-from identification.uncertainty import frequency_response as response_band
+from vehid.identification.errors import InputError
+from vehid.identification.metrics import percentage_explanation
+from vehid.identification.residuals import autocorrelation as residual_autocorrelation
+from vehid.identification.uncertainty import frequency_response as response_band
 
 __all__ = [
     "REPORT_SIZE",
@@ -585,7 +585,7 @@ def plot_bode(
     """Magnitude and phase from one input to every output, for several models.
 
     Models that carry a parameter covariance get their 95 % band shaded
-    (delta method, :func:`identification.uncertainty.frequency_response`)
+    (delta method, :func:`vehid.identification.uncertainty.frequency_response`)
     unless ``confidence`` is False.
 
     Parameters
@@ -652,7 +652,7 @@ def plot_bode(
 def autocorrelation(residuals: Any, max_lag: int) -> np.ndarray:
     """Normalised autocorrelation of each residual column at lags 0..max_lag, shape (max_lag + 1, n_y).
 
-    See :func:`identification.residuals.autocorrelation`.
+    See :func:`vehid.identification.residuals.autocorrelation`.
     """
     return residual_autocorrelation(_matrix("residuals", residuals), max_lag)
 
@@ -759,7 +759,7 @@ def plot_innovation_consistency(nis: Any, band: tuple[float, float], *, title: s
     nis : array_like, shape (n_pass,)
         Mean ``e' R^-1 e`` of each pass.
     band : (float, float)
-        :func:`identification.residuals.nis_band` for the record.
+        :func:`vehid.identification.residuals.nis_band` for the record.
 
     Returns
     -------

@@ -6,7 +6,7 @@ removed, locks released and archives left at their last checkpoint.
 :func:`run_in_workers` runs jobs in spawned processes owned by the caller:
 on any exception there every worker is terminated, killed after
 :data:`GRACE` seconds and reaped. Workers ignore SIGINT (the parent decides)
-and die with their parent even under ``kill -9`` (:mod:`scenarios._parent_watch`).
+and die with their parent even under ``kill -9`` (:mod:`vehid.scenarios._parent_watch`).
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from contextlib import contextmanager
 from multiprocessing import get_context
 from typing import Any, Callable, Iterator, Sequence
 
-from identification.errors import WorkbenchError
+from vehid.identification.errors import WorkbenchError
 
 from ._parent_watch import ENVIRONMENT, die_with_parent
 

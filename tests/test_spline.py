@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from scipy.interpolate import CubicSpline
 
-import identification.spline
-from identification import InputError, SplineBasis, covering_basis, resample
+import vehid.identification.spline as spline_module
+from vehid.identification import InputError, SplineBasis, covering_basis, resample
 
 # Uniform sets exercise the symbolic fast path (one width), uneven ones the
 # general selection; p = 3 has no interior comparison at all, p = 9 the most.
@@ -322,5 +322,5 @@ def test_basis_is_immutable():
 
 
 def test_docstring_examples_run():
-    failed, attempted = doctest.testmod(identification.spline, optionflags=doctest.NORMALIZE_WHITESPACE)
+    failed, attempted = doctest.testmod(spline_module, optionflags=doctest.NORMALIZE_WHITESPACE)
     assert attempted >= 2 and failed == 0

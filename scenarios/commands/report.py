@@ -12,11 +12,11 @@ import argparse
 import math
 from pathlib import Path
 
-from identification.archive import read_archive
-from identification.archive_safety import check_output_folder, replacing_directory
-from identification.errors import InputError
-from scenarios.paths import results_path
-from scenarios.report import archive_figures, archive_table, markdown_table, write_report
+from vehid.identification.archive import read_archive
+from vehid.identification.archive_safety import check_output_folder, replacing_directory
+from vehid.identification.errors import InputError
+from vehid.scenarios.paths import results_path
+from vehid.scenarios.report import archive_figures, archive_table, markdown_table, write_report
 
 NAME = "report"
 GROUP = None
@@ -47,7 +47,7 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     folder = results_path(args.out, f"{path.stem}-report")
     check_output_folder(folder)  # before drawing: a file in its place, no permission
     if archive.kind == "handling-study":
-        from scenarios.handling_report import write_handling_report
+        from vehid.scenarios.handling_report import write_handling_report
 
         with replacing_directory(folder) as partial:
             files = [folder / f.relative_to(partial) for f in write_handling_report(archive, partial)]

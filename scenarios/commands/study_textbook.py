@@ -2,7 +2,7 @@
 
 Kalman filter, RLS and batch least squares, GLS under coloured noise, the
 positivity example in single precision, one UD' step, the joint EKF on a
-bicycle model and the singular pencil model; see :mod:`scenarios.textbook`.
+bicycle model and the singular pencil model; see :mod:`vehid.scenarios.textbook`.
 """
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from scenarios.textbook import run_all
+from vehid.scenarios.textbook import run_all
 
 NAME = "textbook"
 GROUP = "study"
