@@ -144,17 +144,11 @@ def test_model_rejects_bad_input():
 
 
 def _two_input_two_output_model() -> ModalModel:
-    """Two pairs (one fast: |lambda dt| = 0.25 at dt = 0.01) and a real pole, every C entry of both kinds."""
+    """Two pairs (one fast: |lambda dt| = 0.25 at dt = 0.01) and a real pole; B, free C and D drawn at random."""
     structure = ModalStructure.default(5, 2, 2)
-    rng = np.random.default_rng(3)
-    A = np.zeros((5, 5))
-    A[:2, :2] = [[-2.0, 7.0], [-7.0, -2.0]]
-    A[2:4, 2:4] = [[-5.0, 25.0], [-25.0, -5.0]]
-    A[4, 4] = -3.0
-    C = rng.normal(size=(2, 5))
-    for i, j in structure.fixed_c:
-        C[i, j] = 1.0
-    return ModalModel(structure, A, rng.normal(size=(5, 2)), C, rng.normal(size=(2, 2)))
+    theta = np.random.default_rng(3).normal(size=structure.n_parameters)
+    theta[:5] = [-2.0, 7.0, -5.0, 25.0, -3.0]
+    return ModalModel.from_parameters(structure, theta)
 
 
 @pytest.mark.parametrize("method", ["foh", "zoh", "euler"])
