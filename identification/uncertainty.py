@@ -30,7 +30,7 @@ N4SID
 
 spline IEKF
     The parameter block of its final ``P`` as it stands: that filter's R is
-    the measured residual covariance already (:mod:`identification.spline_iekf`);
+    the measured residual covariance already (:mod:`vehid.identification.spline_iekf`);
     :class:`~identification.spline_modal.SplineModalModel` carries it and
     gives bands on its splines and on a mode's frequency and damping.
 
@@ -45,7 +45,7 @@ them; the steady-state gain is ``D - C A^-1 B``; the frequency response
 
 Calibration is measured by ``benchmarks/uncertainty_calibration.py`` (the
 coverage table is in the README, "How sure is the model?"). Every interval
-here assumes white residuals: where :mod:`identification.residuals` rejects
+here assumes white residuals: where :mod:`vehid.identification.residuals` rejects
 whiteness, model error dominates and the intervals are formal.
 """
 
