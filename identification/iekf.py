@@ -367,7 +367,7 @@ def identify_iekf(
         last = history[-1].parameters if history else original_units(theta)
         covariance = None
         if history and np.isfinite(history[-1].nis):
-            # the fit's sensitivity costs a simulation per parameter: for the finished run, not every checkpoint
+            # the fit's sensitivity costs n_u + 1 simulations: for the finished run, not every checkpoint
             covariance = iekf_parameter_covariance(
                 structure, P[n:, n:], input_scale, output_scale, history[-1].nis / structure.n_y, time_unit=time_unit,
                 parameters=last, records=None if stop_reason == "running" else records)

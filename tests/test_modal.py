@@ -141,3 +141,46 @@ def test_model_rejects_bad_input():
         model.simulate_outputs(np.full((10, 2), np.nan), 0.01)
     with pytest.raises(InputError, match="B has shape"):
         ModalModel(model.structure, model.A, model.B[:, :1], model.C, model.D)
+
+
+def _two_input_two_output_model() -> ModalModel:
+    """Two pairs (one fast: |lambda dt| = 0.25 at dt = 0.01) and a real pole; B, free C and D drawn at random."""
+    structure = ModalStructure.default(5, 2, 2)
+    theta = np.random.default_rng(3).normal(size=structure.n_parameters)
+    theta[:5] = [-2.0, 7.0, -5.0, 25.0, -3.0]
+    return ModalModel.from_parameters(structure, theta)
+
+
+@pytest.mark.parametrize("method", ["foh", "zoh", "euler"])
+def test_output_sensitivity_equals_central_differences_of_the_simulation(method):
+    """Each column of the exact Jacobian against central differences of :meth:`simulate_outputs`.
+
+    With a step of 1e-5 (relative, at least 1e-5) the central difference
+    errs by h^2 y''' / 6 (~1e-10 of the column) plus rounding eps |y| / h
+    (~1e-11); 1e-7 of each column's largest value leaves room for both,
+    while a missing term of the hold's derivative errs by O(lambda dt), 1e-2 here.
+    """
+    model = _two_input_two_output_model()
+    u = np.random.default_rng(5).normal(size=(400, 2))
+    dt = 0.01
+    y, sensitivity = model.output_sensitivity(u, dt, method=method)
+    assert sensitivity.shape == (400, 2, model.structure.n_parameters)
+    np.testing.assert_allclose(y, model.simulate_outputs(u, dt, method=method), rtol=0, atol=1e-12)
+    theta = model.parameters
+    for index in range(theta.size):
+        step = 1e-5 * max(abs(theta[index]), 1.0)
+        up, down = theta.copy(), theta.copy()
+        up[index] += step
+        down[index] -= step
+        difference = (ModalModel.from_parameters(model.structure, up).simulate_outputs(u, dt, method=method)
+                      - ModalModel.from_parameters(model.structure, down).simulate_outputs(u, dt, method=method)) / (2 * step)
+        scale = np.abs(difference).max()
+        assert np.abs(sensitivity[:, :, index] - difference).max() < 1e-7 * scale, model.structure.parameter_names()[index]
+
+
+def test_output_sensitivity_rejects_bad_input_by_name():
+    model = _two_input_two_output_model()
+    with pytest.raises(InputError, match="u must have shape"):
+        model.output_sensitivity(np.zeros((10, 3)), 0.01)
+    with pytest.raises(InputError, match="unknown simulation method"):
+        model.output_sensitivity(np.zeros((10, 2)), 0.01, method="rk4")
