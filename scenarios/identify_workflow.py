@@ -42,7 +42,7 @@ import numpy as np
 
 from identification.data import IOData
 from identification.errors import DivergenceError, InputError, StrictWarningsError, WorkbenchError
-from identification.iekf import INVARIANT_P, START_CHOICES, TIMESCALES, IEKFOptions, identify_iekf
+from identification.iekf import INVARIANT_P, START_CHOICES, TIMESCALES, IEKFOptions, identify_iekf, start_structure
 from identification.discrete import DiscreteModel
 from identification.modal import ModalModel, ModalStructure
 from identification.validation import INITIAL_STATES, Scores, default_horizon, score, split_holdout
@@ -682,8 +682,18 @@ def start_of(result: Any, records: tuple[IOData, ...]) -> tuple[float | None, bo
     return float(np.mean(fit)), moved
 
 
-def structure_for(args: argparse.Namespace, order: int, data: IOData) -> ModalStructure:
-    return ModalStructure.from_pattern(args.pattern, order, data.n_u, data.n_y)
+def structure_for(args: argparse.Namespace, order: int, plan: Plan, options: IEKFOptions) -> ModalStructure:
+    """The model structure of an IEKF run: ``--pattern`` where given.
+
+    Without it, a data start sets the modes: its complex pairs stay pairs and its real eigenvalues
+    become real poles (:func:`identification.iekf.start_structure`), each mode tied to the next output
+    in turn; other starts take the default pattern (complex pairs first).
+    """
+    first = plan.records[0]
+    structure = ModalStructure.from_pattern(args.pattern or "default", order, first.n_u, first.n_y)
+    if args.pattern is not None:
+        return structure
+    return start_structure(plan.estimation, structure, options)
 
 
 def last_good_on_divergence(run: Callable[[], Any]) -> tuple[Any, str | None]:
@@ -703,7 +713,7 @@ def last_good_on_divergence(run: Callable[[], Any]) -> tuple[Any, str | None]:
 def run_iekf_order(args: argparse.Namespace, plan: Plan, options: IEKFOptions, order: int
                    ) -> tuple[ModalModel, dict[str, Any]]:
     """One IEKF run of an order search (no checkpoints, p tuned per order): its model and what the summary needs."""
-    structure = structure_for(args, order, plan.records[0])
+    structure = structure_for(args, order, plan, options)
     tuning = tune_p(args, plan, options, structure) if tunes_p(args) else given_p(options)
     options = dataclasses.replace(options, p=tuning.p)
     result, divergence = last_good_on_divergence(
