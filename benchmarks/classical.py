@@ -14,11 +14,11 @@ from __future__ import annotations
 import os
 import time
 
-from identification.comparators import identify_with
-from identification.least_squares import arx_regressors
-from identification.recursive import recursive_least_squares
-from scenarios.benchmarking import median_seconds, record_figures
-from scenarios.linear_example import make_data
+from vehid.identification.comparators import identify_with
+from vehid.identification.least_squares import arx_regressors
+from vehid.identification.recursive import recursive_least_squares
+from vehid.scenarios.benchmarking import median_seconds, record_figures
+from vehid.scenarios.linear_example import make_data
 
 RLS_UPDATES = {"plain": 20_000, "sqrt": 5_000, "ud": 5_000}  # samples timed per form
 

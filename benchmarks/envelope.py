@@ -23,9 +23,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from scenarios.benchmarking import record_figures
-from scenarios.envelope import EnvelopeConfig, parse_speeds, run_campaign
-from scenarios.handling_study import parse_orders
+from vehid.scenarios.benchmarking import record_figures
+from vehid.scenarios.envelope import EnvelopeConfig, parse_speeds, run_campaign
+from vehid.scenarios.handling_study import parse_orders
 
 
 def measure(config: EnvelopeConfig) -> dict:

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import sys
 
-from scenarios.cli import main
+from vehid.scenarios.cli import main
 
 if __name__ == "__main__":
     sys.exit(main(["bench", "iekf", *sys.argv[1:]]))

@@ -25,13 +25,13 @@ import time
 
 import numpy as np
 
-from identification import IEKFOptions, ModalStructure, identify_iekf
-from identification.filter_models import LinearModalFilterModel
-from identification.iekf_pass import compiled_pass, pack_covariance
-from identification.spline_iekf import residual_covariance, covering_ranges
-from identification.spline_modal import SplineModalFilterModel, SplineModalModel
-from scenarios.benchmarking import median_seconds, record_figures
-from vehicle import baseline, make_manoeuvre, simulate
+from vehid.identification import IEKFOptions, ModalStructure, identify_iekf
+from vehid.identification.filter_models import LinearModalFilterModel
+from vehid.identification.iekf_pass import compiled_pass, pack_covariance
+from vehid.identification.spline_iekf import residual_covariance, covering_ranges
+from vehid.identification.spline_modal import SplineModalFilterModel, SplineModalModel
+from vehid.scenarios.benchmarking import median_seconds, record_figures
+from vehid.vehicle import baseline, make_manoeuvre, simulate
 
 OUTPUTS = ["lateral_acceleration", "yaw_rate", "roll_angle"]
 
@@ -109,7 +109,7 @@ def interleaved_medians(works: list, repeats: int, clock=time.perf_counter) -> l
 
 def study_wall_time() -> float:
     started = time.perf_counter()
-    completed = subprocess.run([sys.executable, "-m", "scenarios.cli", "study", "handling", "--quiet", "--json"],
+    completed = subprocess.run([sys.executable, "-m", "vehid.scenarios.cli", "study", "handling", "--quiet", "--json"],
                                capture_output=True, text=True, check=False)
     if completed.returncode != 0:
         raise RuntimeError(f"vehid study handling failed: {completed.stderr.strip()}")

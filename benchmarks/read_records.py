@@ -4,7 +4,7 @@ The record: 1.8 million rows of 4 columns (``t, u1, y1, y2``; 1 h at 500 Hz),
 the paper's eq. 15 system driven by its eq. 16-like input, outputs 1 and 2,
 written with 9 significant digits (81 MB).
 
-- ``read_seconds``: median of 3 reads (:func:`identification.read_record`,
+- ``read_seconds``: median of 3 reads (:func:`vehid.identification.read_record`,
   the identify command's reader);
 - ``first_pass_seconds``: median of 3 first IEKF passes on that record (order
   4, exact discretisation, defaults), pass time including its scoring
@@ -32,9 +32,9 @@ from pathlib import Path
 
 import numpy as np
 
-from identification import IEKFOptions, ModalStructure, identify_iekf, read_record
-from scenarios.benchmarking import record_figures
-from scenarios.linear_example import DT, true_model
+from vehid.identification import IEKFOptions, ModalStructure, identify_iekf, read_record
+from vehid.scenarios.benchmarking import record_figures
+from vehid.scenarios.linear_example import DT, true_model
 
 
 REPEATS = 3
@@ -52,7 +52,7 @@ def _write_record(path: Path, rows: int) -> None:
 
 def _peak_rss_mb(tree: str, path: Path) -> tuple[float, float]:
     env = dict(os.environ, PYTHONPATH=tree)
-    command = ["/usr/bin/time", "-v", sys.executable, "-m", "scenarios.cli", "identify", str(path), "--inputs", "u1",
+    command = ["/usr/bin/time", "-v", sys.executable, "-m", "vehid.scenarios.cli", "identify", str(path), "--inputs", "u1",
                "--outputs", "y1,y2", "--order", "4", "--passes", "3", "--quiet", "--json"]
     completed = subprocess.run(command, capture_output=True, text=True, env=env, cwd=tree, check=False)
     if completed.returncode != 0:

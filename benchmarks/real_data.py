@@ -12,7 +12,7 @@ spline model from rest, as ``identify --nonlinear`` scores it). Every method
 scores the same centred samples (``_real_records.validation_offsets``).
 
 Workbench rows run the command line a user runs on the raw file as
-published, ``python -m scenarios.cli identify FILE --inputs .. --outputs ..
+published, ``python -m vehid.scenarios.cli identify FILE --inputs .. --outputs ..
 --dt .. --validation 0.3 --json`` (DaISy's headerless columns by number),
 and read its ``validation_fit_percent``: default options ("iekf (default)"),
 ``--order auto``, ``--nonlinear`` on the nonlinear records, the paper's
@@ -67,10 +67,10 @@ WORKBENCH_METHODS = (  # label, options after the data arguments
 
 # ------------------------------------------------------------------ workbench
 def _cli(args: list[str], timeout: float = 900) -> tuple[int, dict, float]:
-    """Run ``python -m scenarios.cli`` with ``args`` (and --json); exit status, parsed JSON, wall seconds."""
+    """Run ``python -m vehid.scenarios.cli`` with ``args`` (and --json); exit status, parsed JSON, wall seconds."""
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
     start = time.perf_counter()
-    done = subprocess.run([sys.executable, "-m", "scenarios.cli", *args, "--json", "--quiet"], cwd=ROOT, env=env,
+    done = subprocess.run([sys.executable, "-m", "vehid.scenarios.cli", *args, "--json", "--quiet"], cwd=ROOT, env=env,
                           capture_output=True, text=True, timeout=timeout)
     seconds = time.perf_counter() - start
     try:
@@ -255,7 +255,7 @@ def main(argv: list[str] | None = None) -> dict:
         print(f"{name}: default {_show(entry['default_fit'])} against best peer {entry['best_peer']} "
               f"{_show(entry['best_peer_fit'])}" + (f"; spline {_show(entry['spline_fit'])}" if "spline_fit" in entry
                                                      else ""))
-    from scenarios.benchmarking import record_figures
+    from vehid.scenarios.benchmarking import record_figures
 
     print(f"figures written to {record_figures('real_data', figures)}")
     return figures

@@ -19,15 +19,15 @@ import json
 import sys
 from pathlib import Path
 
-from identification.archive import open_archive, read_records
-from identification.comparators import identify_with
-from identification.iekf import IEKFOptions, identify_iekf
-from identification.iekf_archive import read_iekf_run
-from identification.modal import ModalStructure
-from identification.storage import read_group
-from scenarios.linear_example import make_data, true_model
-from scenarios.model_checks import model_residual_tests
-from scenarios.paths import results_directory
+from vehid.identification.archive import open_archive, read_records
+from vehid.identification.comparators import identify_with
+from vehid.identification.iekf import IEKFOptions, identify_iekf
+from vehid.identification.iekf_archive import read_iekf_run
+from vehid.identification.modal import ModalStructure
+from vehid.identification.storage import read_group
+from vehid.scenarios.linear_example import make_data, true_model
+from vehid.scenarios.model_checks import model_residual_tests
+from vehid.scenarios.paths import results_directory
 
 
 def _row(label: str, tests) -> dict:

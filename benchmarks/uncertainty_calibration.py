@@ -1,6 +1,6 @@
 """Calibration of the 95 % intervals of mode frequency and damping (IEKF and output error).
 
-On the known system of :mod:`scenarios.calibration` (two modes, one output,
+On the known system of :mod:`vehid.scenarios.calibration` (two modes, one output,
 60 s at 100 Hz), for each noise level (10 % and 30 % of the output's RMS)
 and each of ``REALISATIONS`` seeds, a new input and noise are drawn and both
 methods identify the true structure; the table gives the share of
@@ -26,9 +26,9 @@ import json
 import sys
 import time
 
-from scenarios.benchmarking import record_figures
-from scenarios.calibration import IEKF_SETTINGS, coverage, identify_realisation, make_record
-from scenarios.paths import results_directory
+from vehid.scenarios.benchmarking import record_figures
+from vehid.scenarios.calibration import IEKF_SETTINGS, coverage, identify_realisation, make_record
+from vehid.scenarios.paths import results_directory
 
 NOISE_RATIOS = (0.1, 0.3)
 REALISATIONS = 60

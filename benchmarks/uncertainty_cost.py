@@ -21,15 +21,15 @@ import time
 
 import numpy as np
 
-import identification.comparators as comparators
-import identification.iekf as iekf
-from identification.comparators import identify_with
-from identification.iekf import IEKFOptions, identify_iekf
-from identification.modal import ModalStructure
-from identification.uncertainty import frequency_response
-from scenarios.benchmarking import median_seconds, record_figures
-from scenarios.linear_example import make_data
-from scenarios.model_checks import model_residual_tests
+import vehid.identification.comparators as comparators
+import vehid.identification.iekf as iekf
+from vehid.identification.comparators import identify_with
+from vehid.identification.iekf import IEKFOptions, identify_iekf
+from vehid.identification.modal import ModalStructure
+from vehid.identification.uncertainty import frequency_response
+from vehid.scenarios.benchmarking import median_seconds, record_figures
+from vehid.scenarios.linear_example import make_data
+from vehid.scenarios.model_checks import model_residual_tests
 
 FREQUENCIES = np.logspace(-1, 1.5, 200)
 

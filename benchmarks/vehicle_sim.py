@@ -23,11 +23,11 @@ import time
 
 import numpy as np
 
-from identification.compiled import compile_function
-from scenarios.benchmarking import median_seconds, record_figures
-from vehicle import baseline, build_vehicle_model, simulate
-from vehicle.manoeuvres import identification
-from vehicle.simulation import COMPILE_FLAGS, CROSS_CHECK_TOLERANCE, build_rk4_block, reference_outputs
+from vehid.identification.compiled import compile_function
+from vehid.scenarios.benchmarking import median_seconds, record_figures
+from vehid.vehicle import baseline, build_vehicle_model, simulate
+from vehid.vehicle.manoeuvres import identification
+from vehid.vehicle.simulation import COMPILE_FLAGS, CROSS_CHECK_TOLERANCE, build_rk4_block, reference_outputs
 
 TARGET_SECONDS = 0.060
 RK4_RUNS = 21  # each run takes ~0.06 s; many runs steady the median on a shared machine

@@ -2,7 +2,7 @@
 
 One HDF5 file laid out as ``results/RESULTS_LAYOUT.md`` documents (schema version
 :data:`SCHEMA_VERSION`): records are :class:`~identification.data.IOData`, runs are named groups of
-per-pass histories and frozen values stored by :mod:`identification.storage`, never pickled. Writing is
+per-pass histories and frozen values stored by :mod:`vehid.identification.storage`, never pickled. Writing is
 atomic: the file is built under a temporary name beside the target and renamed over it only when the
 ``with`` block ends without an exception, so a crash never leaves a half-written archive.
 """
@@ -347,7 +347,7 @@ def open_archive(path: str | Path, kinds: Sequence[str] | None = None) -> h5py.F
         ``schema_version``); a newer schema version than this workbench reads;
         a missing root attribute or required group; a kind not in ``kinds``;
         a dataset or group whose content no longer matches the checksum
-        written with it (:mod:`identification.archive_safety`).
+        written with it (:mod:`vehid.identification.archive_safety`).
     """
     path = Path(path)
     if not path.exists():

@@ -26,7 +26,7 @@ Methods (:data:`COMPARATORS`, a registry ``name -> function``):
     are nearly collinear (condition number 3e8), which the plain covariance
     update cannot carry in double precision.
 ``n4sid``
-    Subspace identification by PO-MOESP (:mod:`identification.subspace`).
+    Subspace identification by PO-MOESP (:mod:`vehid.identification.subspace`).
 
 Where a discrete model (``arx``, ``rls``, ``n4sid``) has a pole on the
 closed negative real axis there is no continuous-time equivalent: the
@@ -46,7 +46,7 @@ method then returns the discrete model itself as a
     starts, or else the start with each such pole ``z`` moved to ``|z|``.
 
 Every method leaves a parameter covariance on its model
-(:mod:`identification.uncertainty`): ``arx`` and ``rls`` the least-squares
+(:mod:`vehid.identification.uncertainty`): ``arx`` and ``rls`` the least-squares
 covariance carried through the conversion, ``n4sid`` a residual bootstrap
 (options ``bootstrap`` replicates, default 30, each one subspace fit, 0 for
 none; and ``seed``),
@@ -394,7 +394,7 @@ def _continuous_start(discrete: DiscreteModel, method: str, records: list[IOData
 def iekf_comparator(data: IOData, *, order: int, **options: Any) -> ModalModel:
     """The IEKF with the workbench's default settings (exact discretisation), C pattern ``default``.
 
-    Options are those of :class:`identification.iekf.IEKFOptions` (``p``, ``passes``, ...).
+    Options are those of :class:`vehid.identification.iekf.IEKFOptions` (``p``, ``passes``, ...).
     """
     from .iekf import IEKFOptions, identify_iekf
 

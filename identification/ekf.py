@@ -19,7 +19,7 @@ the state as constants, ``p(k+1) = p(k)`` (eq. A.99-A.100), and the EKF
 
 One step is a named CasADi function; runs of :data:`CHUNK` steps are lifted
 with ``mapaccum`` and, optionally, compiled to C by
-:func:`identification.compiled.compile_function`.
+:func:`vehid.identification.compiled.compile_function`.
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 The parameters of a modal state-space model join its states in the filter's
 state vector (eq. 7-8); the filter passes over the record again and again
-(:mod:`identification.rinse`), and after each pass the frozen model,
+(:mod:`vehid.identification.rinse`), and after each pass the frozen model,
 simulated from rest, is scored by the percentage explanation R (eq. 17).
 
 Tuning (section 3): ``Q = p I'`` with ``I'`` the identity with zeros for the
@@ -19,7 +19,7 @@ records like the paper's (T = 2 ms, signals of order 1) and fail on others.
 :meth:`IEKFOptions.invariant` gives settings that do not depend on the units
 of time or of the signals, on the sample interval or on the record length:
 signals divided by their RMS, the start from the data
-(:mod:`identification.start`), time in samples inside the filter
+(:mod:`vehid.identification.start`), time in samples inside the filter
 (``timescale="auto"``: T = 1 whatever the sample interval), and ``p`` per
 dominant time constant ``tau`` of the start: the filter runs as if its
 parameters were ``sigma tau``, ``omega tau``, ``B tau``, C and D (order 1
@@ -93,12 +93,12 @@ class IEKFOptions:
         ``exact`` (first-order hold) converges to the true continuous model;
         ``euler`` is the paper's and converges to its Euler equivalent.
     covariance : {"joseph", "paper"}
-        Covariance numerics (see :mod:`identification.iekf_pass`).
+        Covariance numerics (see :mod:`vehid.identification.iekf_pass`).
     measurement_noise : float or None
         ``R = measurement_noise * I`` in (normalised) output units; default 1 (the paper's R = I).
     start : {"default", "paper", "data", "band"}
         Start values: fixed sigma/omega (:data:`START_VALUES`) or taken from
-        the data (:mod:`identification.start`).
+        the data (:mod:`vehid.identification.start`).
     normalize : bool
         Scale each input and output by its RMS before filtering (the model is
         returned in the original units, with its fixed C entries still 1).

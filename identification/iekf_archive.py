@@ -114,7 +114,7 @@ class Checkpointer:
     Parameters
     ----------
     path : str or Path
-        An archive that exists (written by :func:`identification.archive.write_archive`).
+        An archive that exists (written by :func:`vehid.identification.archive.write_archive`).
     name : str
         The run's name.
     """

@@ -4,7 +4,7 @@ Unrolled, the ``m^2`` covariance terms dominate a large filter step. Here CasADi
 model-specific ``measure(z, u0, c) -> (h, H)`` and ``predict(z, u0, u1, c) -> (x_next, E)``,
 ``E = Phi[:n_x, :] - [I 0]``, both as nonzeros row by row. The parameters have no dynamics, so the
 congruence is the low-rank update ``Phi P Phi' = P + G + G' + E G'``, ``G = E P``: ``O(n_x m nnz(E))``
-work instead of ``O(m^3)``. The update is the Joseph identity of :mod:`identification.iekf_pass` on the
+work instead of ``O(m^3)``. The update is the Joseph identity of :mod:`vehid.identification.iekf_pass` on the
 packed upper triangle, column by column (contiguous, so vectorised); ``S`` is inverted by Gauss-Jordan
 elimination with partial pivoting. The sparsity patterns are constant tables in the C source, so the
 library's cache key names the model exactly.

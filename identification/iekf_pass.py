@@ -9,7 +9,7 @@ of its cost) and predicts with ``Phi P Phi' + T Q``, ``Phi`` the exact transitio
 
 The pass is CasADi-generated C looped by a small C driver in the same library. A large step (the
 spline-nonlinear model) generates only the model and its Jacobians, the covariance algebra running as
-C loops (:mod:`identification.iekf_kernel`). Without a C compiler the step runs in CasADi's virtual
+C loops (:mod:`vehid.identification.iekf_kernel`). Without a C compiler the step runs in CasADi's virtual
 machine under ``mapaccum``.
 """
 
@@ -97,7 +97,7 @@ class FilterStep:
 
 
 def build_filter_step(filter_model: FilterModel, dt: float, discretization: str, covariance: str) -> FilterStep:
-    """Build the SX filter step for a filter model (see :mod:`identification.filter_models`)."""
+    """Build the SX filter step for a filter model (see :mod:`vehid.identification.filter_models`)."""
     check_discretization(discretization)
     if covariance not in COVARIANCE_FORMS:
         raise ValueError(f"unknown covariance form {covariance!r}; use one of {', '.join(COVARIANCE_FORMS)}")
@@ -285,7 +285,7 @@ def compiled_pass(filter_model: FilterModel, dt: float, discretization: str, cov
 
     ``kernel`` chooses the compiled code: ``structured`` generates only the
     model and its Jacobians and runs the covariance algebra as C loops with
-    the low-rank prediction (:mod:`identification.iekf_kernel`);
+    the low-rank prediction (:mod:`vehid.identification.iekf_kernel`);
     ``generated`` compiles the whole SX step; ``auto`` (default) takes the
     loops where the generated step is large (above
     ``LARGE_STEP_INSTRUCTIONS``), which pays only for large steps (docs/iekf_tuning.md).

@@ -400,7 +400,7 @@ class ModalModel(StateSpaceModel):
         Provenance (estimator, discretisation, passes, ...).
     parameter_covariance : ndarray, optional
         Covariance of :attr:`parameters` (n_theta, n_theta), in the model's
-        units, as the estimator found it (see :mod:`identification.uncertainty`);
+        units, as the estimator found it (see :mod:`vehid.identification.uncertainty`);
         ``None`` where none was estimated.
     """
 
@@ -455,7 +455,7 @@ class ModalModel(StateSpaceModel):
     def uncertainty(self, *, level: float = 0.95) -> Any:
         """Modes, steady-state gains and their confidence intervals by the delta method.
 
-        Returns an :class:`identification.uncertainty.ModelUncertainty`;
+        Returns an :class:`vehid.identification.uncertainty.ModelUncertainty`;
         without a parameter covariance every standard deviation is NaN.
         """
         from .uncertainty import model_uncertainty
@@ -464,7 +464,7 @@ class ModalModel(StateSpaceModel):
 
     def frequency_response_band(self, frequencies_hz: Any, *, level: float = 0.95) -> Any:
         """Magnitude and phase at ``frequencies_hz`` with delta-method bands
-        (:func:`identification.uncertainty.frequency_response`)."""
+        (:func:`vehid.identification.uncertainty.frequency_response`)."""
         from .uncertainty import frequency_response
 
         return frequency_response(self, frequencies_hz, level=level)

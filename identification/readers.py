@@ -2,7 +2,7 @@
 
 Every reader returns a :class:`RawRecord`: the chosen channels as they are in the file, each with the
 time it was sampled at (none when time comes from ``dt``), and a way to name a sample's place ("line
-57", "sample 57") for error messages; :mod:`identification.timebase` makes it uniformly sampled. The
+57", "sample 57") for error messages; :mod:`vehid.identification.timebase` makes it uniformly sampled. The
 files and channel names accepted are in docs/measured_data.md ("Files"). Text tables are parsed by
 NumPy's C reader; on any irregularity a careful line-by-line pass reads the file again and either
 parses it or names the column and line at fault.
@@ -447,7 +447,7 @@ def read_mdf(
 
     Needs the optional extra ``mdf`` (``pip install vehid[mdf]``, asammdf).
     Channels at different rates are brought onto one time base by
-    :func:`identification.timebase.uniform_record`.
+    :func:`vehid.identification.timebase.uniform_record`.
     """
     path = _existing(path)
     if dt is not None:

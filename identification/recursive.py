@@ -9,7 +9,7 @@ Plain form with a forgetting factor ``lambda`` (appendix eq. A.76-A.78)::
 ``lambda = 1`` started from a batch fit reproduces batch least squares (appendix Remark 2). A
 rectangular window of ``L`` samples (appendix A.2.4; Goodwin & Payne 1977) also removes the sample
 ``L`` back by a down-date. ``form="sqrt"`` and ``form="ud"`` propagate factors of P
-(:mod:`identification.factorised`). Several outputs share one regressor and one P.
+(:mod:`vehid.identification.factorised`). Several outputs share one regressor and one P.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """The spline-nonlinear IEKF (Best & Bogdanski 2017, section 5).
 
-The rinse (:mod:`identification.rinse`) and the compiled pass run on the spline-modal model of
-:mod:`identification.spline_modal`, with the paper's differences: the start is the linear model
+The rinse (:mod:`vehid.identification.rinse`) and the compiled pass run on the spline-modal model of
+:mod:`vehid.identification.spline_modal`, with the paper's differences: the start is the linear model
 identified on the same data (every node at its linear value); ``R`` is the residual covariance of the
 frozen model, recomputed after every pass; ``p`` is much lower, so that ``P`` and ``K`` adapt slowly.
 Signals are normalised by their largest magnitude (not the RMS of the linear filter), because the B and

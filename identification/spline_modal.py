@@ -1,6 +1,6 @@
 """Spline-nonlinear modal models (Best & Bogdanski 2017, section 5, eq. 20-22).
 
-Every coefficient of a linear modal model becomes a cubic spline (:mod:`identification.spline`) of the
+Every coefficient of a linear modal model becomes a cubic spline (:mod:`vehid.identification.spline`) of the
 variable it multiplies, through ``p`` evenly spaced nodes whose ordinates are the parameters:
 
 * a complex pair's sigma and omega follow the pair's amplitude ``rho = sqrt(x_a^2 + x_b^2 + eps^2)``

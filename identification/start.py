@@ -9,7 +9,7 @@ samples. The same samples with time relabelled or signals rescaled give the
 same start, bit for bit up to rounding.
 
 ``data``
-    A subspace model (PO-MOESP, :mod:`identification.subspace`) of the
+    A subspace model (PO-MOESP, :mod:`vehid.identification.subspace`) of the
     requested order, converted to continuous time for a first-order hold and
     to the structure's modal form. Where that model does not fit the
     structure (other numbers of complex pairs and real poles, an unstable
@@ -31,7 +31,7 @@ the dynamics, not all of the record; see ``_START_BYTES``).
 
 The dominant time constant of the start model (the inverse of the median
 natural frequency of its modes) is the time unit in which the filter's
-tuning parameter p is stated (see :mod:`identification.iekf`).
+tuning parameter p is stated (see :mod:`vehid.identification.iekf`).
 """
 
 from __future__ import annotations

@@ -24,7 +24,7 @@ N4SID
 
 spline IEKF
     The parameter block of its final ``P`` as it stands: that filter's R is
-    the measured residual covariance already (:mod:`identification.spline_iekf`);
+    the measured residual covariance already (:mod:`vehid.identification.spline_iekf`);
     :class:`~identification.spline_modal.SplineModalModel` carries it and
     gives bands on its splines and on a mode's frequency and damping.
 
@@ -43,7 +43,7 @@ frequency and damping cover the truth in 90-98 % of 60 realisations for the
 IEKF at p = 0.001 and for output error. At p = 1 the IEKF's ``P`` is the
 covariance of a random walk of the parameters that the data do not have,
 and the intervals come out 1.8-2.4 times too wide. Every interval here
-assumes white residuals: where :mod:`identification.residuals` rejects
+assumes white residuals: where :mod:`vehid.identification.residuals` rejects
 whiteness, model error dominates and the intervals are formal.
 """
 

@@ -43,7 +43,7 @@ def die_with_parent(parent_pid: int) -> None:
 
 
 def watch_if_worker() -> None:
-    """In a worker started by :func:`scenarios.shutdown.run_in_workers`, die with the parent from now on."""
+    """In a worker started by :func:`vehid.scenarios.shutdown.run_in_workers`, die with the parent from now on."""
     value = os.environ.get(ENVIRONMENT, "")
     if value.isdigit() and int(value) != os.getpid():
         signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group; the parent stops us

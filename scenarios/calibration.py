@@ -22,10 +22,10 @@ from typing import Any
 
 import numpy as np
 
-from identification.comparators import identify_with
-from identification.data import IOData
-from identification.iekf import IEKFOptions, identify_iekf
-from identification.modal import ModalModel, ModalStructure
+from vehid.identification.comparators import identify_with
+from vehid.identification.data import IOData
+from vehid.identification.iekf import IEKFOptions, identify_iekf
+from vehid.identification.modal import ModalModel, ModalStructure
 
 __all__ = ["DT", "true_model", "make_record", "Realisation", "identify_realisation", "coverage"]
 

@@ -1,6 +1,6 @@
 """The ``vehid`` command line.
 
-Subcommands live one per module in :mod:`scenarios.commands`; each module
+Subcommands live one per module in :mod:`vehid.scenarios.commands`; each module
 defines ``NAME``, ``GROUP`` (``None`` for a top-level command, or ``"study"``
 or ``"bench"``), ``HELP`` and ``register(parser)``, which adds its arguments
 and sets ``handler``: a function ``(args) -> (summary: dict, text: str)``.
@@ -14,7 +14,7 @@ clear line on standard error and no traceback for expected errors. An
 operating-system error names the file and the cause (exit 2 for a path that
 is missing, protected or of the wrong kind; 1 for others, such as a full
 disk). SIGTERM and SIGINT stop a command the same way (worker processes
-included, see :mod:`scenarios.shutdown`), with one line and the exit status
+included, see :mod:`vehid.scenarios.shutdown`), with one line and the exit status
 128 + the signal's number.
 """
 
@@ -30,10 +30,10 @@ from typing import Any, Callable, NoReturn, Sequence
 
 import numpy as np
 
-from identification.archive_safety import os_error_text
-from identification.errors import DivergenceError, StrictWarningsError, WorkbenchError
-from identification.jsonable import to_jsonable
-from scenarios.shutdown import PATH_ERRNOS, signal_name, stopping_on_signals
+from vehid.identification.archive_safety import os_error_text
+from vehid.identification.errors import DivergenceError, StrictWarningsError, WorkbenchError
+from vehid.identification.jsonable import to_jsonable
+from vehid.scenarios.shutdown import PATH_ERRNOS, signal_name, stopping_on_signals
 
 __all__ = ["main", "build_parser", "to_jsonable"]
 
@@ -66,8 +66,7 @@ def _common_options() -> argparse.ArgumentParser:
 
 
 def _command_modules() -> list[Any]:
-    import scenarios.commands as package
-
+    import vehid.scenarios.commands as package
     modules = []
     for info in sorted(pkgutil.iter_modules(package.__path__), key=lambda m: m.name):
         if info.name.startswith("_"):

@@ -18,13 +18,13 @@ from typing import Any, Mapping, Sequence
 
 import h5py
 
-from identification.archive import read_records, write_record
-from identification.data import IOData
-from identification.errors import InputError
-from identification.multirecord import score_records
-from identification.preparation import DETRENDS, Preparation, ReadSettings, prepare, read_raw_records
-from identification.storage import read_value, write_value
-from identification.timebase import JITTER_TOLERANCE
+from vehid.identification.archive import read_records, write_record
+from vehid.identification.data import IOData
+from vehid.identification.errors import InputError
+from vehid.identification.multirecord import score_records
+from vehid.identification.preparation import DETRENDS, Preparation, ReadSettings, prepare, read_raw_records
+from vehid.identification.storage import read_value, write_value
+from vehid.identification.timebase import JITTER_TOLERANCE
 
 __all__ = ["channel_names", "register_data_options", "settings_from_args", "read_from_args", "load_from_args", "records_summary", "record_names",
            "archive_records", "archived_records", "archived_preparation", "save_model", "RECORD_PREFIX",

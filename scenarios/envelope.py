@@ -23,7 +23,7 @@ ratio to it as in the handling study (3.5 : 4 deg).
 
 Speeds between grid speeds (by default the midpoints) are identified too,
 as references: the speed-scheduled model
-(:mod:`identification.scheduled`, built from the grid models of each
+(:mod:`vehid.identification.scheduled`, built from the grid models of each
 vehicle, order and seed) is validated there against the vehicle simulated
 at that speed and set beside the model identified directly there.
 
@@ -51,16 +51,16 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from identification.archive import open_archive, read_run, update_archive, write_archive, write_run
-from identification.archive_safety import archive_lock
-from identification.errors import DivergenceError, InputError, SimulationError
-from identification.iekf import IEKFOptions, identify_iekf
-from identification.spline_iekf import SplineIEKFOptions, identify_spline_iekf
-from identification.modal import ModalModel, ModalStructure
-from identification.scheduled import ScheduledModalModel, schedule_models
-from identification.storage import read_value, write_value
-from vehicle import DEFAULT_DT, linearize, make_manoeuvre, named_vehicle, simulate
-from vehicle.parameters import VehicleParameters
+from vehid.identification.archive import open_archive, read_run, update_archive, write_archive, write_run
+from vehid.identification.archive_safety import archive_lock
+from vehid.identification.errors import DivergenceError, InputError, SimulationError
+from vehid.identification.iekf import IEKFOptions, identify_iekf
+from vehid.identification.spline_iekf import SplineIEKFOptions, identify_spline_iekf
+from vehid.identification.modal import ModalModel, ModalStructure
+from vehid.identification.scheduled import ScheduledModalModel, schedule_models
+from vehid.identification.storage import read_value, write_value
+from vehid.vehicle import DEFAULT_DT, linearize, make_manoeuvre, named_vehicle, simulate
+from vehid.vehicle.parameters import VehicleParameters
 
 from .handling_study import (COMPARED_MODES, OUTPUTS, check_orders, positive_number, score, spline_options,
                              study_linear_options, whole_number)
@@ -433,7 +433,7 @@ def _job_in_worker(job: EnvelopeJob, report: Callable[[Any], None]) -> JobOutcom
 
 
 def _run_process_pool(jobs: list[EnvelopeJob], workers: int, on_done: Callable[[JobOutcome], None]) -> None:
-    """Jobs in the study workers of :func:`scenarios.shutdown.run_in_workers`, one job each at a time.
+    """Jobs in the study workers of :func:`vehid.scenarios.shutdown.run_in_workers`, one job each at a time.
 
     Those workers are spawned (forking a process holding BLAS or CasADi threads is unsafe), stop on
     SIGTERM, Ctrl-C or their parent's death, and are reaped before an error or interrupt is raised.

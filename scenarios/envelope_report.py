@@ -1,6 +1,6 @@
 """The envelope campaign's report: modes and fits against speed, the scheduled model, a table per vehicle.
 
-Figures (one set per vehicle), side-effect free (Agg canvas, see :mod:`scenarios.plots`):
+Figures (one set per vehicle), side-effect free (Agg canvas, see :mod:`vehid.scenarios.plots`):
 
 * ``<vehicle>_modes.png``: frequency and damping of every identified mode
   against speed (markers, one colour per order), the vehicle's own

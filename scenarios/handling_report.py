@@ -39,10 +39,10 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from identification.archive import Archive, RunName, read_archive
-from identification.errors import InputError
-from identification.residuals import residual_tests
-from identification.uncertainty import normal_quantile
+from vehid.identification.archive import Archive, RunName, read_archive
+from vehid.identification.errors import InputError
+from vehid.identification.residuals import residual_tests
+from vehid.identification.uncertainty import normal_quantile
 
 from . import plots
 from .report import format_eigenvalues, markdown_table, write_report

@@ -33,7 +33,7 @@ sense is not reached at these settings: at pass 100 trace(P) still grows
 (n = 2 settles at p >= 1e-3, at a fit 2.5 points lower). So the order
 choice below falls back on the fit.
 
-Order choice: :func:`identification.order.assess_orders` on the linear runs
+Order choice: :func:`vehid.identification.order.assess_orders` on the linear runs
 (the lowest converged order within 0.05 points of the best fit, else the
 lowest order within 0.05 points; 0.05 points is the seed-to-seed spread).
 The nonlinear runs cannot be assessed that way: their records carry no
@@ -50,7 +50,7 @@ equivalent linear model of a saturating car: a well-damped mode near
 0.9 Hz (paper: 0.4 Hz) and a 2.8 Hz one for n = 4.
 
 Nonlinear settings: the spline IEKF's defaults (5 nodes, p = 1e-7, 60
-passes; see :class:`identification.spline_iekf.SplineIEKFOptions` for the
+passes; see :class:`vehid.identification.spline_iekf.SplineIEKFOptions` for the
 measurement behind p). Measured, seed 0: nonlinear R on identification
 99.34, 99.51, 99.65, 99.81, 99.74 % and on validation 99.19, 98.89, 99.59,
 99.66, 99.63 % for n = 2..6.
@@ -74,19 +74,19 @@ from typing import Any, Callable, Iterator, Mapping, NamedTuple
 
 import numpy as np
 
-from identification.archive import RunName, append_history, run_group, write_archive, write_record, write_run
-from identification.data import IOData
-from identification.errors import DivergenceError, InputError
-from identification.iekf import IEKFOptions, IEKFResult, identify_iekf
-from identification.iekf_archive import write_iekf_run
-from identification.spline_iekf import SplineIEKFOptions, identify_spline_iekf
-from identification.metrics import percentage_explanation
-from identification.modal import ModalStructure
-from identification.protocol import Mode as ModelMode
-from identification.order import OrderAssessment, OrderRow, assess_orders
-from identification.storage import write_value
-from vehicle import DEFAULT_DT, DEFAULT_SPEED, linearize, make_manoeuvre, named_vehicle, simulate
-from vehicle.linearize import Mode
+from vehid.identification.archive import RunName, append_history, run_group, write_archive, write_record, write_run
+from vehid.identification.data import IOData
+from vehid.identification.errors import DivergenceError, InputError
+from vehid.identification.iekf import IEKFOptions, IEKFResult, identify_iekf
+from vehid.identification.iekf_archive import write_iekf_run
+from vehid.identification.spline_iekf import SplineIEKFOptions, identify_spline_iekf
+from vehid.identification.metrics import percentage_explanation
+from vehid.identification.modal import ModalStructure
+from vehid.identification.protocol import Mode as ModelMode
+from vehid.identification.order import OrderAssessment, OrderRow, assess_orders
+from vehid.identification.storage import write_value
+from vehid.vehicle import DEFAULT_DT, DEFAULT_SPEED, linearize, make_manoeuvre, named_vehicle, simulate
+from vehid.vehicle.linearize import Mode
 
 from .paths import results_directory
 from .shutdown import run_in_workers
@@ -235,7 +235,7 @@ class HandlingConfig:
         Steer amplitude as a fraction of the manoeuvres' defaults (1: the
         nonlinear range of the paper; 0.1 keeps the vehicle linear).
     vehicle : str
-        A named vehicle or a vehicle file (:func:`vehicle.named_vehicle`).
+        A named vehicle or a vehicle file (:func:`vehid.vehicle.named_vehicle`).
     speed : float
         Trim and reference speed (m/s).
     dt : float
@@ -484,7 +484,7 @@ def _run_orders(jobs: list[OrderJob], workers: int, on_event: Callable[[PassEven
 
     Workers send their PassEvents as they go; ``on_outcome`` is called here
     with each order's outcome as it arrives (checkpoints). An interrupt or a
-    failed order stops every worker at once (:func:`scenarios.shutdown.run_in_workers`).
+    failed order stops every worker at once (:func:`vehid.scenarios.shutdown.run_in_workers`).
     """
     if workers == 1 or len(jobs) == 1:
         outcomes = {}

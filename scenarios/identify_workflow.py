@@ -2,7 +2,7 @@
 
 * Validation records: ``--validation FRACTION`` holds out the last part of
   the record; ``--validation-file FILE`` (repeatable) adds other records.
-* Scores on estimation and validation data (:mod:`identification.validation`):
+* Scores on estimation and validation data (:mod:`vehid.identification.validation`):
   NRMSE fit and R per output, linear models simulated from a least-squares
   initial state unless ``--initial-state zero``; an unstable model (allowed
   by ``--allow-unstable``) is scored by k-step-ahead prediction.
@@ -40,12 +40,12 @@ from typing import Any, Callable
 
 import numpy as np
 
-from identification.data import IOData
-from identification.errors import DivergenceError, InputError, StrictWarningsError, WorkbenchError
-from identification.iekf import INVARIANT_P, START_CHOICES, TIMESCALES, IEKFOptions, identify_iekf, start_structure
-from identification.discrete import DiscreteModel
-from identification.modal import ModalModel, ModalStructure
-from identification.validation import INITIAL_STATES, Scores, default_horizon, score, split_holdout
+from vehid.identification.data import IOData
+from vehid.identification.errors import DivergenceError, InputError, StrictWarningsError, WorkbenchError
+from vehid.identification.iekf import INVARIANT_P, START_CHOICES, TIMESCALES, IEKFOptions, identify_iekf, start_structure
+from vehid.identification.discrete import DiscreteModel
+from vehid.identification.modal import ModalModel, ModalStructure
+from vehid.identification.validation import INITIAL_STATES, Scores, default_horizon, score, split_holdout
 
 __all__ = [
     "START_HELP",
@@ -194,8 +194,8 @@ def load_plan(args: argparse.Namespace, paths: list[str]) -> Plan:
     The split comes before the preparation, so the offsets kept with the model
     are the estimation part's own (the held-out part plays no role in them).
     """
-    from identification.preparation import prepare, prepare_validation
-    from scenarios.data_options import read_from_args
+    from vehid.identification.preparation import prepare, prepare_validation
+    from vehid.scenarios.data_options import read_from_args
 
     fraction, note = holdout_fraction(args)
     raw, settings = read_from_args(args, paths)
@@ -216,7 +216,7 @@ def validation_channels(args: argparse.Namespace, preparation: Any) -> tuple[tup
     """The validation files' channel names (model order), where the options name them."""
     if args.validation_inputs is None and args.validation_outputs is None:
         return None
-    from scenarios.data_options import channel_names
+    from vehid.scenarios.data_options import channel_names
 
     inputs = channel_names(args.validation_inputs) if args.validation_inputs is not None else preparation.settings.inputs
     outputs = (channel_names(args.validation_outputs) if args.validation_outputs is not None
@@ -604,7 +604,7 @@ def nonlinear_warnings(outcome: NonlinearOutcome, linear: Evaluation) -> list[st
 
 def identify_nonlinear(linear: ModalModel, plan: Plan, args: argparse.Namespace) -> NonlinearOutcome:
     """The spline-nonlinear model started from ``linear``, its p chosen on validation data from a small grid."""
-    from identification.spline_iekf import SplineIEKFOptions, identify_spline_iekf
+    from vehid.identification.spline_iekf import SplineIEKFOptions, identify_spline_iekf
 
     if not isinstance(linear, ModalModel):
         raise InputError("--nonlinear starts from a continuous-time modal model; this linear model is discrete-time "
@@ -674,7 +674,7 @@ def start_of(result: Any, records: tuple[IOData, ...]) -> tuple[float | None, bo
     model = ModalModel.from_parameters(result.structure, theta)
     start_modes, final_modes = model.mode_eigenvalues(), result.model.mode_eigenvalues()
     moved = bool(np.max(np.abs(final_modes - start_modes) / np.maximum(np.abs(start_modes), 1e-300)) > MOVED)
-    from identification.multirecord import pooled_simulation_fit
+    from vehid.identification.multirecord import pooled_simulation_fit
 
     fit = pooled_simulation_fit(model, records)
     if not np.all(np.isfinite(fit)):  # the start overflows: no fit to compare with
@@ -686,7 +686,7 @@ def structure_for(args: argparse.Namespace, order: int, plan: Plan, options: IEK
     """The model structure of an IEKF run: ``--pattern`` where given.
 
     Without it, a data start sets the modes: its complex pairs stay pairs and its real eigenvalues
-    become real poles (:func:`identification.iekf.start_structure`), each mode tied to the next output
+    become real poles (:func:`vehid.identification.iekf.start_structure`), each mode tied to the next output
     in turn; other starts take the default pattern (complex pairs first).
     """
     first = plan.records[0]

@@ -14,9 +14,9 @@ from typing import Any
 
 import numpy as np
 
-from identification.filter_models import LinearModalFilterModel
-from identification.iekf_pass import compiled_pass, numpy_reference_pass, pack_covariance
-from identification.modal import ModalStructure
+from vehid.identification.filter_models import LinearModalFilterModel
+from vehid.identification.iekf_pass import compiled_pass, numpy_reference_pass, pack_covariance
+from vehid.identification.modal import ModalStructure
 
 from .benchmarking import median_seconds
 from .linear_example import make_data

@@ -40,14 +40,14 @@ from typing import Any, Callable
 
 import numpy as np
 
-from identification.archive import write_archive, write_record
-from identification.data import IOData
-from identification.errors import InputError
-from identification.iekf import IEKFOptions, IEKFResult, identify_iekf
-from identification.iekf_archive import write_iekf_run
-from identification.metrics import percentage_explanation
-from identification.modal import ModalModel, ModalStructure
-from identification.order import OrderAssessment, assess_orders
+from vehid.identification.archive import write_archive, write_record
+from vehid.identification.data import IOData
+from vehid.identification.errors import InputError
+from vehid.identification.iekf import IEKFOptions, IEKFResult, identify_iekf
+from vehid.identification.iekf_archive import write_iekf_run
+from vehid.identification.metrics import percentage_explanation
+from vehid.identification.modal import ModalModel, ModalStructure
+from vehid.identification.order import OrderAssessment, assess_orders
 
 from .paths import results_directory
 
@@ -249,7 +249,7 @@ def run_case(
     discretization : {"euler", "exact", "exact-zoh"}
         ``euler`` reproduces the paper; ``exact`` identifies the continuous system.
     covariance, start :
-        See :class:`identification.iekf.IEKFOptions`.
+        See :class:`vehid.identification.iekf.IEKFOptions`.
     on_pass : callable, optional
         ``on_pass(run_label, record, result)`` after every pass.
 

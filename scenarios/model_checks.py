@@ -11,7 +11,7 @@ Kept apart from the command so that the command only calls
     estimator gave no covariance).
 ``residual_whiteness_p``, ``input_correlation_max``
     Per output, of the continuous model's simulation residuals on the
-    record (:mod:`identification.residuals`); ``residual_tests`` holds the
+    record (:mod:`vehid.identification.residuals`); ``residual_tests`` holds the
     full test results per output (also ``ljung_box``,
     ``input_correlation_p``, ``white``, ``independent``) with the 99 % bound.
 ``innovation_nis``, ``innovation_nis_band``
@@ -28,9 +28,9 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from identification.data import IOData
-from identification.modal import ModalModel
-from identification.residuals import ResidualTests, nis_band, residual_tests
+from vehid.identification.data import IOData
+from vehid.identification.modal import ModalModel
+from vehid.identification.residuals import ResidualTests, nis_band, residual_tests
 
 __all__ = ["model_residual_tests", "uncertainty_summary", "uncertainty_lines"]
 

@@ -6,7 +6,7 @@ Every function takes arrays, :class:`~identification.modal.ModalModel` or
 with the object-oriented API and an Agg canvas: nothing here imports
 ``matplotlib.pyplot``, changes global state or opens a window, so the
 functions are safe in scripts, tests and servers alike. Save a figure with
-``fig.savefig(path)`` or :func:`scenarios.report.write_report`.
+``fig.savefig(path)`` or :func:`vehid.scenarios.report.write_report`.
 
 The figures follow Best & Bogdanski (2017): parameter development over the
 passes (Figure 1), fit R and trace(P) per pass (Figures 2-4), the order study
@@ -27,10 +27,10 @@ from matplotlib.figure import Figure
 import scipy.linalg
 from scipy.stats import chi2
 
-from identification.errors import InputError
-from identification.metrics import percentage_explanation
-from identification.residuals import autocorrelation as residual_autocorrelation
-from identification.uncertainty import frequency_response as response_band
+from vehid.identification.errors import InputError
+from vehid.identification.metrics import percentage_explanation
+from vehid.identification.residuals import autocorrelation as residual_autocorrelation
+from vehid.identification.uncertainty import frequency_response as response_band
 
 __all__ = [
     "REPORT_SIZE",
@@ -618,7 +618,7 @@ def plot_bode(
     """Magnitude and phase from one input to every output, for several models.
 
     Models that carry a parameter covariance get their 95 % band shaded
-    (delta method, :func:`identification.uncertainty.frequency_response`)
+    (delta method, :func:`vehid.identification.uncertainty.frequency_response`)
     unless ``confidence`` is False.
 
     Parameters
@@ -689,7 +689,7 @@ def plot_bode(
 def autocorrelation(residuals: Any, max_lag: int) -> np.ndarray:
     """Normalised autocorrelation of each residual column at lags 0..max_lag, shape (max_lag + 1, n_y).
 
-    See :func:`identification.residuals.autocorrelation`.
+    See :func:`vehid.identification.residuals.autocorrelation`.
     """
     return residual_autocorrelation(_matrix("residuals", residuals), max_lag)
 
@@ -801,7 +801,7 @@ def plot_innovation_consistency(nis: Any, band: tuple[float, float], *, title: s
     nis : array_like, shape (n_pass,)
         Mean ``e' R^-1 e`` of each pass.
     band : (float, float)
-        :func:`identification.residuals.nis_band` for the record.
+        :func:`vehid.identification.residuals.nis_band` for the record.
     title : str
     fig : Figure, optional
 

@@ -18,9 +18,9 @@ import numpy as np
 from matplotlib.backends.backend_pdf import PdfPages
 from matplotlib.figure import Figure
 
-from identification.errors import InputError
-from identification.metrics import percentage_explanation
-from identification.residuals import DEFAULT_LAGS, nis_band, residual_tests
+from vehid.identification.errors import InputError
+from vehid.identification.metrics import percentage_explanation
+from vehid.identification.residuals import DEFAULT_LAGS, nis_band, residual_tests
 
 from . import plots
 
@@ -235,7 +235,7 @@ def archive_figures(archive: Any, *, window: tuple[float, float] | None = None, 
     Parameters
     ----------
     archive : identification.archive.Archive
-        As :func:`identification.archive.read_archive` returns it.
+        As :func:`vehid.identification.archive.read_archive` returns it.
     window : (float, float), optional
         Time range (s) of the time-fit figures.
     max_lag : int

@@ -12,7 +12,7 @@
   it to the whole process group; the parent decides) and die with their
   parent: on Linux the kernel sends them SIGKILL when it dies
   (``PR_SET_PDEATHSIG``), elsewhere a watchdog thread notices the new parent
-  within half a second. Both are set up by :mod:`scenarios._parent_watch`
+  within half a second. Both are set up by :mod:`vehid.scenarios._parent_watch`
   as the worker's first import, before the seconds it spends importing the
   workbench. So neither a signal nor ``kill -9`` of the parent leaves
   workers running or blocked on their pipes.
@@ -31,7 +31,7 @@ from contextlib import contextmanager
 from multiprocessing import get_context
 from typing import Any, Callable, Iterator, Sequence
 
-from identification.errors import WorkbenchError
+from vehid.identification.errors import WorkbenchError
 
 from ._parent_watch import ENVIRONMENT, die_with_parent
 

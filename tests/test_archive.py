@@ -11,7 +11,7 @@ import h5py
 import numpy as np
 import pytest
 
-from identification import (
+from vehid.identification import (
     ArchiveError,
     IOData,
     append_history,
@@ -26,10 +26,10 @@ from identification import (
     write_run,
     write_value,
 )
-from identification import archive as archive_module
-from identification.modal import ModalModel, ModalStructure
-from vehicle import baseline
-from vehicle.linearize import Linearization, Mode
+from vehid.identification import archive as archive_module
+from vehid.identification.modal import ModalModel, ModalStructure
+from vehid.vehicle import baseline
+from vehid.vehicle.linearize import Linearization, Mode
 
 
 def _round_trip(tmp_path, value, **options):

@@ -18,16 +18,16 @@ import h5py
 import numpy as np
 import pytest
 
-from identification import storage
-from identification import archive as archive_module
-from identification.archive import read_archive
-from identification.archive_safety import write_checksums
-from identification.scheduled import schedule_models
-from identification.spline_iekf import SplineIEKFOptions
-from identification.storage import read_value, write_value
-from scenarios.cli import main
-from vehicle.linearize import linearize
-from vehicle.parameters import baseline
+from vehid.identification import storage
+from vehid.identification import archive as archive_module
+from vehid.identification.archive import read_archive
+from vehid.identification.archive_safety import write_checksums
+from vehid.identification.scheduled import schedule_models
+from vehid.identification.spline_iekf import SplineIEKFOptions
+from vehid.identification.storage import read_value, write_value
+from vehid.scenarios.cli import main
+from vehid.vehicle.linearize import linearize
+from vehid.vehicle.parameters import baseline
 
 ARCHIVES = Path(__file__).parent / "data" / "archives"
 

@@ -15,18 +15,18 @@ import h5py
 import numpy as np
 import pytest
 
-from identification import IOData, read_archive, write_archive, write_record, write_run
-from identification.archive import open_archive, update_archive
-from identification.archive_safety import (
+from vehid.identification import IOData, read_archive, write_archive, write_record, write_run
+from vehid.identification.archive import open_archive, update_archive
+from vehid.identification.archive_safety import (
     ArchiveLockedError,
     OutputTargetError,
     archive_lock,
     check_output_target,
     replacing_directory,
 )
-from identification.errors import ArchiveError
-from identification.modal import ModalModel, ModalStructure
-from scenarios.cli import main
+from vehid.identification.errors import ArchiveError
+from vehid.identification.modal import ModalModel, ModalStructure
+from vehid.scenarios.cli import main
 
 CORRUPT_VALUE = 1.6e40  # the value the issue found overwritten on disk, unnoticed
 
@@ -102,7 +102,7 @@ def test_archives_without_checksums_still_read(tmp_path):
 # ------------------------------------------------------------------ locking
 _HOLDER = """
 import sys, time
-from identification.archive_safety import archive_lock
+from vehid.identification.archive_safety import archive_lock
 with archive_lock(sys.argv[1]):
     print("locked", flush=True)
     time.sleep(60)
@@ -221,7 +221,7 @@ def test_a_failed_report_leaves_the_old_folder(tmp_path):
 _KILLED_WRITER = """
 import sys, time
 from pathlib import Path
-from identification.archive_safety import replacing_directory
+from vehid.identification.archive_safety import replacing_directory
 with replacing_directory(sys.argv[1]) as partial:
     (partial / "table.md").write_text("new")
     print("half", flush=True)
@@ -262,7 +262,7 @@ def test_a_second_identify_on_the_same_archive_exits_2_before_any_work(held_else
 
 def test_the_report_folder_holds_no_stale_files(tmp_path, capsys):
     """A new report replaces the old folder whole: no stale table or PDF of an earlier run beside the new files."""
-    from identification import append_history, run_group
+    from vehid.identification import append_history, run_group
 
     path = tmp_path / "run.h5"
     with write_archive(path, kind="identification") as handle:

@@ -7,10 +7,10 @@ outputs by exact simulation of the pairs-first modal form (ModalModel.simulate, 
 import numpy as np
 import pytest
 
-from identification import ExcitationError, InputError, IOData, fit_metrics
-from identification.comparators import COMPARATORS, _continuous_start, identify_with, register_comparator
-from identification.modal import ModalModel, ModalStructure
-from scenarios.linear_example import make_data, true_model
+from vehid.identification import ExcitationError, InputError, IOData, fit_metrics
+from vehid.identification.comparators import COMPARATORS, _continuous_start, identify_with, register_comparator
+from vehid.identification.modal import ModalModel, ModalStructure
+from vehid.scenarios.linear_example import make_data, true_model
 
 REQUIRED_FIT = 99.9  # percent, R of eq. 17
 

@@ -5,10 +5,10 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from identification import InputError
-from identification.ekf import NonlinearModel, ekf_joint
-from identification.kalman import kalman_filter
-from scenarios.textbook import ekf_bicycle_example
+from vehid.identification import InputError
+from vehid.identification.ekf import NonlinearModel, ekf_joint
+from vehid.identification.kalman import kalman_filter
+from vehid.scenarios.textbook import ekf_bicycle_example
 
 
 def _linear_model():

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from identification import InputError
-from identification.kalman import kalman_filter, rts_smoother
-from scenarios.textbook import kalman_example
+from vehid.identification import InputError
+from vehid.identification.kalman import kalman_filter, rts_smoother
+from vehid.scenarios.textbook import kalman_example
 
 # The appendix's example (A.92): x(k+1) = phi x(k) + w(k), y(k) = x(k) + v(k), phi = 1, P0 = 100,
 # Q = 25, R = 15. Its Table A.1 is an image in our copy of the text, so the reference values below

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from identification import ExcitationError, InputError
-from identification.factorised import ud_covariance, ud_factor
-from identification.least_squares import arx_regressors, estimate_arx, least_squares
-from identification.recursive import estimate_arx_recursive, recursive_least_squares
+from vehid.identification import ExcitationError, InputError
+from vehid.identification.factorised import ud_covariance, ud_factor
+from vehid.identification.least_squares import arx_regressors, estimate_arx, least_squares
+from vehid.identification.recursive import estimate_arx_recursive, recursive_least_squares
 
 # Algebraic identities are checked to 1e-10: the regressions here have
 # condition numbers below 1e3, so rounding stays near 1e-13.

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter
 
-from identification import InputError
-from identification.least_squares import ArxModel, estimate_arx
-from identification.pencil import PencilModel, estimate_pencil
+from vehid.identification import InputError
+from vehid.identification.least_squares import ArxModel, estimate_arx
+from vehid.identification.pencil import PencilModel, estimate_pencil
 
 ALGEBRA = 1e-10  # conversions are a few small factorisations of well-conditioned matrices
 

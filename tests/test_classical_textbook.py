@@ -5,8 +5,8 @@ import json
 import numpy as np
 import pytest
 
-from scenarios.cli import main
-from scenarios.textbook import positivity_example, ud_example
+from vehid.scenarios.cli import main
+from vehid.scenarios.textbook import positivity_example, ud_example
 
 
 def test_plain_update_loses_positivity_and_factorised_forms_do_not():

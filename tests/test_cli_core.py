@@ -6,7 +6,7 @@ import sys
 
 import numpy as np
 
-from scenarios.cli import build_parser, to_jsonable
+from vehid.scenarios.cli import build_parser, to_jsonable
 
 
 def test_json_conversion_of_numpy_and_complex():
@@ -16,7 +16,7 @@ def test_json_conversion_of_numpy_and_complex():
 
 def test_top_level_help_lists_groups():
     completed = subprocess.run(
-        [sys.executable, "-m", "scenarios.cli", "--help"], capture_output=True, text=True, check=False
+        [sys.executable, "-m", "vehid.scenarios.cli", "--help"], capture_output=True, text=True, check=False
     )
     assert completed.returncode == 0
     assert "study" in completed.stdout and "bench" in completed.stdout
@@ -27,7 +27,7 @@ def test_parser_builds():
 
 
 def _subcommands():
-    from scenarios.cli import GROUPS, _command_modules
+    from vehid.scenarios.cli import GROUPS, _command_modules
 
     commands = []
     for module in _command_modules():
@@ -41,7 +41,7 @@ def test_every_subcommand_has_help_json_and_quiet():
     assert ["identify"] in commands and ["study", "handling"] in commands and ["report"] in commands
     for command in commands:
         completed = subprocess.run(
-            [sys.executable, "-m", "scenarios.cli", *command, "--help"], capture_output=True, text=True, check=False
+            [sys.executable, "-m", "vehid.scenarios.cli", *command, "--help"], capture_output=True, text=True, check=False
         )
         assert completed.returncode == 0, (command, completed.stderr)
         assert "--json" in completed.stdout and "--quiet" in completed.stdout, command

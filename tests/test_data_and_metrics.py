@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from identification import IOData, InputError, fit_metrics, nrmse_fit, percentage_explanation, r_squared
-from identification import read_csv, read_hdf5
+from vehid.identification import IOData, InputError, fit_metrics, nrmse_fit, percentage_explanation, r_squared
+from vehid.identification import read_csv, read_hdf5
 
 
 def _record(n=100, dt=0.01):

@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from identification.modal import ModalStructure
-from identification.start import data_start
+from vehid.identification.modal import ModalStructure
+from vehid.identification.start import data_start
 
 
 def _unstable_record():

@@ -17,11 +17,11 @@ import signal
 import numpy as np
 import pytest
 
-from identification.archive import read_archive
-from identification.errors import InputError
-from scenarios.cli import main
-from scenarios.envelope import EnvelopeConfig, grip_limit, run_campaign
-from vehicle import named_vehicle
+from vehid.identification.archive import read_archive
+from vehid.identification.errors import InputError
+from vehid.scenarios.cli import main
+from vehid.scenarios.envelope import EnvelopeConfig, grip_limit, run_campaign
+from vehid.vehicle import named_vehicle
 
 SMALL = dict(speeds=(15.0, 25.0), orders=(2,), nonlinear=False, duration=8.0, passes=10)
 

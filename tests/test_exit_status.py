@@ -15,8 +15,8 @@ import json
 
 import pytest
 
-from identification.errors import DivergenceError
-from scenarios.cli import main
+from vehid.identification.errors import DivergenceError
+from vehid.scenarios.cli import main
 
 COMMANDS = {  # every subcommand; test_every_command_is_covered fails when one is added without a row below
     ("identify",), ("report",), ("simulate",), ("linearize",), ("study", "handling"),
@@ -40,7 +40,7 @@ def _check(capsys, argv, status, *words):
 
 
 def test_every_command_is_covered():
-    from scenarios.cli import _command_modules
+    from vehid.scenarios.cli import _command_modules
 
     found = {(m.NAME,) if m.GROUP is None else (m.GROUP, m.NAME) for m in _command_modules()}
     assert found == COMMANDS
@@ -48,7 +48,7 @@ def test_every_command_is_covered():
 
 # ---------------------------------------------------------------- bad input: 2
 def _corrupt_archive(tmp_path):
-    from identification import write_archive
+    from vehid.identification import write_archive
 
     path = tmp_path / "corrupt.h5"
     with write_archive(path, kind="identification"):
@@ -78,11 +78,11 @@ def test_bad_input_exits_2(case, tmp_path, capsys, monkeypatch):
     elif case == "report-missing":
         _check(capsys, ["report", missing], 2, "absent.h5")
     elif case == "report-out-is-a-file":  # refused before drawing, and the file is left alone
-        from identification import write_archive
+        from vehid.identification import write_archive
 
         with write_archive(tmp_path / "a.h5", kind="identification"):
             pass
-        monkeypatch.setattr("scenarios.commands.report.archive_figures", None)  # drawing would fail loudly
+        monkeypatch.setattr("vehid.scenarios.commands.report.archive_figures", None)  # drawing would fail loudly
         _check(capsys, ["report", str(tmp_path / "a.h5"), "--out", str(foreign)], 2, "foreign.csv", "Not a directory")
         assert foreign.read_text() == "t,u,y\n0,0,0\n"
     elif case == "report-corrupt":
@@ -117,10 +117,10 @@ def test_bad_input_exits_2(case, tmp_path, capsys, monkeypatch):
             raise PermissionError(errno.EACCES, "Permission denied", target)
 
         if case == "textbook-unwritable":
-            monkeypatch.setattr("scenarios.commands.study_textbook.run_all", refused)
+            monkeypatch.setattr("vehid.scenarios.commands.study_textbook.run_all", refused)
             _check(capsys, ["study", "textbook"], 2, target, "Permission denied")
         else:
-            monkeypatch.setattr("scenarios.commands.bench_iekf.measure_iekf", refused)
+            monkeypatch.setattr("vehid.scenarios.commands.bench_iekf.measure_iekf", refused)
             _check(capsys, ["bench", "iekf", "--repeats", "1"], 2, target, "Permission denied")
 
 
@@ -128,7 +128,7 @@ def test_bad_input_exits_2(case, tmp_path, capsys, monkeypatch):
 @pytest.mark.parametrize("command", sorted(COMMANDS))
 def test_a_failed_computation_exits_1(command, tmp_path, capsys, monkeypatch):
     """Each command's computation stood in for by one that diverges: exit 1 and one JSON object."""
-    from identification import write_archive
+    from vehid.identification import write_archive
 
     monkeypatch.setenv("VEHID_RESULTS_DIR", str(tmp_path))
 
@@ -137,34 +137,34 @@ def test_a_failed_computation_exits_1(command, tmp_path, capsys, monkeypatch):
 
     argv = list(command)
     if command == ("identify",):
-        monkeypatch.setattr("scenarios.commands.identify.identify_iekf", diverge)
+        monkeypatch.setattr("vehid.scenarios.commands.identify.identify_iekf", diverge)
         data = tmp_path / "record.csv"
         data.write_text("t,u,y\n" + "".join(f"{k * 0.01},{(-1) ** k},{k % 3}\n" for k in range(100)))
         argv += [str(data), "--inputs", "u", "--outputs", "y", "--order", "2"]
     elif command == ("report",):
-        monkeypatch.setattr("scenarios.commands.report.archive_figures", diverge)
+        monkeypatch.setattr("vehid.scenarios.commands.report.archive_figures", diverge)
         archive = tmp_path / "a.h5"
         with write_archive(archive, kind="identification"):
             pass
         argv += [str(archive)]
     elif command == ("simulate",):
-        monkeypatch.setattr("scenarios.commands.simulate.simulate", diverge)
+        monkeypatch.setattr("vehid.scenarios.commands.simulate.simulate", diverge)
         argv += ["--duration", "1"]
     elif command == ("linearize",):
-        monkeypatch.setattr("scenarios.commands.linearize.linearize", diverge)
+        monkeypatch.setattr("vehid.scenarios.commands.linearize.linearize", diverge)
     elif command == ("study", "handling"):
-        monkeypatch.setattr("scenarios.commands.study_handling.run_study", diverge)
-        monkeypatch.setattr("scenarios.commands.study_handling.make_records", lambda config: {})
+        monkeypatch.setattr("vehid.scenarios.commands.study_handling.run_study", diverge)
+        monkeypatch.setattr("vehid.scenarios.commands.study_handling.make_records", lambda config: {})
         argv += ["--orders", "2", "--out", str(tmp_path / "h.h5")]
     elif command == ("study", "linear-example"):
-        monkeypatch.setattr("scenarios.commands.study_linear_example.run_case", diverge)
+        monkeypatch.setattr("vehid.scenarios.commands.study_linear_example.run_case", diverge)
     elif command == ("study", "textbook"):
-        monkeypatch.setattr("scenarios.commands.study_textbook.run_all", diverge)
+        monkeypatch.setattr("vehid.scenarios.commands.study_textbook.run_all", diverge)
     elif command == ("study", "envelope"):
-        monkeypatch.setattr("scenarios.commands.study_envelope.run_campaign", diverge)
+        monkeypatch.setattr("vehid.scenarios.commands.study_envelope.run_campaign", diverge)
         argv += ["--speeds", "15", "--orders", "2", "--linear-only"]
     else:
-        monkeypatch.setattr("scenarios.commands.bench_iekf.measure_iekf", diverge)
+        monkeypatch.setattr("vehid.scenarios.commands.bench_iekf.measure_iekf", diverge)
     _check(capsys, argv, 1, "non-finite")
 
 
@@ -176,14 +176,14 @@ def test_a_full_disk_names_the_file_and_exits_1(tmp_path, capsys, monkeypatch):
     def full(*args, **kwargs):
         raise OSError(errno.ENOSPC, "No space left on device", target)
 
-    monkeypatch.setattr("scenarios.commands.study_linear_example.run_case", full)
+    monkeypatch.setattr("vehid.scenarios.commands.study_linear_example.run_case", full)
     _check(capsys, ["study", "linear-example"], 1, target, "No space left on device")
 
 
 def test_a_full_disk_while_writing_an_archive_names_it(tmp_path, capsys, monkeypatch):
     """fsync reporting ENOSPC (a full disk found at flush): the error names the archive the user gave, not the
     hidden copy being written, exits 1, and leaves no partial file behind."""
-    from identification import archive as archive_module
+    from vehid.identification import archive as archive_module
 
     data = tmp_path / "record.csv"
     data.write_text("t,u,y\n" + "".join(f"{k * 0.01},{(-1) ** (k // 3)},{(-1) ** (k // 4)}\n" for k in range(300)))
@@ -202,11 +202,11 @@ def test_an_interrupt_still_prints_one_json_object(tmp_path, capsys, monkeypatch
     """SIGTERM (raised as Interrupted by the handler the CLI installs) ends with 128 + 15 and one JSON object."""
     import signal
 
-    from scenarios.shutdown import Interrupted
+    from vehid.scenarios.shutdown import Interrupted
 
     def stopped(**options):
         raise Interrupted(signal.SIGTERM)
 
-    monkeypatch.setattr("scenarios.commands.study_textbook.run_all", stopped)
+    monkeypatch.setattr("vehid.scenarios.commands.study_textbook.run_all", stopped)
     body = _check(capsys, ["study", "textbook"], 128 + signal.SIGTERM, "interrupted by SIGTERM")
     assert body["error"] == "interrupted by SIGTERM"

@@ -1,28 +1,28 @@
 """The handling study (Best & Bogdanski 2017, section 6, Table 5): its command, table, modes and archive.
 
-Independent truth: the vehicle's own linearisation (:func:`vehicle.linearize`)
+Independent truth: the vehicle's own linearisation (:func:`vehid.vehicle.linearize`)
 for the modes, the paper's Table 5 for the table's shape, and the archive
 read back from disk. The records are short (10 s) and the passes few, so that
 the module runs in well under a minute; the full study's figures are in the
-module notes of :mod:`scenarios.handling_study`.
+module notes of :mod:`vehid.scenarios.handling_study`.
 """
 
 import json
 import subprocess
 import sys
-from identification.spline_modal import SplineModalModel
+from vehid.identification.spline_modal import SplineModalModel
 from dataclasses import dataclass
 
 import numpy as np
 import pytest
 
-from identification.archive import read_archive
-from identification.errors import DivergenceError, InputError
-from identification.spline_iekf import SplineIEKFOptions
-from scenarios import handling_study
-from scenarios.cli import main
-from scenarios.commands.study_handling import text_of
-from scenarios.handling_study import (
+from vehid.identification.archive import read_archive
+from vehid.identification.errors import DivergenceError, InputError
+from vehid.identification.spline_iekf import SplineIEKFOptions
+from vehid.scenarios import handling_study
+from vehid.scenarios.cli import main
+from vehid.scenarios.commands.study_handling import text_of
+from vehid.scenarios.handling_study import (
     OUTPUTS,
     HandlingConfig,
     compare_modes,
@@ -45,7 +45,7 @@ def study(tmp_path_factory):
     """The command run as a user runs it, two workers (a spawned process pool), JSON on stdout."""
     out = tmp_path_factory.mktemp("handling") / "handling_study.h5"
     completed = subprocess.run(
-        [sys.executable, "-m", "scenarios.cli", "study", "handling", *FAST, "--workers", "2", "--json",
+        [sys.executable, "-m", "vehid.scenarios.cli", "study", "handling", *FAST, "--workers", "2", "--json",
          "--out", str(out)],
         capture_output=True, text=True, check=False,
     )
@@ -146,7 +146,7 @@ def test_linear_modes_near_the_vehicle_modes():
 
 
 def test_compare_modes_picks_the_nearest_mode():
-    from vehicle.linearize import Mode
+    from vehid.vehicle.linearize import Mode
 
     roll = Mode(complex(-5, 7), abs(complex(-5, 7)) / (2 * np.pi), 5 / abs(complex(-5, 7)), "roll", ("phi",))
     (found,) = compare_modes(3, [complex(-20, 0), complex(-4, -6.5)], {"roll": roll})  # a conjugate counts as its pair
@@ -344,7 +344,7 @@ def test_resume_of_a_truncated_study_redoes_only_what_is_missing(study, tmp_path
     """
     import shutil
 
-    from identification.archive import update_archive
+    from vehid.identification.archive import update_archive
 
     summary, out, _ = study
     partial = tmp_path / "partial.h5"
@@ -411,11 +411,11 @@ def test_a_signal_stops_every_worker_and_leaves_a_readable_archive(stop, study, 
     import signal
     import time
 
-    from scenarios.handling_resume import read_progress
+    from vehid.scenarios.handling_resume import read_progress
 
     out = tmp_path / "stopped.h5"
     process = subprocess.Popen(
-        [sys.executable, "-m", "scenarios.cli", "study", "handling", *FAST, "--linear-only", "--workers", "2",
+        [sys.executable, "-m", "vehid.scenarios.cli", "study", "handling", *FAST, "--linear-only", "--workers", "2",
          "--no-report", "--quiet", "--out", str(out)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
     )

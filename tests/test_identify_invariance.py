@@ -14,10 +14,10 @@ import sys
 import numpy as np
 import pytest
 
-from identification.data import IOData
-from identification.iekf import IEKFOptions, identify_iekf
-from identification.modal import ModalModel, ModalStructure
-from identification.validation import score
+from vehid.identification.data import IOData
+from vehid.identification.iekf import IEKFOptions, identify_iekf
+from vehid.identification.modal import ModalModel, ModalStructure
+from vehid.identification.validation import score
 
 DT = 0.05  # s
 # A pair at -0.5 +/- 2j rad/s and a real pole at -0.3 rad/s, one input, one output.
@@ -108,7 +108,7 @@ def test_an_unstable_plant_is_kept_and_scored_by_prediction():
     assert score(result.model, record, horizon=10).fit[0] > 99
 
 
-VEHID = [sys.executable, "-m", "scenarios.cli"]
+VEHID = [sys.executable, "-m", "vehid.scenarios.cli"]
 
 
 def _write_csv(path, data, *, y_factor=1.0):
@@ -184,8 +184,8 @@ def test_cli_order_range_chooses_on_validation_data(tmp_path):
 
 def test_a_negative_real_discrete_pole_gives_a_labelled_discrete_model():
     """y(k) = -0.6 y(k-1) + u(k-1): no continuous-time equivalent; ARX returns the discrete model, not an error."""
-    from identification.comparators import identify_with
-    from identification.discrete import DiscreteModel
+    from vehid.identification.comparators import identify_with
+    from vehid.identification.discrete import DiscreteModel
 
     u = np.random.default_rng(11).standard_normal((400, 1))
     y = np.zeros((400, 1))
@@ -227,8 +227,8 @@ def test_cli_nonlinear_scores_and_archives_both_models(tmp_path):
 
 
 def test_order_parsing_and_the_parsimony_rule():
-    from identification.errors import DivergenceError, InputError
-    from scenarios.identify_workflow import AUTO_MAX_ORDER, ORDER_TOLERANCE, choose_order, parse_orders
+    from vehid.identification.errors import DivergenceError, InputError
+    from vehid.scenarios.identify_workflow import AUTO_MAX_ORDER, ORDER_TOLERANCE, choose_order, parse_orders
 
     assert parse_orders("4") == ([4], False)
     assert parse_orders("2-5") == ([2, 3, 4, 5], False)
@@ -265,8 +265,8 @@ def test_cli_validation_file_is_scored_and_a_mismatched_one_refused(tmp_path):
 
 
 def test_a_divergence_after_good_passes_reports_the_last_good_one_with_a_warning():
-    from identification.errors import DivergenceError
-    from scenarios.identify_workflow import Evaluation, last_good_on_divergence, run_warnings
+    from vehid.identification.errors import DivergenceError
+    from vehid.scenarios.identify_workflow import Evaluation, last_good_on_divergence, run_warnings
 
     good = identify_iekf(_record(20.0, seed=3), STRUCTURE, options=IEKFOptions.invariant(passes=2))
 
@@ -287,7 +287,7 @@ def test_a_spline_model_that_validates_worse_than_its_linear_start_is_warned_abo
     """The warning compares the two models' mean validation fits; no validation data, no comparison."""
     from types import SimpleNamespace
 
-    from scenarios.identify_workflow import Evaluation, nonlinear_warnings
+    from vehid.scenarios.identify_workflow import Evaluation, nonlinear_warnings
 
     record = _record(20.0, seed=3)
     linear = identify_iekf(record, STRUCTURE, options=IEKFOptions.invariant(passes=2)).model
@@ -306,7 +306,7 @@ def test_a_spline_model_that_validates_worse_than_its_linear_start_is_warned_abo
 
 
 def test_the_start_is_returned_only_where_it_beats_every_p_in_cross_validation():
-    from scenarios.identify_workflow import P_TOLERANCE, PTuning
+    from vehid.scenarios.identify_workflow import P_TOLERANCE, PTuning
 
     rows = ({"p": 1e-4, "cv_fit_percent": 70.0, "seconds": 1.0}, {"p": 1e-5, "cv_fit_percent": 72.0, "seconds": 1.0},
             {"p": 1e-6, "cv_fit_percent": None, "error": "diverged", "seconds": 1.0})
@@ -318,9 +318,9 @@ def test_the_start_is_returned_only_where_it_beats_every_p_in_cross_validation()
 
 def test_a_returned_start_is_what_the_summary_and_the_archive_describe(tmp_path, capsys, monkeypatch):
     """Where cross-validation prefers the start, the command returns it, says so once, and archives it."""
-    from identification.archive import read_archive
-    from scenarios import identify_workflow
-    from scenarios.cli import main
+    from vehid.identification.archive import read_archive
+    from vehid.scenarios import identify_workflow
+    from vehid.scenarios.cli import main
 
     real_tune = identify_workflow.tune_p
 

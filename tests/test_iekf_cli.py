@@ -11,12 +11,12 @@ import h5py
 import numpy as np
 import pytest
 
-from identification.archive import open_archive
-from identification.iekf_archive import read_iekf_run
-from scenarios.identify_workflow import P_GRID, P_TOLERANCE
-from scenarios.linear_example import make_data
+from vehid.identification.archive import open_archive
+from vehid.identification.iekf_archive import read_iekf_run
+from vehid.scenarios.identify_workflow import P_GRID, P_TOLERANCE
+from vehid.scenarios.linear_example import make_data
 
-VEHID = [sys.executable, "-m", "scenarios.cli"]
+VEHID = [sys.executable, "-m", "vehid.scenarios.cli"]
 IDENTIFY_KEYS = {"eigenvalues", "fit_percent", "passes_run", "discretization", "A", "B", "C", "D", "seconds"}
 
 

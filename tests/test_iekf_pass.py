@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from identification.filter_models import LinearModalFilterModel
-from identification.iekf_pass import compiled_pass, numpy_reference_pass, pack_covariance, unpack_covariance
-from identification.modal import ModalStructure
-from scenarios.linear_example import make_data, true_model
+from vehid.identification.filter_models import LinearModalFilterModel
+from vehid.identification.iekf_pass import compiled_pass, numpy_reference_pass, pack_covariance, unpack_covariance
+from vehid.identification.modal import ModalStructure
+from vehid.scenarios.linear_example import make_data, true_model
 
 DT = 0.002
 
@@ -138,8 +138,8 @@ def test_covariance_packing_round_trip():
 
 def test_a_failed_generated_step_is_an_error_naming_the_sample():
     """The C driver returns 1 + the sample at which the generated step failed; that must never pass as a finished pass."""
-    from identification.errors import DivergenceError
-    from identification.iekf_pass import _CompiledPass, build_filter_step
+    from vehid.identification.errors import DivergenceError
+    from vehid.identification.iekf_pass import _CompiledPass, build_filter_step
 
     structure = ModalStructure.default(2, 1, 1)
     step = build_filter_step(LinearModalFilterModel(structure), 0.01, "exact", "joseph")
@@ -155,7 +155,7 @@ def test_code_generation_leaves_the_working_directory_alone(monkeypatch):
     import casadi as ca
     import os
 
-    from identification.compiled import generate_c
+    from vehid.identification.compiled import generate_c
 
     def refuse(path):
         raise AssertionError(f"os.chdir({path!r}) called during code generation")
@@ -170,7 +170,7 @@ def test_code_generation_leaves_the_working_directory_alone(monkeypatch):
 def test_structured_loops_equal_the_generated_step(covariance, spline):
     # The low-rank prediction and looped Joseph update are the generated step's algebra in another
     # order: 1,000 steps agree to 1e-10 relative (rounding, as against the NumPy reference above).
-    from identification.spline_modal import SplineModalFilterModel, SplineModalStructure
+    from vehid.identification.spline_modal import SplineModalFilterModel, SplineModalStructure
 
     data, _ = make_data(3, outputs=(0, 1, 2), duration=2.2)
     u, y = data.u[:1000, :1], data.y[:1000]

@@ -5,11 +5,11 @@ import dataclasses
 import numpy as np
 import pytest
 
-from identification import DivergenceError, IEKFOptions, ModalStructure, identify_iekf
-from identification.archive import open_archive, read_archive, write_archive, write_run
-from identification.iekf_archive import read_iekf_run, write_iekf_run
-from identification.spline_modal import SplineModalModel
-from scenarios.linear_example import make_data, true_model
+from vehid.identification import DivergenceError, IEKFOptions, ModalStructure, identify_iekf
+from vehid.identification.archive import open_archive, read_archive, write_archive, write_run
+from vehid.identification.iekf_archive import read_iekf_run, write_iekf_run
+from vehid.identification.spline_modal import SplineModalModel
+from vehid.scenarios.linear_example import make_data, true_model
 
 
 @pytest.fixture(scope="module")

@@ -8,7 +8,7 @@ printed tables, and the true model's own fit to noisy data.
 import numpy as np
 import pytest
 
-from scenarios.linear_example import PAPER, euler_equivalent, make_data, run_case, true_model
+from vehid.scenarios.linear_example import PAPER, euler_equivalent, make_data, run_case, true_model
 
 TRUE_EIGENVALUES = np.array([-15 + 10j, -15 - 10j, -8 + 40j, -8 - 40j, -4 + 0j])
 

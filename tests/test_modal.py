@@ -7,9 +7,9 @@ import pytest
 from scipy.io import loadmat
 from scipy.signal import lsim
 
-from identification.errors import InputError
-from identification.modal import ModalModel, ModalStructure, phi_functions
-from scenarios.linear_example import true_model
+from vehid.identification.errors import InputError
+from vehid.identification.modal import ModalModel, ModalStructure, phi_functions
+from vehid.scenarios.linear_example import true_model
 
 
 def _pattern(rows):

@@ -12,11 +12,11 @@ import pytest
 from matplotlib.figure import Figure
 from scipy import signal
 
-from identification.errors import InputError
-from identification.metrics import percentage_explanation
-from identification.modal import ModalModel, ModalStructure
-from scenarios import plots
-from scenarios.report import format_eigenvalues, markdown_table, write_report
+from vehid.identification.errors import InputError
+from vehid.identification.metrics import percentage_explanation
+from vehid.identification.modal import ModalModel, ModalStructure
+from vehid.scenarios import plots
+from vehid.scenarios.report import format_eigenvalues, markdown_table, write_report
 
 RNG_SEED = 4
 
@@ -270,7 +270,7 @@ def test_no_pyplot_anywhere():
         """
         import sys, tempfile
         import numpy as np
-        from scenarios import plots, report
+        from vehid.scenarios import plots, report
         figure = plots.plot_convergence([90.0, 99.0], [1.0, 0.1])
         report.write_report({"f": figure}, tempfile.mkdtemp(), dpi=30)
         assert "matplotlib.pyplot" not in sys.modules, "pyplot was imported"

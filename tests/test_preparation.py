@@ -7,15 +7,15 @@ import sys
 import numpy as np
 import pytest
 
-from identification import (IEKFOptions, InputError, ModalStructure, identify_iekf, identify_with, prepare,
+from vehid.identification import (IEKFOptions, InputError, ModalStructure, identify_iekf, identify_with, prepare,
                             prepare_validation)
-from identification.archive import open_archive
-from identification.iekf_archive import read_iekf_run
-from identification.multirecord import score_records
-from scenarios.data_options import archived_preparation
-from scenarios.linear_example import make_data
+from vehid.identification.archive import open_archive
+from vehid.identification.iekf_archive import read_iekf_run
+from vehid.identification.multirecord import score_records
+from vehid.scenarios.data_options import archived_preparation
+from vehid.scenarios.linear_example import make_data
 
-VEHID = [sys.executable, "-m", "scenarios.cli"]
+VEHID = [sys.executable, "-m", "vehid.scenarios.cli"]
 OFFSETS = [(0.3, -0.2, 5.0), (-0.1, 0.4, -3.0), (0.25, 0.05, 12.0)]  # (u1, u2, y1) added to each segment
 
 
@@ -149,7 +149,7 @@ def test_identify_several_files_of_different_formats(record, tmp_path):
 
 def test_validation_data_take_the_estimation_datas_preparation(record, tmp_path):
     """A hold-out tail is prepared with the estimation part's scale and offsets, never its own means."""
-    from identification import read_raw_records
+    from vehid.identification import read_raw_records
 
     raw = _offset(record[:4000], OFFSETS[2])
     path = tmp_path / "run.csv"
@@ -167,7 +167,7 @@ def test_validation_data_take_the_estimation_datas_preparation(record, tmp_path)
 
 
 def test_a_constant_output_record_has_undefined_fits_not_a_failed_summary(record):
-    from identification import IOData
+    from vehid.identification import IOData
 
     model = identify_with(record[:3000], method="arx", order=5).model
     constant = IOData(t=record.t[:500], u=record.u[:500], y=np.full((500, 1), 2.0))

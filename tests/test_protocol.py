@@ -15,11 +15,11 @@ import pytest
 from scipy.io import loadmat
 from scipy.signal import dfreqresp, freqresp
 
-from identification import (ArxModel, DiscreteModel, IdentifiedModel, IOData, ModalModel, ModalStructure, Mode,
+from vehid.identification import (ArxModel, DiscreteModel, IdentifiedModel, IOData, ModalModel, ModalStructure, Mode,
                             SplineModalModel, estimate_arx, estimate_subspace, identify_with)
-from identification.errors import InputError
-from identification.pencil import PencilModel
-from identification.statespace import continuous_to_discrete
+from vehid.identification.errors import InputError
+from vehid.identification.pencil import PencilModel
+from vehid.identification.statespace import continuous_to_discrete
 
 DT = 0.01
 # rounding of an exact discretisation carried over 400 samples of an O(1) response

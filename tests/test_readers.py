@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 import scipy.io
 
-from identification import InputError, read_record
-from identification.timebase import JITTER_TOLERANCE
+from vehid.identification import InputError, read_record
+from vehid.identification.timebase import JITTER_TOLERANCE
 
 
 def _write(path, text):

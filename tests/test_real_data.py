@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from identification import IOData
-from identification.metrics import nrmse_fit
+from vehid.identification import IOData
+from vehid.identification.metrics import nrmse_fit
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -89,7 +89,7 @@ def test_peers_and_identify_hold_out_the_same_samples(entry):
 
 def _identify(entry, scratch: Path, *options: str) -> tuple[int, dict]:
     """``vehid identify`` on the raw file with the benchmark's arguments; exit status and JSON summary."""
-    command = [sys.executable, "-m", "scenarios.cli", "identify", *benchmark.data_args(entry, scratch), *options,
+    command = [sys.executable, "-m", "vehid.scenarios.cli", "identify", *benchmark.data_args(entry, scratch), *options,
                "--json", "--quiet"]
     done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert done.returncode in (0, 3), done.stderr[-500:]
@@ -163,7 +163,7 @@ def test_a_validation_file_holding_the_estimation_samples_is_refused(tmp_path):
     """The tanks' .mat holds both records; given again as a validation file it would be read under the
     estimation record's names and score the model on its own data (it did, with exit 0)."""
     mat = ROOT / "tests" / "data" / "cascaded_tanks" / "dataBenchmark.mat"
-    command = [sys.executable, "-m", "scenarios.cli", "identify", str(mat), "--inputs", "uEst", "--outputs", "yEst",
+    command = [sys.executable, "-m", "vehid.scenarios.cli", "identify", str(mat), "--inputs", "uEst", "--outputs", "yEst",
                "--dt", "4", "--validation-file", str(mat), "--method", "arx", "--json", "--quiet"]
     done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert done.returncode == 2

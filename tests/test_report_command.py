@@ -9,11 +9,11 @@ import h5py
 import numpy as np
 import pytest
 
-from identification import IOData, append_history, read_archive, run_group, write_archive, write_record, write_run
-from identification.metrics import fit_metrics
-from identification.modal import ModalModel, ModalStructure
-from scenarios.cli import main
-from scenarios.report import archive_figures, archive_table
+from vehid.identification import IOData, append_history, read_archive, run_group, write_archive, write_record, write_run
+from vehid.identification.metrics import fit_metrics
+from vehid.identification.modal import ModalModel, ModalStructure
+from vehid.scenarios.cli import main
+from vehid.scenarios.report import archive_figures, archive_table
 
 OUTPUTS = ("yaw_rate", "roll_angle")
 UNITS = ("rad/s", "rad")

@@ -10,17 +10,17 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter
 
-from identification.archive import open_archive, read_archive, update_archive
-from identification.errors import InputError
-from identification.iekf import IEKFOptions, identify_iekf
-from identification.iekf_archive import append_iekf_pass, read_iekf_run
-from identification.modal import ModalStructure
-from identification.residuals import nis_band, residual_tests
-from identification.storage import read_value
-from scenarios import calibration
-from scenarios.linear_example import make_data, true_model
-from scenarios.model_checks import model_residual_tests
-from scenarios.report import archive_figures
+from vehid.identification.archive import open_archive, read_archive, update_archive
+from vehid.identification.errors import InputError
+from vehid.identification.iekf import IEKFOptions, identify_iekf
+from vehid.identification.iekf_archive import append_iekf_pass, read_iekf_run
+from vehid.identification.modal import ModalStructure
+from vehid.identification.residuals import nis_band, residual_tests
+from vehid.identification.storage import read_value
+from vehid.scenarios import calibration
+from vehid.scenarios.linear_example import make_data, true_model
+from vehid.scenarios.model_checks import model_residual_tests
+from vehid.scenarios.report import archive_figures
 
 
 def test_white_residuals_pass_with_the_nominal_false_alarm_rate():
@@ -104,7 +104,7 @@ def _csv(tmp_path, seed=3):
 
 
 def _identify(*arguments):
-    return subprocess.run([sys.executable, "-m", "scenarios.cli", "identify", *arguments, "--quiet"],
+    return subprocess.run([sys.executable, "-m", "vehid.scenarios.cli", "identify", *arguments, "--quiet"],
                           capture_output=True, text=True, check=False)
 
 

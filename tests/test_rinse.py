@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from identification import DivergenceError, IOData
-from identification.iekf_pass import pack_covariance
-from identification.rinse import Assessment, RinseHooks, rinse
+from vehid.identification import DivergenceError, IOData
+from vehid.identification.iekf_pass import pack_covariance
+from vehid.identification.rinse import Assessment, RinseHooks, rinse
 
 DT = 0.01
 

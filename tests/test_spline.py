@@ -15,7 +15,7 @@ import pytest
 from scipy.interpolate import CubicSpline
 
 import identification.spline
-from identification import InputError, SplineBasis, covering_basis, resample
+from vehid.identification import InputError, SplineBasis, covering_basis, resample
 
 # Uniform sets exercise the symbolic fast path (one width), uneven ones the
 # general selection; p = 3 has no interior comparison at all, p = 9 the most.

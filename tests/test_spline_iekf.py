@@ -10,13 +10,13 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from identification import IEKFOptions, IOData, ModalModel, ModalStructure, identify_iekf
-from identification.errors import InputError
-from identification.filter_models import LinearModalFilterModel
-from identification.iekf_pass import compiled_pass, pack_covariance
-from identification.spline_iekf import SplineIEKFOptions, identify_spline_iekf
-from identification.spline_modal import SplineModalFilterModel, SplineModalModel, SplineModalStructure
-from scenarios.linear_example import make_data, true_model
+from vehid.identification import IEKFOptions, IOData, ModalModel, ModalStructure, identify_iekf
+from vehid.identification.errors import InputError
+from vehid.identification.filter_models import LinearModalFilterModel
+from vehid.identification.iekf_pass import compiled_pass, pack_covariance
+from vehid.identification.spline_iekf import SplineIEKFOptions, identify_spline_iekf
+from vehid.identification.spline_modal import SplineModalFilterModel, SplineModalModel, SplineModalStructure
+from vehid.scenarios.linear_example import make_data, true_model
 
 DT = 0.002
 

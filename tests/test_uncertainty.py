@@ -5,17 +5,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from identification.comparators import identify_with
-from identification.errors import InputError
-from identification.least_squares import least_squares
-from identification.modal import ModalModel, ModalStructure
-from identification.uncertainty import (
+from vehid.identification.comparators import identify_with
+from vehid.identification.errors import InputError
+from vehid.identification.least_squares import least_squares
+from vehid.identification.modal import ModalModel, ModalStructure
+from vehid.identification.uncertainty import (
     frequency_response,
     gauss_newton_covariance,
     model_uncertainty,
     sample_parameters,
 )
-from scenarios import calibration
+from vehid.scenarios import calibration
 
 
 def _model_with_covariance() -> ModalModel:
@@ -111,8 +111,8 @@ def _arx_record(seed: int):
     """The calibration system with equation-error noise ``e / A(q)`` (the ARX noise model), 20 s at 100 Hz."""
     from scipy.signal import lfilter
 
-    from identification.data import IOData
-    from identification.statespace import continuous_to_discrete
+    from vehid.identification.data import IOData
+    from vehid.identification.statespace import continuous_to_discrete
 
     clean_data, clean = calibration.make_record(seed, 0.0, duration=20.0)
     truth = calibration.true_model()
@@ -160,7 +160,7 @@ def test_intervals_are_calibrated_on_the_known_system_lean():
 
 def test_spline_bands_match_monte_carlo_sampling():
     """Spline coefficient and first-mode frequency/damping std against 1500 samples of the ordinates (relative error of a sampled std 1.8 %: 6 % is 3.3 of it)."""
-    from identification.spline_modal import SplineModalModel
+    from vehid.identification.spline_modal import SplineModalModel
 
     linear = _model_with_covariance().with_parameter_covariance(None)
     spline = SplineModalModel.from_linear(linear, 5, np.ones(2), np.ones(2), 0.01)
@@ -192,13 +192,13 @@ def test_identify_bootstrap_option_sets_n4sid_replicates_and_stdout_stays_one_js
     import subprocess
     import sys
 
-    from scenarios.linear_example import make_data
+    from vehid.scenarios.linear_example import make_data
 
     data, _ = make_data(1, outputs=(0,), duration=20.0)
     record = tmp_path / "one.csv"
     np.savetxt(record, np.column_stack([data.t, data.u[:, :1], data.y[:, :1]]), delimiter=",", header="t,u1,y1",
                comments="")
-    command = [sys.executable, "-m", "scenarios.cli", "identify", str(record), "--inputs", "u1", "--outputs", "y1",
+    command = [sys.executable, "-m", "vehid.scenarios.cli", "identify", str(record), "--inputs", "u1", "--outputs", "y1",
                "--order", "4", "--json", "--quiet"]
 
     def summary(*extra):

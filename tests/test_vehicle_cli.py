@@ -6,8 +6,8 @@ import sys
 
 import pytest
 
-from identification.data import read_hdf5
-from scenarios.cli import main
+from vehid.identification.data import read_hdf5
+from vehid.scenarios.cli import main
 
 
 def _run_json(capsys, argv):
@@ -99,7 +99,7 @@ def test_malformed_arguments_exit_2_with_one_line(capsys, argv, message):
 
 def test_bad_input_from_a_real_process(tmp_path):
     completed = subprocess.run(
-        [sys.executable, "-m", "scenarios.cli", "simulate", "--speed", "-2", "--json"],
+        [sys.executable, "-m", "vehid.scenarios.cli", "simulate", "--speed", "-2", "--json"],
         capture_output=True, text=True, check=False,
     )
     assert completed.returncode == 2

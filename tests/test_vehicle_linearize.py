@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from vehicle import baseline, simulate
-from vehicle.linearize import linearize
-from vehicle.manoeuvres import step
-from vehicle.parameters import GRAVITY, static_axle_loads
-from vehicle.tyre import cornering_stiffness
+from vehid.vehicle import baseline, simulate
+from vehid.vehicle.linearize import linearize
+from vehid.vehicle.manoeuvres import step
+from vehid.vehicle.parameters import GRAVITY, static_axle_loads
+from vehid.vehicle.tyre import cornering_stiffness
 
 SPEED = 20.0
 

@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from identification.errors import InputError
-from vehicle.manoeuvres import MANOEUVRES, band_limited_noise, identification, make_manoeuvre, step, validation
+from vehid.identification.errors import InputError
+from vehid.vehicle.manoeuvres import MANOEUVRES, band_limited_noise, identification, make_manoeuvre, step, validation
 
 
 @pytest.mark.parametrize("name", sorted(MANOEUVRES))

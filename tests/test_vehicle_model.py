@@ -5,10 +5,10 @@ import math
 import numpy as np
 import pytest
 
-from vehicle import baseline, build_vehicle_model, simulate, understeer
-from vehicle.manoeuvres import step
-from vehicle.parameters import GRAVITY, static_axle_loads
-from vehicle.tyre import cornering_stiffness
+from vehid.vehicle import baseline, build_vehicle_model, simulate, understeer
+from vehid.vehicle.manoeuvres import step
+from vehid.vehicle.parameters import GRAVITY, static_axle_loads
+from vehid.vehicle.tyre import cornering_stiffness
 
 SPEED = 20.0
 

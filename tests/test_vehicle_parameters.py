@@ -5,10 +5,10 @@ import json
 
 import pytest
 
-from identification.errors import InputError
-from vehicle import baseline, load_vehicle, named_vehicle, understeer
-from vehicle.parameters import describe, static_axle_loads
-from vehicle.tyre import cornering_stiffness, longitudinal_slip_stiffness
+from vehid.identification.errors import InputError
+from vehid.vehicle import baseline, load_vehicle, named_vehicle, understeer
+from vehid.vehicle.parameters import describe, static_axle_loads
+from vehid.vehicle.tyre import cornering_stiffness, longitudinal_slip_stiffness
 
 
 def _as_toml(params, skip=()):

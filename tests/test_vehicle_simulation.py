@@ -5,12 +5,12 @@ import math
 import numpy as np
 import pytest
 
-from identification.data import IOData
-from identification.errors import InputError
-from vehicle import baseline, linearize, simulate
-from vehicle.manoeuvres import identification, ramp
-from vehicle import build_vehicle_model
-from vehicle.simulation import BLOCK_SAMPLES, build_rk4_block, reference_outputs, rk4_simulator
+from vehid.identification.data import IOData
+from vehid.identification.errors import InputError
+from vehid.vehicle import baseline, linearize, simulate
+from vehid.vehicle.manoeuvres import identification, ramp
+from vehid.vehicle import build_vehicle_model
+from vehid.vehicle.simulation import BLOCK_SAMPLES, build_rk4_block, reference_outputs, rk4_simulator
 
 
 @pytest.fixture(scope="module")

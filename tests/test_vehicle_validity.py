@@ -14,11 +14,11 @@ import time
 import numpy as np
 import pytest
 
-from identification.data import read_hdf5
-from identification.errors import InputError, WorkbenchError
-from scenarios.cli import main
-from vehicle import baseline, build_vehicle_model, simulate
-from vehicle.manoeuvres import identification, step
+from vehid.identification.data import read_hdf5
+from vehid.identification.errors import InputError, WorkbenchError
+from vehid.scenarios.cli import main
+from vehid.vehicle import baseline, build_vehicle_model, simulate
+from vehid.vehicle.manoeuvres import identification, step
 
 
 def _cli(capsys, argv):
@@ -28,7 +28,7 @@ def _cli(capsys, argv):
 
 
 def _vehicle_file(tmp_path, text):
-    path = tmp_path / "vehicle.toml"
+    path = tmp_path / "vehid.vehicle.toml"
     path.write_text('base = "baseline"\n' + text)
     return str(path)
 
@@ -78,7 +78,7 @@ def test_a_step_too_long_for_rk4_is_refused_naming_one_that_works():
 def test_rk4_stability_bound_is_the_textbook_one():
     """|R(z)| = 1 where RK4's stability region meets the axes: z = -2.7853 and z = +/-2.8284j
     (Hairer & Wanner, Solving ODEs II, section IV.2), to the digits printed there."""
-    from vehicle.validity import largest_stable_step, rk4_amplification
+    from vehid.vehicle.validity import largest_stable_step, rk4_amplification
 
     assert rk4_amplification(np.array([-2.7853])) == pytest.approx(1.0, abs=1e-4)
     assert rk4_amplification(np.array([2.8284j])) == pytest.approx(1.0, abs=1e-4)
@@ -98,14 +98,13 @@ def test_a_record_too_large_for_memory_is_refused_before_any_work(capsys):
 def test_memory_estimate_against_the_available_memory(monkeypatch):
     """With 1 MB available a 30 s record (15 001 samples x 35 columns x 8 bytes x 3 copies = 12.6 MB) is refused
     before the model is trimmed."""
-    import vehicle.simulation as simulation
-    import vehicle.validity as validity
-
+    import vehid.vehicle.simulation as simulation
+    import vehid.vehicle.validity as validity
     monkeypatch.setattr(validity, "available_memory_bytes", lambda: 1_000_000)
     monkeypatch.setattr(simulation, "build_vehicle_model", lambda *_: pytest.fail("work started"))
     with pytest.raises(InputError, match="0.0117 GiB"):
         simulate(baseline(), np.zeros(15001))
-    assert simulation.check_record_memory.__module__ == "vehicle.simulation"
+    assert simulation.check_record_memory.__module__ == "vehid.vehicle.simulation"
 
 
 # --- during the run: the physical envelope --------------------------------------------------------
@@ -152,9 +151,8 @@ def test_an_exploding_integration_is_stopped(monkeypatch):
     """The issue's 60 m/s at 100 Hz with both up-front checks (speed range, RK4 step) switched off:
     the integration explodes (it reached 3e49), and the envelope stops it at the first sample
     outside (a wheel's slip ratio, 0.75 s in), keeping only finite values before it."""
-    import vehicle.model as model
-    import vehicle.simulation as simulation
-
+    import vehid.vehicle.model as model
+    import vehid.vehicle.simulation as simulation
     monkeypatch.setattr(simulation, "check_rk4_step", lambda *_: None)
     monkeypatch.setattr(model, "check_speed_range", lambda speed: speed)
     manoeuvre = identification(seed=0, dt=0.01)
@@ -166,7 +164,7 @@ def test_an_exploding_integration_is_stopped(monkeypatch):
 
 
 def test_envelope_scan_names_the_first_sample_and_prefers_non_finite():
-    from vehicle.validity import first_violation
+    from vehid.vehicle.validity import first_violation
 
     model = build_vehicle_model(baseline())
     states = np.tile(model.trim(20.0), (6, 1))
@@ -188,7 +186,7 @@ def test_envelope_scan_names_the_first_sample_and_prefers_non_finite():
 
 def test_the_default_manoeuvres_stay_inside_the_envelope():
     """The study's records (identification, validation, the ramp past the grip limit) are valid runs."""
-    from vehicle.manoeuvres import ramp, validation
+    from vehid.vehicle.manoeuvres import ramp, validation
 
     for manoeuvre in (identification(seed=0), validation(seed=0), ramp()):
         assert simulate(baseline(), manoeuvre).n_samples == manoeuvre.n_samples

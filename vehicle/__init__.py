@@ -2,15 +2,15 @@
 
 Typical use::
 
-    from vehicle import baseline, simulate, linearize
-    from vehicle.manoeuvres import identification
+    from vehid.vehicle import baseline, simulate, linearize
+    from vehid.vehicle.manoeuvres import identification
 
     record = simulate(baseline(), identification(seed=0))   # IOData, 30 s at 500 Hz
     handling = record.select_outputs(["lateral_acceleration", "yaw_rate", "roll_angle"])
     modes = linearize(baseline(), speed=20.0).modes
 
 A run that leaves the model's physical envelope (:data:`ENVELOPE`) raises
-``identification.errors.SimulationError`` with the record up to that point;
+``vehid.identification.errors.SimulationError`` with the record up to that point;
 speeds outside ``MIN_SPEED``-``MAX_SPEED`` (m/s) are input errors.
 """
 

@@ -16,7 +16,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from identification.errors import InputError
+from vehid.identification.errors import InputError
 
 from .simulation import DEFAULT_DT, check_record_memory, check_steer
 

@@ -3,7 +3,7 @@
 A rigid body free in six degrees of freedom rides on four massless tyre nodes
 through quarter-car struts (Best & Bogdanski, section 6). Lateral and
 longitudinal tyre forces come from the combined-slip, load-dependent Magic
-Formula (:mod:`vehicle.tyre`) evaluated on first-order relaxation-lagged slips;
+Formula (:mod:`vehid.vehicle.tyre`) evaluated on first-order relaxation-lagged slips;
 each wheel spins; a PI controller holds the forward speed with the drive torque
 split equally between the front wheels.
 
@@ -51,7 +51,7 @@ from typing import Sequence
 import casadi as ca
 import numpy as np
 
-from identification.errors import DivergenceError, InputError
+from vehid.identification.errors import DivergenceError, InputError
 
 from .parameters import GRAVITY, VehicleParameters, static_axle_loads
 from .tyre import combined_forces
@@ -271,7 +271,7 @@ def positive_number(value: float, name: str, unit: str) -> float:
 
 def check_speed(speed: float) -> float:
     """Return ``speed`` (m/s) as a float, or raise InputError if it is not positive and finite
-    or lies outside the model's valid range (:data:`vehicle.validity.MIN_SPEED` to ``MAX_SPEED``)."""
+    or lies outside the model's valid range (:data:`vehid.vehicle.validity.MIN_SPEED` to ``MAX_SPEED``)."""
     return check_speed_range(positive_number(speed, "speed", "m/s"))
 
 

@@ -22,8 +22,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
-from identification.errors import InputError
-from identification.storage import register_codec
+from vehid.identification.errors import InputError
+from vehid.identification.storage import register_codec
 
 __all__ = [
     "ChassisParameters",

@@ -3,7 +3,7 @@
 The fixed-step path takes one classical Runge-Kutta step per sample. The step
 is a CasADi function lifted over a block of samples with ``mapaccum``,
 generated to C and compiled once per (vehicle, dt) with
-:func:`identification.compiled.compile_function` (cached on disk), so that
+:func:`vehid.identification.compiled.compile_function` (cached on disk), so that
 no Python runs per time step: a record is a handful of calls, one per block.
 
 At 20 m/s the fastest modes sit near 190 rad/s, so RK4 at 500 Hz
@@ -19,14 +19,14 @@ it checks (5.7e-9 against 2.3e-6 m/s^2 over the 30 s identification record;
 ``benchmarks/vehicle_sim.py``).
 
 Every record is checked against the physical envelope of
-:mod:`vehicle.validity` block by block as it is computed; the first sample
+:mod:`vehid.vehicle.validity` block by block as it is computed; the first sample
 outside ends the run with a :class:`~identification.errors.SimulationError`
 that carries the record up to it. The speed, the step and the memory a record
 needs are checked before any work.
 
 Timing convention: ``u[k]`` is held on the interval that ends at ``t[k]``, so
 ``x[k] = step(x[k-1], u[k])``; the record starts at the exact trim of the
-first steer sample (zero in every manoeuvre of :mod:`vehicle.manoeuvres`).
+first steer sample (zero in every manoeuvre of :mod:`vehid.vehicle.manoeuvres`).
 """
 
 from __future__ import annotations
@@ -39,9 +39,9 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from identification.compiled import compile_function
-from identification.data import IOData
-from identification.errors import InputError, SimulationError
+from vehid.identification.compiled import compile_function
+from vehid.identification.data import IOData
+from vehid.identification.errors import InputError, SimulationError
 
 from .linearize import linearization_function
 from .model import DEFAULT_SPEED, MAX_STEER, VehicleModel, build_vehicle_model, check_speed, positive_number
@@ -240,7 +240,7 @@ def simulate(
         The vehicle, or a name (``baseline``, ``understeer``) or TOML/JSON file.
     steer : array_like (N,) or (N, 1), Manoeuvre or IOData
         Road-wheel steer angle (rad), positive left. A
-        :class:`vehicle.manoeuvres.Manoeuvre` gives its steer, dt and metadata;
+        :class:`vehid.vehicle.manoeuvres.Manoeuvre` gives its steer, dt and metadata;
         an IOData its input named ``steer`` (or its only input) and its time base.
     dt : float, optional
         Sample interval (s); default that of the IOData, else 1/500 s.
@@ -267,12 +267,12 @@ def simulate(
     ------
     InputError
         Before any work: on non-finite steer, steer beyond +/-30 deg, a speed
-        outside the model's valid range (:mod:`vehicle.validity`), a
+        outside the model's valid range (:mod:`vehid.vehicle.validity`), a
         non-positive dt or one too long for RK4 at this speed, or a record
         too large for the memory available.
     SimulationError
         If the states leave the physical envelope of
-        :data:`vehicle.validity.ENVELOPE` (roll, pitch, sideslip, tyre slip,
+        :data:`vehid.vehicle.validity.ENVELOPE` (roll, pitch, sideslip, tyre slip,
         speed departure, heave, non-finite or exploding values): the message
         names the quantity, its value and the time; ``partial`` holds the
         record up to that sample (meta ``partial`` and ``stop_reason``).

@@ -9,7 +9,7 @@ stated here once (and in ``docs/conventions.md``):
   step against the fastest modes at trim (:func:`check_rk4_step`), and the
   memory a record will take (:func:`check_memory`). The vehicle's own static
   stability is checked when its parameters are built
-  (:mod:`vehicle.parameters`).
+  (:mod:`vehid.vehicle.parameters`).
 * During the run, on the states (:data:`ENVELOPE`, :func:`first_violation`):
   roll, pitch, sideslip, lateral and longitudinal tyre slip, departure from the
   reference speed, heave, and non-finite or exploding values. The simulator
@@ -27,7 +27,7 @@ from typing import Sequence
 
 import numpy as np
 
-from identification.errors import InputError
+from vehid.identification.errors import InputError
 
 __all__ = [
     "MIN_SPEED",

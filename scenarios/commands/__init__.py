@@ -1,1 +1,1 @@
-"""One module per ``vehid`` subcommand, discovered by :mod:`scenarios.cli`."""
+"""One module per ``vehid`` subcommand, discovered by :mod:`vehid.scenarios.cli`."""

@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import argparse
 
-from scenarios.benchmarking import record_figures
-from scenarios.iekf_benchmark import measure_iekf, report_text
+from vehid.scenarios.benchmarking import record_figures
+from vehid.scenarios.iekf_benchmark import measure_iekf, report_text
 
 NAME = "iekf"
 GROUP = "bench"

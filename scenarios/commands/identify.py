@@ -51,25 +51,25 @@ from pathlib import Path
 
 import numpy as np
 
-from identification.archive import (open_archive, read_records, run_group, update_archive, write_archive,
+from vehid.identification.archive import (open_archive, read_records, run_group, update_archive, write_archive,
                                     write_run)
-from identification.archive_safety import archive_lock, check_output_target
-from identification.comparators import N4SID_BOOTSTRAP
-from identification.errors import InputError
-from identification.filter_models import DISCRETIZATIONS
-from identification.iekf import identify_iekf
-from identification.iekf_archive import Checkpointer, read_iekf_run
-from identification.iekf_pass import COVARIANCE_FORMS
-from identification.modal import C_PATTERNS, ModalModel
-from identification.multirecord import pooled_simulation_fit
-from identification.preparation import prepare_validation, read_record
-from identification.storage import write_value
-from scenarios import identify_workflow as workflow
-from scenarios.data_options import (RECORD_PREFIX, archive_records, archived_preparation, record_series,
+from vehid.identification.archive_safety import archive_lock, check_output_target
+from vehid.identification.comparators import N4SID_BOOTSTRAP
+from vehid.identification.errors import InputError
+from vehid.identification.filter_models import DISCRETIZATIONS
+from vehid.identification.iekf import identify_iekf
+from vehid.identification.iekf_archive import Checkpointer, read_iekf_run
+from vehid.identification.iekf_pass import COVARIANCE_FORMS
+from vehid.identification.modal import C_PATTERNS, ModalModel
+from vehid.identification.multirecord import pooled_simulation_fit
+from vehid.identification.preparation import prepare_validation, read_record
+from vehid.identification.storage import write_value
+from vehid.scenarios import identify_workflow as workflow
+from vehid.scenarios.data_options import (RECORD_PREFIX, archive_records, archived_preparation, record_series,
                                     records_summary, register_data_options, save_model, settings_from_args,
                                     write_record_series)
-from scenarios.model_checks import uncertainty_lines, uncertainty_summary
-from scenarios.progress import Progress
+from vehid.scenarios.model_checks import uncertainty_lines, uncertainty_summary
+from vehid.scenarios.progress import Progress
 
 NAME = "identify"
 GROUP = None
@@ -297,7 +297,7 @@ def _run_order_search(args, plan, options) -> tuple[dict, str]:
                "seconds": sum(row["seconds"] for row in rows)}
     archive_path = Path(args.out) if args.out else None
     if archive_path is not None:
-        from identification.iekf_archive import write_iekf_run
+        from vehid.identification.iekf_archive import write_iekf_run
 
         with write_archive(archive_path, kind="identification", config=options, seeds=[]) as archive:
             _archive_plan(archive, plan)
@@ -306,7 +306,7 @@ def _run_order_search(args, plan, options) -> tuple[dict, str]:
 
 
 def _run_comparator(args: argparse.Namespace, plan) -> tuple[dict, str]:
-    from identification.comparators import identify_with
+    from vehid.identification.comparators import identify_with
 
     outcomes = {}
 

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import argparse
 
-from vehicle import named_vehicle
-from vehicle.linearize import linearize
+from vehid.vehicle import named_vehicle
+from vehid.vehicle.linearize import linearize
 
 NAME = "linearize"
 GROUP = None

@@ -17,11 +17,11 @@ import argparse
 import math
 from pathlib import Path
 
-from identification.archive import read_archive
-from identification.archive_safety import check_output_folder, replacing_directory
-from identification.errors import InputError
-from scenarios.paths import results_directory
-from scenarios.report import archive_figures, archive_table, markdown_table, write_report
+from vehid.identification.archive import read_archive
+from vehid.identification.archive_safety import check_output_folder, replacing_directory
+from vehid.identification.errors import InputError
+from vehid.scenarios.paths import results_directory
+from vehid.scenarios.report import archive_figures, archive_table, markdown_table, write_report
 
 NAME = "report"
 GROUP = None
@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     archive = read_archive(path)
     check_output_folder(_output_folder(path, args.out))  # before drawing: a file in its place, no permission
     if archive.kind == "handling-study":
-        from scenarios.handling_report import write_handling_report
+        from vehid.scenarios.handling_report import write_handling_report
 
         folder = _output_folder(path, args.out)
         with replacing_directory(folder) as partial:

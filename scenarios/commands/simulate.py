@@ -17,10 +17,10 @@ from pathlib import Path
 
 import numpy as np
 
-from identification.archive_safety import check_output_target
-from identification.errors import InputError, SimulationError
-from scenarios.paths import results_directory
-from vehicle import MANOEUVRES, make_manoeuvre, named_vehicle, simulate
+from vehid.identification.archive_safety import check_output_target
+from vehid.identification.errors import InputError, SimulationError
+from vehid.scenarios.paths import results_directory
+from vehid.vehicle import MANOEUVRES, make_manoeuvre, named_vehicle, simulate
 
 NAME = "simulate"
 GROUP = None

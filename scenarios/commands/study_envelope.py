@@ -17,11 +17,11 @@ from __future__ import annotations
 
 import argparse
 
-from scenarios.envelope import EXECUTORS, EnvelopeConfig, parse_speeds, run_campaign
-from scenarios.commands.study_handling import add_filter_options
-from scenarios.handling_study import parse_orders
-from scenarios.progress import Progress
-from identification.errors import InputError
+from vehid.scenarios.envelope import EXECUTORS, EnvelopeConfig, parse_speeds, run_campaign
+from vehid.scenarios.commands.study_handling import add_filter_options
+from vehid.scenarios.handling_study import parse_orders
+from vehid.scenarios.progress import Progress
+from vehid.identification.errors import InputError
 
 NAME = "envelope"
 GROUP = "study"
@@ -89,7 +89,7 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
             progress.close()
     text = result.text
     if not args.no_report:
-        from scenarios.envelope_report import write_envelope_report
+        from vehid.scenarios.envelope_report import write_envelope_report
 
         files = write_envelope_report(result, result.archive.with_suffix(""))
         text += f"\nwrote {len(files)} report files to {result.archive.with_suffix('')}"

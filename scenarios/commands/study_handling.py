@@ -22,16 +22,16 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from identification.archive import open_archive
-from identification.archive_safety import archive_lock, check_output_folder, check_output_target, replacing_directory
-from identification.errors import InputError
-from identification.iekf import IEKFOptions
-from identification.spline_iekf import SplineIEKFOptions
-from scenarios.handling_resume import StudyCheckpoint, read_progress
-from scenarios.handling_study import (OUTPUTS, PAPER, HandlingConfig, HandlingResult, archive_path, make_records,
+from vehid.identification.archive import open_archive
+from vehid.identification.archive_safety import archive_lock, check_output_folder, check_output_target, replacing_directory
+from vehid.identification.errors import InputError
+from vehid.identification.iekf import IEKFOptions
+from vehid.identification.spline_iekf import SplineIEKFOptions
+from vehid.scenarios.handling_resume import StudyCheckpoint, read_progress
+from vehid.scenarios.handling_study import (OUTPUTS, PAPER, HandlingConfig, HandlingResult, archive_path, make_records,
                                       parse_orders, planned_passes, run_study, spline_options, study_linear_options,
                                       write_study_archive)
-from scenarios.progress import Progress
+from vehid.scenarios.progress import Progress
 
 NAME = "handling"
 GROUP = "study"
@@ -136,7 +136,7 @@ def _study(args, config, path, records, finished, checkpoint) -> tuple[dict, str
         summary["resumed_orders"] = sorted(finished)
     text = text_of(result) + f"\nwrote {path}"
     if not args.no_report:
-        from scenarios.handling_report import write_handling_report
+        from vehid.scenarios.handling_report import write_handling_report
 
         folder = path.with_suffix("")
         with replacing_directory(folder) as partial:  # a kill leaves the old report or the new, never a mixture
@@ -148,7 +148,7 @@ def _study(args, config, path, records, finished, checkpoint) -> tuple[dict, str
 
 
 def summary_of(result: HandlingResult) -> dict[str, Any]:
-    """The study's JSON summary (before :func:`scenarios.cli.to_jsonable`): its keys are a public contract."""
+    """The study's JSON summary (before :func:`vehid.scenarios.cli.to_jsonable`): its keys are a public contract."""
     return {
         "table": list(result.table),
         "chosen_order": result.assessment.chosen_order,
@@ -175,7 +175,7 @@ def _percent(value: float | None) -> str:
 
 def text_of(result: HandlingResult) -> str:
     """The study's text summary: Table 5, the order chosen, the modes beside the vehicle's."""
-    from scenarios.report import format_eigenvalues
+    from vehid.scenarios.report import format_eigenvalues
 
     config, linear = result.config, result.config.linear_options
     lines = [

@@ -13,12 +13,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from identification.archive_safety import archive_lock, check_output_target
-from identification.filter_models import DISCRETIZATIONS
-from identification.iekf_pass import COVARIANCE_FORMS
-from scenarios.linear_example import CASES, planned_passes, run_case, write_archive_for
-from scenarios.paths import results_directory
-from scenarios.progress import Progress
+from vehid.identification.archive_safety import archive_lock, check_output_target
+from vehid.identification.filter_models import DISCRETIZATIONS
+from vehid.identification.iekf_pass import COVARIANCE_FORMS
+from vehid.scenarios.linear_example import CASES, planned_passes, run_case, write_archive_for
+from vehid.scenarios.paths import results_directory
+from vehid.scenarios.progress import Progress
 
 NAME = "linear-example"
 GROUP = "study"

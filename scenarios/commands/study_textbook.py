@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from scenarios.textbook import run_all
+from vehid.scenarios.textbook import run_all
 
 NAME = "textbook"
 GROUP = "study"
