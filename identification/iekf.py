@@ -58,6 +58,7 @@ __all__ = [
     "START_VALUES",
     "START_CHOICES",
     "TIMESCALES",
+    "start_structure",
 ]
 
 #: Named start values: (sigma, omega, omega spread between pairs).
@@ -201,6 +202,27 @@ def _scales(data: IOData | tuple[IOData, ...], normalize: bool) -> tuple[np.ndar
     samples = sum(record.n_samples for record in records)
     return tuple(np.sqrt(np.sum([np.sum(getattr(record, key) ** 2, axis=0) for record in records], axis=0) / samples)
                  for key in ("u", "y"))
+
+
+def start_structure(data: IOData | tuple[IOData, ...], structure: ModalStructure,
+                    options: IEKFOptions | None = None) -> ModalStructure:
+    """The structure of ``structure``'s order whose complex pairs and real poles are the data start's.
+
+    The data start (``options.start`` ``"data"``) is found as
+    :func:`identify_iekf` finds it, each subspace candidate keeping its own
+    eigenvalues (complex pairs stay pairs, real eigenvalues become real poles,
+    modes tied to the outputs in turn); the best candidate's structure is
+    returned. Other starts have no eigenvalues of their own: ``structure``
+    is returned unchanged.
+    """
+    options = options or IEKFOptions()
+    if options.start != "data":
+        return structure
+    input_scale, output_scale = _scales(data, options.normalize)
+    first = as_records(data)[0]
+    found = data_start(first.u / input_scale, first.y / output_scale, structure, method="data",
+                       stable=not options.allow_unstable, free_modes=True)
+    return found.model.structure
 
 
 def _settle_states(state, u, y, structure: ModalStructure, run_pass, q, r, dt: float):

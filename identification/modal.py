@@ -125,10 +125,14 @@ class ModalStructure:
         fixed 1s, a real pole by one, outputs assigned round-robin.
         With one output every C entry is fixed (``C = [1 1 ... 1]``).
         """
-        n = _positive_int(n, "order n")
-        pairs, real = divmod(n, 2)
-        modes = range(pairs + real)
-        return cls._tied(pairs, real, n_u, n_y, [mode % n_y for mode in modes])
+        pairs, real = divmod(_positive_int(n, "order n"), 2)
+        return cls.with_modes(pairs, real, n_u, n_y)
+
+    @classmethod
+    def with_modes(cls, n_complex_pairs: int, n_real: int, n_u: int, n_y: int) -> "ModalStructure":
+        """These numbers of complex pairs and real poles, each mode tied to the next output in turn (as :meth:`default`)."""
+        modes = range(n_complex_pairs + n_real)
+        return cls._tied(n_complex_pairs, n_real, n_u, n_y, [mode % n_y for mode in modes])
 
     @classmethod
     def from_pattern(cls, pattern: str, n: int, n_u: int, n_y: int) -> "ModalStructure":

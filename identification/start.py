@@ -195,12 +195,20 @@ def _simulation_fit(model: ModalModel, u: np.ndarray, y: np.ndarray, *, estimate
 
 
 def _subspace_start(u: np.ndarray, y: np.ndarray, structure: ModalStructure, stable: bool,
-                    block_rows: int | None = None) -> DataStart:
+                    block_rows: int | None = None, free_modes: bool = False) -> DataStart:
     from .statespace import discrete_to_continuous, to_modal
     from .subspace import estimate_subspace
 
     fit = estimate_subspace((u, y), order=structure.n, block_rows=block_rows)
     discrete = np.linalg.eigvals(fit.A)
+    magnitude = np.maximum(np.abs(discrete), 1e-12)
+    negative = (np.abs(discrete.imag) <= 1e-9 * magnitude) & (discrete.real < 0)
+    # A negative real discrete pole (a sign flip every sample, mostly noise) has no continuous
+    # counterpart; its decay rate alone is kept, as a real pole.
+    continuous = np.where(negative, np.log(magnitude).astype(complex), np.log(discrete.astype(complex)))
+    if free_modes:
+        pairs = int(np.sum(continuous.imag > 1e-9 * np.abs(continuous)))
+        structure = ModalStructure.with_modes(pairs, structure.n - 2 * pairs, structure.n_u, structure.n_y)
     note = ""
     try:
         A, B, C, D = discrete_to_continuous(fit.A, fit.B, fit.C, fit.D, 1.0, hold="foh")
@@ -213,18 +221,13 @@ def _subspace_start(u: np.ndarray, y: np.ndarray, structure: ModalStructure, sta
             return DataStart(model, "subspace")
     except InputError as exc:
         note = str(exc)
-    magnitude = np.maximum(np.abs(discrete), 1e-12)
-    negative = (np.abs(discrete.imag) <= 1e-9 * magnitude) & (discrete.real < 0)
-    # A negative real discrete pole (a sign flip every sample, mostly noise) has no continuous
-    # counterpart; its decay rate alone is kept, as a real pole.
-    continuous = np.where(negative, np.log(magnitude).astype(complex), np.log(discrete.astype(complex)))
     modes = place_eigenvalues(continuous, structure, stable=stable)
     model = fit_input_gains(structure, modes, u, y)
     return DataStart(model, "subspace eigenvalues", note)
 
 
 def data_start(u: np.ndarray, y: np.ndarray, structure: ModalStructure, *, method: str = "data",
-               stable: bool = True) -> DataStart:
+               stable: bool = True, free_modes: bool = False) -> DataStart:
     """A start model for ``structure`` from normalised inputs ``u`` (N, n_u) and outputs ``y`` (N, n_y).
 
     Parameters
@@ -236,6 +239,11 @@ def data_start(u: np.ndarray, y: np.ndarray, structure: ModalStructure, *, metho
         See the module docstring.
     stable : bool
         Reflect unstable start modes into the left half-plane.
+    free_modes : bool
+        Let each subspace candidate keep its own numbers of complex pairs and
+        real poles (same order, modes tied to outputs as
+        :meth:`ModalStructure.with_modes`); the returned model's structure is
+        the best candidate's.
 
     Returns
     -------
@@ -257,7 +265,7 @@ def data_start(u: np.ndarray, y: np.ndarray, structure: ModalStructure, *, metho
     default_rows = max(2 * structure.n, structure.n + 1)
     for rows in sorted({default_rows, max(default_rows, 10), max(default_rows, 25)}):
         try:
-            candidates.append(_subspace_start(u, y, structure, stable, block_rows=rows))
+            candidates.append(_subspace_start(u, y, structure, stable, block_rows=rows, free_modes=free_modes))
         except (WorkbenchError, np.linalg.LinAlgError) as exc:
             notes.append(f"subspace with {rows} block rows failed ({exc})")
     fits = [_simulation_fit(candidate.model, u, y, estimate_state=not stable) for candidate in candidates]

@@ -180,14 +180,7 @@ def modal_structure_for(A: Any, n_u: int, n_y: int) -> ModalStructure:
     A = finite_matrix("A", A)
     values = np.linalg.eigvals(A)
     pairs, real = _split_modes(values)
-    default = ModalStructure.default(A.shape[0], n_u, n_y)
-    if len(pairs) == default.n_complex_pairs:
-        return default
-    fixed = []
-    for mode in range(len(pairs) + len(real)):
-        states = (2 * mode, 2 * mode + 1) if mode < len(pairs) else (len(pairs) + mode,)
-        fixed.extend((mode % n_y, state) for state in states)
-    return ModalStructure(len(pairs), len(real), n_u, n_y, tuple(fixed))
+    return ModalStructure.with_modes(len(pairs), len(real), n_u, n_y)
 
 
 def to_modal(A: Any, B: Any, C: Any, D: Any, structure: ModalStructure | None = None, *,

@@ -42,7 +42,8 @@ import numpy as np
 
 from vehid.identification.data import IOData
 from vehid.identification.errors import DivergenceError, InputError, StrictWarningsError, WorkbenchError
-from vehid.identification.iekf import INVARIANT_P, START_CHOICES, TIMESCALES, IEKFOptions, identify_iekf
+from vehid.identification.iekf import (INVARIANT_P, START_CHOICES, TIMESCALES, IEKFOptions, identify_iekf,
+                                      start_structure)
 from vehid.identification.discrete import DiscreteModel
 from vehid.identification.modal import ModalModel, ModalStructure
 from vehid.identification.validation import INITIAL_STATES, Scores, default_horizon, score, split_holdout
@@ -682,8 +683,18 @@ def start_of(result: Any, records: tuple[IOData, ...]) -> tuple[float | None, bo
     return float(np.mean(fit)), moved
 
 
-def structure_for(args: argparse.Namespace, order: int, data: IOData) -> ModalStructure:
-    return ModalStructure.from_pattern(args.pattern, order, data.n_u, data.n_y)
+def structure_for(args: argparse.Namespace, order: int, plan: Plan, options: IEKFOptions) -> ModalStructure:
+    """The model structure of an IEKF run: ``--pattern`` where given.
+
+    Without it, a data start sets the modes: its complex pairs stay pairs and its real eigenvalues
+    become real poles (:func:`vehid.identification.iekf.start_structure`), each mode tied to the next output
+    in turn; other starts take the default pattern (complex pairs first).
+    """
+    first = plan.records[0]
+    structure = ModalStructure.from_pattern(args.pattern or "default", order, first.n_u, first.n_y)
+    if args.pattern is not None:
+        return structure
+    return start_structure(plan.estimation, structure, options)
 
 
 def last_good_on_divergence(run: Callable[[], Any]) -> tuple[Any, str | None]:
@@ -703,7 +714,7 @@ def last_good_on_divergence(run: Callable[[], Any]) -> tuple[Any, str | None]:
 def run_iekf_order(args: argparse.Namespace, plan: Plan, options: IEKFOptions, order: int
                    ) -> tuple[ModalModel, dict[str, Any]]:
     """One IEKF run of an order search (no checkpoints, p tuned per order): its model and what the summary needs."""
-    structure = structure_for(args, order, plan.records[0])
+    structure = structure_for(args, order, plan, options)
     tuning = tune_p(args, plan, options, structure) if tunes_p(args) else given_p(options)
     options = dataclasses.replace(options, p=tuning.p)
     result, divergence = last_good_on_divergence(

@@ -59,7 +59,7 @@ from vehid.identification.filter_models import DISCRETIZATIONS
 from vehid.identification.iekf import identify_iekf
 from vehid.identification.iekf_archive import Checkpointer, read_iekf_run
 from vehid.identification.iekf_pass import COVARIANCE_FORMS
-from vehid.identification.modal import C_PATTERNS, ModalModel, ModalStructure
+from vehid.identification.modal import C_PATTERNS, ModalModel
 from vehid.identification.multirecord import pooled_simulation_fit
 from vehid.identification.preparation import prepare_validation, read_record
 from vehid.identification.storage import write_value
@@ -80,7 +80,9 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--inputs", help="comma-separated input column names")
     parser.add_argument("--outputs", help="comma-separated output column names")
     parser.add_argument("--order", default="4", help="model order n, a range such as 2-8, or auto (default 4)")
-    parser.add_argument("--pattern", default="default", choices=C_PATTERNS, help="C pattern (default: pairs tied to outputs in turn)")
+    parser.add_argument("--pattern", choices=C_PATTERNS,
+                        help="C pattern, complex pairs first (without it: with --start data the start model's complex "
+                             "pairs and real poles, else the default pattern; either way modes tied to outputs in turn)")
     parser.add_argument("--method", default="iekf", choices=("iekf", "arx", "rls", "n4sid", "output-error"),
                         help="estimator: the IEKF (default) or a classical comparator on the same data")
     parser.add_argument("--passes", type=int, default=None,
@@ -168,8 +170,7 @@ def _identify(args: argparse.Namespace) -> tuple[dict, str]:
         options = workflow.iekf_options(args, DEFAULT_PASSES)
         if len(plan.orders) > 1:
             return _run_order_search(args, plan, options)
-        first = plan.records[0]
-        structure = ModalStructure.from_pattern(args.pattern, plan.orders[0], first.n_u, first.n_y)
+        structure = workflow.structure_for(args, plan.orders[0], plan, options)
         tuning = workflow.tune_p(args, plan, options, structure) if workflow.tunes_p(args) else workflow.given_p(options)
         options = dataclasses.replace(options, p=tuning.p)
         archive_path = Path(args.out) if args.out else None
