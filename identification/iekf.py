@@ -212,12 +212,10 @@ def start_structure(data: IOData | tuple[IOData, ...], structure: ModalStructure
 def _settle_states(state, u, y, structure: ModalStructure, run_pass, q, r, dt: float):
     """Run the head of a record with the parameters held, so that its unknown start state settles.
 
-    A record of a campaign need not start at rest. Over its first five time
-    constants of the slowest mode (at most a quarter of the record) the
-    filter estimates the states alone, from a prior as large as the output
-    power, with the parameter covariance set aside (so the gain leaves them
-    unchanged); then the parameters' covariance is restored, uncorrelated
-    with the settled states, and the rest of the record rinses as usual.
+    Over five time constants of the slowest mode (at most a quarter of the
+    record) the filter estimates the states alone, from a prior as large as
+    the output power; then the parameters' covariance is restored,
+    uncorrelated with the settled states.
     """
     n = structure.n
     m = n + structure.n_parameters

@@ -77,7 +77,6 @@ def _spread(jacobian: np.ndarray, covariance: np.ndarray | None) -> np.ndarray:
     return np.sqrt(np.maximum(variance, 0.0))
 
 
-# ------------------------------------------------------------- symbolic maps
 @functools.lru_cache(maxsize=64)
 def _mode_function(structure: Any) -> ca.Function:
     """theta -> [re, im, frequency (Hz), damping] of every mode, and their exact Jacobian."""
@@ -129,7 +128,6 @@ def _response_function(structure: Any) -> ca.Function:
     )
 
 
-# ------------------------------------------------------------------ results
 @dataclass(frozen=True, eq=False)
 class ModeEstimate:
     """One mode's eigenvalue, natural frequency and damping with their standard deviations.
@@ -320,7 +318,6 @@ def sample_parameters(model: Any, count: int, rng: np.random.Generator) -> np.nd
     return model.parameters + rng.standard_normal((count, values.size)) @ root.T
 
 
-# ------------------------------------------------------ covariances of estimators
 def iekf_parameter_covariance(
     structure: Any,
     P_parameters: np.ndarray,
