@@ -1,65 +1,35 @@
 """Classical identification methods as comparators beside the IEKF, all ending in the same modal form.
 
-Every comparator takes an :class:`~identification.data.IOData` record and a
-model order and returns a continuous-time
-:class:`~identification.modal.ModalModel` of the workbench's modal structure
-(:func:`~identification.statespace.to_modal`), so that all methods are scored
-alike: :func:`identify_with` times the method, simulates its model exactly
-(``ModalModel.simulate_outputs(u, dt, method="foh")``, inputs linear between samples)
-and computes :func:`~identification.metrics.fit_metrics` against the record.
-
-Methods (:data:`COMPARATORS`, a registry ``name -> function``):
+Every comparator takes one :class:`~identification.data.IOData` record or
+several of one ``dt`` and a model order and returns a continuous-time
+:class:`~identification.modal.ModalModel` (or, where a discrete pole lies on
+the negative real axis and no continuous equivalent exists, the labelled
+:class:`~identification.discrete.DiscreteModel`), so that
+:func:`identify_with` scores all methods alike. Methods (:data:`COMPARATORS`;
+more join with :func:`register_comparator`):
 
 ``arx``
-    Batch least squares of an ARX model per output (``na = order``,
-    ``nb = order + 1`` lags from 0, since a first-order hold gives direct
-    feed-through), realised in observer form, converted to continuous time
-    for a first-order hold (:func:`~identification.statespace.discrete_to_continuous`);
-    with several outputs the per-output realisations are stacked and reduced
-    to ``order`` states by balanced truncation.
+    Least-squares ARX per output (``na = order``, ``nb = order + 1`` lags
+    from 0: a first-order hold has direct feed-through), realised, converted
+    to continuous time for a first-order hold; several outputs' realisations
+    stacked and reduced to ``order`` states by balanced truncation.
 ``rls``
-    The same ARX model by recursive least squares (plain form, forgetting
-    1 by default), started from a batch fit of the first ``10 n_p`` samples
-    (appendix A.2.3, Remark 2). The recursion runs on differenced and
-    normalised regressors (``y(k-1), y(k-1) - y(k-2), ...``; an invertible
-    transformation, undone at the end): at 500 Hz the raw lagged regressors
-    are nearly collinear (condition number 3e8), which the plain covariance
-    update cannot carry in double precision.
+    The same ARX model by recursive least squares, started from a batch fit
+    of the first ``10 n_p`` samples (appendix A.2.3, Remark 2), on
+    differenced and normalised regressors: at high sample rates the raw
+    lagged regressors are too collinear for the plain covariance update
+    (docs/identification_notes.md).
 ``n4sid``
-    Subspace identification by PO-MOESP (:mod:`vehid.identification.subspace`).
-
-Where a discrete model (``arx``, ``rls``, ``n4sid``) has a pole on the
-closed negative real axis there is no continuous-time equivalent: the
-method then returns the discrete model itself as a
-:class:`~identification.discrete.DiscreteModel` (``meta["time_domain"] ==
-"discrete"``), scored alike.
+    PO-MOESP (:mod:`vehid.identification.subspace`).
 ``output-error``
-    The modal model's parameters fitted by nonlinear least squares on the
-    simulation error (``scipy.optimize.least_squares``, trust-region
-    reflective, finite-difference Jacobian), each output's error scaled by
-    its RMS, started from the ``arx`` model (one output) or the ``n4sid``
-    model (several outputs, where the per-output ARX realisations reduced
-    by balanced truncation are only approximate: from that start the
-    three-output linear example was still at R = 99.997 % after 50
-    iterations and 210 s, from the N4SID start exact after 2). Where that
-    start is discrete-time (a negative real pole), the other of the two
-    starts, or else the start with each such pole ``z`` moved to ``|z|``.
+    Nonlinear least squares on each output's RMS-scaled simulation error,
+    started from ``arx`` (one output) or ``n4sid`` (several, where stacked
+    ARX realisations are only approximate and the fit converges far slower).
 
-Every method leaves a parameter covariance on its model
-(:mod:`vehid.identification.uncertainty`): ``arx`` and ``rls`` the least-squares
-covariance carried through the conversion, ``n4sid`` the asymptotic
-covariance of its simulation errors (a residual bootstrap on request:
-option ``bootstrap``),
-``output-error`` the Gauss-Newton covariance of its fit.
-
-Other methods join with :func:`register_comparator` (the IEKF, for one):
-a function ``(data: IOData, *, order: int, **options) -> ModalModel``.
-
-Several records (a sequence of IOData of one ``dt``) identify one model:
-least-squares rows (ARX, RLS) are stacked per record and never span a
-record boundary, N4SID joins each record's Hankel columns and estimates one
-initial state per record, output error simulates each record from rest, and
-the IEKF rinses over the records in turn.
+Each leaves a parameter covariance on its model
+(:mod:`vehid.identification.uncertainty`). Several records identify one
+model: least-squares rows never span a record boundary, N4SID estimates one
+initial state per record, output error simulates each record from rest.
 """
 
 from __future__ import annotations

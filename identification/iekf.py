@@ -1,32 +1,18 @@
 """The Identifying Extended Kalman Filter (Best & Bogdanski 2017, sections 2-4).
 
 The parameters of a modal state-space model join its states in the filter's
-state vector (eq. 7-8); the filter passes over the record again and again
-(:mod:`vehid.identification.rinse`), and after each pass the frozen model,
-simulated from rest, is scored by the percentage explanation R (eq. 17).
+state vector (eq. 7-8); the filter rinses over the record again and again
+(:mod:`vehid.identification.rinse`), each pass scored by R (eq. 17) of the
+frozen model simulated from rest. Tuning (section 3): ``Q = p I'`` with
+zeros for the true states, ``R = I`` unless given, ``P0 = Q``.
 
-Tuning (section 3): ``Q = p I'`` with ``I'`` the identity with zeros for the
-true states (the fixed C entries are not in the state at all), ``R = I``
-unless given, ``P0 = Q``.
-
-Start values. The paper starts every sigma at -1; faster oscillatory start
-modes find the eigenvalues far more often (docs/iekf_tuning.md), so the
-workbench's fixed start is ``sigma = -10, omega = 10 (1 + 0.5 i)`` for pair i
-(``start="default"``); the paper's start is ``start="paper"``.
-
-Units. Those fixed starts, ``p`` and ``R = I`` are absolute: they suit
-records like the paper's (T = 2 ms, signals of order 1) and fail on others.
-:meth:`IEKFOptions.invariant` gives settings that do not depend on the units
-of time or of the signals, on the sample interval or on the record length:
-signals divided by their RMS, the start from the data
+Units. The fixed starts (:data:`START_VALUES`), ``p`` and ``R = I`` are
+absolute and suit only records like the paper's. :meth:`IEKFOptions.invariant`
+removes the units: signals divided by their RMS, the start from the data
 (:mod:`vehid.identification.start`), time in samples inside the filter
-(``timescale="auto"``: T = 1 whatever the sample interval), and ``p`` per
-dominant time constant ``tau`` of the start: the filter runs as if its
-parameters were ``sigma tau``, ``omega tau``, ``B tau``, C and D (order 1
-for normalised signals) with ``Q = P0 = p I`` per ``tau``, carried to the
-filtered parameters by congruence (a linear change of parameters, under
-which the Kalman filter is exact); the stop rule compares those relative
-units. The field defaults stay the paper's absolute ones, so that stored
+(``timescale="auto"``) and ``p`` per dominant time constant ``tau`` of the
+start, carried to the filtered parameters by congruence (under which the
+Kalman filter is exact). The field defaults stay the paper's, so that stored
 runs and the paper's studies are unchanged.
 """
 
@@ -61,7 +47,8 @@ __all__ = [
     "start_structure",
 ]
 
-#: Named start values: (sigma, omega, omega spread between pairs).
+#: Named start values: (sigma, omega, omega spread between pairs). The paper's sigma = -1 finds the
+#: eigenvalues far less often than faster oscillatory modes (docs/iekf_tuning.md), hence ``default``.
 START_VALUES = {
     "default": (-10.0, 10.0, 0.5),
     "paper": (-1.0, 1.0, 0.0),
@@ -208,12 +195,9 @@ def start_structure(data: IOData | tuple[IOData, ...], structure: ModalStructure
                     options: IEKFOptions | None = None) -> ModalStructure:
     """The structure of ``structure``'s order whose complex pairs and real poles are the data start's.
 
-    The data start (``options.start`` ``"data"``) is found as
-    :func:`identify_iekf` finds it, each subspace candidate keeping its own
-    eigenvalues (complex pairs stay pairs, real eigenvalues become real poles,
-    modes tied to the outputs in turn); the best candidate's structure is
-    returned. Other starts have no eigenvalues of their own: ``structure``
-    is returned unchanged.
+    Each subspace candidate of the data start keeps its own eigenvalues; the
+    best one's structure is returned. Other starts have no eigenvalues of
+    their own: ``structure`` comes back unchanged.
     """
     options = options or IEKFOptions()
     if options.start != "data":
@@ -228,12 +212,10 @@ def start_structure(data: IOData | tuple[IOData, ...], structure: ModalStructure
 def _settle_states(state, u, y, structure: ModalStructure, run_pass, q, r, dt: float):
     """Run the head of a record with the parameters held, so that its unknown start state settles.
 
-    A record of a campaign need not start at rest. Over its first five time
-    constants of the slowest mode (at most a quarter of the record) the
-    filter estimates the states alone, from a prior as large as the output
-    power, with the parameter covariance set aside (so the gain leaves them
-    unchanged); then the parameters' covariance is restored, uncorrelated
-    with the settled states, and the rest of the record rinses as usual.
+    Over five time constants of the slowest mode (at most a quarter of the
+    record) the filter estimates the states alone, from a prior as large as
+    the output power; then the parameters' covariance is restored,
+    uncorrelated with the settled states.
     """
     n = structure.n
     m = n + structure.n_parameters

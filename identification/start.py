@@ -1,37 +1,24 @@
 """Start values of the IEKF taken from the data, in units that do not depend on the user's.
 
-The paper starts every mode at fixed values in seconds and signal units
-(sigma = -1, omega = 1); the workbench's former default (sigma = -10,
-omega = 10 rad/s) is fixed too. Both fail on records whose time base or
-signal scale differ from the paper's. The starts here are computed on the
-normalised problem: inputs and outputs divided by their RMS, time counted in
-samples. The same samples with time relabelled or signals rescaled give the
-same start, bit for bit up to rounding.
+Fixed starts in seconds and signal units (the paper's sigma = -1, omega = 1)
+fail on records whose time base or signal scale differ from the paper's. The
+starts here are computed on the normalised problem (signals divided by their
+RMS, time in samples), so relabelling time or rescaling signals gives the
+same start up to rounding.
 
 ``data``
-    A subspace model (PO-MOESP, :mod:`vehid.identification.subspace`) of the
-    requested order, converted to continuous time for a first-order hold and
-    to the structure's modal form. Where that model does not fit the
-    structure (other numbers of complex pairs and real poles, an unstable
-    mode where stability is asked, a discrete pole on the negative real
-    axis, a mode unobservable from its output), its eigenvalues are mapped
-    onto the structure's modes (see :func:`place_eigenvalues`) and B and D
-    fitted by linear least squares with the fixed C entries. Subspace models
-    with 2n, 10 and 25 block rows and the ``band`` start are all tried; the
-    one whose simulation explains the record best (R, eq. 17) is the start,
-    simulated from rest, or where unstable modes are allowed from the
-    least-squares initial state.
+    The best-simulating (R, eq. 17) of the ``band`` start and PO-MOESP
+    models with 2n, 10 and 25 block rows, converted to continuous time for a
+    first-order hold and to the structure's modal form. Where a subspace
+    model does not fit the structure, its eigenvalues are placed on the
+    structure's modes (:func:`place_eigenvalues`) and B and D fitted by least
+    squares (:func:`fit_input_gains`).
 ``band``
-    Modes spread log-evenly over the record's band, from ten periods per
-    record to a quarter of the Nyquist frequency, damping 0.5; B and D by
+    Modes spread log-evenly over the record's band, damping 0.5; B and D by
     least squares.
 
-On a long record both are found on its first samples only (a start needs
-the dynamics, not all of the record; see ``_START_BYTES``).
-
-The dominant time constant of the start model (the inverse of the median
-natural frequency of its modes) is the time unit in which the filter's
-tuning parameter p is stated (see :mod:`vehid.identification.iekf`).
+A start needs the dynamics, not all of a long record: both are found on its
+first samples only (``_START_BYTES``).
 """
 
 from __future__ import annotations
@@ -49,11 +36,9 @@ DATA_STARTS = ("data", "band")
 
 _BAND_DAMPING = 0.5
 _MAX_RATE = 3.0  # rad/sample: the fastest a discrete model can say (pi) with a margin of rounding
-# A start needs the record's dynamics, not all of a long record (the filter then rinses over all of
-# it): the start is found on the record's first samples, as many as keep the largest subspace
-# start's block-Hankel matrix (25 block rows) within this many bytes, at least _START_MIN_SAMPLES.
-# On an hour at 500 Hz (1 input, 2 outputs) the whole record took 5.5 GB; the budget keeps its first
-# 26,666 samples (53 s), ample for every mode the sample rate shows.
+# The start is found on as many first samples as keep the largest subspace start's block-Hankel matrix
+# (25 block rows) within this many bytes, at least _START_MIN_SAMPLES: a long record's whole Hankel
+# matrix would take gigabytes.
 _START_BYTES = 32e6
 _START_MIN_SAMPLES = 1000
 

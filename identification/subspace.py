@@ -22,10 +22,6 @@ the model is scaled back (``B / s_u``, ``s_y C``, ``s_y D / s_u``): a
 channel in microvolts next to one in kilonewtons would otherwise dominate
 the SVD and the regressions, so the model would depend on the units. The
 eigenvalues do not change under the scaling.
-
-This replaces the ``nfoursid`` package (PyPI), which installs cleanly but
-forms a full SVD of a matrix with one column per sample: on the 50,000-sample
-linear example it needs 20 GB and is killed.
 """
 
 from __future__ import annotations

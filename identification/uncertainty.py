@@ -1,51 +1,18 @@
 """How sure is a modal model? Parameter covariances and what follows from them.
 
 Every estimator leaves a covariance of the modal parameter vector
-(:attr:`ModalModel.parameter_covariance`, laid out as
-:class:`~identification.modal.ModalStructure` describes ``theta``):
+(:attr:`ModalModel.parameter_covariance`): the IEKF the upper envelope of its
+steady-state filter covariance and of its fit's asymptotic covariance
+(:func:`iekf_parameter_covariance`); output error the Gauss-Newton covariance
+(:func:`gauss_newton_covariance`); ARX the least-squares covariance carried
+through the conversion (:func:`propagate_by_differences`); N4SID the
+simulation-error bound (:func:`simulation_error_covariance`; too narrow where
+its block rows miss the slow modes) or a residual bootstrap on request
+(:func:`bootstrap_covariance`).
 
-IEKF
-    The upper envelope of the filter's steady-state error covariance (half
-    its final ``P``, scaled by the measured innovations) and the asymptotic
-    covariance of the simulation-error fit at its estimate, mapped to
-    original units, :func:`iekf_parameter_covariance`.
-output error
-    The Gauss-Newton covariance ``(J' W J)^-1`` of the simulation errors'
-    Jacobian with each output weighted by its residual variance,
-    :func:`gauss_newton_covariance`.
-ARX
-    The least-squares covariance ``sigma^2 (Phi'Phi)^-1`` of each output's
-    ARX coefficients (seed appendix eq. A.58), carried to the modal
-    parameters through the ARX-to-modal conversion by central differences,
-    :func:`propagate_by_differences`.
-N4SID
-    The asymptotic covariance of the simulation-error fit at its estimate,
-    :func:`simulation_error_covariance`: the efficient bound, which a
-    consistent subspace estimate approaches where its block rows span the
-    slow modes; where they do not, it is inefficient and these intervals
-    are too narrow. On request a residual (moving-block) bootstrap,
-    :func:`bootstrap_covariance`, measures the spread itself by
-    re-identifying from the model's output plus resampled blocks of its
-    own residuals, at one subspace fit per replicate.
-
-spline IEKF
-    The parameter block of its final ``P`` as it stands: that filter's R is
-    the measured residual covariance already (:mod:`vehid.identification.spline_iekf`);
-    :class:`~identification.spline_modal.SplineModalModel` carries it and
-    gives bands on its splines and on a mode's frequency and damping.
-
-What follows from a covariance is propagated by the delta method with exact
-CasADi derivatives (:func:`model_uncertainty`, :func:`frequency_response`):
-for a function ``g(theta)``, ``cov g = J cov(theta) J'`` with ``J = dg/dtheta``.
-The eigenvalues of a modal model are its sigma/omega parameters; natural
-frequency ``|lambda| / 2 pi`` and damping ``-sigma / |lambda|`` follow from
-them; the steady-state gain is ``D - C A^-1 B``; the frequency response
-``C (j w I - A)^-1 B + D`` in magnitude and phase. Intervals are
-``value +/- z sigma`` with ``z`` the normal quantile of the level.
-
-Calibration is measured by ``benchmarks/uncertainty_calibration.py`` (the
-coverage table is in the README, "How sure is the model?"). Every interval
-here assumes white residuals: where :mod:`vehid.identification.residuals` rejects
+What follows from a covariance (modes, gains, the frequency response) is
+propagated by the delta method with exact CasADi derivatives. Every interval
+assumes white residuals: where :mod:`vehid.identification.residuals` rejects
 whiteness, model error dominates and the intervals are formal.
 """
 
@@ -110,7 +77,6 @@ def _spread(jacobian: np.ndarray, covariance: np.ndarray | None) -> np.ndarray:
     return np.sqrt(np.maximum(variance, 0.0))
 
 
-# ------------------------------------------------------------- symbolic maps
 @functools.lru_cache(maxsize=64)
 def _mode_function(structure: Any) -> ca.Function:
     """theta -> [re, im, frequency (Hz), damping] of every mode, and their exact Jacobian."""
@@ -162,7 +128,6 @@ def _response_function(structure: Any) -> ca.Function:
     )
 
 
-# ------------------------------------------------------------------ results
 @dataclass(frozen=True, eq=False)
 class ModeEstimate:
     """One mode's eigenvalue, natural frequency and damping with their standard deviations.
@@ -220,11 +185,6 @@ class ModelUncertainty:
     gain_std: np.ndarray
     level: float
 
-    def gain_interval(self) -> tuple[np.ndarray, np.ndarray]:
-        """Lower and upper bounds of the steady-state gains at :attr:`level`."""
-        z = normal_quantile(self.level)
-        return self.gain - z * self.gain_std, self.gain + z * self.gain_std
-
 
 @dataclass(frozen=True, eq=False)
 class FrequencyResponseBand:
@@ -250,11 +210,6 @@ class FrequencyResponseBand:
         z = normal_quantile(self.level)
         lower = np.maximum(self.magnitude - z * self.magnitude_std, 1e-3 * self.magnitude)
         return lower, self.magnitude + z * self.magnitude_std
-
-    def phase_band(self) -> tuple[np.ndarray, np.ndarray]:
-        """Lower and upper phase (degrees) at :attr:`level`."""
-        z = normal_quantile(self.level)
-        return self.phase_deg - z * self.phase_deg_std, self.phase_deg + z * self.phase_deg_std
 
 
 def model_uncertainty(model: Any, *, level: float = 0.95) -> ModelUncertainty:
@@ -363,7 +318,6 @@ def sample_parameters(model: Any, count: int, rng: np.random.Generator) -> np.nd
     return model.parameters + rng.standard_normal((count, values.size)) @ root.T
 
 
-# ------------------------------------------------------ covariances of estimators
 def iekf_parameter_covariance(
     structure: Any,
     P_parameters: np.ndarray,
@@ -422,9 +376,6 @@ def iekf_parameter_covariance(
       minimiser and its error this bound; at larger ``p`` the filter
       tracks over a memory shorter than the record and its fluctuation
       dominates.
-
-    The coverage this gives across p is measured by
-    ``benchmarks/uncertainty_calibration.py`` (README, "How sure is the model?").
 
     The map to original units is the Jacobian of
     :meth:`~identification.modal.ModalStructure.rescale_time` and
@@ -523,11 +474,8 @@ def simulation_error_covariance(model: Any, records: Any) -> np.ndarray | None:
     -----
     This is the covariance a prediction-error (output-error) estimate would
     have at this point with white output noise of the measured variance
-    (Ljung 1999, eq. 9.17). For a consistent estimator that is not a
-    minimiser of that criterion (subspace methods) it is the efficient
-    bound its spread approaches on well-excited records; the residual
-    bootstrap, which measures the spread itself, costs one identification
-    per replicate where this costs about ``n_u + 1`` simulations.
+    (Ljung 1999, eq. 9.17); for a consistent estimator that does not
+    minimise that criterion (subspace methods) it is the efficient bound.
     """
     errors, jacobians = [], []
     with np.errstate(all="ignore"):

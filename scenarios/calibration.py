@@ -10,9 +10,8 @@ identify` uses unless told otherwise), the output-error method and N4SID
 identify a model of the true structure, and each mode's 95 % interval of
 frequency and damping is checked against the truth.
 
-A calibrated method covers the truth in about 95 % of realisations;
-with R realisations the count is binomial, so that 90-99 % is the
-acceptance band of the workbench's uncertainty issue.
+A calibrated method covers the truth in about 95 % of realisations; with a
+few dozen realisations the count is binomial, so 90-99 % is accepted.
 """
 
 from __future__ import annotations

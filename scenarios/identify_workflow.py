@@ -1,32 +1,17 @@
 """What `vehid identify` does around one estimator run: hold-out validation, order choice, warnings.
 
-* Validation records: ``--validation FRACTION`` holds out the last part of
-  the record; ``--validation-file FILE`` (repeatable) adds other records.
-* Scores on estimation and validation data (:mod:`vehid.identification.validation`):
-  NRMSE fit and R per output, linear models simulated from a least-squares
-  initial state unless ``--initial-state zero``; an unstable model (allowed
-  by ``--allow-unstable``) is scored by k-step-ahead prediction.
-* Order: one order, a range ``2-8`` or ``auto`` (1, 2, ... up to
-  :data:`AUTO_MAX_ORDER`, stopping after two orders in a row that do not
-  improve on the best). Parsimony rule: the smallest order whose mean
-  validation fit is within :data:`ORDER_TOLERANCE` points of the best order's;
-  models that diverged or are unstable where stability was asked take no part.
-* The IEKF's p (unless ``--p`` is given, or ``--timescale seconds``): each of
-  :data:`P_GRID` identifies on one half of the estimation data and is
-  scored on the other, both ways (two-fold cross-validation); the largest
-  p within :data:`P_TOLERANCE` points of the best mean fit is taken (a
-  larger p converges in fewer passes). Its cost is two half-record runs per
-  candidate, JSON ``tuning_seconds``. The data start is scored on the same
-  halves (``start_cv_fit_percent``); where it beats every p by more than
-  the tolerance, the filter made the model worse and the start model is
+* Validation: ``--validation FRACTION`` holds out the last part of the
+  record, ``--validation-file FILE`` adds records; both are scored
+  (:mod:`vehid.identification.validation`) by simulation, or by k-step-ahead
+  prediction for an unstable model.
+* Order: one, a range ``2-8`` or ``auto`` (stopping after two orders in a row
+  without gain); the smallest order within :data:`ORDER_TOLERANCE` points of
+  the best mean validation fit wins.
+* The IEKF's p, unless given: two-fold cross-validation over :data:`P_GRID`
+  (:func:`tune_p`); where the data start beats every p, the start model is
   returned, with a warning.
-* Warnings: a model no better than its start (R not above the start's, or
-  modes that stayed within :data:`MOVED` of their start values, while it
-  explains less than :data:`NOTHING_TO_GAIN` percent) or worse than it by
-  :data:`WORSE_MARGIN` points of R, a fit below zero on any output, an unstable model where
-  stability was asked, a run that did not converge: one line each on
-  standard error and in the JSON ``warnings``; ``--strict`` turns them into
-  exit status 3.
+* Warnings (:func:`run_warnings`): one line each on standard error and in the
+  JSON ``warnings``; ``--strict`` turns them into exit status 3.
 """
 
 from __future__ import annotations
@@ -96,8 +81,7 @@ WORSE_MARGIN = 0.5  # points of R below the start's: the filter made the model w
 P_GRID = (1e-4, 1e-5, 1e-6)  # p per dominant time constant tried by cross-validation, largest first
 P_TOLERANCE = 0.1  # points of cross-validated fit within which the largest p is taken
 NONLINEAR_P = 1e-7  # the spline model's p without validation data
-# With validation data its p is chosen from NONLINEAR_P times 1, 0.1 and 0.01: on 4 s samples (the
-# cascaded tanks) 1e-7 blows up and 1e-9 fits, on 1 s samples (the heat exchanger) 1e-7 fits best.
+# with validation data: no one p suits every sample interval (README, cascaded tanks)
 NONLINEAR_P_GRID = (1e-7, 1e-8, 1e-9)
 
 
@@ -369,32 +353,31 @@ def iekf_options(args: argparse.Namespace, default_passes: int) -> IEKFOptions:
     )
 
 
+class _RankedScores:
+    """What ranks a model: its ``estimation`` scores and the mean over its ``validation`` scores."""
+
+    @property
+    def validation_fit(self) -> np.ndarray | None:
+        """NRMSE fit per output, mean over validation records."""
+        return np.mean([s.fit for s in self.validation], axis=0) if self.validation else None
+
+    @property
+    def validation_R(self) -> np.ndarray | None:
+        return np.mean([s.R for s in self.validation], axis=0) if self.validation else None
+
+    def ranking_fit(self) -> float:
+        """Mean validation fit (estimation fit without validation data)."""
+        return float(np.mean(self.validation_fit if self.validation else self.estimation.fit))
+
+
 @dataclass(frozen=True, eq=False)
-class Evaluation:
+class Evaluation(_RankedScores):
     """Scores of one model on the estimation record and on each validation record."""
 
     estimation: Scores
     estimation_R_from_rest: np.ndarray
     validation: tuple[Scores, ...]
     horizon: int | None
-
-    @property
-    def validation_fit(self) -> np.ndarray | None:
-        """NRMSE fit per output, mean over validation records."""
-        if not self.validation:
-            return None
-        return np.mean([s.fit for s in self.validation], axis=0)
-
-    @property
-    def validation_R(self) -> np.ndarray | None:
-        if not self.validation:
-            return None
-        return np.mean([s.R for s in self.validation], axis=0)
-
-    def ranking_fit(self) -> float:
-        """Mean validation fit (estimation fit without validation data)."""
-        values = self.validation_fit if self.validation else self.estimation.fit
-        return float(np.mean(values))
 
 
 def evaluate(model: Any, plan: Plan, args: argparse.Namespace) -> Evaluation:
@@ -465,7 +448,7 @@ def choose_order(rows: list[dict[str, Any]]) -> int:
 
 def scores_summary(evaluation: Evaluation, fit_percent: Any) -> dict[str, Any]:
     """The public score keys of a model: ``fit_percent`` (R, estimation, as before), NRMSE fits and ``validation_R``."""
-    summary: dict[str, Any] = {
+    return {
         "fit_percent": fit_percent,
         "estimation_fit_percent": evaluation.estimation.fit,
         "estimation_R": evaluation.estimation.R,
@@ -475,7 +458,6 @@ def scores_summary(evaluation: Evaluation, fit_percent: Any) -> dict[str, Any]:
         "initial_state": evaluation.estimation.initial_state,
         "horizon": evaluation.horizon,
     }
-    return summary
 
 
 def search_orders(plan: Plan, fit_one: Callable[[int], tuple[Any, dict[str, Any]]], args: argparse.Namespace
@@ -644,23 +626,12 @@ def identify_nonlinear(linear: ModalModel, plan: Plan, args: argparse.Namespace)
     return NonlinearOutcome(result, summary, scores)
 
 
-class NonlinearScores:
+class NonlinearScores(_RankedScores):
     """Scores of a spline model (simulated from rest in its own time base) on the plan's records."""
 
     def __init__(self, model: Any, plan: Plan):
         self.estimation = _mean_scores(model, plan.records, initial_state="zero")
         self.validation = tuple(score(model, record, initial_state="zero") for record in plan.validation)
-
-    @property
-    def validation_fit(self) -> np.ndarray | None:
-        return np.mean([s.fit for s in self.validation], axis=0) if self.validation else None
-
-    @property
-    def validation_R(self) -> np.ndarray | None:
-        return np.mean([s.R for s in self.validation], axis=0) if self.validation else None
-
-    def ranking_fit(self) -> float:
-        return float(np.mean(self.validation_fit if self.validation else self.estimation.fit))
 
 
 def start_of(result: Any, records: tuple[IOData, ...]) -> tuple[float | None, bool | None]:
@@ -684,12 +655,8 @@ def start_of(result: Any, records: tuple[IOData, ...]) -> tuple[float | None, bo
 
 
 def structure_for(args: argparse.Namespace, order: int, plan: Plan, options: IEKFOptions) -> ModalStructure:
-    """The model structure of an IEKF run: ``--pattern`` where given.
-
-    Without it, a data start sets the modes: its complex pairs stay pairs and its real eigenvalues
-    become real poles (:func:`vehid.identification.iekf.start_structure`), each mode tied to the next output
-    in turn; other starts take the default pattern (complex pairs first).
-    """
+    """The model structure of an IEKF run: ``--pattern`` where given, else the data start's modes
+    (:func:`vehid.identification.iekf.start_structure`) or, for other starts, the default pattern."""
     first = plan.records[0]
     structure = ModalStructure.from_pattern(args.pattern or "default", order, first.n_u, first.n_y)
     if args.pattern is not None:
@@ -701,7 +668,7 @@ def last_good_on_divergence(run: Callable[[], Any]) -> tuple[Any, str | None]:
     """``run()``'s IEKF result, or on a DivergenceError after some good passes the last good one and the message.
 
     Nothing computed is lost: the caller reports that model with a warning. A divergence at the first
-    pass (no model at all) is raised as before.
+    pass leaves no model and is raised.
     """
     try:
         return run(), None

@@ -211,12 +211,14 @@ def _iekf_summary(result) -> dict:
         "passes_run": result.passes_run,
         "stop_reason": result.stop_reason,
         "discretization": result.options.discretization,
-        "A": model.A,
-        "B": model.B,
-        "C": model.C,
-        "D": model.D,
+        **_matrices(model),
         "seconds": result.seconds,
     }
+
+
+def _matrices(model) -> dict:
+    """The summary's ``A``, ``B``, ``C`` and ``D`` of the model returned."""
+    return {"A": model.A, "B": model.B, "C": model.C, "D": model.D}
 
 
 def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None) -> tuple[dict, str]:
@@ -224,7 +226,7 @@ def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None)
     data = plan.records[0]
     start_returned = result is not None and model is not result.model
     if start_returned:  # the summary describes the model returned
-        summary.update(eigenvalues=model.eigenvalues(), A=model.A, B=model.B, C=model.C, D=model.D,
+        summary.update(eigenvalues=model.eigenvalues(), **_matrices(model),
                        fit_percent=pooled_simulation_fit(model, plan.records), model_returned="start")
     evaluation = workflow.evaluate(model, plan, args)
     summary.update(workflow.scores_summary(evaluation, summary["fit_percent"]))
@@ -336,10 +338,7 @@ def _run_comparator(args: argparse.Namespace, plan) -> tuple[dict, str]:
         "passes_run": 0,
         "discretization": "exact",
         "time_domain": model.meta.get("time_domain", "continuous"),
-        "A": model.A,
-        "B": model.B,
-        "C": model.C,
-        "D": model.D,
+        **_matrices(model),
         "seconds": outcome.seconds,
     }
     if rows is not None:
