@@ -21,7 +21,7 @@ from .data import IOData, as_records, read_hdf5
 from .readers import RawRecord, read_mat, read_mdf, read_raw, read_table
 from .timebase import JITTER_TOLERANCE, uniform_record
 from .preparation import (DETRENDS, Preparation, ReadSettings, RecordOffsets, estimate_preparation, load_records,
-                          prepare, prepare_validation, read_csv, read_raw_records, read_record)
+                          prepare, prepare_validation, read_raw_records, read_record)
 from .errors import ArchiveError, DivergenceError, ExcitationError, InputError, WorkbenchError
 from .iekf import START_VALUES, FilterState, IEKFOptions, IEKFResult, PassRecord, identify_iekf
 from .metrics import FitMetrics, fit_metrics, nrmse_fit, percentage_explanation, r_squared
@@ -49,7 +49,6 @@ from .uncertainty import FrequencyResponseBand, ModelUncertainty, ModeEstimate, 
 
 __all__ = [
     "IOData",
-    "read_csv",
     "read_hdf5",
     "as_records",
     "RawRecord",

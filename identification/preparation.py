@@ -28,7 +28,6 @@ __all__ = [
     "RecordOffsets",
     "Preparation",
     "read_record",
-    "read_csv",
     "estimate_preparation",
     "prepare",
     "load_records",
@@ -123,11 +122,6 @@ def read_record(path: str | Path, settings: ReadSettings | None = None, **option
     return uniform_record(raw, n_inputs=n_inputs, dt=settings.dt, resample=settings.resample,
                           decimate=settings.decimate, segment=settings.segment,
                           jitter_tolerance=settings.jitter_tolerance)
-
-
-def read_csv(path: str | Path, *, inputs: Sequence[str], outputs: Sequence[str], **options: Any) -> IOData:
-    """A raw record from a CSV file: :func:`read_record` with the columns named (kept for older callers)."""
-    return read_record(path, inputs=tuple(inputs), outputs=tuple(outputs), **options)
 
 
 def _hdf5_record(path: Path, settings: ReadSettings) -> IOData:

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from vehid.identification import IOData, InputError, fit_metrics, nrmse_fit, percentage_explanation, r_squared
-from vehid.identification import read_csv, read_hdf5
+from vehid.identification import read_hdf5, read_record
 
 
 def _record(n=100, dt=0.01):
@@ -55,15 +55,15 @@ def test_nrmse_and_r_squared_closed_form():
 def test_csv_round_trip(tmp_path):
     path = tmp_path / "log.csv"
     path.write_text("t,steer,ay\n0,0.1,1\n0.5,0.2,2\n1.0,0.3,3\n")
-    data = read_csv(path, inputs=["steer"], outputs=["ay"])
+    data = read_record(path, inputs=("steer",), outputs=("ay",))
     assert data.dt == pytest.approx(0.5)
     np.testing.assert_array_equal(data.y[:, 0], [1, 2, 3])
     with pytest.raises(InputError, match="unknown column 'yaw'"):
-        read_csv(path, inputs=["steer"], outputs=["yaw"])
+        read_record(path, inputs=("steer",), outputs=("yaw",))
     # --dt beside a time column would silently override it: an error unless the time column is disabled
     with pytest.raises(InputError, match="has a time column 't': --dt would override it"):
-        read_csv(path, inputs=["steer"], outputs=["ay"], dt=0.1)
-    by_dt = read_csv(path, inputs=["steer"], outputs=["ay"], dt=0.1, time_column="none")
+        read_record(path, inputs=("steer",), outputs=("ay",), dt=0.1)
+    by_dt = read_record(path, inputs=("steer",), outputs=("ay",), dt=0.1, time_column="none")
     assert by_dt.dt == pytest.approx(0.1)
 
 
