@@ -194,13 +194,6 @@ class ModalStructure:
         fixed = set(self.fixed_c)
         return tuple((i, j) for i in range(self.n_y) for j in range(self.n) if (i, j) not in fixed)
 
-    def c_pattern(self) -> np.ndarray:
-        """The C pattern as an (n_y, n) array of strings: '1' fixed, 'c' free (for display)."""
-        pattern = np.full((self.n_y, self.n), "c", dtype=object)
-        for i, j in self.fixed_c:
-            pattern[i, j] = "1"
-        return pattern
-
     def parameter_names(self) -> tuple[str, ...]:
         """Names of theta's entries: ``sigma1, omega1, ..., b11, ..., c21, ..., d11, ...`` (1-based)."""
         names = []
