@@ -443,8 +443,10 @@ def gauss_newton_covariance(jacobian: np.ndarray, residuals: np.ndarray) -> np.n
     variance = np.maximum(np.mean(residuals**2, axis=0) / dof, 1e-300)
     weighted = np.asarray(jacobian, dtype=float).reshape(samples, n_y, n_theta) / np.sqrt(variance)[None, :, None]
     stacked = weighted.reshape(samples * n_y, n_theta)
-    # only R is needed; SciPy's R-only QR is several times faster than NumPy's on long records
-    upper = scipy.linalg.qr(stacked, mode="r", check_finite=False)[0][: min(stacked.shape)]
+    # only R is needed: LAPACK's Householder QR leaves it in the top rows, without forming Q or
+    # copying out the full (N n_y, n_theta) triangle as scipy.linalg.qr(mode="r") does
+    factored = scipy.linalg.lapack.dgeqrf(stacked)[0]
+    upper = np.triu(factored[: min(stacked.shape)])
     inverse = scipy.linalg.pinv(upper)
     covariance = inverse @ inverse.T
     return 0.5 * (covariance + covariance.T)
