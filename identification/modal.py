@@ -27,9 +27,7 @@ reports a model.
 
 from __future__ import annotations
 
-import cmath
 import dataclasses
-import math
 from dataclasses import dataclass, field
 from typing import Any, Sequence
 
@@ -593,7 +591,7 @@ class ModalModel(StateSpaceModel):
         eigenvalue ``lambda`` obeying ``xi_{k+1} = g xi_k + w_k``, its
         derivative ``eta = d xi / d lambda`` obeys ``eta_{k+1} = g eta_k +
         g' xi_k + w'_k`` (``'`` the derivative in ``lambda`` of the hold
-        equivalent, :func:`_hold_weights`), from ``eta_0 = 0``. A pair's
+        equivalent, :func:`_hold_weight_derivatives`), from ``eta_0 = 0``. A pair's
         ``lambda`` is ``sigma - j omega``: ``d xi / d sigma = eta``,
         ``d xi / d omega = -j eta``.
         """
@@ -614,7 +612,7 @@ class ModalModel(StateSpaceModel):
             # the mode's response to each input alone (unit gain); its state is their sum weighted by its B row
             responses = [_first_order_recursion(lam, u[:, j].astype(complex), dt, method, 0j) for j in range(s.n_u)]
             xi = sum(response * gain for response, gain in zip(responses, row))
-            eta = _lambda_derivative(xi, u @ row, dt, _hold_weights(lam * dt, method))
+            eta = _lambda_derivative(xi, u @ row, dt, method, lam)
 
             def output_of(state: np.ndarray) -> np.ndarray:
                 output = np.multiply.outer(state.real, self.C[:, a])
@@ -683,18 +681,8 @@ class ModalModel(StateSpaceModel):
 def _first_order_recursion(lam: complex, drive: np.ndarray, dt: float, method: str, start: complex) -> np.ndarray:
     """xi_{k+1} = g xi_k + w_k with the hold-equivalent input w_k; returns xi_0..xi_{N-1}."""
     n = drive.size
-    z = lam * dt
-    if method == "euler":
-        gain = 1.0 + z
-        w = dt * drive[:-1]
-    else:
-        gain = np.exp(z)
-        phi1, phi2 = phi_functions(z)
-        phi1, phi2 = complex(phi1), complex(phi2)
-        if method == "zoh":
-            w = dt * phi1 * drive[:-1]
-        else:
-            w = dt * ((phi1 - phi2) * drive[:-1] + phi2 * drive[1:])
+    gain, alpha, beta = _hold_weights(lam * dt, method)
+    w = dt * alpha * drive[:-1] if beta == 0 else dt * (alpha * drive[:-1] + beta * drive[1:])
     xi = np.empty(n, dtype=complex)
     xi[0] = start
     if n > 1:
@@ -703,44 +691,47 @@ def _first_order_recursion(lam: complex, drive: np.ndarray, dt: float, method: s
     return xi
 
 
-def _hold_weights(z: complex, method: str) -> tuple[complex, ...]:
-    """``(g, alpha, beta)`` of ``xi_{k+1} = g xi_k + dt (alpha d_k + beta d_{k+1})`` at ``z = lambda dt``,
-    then their derivatives in ``z`` (by ``phi_k' = phi_k - k phi_{k+1}``)."""
+def _hold_weights(z: complex, method: str) -> tuple[complex, complex, complex]:
+    """``(g, alpha, beta)`` of ``xi_{k+1} = g xi_k + dt (alpha d_k + beta d_{k+1})`` at ``z = lambda dt``."""
     if method == "euler":
-        return 1.0 + z, 1.0, 0.0, 1.0, 0.0, 0.0
-    g, phi1, phi2, phi3 = _exp_and_phi(z)
+        return 1.0 + z, 1.0, 0.0
+    phi1, phi2 = (complex(value) for value in phi_functions(z))
     if method == "zoh":
-        return g, phi1, 0.0, g, phi1 - phi2, 0.0
-    return g, phi1 - phi2, phi2, g, phi1 - 2 * phi2 + 2 * phi3, phi2 - 2 * phi3
+        return np.exp(z), phi1, 0.0
+    return np.exp(z), phi1 - phi2, phi2
 
 
-def _exp_and_phi(z: complex) -> tuple[complex, complex, complex, complex]:
-    """``e^z, phi_1(z), phi_2(z), phi_3(z)`` to rounding at any ``z``.
+def _hold_weight_derivatives(z: complex, method: str) -> tuple[complex, complex, complex]:
+    """Derivatives in ``z`` of :func:`_hold_weights` (by ``phi_k' = phi_k - k phi_{k+1}``)."""
+    if method == "euler":
+        return 1.0, 0.0, 0.0
+    phi1, phi2 = (complex(value) for value in phi_functions(z))
+    if method == "zoh":
+        return np.exp(z), phi1 - phi2, 0.0
+    phi3 = _phi3(complex(z), phi2)
+    return np.exp(z), phi1 - 2 * phi2 + 2 * phi3, phi2 - 2 * phi3
 
-    Below ``|z| = 1/2`` the Taylor series ``phi_k = sum z^m / (m + k)!`` to
-    ``m = 16`` (remainder below 1e-20); above, ``phi_{k+1} = (phi_k - 1/k!) / z``
-    from ``phi_0 = e^z``, whose cancellation costs at most a factor of 50
-    over rounding there.
+
+def _phi3(z: complex, phi2: complex) -> complex:
+    """``phi_3(z) = (phi_2(z) - 1/2) / z`` to rounding at any ``z``.
+
+    Below ``|z| = 1/2`` its Taylor series ``sum z^m / (m + 3)!`` to ``m = 16``
+    (remainder below 1e-20), where the recurrence would cancel; above, the
+    recurrence loses at most a factor of 4 over ``phi_2``'s rounding.
     """
-    z = complex(z)
-    exp = cmath.exp(z)
     if abs(z) >= 0.5:
-        phi1 = (exp - 1) / z
-        phi2 = (phi1 - 1) / z
-        return exp, phi1, phi2, (phi2 - 0.5) / z
-    values = []
-    for k in (1, 2, 3):
-        term, total = 1.0 / math.factorial(k), 0j
-        for m in range(17):
-            total += term
-            term *= z / (m + k + 1)
-        values.append(total)
-    return (exp, *values)
+        return (phi2 - 0.5) / z
+    term, total = 1.0 / 6.0, 0j
+    for m in range(17):
+        total += term
+        term *= z / (m + 4)
+    return total
 
 
-def _lambda_derivative(xi: np.ndarray, drive: np.ndarray, dt: float, weights: tuple[complex, ...]) -> np.ndarray:
+def _lambda_derivative(xi: np.ndarray, drive: np.ndarray, dt: float, method: str, lam: complex) -> np.ndarray:
     """``d xi / d lambda`` of a mode's recursion from rest (:meth:`ModalModel.output_sensitivity`)."""
-    g, _, _, g_z, alpha_z, beta_z = weights
+    g = _hold_weights(lam * dt, method)[0]
+    g_z, alpha_z, beta_z = _hold_weight_derivatives(lam * dt, method)
     eta = np.zeros_like(xi)
     if xi.size > 1:
         # d/dlambda = dt d/dz: of g xi_k, and of the hold-equivalent input dt (alpha d_k + beta d_{k+1})
