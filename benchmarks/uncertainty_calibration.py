@@ -28,7 +28,8 @@ import sys
 import time
 
 from vehid.scenarios.benchmarking import record_figures
-from vehid.scenarios.calibration import COMMAND_LINE_SETTINGS, IEKF_SETTINGS, coverage, identify_realisation, make_record
+from vehid.scenarios.calibration import (COMMAND_LINE_SETTINGS, IEKF_SETTINGS, coverage, identify_realisation,
+                                        make_record)
 from vehid.scenarios.paths import results_directory
 
 NOISE_RATIOS = (0.1, 0.3)

@@ -31,7 +31,8 @@ from .filter_models import LinearModalFilterModel
 from .iekf_pass import compiled_pass, pack_covariance, unpack_covariance
 from .modal import ModalModel, ModalStructure
 from .multirecord import pooled_simulation_fit
-from .rinse import Assessment, PassHistory, PassRecord, RinseHooks, check_filter_options, check_records, parameters_settled, rinse
+from .rinse import (Assessment, PassHistory, PassRecord, RinseHooks, check_filter_options, check_records,
+                    parameters_settled, rinse)
 from .start import DATA_STARTS, data_start
 from .uncertainty import iekf_parameter_covariance
 

@@ -37,6 +37,7 @@ _UNITS = "vehid_units"  # dataclass group: JSON {field: unit} from field metadat
 _LEGACY_DATACLASS = "dataclass"  # module:QualName of a dataclass group, before schemas
 _RESERVED_PREFIX = "vehid_"
 
+
 def member_name(name: str, what: str) -> str:
     """``name`` if it can name an HDF5 member (non-empty, no ``/``); else ArchiveError."""
     if not isinstance(name, str) or not name or "/" in name or name in (".", ".."):

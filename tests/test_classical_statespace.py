@@ -6,7 +6,7 @@ import pytest
 from vehid.identification import ExcitationError, InputError
 from vehid.identification.modal import ModalStructure
 from vehid.identification.statespace import (balanced_truncation, continuous_to_discrete, discrete_to_continuous,
-                                       modal_structure_for, to_modal)
+                                             modal_structure_for, to_modal)
 from vehid.identification.subspace import estimate_subspace
 from vehid.scenarios.linear_example import identification_input, true_model
 

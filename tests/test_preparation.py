@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from vehid.identification import (IEKFOptions, InputError, ModalStructure, identify_iekf, identify_with, prepare,
-                            prepare_validation)
+                                  prepare_validation)
 from vehid.identification.archive import open_archive
 from vehid.identification.iekf_archive import read_iekf_run
 from vehid.identification.multirecord import score_records

@@ -16,7 +16,7 @@ from scipy.io import loadmat
 from scipy.signal import dfreqresp, freqresp
 
 from vehid.identification import (ArxModel, DiscreteModel, IdentifiedModel, IOData, ModalModel, ModalStructure, Mode,
-                            SplineModalModel, estimate_arx, estimate_subspace, identify_with)
+                                  SplineModalModel, estimate_arx, estimate_subspace, identify_with)
 from vehid.identification.errors import InputError
 from vehid.identification.pencil import PencilModel
 from vehid.identification.statespace import continuous_to_discrete

@@ -52,7 +52,7 @@ from pathlib import Path
 import numpy as np
 
 from vehid.identification.archive import (open_archive, read_records, run_group, update_archive, write_archive,
-                                    write_run)
+                                          write_run)
 from vehid.identification.archive_safety import archive_lock, check_output_target
 from vehid.identification.errors import InputError
 from vehid.identification.filter_models import DISCRETIZATIONS
@@ -65,8 +65,8 @@ from vehid.identification.preparation import prepare_validation, read_record
 from vehid.identification.storage import write_value
 from vehid.scenarios import identify_workflow as workflow
 from vehid.scenarios.data_options import (RECORD_PREFIX, archive_records, archived_preparation, record_series,
-                                    records_summary, register_data_options, save_model, settings_from_args,
-                                    write_record_series)
+                                          records_summary, register_data_options, save_model, settings_from_args,
+                                          write_record_series)
 from vehid.scenarios.model_checks import uncertainty_lines, uncertainty_summary
 from vehid.scenarios.progress import Progress
 

@@ -16,14 +16,15 @@ from pathlib import Path
 from typing import Any
 
 from vehid.identification.archive import open_archive
-from vehid.identification.archive_safety import archive_lock, check_output_folder, check_output_target, replacing_directory
+from vehid.identification.archive_safety import (archive_lock, check_output_folder, check_output_target,
+                                                replacing_directory)
 from vehid.identification.errors import InputError
 from vehid.identification.iekf import IEKFOptions
 from vehid.identification.spline_iekf import SplineIEKFOptions
 from vehid.scenarios.handling_resume import StudyCheckpoint, read_progress
 from vehid.scenarios.handling_study import (OUTPUTS, PAPER, HandlingConfig, HandlingResult, archive_path, make_records,
-                                      parse_orders, percent_text, planned_passes, run_study, spline_options,
-                                      study_linear_options, write_study_archive)
+                                            parse_orders, percent_text, planned_passes, run_study, spline_options,
+                                            study_linear_options, write_study_archive)
 from vehid.scenarios.progress import Progress
 
 NAME = "handling"
