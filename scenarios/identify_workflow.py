@@ -304,6 +304,7 @@ def tune_p(args: argparse.Namespace, plan: Plan, options: IEKFOptions, structure
         first, second = _halves(plan.records)
     except InputError:  # too short to halve: the run itself names what the record lacks
         return given_p(options)
+
     def held_out_fit(model: ModalModel, records: tuple[IOData, ...]) -> float:
         horizon = args.horizon if args.horizon is not None else default_horizon(model)
         return float(np.mean(_mean_scores(model, records, initial_state=args.initial_state, horizon=horizon).fit))
