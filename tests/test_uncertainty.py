@@ -110,6 +110,32 @@ def test_gauss_newton_covariance_equals_least_squares_on_a_linear_regression():
     np.testing.assert_allclose(covariance, reference.covariance[0], rtol=1e-10)
 
 
+@pytest.mark.parametrize("collinearity", [1e-1, 1e-6])
+def test_gauss_newton_covariance_matches_the_singular_value_form_well_and_ill_conditioned(collinearity):
+    """Normal equations (well conditioned) and QR (condition above 1e6) both give V S^-2 V' s^2 of the weighted Jacobian.
+
+    Two outputs with different error variances; the second case makes two columns collinear to 1e-6, so the
+    equilibrated normal equations have condition near 1e12 and the orthogonal factorisation must take over.
+    Tolerance 1e-6 relative to the largest entry: the SVD reference itself carries condition-times-eps
+    rounding (1e6 * 1e-16 on the singular values), far below that.
+    """
+    rng = np.random.default_rng(5)
+    samples, n_y = 3000, 2
+    columns = rng.normal(size=(samples * n_y, 3))
+    columns[:, 2] = columns[:, 1] + collinearity * columns[:, 2]
+    columns[:, 0] *= 1e4  # unequal scales: the equilibration must not mind them
+    residuals = rng.normal(size=(samples, n_y)) * [0.1, 2.0]
+    covariance = gauss_newton_covariance(columns, residuals)
+    variance = np.mean(residuals**2, axis=0) / ((samples * n_y - 3) / (samples * n_y))
+    weighted = columns / np.sqrt(np.tile(variance, samples))[:, None]
+    _, singular, vt = np.linalg.svd(weighted, full_matrices=False)
+    reference = (vt.T / singular**2) @ vt
+    np.testing.assert_allclose(covariance, reference, rtol=0, atol=1e-6 * np.max(np.abs(reference)))
+    in_place = np.asfortranarray(columns)
+    np.testing.assert_allclose(gauss_newton_covariance(in_place, residuals, overwrite_jacobian=True), reference,
+                               rtol=0, atol=1e-6 * np.max(np.abs(reference)))
+
+
 def _arx_record(seed: int):
     """The calibration system with equation-error noise ``e / A(q)`` (the ARX noise model), 20 s at 100 Hz."""
     from scipy.signal import lfilter
