@@ -602,29 +602,36 @@ class ModalModel(StateSpaceModel):
         b_start, c_start, d_start = (s.slices()[group].start for group in ("B", "C", "D"))
         # parameter-major storage: each derivative is written whole, and the returned view is the
         # column-major (N n_y, n_theta) Jacobian that a QR factorisation reads without a copy
-        columns = np.zeros((s.n_parameters, samples, s.n_y))
+        columns = np.empty((s.n_parameters, samples, s.n_y))
+        columns[c_start:] = 0.0  # C and D columns are filled one output at a time below
         x = np.empty((samples, s.n))
+        inputs = u.T.astype(complex)  # (n_u, N), shared by every mode
+        C = self.C
+
+        def write(index: int, real: np.ndarray, imag: np.ndarray | None, a: int, b: int) -> None:
+            # the output of a state (real part through column a of C, imaginary part through column b)
+            target = columns[index]
+            np.multiply.outer(real, C[:, a], out=target)
+            if imag is not None:
+                target += np.multiply.outer(imag, C[:, b])
+
         for states in s.mode_states():
             a, b = states[0], states[-1]
             pair = len(states) == 2
             lam = complex(theta[a], -theta[a + 1]) if pair else complex(theta[a], 0.0)
             row = self.B[a] + 1j * self.B[b] if pair else self.B[a].astype(complex)
             # the mode's response to each input alone (unit gain); its state is their sum weighted by its B row
-            responses = [_first_order_recursion(lam, u[:, j].astype(complex), dt, method, 0j) for j in range(s.n_u)]
-            xi = sum(response * gain for response, gain in zip(responses, row))
+            responses = _first_order_recursion(lam, inputs, dt, method, 0j)
+            xi = row @ responses
             eta = _lambda_derivative(xi, u @ row, dt, method, lam)
-
-            def output_of(state: np.ndarray) -> np.ndarray:
-                output = np.multiply.outer(state.real, self.C[:, a])
-                return output + np.multiply.outer(state.imag, self.C[:, b]) if pair else output
-
-            columns[a] = output_of(eta)
-            for j, response in enumerate(responses):
-                columns[b_start + a * s.n_u + j] = output_of(response)
-            if pair:
-                columns[a + 1] = output_of(-1j * eta)
-                for j, response in enumerate(responses):
-                    columns[b_start + b * s.n_u + j] = output_of(1j * response)
+            write(a, eta.real, eta.imag if pair else None, a, b)
+            for j in range(s.n_u):
+                response = responses[j]
+                write(b_start + a * s.n_u + j, response.real, response.imag if pair else None, a, b)
+            if pair:  # by sigma - j omega: d/d omega = -j d/d lambda, and B_b enters as j B_b
+                write(a + 1, eta.imag, -eta.real, a, b)
+                for j in range(s.n_u):
+                    write(b_start + b * s.n_u + j, -responses[j].imag, responses[j].real, a, b)
             x[:, a] = xi.real
             if pair:
                 x[:, b] = xi.imag
@@ -679,15 +686,20 @@ class ModalModel(StateSpaceModel):
 
 
 def _first_order_recursion(lam: complex, drive: np.ndarray, dt: float, method: str, start: complex) -> np.ndarray:
-    """xi_{k+1} = g xi_k + w_k with the hold-equivalent input w_k; returns xi_0..xi_{N-1}."""
-    n = drive.size
+    """xi_{k+1} = g xi_k + w_k with the hold-equivalent input w_k; returns xi_0..xi_{N-1}.
+
+    ``drive`` may hold several signals along its leading axes (time last),
+    each filtered from the same ``start``: one call for them all.
+    """
+    n = drive.shape[-1]
     gain, alpha, beta = _hold_weights(lam * dt, method)
-    w = dt * alpha * drive[:-1] if beta == 0 else dt * (alpha * drive[:-1] + beta * drive[1:])
-    xi = np.empty(n, dtype=complex)
-    xi[0] = start
+    w = dt * alpha * drive[..., :-1] if beta == 0 else dt * (alpha * drive[..., :-1] + beta * drive[..., 1:])
+    xi = np.empty(drive.shape, dtype=complex)
+    xi[..., 0] = start
     if n > 1:
         # lfilter with initial condition: y_k = g y_{k-1} + w_k, y_{-1} = start
-        xi[1:], _ = lfilter([1.0], [1.0, -gain], w, zi=[gain * start])
+        initial = np.full(drive.shape[:-1] + (1,), gain * start, dtype=complex)
+        xi[..., 1:], _ = lfilter([1.0], [1.0, -gain], w, axis=-1, zi=initial)
     return xi
 
 
