@@ -313,8 +313,22 @@ def with_sensor_noise(records: Mapping[str, IOData], seed: int,
     The simulated records are noise-free, so a model's residuals on them are
     model error only; with sensor noise the residual tests can tell an
     adequate model (residuals white, independent of the input) from an
-    under-modelled one. One generator, seeded with ``seed``, serves the
-    records in their order.
+    under-modelled one.
+
+    Parameters
+    ----------
+    records : mapping of str to IOData
+        The records (:func:`make_records`); one generator, seeded with
+        ``seed``, serves them in their order.
+    seed : int
+        Seed of the noise.
+    noise : tuple of float
+        Standard deviation per output, in the outputs' units.
+
+    Returns
+    -------
+    dict of str to IOData
+        The records under the same names, their outputs noisy.
     """
     rng = np.random.default_rng(seed)
     noisy = {}
