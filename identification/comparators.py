@@ -323,11 +323,12 @@ def output_error_comparator(data: IOData, *, order: int, **options: Any) -> Moda
         A, B, C, D = structure.matrices(theta)
         try:  # each record simulated from rest
             model = ModalModel(structure, A, B, C, D)
-            error = np.concatenate([((model.simulate_outputs(record.u, dt, method="foh") - record.y) * weights).ravel()
-                                    for record in records])
+            with np.errstate(over="ignore", invalid="ignore"):
+                error = np.concatenate([((model.simulate_outputs(record.u, dt, method="foh") - record.y)
+                                         * weights).ravel() for record in records])
         except InputError:
             return np.full(size, limit)
-        # an unstable trial step can overflow: a large finite error sends the optimiser back
+        # an unstable trial step can overflow (silenced above): a large finite error sends the optimiser back
         return np.where(np.isfinite(error), np.clip(error, -limit, limit), limit)
 
     solution = scipy.optimize.least_squares(

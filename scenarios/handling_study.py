@@ -76,6 +76,8 @@ __all__ = [
     "parse_orders",
     "planned_passes",
     "make_records",
+    "SENSOR_NOISE",
+    "with_sensor_noise",
     "identify_order",
     "run_order",
     "run_study",
@@ -297,6 +299,44 @@ def make_records(config: HandlingConfig) -> dict[str, IOData]:
         record = simulate(params, manoeuvre, speed=config.speed).select_outputs(OUTPUTS)
         records[name] = record.replace(x=None, state_names=None, state_units=None)
     return records
+
+
+#: White noise (standard deviation) of a vehicle-grade inertial unit and roll estimate, per output:
+#: lateral acceleration (m/s^2), yaw rate (rad/s), roll angle (rad, 0.1 deg).
+SENSOR_NOISE = (0.05, 0.003, 0.0017)
+
+
+def with_sensor_noise(records: Mapping[str, IOData], seed: int,
+                      noise: tuple[float, ...] = SENSOR_NOISE) -> dict[str, IOData]:
+    """The records with white Gaussian noise of standard deviation ``noise`` (one per output) added to the outputs.
+
+    The simulated records are noise-free, so a model's residuals on them are
+    model error only; with sensor noise the residual tests can tell an
+    adequate model (residuals white, independent of the input) from an
+    under-modelled one.
+
+    Parameters
+    ----------
+    records : mapping of str to IOData
+        The records (:func:`make_records`); one generator, seeded with
+        ``seed``, serves them in their order.
+    seed : int
+        Seed of the noise.
+    noise : tuple of float
+        Standard deviation per output, in the outputs' units.
+
+    Returns
+    -------
+    dict of str to IOData
+        The records under the same names, their outputs noisy.
+    """
+    rng = np.random.default_rng(seed)
+    noisy = {}
+    for name, record in records.items():
+        if len(noise) != record.n_y:
+            raise InputError(f"noise needs one standard deviation per output ({record.n_y}); got {len(noise)}")
+        noisy[name] = record.replace(y=record.y + np.asarray(noise, dtype=float) * rng.standard_normal(record.y.shape))
+    return noisy
 
 
 def score(model: Any, data: IOData) -> np.ndarray:

@@ -11,6 +11,7 @@ import pytest
 from scipy.signal import lfilter
 
 from vehid.identification.archive import open_archive, read_archive, update_archive
+from vehid.identification.comparators import identify_with
 from vehid.identification.errors import InputError
 from vehid.identification.iekf import IEKFOptions, identify_iekf
 from vehid.identification.iekf_archive import append_iekf_pass, read_iekf_run
@@ -18,6 +19,7 @@ from vehid.identification.modal import ModalStructure
 from vehid.identification.residuals import nis_band, residual_tests
 from vehid.identification.storage import read_value
 from vehid.scenarios import calibration
+from vehid.scenarios.handling_study import HandlingConfig, make_records, with_sensor_noise
 from vehid.scenarios.linear_example import make_data, true_model
 from vehid.scenarios.model_checks import model_residual_tests
 from vehid.scenarios.report import archive_figures
@@ -162,3 +164,44 @@ def test_an_exact_fit_is_not_called_coloured():
     assert tests.exact[0] and tests.adequate
     with pytest.raises(InputError, match="constant"):  # without the outputs' scale, as any residual
         residual_tests(data.u, data.y - calibration.true_model().simulate_outputs(data.u, data.dt))
+
+
+@pytest.mark.parametrize("excitation_seed, noise_seed", [(0, 11), (1, 12)])
+def test_residual_tests_on_the_noisy_handling_study(excitation_seed, noise_seed):
+    """The handling study in its linear regime with sensor noise: n = 2 is flagged, n = 6 is not.
+
+    Records of 10 s at a tenth of the steer amplitude with the noise of
+    ``handling_study.SENSOR_NOISE``; the IEKF at the invariant settings (50
+    passes), refined by output error from its model, tested on both records
+    (``benchmarks/residual_adequacy.py``). Independent truth: the vehicle's
+    linearisation has two lightly damped modes (yaw-sideslip and roll), which
+    two states cannot hold, so an n = 2 model leaves input-driven response in
+    its residuals.
+
+    Measured over excitation seeds 0 and 1 by noise seeds 11-15 (ten
+    pairs): n = 2 fails the input cross-correlation test on both records in
+    all ten (lateral acceleration p below 1e-25). At n = 6 the IEKF diverged
+    in two pairs (0/15, 1/14: an unstable model); in the other eight output
+    error's model passes the input test on both records (smallest p 0.08),
+    and its lateral acceleration and roll angle residuals are white (smallest
+    p 0.034, 0.18), but its yaw rate's is coloured on the identification
+    record in three (p 6e-5 to 2e-4; 0.006 on the validation record of one),
+    so the full verdict holds in five of eight. Hence what is asserted for
+    n = 6 is what held in all eight. The second case is one of the three,
+    so the test does not rest on a favourable seed.
+    """
+    records = with_sensor_noise(make_records(HandlingConfig(duration=10.0, amplitude_scale=0.1, seed=excitation_seed)),
+                                noise_seed)
+    data = records["identification"]
+    for order in (2, 6):
+        start = identify_iekf(data, ModalStructure.default(order, data.n_u, data.n_y),
+                              options=IEKFOptions.invariant(passes=50)).model
+        model = identify_with(data, method="output-error", order=order, start=start.with_parameter_covariance(None)).model
+        for name, record in records.items():
+            tests = model_residual_tests(model, record)
+            if order == 2:
+                assert not tests.adequate and not tests.independent.all(), (name, tests.input_correlation_p)
+            else:
+                assert tests.independent.all(), (name, tests.input_correlation_p)
+                white = dict(zip(record.output_names, tests.white))
+                assert white["lateral_acceleration"] and white["roll_angle"], (name, tests.residual_whiteness_p)
