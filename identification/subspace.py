@@ -16,6 +16,15 @@ found in three linear-algebra steps, without iterations:
    problem on the whole record (sec. 9.2.4.3), the output being linear in
    them once ``A`` and ``C`` are fixed. The regressors come from per-mode
    first-order recursions (``scipy.signal.lfilter``) in the eigenbasis of A.
+   Where ``A`` has a mode growing by ``|z| > 1`` per sample (an open-loop
+   unstable plant), one simulation over the whole record weights its samples
+   by ``|z|^k``: the last few decide B and D, the rest hardly count, and the
+   error of the growing mode's state swamps everything. The record is then
+   cut into segments over which that mode grows at most e-fold
+   (:func:`_segment_length`), each with an initial state of its own: B and D
+   are fitted to multi-step predictions over the whole record, as the
+   state-sequence methods fit them to one-step ones (Van Overschee & De Moor
+   1996, ch. 4), and the problem stays linear.
 
 All three steps run on signals divided column by column by their RMS, and
 the model is scaled back (``B / s_u``, ``s_y C``, ``s_y D / s_u``): a
@@ -50,12 +59,14 @@ class SubspaceResult(StateSpaceModel):
     A, B, C, D : ndarray
         Shapes (n, n), (n, n_u), (n_y, n), (n_y, n_u).
     x0 : ndarray, shape (n,)
-        Initial state estimated with B and D.
+        Initial state estimated with B and D (of the first segment where an
+        unstable A cuts the record, module docstring).
     singular_values : ndarray
         Of ``L_32`` of the RMS-scaled signals: a gap after the ``order``-th
         suggests the order.
     residuals : ndarray, shape (N, n_y)
-        Measured minus simulated outputs (from x0).
+        Measured minus simulated outputs (from x0; from each segment's
+        initial state where an unstable A cuts the record).
     block_rows : int
     dt : float or None
     """
@@ -172,9 +183,11 @@ def estimate_subspace(data_or_arrays: Any, *, order: int, block_rows: int | None
     observability = left[:, :n] * np.sqrt(singular[:n])
     C = observability[:n_y]
     A = np.linalg.lstsq(observability[:-n_y], observability[n_y:], rcond=None)[0]
-    n_x0 = n * len(experiments) if estimate_x0 else 0
+    length = _segment_length(A, s, n) if estimate_x0 else None
+    segments = [(u_e[a:b], y_e[a:b]) for u_e, y_e, _ in experiments for a, b in _segments(u_e.shape[0], length)]
+    n_x0 = n * len(segments) if estimate_x0 else 0
     rows = []
-    for index, (u_e, _, _) in enumerate(experiments):
+    for index, (u_e, _) in enumerate(segments):
         samples = u_e.shape[0]
         free, forced = _responses(A, C, u_e)
         d_columns = np.zeros((samples, n_y, n_y * n_u))
@@ -187,7 +200,7 @@ def estimate_subspace(data_or_arrays: Any, *, order: int, block_rows: int | None
                                x0_columns]))
     regressors = rows[0] if len(rows) == 1 else np.vstack(rows)
     del rows
-    target = np.concatenate([e[1].reshape(-1) for e in experiments])
+    target = np.concatenate([y_e.reshape(-1) for _, y_e in segments])
     solution, _, rank, _ = np.linalg.lstsq(regressors, target, rcond=None)
     if rank < regressors.shape[1]:
         raise ExcitationError("the input does not determine B and D (rank-deficient regression)")
@@ -197,6 +210,28 @@ def estimate_subspace(data_or_arrays: Any, *, order: int, block_rows: int | None
     residuals = (target - regressors @ solution).reshape(-1, n_y) * output_scale
     return SubspaceResult(A, B / input_scale, output_scale[:, None] * C,
                           output_scale[:, None] * D / input_scale, x0, singular, residuals, s, dt)
+
+
+def _segment_length(A: np.ndarray, block_rows: int, order: int) -> int | None:
+    """Samples over which A's fastest growing mode grows e-fold (None where no mode grows).
+
+    At least ``max(2 block_rows, 10 order)`` samples, so that each segment's
+    initial state is well determined by its own outputs.
+    """
+    growth = float(np.log(max(np.max(np.abs(np.linalg.eigvals(A))), 1e-300)))
+    if growth <= 0:
+        return None
+    return max(int(np.ceil(1.0 / growth)), 2 * block_rows, 10 * order)
+
+
+def _segments(samples: int, length: int | None) -> list[tuple[int, int]]:
+    """``(start, stop)`` of consecutive segments of ``length`` samples; the last takes a short remainder."""
+    if length is None or length >= samples:
+        return [(0, samples)]
+    starts = list(range(0, samples, length))
+    if samples - starts[-1] < length // 2:
+        starts.pop()
+    return [(a, b) for a, b in zip(starts, starts[1:] + [samples])]
 
 
 def _column_rms(signals: list[np.ndarray]) -> np.ndarray:

@@ -30,6 +30,7 @@ __all__ = [
     "score",
     "split_holdout",
     "default_horizon",
+    "UNSTABLE_HORIZON",
 ]
 
 INITIAL_STATES = ("zero", "estimate")
@@ -37,7 +38,7 @@ INITIAL_STATES = ("zero", "estimate")
 # Steady-state Kalman filter of the k-step predictor, in outputs divided by their RMS:
 # process noise this fraction of the input-driven state variance per sample, unit measurement noise.
 _PREDICTOR_PROCESS_NOISE = 1e-2
-_UNSTABLE_HORIZON = 10  # samples, when a model's simulation diverges and no horizon is given
+UNSTABLE_HORIZON = 10  # samples, when a model's simulation diverges and no horizon is given
 _UNSTABLE_WINDOW = 50  # samples over which an unstable model's initial state is fitted
 
 
@@ -148,7 +149,7 @@ def _free_response_samples(model: ModalModel | DiscreteModel, data: IOData) -> i
 def default_horizon(model: Any) -> int | None:
     """None for a stable model (simulate); for an unstable one a short k-step-ahead horizon."""
     if _linear(model) and not model.is_stable():
-        return _UNSTABLE_HORIZON
+        return UNSTABLE_HORIZON
     return None
 
 

@@ -10,6 +10,14 @@
 * The IEKF's p, unless given: two-fold cross-validation over :data:`P_GRID`
   (:func:`tune_p`); where the data start beats every p, the start model is
   returned, with a warning.
+* Open-loop unstable plants (:func:`assume_unstable`): without
+  ``--allow-unstable``, where the data start kept unstable predicts the other
+  half of the record clearly better than the best stable start, the plant is
+  treated as open-loop unstable, with a warning. The filter may then pull a
+  growing mode into the left half-plane over its passes, more so on the whole
+  record than on the halves the cross-validation sees; the start is returned
+  where it scores better than the filter on the estimation data
+  (:func:`start_beats_filter`).
 * Warnings (:func:`run_warnings`): one line each on standard error and in the
   JSON ``warnings``; ``--strict`` turns them into exit status 3.
 """
@@ -27,11 +35,13 @@ import numpy as np
 
 from vehid.identification.data import IOData
 from vehid.identification.errors import DivergenceError, InputError, StrictWarningsError, WorkbenchError
-from vehid.identification.iekf import (INVARIANT_P, START_CHOICES, TIMESCALES, IEKFOptions, identify_iekf,
+from vehid.identification.iekf import (INVARIANT_P, START_CHOICES, TIMESCALES, IEKFOptions, _scales, identify_iekf,
                                       start_structure)
 from vehid.identification.discrete import DiscreteModel
 from vehid.identification.modal import ModalModel, ModalStructure
-from vehid.identification.validation import INITIAL_STATES, Scores, default_horizon, score, split_holdout
+from vehid.identification.start import data_start
+from vehid.identification.validation import (INITIAL_STATES, UNSTABLE_HORIZON, Scores, default_horizon, score,
+                                            split_holdout)
 
 __all__ = [
     "START_HELP",
@@ -66,6 +76,11 @@ __all__ = [
     "start_model",
     "NONLINEAR_P_GRID",
     "nonlinear_warnings",
+    "UNSTABLE_MARGIN",
+    "assume_unstable",
+    "unstable_warning",
+    "start_beats_filter",
+    "START_KEPT",
 ]
 
 AUTO_MAX_ORDER = 8
@@ -80,6 +95,10 @@ NOTHING_TO_GAIN = 99.0  # percent R: a model this good is no warning for staying
 WORSE_MARGIN = 0.5  # points of R below the start's: the filter made the model worse
 P_GRID = (1e-4, 1e-5, 1e-6)  # p per dominant time constant tried by cross-validation, largest first
 P_TOLERANCE = 0.1  # points of cross-validated fit within which the largest p is taken
+# points of two-fold k-step fit by which the unstable data start must beat the best stable one: well above
+# the spread of a fit between halves, so that noise making a stable plant's subspace model unstable does not
+# switch the stability requirement off
+UNSTABLE_MARGIN = 5.0
 NONLINEAR_P = 1e-7  # the spline model's p without validation data
 # with validation data: no one p suits every sample interval (README, cascaded tanks)
 NONLINEAR_P_GRID = (1e-7, 1e-8, 1e-9)
@@ -345,6 +364,104 @@ def tune_p(args: argparse.Namespace, plan: Plan, options: IEKFOptions, structure
                    start_fit if start_fit is not None and np.isfinite(start_fit) else None)
 
 
+def _start_fits(fit_on: IOData, score_on: IOData, structure: ModalStructure, options: IEKFOptions
+                ) -> tuple[float, float, bool]:
+    """k-step fits on ``score_on`` of the data starts found on ``fit_on``, kept stable and left free.
+
+    Both in the normalised problem (the scales of ``fit_on``, time in samples) and scored alike, by
+    prediction over the horizon an unstable model's validation uses: simulation would be fair to
+    neither (a growing mode's simulation drifts even when its dynamics are right). Returns the
+    stable start's fit, the free start's, and whether the free start is unstable.
+    """
+    input_scale, output_scale = _scales(fit_on, options.normalize)
+    train, test = (IOData(t=np.arange(record.n_samples, dtype=float), u=record.u / input_scale,
+                          y=record.y / output_scale) for record in (fit_on, score_on))
+    stable, free = (data_start(train.u, train.y, structure, stable=keep, free_modes=True).model for keep in (True, False))
+    return (float(np.mean(score(stable, test, horizon=UNSTABLE_HORIZON).fit)),
+            float(np.mean(score(free, test, horizon=UNSTABLE_HORIZON).fit)), not free.is_stable())
+
+
+def assume_unstable(args: argparse.Namespace, plan: Plan, options: IEKFOptions, order: int
+                    ) -> tuple[IEKFOptions, dict[str, Any] | None]:
+    """Options allowing unstable modes where the data say the plant is open-loop unstable, and the evidence.
+
+    Only for the default data start without ``--allow-unstable``: there the
+    start's unstable subspace modes are reflected into the left half-plane,
+    and for an open-loop unstable plant the reflected start (and the filter
+    kept stable after it) cannot follow the record. Where the data start left
+    free is unstable on the first estimation record, each half of that record
+    gives a start kept stable and one left free, each scored on the other half
+    by k-step prediction. Where the free start is unstable on both halves too
+    and its mean fit beats the stable start's by more than
+    :data:`UNSTABLE_MARGIN` points, unstable modes are allowed (as
+    ``--allow-unstable``).
+
+    Returns the options (changed or not) and None where nothing was weighed
+    (the free start is stable, or the record is too short to halve), else the
+    JSON entry ``open_loop_unstable``: both cross-validated fits, the horizon
+    and whether the plant was assumed unstable.
+    """
+    if options.allow_unstable or options.start != "data" or args.pattern is not None:
+        return options, None
+    first = plan.records[0]
+    structure = ModalStructure.from_pattern("default", order, first.n_u, first.n_y)
+    input_scale, output_scale = _scales(first, options.normalize)
+    try:
+        if data_start(first.u / input_scale, first.y / output_scale, structure, stable=False,
+                      free_modes=True).model.is_stable():
+            return options, None
+        halves = [part[0] for part in _halves((first,))]
+        folds = [_start_fits(a, b, structure, options) for a, b in (halves, halves[::-1])]
+    except (WorkbenchError, np.linalg.LinAlgError):  # too short or too poor a record to weigh: stay stable
+        return options, None
+    stable_fit = float(np.mean([fold[0] for fold in folds]))
+    free_fit = float(np.mean([fold[1] for fold in folds]))
+    assumed = bool(all(fold[2] for fold in folds) and np.isfinite(free_fit)
+                   and (not np.isfinite(stable_fit) or free_fit > stable_fit + UNSTABLE_MARGIN))
+    entry = {"assumed": assumed, "unstable_start_cv_fit_percent": free_fit, "stable_start_cv_fit_percent": stable_fit,
+             "horizon": UNSTABLE_HORIZON}
+    return (dataclasses.replace(options, allow_unstable=True) if assumed else options), entry
+
+
+def unstable_warning(entry: dict[str, Any]) -> str:
+    """The warning of a plant treated as open-loop unstable (:func:`assume_unstable`)."""
+    return (f"the data start is unstable and predicts the other half of the record clearly better than a stable "
+            f"one (two-fold {entry['horizon']}-step fit {entry['unstable_start_cv_fit_percent']:.1f} % against "
+            f"{entry['stable_start_cv_fit_percent']:.1f} %): the plant is treated as open-loop unstable, as with "
+            "--allow-unstable; give --start band for a stable model")
+
+
+START_KEPT = ("the filter scores worse than its unstable start on the estimation data; the start model is returned")
+
+
+def start_beats_filter(result: Any, plan: Plan, args: argparse.Namespace) -> dict[str, float] | None:
+    """The start's and the filter's estimation fits where an unstable start scores better than the filter.
+
+    The cross-validation that chooses p runs on half records; on the whole
+    record the filter runs over twice the samples per pass and can pull a
+    growing mode of its start into the left half-plane (its innovations
+    growing as it does). Each model is scored on the estimation records as
+    the validation scores it (k-step prediction for an unstable model); where
+    the start wins by more than :data:`P_TOLERANCE` points, both fits are
+    returned (the JSON entry ``start_kept``). None for a stable start (the
+    cross-validation then decides alone) and where the start is unknown.
+    """
+    if not result.options.allow_unstable or result.meta.get("start_parameters") is None:
+        return None
+    start = start_model(result)
+    if start.is_stable():
+        return None
+
+    def fit(model: ModalModel) -> float:
+        horizon = args.horizon if args.horizon is not None else default_horizon(model)
+        return float(np.mean(_mean_scores(model, plan.records, initial_state=args.initial_state, horizon=horizon).fit))
+
+    start_fit, filter_fit = fit(start), fit(result.model)
+    if np.isfinite(start_fit) and not start_fit <= filter_fit + P_TOLERANCE:
+        return {"start_estimation_fit_percent": start_fit, "filter_estimation_fit_percent": filter_fit}
+    return None
+
+
 def iekf_options(args: argparse.Namespace, default_passes: int) -> IEKFOptions:
     """IEKF settings of the command line: the unit-invariant ones unless asked otherwise."""
     p = args.p if args.p is not None else (INVARIANT_P if args.timescale == "auto" else 1.0)
@@ -477,7 +594,8 @@ def search_orders(plan: Plan, fit_one: Callable[[int], tuple[Any, dict[str, Any]
             rows.append(row)
             continue
         evaluation = evaluate(model, plan, args)
-        stable_enough = args.allow_unstable or not isinstance(model, LINEAR_MODELS) or model.is_stable()
+        assumed = (extra.get("open_loop_unstable") or {}).get("assumed", False)  # as --allow-unstable
+        stable_enough = args.allow_unstable or assumed or not isinstance(model, LINEAR_MODELS) or model.is_stable()
         row.update(
             fit_percent=extra.get("fit_percent"),
             estimation_fit_percent=evaluation.estimation.fit,
@@ -538,7 +656,11 @@ def text_summary(summary: dict[str, Any], data: IOData, plan: Plan) -> str:
         lines.append(f"{name:<14} {est:>28.2f} {('-' if val is None else f'{val:.2f}'):>28}")
     if plan.validation:
         lines.append("validation on: " + "; ".join(plan.validation_names))
-    if summary.get("model_returned") == "start":
+    if summary.get("model_returned") == "start" and "start_kept" in summary:
+        kept = summary["start_kept"]
+        lines.append(f"note: {START_KEPT} (fit {kept['start_estimation_fit_percent']:.2f} % against "
+                     f"{kept['filter_estimation_fit_percent']:.2f} %); the matrices and scores are the start model's")
+    elif summary.get("model_returned") == "start":
         lines.append(f"note: {START_RETURNED} (cross-validated fit {summary['start_cv_fit_percent']:.2f} % "
                      "against the filter's best p); the matrices and scores are the start model's")
     if summary.get("p_tried"):
@@ -682,12 +804,19 @@ def last_good_on_divergence(run: Callable[[], Any]) -> tuple[Any, str | None]:
 def run_iekf_order(args: argparse.Namespace, plan: Plan, options: IEKFOptions, order: int
                    ) -> tuple[ModalModel, dict[str, Any]]:
     """One IEKF run of an order search (no checkpoints, p tuned per order): its model and what the summary needs."""
+    options, unstable = assume_unstable(args, plan, options, order)
     structure = structure_for(args, order, plan, options)
     tuning = tune_p(args, plan, options, structure) if tunes_p(args) else given_p(options)
     options = dataclasses.replace(options, p=tuning.p)
     result, divergence = last_good_on_divergence(
         lambda: identify_iekf(plan.estimation, structure, options=options, settle_start=plan.settle_start))
     stop_reason = f"{result.stop_reason}: {divergence}" if divergence else result.stop_reason
-    model = start_model(result) if tuning.start_wins else result.model
-    return model, {"fit_percent": result.fit_percent, "stop_reason": stop_reason, "result": result,
-                   "tuning": tuning, "p": tuning.p}
+    kept = None if tuning.start_wins else start_beats_filter(result, plan, args)
+    model = start_model(result) if tuning.start_wins or kept is not None else result.model
+    extra = {"fit_percent": result.fit_percent, "stop_reason": stop_reason, "result": result, "tuning": tuning,
+             "p": tuning.p}
+    if unstable is not None:
+        extra["open_loop_unstable"] = unstable
+    if kept is not None:
+        extra["start_kept"] = kept
+    return model, extra

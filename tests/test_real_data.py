@@ -102,12 +102,17 @@ def _identify(entry, scratch: Path, *options: str) -> tuple[int, dict]:
 # by 1e-6 relative noise (two seeds) and in a bare environment: at most 0.77 point (cascaded tanks,
 # 71.76 -> 71.79, 71.98 and 71.21; the same p chosen each time), 0.04 on the heat exchanger (one
 # seed), the others below 0.01. Two unperturbed runs agree exactly (no random numbers). The
-# ball-and-beam plant is open-loop unstable: the default run (stable modes asked, the start's two
-# real poles kept real) ends worse than its start, with a warning; its floor guards that reported
-# model, and the test checks the warning is there. On the CD player arm cross-validation prefers the
-# data start, which is returned.
+# ball-and-beam plant is open-loop unstable (the ball rolls off a tilted beam): its data start, left
+# unstable, predicts each half of the record from the other far better than a stable one (two-fold
+# 10-step fit 69.9 against 5.9 %), so the default run allows unstable modes, says so, and returns that
+# start because the filter pulls its growing mode into the left half-plane (estimation fit 84.5 against
+# 37.0 %); it is scored by 10-step prediction, as every unstable model is. Measured 89.18 (under the
+# perturbation: 89.18 with both seeds), against 32.01 before, when stable modes were asked and the
+# run ended worse than its start; the best peer's is 87.0 (SIPPY N4SID). The test checks that the
+# warning says why the model is unstable. On the CD player arm cross-validation prefers the data
+# start, which is returned.
 DEFAULT_FITS = {
-    "ballbeam": [32.01],
+    "ballbeam": [89.18],
     "dryer": [85.31],
     "robot_arm": [96.87],
     "exchanger": [63.36],
@@ -127,7 +132,9 @@ def test_default_identify_holdout_fit_on_raw_record(name, tmp_path):
     assert summary["order"] == 4 and summary["preparation"]["detrend"] == "mean"
     assert np.all(fits >= np.array(DEFAULT_FITS[name]) - MARGIN), (fits, DEFAULT_FITS[name])
     if name == "ballbeam":
-        assert any("worse than its start" in line for line in summary["warnings"]), summary["warnings"]
+        assert summary["open_loop_unstable"]["assumed"] and summary["model_returned"] == "start" and "start_kept" in summary
+        assert any("treated as open-loop unstable" in line for line in summary["warnings"]), summary["warnings"]
+        assert summary["horizon"] == 10  # an unstable model is scored by k-step prediction
 
 
 # Comparators on the raw files, measured the same way (direct least squares: under the

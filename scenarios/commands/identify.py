@@ -19,7 +19,11 @@ subspace model of the record (--start paper for the paper's), time counted
 in samples inside the filter and p per dominant time constant (--timescale
 seconds for the absolute behaviour), p chosen by cross-validation on the
 estimation data unless --p is given (the data start returned where it
-beats every p). The summary gives the eigenvalues, the
+beats every p). Where the data start, left unstable, predicts the record
+clearly better than a stable one, the plant is treated as open-loop
+unstable (as --allow-unstable, with a warning; JSON `open_loop_unstable`),
+and the start is returned where the filter scores worse on the estimation
+data (`start_kept`). The summary gives the eigenvalues, the
 fit R (eq. 17) per output of the continuous model simulated exactly, NRMSE
 fits on estimation and validation data (--validation, --validation-file),
 whether the run converged, any warnings (--strict: exit status 3), the
@@ -156,7 +160,7 @@ def _archive_plan(archive, plan) -> None:
 
 
 def _identify(args: argparse.Namespace) -> tuple[dict, str]:
-    previous = None
+    previous, unstable = None, None
     if args.resume:
         plan, structure, options, previous = _resume(args)
         tuning = workflow.given_p(options)  # the run's own p, as archived
@@ -170,6 +174,7 @@ def _identify(args: argparse.Namespace) -> tuple[dict, str]:
         options = workflow.iekf_options(args, DEFAULT_PASSES)
         if len(plan.orders) > 1:
             return _run_order_search(args, plan, options)
+        options, unstable = workflow.assume_unstable(args, plan, options, plan.orders[0])
         structure = workflow.structure_for(args, plan.orders[0], plan, options)
         tuning = workflow.tune_p(args, plan, options, structure) if workflow.tunes_p(args) else workflow.given_p(options)
         options = dataclasses.replace(options, p=tuning.p)
@@ -192,11 +197,20 @@ def _identify(args: argparse.Namespace) -> tuple[dict, str]:
                                   settle_start=plan.settle_start))
     if checkpoint is not None:
         checkpoint.finish(result)  # the archive says how the run ended: converged, passes or diverged at pass k
-    summary = {**_iekf_summary(result), **tuning.summary()}
+    summary = {**_iekf_summary(result), **tuning.summary(), **_unstable_summary(unstable, result, plan, args, tuning)}
     if divergence:
         summary["divergence"] = divergence
-    model = workflow.start_model(result) if tuning.start_wins else result.model
+    model = workflow.start_model(result) if tuning.start_wins or "start_kept" in summary else result.model
     return _finish(args, plan, summary, model, result=result, archive_path=archive_path)
+
+
+def _unstable_summary(unstable, result, plan, args, tuning) -> dict:
+    """The keys ``open_loop_unstable`` (where weighed) and ``start_kept`` (where an unstable start beat the filter)."""
+    summary = {} if unstable is None else {"open_loop_unstable": unstable}
+    kept = None if tuning.start_wins else workflow.start_beats_filter(result, plan, args)
+    if kept is not None:
+        summary["start_kept"] = kept
+    return summary
 
 
 def _iekf_summary(result) -> dict:
@@ -243,7 +257,9 @@ def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None)
         result is not None and result.options.allow_unstable)
     start_fit, start_moved = workflow.start_of(result, plan.records) if result is not None and not start_returned \
         else (None, None)
-    warnings = [workflow.START_RETURNED] if start_returned else []
+    warnings = [workflow.unstable_warning(summary["open_loop_unstable"])] \
+        if summary.get("open_loop_unstable", {}).get("assumed") else []
+    warnings += ([workflow.START_KEPT if "start_kept" in summary else workflow.START_RETURNED] if start_returned else [])
     warnings += workflow.run_warnings(
         model=model, evaluation=evaluation, start_fit=start_fit,
         stop_reason=None if start_returned else (f"{summary['stop_reason']}: {summary['divergence']}"
@@ -296,7 +312,8 @@ def _run_order_search(args, plan, options) -> tuple[dict, str]:
     model, extra, _ = kept[chosen]
     result = extra["result"]
     summary = {**_iekf_summary(result), **extra["tuning"].summary(), "orders_tried": rows,
-               "seconds": sum(row["seconds"] for row in rows)}
+               "seconds": sum(row["seconds"] for row in rows),
+               **{key: extra[key] for key in ("open_loop_unstable", "start_kept") if key in extra}}
     archive_path = Path(args.out) if args.out else None
     if archive_path is not None:
         from vehid.identification.iekf_archive import write_iekf_run
