@@ -29,7 +29,7 @@ import dataclasses
 import sys
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -40,6 +40,7 @@ from vehid.identification.iekf import (INVARIANT_P, START_CHOICES, TIMESCALES, I
 from vehid.identification.discrete import DiscreteModel
 from vehid.identification.modal import ModalModel, ModalStructure
 from vehid.identification.start import data_start
+from vehid.identification.uncertainty import simulation_error_covariance
 from vehid.identification.validation import (INITIAL_STATES, UNSTABLE_HORIZON, Scores, default_horizon, score,
                                             split_holdout)
 
@@ -74,6 +75,7 @@ __all__ = [
     "NONLINEAR_P",
     "START_RETURNED",
     "start_model",
+    "returned_start",
     "NONLINEAR_P_GRID",
     "nonlinear_warnings",
     "UNSTABLE_MARGIN",
@@ -293,6 +295,17 @@ def start_model(result: Any) -> ModalModel:
     """The IEKF run's start model, in the record's units (from its ``start_parameters``)."""
     return ModalModel.from_parameters(result.structure, result.meta["start_parameters"],
                                       meta={"start": result.meta.get("start")})
+
+
+def returned_start(result: Any, records: Sequence[IOData]) -> ModalModel:
+    """The start model as it is returned in the filter's place: with the covariance a subspace model gets.
+
+    That is the asymptotic covariance of its simulation errors on ``records``
+    (:func:`~vehid.identification.uncertainty.simulation_error_covariance`), as
+    ``--method n4sid`` gives; None where its simulation diverges (a growing mode).
+    """
+    start = start_model(result)
+    return start.with_parameter_covariance(simulation_error_covariance(start, records))
 
 
 def given_p(options: IEKFOptions) -> PTuning:
@@ -645,7 +658,9 @@ def text_summary(summary: dict[str, Any], data: IOData, plan: Plan) -> str:
         f"{summary['method']}: order {summary['order']}, {summary['passes_run']} passes, "
         f"{summary['discretization']} discretisation, {summary['seconds']:.2f} s, {converged}",
         f"eigenvalues ({kind}-time): {eigen}",
-        f"fit R (continuous model simulated exactly): {_fits(data.output_names, summary['fit_percent'])}",
+        f"fit R (continuous model simulated exactly): {_fits(data.output_names, summary['fit_percent'])}"
+        + (" (from rest, where an unstable model's simulation diverges: the k-step scores below measure it)"
+           if np.any(np.asarray(summary["eigenvalues"], dtype=complex).real > 0) else ""),
     ]
     how = (f"{summary['horizon']}-step-ahead prediction" if summary.get("horizon")
            else f"simulation, initial state {summary.get('initial_state', 'zero')}")
@@ -812,7 +827,7 @@ def run_iekf_order(args: argparse.Namespace, plan: Plan, options: IEKFOptions, o
         lambda: identify_iekf(plan.estimation, structure, options=options, settle_start=plan.settle_start))
     stop_reason = f"{result.stop_reason}: {divergence}" if divergence else result.stop_reason
     kept = None if tuning.start_wins else start_beats_filter(result, plan, args)
-    model = start_model(result) if tuning.start_wins or kept is not None else result.model
+    model = returned_start(result, plan.records) if tuning.start_wins or kept is not None else result.model
     extra = {"fit_percent": result.fit_percent, "stop_reason": stop_reason, "result": result, "tuning": tuning,
              "p": tuning.p}
     if unstable is not None:

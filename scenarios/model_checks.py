@@ -63,7 +63,8 @@ def _plus_minus(value: float, std: float, digits: str) -> str:
 
 def uncertainty_lines(summary: dict[str, Any], output_names: Sequence[str]) -> list[str]:
     """Text lines: each mode as value +/- 2 sigma, and the residual tests per output."""
-    lines = ["modes (value \u00b1 2 sigma):"]
+    covered = any(np.isfinite(mode["frequency_hz_std"]) for mode in summary["modes"])
+    lines = ["modes (value \u00b1 2 sigma):" if covered else "modes (no parameter covariance: the model carries none):"]
     for index, mode in enumerate(summary["modes"], start=1):
         re, im = mode["eigenvalue"]
         re_std, im_std = mode["eigenvalue_std"]
@@ -74,7 +75,9 @@ def uncertainty_lines(summary: dict[str, Any], output_names: Sequence[str]) -> l
             f"damping {_plus_minus(mode['damping'], mode['damping_std'], '.3f')}"
         )
     bound = summary["residual_tests"]["bound"]
-    lines.append(f"residual tests (99 %, {summary['residual_tests']['lags']} lags, bound {bound:.3g}):")
+    growing = any(mode["eigenvalue"][0] > 0 for mode in summary["modes"])
+    lines.append(f"residual tests (99 %, {summary['residual_tests']['lags']} lags, bound {bound:.3g})"
+                 + (", of a simulation from rest that an unstable mode makes diverge:" if growing else ":"))
     for name, output in zip(output_names, summary["residual_tests"]["outputs"]):
         if output["exact"]:
             lines.append(f"  {name}: fitted to rounding, no residual left to test")

@@ -341,6 +341,10 @@ def test_a_returned_start_is_what_the_summary_and_the_archive_describe(tmp_path,
     archived = read_archive(out).runs["start"].model
     np.testing.assert_allclose(np.sort_complex(archived.eigenvalues()),
                                np.sort_complex([complex(*v) for v in summary["eigenvalues"]]), rtol=1e-12)
+    # the start carries the covariance a subspace model gets (its simulation errors'), so its modes have error bars
+    assert archived.parameter_covariance is not None
+    assert np.all(np.linalg.eigvalsh(archived.parameter_covariance) > 0)
+    assert all(np.isfinite(mode["frequency_hz_std"]) and mode["frequency_hz_std"] > 0 for mode in summary["modes"])
     filtered = read_archive(out).runs["iekf"].model  # the filter's own model stays in the archive, apart
     assert not np.allclose(np.sort_complex(filtered.eigenvalues()), np.sort_complex(archived.eigenvalues()),
                            rtol=1e-9)

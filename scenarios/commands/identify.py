@@ -200,7 +200,8 @@ def _identify(args: argparse.Namespace) -> tuple[dict, str]:
     summary = {**_iekf_summary(result), **tuning.summary(), **_unstable_summary(unstable, result, plan, args, tuning)}
     if divergence:
         summary["divergence"] = divergence
-    model = workflow.start_model(result) if tuning.start_wins or "start_kept" in summary else result.model
+    model = workflow.returned_start(result, plan.records) if tuning.start_wins or "start_kept" in summary \
+        else result.model
     return _finish(args, plan, summary, model, result=result, archive_path=archive_path)
 
 
