@@ -12,7 +12,7 @@
    (``handling_study.SENSOR_NOISE``: 0.05 m/s^2 lateral acceleration,
    0.003 rad/s yaw rate, 0.0017 rad (0.1 deg) roll angle, the levels of a
    vehicle-grade inertial unit and roll estimate; noise seeds 11-15).
-   Orders 2, 4 and 6 by the IEKF at `vehid identify`'s defaults, each
+   Orders 2, 4, 6 and 8 by the IEKF at `vehid identify`'s defaults, each
    refined by output error from the IEKF's model, tested on both records;
    a diverged IEKF run is recorded as such. Each row also gives the
    seconds of the IEKF and of output error.
@@ -95,7 +95,7 @@ def noisy_handling_records() -> list[dict]:
         for noise_seed in NOISE_SEEDS:
             records = with_sensor_noise(clean, noise_seed)
             data = records["identification"]
-            for order in (2, 4, 6):
+            for order in (2, 4, 6, 8):
                 label = f"noisy handling seeds {excitation_seed}/{noise_seed} n = {order}"
                 began = time.perf_counter()
                 try:

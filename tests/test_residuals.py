@@ -166,34 +166,35 @@ def test_an_exact_fit_is_not_called_coloured():
         residual_tests(data.u, data.y - calibration.true_model().simulate_outputs(data.u, data.dt))
 
 
-@pytest.mark.parametrize("excitation_seed, noise_seed", [(0, 11), (1, 12)])
+@pytest.mark.parametrize("excitation_seed, noise_seed", [(0, 13), (1, 12)])
 def test_residual_tests_on_the_noisy_handling_study(excitation_seed, noise_seed):
-    """The handling study in its linear regime with sensor noise: n = 2 is flagged, n = 6 is not.
+    """The handling study in its linear regime with sensor noise: n = 2 is flagged on both records, n = 8 passes.
 
     Records of 10 s at a tenth of the steer amplitude with the noise of
     ``handling_study.SENSOR_NOISE``; the IEKF at the invariant settings (50
     passes), refined by output error from its model, tested on both records
     (``benchmarks/residual_adequacy.py``). Independent truth: the vehicle's
-    linearisation has two lightly damped modes (yaw-sideslip and roll), which
-    two states cannot hold, so an n = 2 model leaves input-driven response in
-    its residuals.
+    linearisation has two lightly damped modes (yaw-sideslip and roll) and
+    the tyres' relaxation lags between steer and forces, which two states
+    cannot hold, so an n = 2 model leaves input-driven response in its
+    residuals.
 
     Measured over excitation seeds 0 and 1 by noise seeds 11-15 (ten
     pairs): n = 2 fails the input cross-correlation test on both records in
-    all ten (lateral acceleration p below 1e-25). At n = 6 the IEKF diverged
-    in two pairs (0/15, 1/14: an unstable model); in the other eight output
-    error's model passes the input test on both records (smallest p 0.08),
-    and its lateral acceleration and roll angle residuals are white (smallest
-    p 0.034, 0.18), but its yaw rate's is coloured on the identification
-    record in three (p 6e-5 to 2e-4; 0.006 on the validation record of one),
-    so the full verdict holds in five of eight. Hence what is asserted for
-    n = 6 is what held in all eight. The second case is one of the three,
-    so the test does not rest on a favourable seed.
+    all ten (lateral acceleration p below 1e-25). n = 8 passes every test on
+    the identification record in all ten (smallest whiteness p 0.059,
+    smallest input-correlation p 0.093) and on the validation record in nine
+    (at 0/15 its residuals there are coloured: the record it was not fitted
+    to). n = 6 is in between: the IEKF diverged in two pairs, and of the
+    other eight the yaw rate's residual is coloured in three (p 6e-5 to
+    2e-4) where n = 8's is white. Both cases here are pairs where n = 6 fails, so the test
+    does not rest on a favourable seed; it asserts for n = 8 the verdict that
+    held in all ten pairs (the identification record).
     """
     records = with_sensor_noise(make_records(HandlingConfig(duration=10.0, amplitude_scale=0.1, seed=excitation_seed)),
                                 noise_seed)
     data = records["identification"]
-    for order in (2, 6):
+    for order in (2, 8):
         start = identify_iekf(data, ModalStructure.default(order, data.n_u, data.n_y),
                               options=IEKFOptions.invariant(passes=50)).model
         model = identify_with(data, method="output-error", order=order, start=start.with_parameter_covariance(None)).model
@@ -201,7 +202,5 @@ def test_residual_tests_on_the_noisy_handling_study(excitation_seed, noise_seed)
             tests = model_residual_tests(model, record)
             if order == 2:
                 assert not tests.adequate and not tests.independent.all(), (name, tests.input_correlation_p)
-            else:
-                assert tests.independent.all(), (name, tests.input_correlation_p)
-                white = dict(zip(record.output_names, tests.white))
-                assert white["lateral_acceleration"] and white["roll_angle"], (name, tests.residual_whiteness_p)
+            elif name == "identification":
+                assert tests.adequate, (tests.residual_whiteness_p, tests.input_correlation_p)
