@@ -1,8 +1,8 @@
 """How sure is a modal model? Parameter covariances and what follows from them.
 
 Every estimator leaves a covariance of the modal parameter vector
-(:attr:`ModalModel.parameter_covariance`): the IEKF the upper envelope of its
-steady-state filter covariance and of its fit's asymptotic covariance
+(:attr:`ModalModel.parameter_covariance`): the IEKF its fit's asymptotic
+covariance plus the spread of its parameters along one more pass
 (:func:`iekf_parameter_covariance`); output error the Gauss-Newton covariance
 (:func:`gauss_newton_covariance`); ARX the least-squares covariance carried
 through the conversion (:func:`propagate_by_differences`); N4SID the
@@ -335,8 +335,9 @@ def iekf_parameter_covariance(
     time_unit: float = 1.0,
     parameters: np.ndarray | None = None,
     records: Any = None,
+    pass_parameters: np.ndarray | None = None,
 ) -> np.ndarray:
-    """The IEKF's parameter covariance in original units from its final ``P`` and its estimate's sensitivity.
+    """The IEKF's parameter covariance in original units: its fit's covariance plus its measured fluctuation.
 
     Parameters
     ----------
@@ -354,35 +355,46 @@ def iekf_parameter_covariance(
         The filter's unit of time in seconds (the sample interval when it
         counts time in samples): sigma, omega and B are rescaled to 1/s.
     parameters : ndarray, optional
-        The estimate in original units; with ``records``, the covariance is
-        the larger of the filter's and the fit's (Notes).
+        The estimate in original units; with ``records``, the covariance of
+        the fit at it enters (Notes).
     records : sequence of IOData, optional
         The records the filter ran over.
+    pass_parameters : ndarray, shape (n_samples, n_theta), optional
+        The filter's parameters (original units) at evenly spaced points of
+        one more pass over ``records`` from its final state: with
+        ``parameters`` and ``records``, the covariance is the fit's plus
+        their sample covariance (Notes).
 
     Notes
     -----
-    Two mechanisms leave error in the estimate, and the covariance is the
-    upper envelope of the two (in the basis that diagonalises both, the
-    larger variance in each direction; their sum would count the one noise
-    twice):
+    After many passes the filter runs periodically over the record, and
+    the estimate it returns (its parameters at the end of a pass) is one
+    point of that cycle. Its error ``e_k`` at sample ``k`` splits into the
+    mean over the pass and the deviation from it; averaged over the pass,
+    ``E[e_k e_k'] = Cov(mean) + E[S]`` with ``S`` the covariance of the
+    parameters about their mean along the pass (the law of total variance
+    over the position in the record). To first order the mean weights every
+    sample of the record alike: it is the point that minimises the
+    simulation error (the states carry no process noise, so the filter
+    predicts by simulation), whose covariance is
+    :func:`simulation_error_covariance` at the estimate. So the covariance
+    is that plus ``S``, measured on the pass itself. Both parts are
+    measured in the noise the data carry; neither depends on the filter's
+    tuning model. At a small ``p`` the filter barely moves within a pass
+    (``S`` vanishes, the estimate is the minimiser); at a large ``p`` it
+    forgets within a pass and ``S`` dominates.
 
-    * The filter's own fluctuation. ``P`` is a covariance under the noise
-      model the filter was given, ``R`` (by default ``I`` in normalised
-      units, a tuning choice): the noise-driven error scales with the
-      actual noise variance, ``noise_ratio`` times ``R``. And ``P`` is that
-      of parameters taking a random walk of covariance ``Q`` per step,
-      which they do not: for a constant parameter tracked by a filter at
-      its steady state, the error covariance ``V`` solves
-      ``V M P + P M V = P M P`` (``M = H' R^-1 H``, the Lyapunov equation of
-      the error recursion with gain ``P H' R^-1``, to first order in ``M P``),
-      i.e. ``V = P / 2``. So ``noise_ratio P / 2``.
-    * The error of the point the filter settles on, the minimiser of the
-      simulation error (the states carry no process noise, so the filter
-      predicts by simulation): :func:`simulation_error_covariance` at the
-      estimate. After many passes at a small ``p`` the estimate is that
-      minimiser and its error this bound; at larger ``p`` the filter
-      tracks over a memory shorter than the record and its fluctuation
-      dominates.
+    Without ``pass_parameters`` (a checkpoint of a running filter) or where
+    the fit cannot be simulated, the filter's own ``P`` stands in:
+    ``noise_ratio P / 2``, the steady-state error of a filter tracking a
+    constant under a random-walk model (the Lyapunov equation
+    ``V M P + P M V = P M P``, ``M = H' R^-1 H``, of its error recursion
+    gives ``V = P / 2``), its noise rescaled to the measured innovations;
+    with the fit's covariance but no pass, the larger of the two direction
+    by direction (:func:`upper_envelope`). That reasoning holds for a filter
+    of the parameters alone; for the joint filter of states and parameters
+    it overstates the spread of the estimates, the more so the larger ``p``
+    (measured on the calibration system: README, "How sure is the model?").
 
     The map to original units is the Jacobian of
     :meth:`~identification.modal.ModalStructure.rescale_time` and
@@ -404,7 +416,15 @@ def iekf_parameter_covariance(
     from .modal import ModalModel
 
     fit = simulation_error_covariance(ModalModel.from_parameters(structure, parameters), records)
-    return covariance if fit is None else upper_envelope(covariance, fit)
+    if fit is None:
+        return covariance
+    if pass_parameters is not None:
+        samples = np.asarray(pass_parameters, dtype=float)
+        if samples.ndim == 2 and samples.shape[0] >= 2 and samples.shape[1] == n_theta and np.all(np.isfinite(samples)):
+            fluctuation = np.atleast_2d(np.cov(samples, rowvar=False))
+            total = fit + fluctuation
+            return 0.5 * (total + total.T)
+    return upper_envelope(covariance, fit)
 
 
 def upper_envelope(first: np.ndarray, second: np.ndarray) -> np.ndarray:
