@@ -363,7 +363,7 @@ def iekf_parameter_covariance(
         The filter's parameters (original units) at evenly spaced points of
         one more pass over ``records`` from its final state: with
         ``parameters`` and ``records``, the covariance is the fit's plus
-        their sample covariance (Notes).
+        their mean square deviation from the fit's minimiser (Notes).
 
     Notes
     -----
@@ -378,7 +378,11 @@ def iekf_parameter_covariance(
     simulation error (the states carry no process noise, so the filter
     predicts by simulation), whose covariance is
     :func:`simulation_error_covariance` at the estimate. So the covariance
-    is that plus ``S``, measured on the pass itself. Both parts are
+    is that plus ``S``, measured on the pass itself. ``S`` is taken about
+    that minimiser (one Gauss-Newton step from the estimate) rather than
+    about the samples' own mean: where a filter of high gain does not
+    average to the minimiser, the offset (a bias the fit does not have) is
+    counted with the fluctuation. Both parts are
     measured in the noise the data carry; neither depends on the filter's
     tuning model. At a small ``p`` the filter barely moves within a pass
     (``S`` vanishes, the estimate is the minimiser); at a large ``p`` it
@@ -415,14 +419,15 @@ def iekf_parameter_covariance(
         return covariance
     from .modal import ModalModel
 
-    fit = simulation_error_covariance(ModalModel.from_parameters(structure, parameters), records)
-    if fit is None:
+    found = simulation_error_covariance(ModalModel.from_parameters(structure, parameters), records, with_step=True)
+    if found is None:
         return covariance
+    fit, step = found
     if pass_parameters is not None:
         samples = np.asarray(pass_parameters, dtype=float)
         if samples.ndim == 2 and samples.shape[0] >= 2 and samples.shape[1] == n_theta and np.all(np.isfinite(samples)):
-            fluctuation = np.atleast_2d(np.cov(samples, rowvar=False))
-            total = fit + fluctuation
+            deviations = samples - (np.asarray(parameters, dtype=float) + step)
+            total = fit + deviations.T @ deviations / samples.shape[0]
             return 0.5 * (total + total.T)
     return upper_envelope(covariance, fit)
 
@@ -502,7 +507,7 @@ def gauss_newton_covariance(jacobian: np.ndarray, residuals: np.ndarray, *, over
     return 0.5 * (covariance + covariance.T)
 
 
-def simulation_error_covariance(model: Any, records: Any) -> np.ndarray | None:
+def simulation_error_covariance(model: Any, records: Any, *, with_step: bool = False) -> Any:
     """The asymptotic covariance of a modal model's parameters as a fit of its simulation errors.
 
     Parameters
@@ -520,7 +525,9 @@ def simulation_error_covariance(model: Any, records: Any) -> np.ndarray | None:
         :func:`gauss_newton_covariance` of the errors' exact Jacobian
         (:meth:`~identification.modal.ModalModel.output_sensitivity`); None
         where the model cannot be simulated to finite values (an unstable
-        estimate over a long record).
+        estimate over a long record). With ``with_step``, the pair of it and
+        the Gauss-Newton step from the model's parameters towards the
+        minimiser of the weighted simulation error (or None).
 
     Notes
     -----
@@ -540,7 +547,15 @@ def simulation_error_covariance(model: Any, records: Any) -> np.ndarray | None:
     jacobian = jacobians[0] if len(jacobians) == 1 else np.concatenate(jacobians)
     if not (np.all(np.isfinite(jacobian)) and np.all(np.isfinite(base))):
         return None
-    return gauss_newton_covariance(jacobian, base, overwrite_jacobian=True)
+    if not with_step:
+        return gauss_newton_covariance(jacobian, base, overwrite_jacobian=True)
+    # the step -(J' W J)^-1 J' W e with the covariance's weights W (1 / each output's error variance,
+    # whose degrees-of-freedom factor dof is applied here), taken before the covariance may overwrite J
+    samples, n_y = base.shape
+    dof = max(samples * n_y - jacobian.shape[1], 1) / (samples * n_y)
+    gradient = jacobian.T @ (base / np.maximum(np.mean(base**2, axis=0), 1e-300)).ravel()
+    covariance = gauss_newton_covariance(jacobian, base, overwrite_jacobian=True)
+    return covariance, -dof * covariance @ gradient
 
 
 def propagate_by_differences(
