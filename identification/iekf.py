@@ -66,6 +66,11 @@ TIMESCALES = ("seconds", "auto")
 #: constant of the start model, on parameters of order 1 (chosen by measurement: docs/iekf_tuning.md).
 INVARIANT_P = 1e-4
 
+#: Points of the extra pass at which the filter's parameters are sampled for their covariance
+#: (:func:`~identification.uncertainty.iekf_parameter_covariance`): the sample covariance of 200
+#: points has a relative standard error of about 10 % where they are independent.
+PASS_SAMPLES = 200
+
 
 @dataclass(frozen=True)
 class IEKFOptions:
@@ -372,10 +377,13 @@ def identify_iekf(
         last = history[-1].parameters if history else original_units(theta)
         covariance = None
         if history and np.isfinite(history[-1].nis):
-            # the fit's sensitivity costs n_u + 1 simulations: for the finished run, not every checkpoint
+            # the fit's sensitivity costs n_u + 1 simulations and the sampled pass one pass: for the
+            # finished run, not every checkpoint
+            finished = stop_reason != "running"
             covariance = iekf_parameter_covariance(
                 structure, P[n:, n:], input_scale, output_scale, history[-1].nis / structure.n_y, time_unit=time_unit,
-                parameters=last, records=None if stop_reason == "running" else records)
+                parameters=last, records=records if finished else None,
+                pass_parameters=sampled_pass(theta, P) if finished else None)
         return IEKFResult(
             model=ModalModel.from_parameters(
                 structure, last, input_names=data.input_names, output_names=data.output_names,
@@ -386,6 +394,31 @@ def identify_iekf(
             state=FilterState(theta.copy(), P.copy(), input_scale.copy(), output_scale.copy(), time_unit, time_constant),
             dt=dt, stop_reason=stop_reason, seconds=time.perf_counter() - started, meta=dict(start_meta),
         )
+
+    def sampled_pass(theta: np.ndarray, P: np.ndarray) -> np.ndarray | None:
+        """The parameters (original units) at :data:`PASS_SAMPLES` even points of one more pass from ``theta``, ``P``.
+
+        The pass runs as :func:`~identification.rinse.rinse` runs one, in
+        pieces; its result feeds only the covariance (None if it diverges).
+        """
+        m = n + structure.n_parameters
+        state = np.concatenate([np.zeros(n), theta, pack_covariance(P)])
+        total = sum(y.shape[0] for y in y_scaled)
+        samples = []
+        with np.errstate(all="ignore"):
+            for k in range(len(records)):
+                state[:n] = 0.0
+                u_k, y_k = u_scaled[k], y_scaled[k]
+                if settle:
+                    state, u_k, y_k = _settle_states(state, u_k, y_k, structure, run_pass, q, r, dt / time_unit)
+                pieces = max(1, round(PASS_SAMPLES * y_k.shape[0] / total))
+                edges = np.linspace(0, y_k.shape[0], pieces + 1).astype(int)
+                for begin, end in zip(edges[:-1], edges[1:]):
+                    if end > begin:
+                        state, _ = run_pass(state, u_k[begin:end], y_k[begin:end], q, r)
+                        samples.append(original_units(state[n:m].copy()))
+        samples = np.array(samples)
+        return samples if samples.shape[0] >= 2 and np.all(np.isfinite(samples)) else None
 
     def run_record(state: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
         u_k, y_k = u_scaled[k], y_scaled[k]

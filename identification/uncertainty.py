@@ -1,8 +1,8 @@
 """How sure is a modal model? Parameter covariances and what follows from them.
 
 Every estimator leaves a covariance of the modal parameter vector
-(:attr:`ModalModel.parameter_covariance`): the IEKF the upper envelope of its
-steady-state filter covariance and of its fit's asymptotic covariance
+(:attr:`ModalModel.parameter_covariance`): the IEKF its fit's asymptotic
+covariance plus the spread of its parameters along one more pass
 (:func:`iekf_parameter_covariance`); output error the Gauss-Newton covariance
 (:func:`gauss_newton_covariance`); ARX the least-squares covariance carried
 through the conversion (:func:`propagate_by_differences`); N4SID the
@@ -335,8 +335,9 @@ def iekf_parameter_covariance(
     time_unit: float = 1.0,
     parameters: np.ndarray | None = None,
     records: Any = None,
+    pass_parameters: np.ndarray | None = None,
 ) -> np.ndarray:
-    """The IEKF's parameter covariance in original units from its final ``P`` and its estimate's sensitivity.
+    """The IEKF's parameter covariance in original units: its fit's covariance plus its measured fluctuation.
 
     Parameters
     ----------
@@ -354,35 +355,50 @@ def iekf_parameter_covariance(
         The filter's unit of time in seconds (the sample interval when it
         counts time in samples): sigma, omega and B are rescaled to 1/s.
     parameters : ndarray, optional
-        The estimate in original units; with ``records``, the covariance is
-        the larger of the filter's and the fit's (Notes).
+        The estimate in original units; with ``records``, the covariance of
+        the fit at it enters (Notes).
     records : sequence of IOData, optional
         The records the filter ran over.
+    pass_parameters : ndarray, shape (n_samples, n_theta), optional
+        The filter's parameters (original units) at evenly spaced points of
+        one more pass over ``records`` from its final state: with
+        ``parameters`` and ``records``, the covariance is the fit's plus
+        their mean square deviation from the fit's minimiser (Notes).
 
     Notes
     -----
-    Two mechanisms leave error in the estimate, and the covariance is the
-    upper envelope of the two (in the basis that diagonalises both, the
-    larger variance in each direction; their sum would count the one noise
-    twice):
+    After many passes the filter runs periodically over the record, and
+    the estimate it returns (its parameters at the end of a pass) is one
+    point of that cycle. Its error ``e_k`` at sample ``k`` splits into the
+    mean over the pass and the deviation from it; averaged over the pass,
+    ``E[e_k e_k'] = Cov(mean) + E[S]`` with ``S`` the covariance of the
+    parameters about their mean along the pass (the law of total variance
+    over the position in the record). To first order the mean weights every
+    sample of the record alike: it is the point that minimises the
+    simulation error (the states carry no process noise, so the filter
+    predicts by simulation), whose covariance is
+    :func:`simulation_error_covariance` at the estimate. So the covariance
+    is that plus ``S``, measured on the pass itself. ``S`` is taken about
+    that minimiser (one Gauss-Newton step from the estimate) rather than
+    about the samples' own mean: where a filter of high gain does not
+    average to the minimiser, the offset (a bias the fit does not have) is
+    counted with the fluctuation. Both parts are
+    measured in the noise the data carry; neither depends on the filter's
+    tuning model. At a small ``p`` the filter barely moves within a pass
+    (``S`` vanishes, the estimate is the minimiser); at a large ``p`` it
+    forgets within a pass and ``S`` dominates.
 
-    * The filter's own fluctuation. ``P`` is a covariance under the noise
-      model the filter was given, ``R`` (by default ``I`` in normalised
-      units, a tuning choice): the noise-driven error scales with the
-      actual noise variance, ``noise_ratio`` times ``R``. And ``P`` is that
-      of parameters taking a random walk of covariance ``Q`` per step,
-      which they do not: for a constant parameter tracked by a filter at
-      its steady state, the error covariance ``V`` solves
-      ``V M P + P M V = P M P`` (``M = H' R^-1 H``, the Lyapunov equation of
-      the error recursion with gain ``P H' R^-1``, to first order in ``M P``),
-      i.e. ``V = P / 2``. So ``noise_ratio P / 2``.
-    * The error of the point the filter settles on, the minimiser of the
-      simulation error (the states carry no process noise, so the filter
-      predicts by simulation): :func:`simulation_error_covariance` at the
-      estimate. After many passes at a small ``p`` the estimate is that
-      minimiser and its error this bound; at larger ``p`` the filter
-      tracks over a memory shorter than the record and its fluctuation
-      dominates.
+    Without ``pass_parameters`` (a checkpoint of a running filter) or where
+    the fit cannot be simulated, the filter's own ``P`` stands in:
+    ``noise_ratio P / 2``, the steady-state error of a filter tracking a
+    constant under a random-walk model (the Lyapunov equation
+    ``V M P + P M V = P M P``, ``M = H' R^-1 H``, of its error recursion
+    gives ``V = P / 2``), its noise rescaled to the measured innovations;
+    with the fit's covariance but no pass, the larger of the two direction
+    by direction (:func:`upper_envelope`). That reasoning holds for a filter
+    of the parameters alone; for the joint filter of states and parameters
+    it overstates the spread of the estimates, the more so the larger ``p``
+    (measured on the calibration system: README, "How sure is the model?").
 
     The map to original units is the Jacobian of
     :meth:`~identification.modal.ModalStructure.rescale_time` and
@@ -403,8 +419,17 @@ def iekf_parameter_covariance(
         return covariance
     from .modal import ModalModel
 
-    fit = simulation_error_covariance(ModalModel.from_parameters(structure, parameters), records)
-    return covariance if fit is None else upper_envelope(covariance, fit)
+    found = simulation_error_covariance(ModalModel.from_parameters(structure, parameters), records, with_step=True)
+    if found is None:
+        return covariance
+    fit, step = found
+    if pass_parameters is not None:
+        samples = np.asarray(pass_parameters, dtype=float)
+        if samples.ndim == 2 and samples.shape[0] >= 2 and samples.shape[1] == n_theta and np.all(np.isfinite(samples)):
+            deviations = samples - (np.asarray(parameters, dtype=float) + step)
+            total = fit + deviations.T @ deviations / samples.shape[0]
+            return 0.5 * (total + total.T)
+    return upper_envelope(covariance, fit)
 
 
 def upper_envelope(first: np.ndarray, second: np.ndarray) -> np.ndarray:
@@ -482,7 +507,7 @@ def gauss_newton_covariance(jacobian: np.ndarray, residuals: np.ndarray, *, over
     return 0.5 * (covariance + covariance.T)
 
 
-def simulation_error_covariance(model: Any, records: Any) -> np.ndarray | None:
+def simulation_error_covariance(model: Any, records: Any, *, with_step: bool = False) -> Any:
     """The asymptotic covariance of a modal model's parameters as a fit of its simulation errors.
 
     Parameters
@@ -500,7 +525,9 @@ def simulation_error_covariance(model: Any, records: Any) -> np.ndarray | None:
         :func:`gauss_newton_covariance` of the errors' exact Jacobian
         (:meth:`~identification.modal.ModalModel.output_sensitivity`); None
         where the model cannot be simulated to finite values (an unstable
-        estimate over a long record).
+        estimate over a long record). With ``with_step``, the pair of it and
+        the Gauss-Newton step from the model's parameters towards the
+        minimiser of the weighted simulation error (or None).
 
     Notes
     -----
@@ -520,7 +547,15 @@ def simulation_error_covariance(model: Any, records: Any) -> np.ndarray | None:
     jacobian = jacobians[0] if len(jacobians) == 1 else np.concatenate(jacobians)
     if not (np.all(np.isfinite(jacobian)) and np.all(np.isfinite(base))):
         return None
-    return gauss_newton_covariance(jacobian, base, overwrite_jacobian=True)
+    if not with_step:
+        return gauss_newton_covariance(jacobian, base, overwrite_jacobian=True)
+    # the step -(J' W J)^-1 J' W e with the covariance's weights W (1 / each output's error variance,
+    # whose degrees-of-freedom factor dof is applied here), taken before the covariance may overwrite J
+    samples, n_y = base.shape
+    dof = max(samples * n_y - jacobian.shape[1], 1) / (samples * n_y)
+    gradient = jacobian.T @ (base / np.maximum(np.mean(base**2, axis=0), 1e-300)).ravel()
+    covariance = gauss_newton_covariance(jacobian, base, overwrite_jacobian=True)
+    return covariance, -dof * covariance @ gradient
 
 
 def propagate_by_differences(
