@@ -271,8 +271,14 @@ def test_a_tracking_filter_errs_by_the_batch_error_plus_its_spread_along_a_pass(
         assert np.var(errors) / batch > 1.5
 
 
+#: The command line's unit-invariant settings at the p its cross-validation takes most often on this system
+#: (1e-5: in 37 of 50 realisations at 30 % noise, benchmarks/uncertainty_calibration.py), fixed here so that the
+#: test does not run the six cross-validation fits per realisation.
+LEAN_IEKF_SETTINGS = {**calibration.COMMAND_LINE_SETTINGS, "p": 1e-5}
+
+
 def test_intervals_are_calibrated_on_the_known_system_lean():
-    """Coverage and z-scores of the 95 % intervals at the IEKF's command-line defaults and of output error.
+    """Coverage and z-scores of the 95 % intervals of the IEKF (:data:`LEAN_IEKF_SETTINGS`) and of output error.
 
     20 realisations (30 % noise, 30 s) x 2 modes x 2 quantities = 80
     intervals per method. Coverage: a calibrated method covers 76 on
@@ -291,7 +297,7 @@ def test_intervals_are_calibrated_on_the_known_system_lean():
     scores: dict[str, list] = {"iekf": [], "output-error": []}
     for seed in range(100, 120):
         data, _ = calibration.make_record(seed, 0.3, duration=30.0)
-        for method, realisation in calibration.identify_realisation(data).items():
+        for method, realisation in calibration.identify_realisation(data, iekf_settings=LEAN_IEKF_SETTINGS).items():
             for name in ("frequency_hz", "damping"):
                 if method in scores:
                     scores[method].extend((getattr(realisation, name) - truth[name]) / getattr(realisation, f"{name}_std"))
