@@ -256,6 +256,7 @@ def identify_iekf(
     resume: IEKFResult | None = None,
     on_pass: Callable[[PassRecord, "IEKFResult"], None] | None = None,
     settle_start: bool | None = None,
+    parameter_covariance: bool = True,
 ) -> IEKFResult:
     """Identify a linear modal model with the IEKF.
 
@@ -284,6 +285,11 @@ def identify_iekf(
         or one whose offsets were removed, is not at rest at its start): then
         the head of each record settles the states with the parameters held
         (:func:`_settle_states`). Default: when there are several records.
+    parameter_covariance : bool
+        Leave the model its parameter covariance
+        (:func:`~identification.uncertainty.iekf_parameter_covariance`, which
+        costs one more pass and the fit's sensitivity); False for fits whose
+        covariance nobody reads (cross-validation folds).
 
     Returns
     -------
@@ -376,7 +382,7 @@ def identify_iekf(
     def result(stop_reason: str, history: tuple[PassRecord, ...], theta: np.ndarray, P: np.ndarray) -> IEKFResult:
         last = history[-1].parameters if history else original_units(theta)
         covariance = None
-        if history and np.isfinite(history[-1].nis):
+        if parameter_covariance and history and np.isfinite(history[-1].nis):
             # the fit's sensitivity costs n_u + 1 simulations and the sampled pass one pass: for the
             # finished run, not every checkpoint
             finished = stop_reason != "running"

@@ -352,7 +352,7 @@ def tune_p(args: argparse.Namespace, plan: Plan, options: IEKFOptions, structure
             data = fit_on[0] if len(fit_on) == 1 else fit_on
             try:
                 result, _ = last_good_on_divergence(
-                    lambda: identify_iekf(data, structure, options=trial, settle_start=settle))
+                    lambda: identify_iekf(data, structure, options=trial, settle_start=settle, parameter_covariance=False))
             except WorkbenchError as exc:
                 errors.append(str(exc))
                 continue
