@@ -122,8 +122,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     _configure_logging(args)
     handler: Callable[[argparse.Namespace], tuple[dict, str]] = args.handler
     try:
-        with stopping_on_signals():
+        with stopping_on_signals():  # until the result is printed: a signal before then ends with 128 + its number
             summary, text = handler(args)
+            _print_result(args, summary, text)
     except StrictWarningsError as exc:
         for line in exc.warnings:
             print(f"vehid: warning: {line}", file=sys.stderr)
@@ -151,11 +152,17 @@ def main(argv: Sequence[str] | None = None) -> int:
             file=sys.stderr,
         )
         return _failed(args, exc, 1)
+    # Past this point a SIGTERM or SIGHUP has its default action again: the process ends by the signal
+    # (a shell shows 128 + its number), the work and its output being complete.
+    return 0
+
+
+def _print_result(args: argparse.Namespace, summary: dict, text: str) -> None:
     if args.json:
         sys.stdout.write(json.dumps(to_jsonable(summary), allow_nan=False) + "\n")
     elif text:
         sys.stdout.write(text.rstrip("\n") + "\n")
-    return 0
+    sys.stdout.flush()  # the result is out before the signals' default action is back
 
 
 if __name__ == "__main__":  # pragma: no cover

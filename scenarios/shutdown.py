@@ -16,6 +16,7 @@ import os
 import pickle
 import queue as queue_module
 import signal
+import sys
 import threading
 import time
 from contextlib import contextmanager
@@ -32,6 +33,7 @@ __all__ = [
     "Interrupted",
     "WorkerError",
     "stopping_on_signals",
+    "raise_if_interrupted",
     "signal_name",
     "run_in_workers",
 ]
@@ -44,6 +46,9 @@ PATH_ERRNOS = frozenset({errno.ENOENT, errno.EACCES, errno.EPERM, errno.EISDIR, 
                          errno.ENAMETOOLONG, errno.EEXIST, errno.ELOOP})
 
 _STOPPING_SIGNALS = tuple(getattr(signal, name) for name in ("SIGTERM", "SIGHUP") if hasattr(signal, name))
+
+#: Stopping signals received within the innermost :func:`stopping_on_signals` block, oldest first.
+_RECEIVED: list[int] = []
 
 
 class Interrupted(KeyboardInterrupt):
@@ -76,14 +81,47 @@ def stopping_on_signals() -> Iterator[None]:
         return
 
     def stop(signum: int, frame: Any) -> None:
+        # Remembered before raising: a handler that runs inside a weakref callback, a __del__ or a
+        # library's cleanup has its exception printed as "Exception ignored" and dropped, and the
+        # command would otherwise finish with exit status 0 as if never asked to stop.
+        _RECEIVED.append(signum)
         raise Interrupted(signum)
 
+    previous_hook = sys.unraisablehook
+
+    def unraisable(info: Any) -> None:
+        if isinstance(info.exc_value, Interrupted):  # remembered in _RECEIVED and raised again below: not news
+            return
+        previous_hook(info)
+
+    sys.unraisablehook = unraisable
     previous = {signum: signal.signal(signum, stop) for signum in _STOPPING_SIGNALS}
+    outer = list(_RECEIVED)
+    _RECEIVED.clear()
     try:
         yield
+        raise_if_interrupted()
+    except KeyboardInterrupt:
+        raise
+    except BaseException as exc:  # a failure that ran over a swallowed signal: the signal decides the exit
+        if _RECEIVED:
+            raise Interrupted(_RECEIVED[0]) from exc
+        raise
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)
+        sys.unraisablehook = previous_hook
+        _RECEIVED[:] = outer
+
+
+def raise_if_interrupted() -> None:
+    """Raise :class:`Interrupted` if a stopping signal arrived whose exception was swallowed on the way.
+
+    Long loops call it where they wait (as :func:`run_in_workers` does) so that
+    such a signal stops the command within a moment rather than at its end.
+    """
+    if _RECEIVED:
+        raise Interrupted(_RECEIVED[0])
 
 
 
@@ -184,6 +222,7 @@ def run_in_workers(
                 os.environ[ENVIRONMENT] = announced
         all_ended_before = False
         while len(outcomes) < len(jobs):
+            raise_if_interrupted()
             crashed = [p for p in processes if p.exitcode not in (None, 0)]
             if crashed:  # killed or crashed: its job will never report
                 raise WorkerError(f"worker process {crashed[0].pid} ended with exit code {crashed[0].exitcode} "
