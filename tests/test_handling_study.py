@@ -434,11 +434,15 @@ def test_a_signal_stops_every_worker_and_leaves_a_readable_archive(stop, study, 
         os.killpg(process.pid, signal.SIGINT)  # as a terminal's Ctrl-C: the whole foreground group
     else:
         process.send_signal(getattr(signal, stop))
-    _, stderr = process.communicate(timeout=30)
+    stdout, stderr = process.communicate(timeout=30)
     while _session_processes(process.pid) and time.monotonic() - stopped < 10:
         time.sleep(0.1)
     assert _session_processes(process.pid) == {}, "processes of the study outlived it"
     assert time.monotonic() - stopped < 10
+    if stop != "SIGKILL" and process.returncode == -getattr(signal, stop) and f"wrote {out}" in stdout:
+        # The one window where the signal's default action ends the command: its result was complete and
+        # printed (the CLI restores the handlers only after that), so there was nothing left to stop.
+        pytest.skip("the study had finished and printed its result when the signal came")
     if stop != "SIGKILL":
         assert process.returncode == 128 + getattr(signal, stop)
         assert stderr.strip().splitlines() == [f"vehid: interrupted by {stop}"]
