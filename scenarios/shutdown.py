@@ -73,8 +73,13 @@ def signal_name(exc: BaseException) -> tuple[str, int]:
 def stopping_on_signals() -> Iterator[None]:
     """Within the block, SIGTERM and SIGHUP raise :class:`Interrupted` in the main thread.
 
-    Outside the main thread (where Python cannot handle signals) the block
-    runs unchanged.
+    A signal whose exception the interpreter swallows (the handler ran inside
+    a weakref callback or a ``__del__``, where Python only reports it as
+    "Exception ignored") is still acted on: :class:`Interrupted` is raised
+    again where :func:`raise_if_interrupted` is called and at the latest when
+    the block ends, so the command never finishes as if it had not been asked
+    to stop. Outside the main thread (where Python cannot handle signals) the
+    block runs unchanged.
     """
     if threading.current_thread() is not threading.main_thread():
         yield
