@@ -520,18 +520,19 @@ class ModalModel(StateSpaceModel):
             raise InputError(f"x0 must have {s.n} entries; got {x0.shape}")
         # without states asked for, y gathers each mode in turn: no (N, n) state array held for a long record
         x = np.empty((u.shape[0], s.n)) if return_states else None
-        y = None if return_states else u @ self.D.T
+        # products over the inputs as sums (_weighted_sum): BLAS threads cost more than they give at inner size n_u
+        y = None if return_states else np.einsum("kj,ij->ki", u, self.D)
         theta = self.parameters
         for states in s.mode_states():
             if len(states) == 2:
                 a, b = states
                 lam = complex(theta[a], -theta[a + 1])  # state a + j state b evolves by sigma - j omega
-                drive = u @ (self.B[a] + 1j * self.B[b])
+                drive = _weighted_sum(self.B[a] + 1j * self.B[b], u.T)
                 start = complex(x0[a], x0[b])
             else:
                 (a,) = states
                 lam = complex(theta[a], 0.0)
-                drive = (u @ self.B[a]).astype(complex)
+                drive = _weighted_sum(self.B[a], u.T).astype(complex)
                 start = complex(x0[a], 0.0)
             xi = _first_order_recursion(lam, drive, dt, method, start)
             del drive
@@ -545,7 +546,7 @@ class ModalModel(StateSpaceModel):
                     y += np.multiply.outer(xi.imag, self.C[:, states[1]])
         if x is None:
             return y
-        return x @ self.C.T + u @ self.D.T, x
+        return np.einsum("kj,ij->ki", x, self.C) + np.einsum("kj,ij->ki", u, self.D), x
 
     def _checked_input(self, u: Any, dt: float, method: str) -> np.ndarray:
         """u as a float (N, n_u) array; InputError naming what is wrong with u, dt or method."""
@@ -622,8 +623,9 @@ class ModalModel(StateSpaceModel):
             row = self.B[a] + 1j * self.B[b] if pair else self.B[a].astype(complex)
             # the mode's response to each input alone (unit gain); its state is their sum weighted by its B row
             responses = _first_order_recursion(lam, inputs, dt, method, 0j)
-            xi = row @ responses
-            eta = _lambda_derivative(xi, u @ row, dt, method, lam)
+            # sums over the inputs, not matrix products: BLAS threads cost more than they give at an inner size of n_u
+            xi = _weighted_sum(row, responses)
+            eta = _lambda_derivative(xi, _weighted_sum(row, u.T), dt, method, lam)
             write(a, eta.real, eta.imag if pair else None, a, b)
             for j in range(s.n_u):
                 response = responses[j]
@@ -640,7 +642,7 @@ class ModalModel(StateSpaceModel):
         for i in range(s.n_y):
             for j in range(s.n_u):
                 columns[d_start + i * s.n_u + j, :, i] = u[:, j]
-        return x @ self.C.T + u @ self.D.T, columns.transpose(1, 2, 0)
+        return np.einsum("kj,ij->ki", x, self.C) + np.einsum("kj,ij->ki", u, self.D), columns.transpose(1, 2, 0)
 
     def to_statespace(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
         """``(A, B, C, D, None)``: continuous time."""
@@ -683,6 +685,14 @@ class ModalModel(StateSpaceModel):
         for i, j in self.structure.fixed_c:
             mask[i, j] = 1
         return {**super().mat_fields(), "C_fixed": mask}
+
+
+def _weighted_sum(weights: np.ndarray, signals: np.ndarray) -> np.ndarray:
+    """``sum_j weights[j] signals[j]`` for a few long signals (rows of ``signals``)."""
+    total = weights[0] * signals[0]
+    for weight, signal in zip(weights[1:], signals[1:]):
+        total = total + weight * signal
+    return total
 
 
 def _first_order_recursion(lam: complex, drive: np.ndarray, dt: float, method: str, start: complex) -> np.ndarray:
