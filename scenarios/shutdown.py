@@ -71,7 +71,7 @@ def signal_name(exc: BaseException) -> tuple[str, int]:
 
 @contextmanager
 def stopping_on_signals() -> Iterator[None]:
-    """Within the block, SIGTERM and SIGHUP raise :class:`Interrupted` in the main thread.
+    """Within the block, SIGTERM, SIGHUP and (where Python handles it) SIGINT raise :class:`Interrupted` in the main thread.
 
     A signal whose exception the interpreter swallows (the handler ran inside
     a weakref callback or a ``__del__``, where Python only reports it as
@@ -100,7 +100,11 @@ def stopping_on_signals() -> Iterator[None]:
         previous_hook(info)
 
     sys.unraisablehook = unraisable
-    previous = {signum: signal.signal(signum, stop) for signum in _STOPPING_SIGNALS}
+    # Ctrl-C too, where Python's own KeyboardInterrupt handler has it (not where it is ignored): that
+    # handler's exception can be swallowed in the same places, and is then remembered alike
+    handled = _STOPPING_SIGNALS + ((signal.SIGINT,) if signal.getsignal(signal.SIGINT) is signal.default_int_handler
+                                   else ())
+    previous = {signum: signal.signal(signum, stop) for signum in handled}
     outer = list(_RECEIVED)
     _RECEIVED.clear()
     try:
