@@ -520,19 +520,19 @@ class ModalModel(StateSpaceModel):
             raise InputError(f"x0 must have {s.n} entries; got {x0.shape}")
         # without states asked for, y gathers each mode in turn: no (N, n) state array held for a long record
         x = np.empty((u.shape[0], s.n)) if return_states else None
-        # products over the inputs as sums (_weighted_sum): BLAS threads cost more than they give at inner size n_u
+        # contractions over the inputs by einsum, not BLAS: threads cost more than they give at inner size n_u
         y = None if return_states else np.einsum("kj,ij->ki", u, self.D)
         theta = self.parameters
         for states in s.mode_states():
             if len(states) == 2:
                 a, b = states
                 lam = complex(theta[a], -theta[a + 1])  # state a + j state b evolves by sigma - j omega
-                drive = _weighted_sum(self.B[a] + 1j * self.B[b], u.T)
+                drive = np.einsum("kj,j->k", u, self.B[a] + 1j * self.B[b])
                 start = complex(x0[a], x0[b])
             else:
                 (a,) = states
                 lam = complex(theta[a], 0.0)
-                drive = _weighted_sum(self.B[a], u.T).astype(complex)
+                drive = np.einsum("kj,j->k", u, self.B[a]).astype(complex)
                 start = complex(x0[a], 0.0)
             xi = _first_order_recursion(lam, drive, dt, method, start)
             del drive
@@ -623,9 +623,9 @@ class ModalModel(StateSpaceModel):
             row = self.B[a] + 1j * self.B[b] if pair else self.B[a].astype(complex)
             # the mode's response to each input alone (unit gain); its state is their sum weighted by its B row
             responses = _first_order_recursion(lam, inputs, dt, method, 0j)
-            # sums over the inputs, not matrix products: BLAS threads cost more than they give at an inner size of n_u
-            xi = _weighted_sum(row, responses)
-            eta = _lambda_derivative(xi, _weighted_sum(row, u.T), dt, method, lam)
+            # einsum over the inputs, not BLAS (as in simulate_outputs)
+            xi = np.einsum("j,jk->k", row, responses)
+            eta = _lambda_derivative(xi, np.einsum("kj,j->k", u, row), dt, method, lam)
             write(a, eta.real, eta.imag if pair else None, a, b)
             for j in range(s.n_u):
                 response = responses[j]
@@ -685,14 +685,6 @@ class ModalModel(StateSpaceModel):
         for i, j in self.structure.fixed_c:
             mask[i, j] = 1
         return {**super().mat_fields(), "C_fixed": mask}
-
-
-def _weighted_sum(weights: np.ndarray, signals: np.ndarray) -> np.ndarray:
-    """``sum_j weights[j] signals[j]`` for a few long signals (rows of ``signals``)."""
-    total = weights[0] * signals[0]
-    for weight, signal in zip(weights[1:], signals[1:]):
-        total = total + weight * signal
-    return total
 
 
 def _first_order_recursion(lam: complex, drive: np.ndarray, dt: float, method: str, start: complex) -> np.ndarray:
