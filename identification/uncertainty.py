@@ -475,9 +475,7 @@ def gauss_newton_covariance(jacobian: np.ndarray, residuals: np.ndarray, *, over
     residuals = np.asarray(residuals, dtype=float)
     samples, n_y = residuals.shape
     n_theta = jacobian.shape[1]
-    dof = max(samples * n_y - n_theta, 1) / (samples * n_y)
-    # an exact fit (noise-free data) has no spread: the floor makes its covariance vanish, not divide by zero
-    variance = np.maximum(np.mean(residuals**2, axis=0) / dof, 1e-300)
+    variance = _error_variances(residuals, n_theta)
     jacobian = np.asarray(jacobian, dtype=float)
     blocks = jacobian.reshape(samples, n_y, n_theta)
     # the normal equations, equilibrated, where they are well conditioned: a Gram product costs a
@@ -505,6 +503,14 @@ def gauss_newton_covariance(jacobian: np.ndarray, residuals: np.ndarray, *, over
     inverse = scipy.linalg.pinv(upper)
     covariance = inverse @ inverse.T
     return 0.5 * (covariance + covariance.T)
+
+
+def _error_variances(residuals: np.ndarray, n_theta: int) -> np.ndarray:
+    """Each output's error variance, its ``N n_y - n_theta`` degrees of freedom shared in proportion."""
+    samples, n_y = residuals.shape
+    dof = max(samples * n_y - n_theta, 1) / (samples * n_y)
+    # an exact fit (noise-free data) has no spread: the floor makes its covariance vanish, not divide by zero
+    return np.maximum(np.mean(residuals**2, axis=0) / dof, 1e-300)
 
 
 def _gram(columns: np.ndarray, rows_per_block: int = 1024) -> np.ndarray:
@@ -563,13 +569,11 @@ def simulation_error_covariance(model: Any, records: Any, *, with_step: bool = F
         return None
     if not with_step:
         return gauss_newton_covariance(jacobian, base, overwrite_jacobian=True)
-    # the step -(J' W J)^-1 J' W e with the covariance's weights W (1 / each output's error variance,
-    # whose degrees-of-freedom factor dof is applied here), taken before the covariance may overwrite J
-    samples, n_y = base.shape
-    dof = max(samples * n_y - jacobian.shape[1], 1) / (samples * n_y)
-    gradient = jacobian.T @ (base / np.maximum(np.mean(base**2, axis=0), 1e-300)).ravel()
+    # the step -(J' W J)^-1 J' W e with the covariance's weights W (1 / each output's error variance),
+    # its gradient taken before the covariance may overwrite J
+    gradient = jacobian.T @ (base / _error_variances(base, jacobian.shape[1])).ravel()
     covariance = gauss_newton_covariance(jacobian, base, overwrite_jacobian=True)
-    return covariance, -dof * covariance @ gradient
+    return covariance, -covariance @ gradient
 
 
 def propagate_by_differences(
