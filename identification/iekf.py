@@ -46,6 +46,8 @@ __all__ = [
     "START_CHOICES",
     "TIMESCALES",
     "start_structure",
+    "normalized_data_start",
+    "signal_scales",
 ]
 
 #: Named start values: (sigma, omega, omega spread between pairs). The paper's sigma = -1 finds the
@@ -188,7 +190,8 @@ class IEKFResult(PassHistory):
         return self.history[-1].fit_continuous
 
 
-def _scales(data: IOData | tuple[IOData, ...], normalize: bool) -> tuple[np.ndarray, np.ndarray]:
+def signal_scales(data: IOData | tuple[IOData, ...], normalize: bool) -> tuple[np.ndarray, np.ndarray]:
+    """The RMS of each input and output over all records (ones without ``normalize``): the filter's units."""
     records = as_records(data)
     if not normalize:
         return np.ones(records[0].n_u), np.ones(records[0].n_y)
@@ -208,11 +211,19 @@ def start_structure(data: IOData | tuple[IOData, ...], structure: ModalStructure
     options = options or IEKFOptions()
     if options.start != "data":
         return structure
-    input_scale, output_scale = _scales(data, options.normalize)
+    return normalized_data_start(data, structure, normalize=options.normalize, stable=not options.allow_unstable).structure
+
+
+def normalized_data_start(data: IOData | tuple[IOData, ...], structure: ModalStructure, *, normalize: bool,
+                          stable: bool) -> ModalModel:
+    """The data start (:func:`~identification.start.data_start`, modes free) of the first record, in the filter's units.
+
+    Signals divided by :func:`signal_scales` of all records, time in samples.
+    """
+    input_scale, output_scale = signal_scales(data, normalize)
     first = as_records(data)[0]
-    found = data_start(first.u / input_scale, first.y / output_scale, structure, method="data",
-                       stable=not options.allow_unstable, free_modes=True)
-    return found.model.structure
+    return data_start(first.u / input_scale, first.y / output_scale, structure, method="data", stable=stable,
+                      free_modes=True).model
 
 
 def _settle_states(state, u, y, structure: ModalStructure, run_pass, q, r, dt: float):
@@ -326,7 +337,7 @@ def identify_iekf(
         history = list(resume.history)
         start_meta = dict(resume.meta)
     else:
-        input_scale, output_scale = _scales(records, options.normalize)
+        input_scale, output_scale = signal_scales(records, options.normalize)
         time_unit = dt if options.timescale == "auto" else 1.0
         if initial_model is not None:
             if initial_model.structure != structure:
@@ -414,9 +425,7 @@ def identify_iekf(
         with np.errstate(all="ignore"):
             for k in range(len(records)):
                 state[:n] = 0.0
-                u_k, y_k = u_scaled[k], y_scaled[k]
-                if settle:
-                    state, u_k, y_k = _settle_states(state, u_k, y_k, structure, run_pass, q, r, dt / time_unit)
+                state, u_k, y_k = prepared_record(state, k)
                 pieces = max(1, round(PASS_SAMPLES * y_k.shape[0] / total))
                 edges = np.linspace(0, y_k.shape[0], pieces + 1).astype(int)
                 for begin, end in zip(edges[:-1], edges[1:]):
@@ -426,11 +435,15 @@ def identify_iekf(
         samples = np.array(samples)
         return samples if samples.shape[0] >= 2 and np.all(np.isfinite(samples)) else None
 
-    def run_record(state: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    def prepared_record(state: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The state and record ``k`` as a pass takes them: its head spent settling the states where asked."""
         u_k, y_k = u_scaled[k], y_scaled[k]
         if settle:
-            state, u_k, y_k = _settle_states(state, u_k, y_k, structure, run_pass, q, r, dt / time_unit)
-        return run_pass(state, u_k, y_k, q, r)
+            return _settle_states(state, u_k, y_k, structure, run_pass, q, r, dt / time_unit)
+        return state, u_k, y_k
+
+    def run_record(state: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+        return run_pass(*prepared_record(state, k), q, r)
 
     def assess(theta_filter: np.ndarray, P_filter: np.ndarray) -> Assessment:
         theta_original = original_units(theta_filter)

@@ -96,8 +96,10 @@ def command_line_iekf(data: IOData) -> tuple[ModalModel, float]:
     The command's own steps: its argument defaults, each record's mean
     removed (so its start state is unknown and settled), p by two-fold
     cross-validation (:func:`~vehid.scenarios.identify_workflow.tune_p`),
-    and the start model where that beat every p. The pattern is the true
-    structure's, as for the other methods.
+    and the start model where that beat every p, all as one order of the
+    command's order search runs them
+    (:func:`~vehid.scenarios.identify_workflow.run_iekf_order`). The pattern
+    is the true structure's, as for the other methods.
     """
     from vehid.identification.preparation import prepare
     from vehid.scenarios import identify_workflow as workflow
@@ -108,13 +110,9 @@ def command_line_iekf(data: IOData) -> tuple[ModalModel, float]:
     args = parser.parse_args(["--order", "4", "--pattern", "default"])
     records, preparation = prepare((data,), detrend=args.detrend)
     plan = workflow.make_plan(args, records, lambda path: data, preparation=preparation)
-    options = workflow.iekf_options(args, command.DEFAULT_PASSES)
-    structure = workflow.structure_for(args, plan.orders[0], plan, options)
-    tuning = workflow.tune_p(args, plan, options, structure) if workflow.tunes_p(args) else workflow.given_p(options)
-    options = dataclasses.replace(options, p=tuning.p)
-    result, _ = workflow.last_good_on_divergence(
-        lambda: identify_iekf(plan.estimation, structure, options=options, settle_start=plan.settle_start))
-    return (workflow.start_model(result) if tuning.start_wins else result.model), tuning.p
+    model, extra = workflow.run_iekf_order(args, plan, workflow.iekf_options(args, command.DEFAULT_PASSES),
+                                           plan.orders[0])
+    return model, extra["p"]
 
 
 def identify_realisation(data: IOData, *, iekf_settings: dict[str, Any] | None = None,

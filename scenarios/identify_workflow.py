@@ -35,8 +35,8 @@ import numpy as np
 
 from vehid.identification.data import IOData
 from vehid.identification.errors import DivergenceError, InputError, StrictWarningsError, WorkbenchError
-from vehid.identification.iekf import (INVARIANT_P, START_CHOICES, TIMESCALES, IEKFOptions, _scales, identify_iekf,
-                                      start_structure)
+from vehid.identification.iekf import (INVARIANT_P, START_CHOICES, TIMESCALES, IEKFOptions, identify_iekf,
+                                      normalized_data_start, signal_scales, start_structure)
 from vehid.identification.discrete import DiscreteModel
 from vehid.identification.modal import ModalModel, ModalStructure
 from vehid.identification.start import data_start
@@ -76,6 +76,7 @@ __all__ = [
     "START_RETURNED",
     "start_model",
     "returned_start",
+    "returned_model",
     "NONLINEAR_P_GRID",
     "nonlinear_warnings",
     "UNSTABLE_MARGIN",
@@ -386,7 +387,7 @@ def _start_fits(fit_on: IOData, score_on: IOData, structure: ModalStructure, opt
     neither (a growing mode's simulation drifts even when its dynamics are right). Returns the
     stable start's fit, the free start's, and whether the free start is unstable.
     """
-    input_scale, output_scale = _scales(fit_on, options.normalize)
+    input_scale, output_scale = signal_scales(fit_on, options.normalize)
     train, test = (IOData(t=np.arange(record.n_samples, dtype=float), u=record.u / input_scale,
                           y=record.y / output_scale) for record in (fit_on, score_on))
     stable, free = (data_start(train.u, train.y, structure, stable=keep, free_modes=True).model for keep in (True, False))
@@ -418,10 +419,8 @@ def assume_unstable(args: argparse.Namespace, plan: Plan, options: IEKFOptions, 
         return options, None
     first = plan.records[0]
     structure = ModalStructure.from_pattern("default", order, first.n_u, first.n_y)
-    input_scale, output_scale = _scales(first, options.normalize)
     try:
-        if data_start(first.u / input_scale, first.y / output_scale, structure, stable=False,
-                      free_modes=True).model.is_stable():
+        if normalized_data_start(first, structure, normalize=options.normalize, stable=False).is_stable():
             return options, None
         halves = [part[0] for part in _halves((first,))]
         folds = [_start_fits(a, b, structure, options) for a, b in (halves, halves[::-1])]
@@ -445,6 +444,23 @@ def unstable_warning(entry: dict[str, Any]) -> str:
 
 
 START_KEPT = ("the filter scores worse than its unstable start on the estimation data; the start model is returned")
+
+
+def returned_model(result: Any, plan: Plan, args: argparse.Namespace, tuning: PTuning,
+                   unstable: dict[str, Any] | None) -> tuple[ModalModel, dict[str, Any]]:
+    """The model an IEKF run returns (the filter's, or its start where that won) and the summary keys saying why.
+
+    The start is returned where it beat every p in cross-validation
+    (``tuning.start_wins``) or, being unstable, scored better than the filter
+    (:func:`start_beats_filter`, key ``start_kept``); ``open_loop_unstable``
+    is :func:`assume_unstable`'s entry, where it weighed the plant.
+    """
+    keys: dict[str, Any] = {} if unstable is None else {"open_loop_unstable": unstable}
+    kept = None if tuning.start_wins else start_beats_filter(result, plan, args)
+    if kept is not None:
+        keys["start_kept"] = kept
+    model = returned_start(result, plan.records) if tuning.start_wins or kept is not None else result.model
+    return model, keys
 
 
 def start_beats_filter(result: Any, plan: Plan, args: argparse.Namespace) -> dict[str, float] | None:
@@ -826,12 +842,6 @@ def run_iekf_order(args: argparse.Namespace, plan: Plan, options: IEKFOptions, o
     result, divergence = last_good_on_divergence(
         lambda: identify_iekf(plan.estimation, structure, options=options, settle_start=plan.settle_start))
     stop_reason = f"{result.stop_reason}: {divergence}" if divergence else result.stop_reason
-    kept = None if tuning.start_wins else start_beats_filter(result, plan, args)
-    model = returned_start(result, plan.records) if tuning.start_wins or kept is not None else result.model
-    extra = {"fit_percent": result.fit_percent, "stop_reason": stop_reason, "result": result, "tuning": tuning,
-             "p": tuning.p}
-    if unstable is not None:
-        extra["open_loop_unstable"] = unstable
-    if kept is not None:
-        extra["start_kept"] = kept
-    return model, extra
+    model, keys = returned_model(result, plan, args, tuning, unstable)
+    return model, {"fit_percent": result.fit_percent, "stop_reason": stop_reason, "result": result, "tuning": tuning,
+                   "p": tuning.p, **keys}

@@ -197,21 +197,11 @@ def _identify(args: argparse.Namespace) -> tuple[dict, str]:
                                   settle_start=plan.settle_start))
     if checkpoint is not None:
         checkpoint.finish(result)  # the archive says how the run ended: converged, passes or diverged at pass k
-    summary = {**_iekf_summary(result), **tuning.summary(), **_unstable_summary(unstable, result, plan, args, tuning)}
+    model, keys = workflow.returned_model(result, plan, args, tuning, unstable)
+    summary = {**_iekf_summary(result), **tuning.summary(), **keys}
     if divergence:
         summary["divergence"] = divergence
-    model = workflow.returned_start(result, plan.records) if tuning.start_wins or "start_kept" in summary \
-        else result.model
     return _finish(args, plan, summary, model, result=result, archive_path=archive_path)
-
-
-def _unstable_summary(unstable, result, plan, args, tuning) -> dict:
-    """The keys ``open_loop_unstable`` (where weighed) and ``start_kept`` (where an unstable start beat the filter)."""
-    summary = {} if unstable is None else {"open_loop_unstable": unstable}
-    kept = None if tuning.start_wins else workflow.start_beats_filter(result, plan, args)
-    if kept is not None:
-        summary["start_kept"] = kept
-    return summary
 
 
 def _iekf_summary(result) -> dict:
