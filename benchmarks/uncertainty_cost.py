@@ -6,7 +6,8 @@ the same record by output error (started from the IEKF's model: its ARX
 start is biased by the noise and fails): the identification is
 timed with its covariance step switched off (the baseline) and as shipped,
 plus the delta-method modes and gains, a 200-point frequency response with
-bands and the residual tests, i.e. everything `vehid identify` adds.
+bands and the residual tests: everything `vehid identify` adds, and the band
+that reports add on top of it.
 N4SID (on the noise-free record: the subspace fit fails on the noisy one)
 is timed without a covariance (``bootstrap=0``) as the baseline and with
 its default asymptotic covariance plus the same extras; its residual
@@ -14,9 +15,14 @@ bootstrap (on request) re-identifies the record once per replicate: 30
 replicates are timed for the ratio they cost. N4SID's added seconds are also
 given as a share of the whole `vehid identify --method n4sid` command on the
 same record (read from CSV, identified, scored, summarised; in process).
-Baseline and shipped runs alternate (7 of each for the IEKF, 21 for N4SID, 3
-for output error, after one warm-up) and the medians are compared. Figures go to ``results/benchmarks.json``
-under ``uncertainty_cost``.
+Since a difference of two medians is as noisy as what it measures where the
+fit's run-to-run spread is large, each step that output error's and N4SID's
+uncertainty adds is also timed itself where it runs, right after the fit
+(``output-error_steps``, ``n4sid_steps``): what `vehid identify` adds
+(covariance, modes, residual tests) apart from the band that reports draw.
+Baseline and shipped runs alternate (7 of each for the IEKF and output
+error, 21 for N4SID, after one warm-up) and the medians are compared.
+Figures go to ``results/benchmarks.json`` under ``uncertainty_cost``.
 """
 
 from __future__ import annotations
@@ -50,8 +56,12 @@ def _extras(model, data) -> None:
     model_residual_tests(model, data)
 
 
-def _alternating(bare, run, repeats: int) -> tuple[float, float]:
-    """Medians of the baseline (covariance steps off) and the shipped run, timed in turn so that load drifts hit both."""
+def _alternating(bare, run, repeats: int) -> tuple[float, float, float]:
+    """Medians of the baseline (covariance steps off) and the shipped run, timed in turn so that load drifts hit both.
+
+    Also the baseline's interquartile range over its median: the run-to-run spread against which
+    a difference of the two medians is read.
+    """
     shipped = (iekf.iekf_parameter_covariance, comparators.gauss_newton_covariance)
     times: dict[str, list[float]] = {"bare": [], "run": []}
     run()  # warm-up: compiled pass and CasADi functions
@@ -67,7 +77,50 @@ def _alternating(bare, run, repeats: int) -> tuple[float, float]:
         started = time.perf_counter()
         run()
         times["run"].append(time.perf_counter() - started)
-    return statistics.median(times["bare"]), statistics.median(times["run"])
+    quartiles = statistics.quantiles(times["bare"], n=4)
+    baseline = statistics.median(times["bare"])
+    return baseline, statistics.median(times["run"]), (quartiles[2] - quartiles[0]) / baseline
+
+
+def _added_steps(identify, covariance: str, record, repeats: int) -> dict:
+    """The seconds of each step uncertainty adds, timed where it runs (right after the fit), medians.
+
+    ``identify()`` returns the model with its covariance, which the
+    comparators' function named ``covariance`` computes. A difference of two
+    medians of whole runs carries the noise of two fits (their run-to-run
+    spread, ``baseline_iqr_percent``, is as large as what is measured);
+    the steps timed themselves do not. ``identify_s`` is what `vehid
+    identify` adds (the covariance, the modes and gains, the residual tests);
+    the frequency-response band is drawn by reports only, so it is given
+    apart.
+    """
+    shipped = getattr(comparators, covariance)
+    spent: dict[str, list[float]] = {"covariance": [], "modes": [], "residual_tests": [], "band": []}
+
+    def timed(*args, **kwargs):
+        started = time.perf_counter()
+        try:
+            return shipped(*args, **kwargs)
+        finally:
+            spent["covariance"].append(time.perf_counter() - started)
+
+    def step(name, function) -> None:
+        started = time.perf_counter()
+        function()
+        spent[name].append(time.perf_counter() - started)
+
+    setattr(comparators, covariance, timed)
+    try:
+        for _ in range(repeats + 1):
+            model = identify()
+            step("modes", model.uncertainty)
+            step("residual_tests", lambda: model_residual_tests(model, record))
+            step("band", lambda: frequency_response(model, FREQUENCIES))
+    finally:
+        setattr(comparators, covariance, shipped)
+    medians = {f"{name}_s": statistics.median(values[1:]) for name, values in spent.items()}  # first: warm-up
+    medians["identify_s"] = medians["covariance_s"] + medians["modes_s"] + medians["residual_tests_s"]
+    return medians
 
 
 def _command_share(record, estimator: dict) -> dict:
@@ -91,7 +144,8 @@ def _command_share(record, estimator: dict) -> dict:
 
         seconds = median_seconds(command, repeats=7)
     added = estimator["with_uncertainty_s"] - estimator["baseline_s"]
-    return {"seconds": seconds, "added_s": added, "added_percent_of_command": 100 * added / seconds}
+    return {"seconds": seconds, "added_s": added, "added_percent_of_command": 100 * added / seconds,
+            "steps_identify_percent_of_command": 100 * estimator["steps"]["identify_s"] / seconds}
 
 
 def main() -> dict:
@@ -116,17 +170,27 @@ def main() -> dict:
     figures = {}
     for name, run, bare, repeats in (
         ("iekf", run_iekf, lambda: identify_iekf(data, structure, options=options, parameter_covariance=False), 7),
-        ("output-error", run_output_error, lambda: identify_with(data, method="output-error", order=5, start=start), 3),
+        ("output-error", run_output_error, lambda: identify_with(data, method="output-error", order=5, start=start), 7),
         ("n4sid", run_n4sid, lambda: identify_with(clean, method="n4sid", order=5, bootstrap=0), 21),
     ):
-        baseline, with_uncertainty = _alternating(bare, run, repeats)
+        baseline, with_uncertainty, spread = _alternating(bare, run, repeats)
         figures[name] = {"baseline_s": baseline, "with_uncertainty_s": with_uncertainty,
-                         "added_percent": 100 * (with_uncertainty / baseline - 1), "repeats": repeats}
-    figures["n4sid_command"] = _command_share(clean, figures["n4sid"])
+                         "added_percent": 100 * (with_uncertainty / baseline - 1), "repeats": repeats,
+                         "baseline_iqr_percent": 100 * spread}
+    for name, identify, covariance, record, repeats in (
+        ("output-error", lambda: identify_with(data, method="output-error", order=5, start=start).model,
+         "gauss_newton_covariance", data, 7),
+        ("n4sid", lambda: identify_with(clean, method="n4sid", order=5).model, "simulation_error_covariance", clean, 21),
+    ):
+        steps = _added_steps(identify, covariance, record, repeats)
+        baseline = figures[name]["baseline_s"]
+        figures[f"{name}_steps"] = {**steps, "identify_percent": 100 * steps["identify_s"] / baseline,
+                                    "band_percent": 100 * steps["band_s"] / baseline}
+    figures["n4sid_command"] = _command_share(clean, {**figures["n4sid"], "steps": figures["n4sid_steps"]})
     boot = median_seconds(lambda: identify_with(clean, method="n4sid", order=5, bootstrap=30), repeats=3)
     figures["n4sid_bootstrap_30"] = {"seconds": boot, "ratio": boot / figures["n4sid"]["baseline_s"]}
     for name, row in figures.items():
-        print(name, {key: round(value, 3) for key, value in row.items()})
+        print(name, {key: round(value, 4) for key, value in row.items()})
     record_figures("uncertainty_cost", figures)
     return figures
 
