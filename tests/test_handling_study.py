@@ -414,11 +414,18 @@ def test_a_signal_stops_every_worker_and_leaves_a_readable_archive(stop, study, 
     from vehid.scenarios.handling_resume import read_progress
 
     out = tmp_path / "stopped.h5"
-    process = subprocess.Popen(
-        [sys.executable, "-m", "vehid.scenarios.cli", "study", "handling", *FAST, "--linear-only", "--workers", "2",
-         "--no-report", "--quiet", "--out", str(out)],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
-    )
+    # started as from a terminal: a test run launched in the background of a non-interactive shell has
+    # SIGINT ignored, the study would inherit that and rightly ignore Ctrl-C (a handler, unlike an
+    # ignore, is reset to the default in the new program)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        process = subprocess.Popen(
+            [sys.executable, "-m", "vehid.scenarios.cli", "study", "handling", *FAST, "--linear-only", "--workers",
+             "2", "--no-report", "--quiet", "--out", str(out)],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+        )
+    finally:
+        signal.signal(signal.SIGINT, previous)
     deadline = time.monotonic() + 120
     workers = {}
     while time.monotonic() < deadline and process.poll() is None:

@@ -12,8 +12,21 @@ class _Thing:
     pass
 
 
+@pytest.fixture
+def ctrl_c_as_at_a_terminal():
+    """SIGINT handled by Python's KeyboardInterrupt handler, as a command started at a terminal has it.
+
+    A job started in the background of a non-interactive shell inherits SIGINT
+    ignored, and the block then rightly leaves Ctrl-C alone: without this the
+    SIGINT case would depend on how the test run was started.
+    """
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
 @pytest.mark.parametrize("stop", ["SIGTERM", "SIGINT"])
-def test_a_signal_handled_inside_a_weakref_callback_still_interrupts(stop, capsys):
+def test_a_signal_handled_inside_a_weakref_callback_still_interrupts(stop, capsys, ctrl_c_as_at_a_terminal):
     """The window seen in ``study handling``: the signal's handler ran inside a weakref callback.
 
     Both were seen there: SIGTERM (the command's own handler) and Ctrl-C (Python's KeyboardInterrupt,
@@ -37,3 +50,15 @@ def test_a_signal_handled_inside_a_weakref_callback_still_interrupts(stop, capsy
     assert caught.value.signum == signum
     assert "Exception ignored" not in capsys.readouterr().err
     assert signal.getsignal(signum) is before
+
+
+def test_an_inherited_ignore_of_ctrl_c_is_respected():
+    """A command started with SIGINT ignored (a background job, nohup) keeps ignoring it inside the block."""
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        with stopping_on_signals():
+            assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+            signal.raise_signal(signal.SIGINT)  # ignored: the block runs on and ends normally
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, previous)
