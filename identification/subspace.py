@@ -185,28 +185,44 @@ def estimate_subspace(data_or_arrays: Any, *, order: int, block_rows: int | None
     A = np.linalg.lstsq(observability[:-n_y], observability[n_y:], rcond=None)[0]
     length = _segment_length(A, s, n) if estimate_x0 else None
     segments = [(u_e[a:b], y_e[a:b]) for u_e, y_e, _ in experiments for a, b in _segments(u_e.shape[0], length)]
-    n_x0 = n * len(segments) if estimate_x0 else 0
-    rows = []
-    for index, (u_e, _) in enumerate(segments):
+    # Each segment's initial state enters only its own rows: it is eliminated segment by segment (the
+    # segment's free responses projected out of its regressors and outputs), and B, D solve the
+    # projected problem. That is the minimiser of the whole regression, whose dense solve costs
+    # O(N (n segments)^2): seconds for the hundreds of segments a fast-growing mode asks for.
+    projected, targets, first_state = [], [], None
+    for u_e, y_e in segments:
         samples = u_e.shape[0]
         free, forced = _responses(A, C, u_e)
         d_columns = np.zeros((samples, n_y, n_y * n_u))
         for i in range(n_y):
             d_columns[:, i, i * n_u:(i + 1) * n_u] = u_e
-        x0_columns = np.zeros((samples * n_y, n_x0))
+        shared = np.hstack([forced.reshape(samples * n_y, n * n_u), d_columns.reshape(samples * n_y, n_y * n_u)])
+        target = y_e.reshape(-1)
         if estimate_x0:
-            x0_columns[:, index * n: (index + 1) * n] = free.reshape(samples * n_y, n)
-        rows.append(np.hstack([forced.reshape(samples * n_y, n * n_u), d_columns.reshape(samples * n_y, n_y * n_u),
-                               x0_columns]))
-    regressors = rows[0] if len(rows) == 1 else np.vstack(rows)
-    del rows
-    target = np.concatenate([y_e.reshape(-1) for _, y_e in segments])
+            basis, triangle = np.linalg.qr(free.reshape(samples * n_y, n))
+            diagonal = np.abs(np.diag(triangle))
+            if diagonal.min() <= np.finfo(float).eps * max(basis.shape) * diagonal.max():
+                raise ExcitationError("the input does not determine B and D (rank-deficient regression)")
+            on_shared, on_target = basis.T @ shared, basis.T @ target
+            if first_state is None:  # what the first segment's initial state is solved from, below
+                first_state = (triangle, on_shared, on_target)
+            shared = shared - basis @ on_shared
+            target = target - basis @ on_target
+        projected.append(shared)
+        targets.append(target)
+    regressors = projected[0] if len(projected) == 1 else np.vstack(projected)
+    target = targets[0] if len(targets) == 1 else np.concatenate(targets)
+    del projected, targets
     solution, _, rank, _ = np.linalg.lstsq(regressors, target, rcond=None)
     if rank < regressors.shape[1]:
         raise ExcitationError("the input does not determine B and D (rank-deficient regression)")
     B = solution[: n * n_u].reshape(n, n_u)
-    D = solution[n * n_u: n * n_u + n_y * n_u].reshape(n_y, n_u)
-    x0 = solution[n * n_u + n_y * n_u: n * n_u + n_y * n_u + n] if estimate_x0 else np.zeros(n)
+    D = solution[n * n_u:].reshape(n_y, n_u)
+    x0 = np.zeros(n)
+    if first_state is not None:  # the first segment's free responses fitted to what B and D leave
+        triangle, on_shared, on_target = first_state
+        x0 = scipy.linalg.solve_triangular(triangle, on_target - on_shared @ solution)
+    # each segment's residual at its best initial state is the projected one
     residuals = (target - regressors @ solution).reshape(-1, n_y) * output_scale
     return SubspaceResult(A, B / input_scale, output_scale[:, None] * C,
                           output_scale[:, None] * D / input_scale, x0, singular, residuals, s, dt)

@@ -168,3 +168,7 @@ def test_subspace_recovers_an_open_loop_unstable_plant_from_a_closed_loop_record
     response = lambda a, b, c, d: np.array([c @ np.linalg.solve(v * np.eye(4) - a, b) + d for v in z])  # noqa: E731
     truth = response(Ad, Bd, Cd, Dd)
     np.testing.assert_allclose(response(fit.A, fit.B, fit.C, fit.D), truth, atol=1e-9 * np.abs(truth).min())
+    # from rest and noise-free: the first segment's initial state is zero and every segment's residual vanishes
+    # (measured 2e-15 and 7e-14 of an output up to 2.4; each segment's state is eliminated from its own rows)
+    assert np.abs(fit.x0).max() < 1e-12
+    assert np.abs(fit.residuals).max() < 1e-11 * np.abs(y).max()
