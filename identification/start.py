@@ -23,6 +23,9 @@ first samples only (``_START_BYTES``).
 
 from __future__ import annotations
 
+import hashlib
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -41,6 +44,10 @@ _MAX_RATE = 3.0  # rad/sample: the fastest a discrete model can say (pi) with a 
 # matrix would take gigabytes.
 _START_BYTES = 32e6
 _START_MIN_SAMPLES = 1000
+# data starts remembered (see data_start): a command asks for at most five distinct ones
+_REMEMBER = 8
+_REMEMBERED: OrderedDict[tuple, DataStart] = OrderedDict()
+_REMEMBERED_LOCK = threading.Lock()
 
 
 @dataclass(frozen=True, eq=False)
@@ -238,7 +245,30 @@ def data_start(u: np.ndarray, y: np.ndarray, structure: ModalStructure, *, metho
         raise InputError(f"unknown data start {method!r}; use one of {', '.join(DATA_STARTS)}")
     largest_rows = max(2 * structure.n, structure.n + 1, 25)
     window = max(int(_START_BYTES / (8 * 2 * largest_rows * (u.shape[1] + y.shape[1]))), _START_MIN_SAMPLES)
-    u, y = u[:window], y[:window]
+    u, y = np.asarray(u[:window], dtype=float), np.asarray(y[:window], dtype=float)
+    # a pure function of its arguments, asked for the same record several times by one command (each p
+    # of a cross-validation starts from its fold's start): the last few answers are kept, keyed by a
+    # digest of the data, and the immutable result is shared
+    digest = hashlib.blake2b(digest_size=16)
+    for array in (u, y):
+        digest.update(repr(array.shape).encode())
+        digest.update(np.ascontiguousarray(array).tobytes())
+    key = (digest.hexdigest(), structure, method, bool(stable), bool(free_modes))
+    with _REMEMBERED_LOCK:
+        if key in _REMEMBERED:
+            _REMEMBERED.move_to_end(key)
+            return _REMEMBERED[key]
+    found = _found_start(u, y, structure, method, stable, free_modes)
+    with _REMEMBERED_LOCK:
+        _REMEMBERED[key] = found
+        while len(_REMEMBERED) > _REMEMBER:
+            _REMEMBERED.popitem(last=False)
+    return found
+
+
+def _found_start(u: np.ndarray, y: np.ndarray, structure: ModalStructure, method: str, stable: bool,
+                 free_modes: bool) -> DataStart:
+    """:func:`data_start` on the window of the record it uses."""
     modes = band_eigenvalues(structure, u.shape[0])
     model = fit_input_gains(structure, modes, u, y)
     band = DataStart(model, "band")
