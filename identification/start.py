@@ -240,6 +240,13 @@ def data_start(u: np.ndarray, y: np.ndarray, structure: ModalStructure, *, metho
     Returns
     -------
     DataStart
+
+    Notes
+    -----
+    The answers to the last eight distinct problems (the windowed record's
+    digest, the structure and the options) are kept and returned again,
+    the same immutable object: one `vehid identify` asks for each
+    cross-validation fold's start once per candidate p.
     """
     if method not in DATA_STARTS:
         raise InputError(f"unknown data start {method!r}; use one of {', '.join(DATA_STARTS)}")
