@@ -30,7 +30,6 @@ import sys
 import time
 from pathlib import Path
 
-
 from vehid.identification.archive import open_archive, read_records
 from vehid.identification.comparators import identify_with
 from vehid.identification.errors import DivergenceError

@@ -412,11 +412,12 @@ def identify_iekf(
             dt=dt, stop_reason=stop_reason, seconds=time.perf_counter() - started, meta=dict(start_meta),
         )
 
-    def sampled_pass(theta: np.ndarray, P: np.ndarray) -> np.ndarray | None:
+    def sampled_pass(theta: np.ndarray, P: np.ndarray) -> np.ndarray:
         """The parameters (original units) at :data:`PASS_SAMPLES` even points of one more pass from ``theta``, ``P``.
 
         The pass runs as :func:`~identification.rinse.rinse` runs one, in
-        pieces; its result feeds only the covariance (None if it diverges).
+        pieces; its result feeds only the covariance, which leaves it out
+        where it diverged (non-finite) or holds fewer than two points.
         """
         m = n + structure.n_parameters
         state = np.concatenate([np.zeros(n), theta, pack_covariance(P)])
@@ -432,8 +433,7 @@ def identify_iekf(
                     if end > begin:
                         state, _ = run_pass(state, u_k[begin:end], y_k[begin:end], q, r)
                         samples.append(original_units(state[n:m].copy()))
-        samples = np.array(samples)
-        return samples if samples.shape[0] >= 2 and np.all(np.isfinite(samples)) else None
+        return np.array(samples)
 
     def prepared_record(state: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The state and record ``k`` as a pass takes them: its head spent settling the states where asked."""

@@ -39,7 +39,6 @@ from vehid.identification.iekf import (INVARIANT_P, START_CHOICES, TIMESCALES, I
                                       normalized_data_start, signal_scales, start_structure)
 from vehid.identification.discrete import DiscreteModel
 from vehid.identification.modal import ModalModel, ModalStructure
-from vehid.identification.start import data_start
 from vehid.identification.uncertainty import simulation_error_covariance
 from vehid.identification.validation import (INITIAL_STATES, UNSTABLE_HORIZON, Scores, default_horizon, score,
                                             split_holdout)
@@ -387,10 +386,11 @@ def _start_fits(fit_on: IOData, score_on: IOData, structure: ModalStructure, opt
     neither (a growing mode's simulation drifts even when its dynamics are right). Returns the
     stable start's fit, the free start's, and whether the free start is unstable.
     """
+    stable, free = (normalized_data_start(fit_on, structure, normalize=options.normalize, stable=keep)
+                    for keep in (True, False))
     input_scale, output_scale = signal_scales(fit_on, options.normalize)
-    train, test = (IOData(t=np.arange(record.n_samples, dtype=float), u=record.u / input_scale,
-                          y=record.y / output_scale) for record in (fit_on, score_on))
-    stable, free = (data_start(train.u, train.y, structure, stable=keep, free_modes=True).model for keep in (True, False))
+    test = IOData(t=np.arange(score_on.n_samples, dtype=float), u=score_on.u / input_scale,
+                  y=score_on.y / output_scale)
     return (float(np.mean(score(stable, test, horizon=UNSTABLE_HORIZON).fit)),
             float(np.mean(score(free, test, horizon=UNSTABLE_HORIZON).fit)), not free.is_stable())
 
