@@ -2,9 +2,13 @@
 
 :func:`archive_lock` is an ``flock`` on a hidden file beside the archive, so that the system releases it
 when the holder dies, even by ``SIGKILL``; :func:`check_output_target` refuses a bad target before any
-work; :func:`write_checksums` and :func:`verify_checksums` find values changed on disk behind the
-workbench's back (archives written without digests still read); :func:`replacing_directory` swaps a
-finished folder in whole, so an interrupted writer leaves the old folder or the new one.
+work, replacing an existing file only when it is the workbench's own output of the same kind and
+the same run; :func:`write_checksums` and :func:`verify_checksums` find values changed on disk behind
+the workbench's back (archives written without digests still read); :func:`replacing_directory` swaps a
+finished folder in whole, so an interrupted writer leaves the old folder or the new one;
+:func:`check_report_folder` and :func:`writing_report_folder` write a report folder that is absent,
+empty or an earlier report (marked by :data:`REPORT_MARKER`), and never delete a file the report did
+not write.
 """
 
 from __future__ import annotations
@@ -12,14 +16,16 @@ from __future__ import annotations
 import ctypes
 import errno
 import fcntl
+import json
 import os
 import shutil
 import socket
 import uuid
 import zlib
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable, Iterator
+from typing import Any, Callable, Iterable, Iterator
 
 import h5py
 import numpy as np
@@ -32,6 +38,14 @@ __all__ = [
     "archive_lock",
     "check_output_target",
     "check_output_folder",
+    "check_report_folder",
+    "report_files",
+    "writing_report_folder",
+    "output_identity",
+    "OutputIdentity",
+    "RUN_ATTRIBUTE",
+    "KIND_ATTRIBUTE",
+    "REPORT_MARKER",
     "is_workbench_archive",
     "write_checksums",
     "verify_checksums",
@@ -43,6 +57,12 @@ DIGEST_ATTRIBUTE = "vehid_digest"
 #: Root attribute naming the digest scheme; its presence promises a digest on every object.
 CHECKSUM_ATTRIBUTE = "vehid_checksums"
 CHECKSUM_SCHEME = "crc32"  # against faults, not forgery: 25 times faster than a cryptographic hash here
+#: Root attribute naming the run that wrote a file: a digest of the command, its settings and its inputs.
+RUN_ATTRIBUTE = "vehid_run"
+#: Root attribute naming what an HDF5 output that is not a results archive holds (e.g. a simulated record).
+KIND_ATTRIBUTE = "vehid_kind"
+#: The file that marks a folder as a report of the workbench; it lists the report's own files.
+REPORT_MARKER = ".vehid-report.json"
 
 
 class ArchiveLockedError(InputError):
@@ -171,11 +191,53 @@ def is_workbench_archive(path: str | Path) -> bool:
         return False
 
 
+@dataclass(frozen=True)
+class OutputIdentity:
+    """What a workbench output file holds and which run wrote it.
+
+    Attributes
+    ----------
+    kind : str
+        An archive's ``kind`` (``identification``, ``handling-study``, ...) or
+        the :data:`KIND_ATTRIBUTE` of another HDF5 output (``simulated-record``).
+    run : str or None
+        The :data:`RUN_ATTRIBUTE` digest of the run that wrote it; None for
+        files written before runs were recorded.
+    """
+
+    kind: str
+    run: str | None
+
+
+def output_identity(path: str | Path) -> OutputIdentity | None:
+    """The kind and run of a workbench output file; None for any other file (text, CSV, foreign HDF5)."""
+    try:
+        if not h5py.is_hdf5(path):
+            return None
+        with h5py.File(path, "r") as handle:
+            attrs = handle.attrs
+            if "schema_version" in attrs:
+                kind = str(attrs.get("kind", ""))
+            elif KIND_ATTRIBUTE in attrs:
+                kind = str(attrs[KIND_ATTRIBUTE])
+            else:
+                return None
+            run = attrs.get(RUN_ATTRIBUTE)
+            return OutputIdentity(kind, None if run is None else str(run))
+    except (OSError, RuntimeError):
+        return None
+
+
 def _same_file(a: Path, b: Path) -> bool:
     try:
         return a.exists() and b.exists() and os.path.samefile(a, b)
     except OSError:
         return False
+
+
+def _refuse_to_replace(path: Path, cause: str) -> OutputTargetError:
+    return OutputTargetError(
+        f"{path} exists and {cause}; refusing to overwrite it (give --force to replace it, or choose another file)")
 
 
 def check_output_target(
@@ -184,6 +246,10 @@ def check_output_target(
     inputs: Iterable[str | Path | None] = (),
     force: bool = False,
     what: str = "archive",
+    kind: str | None = None,
+    run: str | None = None,
+    identify: Callable[[Path], OutputIdentity | None] | None = None,
+    suffixes: Iterable[str] | None = None,
 ) -> Path:
     """Check, before any work, that ``path`` may and can be written; returns it.
 
@@ -195,16 +261,31 @@ def check_output_target(
         Files the run reads; the target must be none of them (never, even
         with ``force``: the run would replace its own data).
     force : bool
-        Allow replacing an existing file that is not a workbench archive.
+        Allow replacing any existing file.
     what : str
         What is written, for the messages.
+    kind : str, optional
+        The kind of output the run writes: an existing file is replaced only
+        if it is a workbench output of this kind. None accepts any workbench
+        archive (the rule before kinds were checked).
+    run : str, optional
+        The digest of the run (see :data:`RUN_ATTRIBUTE`): an existing file
+        is replaced only if the same run wrote it, so that rerunning a command
+        replaces its own output while another run's result is kept.
+    identify : callable, optional
+        Tells what an existing file holds, for outputs that are not HDF5
+        (e.g. model files); default :func:`output_identity`.
+    suffixes : iterable of str, optional
+        The name endings of the format written (e.g. ``.h5``): a name such
+        as ``data.csv`` promises a format that would not be there.
 
     Raises
     ------
     OutputTargetError
         One line naming the path and the cause: a directory; one of the
-        inputs; an existing file that is not a workbench archive (without
-        ``force``); a directory that cannot be created or written.
+        inputs; without ``force``, an existing file that is not a workbench
+        output, is one of another kind, or was written by another run; a
+        directory that cannot be created or written.
     """
     path = Path(path)
     for source in inputs:
@@ -212,10 +293,19 @@ def check_output_target(
             raise OutputTargetError(f"the {what} {path} is an input of this run; choose another output file")
     if path.is_dir():
         raise OutputTargetError(f"cannot write the {what} {path}: {os.strerror(errno.EISDIR)}")
-    if path.exists() and not force and not is_workbench_archive(path):
-        raise OutputTargetError(
-            f"{path} exists and is not a workbench archive; refusing to overwrite it (give --force to replace it)"
-        )
+    if suffixes is not None and path.suffix.lower() not in {suffix.lower() for suffix in suffixes}:
+        raise OutputTargetError(f"cannot write the {what} {path}: its name must end in "
+                                f"{' or '.join(suffixes)}, the format written")
+    if path.exists() and not force:
+        identity = (identify or output_identity)(path)
+        if identity is None or (kind is None and not is_workbench_archive(path)):
+            raise _refuse_to_replace(path, f"is not a workbench {what}")
+        if kind is not None and identity.kind != kind:
+            raise _refuse_to_replace(path, f"holds a {identity.kind!r} output, not {kind!r}")
+        if run is not None and identity.run is None:
+            raise _refuse_to_replace(path, f"holds a {identity.kind!r} output that does not say which run wrote it")
+        if run is not None and identity.run != run:
+            raise _refuse_to_replace(path, f"holds the {identity.kind!r} output of another run (other settings or data)")
     _check_writable_directory(path, what)
     if path.exists() and not os.access(path, os.W_OK):
         # os.replace would succeed in a writable directory, but the user protected this file
@@ -253,6 +343,133 @@ def check_output_folder(folder: str | Path, *, what: str = "report folder") -> P
         raise OutputTargetError(f"cannot write the {what} {folder}: {os.strerror(errno.ENOTDIR)}")
     _check_writable_directory(folder, what)
     return folder
+
+
+def _listed_name(name: Any) -> str | None:
+    """A marker's file name if it stays inside the folder (relative, no ``..``), else None."""
+    if not isinstance(name, str) or not name:
+        return None
+    parts = Path(name).parts
+    if Path(name).is_absolute() or ".." in parts or name == REPORT_MARKER:
+        return None
+    return str(Path(*parts))
+
+
+def report_files(folder: str | Path) -> set[str] | None:
+    """The files (relative paths) an earlier report in ``folder`` wrote, or None if it holds no report marker."""
+    try:
+        listed = json.loads((Path(folder) / REPORT_MARKER).read_text())["files"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    if not isinstance(listed, list):
+        return None
+    return {name for name in map(_listed_name, listed) if name is not None}
+
+
+def _entries(folder: Path) -> set[str]:
+    """Every file and folder under ``folder``, as paths relative to it (symbolic links are not followed)."""
+    found: set[str] = set()
+    for root, directories, files in os.walk(folder):
+        relative = Path(root).relative_to(folder)
+        found.update(str(relative / name) for name in (*directories, *files))
+    return found
+
+
+def _foreign_entries(folder: Path, own: set[str]) -> set[str]:
+    """What in ``folder`` the report did not write: entries neither listed in ``own`` nor a folder holding them."""
+    holding = {str(parent) for name in own for parent in Path(name).parents if str(parent) != "."}
+    return _entries(folder) - own - holding - {REPORT_MARKER}
+
+
+def check_report_folder(folder: str | Path, *, force: bool = False, what: str = "report folder") -> Path:
+    """Check, before any work, that a report may be written to ``folder``; returns it.
+
+    A report folder may be absent, empty or an earlier report of the
+    workbench (it holds :data:`REPORT_MARKER`); any other folder is refused
+    unless ``force``, and even then :func:`writing_report_folder` only adds
+    and replaces the report's own files beside what is there.
+
+    Raises
+    ------
+    OutputTargetError
+        One line naming the folder and the cause: a file in its place; a
+        folder of other files (without ``force``); no permission.
+    """
+    folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise OutputTargetError(f"cannot write the {what} {folder}: {os.strerror(errno.ENOTDIR)}")
+    if folder.is_dir() and not force and report_files(folder) is None and any(folder.iterdir()):
+        raise OutputTargetError(
+            f"{folder} is a folder of other files, not a report of the workbench; refusing to write into it "
+            "(give --force to add the report's files beside them, or choose another folder)")
+    _check_writable_directory(folder, what)
+    if folder.is_dir() and not os.access(folder, os.W_OK | os.X_OK):
+        raise OutputTargetError(f"cannot write the {what} {folder}: {os.strerror(errno.EACCES)}")
+    return folder
+
+
+@contextmanager
+def writing_report_folder(folder: str | Path, *, force: bool = False) -> Iterator[Path]:
+    """Yield a fresh hidden folder to draw the report in; put its files in ``folder`` when the block ends normally.
+
+    The report's files are listed in :data:`REPORT_MARKER` inside the folder.
+    When ``folder`` is absent or holds nothing but an earlier report's own
+    files, the new folder replaces it whole and in one step (as
+    :func:`replacing_directory`). When it holds anything else (the input
+    archive, the user's notes, a folder accepted with ``force``), each of
+    the report's files is moved in on its own, the earlier report's files the
+    new one lacks are removed, and nothing else is touched; the marker is
+    written last. On an exception ``folder`` is left as it was.
+
+    Raises
+    ------
+    OutputTargetError
+        As :func:`check_report_folder`; or a file of the report would replace
+        a folder that is there.
+    """
+    folder = check_report_folder(folder, force=force)
+    try:
+        _remove_dead_partials(folder)
+        fresh = folder.with_name(f".{folder.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.partial")
+        fresh.mkdir()
+    except OSError as exc:
+        raise OutputTargetError(f"cannot write the report folder {folder}: {os_error_text(exc)}") from None
+    try:
+        yield fresh
+        written = sorted(name for name in _entries(fresh) if not (fresh / name).is_dir())
+        (fresh / REPORT_MARKER).write_text(json.dumps({"files": written}, indent=1) + "\n")
+        earlier = (report_files(folder) or set()) if folder.is_dir() else set()
+        if folder.is_dir() and _foreign_entries(folder, earlier):
+            _merge_report(fresh, folder, written, earlier)
+        elif folder.exists() and _exchange(fresh, folder):
+            shutil.rmtree(fresh, ignore_errors=True)  # now the earlier report
+        elif folder.exists():
+            aside = folder.with_name(f".{folder.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.partial")
+            os.replace(folder, aside)
+            os.replace(fresh, folder)
+            shutil.rmtree(aside, ignore_errors=True)
+        else:
+            os.replace(fresh, folder)
+    finally:
+        if fresh.exists():
+            shutil.rmtree(fresh, ignore_errors=True)
+
+
+def _merge_report(fresh: Path, folder: Path, written: list[str], earlier: set[str]) -> None:
+    """Move the report's files into a folder that holds other files too, touching nothing else."""
+    for name in written:
+        target = folder / name
+        if target.is_dir() and not target.is_symlink():
+            raise OutputTargetError(f"cannot write the report file {target}: {os.strerror(errno.EISDIR)}")
+    for name in written:
+        target = folder / name
+        target.parent.mkdir(parents=True, exist_ok=True)
+        os.replace(fresh / name, target)
+    for name in earlier.difference(written):
+        stale = folder / name
+        if stale.is_symlink() or stale.is_file():
+            stale.unlink()
+    os.replace(fresh / REPORT_MARKER, folder / REPORT_MARKER)  # last: the folder is marked once its files are in
 
 
 def _value_bytes(value: Any) -> bytes:

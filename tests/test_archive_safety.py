@@ -18,11 +18,13 @@ import pytest
 from vehid.identification import IOData, read_archive, write_archive, write_record, write_run
 from vehid.identification.archive import open_archive, update_archive
 from vehid.identification.archive_safety import (
+    REPORT_MARKER,
     ArchiveLockedError,
     OutputTargetError,
     archive_lock,
     check_output_target,
     replacing_directory,
+    writing_report_folder,
 )
 from vehid.identification.errors import ArchiveError
 from vehid.identification.modal import ModalModel, ModalStructure
@@ -261,7 +263,7 @@ def test_a_second_identify_on_the_same_archive_exits_2_before_any_work(held_else
 
 
 def test_the_report_folder_holds_no_stale_files(tmp_path, capsys):
-    """A new report replaces the old folder whole: no stale table or PDF of an earlier run beside the new files."""
+    """A new report replaces an earlier one: no stale table or PDF of an earlier run beside the new files."""
     from vehid.identification import append_history, run_group
 
     path = tmp_path / "run.h5"
@@ -269,10 +271,11 @@ def test_the_report_folder_holds_no_stale_files(tmp_path, capsys):
         for k in range(4):
             append_history(run_group(handle, "n3"), {"fit_filter": [90.0 + k], "trace_p": 10.0 ** -k})
     folder = tmp_path / "figs"
-    folder.mkdir()
-    (folder / "summary.md").write_text("stale")
-    (folder / "convergence_n9.png").write_text("stale")
+    with writing_report_folder(folder) as partial:  # an earlier report, of another archive
+        (partial / "summary.md").write_text("stale")
+        (partial / "convergence_n9.png").write_text("stale")
     assert main(["report", str(path), "--out", str(folder), "--dpi", "30", "--json"]) == 0
     summary = json.loads(capsys.readouterr().out)
-    assert sorted(p.name for p in folder.iterdir()) == sorted(os.path.basename(f) for f in summary["files"])
+    assert sorted(p.name for p in folder.iterdir() if p.name != REPORT_MARKER) == sorted(
+        os.path.basename(f) for f in summary["files"])
     assert "convergence_n9.png" not in summary["files"] and all(os.path.exists(f) for f in summary["files"])
