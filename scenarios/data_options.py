@@ -140,6 +140,42 @@ def archived_preparation(archive: h5py.File) -> Preparation | None:
     return value
 
 
+MODEL_FILE_SUFFIXES = (".json", ".mat")
+
+
+def _model_file_identity(path: Path):
+    """A model file the workbench wrote (JSON or MATLAB with the matrices A, B, C, D), or None for any other file."""
+    from vehid.identification.archive_safety import OutputIdentity
+
+    matrices = {"A", "B", "C", "D"}
+    try:
+        if path.suffix.lower() == ".json":
+            content = json.loads(path.read_text())
+            found = isinstance(content, dict) and matrices <= content.keys() and "structure" in content
+        else:
+            from scipy.io import whosmat
+
+            found = matrices <= {name for name, _, _ in whosmat(path)}
+    except (OSError, ValueError, TypeError, NotImplementedError):
+        return None
+    return OutputIdentity("model", None) if found else None
+
+
+def check_model_target(target: str, *, inputs=(), force: bool = False) -> Path:
+    """Check ``--save-model`` before any work: a .json or .mat name, a writable place, nothing of the user's replaced.
+
+    An existing file is replaced only if it is a model file of the
+    workbench, or with ``force``.
+    """
+    from vehid.identification.archive_safety import check_output_target
+
+    path = Path(target)
+    if path.suffix.lower() not in MODEL_FILE_SUFFIXES:
+        raise InputError(f"--save-model takes a .json or .mat file; got {target!r}")
+    return check_output_target(path, inputs=inputs, force=force, what="model file", kind="model",
+                               identify=_model_file_identity)
+
+
 def save_model(model: Any, target: str, preparation: Preparation | None) -> Path:
     """Write the model, with its preparation, to a ``.json`` or ``.mat`` file."""
     path = Path(target)

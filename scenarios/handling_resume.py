@@ -41,12 +41,15 @@ class StudyCheckpoint:
         The archive; the caller holds its writer's lock for the whole study.
     fresh : bool
         Start a new archive (True) or add to a resumed one (False).
+    run : str, optional
+        The digest of the command line that asked for the study, kept in a fresh archive.
     """
 
-    def __init__(self, path: str | Path, config: HandlingConfig, records: dict, *, fresh: bool = True):
+    def __init__(self, path: str | Path, config: HandlingConfig, records: dict, *, fresh: bool = True,
+                 run: str | None = None):
         self.path = Path(path)
         if fresh:
-            with start_archive(self.path, config, records):
+            with start_archive(self.path, config, records, run=run):
                 pass
 
     def __call__(self, outcome: OrderOutcome) -> None:

@@ -34,6 +34,7 @@ from typing import Any, Callable, Iterator, Mapping, NamedTuple
 import numpy as np
 
 from vehid.identification.archive import RunName, append_history, run_group, write_archive, write_record, write_run
+from vehid.identification.archive_safety import RUN_ATTRIBUTE
 from vehid.identification.data import IOData
 from vehid.identification.errors import DivergenceError, InputError
 from vehid.identification.iekf import IEKFOptions, IEKFResult, identify_iekf
@@ -713,7 +714,7 @@ ORDERS_DONE = "orders_done_json"
 
 
 def archive_path(out: str | Path | None = None) -> Path:
-    """The archive file of ``--out``: ``handling_study.h5`` under the results folder by default, relative names there too."""
+    """The archive file of ``--out`` (a relative name from the working directory); ``handling_study.h5`` under the results folder by default."""
     return results_path(out, "handling_study.h5")
 
 
@@ -732,9 +733,15 @@ def write_order(archive: Any, order: int, outcome: OrderOutcome) -> None:
 
 
 @contextmanager
-def start_archive(path: str | Path, config: HandlingConfig, records: Mapping[str, IOData]) -> Iterator[Any]:
-    """Write a new study archive (a ``with`` block): header, configuration and both records, then the caller's runs."""
+def start_archive(path: str | Path, config: HandlingConfig, records: Mapping[str, IOData], *,
+                  run: str | None = None) -> Iterator[Any]:
+    """Write a new study archive (a ``with`` block): header, configuration and both records, then the caller's runs.
+
+    ``run`` names the command line that asked for the study (``RUN_ATTRIBUTE``), so that a rerun may replace it.
+    """
     with write_archive(path, kind="handling-study", config=config.as_dict(), seeds=[config.seed]) as archive:
+        if run is not None:
+            archive.attrs[RUN_ATTRIBUTE] = run
         for name, record in records.items():
             write_record(archive, name, record)
         yield archive
@@ -745,12 +752,12 @@ def write_archive_for(result: HandlingResult, out: str | Path | None = None) -> 
     return write_study_archive(result, archive_path(out))
 
 
-def write_study_archive(result: HandlingResult, path: str | Path) -> Path:
-    """Write the study's archive to exactly ``path`` (see :func:`write_archive_for`)."""
+def write_study_archive(result: HandlingResult, path: str | Path, *, run: str | None = None) -> Path:
+    """Write the study's archive to exactly ``path`` (see :func:`write_archive_for`; ``run`` as :func:`start_archive`)."""
     from .commands.study_handling import summary_of
 
     path = Path(path)
-    with start_archive(path, result.config, result.records) as archive:
+    with start_archive(path, result.config, result.records, run=run) as archive:
         for order, outcome in result.outcomes.items():
             write_order(archive, order, outcome)
         archive.attrs["summary_json"] = json.dumps(to_jsonable(summary_of(result)), allow_nan=False)

@@ -34,6 +34,7 @@ from typing import Any, Callable
 import numpy as np
 
 from vehid.identification.archive import write_archive, write_record
+from vehid.identification.archive_safety import RUN_ATTRIBUTE
 from vehid.identification.data import IOData
 from vehid.identification.errors import InputError
 from vehid.identification.iekf import IEKFOptions, IEKFResult, identify_iekf
@@ -363,14 +364,17 @@ def planned_passes(case: str, passes: int | None = None) -> int:
     return per_run * runs
 
 
-def write_archive_for(result: CaseResult, out: str | Path | None = None) -> Path:
+def write_archive_for(result: CaseResult, out: str | Path | None = None, *, run: str | None = None) -> Path:
     """Write a case's archive (kind ``linear-example``): its data, every run and the summary.
 
-    The default file is ``linear_example_<case>.h5`` under the results folder.
+    The default file is ``linear_example_<case>.h5`` under the results folder; a relative ``out`` is taken
+    from the working directory. ``run`` names the command line that asked for it (``RUN_ATTRIBUTE``).
     """
     path = results_path(out, f"linear_example_{result.case}.h5")
     settings = to_jsonable(result.settings)
     with write_archive(path, kind="linear-example", config=settings, seeds=[result.settings["seed"]]) as archive:
+        if run is not None:
+            archive.attrs[RUN_ATTRIBUTE] = run
         for name, data in result.data.items():
             write_record(archive, name, data)
         for name, run in result.runs.items():

@@ -70,6 +70,7 @@ def test_archive_figures_and_table_cover_everything_present(tmp_path):
 
 def test_report_command_writes_figures_pdf_and_table(capsys, tmp_path, monkeypatch):
     monkeypatch.setenv("VEHID_RESULTS_DIR", str(tmp_path / "results"))
+    monkeypatch.chdir(tmp_path)  # a relative --out is taken from the working directory, as by every command
     path = tmp_path / "history.h5"
     with write_archive(path, kind="identification") as handle:
         for k in range(4):
@@ -80,7 +81,8 @@ def test_report_command_writes_figures_pdf_and_table(capsys, tmp_path, monkeypat
     summary = json.loads(captured.out)
     assert summary["kind"] == "identification" and summary["runs"] == ["n3"]
     assert summary["figures"] == ["convergence_n3"]
-    folder = tmp_path / "results" / "figs"
+    folder = tmp_path / "figs"
+    assert not (tmp_path / "results" / "figs").exists()
     assert (folder / "convergence_n3.png").is_file()
     pdf = (folder / "report.pdf").read_bytes()
     assert len(re.findall(rb"/Type\s*/Page\b(?!s)", pdf)) == 1

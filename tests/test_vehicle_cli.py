@@ -18,7 +18,7 @@ def _run_json(capsys, argv):
 
 
 def test_simulate_step_summary_keys(capsys, tmp_path, monkeypatch):
-    monkeypatch.setenv("VEHID_RESULTS_DIR", str(tmp_path))
+    monkeypatch.chdir(tmp_path)  # a relative --out is taken from the working directory
     summary = _run_json(capsys, ["simulate", "--manoeuvre", "step", "--amplitude-deg", "0.3",
                                  "--duration", "6", "--out", "step.h5"])
     for key in ("peak_lateral_acceleration", "min_speed", "max_speed", "seconds",

@@ -124,7 +124,7 @@ def test_wheelspin_beyond_the_grip_limit_stops_the_run_with_the_partial_record(c
     assert partial.t[-1] == pytest.approx(error.time)
     kappa = np.abs(partial.x[:, [partial.state_names.index(f"kappa_{c}") for c in ("fl", "fr", "rl", "rr")]])
     assert np.max(kappa[:-1]) <= 0.5 < np.max(kappa[-1])  # it ends at the first sample outside
-    monkeypatch.setenv("VEHID_RESULTS_DIR", str(tmp_path))
+    monkeypatch.chdir(tmp_path)  # a relative --out is taken from the working directory
     status, body, err = _cli(capsys, ["simulate", "--speed", "40", "--out", "spin.h5"])
     assert status == 1 and body["exit_status"] == 1 and "longitudinal tyre slip" in body["error"]
     assert len(err.strip().splitlines()) == 1 and "Traceback" not in err

@@ -41,9 +41,12 @@ with the same data and settings, and reaches the same parameters as a run
 that was never interrupted: it runs to the run's own pass budget and stop
 rule (--passes, given explicitly, sets a new budget). Once the run ends, the
 archive records its final stop reason. Every method writes its model to
---out; the target is checked before any work (no directory, no input file,
-no existing file that is not a workbench archive unless --force), and an
-archive being written is locked against a second writer.
+--out. A relative --out or --save-model is taken from the working directory.
+Both are checked before any work: an HDF5 name for --out, .json or .mat for
+--save-model, no directory, no input file, and an existing file is replaced
+only if it is the identification archive of the same run (same data and
+settings) or a model file of the workbench, unless --force; an archive being
+written is locked against a second writer.
 """
 
 from __future__ import annotations
@@ -57,7 +60,7 @@ import numpy as np
 
 from vehid.identification.archive import (open_archive, read_records, run_group, update_archive, write_archive,
                                           write_run)
-from vehid.identification.archive_safety import archive_lock, check_output_target
+from vehid.identification.archive_safety import RUN_ATTRIBUTE, archive_lock, check_output_target
 from vehid.identification.errors import InputError
 from vehid.identification.filter_models import DISCRETIZATIONS
 from vehid.identification.iekf import identify_iekf
@@ -69,9 +72,10 @@ from vehid.identification.preparation import prepare_validation, read_record
 from vehid.identification.storage import write_value
 from vehid.scenarios import identify_workflow as workflow
 from vehid.scenarios.data_options import (RECORD_PREFIX, archive_records, archived_preparation, record_series,
-                                          records_summary, register_data_options, save_model, settings_from_args,
-                                          write_record_series)
+                                          check_model_target, records_summary, register_data_options, save_model,
+                                          settings_from_args, write_record_series)
 from vehid.scenarios.model_checks import uncertainty_lines, uncertainty_summary
+from vehid.scenarios.paths import HDF5_SUFFIXES, OUT_RULE, run_digest
 from vehid.scenarios.progress import Progress
 
 NAME = "identify"
@@ -99,10 +103,10 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--start", default="data", choices=workflow.START_CHOICES, help=workflow.START_HELP)
     parser.add_argument("--normalize", action=argparse.BooleanOptionalAction, default=True,
                         help="scale inputs and outputs by their RMS while filtering (default on)")
-    parser.add_argument("--save-model", help="write the model to this .json or .mat file")
-    parser.add_argument("--out", help="HDF5 archive of the run, checkpointed after every pass")
+    parser.add_argument("--save-model", help=f"write the model to this .json or .mat file ({OUT_RULE})")
+    parser.add_argument("--out", help=f"HDF5 archive of the run, checkpointed after every pass ({OUT_RULE})")
     parser.add_argument("--force", action="store_true",
-                        help="let --out replace an existing file that is not a workbench archive")
+                        help="let --out and --save-model replace an existing file that is not this run's own output")
     parser.add_argument("--resume", metavar="ARCHIVE",
                         help="continue the run checkpointed in ARCHIVE (its data and settings; --passes counts all passes)")
     parser.add_argument("--bootstrap", type=int, metavar="N",
@@ -115,6 +119,7 @@ def register(parser: argparse.ArgumentParser) -> None:
 
 
 RUN_NAME = "iekf"
+ARCHIVE_KIND = "identification"
 DEFAULT_PASSES = 50
 VALIDATION_PREFIX = "validation"
 
@@ -144,8 +149,14 @@ def _resume(args: argparse.Namespace):
 def run(args: argparse.Namespace) -> tuple[dict, str]:
     if args.resume and args.out:
         raise InputError("--resume continues in its own archive: give no --out")
+    inputs = [*args.data, *args.validation_file, args.resume]
+    # the run's identity, kept with the archive: a rerun of the same run may replace it, another may not
+    args = argparse.Namespace(**vars(args), output_run=run_digest(args))
     if args.out:  # before any work: a bad target must not cost the run
-        check_output_target(args.out, inputs=[*args.data, *args.validation_file], force=args.force)
+        check_output_target(args.out, inputs=inputs, force=args.force, kind=ARCHIVE_KIND, run=args.output_run,
+                            suffixes=HDF5_SUFFIXES)
+    if args.save_model:
+        check_model_target(args.save_model, inputs=[*inputs, args.out], force=args.force)
     if args.resume:  # a missing, foreign or corrupt file is named as such before anything is locked or created
         open_archive(args.resume, kinds=["identification"]).close()
     target = args.resume or args.out
@@ -180,7 +191,8 @@ def _identify(args: argparse.Namespace) -> tuple[dict, str]:
         options = dataclasses.replace(options, p=tuning.p)
         archive_path = Path(args.out) if args.out else None
         if archive_path is not None:
-            with write_archive(archive_path, kind="identification", config=options, seeds=[]) as archive:
+            with write_archive(archive_path, kind=ARCHIVE_KIND, config=options, seeds=[]) as archive:
+                archive.attrs[RUN_ATTRIBUTE] = args.output_run
                 _archive_plan(archive, plan)
     checkpoint = Checkpointer(archive_path, RUN_NAME) if archive_path is not None else None
     done = previous.passes_run if previous is not None else 0
@@ -309,7 +321,8 @@ def _run_order_search(args, plan, options) -> tuple[dict, str]:
     if archive_path is not None:
         from vehid.identification.iekf_archive import write_iekf_run
 
-        with write_archive(archive_path, kind="identification", config=options, seeds=[]) as archive:
+        with write_archive(archive_path, kind=ARCHIVE_KIND, config=options, seeds=[]) as archive:
+            archive.attrs[RUN_ATTRIBUTE] = args.output_run
             _archive_plan(archive, plan)
             write_iekf_run(archive, RUN_NAME, result)
     return _finish(args, plan, summary, model, result=result, archive_path=archive_path)
@@ -359,7 +372,8 @@ def _archive_comparator(args: argparse.Namespace, plan, outcome) -> Path:
     """The records and the comparator's model and fit, as ``runs/<method>`` of an identification archive."""
     path = Path(args.out)
     config = {"method": args.method, "order": outcome.model.structure.n}
-    with write_archive(path, kind="identification", config=config, seeds=[]) as archive:
+    with write_archive(path, kind=ARCHIVE_KIND, config=config, seeds=[]) as archive:
+        archive.attrs[RUN_ATTRIBUTE] = args.output_run
         _archive_plan(archive, plan)
         run = write_run(archive, args.method, model=outcome.model, metrics=outcome.metrics)
         run.attrs["stop_reason"] = "finished"

@@ -2,8 +2,12 @@
 
 Draws whatever the archive (layout: results/RESULTS_LAYOUT.md) holds: parameter
 development and convergence per run, the order study, eigenvalues, Bode plots,
-time fits and residual tests per record. Writes the PNGs, a PDF and summary.md;
-the folder is replaced whole, so an interrupted report leaves the previous one.
+time fits and residual tests per record. Writes the PNGs, a PDF and summary.md
+to a folder that is absent, empty or an earlier report of the workbench (marked
+by a hidden file listing the report's own files); any other folder is refused
+unless --force, and even then only the report's own files are added or
+replaced, never anything else deleted. An interrupted report leaves the
+previous one.
 """
 
 from __future__ import annotations
@@ -13,9 +17,9 @@ import math
 from pathlib import Path
 
 from vehid.identification.archive import read_archive
-from vehid.identification.archive_safety import check_output_folder, replacing_directory
+from vehid.identification.archive_safety import check_report_folder, writing_report_folder
 from vehid.identification.errors import InputError
-from vehid.scenarios.paths import results_path
+from vehid.scenarios.paths import OUT_RULE, results_path
 from vehid.scenarios.report import archive_figures, archive_table, markdown_table, write_report
 
 NAME = "report"
@@ -26,7 +30,9 @@ HELP = "draw the figures and summary table of a results archive"
 def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("archive", help="an HDF5 results archive")
     parser.add_argument("--out", default=None,
-                        help="output folder (default: <archive name>-report under the results folder)")
+                        help=f"output folder ({OUT_RULE}; default: <archive name>-report under the results folder)")
+    parser.add_argument("--force", action="store_true",
+                        help="write into a folder that is not an earlier report (its other files are kept)")
     parser.add_argument("--window", type=float, nargs=2, metavar=("T0", "T1"), default=None,
                         help="time range in seconds shown in the time-fit figures (default: all)")
     parser.add_argument("--max-lag", type=int, default=50,
@@ -45,11 +51,11 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     path = Path(args.archive)
     archive = read_archive(path)
     folder = results_path(args.out, f"{path.stem}-report")
-    check_output_folder(folder)  # before drawing: a file in its place, no permission
+    check_report_folder(folder, force=args.force)  # before drawing: a file in its place, a folder of other files
     if archive.kind == "handling-study":
         from vehid.scenarios.handling_report import write_handling_report
 
-        with replacing_directory(folder) as partial:
+        with writing_report_folder(folder, force=args.force) as partial:
             files = [folder / f.relative_to(partial) for f in write_handling_report(archive, partial)]
         summary = {"archive": str(path), "kind": archive.kind, "out": str(folder), "files": [str(f) for f in files]}
         return summary, f"{path.name} (handling study): wrote {len(files)} files to {folder}"
@@ -57,7 +63,7 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     if not figures:
         raise InputError(f"nothing to draw in {path}: it holds no records and no runs with histories or models")
     rows = archive_table(archive)
-    with replacing_directory(folder) as partial:
+    with writing_report_folder(folder, force=args.force) as partial:
         files = write_report(figures, partial, dpi=args.dpi, title=f"vehid report: {path.name}")
         if rows:
             table = partial / "summary.md"

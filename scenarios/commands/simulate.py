@@ -1,9 +1,11 @@
 """Simulate the 23-state full-vehicle model under a steer manoeuvre.
 
 Prints peak lateral acceleration, speed range, wall time and, for a step, the
-steady-state gains; --out writes the record to HDF5. A run that leaves the
-model's physical envelope fails (exit status 1), writing with --out the record
-up to that sample.
+steady-state gains; --out writes the record to HDF5 (a relative path is taken
+from the working directory, so `vehid identify` finds it under the same name).
+An existing file is replaced only if it is the record of the same simulation,
+or with --force. A run that leaves the model's physical envelope fails (exit
+status 1), writing with --out the record up to that sample.
 """
 
 from __future__ import annotations
@@ -14,9 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-from vehid.identification.archive_safety import check_output_target
+from vehid.identification.archive_safety import KIND_ATTRIBUTE, RUN_ATTRIBUTE, check_output_target
 from vehid.identification.errors import InputError, SimulationError
-from vehid.scenarios.paths import results_path
+from vehid.scenarios.paths import HDF5_SUFFIXES, OUT_RULE, run_digest
 from vehid.vehicle import MANOEUVRES, make_manoeuvre, named_vehicle, simulate
 
 NAME = "simulate"
@@ -39,7 +41,9 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="seed of the random parts of the input")
     parser.add_argument("--method", default="rk4", choices=("rk4", "cvodes"),
                         help="compiled fixed-step RK4 (default) or the CVODES cross-check")
-    parser.add_argument("--out", default=None, help="write the record to this HDF5 file (under results/)")
+    parser.add_argument("--out", default=None, help=f"write the record to this HDF5 file ({OUT_RULE})")
+    parser.add_argument("--force", action="store_true",
+                        help="let --out replace an existing file that is not this simulation's record")
     parser.set_defaults(handler=run)
 
 
@@ -58,16 +62,30 @@ def step_gains(data, amplitude: float, window: float = _STEADY_WINDOW) -> dict[s
     }
 
 
-def _write_record(data, args: argparse.Namespace) -> Path:
+RECORD_KIND = "simulated-record"
+
+
+def _write_record(data, args: argparse.Namespace, run: str) -> Path:
+    """Write the record under a hidden name and rename it: a killed run never leaves half a file at --out."""
+    import os
+    import uuid
+
     import casadi
     import h5py
 
-    path = results_path(args.out, args.out)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with h5py.File(path, "w") as handle:
-        handle.attrs["casadi_version"] = casadi.__version__
-        handle.attrs["seed"] = args.seed
-        data.to_hdf5(handle.create_group("data"))
+    path = Path(args.out)
+    temporary = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.partial")
+    try:
+        with h5py.File(temporary, "w") as handle:
+            handle.attrs["casadi_version"] = casadi.__version__
+            handle.attrs["seed"] = args.seed
+            handle.attrs[KIND_ATTRIBUTE] = RECORD_KIND
+            handle.attrs[RUN_ATTRIBUTE] = run
+            data.to_hdf5(handle.create_group("data"))
+        os.replace(temporary, path)
+    finally:
+        if temporary.exists():
+            temporary.unlink()
     return path
 
 
@@ -81,14 +99,16 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     if args.duration is not None:
         options["duration"] = args.duration
     manoeuvre = make_manoeuvre(args.manoeuvre, **options)
-    if args.out:  # before the simulation: no directory, no input file, a writable place
-        check_output_target(results_path(args.out, args.out), inputs=[args.vehicle], force=True, what="record")
+    run = run_digest(args)
+    if args.out:  # before the simulation: an HDF5 name, no directory, no input file, nothing of the user's
+        check_output_target(args.out, inputs=[args.vehicle], force=args.force, what="record", kind=RECORD_KIND,
+                            run=run, suffixes=HDF5_SUFFIXES)
     try:
         data = simulate(params, manoeuvre, speed=args.speed, method=args.method)
     except SimulationError as exc:
         if not args.out or exc.partial is None:
             raise
-        path = _write_record(exc.partial, args)  # nothing computed is lost
+        path = _write_record(exc.partial, args, run)  # nothing computed is lost
         raise SimulationError(
             f"{exc}; the record up to it ({exc.partial.n_samples} samples) is in {path}",
             exc.partial, quantity=exc.quantity, value=exc.value, time=exc.time,
@@ -110,7 +130,7 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     if args.manoeuvre == "step":
         summary.update(step_gains(data, float(manoeuvre.meta["amplitude"])))
     if args.out:
-        summary["out"] = str(_write_record(data, args))
+        summary["out"] = str(_write_record(data, args, run))
     lines = [
         f"{args.manoeuvre} on {params.name} at {args.speed:g} m/s: {data.n_samples} samples, "
         f"{data.duration:g} s simulated in {summary['seconds'] * 1000:.1f} ms ({args.method})",

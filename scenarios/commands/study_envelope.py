@@ -5,16 +5,25 @@ spline-nonlinear one unless --linear-only) from steer inputs at
 --amplitude-fraction of the grip limit at its speed. Jobs run on a process pool
 or Dask and are archived as they finish (--resume skips those done). The grid
 models become one speed-scheduled model, validated at the speeds between.
+A relative --out is taken from the working directory; an existing archive is
+only continued (--resume), never replaced. The report folder beside it is
+written only if absent, empty or an earlier report, or with --force (which
+still deletes no file in it that is not the report's own).
 """
 
 from __future__ import annotations
 
 import argparse
+import errno
+import os
 
-from vehid.scenarios.envelope import EXECUTORS, EnvelopeConfig, parse_speeds, run_campaign
+from vehid.scenarios.envelope import ARCHIVE_KIND, EXECUTORS, EnvelopeConfig, parse_speeds, run_campaign
 from vehid.scenarios.commands.study_handling import add_filter_options
 from vehid.scenarios.handling_study import parse_orders
+from vehid.scenarios.paths import HDF5_SUFFIXES, OUT_RULE, results_path
 from vehid.scenarios.progress import Progress
+from vehid.identification.archive_safety import (OutputTargetError, check_report_folder, output_identity,
+                                                writing_report_folder)
 from vehid.identification.errors import InputError
 
 NAME = "envelope"
@@ -50,13 +59,37 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--workers", type=int, default=None,
                         help="processes of the pool or of the local Dask cluster (default: the cores)")
     parser.add_argument("--scheduler", default=None, help="address of a running Dask scheduler (with --executor dask)")
-    parser.add_argument("--out", default=None, help="archive file (default envelope.h5 under results/)")
+    parser.add_argument("--out", default=None,
+                        help=f"archive file ({OUT_RULE}; default envelope.h5 under the results folder)")
     parser.add_argument("--resume", action="store_true", help="continue the campaign in --out, skipping finished jobs")
     parser.add_argument("--no-report", action="store_true", help="write only the archive, not the figures beside it")
+    parser.add_argument("--force", action="store_true",
+                        help="let the report go into a folder that is not an earlier report (its other files are kept)")
     parser.set_defaults(handler=run)
 
 
+def _check_archive_target(path, resume: bool) -> None:
+    """A campaign archive is only ever continued, never replaced: say so before any job is planned."""
+    if path.is_dir():
+        raise OutputTargetError(f"cannot write the archive {path}: {os.strerror(errno.EISDIR)}")
+    if path.suffix.lower() not in HDF5_SUFFIXES:
+        raise OutputTargetError(f"cannot write the archive {path}: its name must end in {' or '.join(HDF5_SUFFIXES)}, "
+                                "the format written")
+    if not path.exists():
+        return
+    if not resume:
+        raise OutputTargetError(f"{path} exists; refusing to overwrite it (give --resume to continue the campaign "
+                                "it holds, or choose another file)")
+    identity = output_identity(path)
+    if identity is None or identity.kind != ARCHIVE_KIND:
+        raise OutputTargetError(f"{path} is not a campaign archive of the workbench; nothing to resume there "
+                                "(choose another file)")
+
+
 def run(args: argparse.Namespace) -> tuple[dict, str]:
+    _check_archive_target(results_path(args.out, "envelope.h5"), args.resume)
+    if not args.no_report:  # before the campaign: a folder of the user's is refused now, not after hours
+        check_report_folder(results_path(args.out, "envelope.h5").with_suffix(""), force=args.force)
     off_grid = None
     if args.off_grid is not None:
         off_grid = () if args.off_grid.strip().lower() == "none" else parse_speeds(args.off_grid, "off-grid speeds")
@@ -85,6 +118,8 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     if not args.no_report:
         from vehid.scenarios.envelope_report import write_envelope_report
 
-        files = write_envelope_report(result, result.archive.with_suffix(""))
-        text += f"\nwrote {len(files)} report files to {result.archive.with_suffix('')}"
+        folder = result.archive.with_suffix("")
+        with writing_report_folder(folder, force=args.force) as partial:
+            files = write_envelope_report(result, partial)
+        text += f"\nwrote {len(files)} report files to {folder}"
     return result.summary, text

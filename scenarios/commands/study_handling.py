@@ -6,6 +6,10 @@ spline-nonlinear one started from it, both scored on identification and
 validation records; orders run in parallel processes. Prints the Table-5 style
 table, the chosen order and the modes beside the vehicle's, and writes an HDF5
 archive, checkpointed as each order finishes, and a report folder beside it.
+A relative --out is taken from the working directory. An existing archive is
+replaced only by a rerun of the same study (same settings), and the report
+folder is written only if absent, empty or an earlier report; --force allows
+both, and still deletes no file in the folder that is not the report's own.
 --resume ARCHIVE runs only the orders an interrupted study's archive lacks.
 """
 
@@ -16,8 +20,8 @@ from pathlib import Path
 from typing import Any
 
 from vehid.identification.archive import open_archive
-from vehid.identification.archive_safety import (archive_lock, check_output_folder, check_output_target,
-                                                replacing_directory)
+from vehid.identification.archive_safety import (archive_lock, check_output_target, check_report_folder,
+                                                output_identity, writing_report_folder)
 from vehid.identification.errors import InputError
 from vehid.identification.iekf import IEKFOptions
 from vehid.identification.spline_iekf import SplineIEKFOptions
@@ -25,6 +29,7 @@ from vehid.scenarios.handling_resume import StudyCheckpoint, read_progress
 from vehid.scenarios.handling_study import (OUTPUTS, PAPER, HandlingConfig, HandlingResult, archive_path, make_records,
                                             parse_orders, percent_text, planned_passes, run_study, spline_options,
                                             study_linear_options, write_study_archive)
+from vehid.scenarios.paths import HDF5_SUFFIXES, OUT_RULE, run_digest
 from vehid.scenarios.progress import Progress
 
 NAME = "handling"
@@ -62,11 +67,13 @@ def register(parser: argparse.ArgumentParser) -> None:
                         help="steer amplitude as a fraction of the inputs' defaults (default 1; 0.1 stays linear)")
     parser.add_argument("--vehicle", default=_DEFAULTS.vehicle, help="baseline, understeer, or a vehicle file")
     parser.add_argument("--speed", type=float, default=_DEFAULTS.speed, help="trim speed in m/s (default 20)")
-    parser.add_argument("--out", default=None, help="archive file name (default handling_study.h5 under results/)")
+    parser.add_argument("--out", default=None,
+                        help=f"archive file ({OUT_RULE}; default handling_study.h5 under the results folder)")
     parser.add_argument("--no-report", action="store_true",
                         help="write only the archive, not the report folder beside it (figures, PDF, table, CasADi export)")
     parser.add_argument("--force", action="store_true",
-                        help="let --out replace an existing file that is not a workbench archive")
+                        help="let --out replace an existing file that is not this study's archive, and the report "
+                             "go into a folder that is not an earlier report (its other files are kept)")
     parser.add_argument("--resume", metavar="ARCHIVE", default=None,
                         help="continue the study checkpointed in ARCHIVE: its settings, only the orders missing")
     parser.set_defaults(handler=run)
@@ -88,6 +95,8 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
             raise InputError(f"--resume continues the study with the settings and file of its archive; do not give {named}")
         path = Path(args.resume)
         open_archive(path, kinds=["handling-study"]).close()  # missing, foreign or corrupt: said before anything else
+        identity = output_identity(path)
+        run = identity.run if identity is not None else None  # the study goes on as the run that began it
     else:
         orders = parse_orders(args.orders)
         spline = spline_options(args.nodes, args.nonlinear_passes, args.nonlinear_p)  # checked even if unused
@@ -96,20 +105,22 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
             vehicle=args.vehicle, speed=args.speed, linear_options=study_linear_options(args.p, args.passes),
             spline_options=None if args.linear_only else spline, workers=args.workers,
         )
-        path = check_output_target(archive_path(args.out), inputs=[args.vehicle], force=args.force)  # before any work
+        run = run_digest(args)
+        path = check_output_target(archive_path(args.out), inputs=[args.vehicle], force=args.force,
+                                   kind="handling-study", run=run, suffixes=HDF5_SUFFIXES)  # before any work
     if not args.no_report:
-        check_output_folder(path.with_suffix(""))  # the report folder too, before hours of work
+        check_report_folder(path.with_suffix(""), force=args.force)  # the report folder too, before hours of work
     with archive_lock(path):  # one writer for the whole study: checkpoints, archive and report
         if args.resume:
             config, records, finished = read_progress(path, workers=args.workers)
             checkpoint = StudyCheckpoint(path, config, records, fresh=False)
         else:
             records, finished = make_records(config), {}
-            checkpoint = StudyCheckpoint(path, config, records)
-        return _study(args, config, path, records, finished, checkpoint)
+            checkpoint = StudyCheckpoint(path, config, records, run=run)
+        return _study(args, config, path, records, finished, checkpoint, run)
 
 
-def _study(args, config, path, records, finished, checkpoint) -> tuple[dict, str]:
+def _study(args, config, path, records, finished, checkpoint, run) -> tuple[dict, str]:
     state = {order: "-" for order in config.orders}
     shown: list[Progress] = []  # drawn from the first pass on, after the set-up has logged its warnings
 
@@ -124,7 +135,7 @@ def _study(args, config, path, records, finished, checkpoint) -> tuple[dict, str
     finally:
         for progress in shown:
             progress.close()
-    path = write_study_archive(result, path)
+    path = write_study_archive(result, path, run=run)
     summary = {**summary_of(result), "archive": str(path)}
     if finished:
         summary["resumed_orders"] = sorted(finished)
@@ -133,7 +144,7 @@ def _study(args, config, path, records, finished, checkpoint) -> tuple[dict, str
         from vehid.scenarios.handling_report import write_handling_report
 
         folder = path.with_suffix("")
-        with replacing_directory(folder) as partial:  # a kill leaves the old report or the new, never a mixture
+        with writing_report_folder(folder, force=args.force) as partial:  # a kill leaves the old report or the new
             written = write_handling_report(path, partial)
         summary["report"] = str(folder)
         text += f"\nwrote {len(written)} report files to {folder}"
