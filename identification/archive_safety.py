@@ -439,7 +439,7 @@ def writing_report_folder(folder: str | Path, *, force: bool = False) -> Iterato
         written = sorted(name for name in _entries(fresh) if not (fresh / name).is_dir())
         (fresh / REPORT_MARKER).write_text(json.dumps({"files": written}, indent=1) + "\n")
         earlier = (report_files(folder) or set()) if folder.is_dir() else set()
-        if folder.is_dir() and _foreign_entries(folder, earlier):
+        if folder.is_dir() and (folder.is_symlink() or _foreign_entries(folder, earlier)):  # a link stays a link
             _merge_report(fresh, folder, written, earlier)
         elif folder.exists() and _exchange(fresh, folder):
             shutil.rmtree(fresh, ignore_errors=True)  # now the earlier report

@@ -714,7 +714,8 @@ ORDERS_DONE = "orders_done_json"
 
 
 def archive_path(out: str | Path | None = None) -> Path:
-    """The archive file of ``--out`` (a relative name from the working directory); ``handling_study.h5`` under the results folder by default."""
+    """The archive file of ``--out``, a relative name from the working directory; by default ``handling_study.h5``
+    under the results folder."""
     return results_path(out, "handling_study.h5")
 
 

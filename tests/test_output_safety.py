@@ -303,6 +303,16 @@ def test_an_earlier_report_is_replaced_without_its_stale_files(tmp_path):
         check_report_folder(tmp_path)
 
 
+def test_a_report_folder_given_as_a_link_stays_a_link(tmp_path):
+    real = tmp_path / "real"
+    with writing_report_folder(real) as partial:
+        (partial / "summary.md").write_text("old")
+    (tmp_path / "link").symlink_to(real, target_is_directory=True)
+    with writing_report_folder(tmp_path / "link") as partial:
+        (partial / "summary.md").write_text("new")
+    assert (tmp_path / "link").is_symlink() and (real / "summary.md").read_text() == "new"
+
+
 def test_a_forged_marker_cannot_reach_outside_the_folder(tmp_path):
     folder = tmp_path / "report"
     folder.mkdir()
