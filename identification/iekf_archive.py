@@ -7,6 +7,7 @@ checkpoint reaches the same parameters as one that was never interrupted.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Any
 
@@ -16,6 +17,7 @@ import numpy as np
 from .archive import append_history, read_run, run_group, update_archive, write_run
 from .errors import ArchiveError
 from .iekf import FilterState, IEKFOptions, IEKFResult, PassRecord
+from .jsonable import to_jsonable
 from .modal import ModalModel
 from .storage import read_value, write_value
 
@@ -52,6 +54,8 @@ def _write_summary(run: h5py.Group, result: IEKFResult) -> None:
     run.attrs["dt"] = result.dt
     run.attrs["stop_reason"] = result.stop_reason
     run.attrs["seconds"] = result.seconds
+    # how the run started (its start model among it): a resumed run judges its model against the same start
+    run.attrs["meta_json"] = json.dumps(to_jsonable(result.meta), allow_nan=False)
 
 
 def write_iekf_run(archive: h5py.File, name: str, result: IEKFResult) -> h5py.Group:
@@ -104,8 +108,21 @@ def read_iekf_run(archive: h5py.File, name: str) -> IEKFResult:
     )
     return IEKFResult(
         model=model, structure=model.structure, options=options, history=records, state=state,
-        dt=dt, stop_reason=stop_reason, seconds=seconds,
+        dt=dt, stop_reason=stop_reason, seconds=seconds, meta=_read_meta(run),
     )
+
+
+def _read_meta(run: h5py.Group) -> dict[str, Any]:
+    """The run's start description; empty for a run archived before it was kept."""
+    if "meta_json" not in run.attrs:
+        return {}
+    try:
+        meta = json.loads(run.attrs["meta_json"])
+    except ValueError:
+        raise ArchiveError(f"run {run.name!r} holds an unreadable start description") from None
+    if meta.get("start_parameters") is not None:
+        meta["start_parameters"] = np.asarray(meta["start_parameters"], dtype=float)
+    return meta
 
 
 class Checkpointer:
