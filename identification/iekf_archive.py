@@ -21,7 +21,8 @@ from .jsonable import to_jsonable
 from .modal import ModalModel
 from .storage import read_value, write_value
 
-__all__ = ["HISTORY_UNITS", "write_iekf_run", "append_iekf_pass", "read_iekf_run", "Checkpointer"]
+__all__ = ["HISTORY_UNITS", "write_iekf_run", "write_pass_history", "append_iekf_pass", "read_iekf_run",
+           "Checkpointer"]
 
 HISTORY_UNITS = {
     "index": "-",
@@ -67,6 +68,22 @@ def write_iekf_run(archive: h5py.File, name: str, result: IEKFResult) -> h5py.Gr
     for record in result.history:
         append_history(run, _history_row(record), units=HISTORY_UNITS)
     _write_summary(run, result)
+    return run
+
+
+def write_pass_history(archive: h5py.File, name: str, history: tuple[PassRecord, ...]) -> h5py.Group:
+    """Store the passes of a filter run that keeps no resume state (the spline IEKF's) as ``runs/<name>/history``.
+
+    Its rows are those of an IEKF run, so that a report draws and counts its passes alike.
+    """
+    run = run_group(archive, name)
+    if "history" in run:
+        del run["history"]
+    for record in history:
+        row = _history_row(record)
+        if not np.isfinite(record.nis):  # a filter that does not measure its innovations: no column of NaN
+            del row["nis"]
+        append_history(run, row, units=HISTORY_UNITS)
     return run
 
 

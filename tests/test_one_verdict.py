@@ -157,3 +157,19 @@ def test_a_run_without_a_stored_history_shows_the_passes_the_command_counted(tmp
     assert row["run"] == "nonlinear" and row["passes"] == 30 and row["returned"] is False
     # the true model on its own noise-free record: both scores are 100 % up to rounding
     assert row["NRMSE fit identification (%)"] > 99.99 and row["R identification (%)"] > 99.99
+
+
+@pytest.mark.slow  # the spline filter's first compilation takes up to ~30 s on a fresh cache
+def test_the_spline_run_is_archived_with_its_passes_and_scored_as_the_command_did(tmp_path, capsys):
+    record = _csv(tmp_path / "r.csv", _record(30.0))
+    archive = tmp_path / "run.h5"
+    status, out, _ = _identify(capsys, record, "--order", "3", "--p", "1e-4", "--passes", "3", "--validation", "0.3",
+                               "--nonlinear", "--nonlinear-p", "1e-8", "--nonlinear-passes", "3", "--out",
+                               str(archive), "--json")
+    command = json.loads(out)["nonlinear"]
+    assert status == 0 and command["passes_run"] >= 1
+    rows = {row["run"]: row for row in archive_table(read_archive(archive))}
+    assert rows["nonlinear"]["passes"] == command["passes_run"]
+    # scored by the same function on the same held-out samples, read back exactly
+    assert rows["nonlinear"]["NRMSE fit validation (%)"] == pytest.approx(command["validation_fit_percent"][0],
+                                                                          abs=1e-9)

@@ -26,7 +26,7 @@ and the start is returned where the filter scores worse on the estimation
 data (`start_kept`). The summary gives the eigenvalues, the
 fit R (eq. 17) per output of the continuous model simulated exactly, NRMSE
 fits on estimation and validation data (--validation, --validation-file),
-whether the run converged, any warnings (--strict: exit status 3), the
+whether the run converged, any warnings (--strict: the summary, then exit status 3), the
 matrices and the run time. --order takes a number, a range (2-8) or auto,
 chosen on validation data; --nonlinear adds the spline-nonlinear model. It
 also says how sure the model is (scenarios.model_checks): each mode with
@@ -62,7 +62,7 @@ from vehid.identification.archive_safety import archive_lock, check_output_targe
 from vehid.identification.errors import InputError, StrictWarningsError
 from vehid.identification.filter_models import DISCRETIZATIONS
 from vehid.identification.iekf import identify_iekf
-from vehid.identification.iekf_archive import Checkpointer, read_iekf_run
+from vehid.identification.iekf_archive import Checkpointer, read_iekf_run, write_pass_history
 from vehid.identification.iekf_pass import COVARIANCE_FORMS
 from vehid.identification.jsonable import to_jsonable
 from vehid.identification.modal import C_PATTERNS, ModalModel
@@ -308,6 +308,7 @@ def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None)
         with update_archive(archive_path) as archive:  # one atomic update (each copies the archive)
             if nonlinear is not None:
                 write_run(archive, "nonlinear", model=nonlinear)
+                write_pass_history(archive, "nonlinear", outcome.result.history)
             if start_returned:
                 write_run(archive, "start", model=model)
             if tests is not None:

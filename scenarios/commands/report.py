@@ -1,5 +1,9 @@
 """Draw the figures and the summary table of a results archive.
 
+Every model is scored as the identify command that wrote the archive scored
+it (same initial-state rule, NRMSE fit beside R), and the command's verdict
+(its scores and warnings, kept in the archive) heads summary.md and the text.
+
 Draws whatever the archive (layout: results/RESULTS_LAYOUT.md) holds: parameter
 development and convergence per run, the order study, eigenvalues, Bode plots,
 time fits and residual tests per record. Writes the PNGs, a PDF and summary.md;
