@@ -73,14 +73,17 @@ class StrictWarningsError(WorkbenchError):
         The warnings, one line each.
     summary : dict or None
         What the run produced, so that it can still be reported.
+    text : str or None
+        The run's text summary, printed before the exit status says that it had warnings.
     """
 
     exit_status = 3
 
-    def __init__(self, warnings: tuple[str, ...] | list[str], summary: dict | None = None):
+    def __init__(self, warnings: tuple[str, ...] | list[str], summary: dict | None = None, text: str | None = None):
         super().__init__("; ".join(warnings))
         self.warnings = tuple(warnings)
         self.summary = summary
+        self.text = text
 
 
 class SimulationError(WorkbenchError):

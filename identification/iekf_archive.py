@@ -7,6 +7,7 @@ checkpoint reaches the same parameters as one that was never interrupted.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Any
 
@@ -16,10 +17,12 @@ import numpy as np
 from .archive import append_history, read_run, run_group, update_archive, write_run
 from .errors import ArchiveError
 from .iekf import FilterState, IEKFOptions, IEKFResult, PassRecord
+from .jsonable import to_jsonable
 from .modal import ModalModel
 from .storage import read_value, write_value
 
-__all__ = ["HISTORY_UNITS", "write_iekf_run", "append_iekf_pass", "read_iekf_run", "Checkpointer"]
+__all__ = ["HISTORY_UNITS", "write_iekf_run", "write_pass_history", "append_iekf_pass", "read_iekf_run",
+           "Checkpointer"]
 
 HISTORY_UNITS = {
     "index": "-",
@@ -52,6 +55,8 @@ def _write_summary(run: h5py.Group, result: IEKFResult) -> None:
     run.attrs["dt"] = result.dt
     run.attrs["stop_reason"] = result.stop_reason
     run.attrs["seconds"] = result.seconds
+    # how the run started (its start model among it): a resumed run judges its model against the same start
+    run.attrs["meta_json"] = json.dumps(to_jsonable(result.meta), allow_nan=False)
 
 
 def write_iekf_run(archive: h5py.File, name: str, result: IEKFResult) -> h5py.Group:
@@ -63,6 +68,22 @@ def write_iekf_run(archive: h5py.File, name: str, result: IEKFResult) -> h5py.Gr
     for record in result.history:
         append_history(run, _history_row(record), units=HISTORY_UNITS)
     _write_summary(run, result)
+    return run
+
+
+def write_pass_history(archive: h5py.File, name: str, history: tuple[PassRecord, ...]) -> h5py.Group:
+    """Store the passes of a filter run that keeps no resume state (the spline IEKF's) as ``runs/<name>/history``.
+
+    Its rows are those of an IEKF run, so that a report draws and counts its passes alike.
+    """
+    run = run_group(archive, name)
+    if "history" in run:
+        del run["history"]
+    for record in history:
+        row = _history_row(record)
+        if not np.isfinite(record.nis):  # a filter that does not measure its innovations: no column of NaN
+            del row["nis"]
+        append_history(run, row, units=HISTORY_UNITS)
     return run
 
 
@@ -104,8 +125,21 @@ def read_iekf_run(archive: h5py.File, name: str) -> IEKFResult:
     )
     return IEKFResult(
         model=model, structure=model.structure, options=options, history=records, state=state,
-        dt=dt, stop_reason=stop_reason, seconds=seconds,
+        dt=dt, stop_reason=stop_reason, seconds=seconds, meta=_read_meta(run),
     )
+
+
+def _read_meta(run: h5py.Group) -> dict[str, Any]:
+    """The run's start description; empty for a run archived before it was kept."""
+    if "meta_json" not in run.attrs:
+        return {}
+    try:
+        meta = json.loads(run.attrs["meta_json"])
+    except ValueError:
+        raise ArchiveError(f"run {run.name!r} holds an unreadable start description") from None
+    if meta.get("start_parameters") is not None:
+        meta["start_parameters"] = np.asarray(meta["start_parameters"], dtype=float)
+    return meta
 
 
 class Checkpointer:

@@ -126,6 +126,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             summary, text = handler(args)
             _print_result(args, summary, text)
     except StrictWarningsError as exc:
+        if not args.json and exc.text:  # the run's result is still the result; the status says it had warnings
+            sys.stdout.write(exc.text.rstrip("\n") + "\n")
+            sys.stdout.flush()
         for line in exc.warnings:
             print(f"vehid: warning: {line}", file=sys.stderr)
         print("vehid: error: warnings under --strict", file=sys.stderr)

@@ -323,6 +323,7 @@ def plot_time_fits(
     window: tuple[float, float] | None = None,
     title: str = "Model fits to the data",
     fig: Figure | None = None,
+    scores: Mapping[str, tuple[Any, Any]] | None = None,
 ) -> Figure:
     """Measured outputs against model predictions (Best & Bogdanski 2017, Figures 7 and 9).
 
@@ -339,6 +340,10 @@ def plot_time_fits(
         Show only this time range (s), e.g. a stretch at high lateral
         acceleration; only its samples are drawn, but R in the legend is
         always over the whole record given.
+    scores : mapping of str to (array_like, array_like), optional
+        Per prediction label, the NRMSE fit and R per output (percent) as the
+        caller scored them (e.g. past a k-step horizon); the legend then shows
+        both, labelled. Without it the legend shows R over the whole record.
 
     Returns
     -------
@@ -367,7 +372,12 @@ def plot_time_fits(
         _style(ax)
         ax.plot(t[shown], y[shown, i], color="k", linewidth=1.6, label="measured")
         for label, value in predicted.items():
-            ax.plot(t[shown], value[shown, i], linewidth=1.2, label=f"{label} (R = {fits[label][i]:.2f} %)")
+            if scores is not None and label in scores:
+                fit, R = (np.ravel(np.asarray(part, dtype=float)) for part in scores[label])
+                text = f"{label} (NRMSE fit = {fit[i]:.2f} %, R = {R[i]:.2f} %)"
+            else:
+                text = f"{label} (R = {fits[label][i]:.2f} %)"
+            ax.plot(t[shown], value[shown, i], linewidth=1.2, label=text)
         ax.set_ylabel(f"{names[i]} ({units[i]})")
         _legend(ax, loc="upper right")
     axes[-1].set_xlabel("time (s)")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import re
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -11,9 +12,9 @@ import numpy as np
 from matplotlib.backends.backend_pdf import PdfPages
 from matplotlib.figure import Figure
 
-from vehid.identification.errors import InputError
-from vehid.identification.metrics import percentage_explanation
+from vehid.identification.errors import InputError, WorkbenchError
 from vehid.identification.residuals import DEFAULT_LAGS, nis_band, residual_tests
+from vehid.identification.validation import default_horizon, predict, score
 
 from . import plots
 
@@ -24,6 +25,8 @@ __all__ = [
     "format_eigenvalues",
     "archive_figures",
     "archive_table",
+    "archive_verdict",
+    "verdict_lines",
 ]
 
 _SAFE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
@@ -194,8 +197,56 @@ def _parameter_names(model: Any, n_theta: int) -> Sequence[str] | None:
     return None
 
 
-def _model_prediction(model: Any, record: Any) -> tuple[Any, np.ndarray] | None:
-    """The record restricted to the model's inputs and outputs, and the model's simulated outputs."""
+@dataclass(frozen=True)
+class ScoringRule:
+    """How the command that wrote an archive scored its models, so that a report scores them alike.
+
+    Attributes
+    ----------
+    initial_state : str
+        ``"estimate"`` (least-squares initial state per record) or ``"zero"``.
+    horizon : int or None
+        A k-step-ahead horizon the command was given; None: each model's own
+        default (simulation, or a short horizon for an unstable model).
+    """
+
+    initial_state: str = "estimate"
+    horizon: int | None = None
+
+    def horizon_for(self, model: Any) -> int | None:
+        return self.horizon if self.horizon is not None else default_horizon(model)
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """A model's outputs on a record (restricted to the model's channels), scored as the command scores them."""
+
+    record: Any
+    outputs: np.ndarray
+    fit: np.ndarray
+    R: np.ndarray
+
+
+def archive_verdict(archive: Any) -> dict[str, Any] | None:
+    """The summary the identify command stored with its archive (scores, warnings, returned run), or None."""
+    summary = getattr(archive, "summary", None)
+    if getattr(archive, "kind", None) != "identification" or not isinstance(summary, Mapping) \
+            or "warnings" not in summary:
+        return None
+    return dict(summary)
+
+
+def _scoring_rule(archive: Any) -> ScoringRule:
+    rule = (archive_verdict(archive) or {}).get("scoring_rule") or {}
+    return ScoringRule(initial_state=rule.get("initial_state") or "estimate", horizon=rule.get("horizon"))
+
+
+def _model_prediction(model: Any, record: Any, rule: ScoringRule = ScoringRule()) -> Prediction | None:
+    """The model on the record restricted to its inputs and outputs: outputs, NRMSE fit and R, by ``rule``.
+
+    The same functions score it as the identify command (:func:`~vehid.identification.validation.score`),
+    with the same initial state, so that a drawn curve is the one whose fit the command stated.
+    """
     if not hasattr(model, "simulate_outputs"):
         return None
     inputs = tuple(getattr(model, "input_names", ()) or ())
@@ -206,10 +257,15 @@ def _model_prediction(model: Any, record: Any) -> tuple[Any, np.ndarray] | None:
     sizes = getattr(structure, "linear", structure)  # a spline-modal structure keeps its sizes on its linear one
     if sizes is None or (record.n_u, record.n_y) != (sizes.n_u, sizes.n_y):
         return None
-    predicted = np.asarray(model.simulate_outputs(record.u, record.dt), dtype=float)
+    horizon = rule.horizon_for(model)
+    try:
+        predicted = np.asarray(predict(model, record, initial_state=rule.initial_state, horizon=horizon), dtype=float)
+        scores = score(model, record, initial_state=rule.initial_state, horizon=horizon)
+    except WorkbenchError:  # a model the scores do not cover: nothing to draw, as for a diverging one
+        return None
     if not np.all(np.isfinite(predicted)):
         return None
-    return record, predicted
+    return Prediction(record, predicted, scores.fit, scores.R)
 
 
 def _most_divergent(parameters: np.ndarray) -> np.ndarray:
@@ -280,51 +336,104 @@ def archive_figures(archive: Any, *, window: tuple[float, float] | None = None, 
         figures["eigenvalues"] = plots.plot_eigenvalue_map(models)
         n_y = np.shape(next(iter(models.values())).C)[0]
         figures["bode"] = plots.plot_bode({k: m for k, m in models.items() if np.shape(m.C)[0] == n_y})
+    rule = _scoring_rule(archive)
     for record_name, record in archive.records.items():
         predictions: dict[str, np.ndarray] = {}
+        scores: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         shown = None
         for name, run in runs.items():
-            result = _model_prediction(run.model, record)
-            if result is None or (shown is not None and result[0].output_names != shown.output_names):
+            result = _model_prediction(run.model, record, rule)
+            if result is None or (shown is not None and result.record.output_names != shown.output_names):
                 continue
-            shown, predictions[name] = result
+            shown, predictions[name], scores[name] = result.record, result.outputs, (result.fit, result.R)
             figures[_stem("residuals", record_name, name)] = plots.plot_residual_autocorrelation(
-                shown.y - result[1], min(max_lag, shown.n_samples - 1), shown.output_names, dt=shown.dt,
+                shown.y - result.outputs, min(max_lag, shown.n_samples - 1), shown.output_names, dt=shown.dt,
                 title=f"Residual autocorrelation: {name} on {record_name}")
             if shown.n_samples > 2 * DEFAULT_LAGS:
-                tests = residual_tests(shown.u, shown.y - result[1], input_names=shown.input_names,
+                tests = residual_tests(shown.u, shown.y - result.outputs, input_names=shown.input_names,
                                        output_names=shown.output_names)
                 figures[_stem("residual_tests", record_name, name)] = plots.plot_residual_tests(
                     tests, dt=shown.dt, title=f"Residual tests: {name} on {record_name}")
         if shown is not None:
             figures[_stem("fits", record_name)] = plots.plot_time_fits(
                 shown.t, shown.y, predictions, shown.output_names, shown.output_units, window=window,
-                title=f"Model fits to {record_name}")
+                title=f"Model fits to {record_name} ({_rule_text(rule)})", scores=scores)
     return figures
 
 
-def archive_table(archive: Any) -> list[dict[str, Any]]:
-    """One row per run: order, passes, eigenvalues, final fits and trace(P), mean R on each record.
+def _rule_text(rule: ScoringRule) -> str:
+    if rule.horizon is not None:
+        return f"{rule.horizon}-step-ahead prediction"
+    return f"simulated, initial state {rule.initial_state}"
 
-    Columns that no run fills are left out.
+
+def archive_table(archive: Any) -> list[dict[str, Any]]:
+    """One row per run: order, passes, eigenvalues, final fits and trace(P), NRMSE fit and R on each record.
+
+    Each model is scored on each record as the identify command that wrote the
+    archive scored it (its initial-state rule, :class:`ScoringRule`); the run
+    whose model the command returned is marked. Columns that no run fills are left out.
     """
+    verdict = archive_verdict(archive) or {}
+    rule = _scoring_rule(archive)
+    returned = (verdict.get("scoring_rule") or {}).get("returned_run")
     rows = []
     for name, run in archive.runs.items():
         model = run.model
         row: dict[str, Any] = {
             "run": name,
+            "returned": (name == returned) if returned is not None else None,
             "n": getattr(getattr(model, "structure", None), "n", None),
-            "passes": run.n_pass,
+            "passes": run.n_pass or _passes_run(verdict, name, returned),
             "eigenvalues": list(model.eigenvalues()) if hasattr(model, "eigenvalues") else None,
             "R filter (%)": _mean_last(run.history, "fit_filter"),
             "R simulated (%)": _mean_last(run.history, "fit_continuous"),
             "trace(P)": _mean_last(run.history, "trace_p"),
         }
         for record_name, record in archive.records.items():
-            result = _model_prediction(model, record)
+            result = _model_prediction(model, record, rule)
             if result is not None:
-                row[f"R {record_name} (%)"] = float(np.mean(percentage_explanation(result[0].y, result[1])))
+                row[f"NRMSE fit {record_name} (%)"] = float(np.mean(result.fit))
+                row[f"R {record_name} (%)"] = float(np.mean(result.R))
         rows.append(row)
     empty = {key for key in (rows[0] if rows else {}) if all(row.get(key) is None for row in rows)}
     return [{key: value for key, value in row.items() if key not in empty} for row in rows]
 
+
+def _passes_run(verdict: Mapping[str, Any], name: str, returned: str | None) -> int:
+    """The passes a run without a stored history made, as the command counted them (0 where unknown)."""
+    if name == "nonlinear":
+        return int((verdict.get("nonlinear") or {}).get("passes_run") or 0)
+    if name == returned and name != "start":
+        return int(verdict.get("passes_run") or 0)
+    return 0
+
+
+def _per_output(names: Sequence[str], values: Any) -> str:
+    if values is None:
+        return "-"
+    return ", ".join(f"{name} {value:.2f} %" if value is not None else f"{name} -"
+                     for name, value in zip(names, values))
+
+
+def verdict_lines(verdict: Mapping[str, Any], output_names: Sequence[str]) -> list[str]:
+    """The identify command's verdict on its returned model, as the report's summary states it.
+
+    NRMSE fit and R side by side, on estimation and on validation data, with
+    how they were scored, then every warning the command gave (or that it gave none).
+    """
+    rule = verdict.get("scoring_rule") or {}
+    how = (f"{verdict['horizon']}-step-ahead prediction" if verdict.get("horizon")
+           else f"simulated, initial state {verdict.get('initial_state', 'estimate')}")
+    lines = [f"model returned: {rule.get('returned_run', verdict.get('method', '-'))} "
+             f"({verdict.get('method', '-')}, order {verdict.get('order', '-')}; scores {how})",
+             f"estimation: NRMSE fit {_per_output(output_names, verdict.get('estimation_fit_percent'))}; "
+             f"R {_per_output(output_names, verdict.get('estimation_R'))}"]
+    if verdict.get("validation_fit_percent") is not None:
+        lines.append(f"validation: NRMSE fit {_per_output(output_names, verdict.get('validation_fit_percent'))}; "
+                     f"R {_per_output(output_names, verdict.get('validation_R'))}")
+    else:
+        lines.append("validation: none held out")
+    warnings = verdict.get("warnings") or []
+    lines += [f"warning: {line}" for line in warnings] if warnings else ["warnings: none"]
+    return lines

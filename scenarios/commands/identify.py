@@ -26,7 +26,7 @@ and the start is returned where the filter scores worse on the estimation
 data (`start_kept`). The summary gives the eigenvalues, the
 fit R (eq. 17) per output of the continuous model simulated exactly, NRMSE
 fits on estimation and validation data (--validation, --validation-file),
-whether the run converged, any warnings (--strict: exit status 3), the
+whether the run converged, any warnings (--strict: the summary, then exit status 3), the
 matrices and the run time. --order takes a number, a range (2-8) or auto,
 chosen on validation data; --nonlinear adds the spline-nonlinear model. It
 also says how sure the model is (scenarios.model_checks): each mode with
@@ -53,6 +53,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 from contextlib import nullcontext
 from pathlib import Path
 
@@ -61,11 +62,12 @@ import numpy as np
 from vehid.identification.archive import (open_archive, read_records, run_group, update_archive, write_archive,
                                           write_run)
 from vehid.identification.archive_safety import RUN_ATTRIBUTE, archive_lock, check_output_target
-from vehid.identification.errors import InputError
+from vehid.identification.errors import InputError, StrictWarningsError
 from vehid.identification.filter_models import DISCRETIZATIONS
 from vehid.identification.iekf import identify_iekf
-from vehid.identification.iekf_archive import Checkpointer, read_iekf_run
+from vehid.identification.iekf_archive import Checkpointer, read_iekf_run, write_pass_history
 from vehid.identification.iekf_pass import COVARIANCE_FORMS
+from vehid.identification.jsonable import to_jsonable
 from vehid.identification.modal import C_PATTERNS, ModalModel
 from vehid.identification.multirecord import pooled_simulation_fit
 from vehid.identification.preparation import prepare_validation, read_record
@@ -132,6 +134,7 @@ def _resume(args: argparse.Namespace):
         previous = read_iekf_run(archive, RUN_NAME)
         preparation = archived_preparation(archive)
         stored = read_records(archive)
+        decisions = _read_decisions(archive)
     records = record_series(stored, RECORD_PREFIX)
     if not records:
         raise InputError(f"{args.resume} holds no identification record to resume on")
@@ -143,7 +146,7 @@ def _resume(args: argparse.Namespace):
     else:  # an archive written before preparations were kept
         load = lambda path: read_record(path, settings_from_args(args))  # noqa: E731
     plan = workflow.make_plan(args, records, load, held_out=held_out, preparation=preparation)
-    return plan, previous.structure, options, previous
+    return plan, previous.structure, options, previous, decisions
 
 
 def run(args: argparse.Namespace) -> tuple[dict, str]:
@@ -164,6 +167,28 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
         return _identify(args)
 
 
+DECISIONS = "decisions_json"  # root attribute: the p tuning and the stability decision taken before the passes
+
+
+def _archive_decisions(archive, tuning, unstable) -> None:
+    """What the run decided before its passes, so that a resumed run returns and warns as the original did."""
+    archive.attrs[DECISIONS] = json.dumps(to_jsonable({"tuning": tuning, "open_loop_unstable": unstable}),
+                                          allow_nan=False)
+
+
+def _read_decisions(archive) -> tuple:
+    """The archived ``(tuning, unstable)`` of a run; ``(None, None)`` for an archive written before they were kept."""
+    if DECISIONS not in archive.attrs:
+        return None, None
+    try:
+        stored = json.loads(archive.attrs[DECISIONS])
+        tuning = stored["tuning"]
+        return (workflow.PTuning(p=float(tuning["p"]), tried=tuple(tuning["tried"]), seconds=float(tuning["seconds"]),
+                                 start_fit=tuning["start_fit"]), stored["open_loop_unstable"])
+    except (ValueError, KeyError, TypeError):
+        raise InputError(f"{archive.filename} holds an unreadable record of the run's decisions") from None
+
+
 def _archive_plan(archive, plan) -> None:
     """The prepared estimation records, the preparation and the held-out parts (what a resume needs)."""
     archive_records(archive, plan.records, plan.preparation)
@@ -173,8 +198,9 @@ def _archive_plan(archive, plan) -> None:
 def _identify(args: argparse.Namespace) -> tuple[dict, str]:
     previous, unstable = None, None
     if args.resume:
-        plan, structure, options, previous = _resume(args)
-        tuning = workflow.given_p(options)  # the run's own p, as archived
+        plan, structure, options, previous, (tuning, unstable) = _resume(args)
+        if tuning is None:  # an archive written before the tuning was kept: the run's own p, as archived
+            tuning = workflow.given_p(options)
         archive_path = Path(args.resume)
     else:
         if not args.data:
@@ -194,6 +220,7 @@ def _identify(args: argparse.Namespace) -> tuple[dict, str]:
             with write_archive(archive_path, kind=ARCHIVE_KIND, config=options, seeds=[]) as archive:
                 archive.attrs[RUN_ATTRIBUTE] = args.output_run
                 _archive_plan(archive, plan)
+                _archive_decisions(archive, tuning, unstable)
     checkpoint = Checkpointer(archive_path, RUN_NAME) if archive_path is not None else None
     done = previous.passes_run if previous is not None else 0
     with Progress(options.passes, "IEKF passes", enabled=None if not args.quiet else False) as progress:
@@ -287,24 +314,46 @@ def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None)
             stop_reason=outcome.result.stop_reason, start_fit=float(np.mean(outcome.result.start_fit)),
             final_fit=float(np.mean(outcome.result.fit_percent)), allow_unstable=True, label="nonlinear")
         warnings += workflow.nonlinear_warnings(outcome, evaluation)
+    summary["warnings"] = list(warnings)
     if archive_path is not None:
-        if tests is not None or nonlinear is not None or start_returned:  # one atomic update (each copies the archive)
-            with update_archive(archive_path) as archive:
-                if nonlinear is not None:
-                    write_run(archive, "nonlinear", model=nonlinear)
-                if start_returned:
-                    write_run(archive, "start", model=model)
-                if tests is not None:
-                    write_value(run_group(archive, RUN_NAME if result is not None else args.method),
-                                "residual_tests", tests)
         summary["archive"] = str(archive_path)
+        with update_archive(archive_path) as archive:  # one atomic update (each copies the archive)
+            if nonlinear is not None:
+                write_run(archive, "nonlinear", model=nonlinear)
+                write_pass_history(archive, "nonlinear", outcome.result.history)
+            if start_returned:
+                write_run(archive, "start", model=model)
+            if tests is not None:
+                write_value(run_group(archive, RUN_NAME if result is not None else args.method),
+                            "residual_tests", tests)
+            _archive_verdict(archive, summary, args, returned="start" if start_returned else (
+                RUN_NAME if result is not None else args.method))
     if args.save_model:
         summary["model_file"] = str(save_model(model, args.save_model, plan.preparation))
-    workflow.emit(summary, warnings, args)
     text = workflow.text_summary(summary, data, plan)
     if "modes" in summary:
         text += "\n" + "\n".join(uncertainty_lines(summary, data.output_names))
+    try:
+        workflow.emit(summary, warnings, args)
+    except StrictWarningsError as exc:  # the summary is printed all the same, then the exit status says "warnings"
+        exc.text = text
+        raise
     return summary, text
+
+
+SCORING_RULE = "scoring_rule"  # key of the archived summary only: how every model of the run is scored
+
+
+def _archive_verdict(archive, summary: dict, args, *, returned: str) -> None:
+    """The command's summary (scores, warnings) as the archive's ``summary_json``: what a report and a resume show.
+
+    Beside the public keys it names the run whose model the command returned and
+    the rule by which every model was scored (initial state, prediction horizon
+    where one was given), so that a report scores the other runs the same way.
+    """
+    verdict = {**summary, SCORING_RULE: {"initial_state": args.initial_state, "horizon": args.horizon,
+                                         "returned_run": returned}}
+    archive.attrs["summary_json"] = json.dumps(to_jsonable(verdict), allow_nan=False)
 
 
 def _run_order_search(args, plan, options) -> tuple[dict, str]:
@@ -324,6 +373,7 @@ def _run_order_search(args, plan, options) -> tuple[dict, str]:
         with write_archive(archive_path, kind=ARCHIVE_KIND, config=options, seeds=[]) as archive:
             archive.attrs[RUN_ATTRIBUTE] = args.output_run
             _archive_plan(archive, plan)
+            _archive_decisions(archive, extra["tuning"], extra.get("open_loop_unstable"))
             write_iekf_run(archive, RUN_NAME, result)
     return _finish(args, plan, summary, model, result=result, archive_path=archive_path)
 

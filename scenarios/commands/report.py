@@ -1,5 +1,9 @@
 """Draw the figures and the summary table of a results archive.
 
+Every model is scored as the identify command that wrote the archive scored
+it (same initial-state rule, NRMSE fit beside R), and the command's verdict
+(its scores and warnings, kept in the archive) heads summary.md and the text.
+
 Draws whatever the archive (layout: results/RESULTS_LAYOUT.md) holds: parameter
 development and convergence per run, the order study, eigenvalues, Bode plots,
 time fits and residual tests per record. Writes the PNGs, a PDF and summary.md
@@ -20,7 +24,8 @@ from vehid.identification.archive import read_archive
 from vehid.identification.archive_safety import check_report_folder, writing_report_folder
 from vehid.identification.errors import InputError
 from vehid.scenarios.paths import OUT_RULE, results_path
-from vehid.scenarios.report import archive_figures, archive_table, markdown_table, write_report
+from vehid.scenarios.report import (archive_figures, archive_table, archive_verdict, markdown_table, verdict_lines,
+                                    write_report)
 
 NAME = "report"
 GROUP = None
@@ -63,11 +68,16 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     if not figures:
         raise InputError(f"nothing to draw in {path}: it holds no records and no runs with histories or models")
     rows = archive_table(archive)
+    verdict = archive_verdict(archive)
+    stated = verdict_lines(verdict, _output_names(archive, verdict)) if verdict is not None else []
     with writing_report_folder(folder, force=args.force) as partial:
         files = write_report(figures, partial, dpi=args.dpi, title=f"vehid report: {path.name}")
-        if rows:
+        if rows or stated:
             table = partial / "summary.md"
-            table.write_text(f"# {path.name}: {archive.kind}\n\n" + markdown_table(rows))
+            verdict_text = ("## Verdict of the identify command\n\n" + "".join(f"- {line}\n" for line in stated) + "\n"
+                            if stated else "")
+            table.write_text(f"# {path.name}: {archive.kind}\n\n" + verdict_text
+                             + (markdown_table(rows) if rows else ""))
             files.append(table)
     files = [folder / file.relative_to(partial) for file in files]
     summary = {
@@ -79,10 +89,28 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
         "figures": list(figures),
         "files": [str(file) for file in files],
     }
+    if verdict is not None:  # the command's own scores and warnings, as it stated them
+        summary["verdict"] = {key: verdict.get(key) for key in VERDICT_KEYS}
+        summary["verdict"]["returned_run"] = (verdict.get("scoring_rule") or {}).get("returned_run")
     lines = [
         f"{path.name} ({archive.kind}): {len(archive.records)} record(s), {len(archive.runs)} run(s)",
         f"wrote {len(figures)} figures ({', '.join(figures)}) to {folder}",
+        *stated,
     ]
     if rows:
         lines.append(markdown_table(rows).rstrip("\n"))
     return summary, "\n".join(lines)
+
+
+VERDICT_KEYS = ("method", "order", "passes_run", "stop_reason", "estimation_fit_percent", "estimation_R",
+                "validation_fit_percent", "validation_R", "initial_state", "horizon", "warnings")
+
+
+def _output_names(archive, verdict) -> tuple[str, ...]:
+    """The returned model's output names (else the first record's), to label the verdict's per-output scores."""
+    returned = archive.runs.get((verdict.get("scoring_rule") or {}).get("returned_run"))
+    names = getattr(getattr(returned, "model", None), "output_names", None)
+    if names:
+        return tuple(names)
+    record = next(iter(archive.records.values()), None)
+    return tuple(record.output_names) if record is not None else ()
