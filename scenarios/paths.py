@@ -9,7 +9,6 @@ given, goes to the results folder (``$VEHID_RESULTS_DIR``, else ``results/``).
 from __future__ import annotations
 
 import argparse
-import functools
 import hashlib
 import json
 import os
@@ -51,8 +50,7 @@ _NOT_THE_RUN = frozenset({
 })
 
 
-@functools.lru_cache(maxsize=64)
-def _file_digest(path: str, size: int, modified_ns: int) -> str:
+def _file_digest(path: str) -> str:
     digest = hashlib.blake2b(digest_size=16)
     with open(path, "rb") as handle:
         for block in iter(lambda: handle.read(1 << 20), b""):
@@ -66,9 +64,8 @@ def _identity(value: Any) -> Any:
         return [_identity(item) for item in value]
     if isinstance(value, (str, os.PathLike)) and str(value):
         try:
-            if os.path.isfile(value):
-                status = os.stat(value)
-                return {"file": _file_digest(os.path.realpath(value), status.st_size, status.st_mtime_ns)}
+            if os.path.isfile(value):  # read each time: a timestamp may not change when a file is rewritten
+                return {"file": _file_digest(os.fspath(value))}
         except OSError:
             pass  # unreadable here: the command's own check names it
     return value

@@ -24,7 +24,7 @@ from vehid.identification.archive_safety import (REPORT_MARKER, OutputTargetErro
                                                 output_identity, writing_report_folder)
 from vehid.scenarios.cli import build_parser, main
 from vehid.scenarios.linear_example import make_data
-from vehid.scenarios.paths import results_path, run_digest
+from vehid.scenarios.paths import OUT_RULE, results_path, run_digest
 
 
 def _record(path: Path, duration: float = 2.0) -> Path:
@@ -102,7 +102,8 @@ _OTHER_KIND = {"study handling": "identification"}
 
 
 def test_every_command_with_an_output_option_is_in_the_matrix():
-    """A new command that writes a user-named file must get its row in WRITERS (or the report's tests)."""
+    """A new command that writes a user-named file must get its row in WRITERS (or the report's tests), and
+    its --help must state the one rule for relative paths."""
     parser = build_parser()
     named = set()
 
@@ -113,6 +114,7 @@ def test_every_command_with_an_output_option_is_in_the_matrix():
                     walk(sub, [*prefix, name])
             elif set(action.option_strings) & {"--out", "--save-model"}:
                 named.add((" ".join(prefix), action.option_strings[0]))
+                assert OUT_RULE in action.help, (prefix, action.help)  # each --help says what a relative path means
 
     walk(parser, [])
     covered = {(argv[0] if argv[0] != "study" else f"study {argv[1]}", option)
@@ -209,8 +211,7 @@ def test_a_rerun_replaces_its_own_output_and_another_run_does_not(tmp_path, caps
     assert main(argv) == 0
     first = output_identity(tmp_path / "run.h5")
     assert first.kind == "identification" and first.run
-    assert main(argv) == 0  # a rerun, also after the record was copied back unchanged
-    assert main([*argv, "--quiet"]) == 0  # how the output is shown is no part of the run
+    assert main(argv) == 0  # the same run again replaces its own archive and model file
     capsys.readouterr()
     before = (tmp_path / "run.h5").read_bytes()
     assert main([*[a if a != "2" else "3" for a in argv]]) == 2  # another order: another run
@@ -221,7 +222,7 @@ def test_a_rerun_replaces_its_own_output_and_another_run_does_not(tmp_path, caps
     assert main([*argv, "--force"]) == 0
 
 
-def test_the_run_digest_names_files_by_content():
+def test_the_run_digest_names_files_by_content(tmp_path):
     import argparse
 
     def args(**values):
@@ -229,6 +230,10 @@ def test_the_run_digest_names_files_by_content():
 
     assert run_digest(args(order=2, out="a.h5", json=True)) == run_digest(args(order=2, out="b.h5", json=False))
     assert run_digest(args(order=2)) != run_digest(args(order=3))
+    first, copy = _csv(tmp_path / "a.csv"), _csv(tmp_path / "b.csv")
+    assert run_digest(args(data=[str(first)])) == run_digest(args(data=[str(copy)]))  # a copy is the same data
+    copy.write_text("t,u,y\n0,1,2\n0.01,1,3\n")
+    assert run_digest(args(data=[str(first)])) != run_digest(args(data=[str(copy)]))
 
 
 def test_simulate_replaces_its_own_record_only(tmp_path, capsys, monkeypatch):
