@@ -192,8 +192,9 @@ def _mean_last(history: Mapping[str, np.ndarray], key: str) -> float | None:
 
 def _parameter_names(model: Any, n_theta: int) -> Sequence[str] | None:
     structure = getattr(model, "structure", None)
-    if structure is not None and getattr(structure, "n_parameters", None) == n_theta:
-        return structure.parameter_names()
+    names = getattr(structure, "parameter_names", None)  # a spline structure's ordinates have no names
+    if callable(names) and getattr(structure, "n_parameters", None) == n_theta:
+        return names()
     return None
 
 

@@ -168,8 +168,10 @@ def test_the_spline_run_is_archived_with_its_passes_and_scored_as_the_command_di
                                str(archive), "--json")
     command = json.loads(out)["nonlinear"]
     assert status == 0 and command["passes_run"] >= 1
-    rows = {row["run"]: row for row in archive_table(read_archive(archive))}
+    stored = read_archive(archive)
+    rows = {row["run"]: row for row in archive_table(stored)}
     assert rows["nonlinear"]["passes"] == command["passes_run"]
+    assert {"parameters_nonlinear", "convergence_nonlinear"} <= set(archive_figures(stored))
     # scored by the same function on the same held-out samples, read back exactly
     assert rows["nonlinear"]["NRMSE fit validation (%)"] == pytest.approx(command["validation_fit_percent"][0],
                                                                           abs=1e-9)
