@@ -99,8 +99,10 @@ def test_a_resumed_or_reread_run_gives_the_original_verdict(tmp_path, capsys, op
     # re-read: the report states the command's scores and every one of its warnings
     status, out, _ = _vehid(capsys, "report", str(archive), "--out", str(tmp_path / "report"), "--dpi", "30",
                             "--json")
-    verdict = json.loads(out)["verdict"]
+    report = json.loads(out)
+    verdict = report["verdict"]
     assert status == 0 and verdict["warnings"] == original["warnings"]
+    assert report["figures"][0] == "verdict" and (tmp_path / "report" / "verdict.png").is_file()
     assert verdict["validation_fit_percent"] == original["validation_fit_percent"]
     written = (tmp_path / "report" / "summary.md").read_text()
     assert all(line in written for line in original["warnings"])
