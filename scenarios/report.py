@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import re
+import textwrap
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping, Sequence
@@ -27,6 +28,7 @@ __all__ = [
     "archive_table",
     "archive_verdict",
     "verdict_lines",
+    "verdict_page",
 ]
 
 _SAFE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
@@ -192,8 +194,9 @@ def _mean_last(history: Mapping[str, np.ndarray], key: str) -> float | None:
 
 def _parameter_names(model: Any, n_theta: int) -> Sequence[str] | None:
     structure = getattr(model, "structure", None)
-    if structure is not None and getattr(structure, "n_parameters", None) == n_theta:
-        return structure.parameter_names()
+    names = getattr(structure, "parameter_names", None)  # a spline structure's ordinates have no names
+    if callable(names) and getattr(structure, "n_parameters", None) == n_theta:
+        return names()
     return None
 
 
@@ -437,3 +440,18 @@ def verdict_lines(verdict: Mapping[str, Any], output_names: Sequence[str]) -> li
     warnings = verdict.get("warnings") or []
     lines += [f"warning: {line}" for line in warnings] if warnings else ["warnings: none"]
     return lines
+
+
+_PAGE_COLUMNS = 95  # characters per line of the verdict page at 9 pt on the report's width
+_PAGE_LINE_HEIGHT = 0.2  # inch per line at 9 pt
+
+
+def verdict_page(lines: Sequence[str], title: str = "Verdict of the identify command") -> Figure:
+    """The verdict as the report's first page: each line wrapped to the page's width, long warnings included."""
+    wrapped = [part for line in lines
+               for part in textwrap.wrap(line, _PAGE_COLUMNS, subsequent_indent="    ") or [""]]
+    height = max(plots.REPORT_SIZE[1] / 2, 0.9 + _PAGE_LINE_HEIGHT * len(wrapped))
+    fig = plots.new_figure((plots.REPORT_SIZE[0], height))
+    fig.suptitle(title)
+    fig.text(0.02, 1.0 - 0.6 / height, "\n".join(wrapped), va="top", ha="left", fontsize=9, linespacing=1.35)
+    return fig

@@ -99,8 +99,10 @@ def test_a_resumed_or_reread_run_gives_the_original_verdict(tmp_path, capsys, op
     # re-read: the report states the command's scores and every one of its warnings
     status, out, _ = _vehid(capsys, "report", str(archive), "--out", str(tmp_path / "report"), "--dpi", "30",
                             "--json")
-    verdict = json.loads(out)["verdict"]
+    report = json.loads(out)
+    verdict = report["verdict"]
     assert status == 0 and verdict["warnings"] == original["warnings"]
+    assert report["figures"][0] == "verdict" and (tmp_path / "report" / "verdict.png").is_file()
     assert verdict["validation_fit_percent"] == original["validation_fit_percent"]
     written = (tmp_path / "report" / "summary.md").read_text()
     assert all(line in written for line in original["warnings"])
@@ -168,8 +170,10 @@ def test_the_spline_run_is_archived_with_its_passes_and_scored_as_the_command_di
                                str(archive), "--json")
     command = json.loads(out)["nonlinear"]
     assert status == 0 and command["passes_run"] >= 1
-    rows = {row["run"]: row for row in archive_table(read_archive(archive))}
+    stored = read_archive(archive)
+    rows = {row["run"]: row for row in archive_table(stored)}
     assert rows["nonlinear"]["passes"] == command["passes_run"]
+    assert {"parameters_nonlinear", "convergence_nonlinear"} <= set(archive_figures(stored))
     # scored by the same function on the same held-out samples, read back exactly
     assert rows["nonlinear"]["NRMSE fit validation (%)"] == pytest.approx(command["validation_fit_percent"][0],
                                                                           abs=1e-9)

@@ -25,7 +25,7 @@ from vehid.identification.archive_safety import check_report_folder, writing_rep
 from vehid.identification.errors import InputError
 from vehid.scenarios.paths import OUT_RULE, results_path
 from vehid.scenarios.report import (archive_figures, archive_table, archive_verdict, markdown_table, verdict_lines,
-                                    write_report)
+                                    verdict_page, write_report)
 
 NAME = "report"
 GROUP = None
@@ -70,6 +70,8 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     rows = archive_table(archive)
     verdict = archive_verdict(archive)
     stated = verdict_lines(verdict, _output_names(archive, verdict)) if verdict is not None else []
+    if stated:  # the command's verdict is the report's first page
+        figures = {"verdict": verdict_page(stated), **figures}
     with writing_report_folder(folder, force=args.force) as partial:
         files = write_report(figures, partial, dpi=args.dpi, title=f"vehid report: {path.name}")
         if rows or stated:
