@@ -87,11 +87,16 @@ def test_peers_and_identify_hold_out_the_same_samples(entry):
     assert (estimation.n_samples, validation.n_samples) == (len(u_est), len(u_val))
 
 
+# A guard against a hung process only, not a speed target (those live in benchmarks/): a spline run on the
+# heat exchanger took more than 300 s on a 2-core machine at load average 27 with an empty compile cache.
+HANG_SECONDS = 1800
+
+
 def _identify(entry, scratch: Path, *options: str) -> tuple[int, dict]:
     """``vehid identify`` on the raw file with the benchmark's arguments; exit status and JSON summary."""
     command = [sys.executable, "-m", "vehid.scenarios.cli", "identify", *benchmark.data_args(entry, scratch), *options,
                "--json", "--quiet"]
-    done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=300)
+    done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=HANG_SECONDS)
     assert done.returncode in (0, 3), done.stderr[-500:]
     return done.returncode, json.loads(done.stdout.strip().splitlines()[-1])
 
@@ -186,11 +191,11 @@ def test_a_validation_file_holding_the_estimation_samples_is_refused(tmp_path):
     mat = ROOT / "tests" / "data" / "cascaded_tanks" / "dataBenchmark.mat"
     command = [sys.executable, "-m", "vehid.scenarios.cli", "identify", str(mat), "--inputs", "uEst", "--outputs", "yEst",
                "--dt", "4", "--validation-file", str(mat), "--method", "arx", "--json", "--quiet"]
-    done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=300)
+    done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=HANG_SECONDS)
     assert done.returncode == 2
     assert "same samples as the estimation record" in json.loads(done.stdout)["error"]
     named = subprocess.run([*command, "--validation-inputs", "uVal", "--validation-outputs", "yVal"], cwd=ROOT,
-                           capture_output=True, text=True, timeout=300)
+                           capture_output=True, text=True, timeout=HANG_SECONDS)
     assert named.returncode == 0, named.stderr[-500:]
     summary = json.loads(named.stdout)
     # ARX is deterministic: the published validation record scores 69.58 % (benchmarks/real_data.py,
