@@ -1,51 +1,66 @@
-"""Model structures, estimators and fit metrics. Knows nothing of vehicles."""
+"""Model structures, estimators and fit metrics. Knows nothing of vehicles.
 
-from .archive import (
-    SCHEMA_VERSION,
-    Archive,
-    RunName,
-    RunRecord,
-    append_history,
-    open_archive,
-    read_archive,
-    read_history,
-    read_records,
-    read_run,
-    run_group,
-    update_archive,
-    write_archive,
-    write_record,
-    write_run,
-)
-from .data import IOData, as_records, read_hdf5
-from .readers import RawRecord, read_mat, read_mdf, read_raw, read_table
-from .timebase import JITTER_TOLERANCE, uniform_record
-from .preparation import (DETRENDS, Preparation, ReadSettings, RecordOffsets, estimate_preparation, load_records,
-                          prepare, prepare_validation, read_raw_records, read_record)
-from .errors import ArchiveError, DivergenceError, ExcitationError, InputError, WorkbenchError
-from .iekf import START_VALUES, FilterState, IEKFOptions, IEKFResult, PassRecord, identify_iekf
-from .metrics import FitMetrics, fit_metrics, nrmse_fit, percentage_explanation, r_squared
-from .modal import C_PATTERNS, ModalModel, ModalStructure
-from .protocol import IdentifiedModel, Mode
-from .discrete import DiscreteModel
-from .spline_iekf import SplineIEKFOptions, SplineIEKFResult, identify_spline_iekf
-from .spline_modal import SplineModalModel, SplineModalStructure
-from .order import OrderAssessment, assess_orders
-from .spline import SplineBasis, covering_basis, resample
-from .storage import read_group, read_value, write_group, write_value
-from .comparators import (COMPARATORS, ComparatorResult, identify_with, register_comparator)
-from .ekf import EkfResult, NonlinearModel, ekf_joint
-from .gls import GlsResult, estimate_gls
-from .kalman import KalmanResult, SmootherResult, kalman_filter, kalman_predict, kalman_update, rts_smoother
-from .least_squares import ArxModel, ArxResult, LeastSquaresResult, arx_regressors, estimate_arx, least_squares
-from .pencil import PencilEstimate, PencilModel, estimate_pencil
-from .recursive import RecursiveResult, estimate_arx_recursive, recursive_least_squares, rls_step
-from .factorised import sqrt_step, ud_step
-from .statespace import (balanced_truncation, continuous_to_discrete, discrete_to_continuous,
-                         modal_structure_for, to_modal)
-from .subspace import SubspaceResult, estimate_subspace
-from .residuals import ResidualTests, residual_tests
-from .uncertainty import FrequencyResponseBand, ModelUncertainty, ModeEstimate, model_uncertainty
+Every public name below is importable from here (``from vehid.identification
+import IOData``), but its module is imported only when the name is first
+asked for: the command line and any script that needs one estimator do not
+pay for SciPy's signal processing, CasADi and HDF5 before they use them.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+# submodule -> the public names it defines
+_EXPORTS: dict[str, tuple[str, ...]] = {
+    "archive": ("SCHEMA_VERSION", "Archive", "RunName", "RunRecord", "append_history", "open_archive",
+        "read_archive", "read_history", "read_records", "read_run", "run_group", "update_archive", "write_archive",
+        "write_record", "write_run"),
+    "data": ("IOData", "as_records", "read_hdf5"),
+    "readers": ("RawRecord", "read_mat", "read_mdf", "read_raw", "read_table"),
+    "timebase": ("JITTER_TOLERANCE", "uniform_record"),
+    "preparation": ("DETRENDS", "Preparation", "ReadSettings", "RecordOffsets", "estimate_preparation",
+        "load_records", "prepare", "prepare_validation", "read_raw_records", "read_record"),
+    "errors": ("ArchiveError", "DivergenceError", "ExcitationError", "InputError", "WorkbenchError"),
+    "iekf": ("START_VALUES", "FilterState", "IEKFOptions", "IEKFResult", "PassRecord", "identify_iekf"),
+    "metrics": ("FitMetrics", "fit_metrics", "nrmse_fit", "percentage_explanation", "r_squared"),
+    "modal": ("C_PATTERNS", "ModalModel", "ModalStructure"),
+    "protocol": ("IdentifiedModel", "Mode"),
+    "discrete": ("DiscreteModel",),
+    "spline_iekf": ("SplineIEKFOptions", "SplineIEKFResult", "identify_spline_iekf"),
+    "spline_modal": ("SplineModalModel", "SplineModalStructure"),
+    "order": ("OrderAssessment", "assess_orders"),
+    "spline": ("SplineBasis", "covering_basis", "resample"),
+    "storage": ("read_group", "read_value", "write_group", "write_value"),
+    "comparators": ("COMPARATORS", "ComparatorResult", "identify_with", "register_comparator"),
+    "ekf": ("EkfResult", "NonlinearModel", "ekf_joint"),
+    "gls": ("GlsResult", "estimate_gls"),
+    "kalman": ("KalmanResult", "SmootherResult", "kalman_filter", "kalman_predict", "kalman_update", "rts_smoother"),
+    "least_squares": ("ArxModel", "ArxResult", "LeastSquaresResult", "arx_regressors", "estimate_arx", "least_squares"),
+    "pencil": ("PencilEstimate", "PencilModel", "estimate_pencil"),
+    "recursive": ("RecursiveResult", "estimate_arx_recursive", "recursive_least_squares", "rls_step"),
+    "factorised": ("sqrt_step", "ud_step"),
+    "statespace": ("balanced_truncation", "continuous_to_discrete", "discrete_to_continuous", "modal_structure_for",
+        "to_modal"),
+    "subspace": ("SubspaceResult", "estimate_subspace"),
+    "residuals": ("ResidualTests", "residual_tests"),
+    "uncertainty": ("FrequencyResponseBand", "ModelUncertainty", "ModeEstimate", "model_uncertainty"),
+}
+_MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
+
+
+def __getattr__(name: str) -> Any:
+    module = _MODULE_OF.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value  # later look-ups skip this function
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_MODULE_OF))
+
 
 __all__ = [
     "IOData",

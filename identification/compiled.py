@@ -3,12 +3,15 @@
 A function is generated to C, hashed (source, compiler flags, CasADi version), compiled once into a
 shared library under the cache directory (``$VEHID_CACHE_DIR``, else ``$XDG_CACHE_HOME/vehid`` or
 ``~/.cache/vehid``) and loaded with ``casadi.external``; without a C compiler it runs in CasADi's
-virtual machine and a warning says so. The key holds no path or host name, so a shared cache works:
-native code is keyed by CPU type, and processes on one host wait for each other's build (a file lock).
+virtual machine and a warning says so. The key holds no host name, so a shared cache works: it names the
+machine type, the compiler's own account of its version (a compiler upgrade recompiles rather than
+loading a library built by another), native code also the CPU type; processes on one host wait for each
+other's build (a file lock).
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
 import platform
@@ -140,6 +143,23 @@ def _cpu_identity() -> str:
     return identity
 
 
+@functools.lru_cache(maxsize=None)
+def _compiler_identity(compiler: str) -> str:
+    """What ``compiler --version`` says, with the resolved file's size and time: two builds of the same
+    version string from different packages still differ in the file. Asked once per compiler and process."""
+    try:
+        done = subprocess.run([compiler, "--version"], capture_output=True, text=True, timeout=60, check=False)
+        version = done.stdout.strip() or done.stderr.strip()
+    except (OSError, subprocess.SubprocessError) as exc:
+        version = f"unknown ({type(exc).__name__})"
+    try:
+        status = Path(compiler).resolve().stat()
+        version += f"\n{status.st_size} {status.st_mtime_ns}"
+    except OSError:
+        pass
+    return version
+
+
 @contextmanager
 def _host_lock(path: Path) -> Iterator[None]:
     """An exclusive lock between processes (POSIX ``flock``): parallel workers on one host compile a
@@ -166,16 +186,16 @@ def build_shared_library(
 ) -> Path:
     """Compile C ``source`` into a shared library under the cache, once; return its path.
 
-    The library's file name carries a hash of the source, compiler, flags and
-    CasADi version, so a changed model or option compiles anew and an
-    unchanged one is found on disk. Raises ``RuntimeError`` when no compiler
-    is available or compilation fails.
+    The library's file name carries a hash of the source, the compiler and
+    its version, flags, CasADi version and machine type, so a changed model,
+    option or compiler compiles anew and an unchanged one is found on disk.
+    Raises ``RuntimeError`` when no compiler is available or compilation fails.
     """
     compiler = compiler or find_c_compiler()
     if compiler is None:
         raise RuntimeError("no C compiler found (set CC or install gcc)")
     digest = hashlib.sha256()
-    parts = [source, compiler, optimisation, ca.__version__]
+    parts = [source, compiler, _compiler_identity(compiler), optimisation, ca.__version__, platform.machine()]
     if "-march=native" in optimisation:
         parts.append(_cpu_identity())  # native code must not be loaded on another CPU sharing the cache
     for part in parts:

@@ -24,7 +24,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.signal import lfilter
 
 from ._checks import io_arrays, positive_int
 from .errors import InputError
@@ -98,6 +97,8 @@ def estimate_gls(data_or_arrays: Any, *, na: int, nb: Any = None, nk: Any = 0, n
     passes = positive_int(iterations, "iterations")
     if not (np.isfinite(tolerance) and tolerance > 0):
         raise InputError(f"tolerance must be positive; got {tolerance}")
+    from scipy.signal import lfilter  # scipy.signal costs most of a second to import: paid by the first call, not by every import
+
     fit = estimate_arx((u, y), na=na, nb=nb, nk=nk)  # step 1
     history = [fit.theta[:, 0].copy()]
     c = np.ones(1)

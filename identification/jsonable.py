@@ -8,10 +8,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import sys
 from collections.abc import Mapping
 from typing import Any
-
-import numpy as np
 
 __all__ = ["to_jsonable"]
 
@@ -25,20 +24,24 @@ def to_jsonable(value: Any) -> Any:
 
     Examples
     --------
+    >>> import numpy as np
     >>> to_jsonable({"e": np.array([complex(-1, 2)]), "n": float("nan"), "k": np.int64(3)})
     {'e': [[-1.0, 2.0]], 'n': None, 'k': 3}
     """
+    # A NumPy value exists only once NumPy is imported; not importing it here keeps the command
+    # line's start-up (which needs this function) free of NumPy's import time.
+    np = sys.modules.get("numpy")
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
         return {f.name: to_jsonable(getattr(value, f.name)) for f in dataclasses.fields(value)}
     if isinstance(value, Mapping):
         return {str(k): to_jsonable(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
         return [to_jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
+    if np is not None and isinstance(value, np.ndarray):
         return to_jsonable(value.tolist())
-    if isinstance(value, (complex, np.complexfloating)):
+    if isinstance(value, complex) or (np is not None and isinstance(value, np.complexfloating)):
         return [to_jsonable(float(value.real)), to_jsonable(float(value.imag))]
-    if isinstance(value, np.generic):
+    if np is not None and isinstance(value, np.generic):
         return to_jsonable(value.item())
     if isinstance(value, float):
         return value if math.isfinite(value) else None

@@ -32,7 +32,6 @@ from dataclasses import dataclass, field
 from typing import Any, Sequence
 
 import numpy as np
-from scipy.signal import sosfilt
 
 from .errors import InputError
 from .protocol import Mode, StateSpaceModel
@@ -720,6 +719,8 @@ def _section_from(numerator: np.ndarray, denominator: np.ndarray, drive: np.ndar
     scipy's section filter has a loop compiled per data type; ``lfilter``'s
     generic one takes about twice as long per complex sample.
     """
+    from scipy.signal import sosfilt  # scipy.signal costs most of a second to import: paid by the first call, not by every import
+
     coefficients = np.concatenate([numerator, denominator])
     # a real mode of a real drive runs in real arithmetic (about two thirds of the complex loop's time)
     kind = complex if np.iscomplexobj(drive) or np.any(np.imag(coefficients) != 0) else float

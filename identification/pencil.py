@@ -16,7 +16,6 @@ from typing import Any
 
 import numpy as np
 import scipy.linalg
-from scipy.signal import ss2tf
 
 from ._checks import finite_matrix, io_arrays, non_negative_int, per_input
 from .errors import InputError
@@ -111,6 +110,8 @@ class PencilModel(StateSpaceModel):
         Exact for any number of outputs (for several outputs the common
         scalar denominator is not the smallest MIMO ARX form).
         """
+        from scipy.signal import ss2tf  # scipy.signal costs most of a second to import: paid by the first call, not by every import
+
         A, B, C, D, dt = self.to_statespace()
         n = A.shape[0]
         b = np.zeros((n + 1, self.n_y, self.n_u))

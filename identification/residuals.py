@@ -20,7 +20,9 @@ from typing import Any, Sequence
 
 import numpy as np
 import scipy.linalg
-from scipy.stats import chi2, norm
+# scipy.stats's chi2.sf, chi2.ppf and norm.ppf are these special functions; importing scipy.stats costs most
+# of a second of every command's start-up
+from scipy.special import chdtrc, gammaincinv, ndtri
 
 from .errors import InputError
 
@@ -233,7 +235,7 @@ def residual_tests(
         r_ue[:, :, tested] = cross_correlation(u, e[:, tested], lags)
         k = np.arange(1, lags + 1)
         statistic[tested] = n * (n + 2) * np.sum(r_e[1:, tested] ** 2 / (n - k)[:, None], axis=0)
-        whiteness_p[tested] = chi2.sf(statistic[tested], lags)
+        whiteness_p[tested] = chdtrc(lags, statistic[tested])
         correlation_p[tested] = _cross_correlation_p(u, r_ue[:, :, tested], n)
     return ResidualTests(
         output_names=tuple(output_names) if output_names else tuple(f"y{i + 1}" for i in range(e.shape[1])),
@@ -241,7 +243,7 @@ def residual_tests(
         samples=n,
         lags=lags,
         level=level,
-        bound=float(norm.ppf(0.5 + level / 2) / np.sqrt(n)),
+        bound=float(ndtri(0.5 + level / 2) / np.sqrt(n)),
         autocorrelation=r_e,
         cross_correlation=r_ue,
         ljung_box=statistic,
@@ -268,7 +270,7 @@ def _cross_correlation_p(u: np.ndarray, r_ue: np.ndarray, samples: int) -> np.nd
         kept = values > 1e-8 * values[-1]
         projected = vectors[:, kept].T @ r_ue[:, j, :]  # (kept, n_y)
         statistic = samples * np.sum(projected**2 / values[kept][:, None], axis=0)
-        p_values[j] = chi2.sf(statistic, int(kept.sum()))
+        p_values[j] = chdtrc(int(kept.sum()), statistic)
     return np.minimum(p_values.min(axis=0) * u.shape[1], 1.0)
 
 
@@ -280,4 +282,9 @@ def nis_band(samples: int, n_y: int, *, level: float = 0.99) -> tuple[float, flo
     distribution's ``(1 - level)/2`` and ``(1 + level)/2`` quantiles over ``samples``.
     """
     dof = samples * n_y
-    return float(chi2.ppf((1 - level) / 2, dof) / samples), float(chi2.ppf((1 + level) / 2, dof) / samples)
+    return _chi2_quantile((1 - level) / 2, dof) / samples, _chi2_quantile((1 + level) / 2, dof) / samples
+
+
+def _chi2_quantile(probability: float, dof: int) -> float:
+    """The chi-square distribution's ``probability`` quantile (``scipy.stats.chi2.ppf``)."""
+    return 2.0 * float(gammaincinv(dof / 2.0, probability))

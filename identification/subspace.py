@@ -41,7 +41,6 @@ from typing import Any
 import numpy as np
 import scipy.linalg
 from numpy.lib.stride_tricks import sliding_window_view
-from scipy.signal import lfilter
 
 from ._checks import io_arrays, positive_int
 from .errors import ExcitationError, InputError
@@ -94,6 +93,8 @@ def _hankel(signal: np.ndarray, rows: int, columns: int) -> np.ndarray:
 
 def _responses(A: np.ndarray, C: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Output regressors of x0 and of each B entry: shapes (N, n_y, n) and (N, n_y, n, n_u)."""
+    from scipy.signal import lfilter  # scipy.signal costs most of a second to import: paid by the first call, not by every import
+
     values, vectors = np.linalg.eig(A)
     if np.linalg.cond(vectors) > 1e12:
         raise InputError("the identified A is not diagonalisable: B and D cannot be estimated this way")

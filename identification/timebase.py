@@ -12,7 +12,6 @@ import math
 from typing import Any, Sequence
 
 import numpy as np
-import scipy.signal
 
 from .data import IOData
 from .errors import InputError
@@ -86,6 +85,8 @@ def _stray(t: np.ndarray) -> np.ndarray:
 def _low_pass_onto(t: np.ndarray, values: np.ndarray, source_step: float, grid: np.ndarray, rate: float,
                    raw: RawRecord, channel: int) -> np.ndarray:
     """Anti-aliased resampling of one channel onto a grid of a lower rate."""
+    import scipy.signal  # scipy.signal costs most of a second to import: paid by the first call, not by every import
+
     count = int(math.floor((t[-1] - t[0]) / source_step + 1e-9)) + 1
     fine_t = t[0] + np.arange(count) * source_step
     fine = np.interp(fine_t, t, values)
@@ -214,6 +215,8 @@ def uniform_record(
         factor = int(decimate)
         if table.shape[0] < 2 * factor:
             raise InputError(f"{raw.source}: {table.shape[0]} samples are too few to decimate by {factor}")
+        import scipy.signal  # imported here for the reason given in _low_pass_onto
+
         table = scipy.signal.decimate(table, factor, ftype="fir", axis=0, zero_phase=True)
         t = t[::factor]
         report["decimate"] = {"factor": factor, "filter": f"FIR, Hamming window, order {20 * factor}, zero phase"}

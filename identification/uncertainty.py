@@ -25,7 +25,7 @@ from typing import Any, Callable
 import casadi as ca
 import numpy as np
 import scipy.linalg
-from scipy.stats import norm
+from scipy.special import ndtri  # scipy.stats.norm.ppf, without scipy.stats's import time
 
 from .errors import InputError
 
@@ -66,7 +66,7 @@ def normal_quantile(level: float) -> float:
     """``z`` of a two-sided interval ``+/- z sigma`` holding ``level`` of a normal distribution."""
     if not 0 < level < 1:
         raise InputError(f"a confidence level lies between 0 and 1; got {level!r}")
-    return float(norm.ppf(0.5 + level / 2))
+    return float(ndtri(0.5 + level / 2))
 
 
 def _spread(jacobian: np.ndarray, covariance: np.ndarray | None) -> np.ndarray:

@@ -12,14 +12,15 @@ computation, 3 warnings under ``--strict``, 128 + the signal's number).
 from __future__ import annotations
 
 import argparse
+import ast
 import importlib
 import json
 import logging
 import pkgutil
 import sys
+from pathlib import Path
 from typing import Any, Callable, NoReturn, Sequence
 
-from vehid.identification.archive_safety import os_error_text
 from vehid.identification.errors import DivergenceError, StrictWarningsError, WorkbenchError
 from vehid.identification.jsonable import to_jsonable
 from vehid.scenarios.shutdown import PATH_ERRNOS, signal_name, stopping_on_signals
@@ -66,8 +67,74 @@ def _command_modules() -> list[Any]:
     return modules
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser with every subcommand registered."""
+_HEADER_NAMES = ("NAME", "GROUP", "HELP")
+
+
+def _command_headers() -> list[dict[str, Any]]:
+    """Each command module's ``NAME``, ``GROUP``, ``HELP``, docstring and module name, read from its source.
+
+    Importing a command imports what it computes with (CasADi, SciPy, h5py,
+    matplotlib), which costs seconds; the list of commands and their one-line
+    help need only these constants. A module whose constants are not plain
+    literals is imported instead.
+    """
+    import vehid.scenarios.commands as package
+    headers = []
+    for info in sorted(pkgutil.iter_modules(package.__path__), key=lambda m: m.name):
+        if info.name.startswith("_"):
+            continue
+        module_name = f"{package.__name__}.{info.name}"
+        header = _literal_header(Path(package.__path__[0]) / f"{info.name}.py")
+        if header is None:
+            module = importlib.import_module(module_name)
+            if not hasattr(module, "register"):
+                continue
+            header = {key: getattr(module, key) for key in _HEADER_NAMES} | {"doc": module.__doc__}
+        headers.append(header | {"module": module_name})
+    return headers
+
+
+def _literal_header(source: Path) -> dict[str, Any] | None:
+    """``NAME``, ``GROUP``, ``HELP`` and the docstring of a command's source, or None if not all are literals."""
+    try:
+        tree = ast.parse(source.read_text(encoding="utf-8"))
+    except (OSError, SyntaxError, ValueError):
+        return None
+    found: dict[str, Any] = {}
+    defines_register = False
+    for node in tree.body:
+        if isinstance(node, ast.FunctionDef) and node.name == "register":
+            defines_register = True
+        if isinstance(node, ast.Assign) and len(node.targets) == 1 and isinstance(node.targets[0], ast.Name):
+            if node.targets[0].id in _HEADER_NAMES:
+                try:
+                    found[node.targets[0].id] = ast.literal_eval(node.value)
+                except ValueError:
+                    return None
+    if not defines_register or set(found) != set(_HEADER_NAMES):
+        return None
+    return found | {"doc": ast.get_docstring(tree, clean=False)}
+
+
+def _chosen_command(argv: Sequence[str]) -> tuple[str, ...]:
+    """The command words ``argv`` names: ``("identify",)`` or ``("study", "handling")``, as far as given.
+
+    Before the command only ``-h``/``--help`` exist, so the first words that
+    are not options name it.
+    """
+    words = [word for word in argv if not word.startswith("-")]
+    if not words:
+        return ()
+    return tuple(words[:2]) if words[0] in GROUPS else (words[0],)
+
+
+def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
+    """The argument parser with every subcommand registered.
+
+    Given the ``argv`` it is to parse, only the command that ``argv`` names is
+    imported and gets its arguments; the others are listed with their help
+    line alone, which is all argparse shows of a command not chosen.
+    """
     common = _common_options()
     parser = _Parser(
         prog="vehid",
@@ -82,16 +149,19 @@ def build_parser() -> argparse.ArgumentParser:
         sub = group_parser.add_subparsers(dest="subcommand", metavar="NAME")
         sub.required = True
         group_parsers[group] = sub
-    for module in _command_modules():
-        target = top if module.GROUP is None else group_parsers[module.GROUP]
+    chosen = None if argv is None else _chosen_command(argv)
+    for header in _command_headers():
+        words = (header["NAME"],) if header["GROUP"] is None else (header["GROUP"], header["NAME"])
+        target = top if header["GROUP"] is None else group_parsers[header["GROUP"]]
         command = target.add_parser(
-            module.NAME,
-            help=module.HELP,
-            description=(module.__doc__ or module.HELP).strip(),
+            header["NAME"],
+            help=header["HELP"],
+            description=(header["doc"] or header["HELP"]).strip(),
             parents=[common],
             formatter_class=argparse.RawDescriptionHelpFormatter,
         )
-        module.register(command)
+        if chosen is None or chosen == words:
+            importlib.import_module(header["module"]).register(command)
     return parser
 
 
@@ -117,7 +187,8 @@ def _failed(args: argparse.Namespace, exc: BaseException, status: int, summary: 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit status."""
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(argv)
     args = parser.parse_args(argv)
     _configure_logging(args)
     handler: Callable[[argparse.Namespace], tuple[dict, str]] = args.handler
@@ -144,6 +215,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"vehid: interrupted by {name}", file=sys.stderr)
         return _failed(args, exc, status, message=f"interrupted by {name}")
     except OSError as exc:  # a file read or written: its name and the cause, never "internal error"
+        from vehid.identification.archive_safety import os_error_text  # h5py: imported when needed
         text = os_error_text(exc)
         print(f"vehid: error: {text}", file=sys.stderr)
         return _failed(args, exc, 2 if exc.errno in PATH_ERRNOS else 1, message=text)

@@ -136,7 +136,9 @@ def test_linear_modes_near_the_vehicle_modes():
     """
     result = run_study(HandlingConfig(orders=(3,), duration=10.0, amplitude_scale=0.1,
                                       linear_options=study_linear_options(1e-3, 30), spline_options=None, workers=1))
-    assert result.table[0].linear_identification_R > 99.5  # measured 99.57 %
+    # measured 99.5718 % with OpenBLAS's Haswell, Sandybridge and Prescott kernels and with one BLAS thread,
+    # equal to 13 digits: simulated data and a fixed p leave no decision to flip
+    assert result.table[0].linear_identification_R > 99.5
     modes = {item.mode: item for item in result.mode_comparison}
     roll = modes["roll"]
     assert roll.vehicle_frequency_hz == pytest.approx(1.447, abs=1e-3)

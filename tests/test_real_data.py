@@ -87,11 +87,16 @@ def test_peers_and_identify_hold_out_the_same_samples(entry):
     assert (estimation.n_samples, validation.n_samples) == (len(u_est), len(u_val))
 
 
+# A guard against a hung process only, not a speed target (those live in benchmarks/): a spline run on the
+# heat exchanger took more than 300 s on a 2-core machine at load average 27 with an empty compile cache.
+HANG_SECONDS = 1800
+
+
 def _identify(entry, scratch: Path, *options: str) -> tuple[int, dict]:
     """``vehid identify`` on the raw file with the benchmark's arguments; exit status and JSON summary."""
     command = [sys.executable, "-m", "vehid.scenarios.cli", "identify", *benchmark.data_args(entry, scratch), *options,
                "--json", "--quiet"]
-    done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=300)
+    done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=HANG_SECONDS)
     assert done.returncode in (0, 3), done.stderr[-500:]
     return done.returncode, json.loads(done.stdout.strip().splitlines()[-1])
 
@@ -122,6 +127,16 @@ DEFAULT_FITS = {
 # 2 points: more than twice the largest spread under perturbation, and the same
 # yardstick as the benchmark's goal (within 2 points of the best peer).
 MARGIN = 2.0
+# The cascaded tanks' default fit moves more than that with rounding alone: 71.76 with OpenBLAS's Haswell
+# kernel (one thread or two, and on a byte-faithful copy of the record), 70.54 with the Sandybridge and Prescott
+# kernels (cross-validation chooses p 1e-4 instead of 1e-5), 65.25 with every sample perturbed by 1e-9 relative
+# (p 1e-4). The committed record stays above its floor on every kernel measured (0.78 point to spare); the
+# 6.5-point spread under perturbation is the method's fragility (the p decision and the filter run from it), to
+# be fixed in the method rather than by lowering this floor. Its cause, measured: the cross-validated fit of
+# p 1e-4 is 38.6 % with the Haswell kernel and 71.5 % with Sandybridge (p 1e-5: 67.2 and 69.1 %), so the
+# filter run at that p, not a near tie, decides. With the Sandybridge kernel every other record gives its
+# figure above to 0.01 point (ball-and-beam 89.18, dryer 85.31, robot arm 96.87, exchanger 63.36, CD player
+# arm 73.43 and 78.96), and so do the comparators below (N4SID 96.80, ARX 69.58).
 
 
 @pytest.mark.parametrize("name", list(DEFAULT_FITS))
@@ -149,21 +164,25 @@ def test_comparator_holdout_fit_on_raw_record(name, method, measured, tmp_path):
 
 
 # The spline model (``--nonlinear``, p chosen on the held-out data from 1e-7, 1e-8, 1e-9) on the nonlinear
-# records: its hold-out fit and the best peer's (benchmarks/real_data.py; linear starts 63.36 and 71.76). Under the
-# 1e-6 perturbation the tanks' spline model gives 75.97 (measured 75.69); floors: less MARGIN.
-SPLINE_FITS = [("exchanger", 77.46, 58.2), ("cascaded_tanks", 75.69, 68.7)]
+# records, and the best peer's hold-out fit (benchmarks/real_data.py). Its own figure is not asserted: it moves
+# with the BLAS kernel's rounding, through the linear start it refines (the tanks' default run chooses p 1e-5 or
+# 1e-4 by cross-validation depending on the kernel). Measured on the tanks (spline / linear start, hold-out %):
+# OpenBLAS Haswell kernel 75.69 / 71.76 with one thread and two, Sandybridge and Prescott 79.43 / 70.54, every
+# sample perturbed by 1e-9 relative 76.52 / 65.25, an AVX-512 machine 73.5; on the exchanger 77.46 / 63.36.
+# What holds across all of them, and is the claim: the spline model beats its linear start (by 3.9 to 14.1
+# points where the start was recorded; asserted by half the smallest gap) and every peer (the lowest spline
+# fit, 73.5, is 4.8 points above the best peer's 68.7).
+SPLINE_BEST_PEERS = [("exchanger", 58.2), ("cascaded_tanks", 68.7)]
 
 
 @pytest.mark.slow  # the spline filter's first compilation takes up to ~30 s on a fresh cache
-@pytest.mark.parametrize("name, measured, best_peer", SPLINE_FITS, ids=[c[0] for c in SPLINE_FITS])
-def test_spline_model_holdout_fit_on_raw_nonlinear_records(name, measured, best_peer, tmp_path):
+@pytest.mark.parametrize("name, best_peer", SPLINE_BEST_PEERS, ids=[c[0] for c in SPLINE_BEST_PEERS])
+def test_spline_model_holdout_fit_on_raw_nonlinear_records(name, best_peer, tmp_path):
     """``--nonlinear`` on a raw nonlinear record: the spline model beats its linear start and every peer held out."""
     _, summary = _identify(records.record_set(name), tmp_path, "--nonlinear")
     spline = summary["nonlinear"]["validation_fit_percent"]
-    assert spline[0] >= measured - MARGIN, summary["nonlinear"]
-    # measured 14.1 (exchanger) and 3.9 (tanks) points above the linear start: half of the smaller gap
-    assert spline[0] > summary["validation_fit_percent"][0] + (75.69 - 71.76) / 2
-    assert spline[0] > best_peer  # measured 19.3 and 7.0 points ahead
+    assert spline[0] > summary["validation_fit_percent"][0] + (75.69 - 71.76) / 2, summary["nonlinear"]
+    assert spline[0] > best_peer, summary["nonlinear"]
 
 
 def test_a_validation_file_holding_the_estimation_samples_is_refused(tmp_path):
@@ -172,11 +191,11 @@ def test_a_validation_file_holding_the_estimation_samples_is_refused(tmp_path):
     mat = ROOT / "tests" / "data" / "cascaded_tanks" / "dataBenchmark.mat"
     command = [sys.executable, "-m", "vehid.scenarios.cli", "identify", str(mat), "--inputs", "uEst", "--outputs", "yEst",
                "--dt", "4", "--validation-file", str(mat), "--method", "arx", "--json", "--quiet"]
-    done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=300)
+    done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=HANG_SECONDS)
     assert done.returncode == 2
     assert "same samples as the estimation record" in json.loads(done.stdout)["error"]
     named = subprocess.run([*command, "--validation-inputs", "uVal", "--validation-outputs", "yVal"], cwd=ROOT,
-                           capture_output=True, text=True, timeout=300)
+                           capture_output=True, text=True, timeout=HANG_SECONDS)
     assert named.returncode == 0, named.stderr[-500:]
     summary = json.loads(named.stdout)
     # ARX is deterministic: the published validation record scores 69.58 % (benchmarks/real_data.py,
