@@ -131,7 +131,7 @@ def handling_figures(archive: Archive | str | Path) -> dict[str, Figure]:
         damping_axis.set_ylabel("damping ratio (-)")
         damping_axis.set_xlabel("first mode's amplitude (normalised state units)")
         frequency_axis.set_title("First mode of the nonlinear models against its amplitude")
-        frequency_axis.legend(fontsize=8, ncol=3)
+        plots._legend(frequency_axis)
         for axis in (frequency_axis, damping_axis):
             axis.grid(True, alpha=0.3)
         figures["mode_amplitude"] = figure
@@ -154,7 +154,7 @@ def handling_figures(archive: Archive | str | Path) -> dict[str, Figure]:
     axis.set_title("Handling study: explanation per order (Table 5)")
     axis.set_xticks(orders)
     axis.grid(True, alpha=0.3)
-    axis.legend(fontsize=8)
+    plots._legend(axis)
     figures["orders"] = figure
 
     if chosen in linear:
@@ -183,7 +183,7 @@ def handling_figures(archive: Archive | str | Path) -> dict[str, Figure]:
     models = {f"n = {order}": model for order, model in sorted(linear.items())}
     if models:
         figures["eigenvalues"] = plots.plot_eigenvalue_map(
-            models, reference_eigenvalues, title="Identified linear models and the vehicle's modes (x)",
+            models, reference_eigenvalues, title="Identified linear models and the vehicle's modes (circles)",
         )
         figures["bode"] = plots.plot_bode(
             models, reference=reference, output_names=names, output_units=units, input_name="steer", input_unit="rad",

@@ -17,6 +17,8 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+from matplotlib.text import Text
+from matplotlib.transforms import Bbox
 import scipy.linalg
 from scipy.stats import chi2
 
@@ -28,12 +30,15 @@ from vehid.identification.uncertainty import frequency_response as response_band
 __all__ = [
     "REPORT_SIZE",
     "new_figure",
+    "channel_label",
+    "display_samples",
     "parameter_groups",
     "plot_parameter_history",
     "plot_convergence",
     "plot_order_study",
     "plot_time_fits",
     "plot_splines",
+    "eigenvalue_view",
     "plot_eigenvalue_map",
     "frequency_response",
     "plot_bode",
@@ -82,9 +87,79 @@ def _style(ax: Axes) -> Axes:
 
 
 def _legend(ax: Axes, **options: Any) -> None:
+    """The axis's legend beside it, right of the frame, so that it never hides a stretch of the data."""
     handles, labels = ax.get_legend_handles_labels()
     if 0 < len(handles) <= _MAX_LEGEND_ENTRIES:
-        ax.legend(**{"fontsize": _LEGEND_SIZE, **options})
+        ax.legend(**{"fontsize": _LEGEND_SIZE, "loc": "upper left", "bbox_to_anchor": (1.02, 1.0),
+                     "borderaxespad": 0.0, **options})
+
+
+def _figure_legend(fig: Figure, ax: Axes) -> None:
+    """One legend for the whole figure, right of every axis, from the entries of ``ax``.
+
+    For grids whose axes share the same lines: a legend beside one axis would
+    sit in the gap between two columns.
+    """
+    handles, labels = ax.get_legend_handles_labels()
+    if 0 < len(handles) <= _MAX_LEGEND_ENTRIES:
+        fig.legend(handles, labels, loc="outside right upper", fontsize=_LEGEND_SIZE)
+
+
+def _known_unit(unit: str | None) -> str:
+    """A channel's unit for a label, or "" where none was given ("-" is what a record without units holds)."""
+    unit = "" if unit is None else str(unit).strip()
+    return "" if unit in ("", "-") else unit
+
+
+def _with_unit(label: str, unit: str | None) -> str:
+    unit = _known_unit(unit)
+    return f"{label} ({unit})" if unit else label
+
+
+def channel_label(name: str) -> str:
+    """A channel name fit for a title: a bare column number (a text table without header) reads ``column 2``."""
+    name = str(name)
+    return f"column {name}" if name.isdigit() else name
+
+
+def display_samples(x: Any, y: Any, bins: int = 1000) -> tuple[np.ndarray, np.ndarray]:
+    """``(x, y)`` thinned for drawing by a min/max envelope over ``bins`` stretches; see below.
+
+    Parameters
+    ----------
+    x : array_like, shape (N,)
+    y : array_like, shape (N,)
+    bins : int
+        Number of stretches; a report axis is about 700-900 pixels wide, so
+        1000 stretches (two points each) leave every pixel column its extremes.
+
+    Returns
+    -------
+    x_shown, y_shown : ndarray, shape (M,)
+        ``M <= 2 * bins + 2``; every sample when ``N <= 2 * bins``. The first
+        and last samples, each stretch's minimum and maximum (in time order)
+        are kept, so the drawn line reaches every peak of the series.
+    """
+    x = np.asarray(x, dtype=float).ravel()
+    y = np.asarray(y, dtype=float).ravel()
+    count = y.size
+    if x.size != count:
+        raise InputError(f"x has {x.size} samples but y has {count}")
+    if bins < 1:
+        raise InputError(f"bins must be at least 1; got {bins}")
+    if count <= 2 * bins:
+        return x, y
+    width = -(-count // bins)
+    padded = np.concatenate([y, np.full(width * bins - count, np.nan)]).reshape(bins, width)
+    finite = np.isfinite(padded)
+    has_finite = finite.any(axis=1)
+    lows = np.argmin(np.where(finite, padded, np.inf), axis=1)
+    highs = np.argmax(np.where(finite, padded, -np.inf), axis=1)
+    starts = np.arange(bins) * width
+    kept = np.concatenate([starts[has_finite] + lows[has_finite], starts[has_finite] + highs[has_finite],
+                           np.flatnonzero(~np.isfinite(y)), [0, count - 1]])  # gaps stay gaps
+    kept = np.unique(kept[kept < count])
+    return x[kept], y[kept]
 
 
 def _matrix(name: str, value: Any, columns: int | None = None) -> np.ndarray:
@@ -181,7 +256,7 @@ def plot_parameter_history(
             ax.plot(x, values[:, index], label=names[index], linewidth=1.2)
         ax.set_ylabel(_GROUP_LABELS.get(label, "value"), fontsize=10)
         ax.set_title(f"{label} ({len(indices)} parameters)" if label in _GROUP_LABELS else label, fontsize=10)
-        _legend(ax, loc="center left", bbox_to_anchor=(1.0, 0.5), ncols=1 + len(indices) // 7)
+        _legend(ax, loc="center left", bbox_to_anchor=(1.02, 0.5), ncols=1 + len(indices) // 7)
     axes[-1].set_xlabel(x_label)
     fig.suptitle(title)
     return fig
@@ -240,7 +315,7 @@ def plot_convergence(
                     label="simulated model" + (" (mean)" if continuous.shape[1] > 1 else ""))
     ax_fit.set_ylabel("R (%)")
     ax_fit.set_title("(a) percentage explanation R (eq. 17)", fontsize=10)
-    _legend(ax_fit, loc="lower right")
+    _legend(ax_fit)
     ax_trace.semilogy(x, trace, color="tab:blue", linewidth=1.8, label="trace(P)")
     if min_eig_p is not None:
         smallest = np.asarray(min_eig_p, dtype=float).ravel()
@@ -251,7 +326,7 @@ def plot_convergence(
     ax_trace.set_ylabel("parameter covariance (-)")
     ax_trace.set_xlabel("pass")
     ax_trace.set_title("(b) trace of the parameter covariance P", fontsize=10)
-    _legend(ax_trace, loc="upper right")
+    _legend(ax_trace)
     fig.suptitle(title)
     return fig
 
@@ -300,7 +375,7 @@ def plot_order_study(
             for n, values in zip(orders, series):
                 values = np.asarray(values, dtype=float).ravel()
                 ax.plot(np.arange(1, values.size + 1), values, linewidth=1.4, label=f"n = {n}")
-            _legend(ax, loc="center left", bbox_to_anchor=(1.0, 0.5))
+            _legend(ax, loc="center left", bbox_to_anchor=(1.02, 0.5))
         else:
             ax.plot(orders, np.asarray(series, dtype=float), marker="o", linewidth=1.4)
             ax.set_xticks(orders)
@@ -344,7 +419,9 @@ def plot_time_fits(
     -------
     Figure
         One axis per output holding the measurement (black) and one line per
-        prediction, labelled with its R (eq. 17) for that output.
+        prediction, labelled with its R (eq. 17) for that output, the legend
+        beside the axis. Long records are drawn thinned to a min/max envelope
+        (:func:`display_samples`); R is computed from every sample.
     """
     t = np.asarray(t, dtype=float).ravel()
     y = _matrix("y_measured", y_measured)
@@ -365,11 +442,12 @@ def plot_time_fits(
     axes = fig.subplots(n_y, 1, sharex=True, squeeze=False)[:, 0]
     for i, ax in enumerate(axes):
         _style(ax)
-        ax.plot(t[shown], y[shown, i], color="k", linewidth=1.6, label="measured")
+        ax.plot(*display_samples(t[shown], y[shown, i]), color="k", linewidth=1.6, label="measured")
         for label, value in predicted.items():
-            ax.plot(t[shown], value[shown, i], linewidth=1.2, label=f"{label} (R = {fits[label][i]:.2f} %)")
-        ax.set_ylabel(f"{names[i]} ({units[i]})")
-        _legend(ax, loc="upper right")
+            ax.plot(*display_samples(t[shown], value[shown, i]), linewidth=1.2,
+                    label=f"{label} (R = {fits[label][i]:.2f} %)")
+        ax.set_ylabel(_with_unit(channel_label(names[i]), units[i]))
+        _legend(ax)
     axes[-1].set_xlabel("time (s)")
     fig.suptitle(title)
     return fig
@@ -438,7 +516,7 @@ def plot_splines(
         ax.set_xlabel(x_labels[i])
         ax.set_ylabel(labels[i])
         ax.set_title(labels[i], fontsize=10)
-    _legend(axes[0], loc="best")
+    _figure_legend(fig, axes[0])
     fig.suptitle(title)
     return fig
 
@@ -449,6 +527,143 @@ def _eigenvalues(model: Any) -> np.ndarray:
     if hasattr(model, "A"):
         return np.linalg.eigvals(np.asarray(model.A, dtype=float))
     return np.asarray(model, dtype=complex).ravel()
+
+
+#: A pole nearer the origin than this fraction of the view's reach is drawn on top of it: not resolved.
+_RESOLVED_FRACTION = 0.05
+#: Where a pole's label may go, tried in turn: (dx, dy) in points from the pole, alignment.
+_LABEL_PLACES = tuple(
+    (sign_x * 6, sign_y * (4 + 11 * ring), "left" if sign_x > 0 else "right", "bottom" if sign_y > 0 else "top")
+    for ring in range(5) for sign_y in (1, -1) for sign_x in (1, -1)
+)
+
+
+def eigenvalue_view(eigenvalues: Any) -> float:
+    """The reach ``|lambda|`` up to which an eigenvalue map is drawn, so that the poles that matter are seen.
+
+    A map must separate its poles: one nearer the origin than 5 % of the
+    axis' reach sits on the origin's marker. Of the candidate reaches (each
+    eigenvalue's magnitude), the one that resolves the most eigenvalues, those
+    with ``5 % of the reach <= |lambda| <= reach``, is chosen; on a tie the
+    wider one, so that nothing is left out for nothing. A record with a
+    wide-band mode at thousands of rad/s beside several slow modes is then
+    drawn at the slow modes' scale and the fast one marked at the edge.
+
+    Parameters
+    ----------
+    eigenvalues : array_like of complex
+        Every eigenvalue to be drawn (all models and any reference); each
+        conjugate pair counts once.
+
+    Returns
+    -------
+    float
+        The reach in rad/s, 1.0 where every eigenvalue is zero or none is finite.
+
+    Examples
+    --------
+    >>> eigenvalue_view([-1 + 3j, -1 - 3j, -2 + 8j, -2 - 8j, -3000.0])
+    8.246...
+    >>> eigenvalue_view([-0.5, -3000.0])  # one each: the wider view loses nothing
+    3000.0
+    """
+    values = np.asarray(eigenvalues, dtype=complex).ravel()
+    magnitudes = np.abs(values[np.isfinite(values) & (values.imag >= 0)])
+    candidates = np.unique(magnitudes[magnitudes > 0])
+    best, best_count = 1.0, -1
+    for reach in candidates[::-1]:  # widest first, so that a tie keeps the wider view
+        count = np.count_nonzero((magnitudes >= _RESOLVED_FRACTION * reach) & (magnitudes <= reach))
+        if count > best_count:
+            best, best_count = float(reach), count
+    return best
+
+
+def _format_pole(value: complex) -> str:
+    return f"{value.real:.3g} \u00b1 {abs(value.imag):.3g}j" if value.imag != 0 else f"{value.real:.3g}"
+
+
+def _view_limits(shown: np.ndarray, reach: float) -> tuple[tuple[float, float], tuple[float, float]]:
+    """Axis limits around the shown eigenvalues and the imaginary axis, with room for labels."""
+    if shown.size == 0:
+        return (-reach, 0.1 * reach), (-reach, reach)
+    low, high = min(shown.real.min(), 0.0), max(shown.real.max(), 0.0)
+    top = float(np.abs(shown.imag).max())
+    width = high - low
+    if width == 0.0:
+        width = 0.2 * max(top, reach)
+        low -= width
+    if top == 0.0:
+        top = 0.4 * width  # real poles only: a band around the real axis
+    return (low - 0.08 * width, high + 0.08 * width), (-1.18 * top, 1.18 * top)
+
+
+def _edge_marker(value: complex, x_limits: tuple[float, float], y_limits: tuple[float, float]) -> tuple[float, float, str]:
+    """Where a pole outside the view meets its edge, and a triangle pointing the way out."""
+    inset_x = 0.02 * (x_limits[1] - x_limits[0])
+    inset_y = 0.03 * (y_limits[1] - y_limits[0])
+    x = float(np.clip(value.real, x_limits[0] + inset_x, x_limits[1] - inset_x))
+    y = float(np.clip(value.imag, y_limits[0] + inset_y, y_limits[1] - inset_y))
+    if value.real < x_limits[0]:
+        return x, y, "<"
+    if value.real > x_limits[1]:
+        return x, y, ">"
+    return x, y, "^" if value.imag > 0 else "v"
+
+
+def _overlap(box: Any, others: Sequence[Any]) -> float:
+    area = 0.0
+    for other in others:
+        width = min(box.x1, other.x1) - max(box.x0, other.x0)
+        height = min(box.y1, other.y1) - max(box.y0, other.y0)
+        if width > 0 and height > 0:
+            area += width * height
+    return area
+
+
+def _place_labels(ax: Axes, notes: Sequence[Any], anchors: np.ndarray) -> None:
+    """Move each pole's label to the first place beside its pole where it overlaps no other label or pole.
+
+    The figure is laid out first (no pixels drawn), so the places are those
+    of the page as saved; a label that fits nowhere takes the place of least
+    overlap. Labels with the same text on the same spot (the same mode of
+    several models) are drawn once.
+    """
+    fig = ax.figure
+    fig.draw_without_rendering()
+    renderer = fig.canvas.get_renderer()
+    frame = ax.get_window_extent(renderer)
+    to_pixels = ax.transData.transform
+    half = 5.0 * fig.dpi / 72.0  # a marker of 7 pt, as a square of 10 pt
+    points = to_pixels(np.c_[anchors.real, anchors.imag]) if len(anchors) else np.empty((0, 2))
+    markers = [Bbox.from_extents(x - half, y - half, x + half, y + half) for x, y in points]
+    placed: list[Any] = []
+    seen: list[tuple[str, np.ndarray]] = []
+    order = sorted(notes, key=lambda note: -to_pixels(note.xy)[1])
+    for note in order:
+        where = to_pixels(note.xy)
+        if any(text == note.get_text() and np.hypot(*(where - spot)) < 2 * half for text, spot in seen):
+            note.remove()
+            continue
+        seen.append((note.get_text(), where))
+        others = [m for m, p in zip(markers, points) if np.hypot(*(p - where)) > 0.5] + placed
+        best, best_cost = _LABEL_PLACES[0], np.inf
+        for place in _LABEL_PLACES:
+            note.xyann = place[:2]
+            note.set_horizontalalignment(place[2])
+            note.set_verticalalignment(place[3])
+            note.update_positions(renderer)
+            box = Text.get_window_extent(note, renderer)
+            outside = box.width * box.height - _overlap(box, [frame])
+            cost = _overlap(box, others) + 4.0 * outside  # leaving the frame is worse than touching a label
+            if cost < best_cost:
+                best, best_cost = place, cost
+            if cost == 0.0:
+                break
+        note.xyann = best[:2]
+        note.set_horizontalalignment(best[2])
+        note.set_verticalalignment(best[3])
+        note.update_positions(renderer)
+        placed.append(Text.get_window_extent(note, renderer))
 
 
 def plot_eigenvalue_map(
@@ -466,6 +681,12 @@ def plot_eigenvalue_map(
     of each eigenvalue (delta method; chi-square with 2 degrees of freedom,
     a line along the real axis for a real pole) unless ``confidence`` is False.
 
+    The axes reach as far as :func:`eigenvalue_view` says: far enough to
+    separate the poles that matter. Eigenvalues beyond are drawn as open
+    triangles at the edge, pointing their way, and counted and listed under
+    the real axis. Labels are placed where they overlap neither each other
+    nor a pole; the legend sits beside the map.
+
     Parameters
     ----------
     models : mapping of str to ModalModel, (A, B, C, D)-like or eigenvalue array
@@ -479,46 +700,98 @@ def plot_eigenvalue_map(
     fig = new_figure(REPORT_SIZE) if ax is None else ax.figure
     ax = _style(fig.subplots() if ax is None else ax)
     markers = "xs^Dv<>p"
-    for k, (label, model) in enumerate(models.items()):
-        values = _eigenvalues(model)
-        points = ax.plot(values.real, values.imag, linestyle="none", marker=markers[k % len(markers)],
+    eigenvalues = {label: _eigenvalues(model) for label, model in models.items()}
+    reference = None if reference_eigenvalues is None else np.asarray(reference_eigenvalues, dtype=complex).ravel()
+    everything = np.concatenate([*eigenvalues.values(), *([] if reference is None else [reference])]) \
+        if eigenvalues or reference is not None else np.empty(0, dtype=complex)
+    everything = everything[np.isfinite(everything)]
+    reach = eigenvalue_view(everything)
+
+    def in_view(values: np.ndarray) -> np.ndarray:
+        return np.isfinite(values) & (np.abs(values) <= reach * (1 + 1e-9))
+
+    x_limits, y_limits = _view_limits(everything[in_view(everything)], reach)
+    notes, anchors, beyond, outlines = [], [], [], []
+    for k, (label, values) in enumerate(eigenvalues.items()):
+        model = models[label]
+        inside = in_view(values)
+        points = ax.plot(values[inside].real, values[inside].imag, linestyle="none", marker=markers[k % len(markers)],
                          markersize=7, markeredgewidth=1.6, label=label)
+        color = points[0].get_color()
         if confidence and getattr(model, "parameter_covariance", None) is not None:
             for mode in model.uncertainty().modes:
-                _ellipse(ax, mode.eigenvalue, mode.eigenvalue_covariance, points[0].get_color())
+                if in_view(np.array([mode.eigenvalue]))[0]:
+                    outlines.extend(_ellipse(ax, mode.eigenvalue, mode.eigenvalue_covariance, color))
+        for value in values[~inside & np.isfinite(values)]:
+            x, y, marker = _edge_marker(value, x_limits, y_limits)
+            ax.plot([x], [y], linestyle="none", marker=marker, markersize=8, markerfacecolor="none",
+                    markeredgecolor=color, markeredgewidth=1.4)
+            beyond.append(value)
+        anchors.extend(values[inside])
         if annotate:
-            for value in values[values.imag >= 0]:
+            for value in values[inside & (values.imag >= 0)]:
                 magnitude = abs(value)
                 damping = -value.real / magnitude if magnitude > 0 else float("nan")
-                ax.annotate(f"{magnitude / (2 * np.pi):.2f} Hz, \u03b6 = {damping:.2f}", (value.real, value.imag),
-                            textcoords="offset points", xytext=(6, 4 + 10 * k), fontsize=9)
-    if reference_eigenvalues is not None:
-        reference = np.asarray(reference_eigenvalues, dtype=complex).ravel()
-        ax.plot(reference.real, reference.imag, linestyle="none", marker="o", markersize=10,
+                note = ax.annotate(f"{magnitude / (2 * np.pi):.2f} Hz, \u03b6 = {damping:.2f}",
+                                   (value.real, value.imag), textcoords="offset points", xytext=(6, 4), fontsize=8)
+                note.set_in_layout(False)  # placed after the layout, inside the frame
+                notes.append(note)
+    if reference is not None:
+        inside = in_view(reference)
+        ax.plot(reference[inside].real, reference[inside].imag, linestyle="none", marker="o", markersize=10,
                 markerfacecolor="none", markeredgecolor="k", label="reference")
+        for value in reference[~inside & np.isfinite(reference)]:
+            x, y, marker = _edge_marker(value, x_limits, y_limits)
+            ax.plot([x], [y], linestyle="none", marker=marker, markersize=9, markerfacecolor="none",
+                    markeredgecolor="k")
+            beyond.append(value)
+        anchors.extend(reference[inside])
+    if outlines:  # an ellipse may widen the view, but only so far that the poles stay apart
+        outline = np.concatenate(outlines, axis=1)
+        width, height = x_limits[1] - x_limits[0], y_limits[1] - y_limits[0]
+        x_limits = (max(min(x_limits[0], outline[0].min()), x_limits[0] - width),
+                    min(max(x_limits[1], outline[0].max()), x_limits[1] + width))
+        y_limits = (max(min(y_limits[0], outline[1].min()), y_limits[0] - height),
+                    min(max(y_limits[1], outline[1].max()), y_limits[1] + height))
+    ax.set_xlim(x_limits)
+    ax.set_ylim(y_limits)
     ax.axvline(0.0, color="k", linewidth=0.8)
     ax.axhline(0.0, color="k", linewidth=0.8)
-    ax.set_xlabel("real part (1/s)")
+    x_label = "real part (1/s)"
+    if beyond:
+        upper = sorted({complex(round(v.real, 12), round(abs(v.imag), 12)) for v in beyond}, key=abs)
+        listed = ", ".join(_format_pole(v) for v in upper[:3]) + (", ..." if len(upper) > 3 else "")
+        x_label += f"\n{len(beyond)} eigenvalue{'s' if len(beyond) > 1 else ''} beyond the view (open triangles " \
+                   f"at the edge): {listed}"
+    ax.set_xlabel(x_label)
     ax.set_ylabel("imaginary part (rad/s)")
     ax.set_title(title)
-    _legend(ax, loc="best")
+    _legend(ax)
+    if notes:
+        _place_labels(ax, notes, np.asarray(anchors, dtype=complex))
     return fig
 
 
 ELLIPSE_SCALE = float(np.sqrt(chi2.ppf(0.95, 2)))  # 95 % region of a 2-D normal, in standard deviations
 
 
-def _ellipse(ax: Axes, value: complex, covariance: np.ndarray, color: Any) -> None:
-    """The 95 % ellipse of an eigenvalue (and its mirror image for a pair) from the covariance of (re, im)."""
+def _ellipse(ax: Axes, value: complex, covariance: np.ndarray, color: Any) -> list[np.ndarray]:
+    """The 95 % ellipse of an eigenvalue (and its mirror image for a pair) from the covariance of (re, im).
+
+    Returns the outlines drawn, each of shape (2, n_points): real and imaginary parts.
+    """
     if not np.all(np.isfinite(covariance)):
-        return
+        return []
     values, vectors = scipy.linalg.eigh(covariance)  # numpy's stalls under load with this BLAS
     angle = np.linspace(0.0, 2 * np.pi, 60)
     circle = np.vstack([np.cos(angle), np.sin(angle)])
     outline = vectors @ (ELLIPSE_SCALE * np.sqrt(np.maximum(values, 0.0))[:, None] * circle)
     ax.plot(value.real + outline[0], value.imag + outline[1], color=color, linewidth=0.9)
+    drawn = [np.vstack([value.real + outline[0], value.imag + outline[1]])]
     if value.imag != 0:
         ax.plot(value.real + outline[0], -value.imag - outline[1], color=color, linewidth=0.9)
+        drawn.append(np.vstack([value.real + outline[0], -value.imag - outline[1]]))
+    return drawn
 
 
 def _state_space(model: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -575,7 +848,7 @@ def plot_bode(
     input_index: int = 0,
     output_names: Sequence[str] | None = None,
     output_units: Sequence[str] | None = None,
-    input_name: str = "u",
+    input_name: str | None = None,
     input_unit: str = "-",
     frequencies: Any = None,
     title: str | None = None,
@@ -594,9 +867,11 @@ def plot_bode(
     reference : ModalModel or (A, B, C, D), optional
         E.g. the linearised source model; drawn black dashed.
     output_names, output_units : sequence of str, optional
-        Default: the first model's output names, units ``-``.
-    input_name, input_unit : str
-        For the title and the magnitude's unit.
+        Default: the first model's output names; units unknown (``-``).
+    input_name, input_unit : str, optional
+        For the title and the magnitude's unit; default the first model's
+        name of input ``input_index``, unit unknown. A unit that is unknown
+        (``-``) is left out of the labels rather than printed as ``(-)``.
     frequencies : array_like, optional
         In Hz; default 200 points from 0.05 to 25 Hz, log-spaced.
 
@@ -624,6 +899,9 @@ def plot_bode(
         output_names = getattr(first, "output_names", None)
     names = _names(output_names, n_y, "y")
     units = _names(output_units, n_y, "unit") if output_units is not None else ["-"] * n_y
+    if input_name is None:
+        known = getattr(next(iter(models.values()), None), "input_names", None)
+        input_name = known[input_index] if known is not None and len(known) > input_index else f"u{input_index + 1}"
     fig = _figure(fig, (max(REPORT_SIZE[0], 2.6 * n_y), REPORT_SIZE[1]))
     axes = fig.subplots(2, n_y, sharex=True, squeeze=False)
     for i in range(n_y):
@@ -640,13 +918,23 @@ def plot_bode(
                 spread = band.normal_quantile() * band.phase_deg_std[:, i, input_index]
                 ax_phase.fill_between(frequencies, phase - spread, phase + spread, color=lines[0].get_color(),
                                       alpha=0.2, linewidth=0)
-        ax_mag.set_title(names[i], fontsize=10)
-        ax_mag.set_ylabel(f"|G| ({units[i]}/{input_unit})")
+        ax_mag.set_title(channel_label(names[i]), fontsize=10)
+        ax_mag.set_ylabel(_gain_label(units[i], input_unit))
         ax_phase.set_ylabel("phase (deg)")
         ax_phase.set_xlabel("frequency (Hz)")
-    _legend(axes[0, 0], loc="best")
-    fig.suptitle(title or f"Frequency response from {input_name}")
+    _figure_legend(fig, axes[0, 0])
+    fig.suptitle(title or f"Frequency response from {channel_label(input_name)}")
     return fig
+
+
+def _gain_label(output_unit: str, input_unit: str) -> str:
+    """``|G| (out/in)``, saying so where a unit is unknown instead of printing ``(-/-)``."""
+    output_unit, input_unit = _known_unit(output_unit), _known_unit(input_unit)
+    if not (output_unit or input_unit):
+        return "|G|"
+    if not input_unit:
+        return f"|G| ({output_unit} per input unit)"
+    return f"|G| ({output_unit or 'output unit'}/{input_unit})"
 
 
 def autocorrelation(residuals: Any, max_lag: int) -> np.ndarray:
@@ -697,7 +985,7 @@ def plot_residual_autocorrelation(
         outside = np.count_nonzero(np.abs(r[1:, i]) > band)
         ax.set_ylabel(f"{names[i]} (-)")
         ax.set_title(f"{names[i]}: {outside} of {max_lag} lags outside the band", fontsize=10)
-        _legend(ax, loc="upper right")
+    _figure_legend(fig, axes[0])
     axes[-1].set_xlabel("lag (s)" if dt else "lag (samples)")
     fig.suptitle(title)
     return fig
@@ -723,11 +1011,17 @@ def plot_residual_tests(tests: Any, *, dt: float | None = None, title: str = "Re
     """
     n_y = len(tests.output_names)
     scale = dt if dt else 1.0
-    fig = _figure(fig, (REPORT_SIZE[0], max(REPORT_SIZE[1], 1.0 + 2.0 * n_y)))
+    fig = _figure(fig, (REPORT_SIZE[0], max(REPORT_SIZE[1], 1.2 + 1.9 * n_y)))
     axes = fig.subplots(n_y, 2, squeeze=False)
     band = tests.bound
     level = f"{100 * tests.level:g} %"
     lags = np.arange(-tests.lags, tests.lags + 1) * scale
+    # What each column shows is said once, above it; each panel's own title
+    # keeps to its verdict, so that two titles side by side fit their columns.
+    axes[0, 0].annotate("autocorrelation (Ljung-Box)", (0.5, 1.0), xycoords="axes fraction",
+                        xytext=(0, 18), textcoords="offset points", ha="center", va="bottom", fontsize=10)
+    axes[0, 1].annotate("cross-correlation with the inputs", (0.5, 1.0), xycoords="axes fraction",
+                        xytext=(0, 18), textcoords="offset points", ha="center", va="bottom", fontsize=10)
     for i, name in enumerate(tests.output_names):
         left, right = _style(axes[i, 0]), _style(axes[i, 1])
         for ax in (left, right):
@@ -735,15 +1029,15 @@ def plot_residual_tests(tests: Any, *, dt: float | None = None, title: str = "Re
         auto = tests.autocorrelation[1:, i]
         left.vlines(np.arange(1, tests.lags + 1) * scale, 0.0, auto, color="k", linewidth=1.2)
         verdict = "white" if tests.white[i] else "NOT white"
-        left.set_title(f"{name}: autocorrelation, Ljung-Box p = {tests.residual_whiteness_p[i]:.3g} ({verdict})",
-                       fontsize=9)
+        left.set_title(f"p = {tests.residual_whiteness_p[i]:.3g}: {verdict}", fontsize=9)
+        left.set_ylabel(channel_label(name), fontsize=9)
         for j, input_name in enumerate(tests.input_names):
-            right.plot(lags, tests.cross_correlation[:, j, i], marker="o", markersize=2, linewidth=0.8, label=input_name)
+            right.plot(lags, tests.cross_correlation[:, j, i], marker="o", markersize=2, linewidth=0.8,
+                       label=channel_label(input_name))
         independent = "independent" if tests.independent[i] else "NOT independent"
-        right.set_title(f"{name}: input cross-correlation, p = {tests.input_correlation_p[i]:.3g} ({independent})",
-                        fontsize=9)
-        if len(tests.input_names) > 1:
-            _legend(right, loc="upper right", fontsize=7)
+        right.set_title(f"p = {tests.input_correlation_p[i]:.3g}: {independent}", fontsize=9)
+        if len(tests.input_names) > 1 and i == 0:
+            _legend(right, fontsize=7)
     for ax in axes[-1]:
         ax.set_xlabel("lag (s)" if dt else "lag (samples)")
     fig.suptitle(f"{title} ({level} bands, N = {tests.samples})")
@@ -775,5 +1069,5 @@ def plot_innovation_consistency(nis: Any, band: tuple[float, float], *, title: s
     ax.set_xlabel("pass")
     ax.set_ylabel("mean e' R^-1 e (-)")
     ax.set_title(title)
-    _legend(ax, loc="best")
+    _legend(ax)
     return fig
