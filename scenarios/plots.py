@@ -18,6 +18,7 @@ from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.text import Text
+from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 from matplotlib.transforms import Bbox
 import scipy.linalg
 from scipy.stats import chi2
@@ -102,7 +103,7 @@ def _figure_legend(fig: Figure, ax: Axes) -> None:
     """
     handles, labels = ax.get_legend_handles_labels()
     if 0 < len(handles) <= _MAX_LEGEND_ENTRIES:
-        fig.legend(handles, labels, loc="outside right upper", fontsize=_LEGEND_SIZE)
+        fig.legend(handles, labels, loc="outside right center", fontsize=_LEGEND_SIZE)  # clear of a long title
 
 
 def _known_unit(unit: str | None) -> str:
@@ -918,6 +919,7 @@ def plot_bode(
                 spread = band.normal_quantile() * band.phase_deg_std[:, i, input_index]
                 ax_phase.fill_between(frequencies, phase - spread, phase + spread, color=lines[0].get_color(),
                                       alpha=0.2, linewidth=0)
+        _log_ticks(ax_mag)
         ax_mag.set_title(channel_label(names[i]), fontsize=10)
         ax_mag.set_ylabel(_gain_label(units[i], input_unit))
         ax_phase.set_ylabel("phase (deg)")
@@ -925,6 +927,19 @@ def plot_bode(
     _figure_legend(fig, axes[0, 0])
     fig.suptitle(title or f"Frequency response from {channel_label(input_name)}")
     return fig
+
+
+def _log_ticks(ax: Axes) -> None:
+    """Tick labels on a log y axis that never collide: powers of ten, or 1-2-5 steps where less than two decades show.
+
+    Matplotlib labels the minor ticks of a short log axis (3e-1, 4e-1, ...),
+    which run into each other on a narrow panel.
+    """
+    low, high = ax.get_ylim()
+    if low > 0 and np.log10(high / low) < 2.0:
+        ax.yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+        ax.yaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
+    ax.yaxis.set_minor_formatter(NullFormatter())
 
 
 def _gain_label(output_unit: str, input_unit: str) -> str:

@@ -222,6 +222,12 @@ def _channel_units(model: Any, records: Mapping[str, Any]) -> dict[str, Any]:
             output_units = dict(zip(record.output_names, record.output_units))
             return {"input_name": inputs[0], "input_unit": input_units[inputs[0]],
                     "output_names": list(outputs), "output_units": [output_units[name] for name in outputs]}
+    # A model that kept no channel names (u1, y1, ...) describes the record it has the size of, as in the time fits.
+    sizes = (np.shape(model.B)[1], np.shape(model.C)[0])
+    for record in records.values():
+        if (record.n_u, record.n_y) == sizes:
+            return {"input_name": record.input_names[0], "input_unit": record.input_units[0],
+                    "output_names": list(record.output_names), "output_units": list(record.output_units)}
     return {}
 
 
