@@ -621,13 +621,46 @@ def _overlap(box: Any, others: Sequence[Any]) -> float:
     return area
 
 
+def _mode_clusters(values: np.ndarray, reach: float) -> list[np.ndarray]:
+    """Eigenvalues grouped where they are the same mode of several models (within 8 % of their size).
+
+    An order study's models share their dominant modes to a few percent; one
+    label per mode keeps the map readable where one per model would pile up.
+    """
+    clusters: list[list[complex]] = []
+    for value in sorted(values, key=abs):
+        for members in clusters:
+            if abs(value - members[0]) <= 0.08 * abs(members[0]) + 0.01 * reach:
+                members.append(value)
+                break
+        else:
+            clusters.append([value])
+    return [np.asarray(members, dtype=complex) for members in clusters]
+
+
+def _mode_text(members: np.ndarray) -> str:
+    """Natural frequency (Hz) and damping ratio of a mode, as a range where several models differ."""
+    magnitudes = np.abs(members)
+    frequencies = magnitudes / (2 * np.pi)
+    dampings = np.where(magnitudes > 0, -members.real / np.where(magnitudes > 0, magnitudes, 1.0), np.nan)
+
+    def damping_text(value: float) -> str:
+        return f"{value:.2f}" if not abs(value) < 0.095 else f"{value:.2g}"  # 0.005 must not read 0.00
+
+    low, high = f"{frequencies.min():.2f}", f"{frequencies.max():.2f}"
+    frequency = low if low == high else f"{low}-{high}"
+    low, high = damping_text(np.nanmin(dampings)) if np.any(np.isfinite(dampings)) else "nan", \
+        damping_text(np.nanmax(dampings)) if np.any(np.isfinite(dampings)) else "nan"
+    damping = low if low == high else f"{low} to {high}"
+    return f"{frequency} Hz, \u03b6 = {damping}"
+
+
 def _place_labels(ax: Axes, notes: Sequence[Any], anchors: np.ndarray) -> None:
     """Move each pole's label to the first place beside its pole where it overlaps no other label or pole.
 
     The figure is laid out first (no pixels drawn), so the places are those
     of the page as saved; a label that fits nowhere takes the place of least
-    overlap. Labels with the same text on the same spot (the same mode of
-    several models) are drawn once.
+    overlap.
     """
     fig = ax.figure
     fig.draw_without_rendering()
@@ -638,14 +671,9 @@ def _place_labels(ax: Axes, notes: Sequence[Any], anchors: np.ndarray) -> None:
     points = to_pixels(np.c_[anchors.real, anchors.imag]) if len(anchors) else np.empty((0, 2))
     markers = [Bbox.from_extents(x - half, y - half, x + half, y + half) for x, y in points]
     placed: list[Any] = []
-    seen: list[tuple[str, np.ndarray]] = []
     order = sorted(notes, key=lambda note: -to_pixels(note.xy)[1])
     for note in order:
         where = to_pixels(note.xy)
-        if any(text == note.get_text() and np.hypot(*(where - spot)) < 2 * half for text, spot in seen):
-            note.remove()
-            continue
-        seen.append((note.get_text(), where))
         others = [m for m, p in zip(markers, points) if np.hypot(*(p - where)) > 0.5] + placed
         best, best_cost = _LABEL_PLACES[0], np.inf
         for place in _LABEL_PLACES:
@@ -685,8 +713,9 @@ def plot_eigenvalue_map(
     The axes reach as far as :func:`eigenvalue_view` says: far enough to
     separate the poles that matter. Eigenvalues beyond are drawn as open
     triangles at the edge, pointing their way, and counted and listed under
-    the real axis. Labels are placed where they overlap neither each other
-    nor a pole; the legend sits beside the map.
+    the real axis. The same mode of several models (within 8 %) gets one
+    label, its frequency and damping as a range; labels are placed where
+    they overlap neither each other nor a pole; the legend sits beside the map.
 
     Parameters
     ----------
@@ -712,7 +741,7 @@ def plot_eigenvalue_map(
         return np.isfinite(values) & (np.abs(values) <= reach * (1 + 1e-9))
 
     x_limits, y_limits = _view_limits(everything[in_view(everything)], reach)
-    notes, anchors, beyond, outlines = [], [], [], []
+    notes, anchors, beyond, outlines, labelled = [], [], [], [], []
     for k, (label, values) in enumerate(eigenvalues.items()):
         model = models[label]
         inside = in_view(values)
@@ -729,14 +758,14 @@ def plot_eigenvalue_map(
                     markeredgecolor=color, markeredgewidth=1.4)
             beyond.append(value)
         anchors.extend(values[inside])
-        if annotate:
-            for value in values[inside & (values.imag >= 0)]:
-                magnitude = abs(value)
-                damping = -value.real / magnitude if magnitude > 0 else float("nan")
-                note = ax.annotate(f"{magnitude / (2 * np.pi):.2f} Hz, \u03b6 = {damping:.2f}",
-                                   (value.real, value.imag), textcoords="offset points", xytext=(6, 4), fontsize=8)
-                note.set_in_layout(False)  # placed after the layout, inside the frame
-                notes.append(note)
+        labelled.extend(values[inside & (values.imag >= 0)])
+    if annotate:
+        for members in _mode_clusters(np.asarray(labelled, dtype=complex), reach):
+            centre = complex(np.mean(members))
+            note = ax.annotate(_mode_text(members), (centre.real, centre.imag), textcoords="offset points",
+                               xytext=(6, 4), fontsize=8)
+            note.set_in_layout(False)  # placed after the layout, inside the frame
+            notes.append(note)
     if reference is not None:
         inside = in_view(reference)
         ax.plot(reference[inside].real, reference[inside].imag, linestyle="none", marker="o", markersize=10,
