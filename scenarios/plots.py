@@ -663,6 +663,8 @@ def _place_labels(ax: Axes, notes: Sequence[Any], anchors: np.ndarray) -> None:
     overlap.
     """
     fig = ax.figure
+    if not hasattr(fig.canvas, "get_renderer"):
+        return  # a caller's figure without a pixel canvas: its labels keep their first place
     fig.draw_without_rendering()
     renderer = fig.canvas.get_renderer()
     frame = ax.get_window_extent(renderer)
