@@ -211,7 +211,7 @@ def plot_convergence(
     ax_fit, ax_trace = (_style(ax) for ax in fig.subplots(2, 1, sharex=True))
     if fit.shape[1] > 1:
         for name, column in zip(_names(output_names, fit.shape[1], "y"), fit.T):
-            ax_fit.plot(x, column, linewidth=0.8, alpha=0.7, label=f"filter, {name}")
+            ax_fit.plot(x, column, linewidth=0.8, alpha=0.7, label=f"filter, {channel_label(name)}")
     ax_fit.plot(x, fit.mean(axis=1), color="k", linewidth=1.8,
                 label="filter" + (" (mean)" if fit.shape[1] > 1 else ""))
     if fit_continuous is not None:
@@ -631,8 +631,8 @@ def plot_residual_autocorrelation(
         ax.vlines(lags, 0.0, r[:, i], color="k", linewidth=1.2)
         ax.plot(lags, r[:, i], linestyle="none", marker="o", markersize=3, color="k", label="autocorrelation")
         outside = np.count_nonzero(np.abs(r[1:, i]) > band)
-        ax.set_ylabel(f"{names[i]} (-)")
-        ax.set_title(f"{names[i]}: {outside} of {max_lag} lags outside the band", fontsize=10)
+        ax.set_ylabel("autocorrelation (-)")
+        ax.set_title(f"{channel_label(names[i])}: {outside} of {max_lag} lags outside the band", fontsize=10)
     _figure_legend(fig, axes[0])
     axes[-1].set_xlabel("lag (s)" if dt else "lag (samples)")
     fig.suptitle(title)
