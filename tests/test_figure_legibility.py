@@ -173,6 +173,23 @@ def test_channel_names_of_a_headerless_table_read_as_columns(robot_arm_figures):
     assert robot_arm_figures["fits_validation"].axes[0].get_ylabel() == "column 2"
 
 
+def test_a_long_real_record_is_drawn_as_its_envelope_and_kept_whole(tmp_path):
+    """The DaISy heat exchanger: 4,000 rows, of which 70 % identify; more samples than a report axis has pixels."""
+    archive = tmp_path / "exchanger.h5"
+    assert main(["identify", str(DATA / "exchanger" / "exchanger.dat"), "--inputs", "2", "--outputs", "3",
+                 "--dt", "1", "--order", "2", "--method", "n4sid", "--validation", "0.3", "--quiet",
+                 "--out", str(archive)]) == 0
+    stored = read_archive(archive)
+    record = stored.records["identification"]
+    assert record.n_samples + stored.records["validation"].n_samples == 4000  # every row kept in the archive
+    figures = archive_figures(stored)
+    measured = figures["fits_identification"].axes[0].get_lines()[0]
+    drawn = np.asarray(measured.get_ydata())
+    assert len(drawn) < record.n_samples and len(drawn) <= 2002  # thinned for the page ...
+    assert drawn.max() == record.y[:, 0].max() and drawn.min() == record.y[:, 0].min()  # ... with its extremes
+    _assert_legible(figures)
+
+
 @pytest.mark.slow
 def test_every_figure_of_the_handling_report_is_legible():
     _assert_legible(handling_figures(read_archive(DATA / "archives" / "handling_study.h5")))
