@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from .plots import _legend, _style, new_figure
+from .figure_style import _legend, _style, new_figure
 
 __all__ = ["envelope_figures", "write_envelope_report"]
 

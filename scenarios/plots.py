@@ -15,25 +15,41 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 from matplotlib.axes import Axes
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
-import scipy.linalg
-from scipy.stats import chi2
+from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
 from vehid.identification.errors import InputError
 from vehid.identification.metrics import percentage_explanation
 from vehid.identification.residuals import autocorrelation as residual_autocorrelation
 from vehid.identification.uncertainty import frequency_response as response_band
 
+# The shared style and the pole map live in their own modules; they stay part of this module's API.
+from .figure_style import (  # noqa: F401
+    REPORT_SIZE,
+    _figure,
+    _figure_legend,
+    _known_unit,
+    _legend,
+    _style,
+    _with_unit,
+    channel_label,
+    display_samples,
+    new_figure,
+)
+from .pole_map import ELLIPSE_SCALE, eigenvalue_view, plot_eigenvalue_map  # noqa: F401
+
 __all__ = [
     "REPORT_SIZE",
     "new_figure",
+    "channel_label",
+    "display_samples",
     "parameter_groups",
     "plot_parameter_history",
     "plot_convergence",
     "plot_order_study",
     "plot_time_fits",
     "plot_splines",
+    "eigenvalue_view",
     "plot_eigenvalue_map",
     "frequency_response",
     "plot_bode",
@@ -43,13 +59,6 @@ __all__ = [
     "plot_innovation_consistency",
 ]
 
-#: Default figure size in inches: legible on an A4 page at 100 % with 9-10 pt text.
-REPORT_SIZE = (7.0, 4.5)
-
-_LEGEND_SIZE = 9  # [pt]
-_TICK_SIZE = 9  # [pt]
-_MAX_LEGEND_ENTRIES = 12  # more lines than this get no legend (it would hide the data)
-
 # Axis labels of the parameter groups of a modal model (ModalStructure.parameter_names).
 _GROUP_LABELS = {
     "modal": "sigma, omega (rad/s)",
@@ -58,33 +67,6 @@ _GROUP_LABELS = {
     "D": "d_ij (output/input)",
 }
 _GROUP_PATTERNS = (("modal", r"(sigma|omega)\d+"), ("B", r"b\d+"), ("C", r"c\d+"), ("D", r"d\d+"))
-
-
-def new_figure(size: tuple[float, float] = REPORT_SIZE) -> Figure:
-    """An empty figure with an Agg canvas and constrained layout (no pyplot)."""
-    fig = Figure(figsize=size, layout="constrained")
-    FigureCanvasAgg(fig)
-    return fig
-
-
-def _figure(fig: Figure | None, size: tuple[float, float]) -> Figure:
-    if fig is None:
-        return new_figure(size)
-    if fig.axes:
-        raise InputError("pass an empty figure (fig.clear() first): this plot lays out its own axes")
-    return fig
-
-
-def _style(ax: Axes) -> Axes:
-    ax.grid(True, alpha=0.3)
-    ax.tick_params(labelsize=_TICK_SIZE)
-    return ax
-
-
-def _legend(ax: Axes, **options: Any) -> None:
-    handles, labels = ax.get_legend_handles_labels()
-    if 0 < len(handles) <= _MAX_LEGEND_ENTRIES:
-        ax.legend(**{"fontsize": _LEGEND_SIZE, **options})
 
 
 def _matrix(name: str, value: Any, columns: int | None = None) -> np.ndarray:
@@ -181,7 +163,7 @@ def plot_parameter_history(
             ax.plot(x, values[:, index], label=names[index], linewidth=1.2)
         ax.set_ylabel(_GROUP_LABELS.get(label, "value"), fontsize=10)
         ax.set_title(f"{label} ({len(indices)} parameters)" if label in _GROUP_LABELS else label, fontsize=10)
-        _legend(ax, loc="center left", bbox_to_anchor=(1.0, 0.5), ncols=1 + len(indices) // 7)
+        _legend(ax, loc="center left", bbox_to_anchor=(1.02, 0.5), ncols=1 + len(indices) // 7)
     axes[-1].set_xlabel(x_label)
     fig.suptitle(title)
     return fig
@@ -229,7 +211,7 @@ def plot_convergence(
     ax_fit, ax_trace = (_style(ax) for ax in fig.subplots(2, 1, sharex=True))
     if fit.shape[1] > 1:
         for name, column in zip(_names(output_names, fit.shape[1], "y"), fit.T):
-            ax_fit.plot(x, column, linewidth=0.8, alpha=0.7, label=f"filter, {name}")
+            ax_fit.plot(x, column, linewidth=0.8, alpha=0.7, label=f"filter, {channel_label(name)}")
     ax_fit.plot(x, fit.mean(axis=1), color="k", linewidth=1.8,
                 label="filter" + (" (mean)" if fit.shape[1] > 1 else ""))
     if fit_continuous is not None:
@@ -240,7 +222,7 @@ def plot_convergence(
                     label="simulated model" + (" (mean)" if continuous.shape[1] > 1 else ""))
     ax_fit.set_ylabel("R (%)")
     ax_fit.set_title("(a) percentage explanation R (eq. 17)", fontsize=10)
-    _legend(ax_fit, loc="lower right")
+    _legend(ax_fit)
     ax_trace.semilogy(x, trace, color="tab:blue", linewidth=1.8, label="trace(P)")
     if min_eig_p is not None:
         smallest = np.asarray(min_eig_p, dtype=float).ravel()
@@ -251,7 +233,7 @@ def plot_convergence(
     ax_trace.set_ylabel("parameter covariance (-)")
     ax_trace.set_xlabel("pass")
     ax_trace.set_title("(b) trace of the parameter covariance P", fontsize=10)
-    _legend(ax_trace, loc="upper right")
+    _legend(ax_trace)
     fig.suptitle(title)
     return fig
 
@@ -300,7 +282,7 @@ def plot_order_study(
             for n, values in zip(orders, series):
                 values = np.asarray(values, dtype=float).ravel()
                 ax.plot(np.arange(1, values.size + 1), values, linewidth=1.4, label=f"n = {n}")
-            _legend(ax, loc="center left", bbox_to_anchor=(1.0, 0.5))
+            _legend(ax, loc="center left", bbox_to_anchor=(1.02, 0.5))
         else:
             ax.plot(orders, np.asarray(series, dtype=float), marker="o", linewidth=1.4)
             ax.set_xticks(orders)
@@ -349,7 +331,9 @@ def plot_time_fits(
     -------
     Figure
         One axis per output holding the measurement (black) and one line per
-        prediction, labelled with its R (eq. 17) for that output.
+        prediction, labelled with its R (eq. 17) for that output, the legend
+        beside the axis. Long records are drawn thinned to a min/max envelope
+        (:func:`display_samples`); R is computed from every sample.
     """
     t = np.asarray(t, dtype=float).ravel()
     y = _matrix("y_measured", y_measured)
@@ -370,16 +354,16 @@ def plot_time_fits(
     axes = fig.subplots(n_y, 1, sharex=True, squeeze=False)[:, 0]
     for i, ax in enumerate(axes):
         _style(ax)
-        ax.plot(t[shown], y[shown, i], color="k", linewidth=1.6, label="measured")
+        ax.plot(*display_samples(t[shown], y[shown, i]), color="k", linewidth=1.6, label="measured")
         for label, value in predicted.items():
             if scores is not None and label in scores:
                 fit, R = (np.ravel(np.asarray(part, dtype=float)) for part in scores[label])
                 text = f"{label} (NRMSE fit = {fit[i]:.2f} %, R = {R[i]:.2f} %)"
             else:
                 text = f"{label} (R = {fits[label][i]:.2f} %)"
-            ax.plot(t[shown], value[shown, i], linewidth=1.2, label=text)
-        ax.set_ylabel(f"{names[i]} ({units[i]})")
-        _legend(ax, loc="upper right")
+            ax.plot(*display_samples(t[shown], value[shown, i]), linewidth=1.2, label=text)
+        ax.set_ylabel(_with_unit(channel_label(names[i]), units[i]))
+        _legend(ax)
     axes[-1].set_xlabel("time (s)")
     fig.suptitle(title)
     return fig
@@ -448,87 +432,9 @@ def plot_splines(
         ax.set_xlabel(x_labels[i])
         ax.set_ylabel(labels[i])
         ax.set_title(labels[i], fontsize=10)
-    _legend(axes[0], loc="best")
+    _figure_legend(fig, axes[0])
     fig.suptitle(title)
     return fig
-
-
-def _eigenvalues(model: Any) -> np.ndarray:
-    if hasattr(model, "eigenvalues"):
-        return np.asarray(model.eigenvalues(), dtype=complex)
-    if hasattr(model, "A"):
-        return np.linalg.eigvals(np.asarray(model.A, dtype=float))
-    return np.asarray(model, dtype=complex).ravel()
-
-
-def plot_eigenvalue_map(
-    models: Mapping[str, Any],
-    reference_eigenvalues: Any = None,
-    *,
-    annotate: bool = True,
-    title: str = "Eigenvalues of the identified models",
-    ax: Axes | None = None,
-    confidence: bool = True,
-) -> Figure:
-    """Eigenvalues in the complex plane, each oscillatory mode annotated with frequency and damping.
-
-    Models that carry a parameter covariance get the 95 % confidence ellipse
-    of each eigenvalue (delta method; chi-square with 2 degrees of freedom,
-    a line along the real axis for a real pole) unless ``confidence`` is False.
-
-    Parameters
-    ----------
-    models : mapping of str to ModalModel, (A, B, C, D)-like or eigenvalue array
-        Anything with ``eigenvalues()``, an ``A`` attribute, or the eigenvalues.
-    reference_eigenvalues : array_like of complex, optional
-        The source model's eigenvalues, drawn as open black circles.
-    annotate : bool
-        Label each eigenvalue with non-negative imaginary part by its natural
-        frequency ``|lambda| / 2 pi`` (Hz) and damping ratio ``-Re(lambda)/|lambda|``.
-    """
-    fig = new_figure(REPORT_SIZE) if ax is None else ax.figure
-    ax = _style(fig.subplots() if ax is None else ax)
-    markers = "xs^Dv<>p"
-    for k, (label, model) in enumerate(models.items()):
-        values = _eigenvalues(model)
-        points = ax.plot(values.real, values.imag, linestyle="none", marker=markers[k % len(markers)],
-                         markersize=7, markeredgewidth=1.6, label=label)
-        if confidence and getattr(model, "parameter_covariance", None) is not None:
-            for mode in model.uncertainty().modes:
-                _ellipse(ax, mode.eigenvalue, mode.eigenvalue_covariance, points[0].get_color())
-        if annotate:
-            for value in values[values.imag >= 0]:
-                magnitude = abs(value)
-                damping = -value.real / magnitude if magnitude > 0 else float("nan")
-                ax.annotate(f"{magnitude / (2 * np.pi):.2f} Hz, \u03b6 = {damping:.2f}", (value.real, value.imag),
-                            textcoords="offset points", xytext=(6, 4 + 10 * k), fontsize=9)
-    if reference_eigenvalues is not None:
-        reference = np.asarray(reference_eigenvalues, dtype=complex).ravel()
-        ax.plot(reference.real, reference.imag, linestyle="none", marker="o", markersize=10,
-                markerfacecolor="none", markeredgecolor="k", label="reference")
-    ax.axvline(0.0, color="k", linewidth=0.8)
-    ax.axhline(0.0, color="k", linewidth=0.8)
-    ax.set_xlabel("real part (1/s)")
-    ax.set_ylabel("imaginary part (rad/s)")
-    ax.set_title(title)
-    _legend(ax, loc="best")
-    return fig
-
-
-ELLIPSE_SCALE = float(np.sqrt(chi2.ppf(0.95, 2)))  # 95 % region of a 2-D normal, in standard deviations
-
-
-def _ellipse(ax: Axes, value: complex, covariance: np.ndarray, color: Any) -> None:
-    """The 95 % ellipse of an eigenvalue (and its mirror image for a pair) from the covariance of (re, im)."""
-    if not np.all(np.isfinite(covariance)):
-        return
-    values, vectors = scipy.linalg.eigh(covariance)  # numpy's stalls under load with this BLAS
-    angle = np.linspace(0.0, 2 * np.pi, 60)
-    circle = np.vstack([np.cos(angle), np.sin(angle)])
-    outline = vectors @ (ELLIPSE_SCALE * np.sqrt(np.maximum(values, 0.0))[:, None] * circle)
-    ax.plot(value.real + outline[0], value.imag + outline[1], color=color, linewidth=0.9)
-    if value.imag != 0:
-        ax.plot(value.real + outline[0], -value.imag - outline[1], color=color, linewidth=0.9)
 
 
 def _state_space(model: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -585,7 +491,7 @@ def plot_bode(
     input_index: int = 0,
     output_names: Sequence[str] | None = None,
     output_units: Sequence[str] | None = None,
-    input_name: str = "u",
+    input_name: str | None = None,
     input_unit: str = "-",
     frequencies: Any = None,
     title: str | None = None,
@@ -604,9 +510,11 @@ def plot_bode(
     reference : ModalModel or (A, B, C, D), optional
         E.g. the linearised source model; drawn black dashed.
     output_names, output_units : sequence of str, optional
-        Default: the first model's output names, units ``-``.
-    input_name, input_unit : str
-        For the title and the magnitude's unit.
+        Default: the first model's output names; units unknown (``-``).
+    input_name, input_unit : str, optional
+        For the title and the magnitude's unit; default the first model's
+        name of input ``input_index``, unit unknown. A unit that is unknown
+        (``-``) is left out of the labels rather than printed as ``(-)``.
     frequencies : array_like, optional
         In Hz; default 200 points from 0.05 to 25 Hz, log-spaced.
 
@@ -634,6 +542,9 @@ def plot_bode(
         output_names = getattr(first, "output_names", None)
     names = _names(output_names, n_y, "y")
     units = _names(output_units, n_y, "unit") if output_units is not None else ["-"] * n_y
+    if input_name is None:
+        known = getattr(next(iter(models.values()), None), "input_names", None)
+        input_name = known[input_index] if known is not None and len(known) > input_index else f"u{input_index + 1}"
     fig = _figure(fig, (max(REPORT_SIZE[0], 2.6 * n_y), REPORT_SIZE[1]))
     axes = fig.subplots(2, n_y, sharex=True, squeeze=False)
     for i in range(n_y):
@@ -650,13 +561,37 @@ def plot_bode(
                 spread = band.normal_quantile() * band.phase_deg_std[:, i, input_index]
                 ax_phase.fill_between(frequencies, phase - spread, phase + spread, color=lines[0].get_color(),
                                       alpha=0.2, linewidth=0)
-        ax_mag.set_title(names[i], fontsize=10)
-        ax_mag.set_ylabel(f"|G| ({units[i]}/{input_unit})")
+        _log_ticks(ax_mag)
+        ax_mag.set_title(channel_label(names[i]), fontsize=10)
+        ax_mag.set_ylabel(_gain_label(units[i], input_unit))
         ax_phase.set_ylabel("phase (deg)")
         ax_phase.set_xlabel("frequency (Hz)")
-    _legend(axes[0, 0], loc="best")
-    fig.suptitle(title or f"Frequency response from {input_name}")
+    _figure_legend(fig, axes[0, 0])
+    fig.suptitle(title or f"Frequency response from {channel_label(input_name)}")
     return fig
+
+
+def _log_ticks(ax: Axes) -> None:
+    """Tick labels on a log y axis that never collide: powers of ten, or 1-2-5 steps where less than two decades show.
+
+    Matplotlib labels the minor ticks of a short log axis (3e-1, 4e-1, ...),
+    which run into each other on a narrow panel.
+    """
+    low, high = ax.get_ylim()
+    if low > 0 and np.log10(high / low) < 2.0:
+        ax.yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+        ax.yaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
+    ax.yaxis.set_minor_formatter(NullFormatter())
+
+
+def _gain_label(output_unit: str, input_unit: str) -> str:
+    """``|G| (out/in)``, saying so where a unit is unknown instead of printing ``(-/-)``."""
+    output_unit, input_unit = _known_unit(output_unit), _known_unit(input_unit)
+    if not (output_unit or input_unit):
+        return "|G|"
+    if not input_unit:
+        return f"|G| ({output_unit} per input unit)"
+    return f"|G| ({output_unit or 'output unit'}/{input_unit})"
 
 
 def autocorrelation(residuals: Any, max_lag: int) -> np.ndarray:
@@ -705,9 +640,9 @@ def plot_residual_autocorrelation(
         ax.vlines(lags, 0.0, r[:, i], color="k", linewidth=1.2)
         ax.plot(lags, r[:, i], linestyle="none", marker="o", markersize=3, color="k", label="autocorrelation")
         outside = np.count_nonzero(np.abs(r[1:, i]) > band)
-        ax.set_ylabel(f"{names[i]} (-)")
-        ax.set_title(f"{names[i]}: {outside} of {max_lag} lags outside the band", fontsize=10)
-        _legend(ax, loc="upper right")
+        ax.set_ylabel("autocorrelation (-)")
+        ax.set_title(f"{channel_label(names[i])}: {outside} of {max_lag} lags outside the band", fontsize=10)
+    _figure_legend(fig, axes[0])
     axes[-1].set_xlabel("lag (s)" if dt else "lag (samples)")
     fig.suptitle(title)
     return fig
@@ -733,11 +668,17 @@ def plot_residual_tests(tests: Any, *, dt: float | None = None, title: str = "Re
     """
     n_y = len(tests.output_names)
     scale = dt if dt else 1.0
-    fig = _figure(fig, (REPORT_SIZE[0], max(REPORT_SIZE[1], 1.0 + 2.0 * n_y)))
+    fig = _figure(fig, (REPORT_SIZE[0], max(REPORT_SIZE[1], 1.2 + 1.9 * n_y)))
     axes = fig.subplots(n_y, 2, squeeze=False)
     band = tests.bound
     level = f"{100 * tests.level:g} %"
     lags = np.arange(-tests.lags, tests.lags + 1) * scale
+    # What each column shows is said once, above it; each panel's own title
+    # keeps to its verdict, so that two titles side by side fit their columns.
+    axes[0, 0].annotate("autocorrelation (Ljung-Box)", (0.5, 1.0), xycoords="axes fraction",
+                        xytext=(0, 18), textcoords="offset points", ha="center", va="bottom", fontsize=10)
+    axes[0, 1].annotate("cross-correlation with the inputs", (0.5, 1.0), xycoords="axes fraction",
+                        xytext=(0, 18), textcoords="offset points", ha="center", va="bottom", fontsize=10)
     for i, name in enumerate(tests.output_names):
         left, right = _style(axes[i, 0]), _style(axes[i, 1])
         for ax in (left, right):
@@ -745,15 +686,15 @@ def plot_residual_tests(tests: Any, *, dt: float | None = None, title: str = "Re
         auto = tests.autocorrelation[1:, i]
         left.vlines(np.arange(1, tests.lags + 1) * scale, 0.0, auto, color="k", linewidth=1.2)
         verdict = "white" if tests.white[i] else "NOT white"
-        left.set_title(f"{name}: autocorrelation, Ljung-Box p = {tests.residual_whiteness_p[i]:.3g} ({verdict})",
-                       fontsize=9)
+        left.set_title(f"p = {tests.residual_whiteness_p[i]:.3g}: {verdict}", fontsize=9)
+        left.set_ylabel(channel_label(name), fontsize=9)
         for j, input_name in enumerate(tests.input_names):
-            right.plot(lags, tests.cross_correlation[:, j, i], marker="o", markersize=2, linewidth=0.8, label=input_name)
+            right.plot(lags, tests.cross_correlation[:, j, i], marker="o", markersize=2, linewidth=0.8,
+                       label=channel_label(input_name))
         independent = "independent" if tests.independent[i] else "NOT independent"
-        right.set_title(f"{name}: input cross-correlation, p = {tests.input_correlation_p[i]:.3g} ({independent})",
-                        fontsize=9)
-        if len(tests.input_names) > 1:
-            _legend(right, loc="upper right", fontsize=7)
+        right.set_title(f"p = {tests.input_correlation_p[i]:.3g}: {independent}", fontsize=9)
+        if len(tests.input_names) > 1 and i == 0:
+            _legend(right, fontsize=7)
     for ax in axes[-1]:
         ax.set_xlabel("lag (s)" if dt else "lag (samples)")
     fig.suptitle(f"{title} ({level} bands, N = {tests.samples})")
@@ -785,5 +726,5 @@ def plot_innovation_consistency(nis: Any, band: tuple[float, float], *, title: s
     ax.set_xlabel("pass")
     ax.set_ylabel("mean e' R^-1 e (-)")
     ax.set_title(title)
-    _legend(ax, loc="best")
+    _legend(ax)
     return fig

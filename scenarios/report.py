@@ -271,6 +271,25 @@ def _model_prediction(model: Any, record: Any, rule: ScoringRule = ScoringRule()
     return Prediction(record, predicted, scores.fit, scores.R)
 
 
+def _channel_units(model: Any, records: Mapping[str, Any]) -> dict[str, Any]:
+    """The Bode plot's channel names and units: the model's names, with units from a record that has those channels."""
+    inputs = tuple(getattr(model, "input_names", ()) or ())
+    outputs = tuple(getattr(model, "output_names", ()) or ())
+    for record in records.values():
+        if inputs and outputs and set(inputs) <= set(record.input_names) and set(outputs) <= set(record.output_names):
+            input_units = dict(zip(record.input_names, record.input_units))
+            output_units = dict(zip(record.output_names, record.output_units))
+            return {"input_name": inputs[0], "input_unit": input_units[inputs[0]],
+                    "output_names": list(outputs), "output_units": [output_units[name] for name in outputs]}
+    # A model that kept no channel names (u1, y1, ...) describes the record it has the size of, as in the time fits.
+    sizes = (np.shape(model.B)[1], np.shape(model.C)[0])
+    for record in records.values():
+        if (record.n_u, record.n_y) == sizes:
+            return {"input_name": record.input_names[0], "input_unit": record.input_units[0],
+                    "output_names": list(record.output_names), "output_units": list(record.output_units)}
+    return {}
+
+
 def _most_divergent(parameters: np.ndarray) -> np.ndarray:
     """The history of the parameter that moved most, relative to its size, over the last half of the passes."""
     half = parameters.shape[0] // 2
@@ -338,7 +357,8 @@ def archive_figures(archive: Any, *, window: tuple[float, float] | None = None, 
     if models:
         figures["eigenvalues"] = plots.plot_eigenvalue_map(models)
         n_y = np.shape(next(iter(models.values())).C)[0]
-        figures["bode"] = plots.plot_bode({k: m for k, m in models.items() if np.shape(m.C)[0] == n_y})
+        figures["bode"] = plots.plot_bode({k: m for k, m in models.items() if np.shape(m.C)[0] == n_y},
+                                          **_channel_units(next(iter(models.values())), archive.records))
     rule = _scoring_rule(archive)
     for record_name, record in archive.records.items():
         predictions: dict[str, np.ndarray] = {}
