@@ -55,7 +55,7 @@ def _write_summary(run: h5py.Group, result: IEKFResult) -> None:
     run.attrs["dt"] = result.dt
     run.attrs["stop_reason"] = result.stop_reason
     run.attrs["seconds"] = result.seconds
-    # how the run started (its start model among it): a resumed run judges its model against the same start
+    # how the run started, its start parameters included: a resumed run judges its model against the same start
     run.attrs["meta_json"] = json.dumps(to_jsonable(result.meta), allow_nan=False)
 
 

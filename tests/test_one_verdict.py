@@ -120,24 +120,31 @@ def test_an_archived_run_keeps_its_start_exactly(tmp_path):
         {key: value for key, value in result.meta.items() if key != "start_parameters"}
 
 
-def test_the_report_scores_the_robot_arm_as_the_command_does(tmp_path, capsys):
+# Hold-out fits measured on the raw record (tests/test_real_data.py: IEKF 96.87 %, N4SID 96.80 %), less
+# that file's 2-point margin: a floor independent of the report.
+ARM_FLOORS = [pytest.param("n4sid", 96.80 - 2.0, id="n4sid"),
+              pytest.param("iekf", 96.87 - 2.0, id="iekf", marks=pytest.mark.slow)]  # p tuning and 26 passes
+
+
+@pytest.mark.parametrize("method, floor", ARM_FLOORS)
+def test_the_report_scores_the_robot_arm_as_the_command_does(tmp_path, capsys, method, floor):
     """The lightly damped arm starts mid-motion: from rest its model runs out of phase (23 % in the old report)."""
     archive = tmp_path / "arm.h5"
     status, out, _ = _vehid(capsys, "identify", str(ROBOT_ARM), "--inputs", "1", "--outputs", "2", "--dt", "1",
-                            "--validation", "0.3", "--method", "n4sid", "--out", str(archive), "--json", "--quiet")
+                            "--validation", "0.3", "--method", method, "--out", str(archive), "--json", "--quiet")
     command = json.loads(out)
     assert status == 0
-    # the published comparator fit (tests/test_real_data.py: 96.80 %) less its 2-point margin: independent of the report
-    assert command["validation_fit_percent"][0] > 94.8
+    assert command["validation_fit_percent"][0] > floor
     stored = read_archive(archive)
-    row = archive_table(stored)[0]
+    row = next(row for row in archive_table(stored) if row["returned"])  # the model the command returned
     # the same functions on the same samples read back exactly: only summation order could differ
     assert row["NRMSE fit validation (%)"] == pytest.approx(command["validation_fit_percent"][0], abs=1e-9)
     assert row["R validation (%)"] == pytest.approx(command["validation_R"][0], abs=1e-9)
     assert row["NRMSE fit identification (%)"] == pytest.approx(command["estimation_fit_percent"][0], abs=1e-9)
-    assert row["returned"] is True
     figure = archive_figures(stored)["fits_validation"]
-    measured, drawn = (np.asarray(line.get_ydata(), dtype=float) for line in figure.axes[0].get_lines()[:2])
+    lines = {line.get_label().split(" (")[0]: np.asarray(line.get_ydata(), dtype=float)
+             for line in figure.axes[0].get_lines()}
+    measured, drawn = lines["measured"], lines[row["run"]]
     # the drawn curve is the one whose fit is stated: its own NRMSE fit equals the command's
     assert nrmse_fit(measured[:, None], drawn[:, None])[0] == pytest.approx(command["validation_fit_percent"][0],
                                                                            abs=1e-9)
@@ -147,7 +154,8 @@ def test_the_report_scores_the_robot_arm_as_the_command_does(tmp_path, capsys):
 
 
 def test_a_run_without_a_stored_history_shows_the_passes_the_command_counted(tmp_path):
-    """The spline model is archived as a model only; its row said "passes 0" after 30 passes."""
+    """An archive whose spline run holds its model only (as before its passes were kept): its row said "passes 0"
+    after 30 passes; the command's own count is shown."""
     data = _record(10.0)
     with write_archive(tmp_path / "run.h5", kind="identification") as handle:
         write_record(handle, "identification", data)

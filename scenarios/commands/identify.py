@@ -135,6 +135,7 @@ def _resume(args: argparse.Namespace):
         preparation = archived_preparation(archive)
         stored = read_records(archive)
         decisions = _read_decisions(archive)
+        judged = VERDICT in archive.attrs
     records = record_series(stored, RECORD_PREFIX)
     if not records:
         raise InputError(f"{args.resume} holds no identification record to resume on")
@@ -146,6 +147,9 @@ def _resume(args: argparse.Namespace):
     else:  # an archive written before preparations were kept
         load = lambda path: read_record(path, settings_from_args(args))  # noqa: E731
     plan = workflow.make_plan(args, records, load, held_out=held_out, preparation=preparation)
+    if judged:  # the run goes on: a verdict on fewer passes must not outlive it (a kill would leave it stale)
+        with update_archive(args.resume) as archive:
+            del archive.attrs[VERDICT]
     return plan, previous.structure, options, previous, decisions
 
 
@@ -342,6 +346,7 @@ def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None)
 
 
 SCORING_RULE = "scoring_rule"  # key of the archived summary only: how every model of the run is scored
+VERDICT = "summary_json"  # root attribute, as a study keeps its summary
 
 
 def _archive_verdict(archive, summary: dict, args, *, returned: str) -> None:
@@ -353,7 +358,7 @@ def _archive_verdict(archive, summary: dict, args, *, returned: str) -> None:
     """
     verdict = {**summary, SCORING_RULE: {"initial_state": args.initial_state, "horizon": args.horizon,
                                          "returned_run": returned}}
-    archive.attrs["summary_json"] = json.dumps(to_jsonable(verdict), allow_nan=False)
+    archive.attrs[VERDICT] = json.dumps(to_jsonable(verdict), allow_nan=False)
 
 
 def _run_order_search(args, plan, options) -> tuple[dict, str]:
