@@ -248,8 +248,8 @@ def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None)
                                          "seconds": summary["seconds"]}])
     allow_unstable = bool(getattr(args, "allow_unstable", False)) or (
         result is not None and result.options.allow_unstable)
-    start_fit, start_moved = workflow.start_of(result, plan.records) if result is not None and not start_returned \
-        else (None, None)
+    # modes that never left their start are a problem of the run, whichever of the two models is returned
+    start_fit, start_moved = workflow.start_of(result, plan.records) if result is not None else (None, None)
     summary["notes"] = workflow.decision_notes(summary)  # choices made for the user: said once, not warnings
     warnings = workflow.run_warnings(
         model=model, evaluation=evaluation, start_fit=start_fit,
