@@ -66,15 +66,15 @@ def test_the_better_of_filter_and_start_is_returned_at_every_order(order):
     assert margin["choice"] == "start" and "start_kept" in keys
     np.testing.assert_allclose(model.parameters, truth.parameters, rtol=1e-12)  # algebra: the start itself
     # the truth explains its own noise-free record (algebra and simulation rounding: above 99.9 %)
-    assert margin["score"] > 99.9 and margin["score"] > margin["runner_up_score"] + workflow.P_TOLERANCE
+    assert margin["score"] > 99.9 and margin["score"] > margin["runner_up_score"] + workflow.WHOLE_RECORD_MARGIN
 
     model, keys = workflow.returned_model(_run(_spoiled(truth), truth), plan, args, no_tuning, None)
     assert keys["decision_margins"]["model_returned"]["choice"] == "filter" and "start_kept" not in keys
     assert model is not None and np.allclose(model.parameters, truth.parameters, rtol=1e-12)
 
 
-def test_a_decision_within_its_tolerance_keeps_the_filter():
-    """Equal fits: the filter's model stands (the start must win by more than the tolerance)."""
+def test_a_decision_within_its_margin_keeps_the_filter():
+    """Equal fits: the filter's model stands (the start must win by more than the margin)."""
     truth = _truth(3)
     plan = SimpleNamespace(records=(_record(truth),))
     args = SimpleNamespace(horizon=None, initial_state="estimate")
@@ -111,7 +111,7 @@ def _check_margins(summary: dict) -> None:
     if returned is not None:
         assert returned["choice"] == summary.get("model_returned", "filter")
         if returned["choice"] == "filter":  # else the cross-validation may have decided
-            assert not returned["runner_up_score"] > returned["score"] + workflow.P_TOLERANCE
+            assert not returned["runner_up_score"] > returned["score"] + workflow.WHOLE_RECORD_MARGIN
     unstable = margins.get("open_loop_unstable")
     if unstable is not None:
         assert (unstable["choice"] == "unstable") == summary["open_loop_unstable"]["assumed"]
