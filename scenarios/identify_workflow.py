@@ -502,14 +502,20 @@ def returned_model(result: Any, plan: Plan, args: argparse.Namespace, tuning: PT
     ``start_kept``): one rule at every order and for every start, so that a
     model clearly worse than its start is never returned. Within that margin
     an in-sample gap is what fitting alone gives the start, and the
-    cross-validation decides.
+    cross-validation decides. A run that diverged on the whole record
+    returns an interrupted pass, which no cross-validation scored: there the
+    start needs to win by :data:`P_TOLERANCE` only.
     ``open_loop_unstable`` is :func:`assume_unstable`'s entry, where it weighed
     the plant; ``decision_margins`` holds each decision's margin.
     """
     keys: dict[str, Any] = {} if unstable is None else {"open_loop_unstable": unstable}
     comparison = start_beats_filter(result, plan, args)
+    diverged = str(getattr(result, "stop_reason", "")).startswith("diverged")
+    margin = P_TOLERANCE if diverged else WHOLE_RECORD_MARGIN
+    if comparison is not None:
+        comparison["margin"] = margin
     kept = comparison is not None and comparison["start_estimation_fit_percent"] > (
-        comparison["filter_estimation_fit_percent"] + WHOLE_RECORD_MARGIN)
+        comparison["filter_estimation_fit_percent"] + margin)
     if kept and not tuning.start_wins:
         keys["start_kept"] = {key: comparison[key] for key in ("start_estimation_fit_percent",
                                                                 "filter_estimation_fit_percent")}
@@ -580,8 +586,9 @@ def decision_margins(tuning: PTuning, unstable: dict[str, Any] | None, compariso
         how = f"{comparison['horizon']}-step prediction" if comparison.get("horizon") else "simulation"
         margins["model_returned"] = _margin(
             returned, fits[returned], other, fits[other], measure=f"estimation NRMSE fit % ({how})",
-            rule=f"the start where it beats the filter by more than {WHOLE_RECORD_MARGIN} points here, or by more "
-                 f"than {P_TOLERANCE} in cross-validation")
+            rule=f"the start where it beats the filter by more than {comparison.get('margin', WHOLE_RECORD_MARGIN)} "
+                 f"points here (the filter's run {'diverged' if comparison.get('margin') == P_TOLERANCE else 'finished'}),"
+                 f" or by more than {P_TOLERANCE} in cross-validation")
     return margins
 
 

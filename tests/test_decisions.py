@@ -73,6 +73,23 @@ def test_the_better_of_filter_and_start_is_returned_at_every_order(order):
     assert model is not None and np.allclose(model.parameters, truth.parameters, rtol=1e-12)
 
 
+def test_a_run_that_diverged_gives_way_to_a_slightly_better_start():
+    """An interrupted pass is no cross-validated result: the start wins it by the small tolerance."""
+    truth = _truth(3)
+    plan = SimpleNamespace(records=(_record(truth),))
+    args = SimpleNamespace(horizon=None, initial_state="estimate")
+    slightly = ModalModel.from_parameters(truth.structure, truth.parameters * 1.01)
+    finished, interrupted = _run(truth, slightly), _run(truth, slightly)
+    interrupted.stop_reason = "diverged at pass 2"
+    _, kept = workflow.returned_model(finished, plan, args, workflow.PTuning(1e-5, (), 0.0), None)
+    margin = kept["decision_margins"]["model_returned"]
+    gap = margin["runner_up_score"] - margin["score"]
+    # 1 % off every parameter: the truth fits its noise-free record better, by less than the finished run's margin
+    assert margin["choice"] == "filter" and workflow.P_TOLERANCE < gap < workflow.WHOLE_RECORD_MARGIN, gap
+    _, kept = workflow.returned_model(interrupted, plan, args, workflow.PTuning(1e-5, (), 0.0), None)
+    assert kept["decision_margins"]["model_returned"]["choice"] == "start"
+
+
 def test_a_decision_within_its_margin_keeps_the_filter():
     """Equal fits: the filter's model stands (the start must win by more than the margin)."""
     truth = _truth(3)
