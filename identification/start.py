@@ -211,8 +211,13 @@ def _subspace_start(u: np.ndarray, y: np.ndarray, structure: ModalStructure, sta
             note = "the subspace model has modes beyond the sample rate"
         else:
             return DataStart(model, "subspace")
-    except InputError as exc:
-        note = str(exc)
+    except InputError:
+        # the conversion's own message advises a library call; the start's note speaks of the model
+        pairs = int(np.sum(np.abs(continuous.imag) > 1e-9 * np.abs(continuous))) // 2
+        counts = (f" ({pairs} complex pairs and {structure.n - 2 * pairs} real poles where the structure has "
+                  f"{structure.n_complex_pairs} and {structure.n_real})"
+                  if (pairs, structure.n - 2 * pairs) != (structure.n_complex_pairs, structure.n_real) else "")
+        note = f"the subspace model does not fit the structure's modes{counts}"
     modes = place_eigenvalues(continuous, structure, stable=stable)
     model = fit_input_gains(structure, modes, u, y)
     return DataStart(model, "subspace eigenvalues", note)

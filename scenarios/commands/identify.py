@@ -18,12 +18,14 @@ signals normalised (--no-normalize to switch off), start values from a
 subspace model of the record (--start paper for the paper's), time counted
 in samples inside the filter and p per dominant time constant (--timescale
 seconds for the absolute behaviour), p chosen by cross-validation on the
-estimation data unless --p is given (the data start returned where it
-beats every p). Where the data start, left unstable, predicts the record
-clearly better than a stable one, the plant is treated as open-loop
-unstable (as --allow-unstable, with a warning; JSON `open_loop_unstable`),
-and the start is returned where the filter scores worse on the estimation
-data (`start_kept`). The summary gives the eigenvalues, the
+estimation data unless --p is given. Where the data start, left unstable,
+predicts the record clearly better than a stable one, the plant is treated
+as open-loop unstable (as --allow-unstable; JSON `open_loop_unstable`), and
+the data start is returned where it beats every p in cross-validation or
+the filter's model on the estimation data (`start_kept`), at every order.
+These choices are said once as notes (JSON `notes`), each with its margin
+(JSON `decision_margins`: choice, score, runner-up and its score). The
+summary gives the eigenvalues, the
 fit R (eq. 17) per output of the continuous model simulated exactly, NRMSE
 fits on estimation and validation data (--validation, --validation-file),
 whether the run converged, any warnings (--strict: the summary, then exit status 3), the
@@ -289,17 +291,16 @@ def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None)
                                          "seconds": summary["seconds"]}])
     allow_unstable = bool(getattr(args, "allow_unstable", False)) or (
         result is not None and result.options.allow_unstable)
-    start_fit, start_moved = workflow.start_of(result, plan.records) if result is not None and not start_returned \
-        else (None, None)
-    warnings = [workflow.unstable_warning(summary["open_loop_unstable"])] \
-        if summary.get("open_loop_unstable", {}).get("assumed") else []
-    warnings += ([workflow.START_KEPT if "start_kept" in summary else workflow.START_RETURNED] if start_returned else [])
-    warnings += workflow.run_warnings(
+    # modes that never left their start are a problem of the run, whichever of the two models is returned
+    start_fit, start_moved = workflow.start_of(result, plan.records) if result is not None else (None, None)
+    summary["notes"] = workflow.decision_notes(summary)  # choices made for the user: said once, not warnings
+    warnings = workflow.run_warnings(
         model=model, evaluation=evaluation, start_fit=start_fit,
         stop_reason=None if start_returned else (f"{summary['stop_reason']}: {summary['divergence']}"
                                                  if "divergence" in summary else summary.get("stop_reason")),
         final_fit=float(np.mean(summary["fit_percent"])) if result is not None else None,
-        allow_unstable=allow_unstable, start_moved=start_moved,
+        allow_unstable=allow_unstable, start_moved=start_moved, p_tuned=bool(summary.get("p_tried")),
+        fit_history=[record.mean_fit_continuous for record in result.history] if result is not None else None,
     )
     if evaluation.horizon is not None and args.horizon is None:
         summary["scoring_note"] = (f"the model is unstable: scored by {evaluation.horizon}-step-ahead prediction, "
@@ -370,7 +371,8 @@ def _run_order_search(args, plan, options) -> tuple[dict, str]:
     result = extra["result"]
     summary = {**_iekf_summary(result), **extra["tuning"].summary(), "orders_tried": rows,
                "seconds": sum(row["seconds"] for row in rows),
-               **{key: extra[key] for key in ("open_loop_unstable", "start_kept") if key in extra}}
+               **{key: extra[key] for key in ("open_loop_unstable", "start_kept", "decision_margins") if key in extra}}
+    summary["decision_margins"] = {**summary.get("decision_margins", {}), "order": workflow.order_margin(rows, chosen)}
     archive_path = Path(args.out) if args.out else None
     if archive_path is not None:
         from vehid.identification.iekf_archive import write_iekf_run
@@ -419,6 +421,7 @@ def _run_comparator(args: argparse.Namespace, plan) -> tuple[dict, str]:
     }
     if rows is not None:
         summary["orders_tried"] = rows
+        summary["decision_margins"] = {"order": workflow.order_margin(rows, chosen)}
     archive_path = _archive_comparator(args, plan, outcome) if args.out else None
     return _finish(args, plan, summary, model, archive_path=archive_path)
 

@@ -1,0 +1,194 @@
+"""The choices `vehid identify` makes by itself: one rule each, reported with their margins, stable.
+
+Properties checked: the model returned is the better scoring of the filter's
+model and its start at every order; each entry of ``decision_margins``
+agrees with the choice the run made and with its own rule; a healthy run
+warns of nothing; the data start's note names no library call; and on the
+public ball-and-beam record a slightly different hold-out fraction or a
+1e-6 relative perturbation of the samples does not switch the model class
+(the issue's case: 90.6 % at a fraction of 0.3, 23.2 % at 0.3333).
+"""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from vehid.identification.data import IOData
+from vehid.identification.modal import ModalModel, ModalStructure
+from vehid.scenarios import identify_workflow as workflow
+
+ROOT = Path(__file__).resolve().parent.parent
+BALLBEAM = ROOT / "tests" / "data" / "ballbeam" / "ballbeam.dat"
+VEHID = [sys.executable, "-m", "vehid.scenarios.cli"]
+
+
+def _record(model: ModalModel, samples: int = 600, seed: int = 0) -> IOData:
+    """A random piecewise-linear input (a point every 10 samples) and the model's exact output, dt = 1."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(samples, dtype=float)
+    u = np.interp(t, np.arange(samples // 10 + 2) * 10.0, rng.standard_normal(samples // 10 + 2))[:, None]
+    return IOData(t=t, u=u, y=model.simulate_outputs(u, 1.0))
+
+
+def _truth(order: int) -> ModalModel:
+    structure = ModalStructure.default(order, 1, 1)
+    # modes decaying over 5 samples, well inside the band a 600-sample record shows, each driven by the input
+    modes = ModalModel.from_parameters(structure, structure.initial_parameters(sigma=-0.2, omega=0.5, omega_spread=0.4))
+    return ModalModel(structure, modes.A, np.linspace(1.0, 0.3, order)[:, None], modes.C, modes.D)
+
+
+def _run(start: ModalModel, final: ModalModel) -> SimpleNamespace:
+    """What :func:`workflow.returned_model` reads of an IEKF result: its structure, start and final model."""
+    return SimpleNamespace(structure=start.structure, model=final, meta={"start_parameters": start.parameters},
+                           options=SimpleNamespace(allow_unstable=False))
+
+
+def _spoiled(model: ModalModel) -> ModalModel:
+    """The model with every parameter 30 % off: a clearly worse fit of the model's own record."""
+    return ModalModel.from_parameters(model.structure, model.parameters * 1.3)
+
+
+@pytest.mark.parametrize("order", [1, 2, 3, 4, 5])
+def test_the_better_of_filter_and_start_is_returned_at_every_order(order):
+    """A filter's model worse than its start returns the start; a better one is returned itself (noise-free truth)."""
+    truth = _truth(order)
+    plan = SimpleNamespace(records=(_record(truth),))
+    args = SimpleNamespace(horizon=None, initial_state="estimate")
+    no_tuning = workflow.PTuning(1e-5, (), 0.0)
+
+    model, keys = workflow.returned_model(_run(truth, _spoiled(truth)), plan, args, no_tuning, None)
+    margin = keys["decision_margins"]["model_returned"]
+    assert margin["choice"] == "start" and "start_kept" in keys
+    np.testing.assert_allclose(model.parameters, truth.parameters, rtol=1e-12)  # algebra: the start itself
+    # the truth explains its own noise-free record (algebra and simulation rounding: above 99.9 %)
+    assert margin["score"] > 99.9 and margin["score"] > margin["runner_up_score"] + workflow.WHOLE_RECORD_MARGIN
+
+    model, keys = workflow.returned_model(_run(_spoiled(truth), truth), plan, args, no_tuning, None)
+    assert keys["decision_margins"]["model_returned"]["choice"] == "filter" and "start_kept" not in keys
+    assert model is not None and np.allclose(model.parameters, truth.parameters, rtol=1e-12)
+
+
+def test_a_run_that_diverged_gives_way_to_a_slightly_better_start():
+    """An interrupted pass is no cross-validated result: the start wins it by the small tolerance."""
+    truth = _truth(3)
+    plan = SimpleNamespace(records=(_record(truth),))
+    args = SimpleNamespace(horizon=None, initial_state="estimate")
+    slightly = ModalModel.from_parameters(truth.structure, truth.parameters * 1.01)
+    finished, interrupted = _run(truth, slightly), _run(truth, slightly)
+    interrupted.stop_reason = "diverged at pass 2"
+    _, kept = workflow.returned_model(finished, plan, args, workflow.PTuning(1e-5, (), 0.0), None)
+    margin = kept["decision_margins"]["model_returned"]
+    gap = margin["runner_up_score"] - margin["score"]
+    # 1 % off every parameter: the truth fits its noise-free record better, by less than the finished run's margin
+    assert margin["choice"] == "filter" and workflow.P_TOLERANCE < gap < workflow.WHOLE_RECORD_MARGIN, gap
+    _, kept = workflow.returned_model(interrupted, plan, args, workflow.PTuning(1e-5, (), 0.0), None)
+    assert kept["decision_margins"]["model_returned"]["choice"] == "start"
+
+
+def test_a_decision_within_its_margin_keeps_the_filter():
+    """Equal fits: the filter's model stands (the start must win by more than the margin)."""
+    truth = _truth(3)
+    plan = SimpleNamespace(records=(_record(truth),))
+    args = SimpleNamespace(horizon=None, initial_state="estimate")
+    _, keys = workflow.returned_model(_run(truth, truth), plan, args, workflow.PTuning(1e-5, (), 0.0), None)
+    margin = keys["decision_margins"]["model_returned"]
+    assert margin["choice"] == "filter" and margin["score"] == margin["runner_up_score"]
+
+
+def test_the_data_start_note_names_no_library_call():
+    """A subspace model whose modes do not fit the structure is described in the model's terms."""
+    from vehid.identification.start import _subspace_start
+
+    # two well separated real poles asked to fit one complex pair: the conversion to the structure fails
+    structure = ModalStructure.default(2, 1, 1)
+    real = ModalModel(ModalStructure.with_modes(0, 2, 1, 1), [[-0.05, 0.0], [0.0, -0.5]], [[1.0], [0.5]],
+                      [[1.0, 1.0]], [[0.0]])
+    record = _record(real, samples=800, seed=3)
+    found = _subspace_start(record.u, record.y, structure, stable=True)
+    assert found.source == "subspace eigenvalues"
+    assert "modal_structure_for" not in found.note and "(" in found.note and "real poles" in found.note
+
+
+def _check_margins(summary: dict) -> None:
+    """Every decision_margins entry agrees with the run's choice and with its own rule."""
+    margins = summary["decision_margins"]
+    for name, entry in margins.items():
+        assert {"choice", "score", "runner_up", "runner_up_score", "measure", "rule"} <= set(entry), name
+        assert entry["choice"] != entry["runner_up"], name
+    if "p" in margins:
+        assert margins["p"]["choice"] == f"p {summary['p']:g}"
+        if margins["p"]["runner_up_score"] is not None and margins["p"]["runner_up"].startswith("p "):
+            assert margins["p"]["score"] >= margins["p"]["runner_up_score"] - workflow.P_TOLERANCE
+    returned = margins.get("model_returned")
+    if returned is not None:
+        assert returned["choice"] == summary.get("model_returned", "filter")
+        if returned["choice"] == "filter":  # else the cross-validation may have decided
+            assert not returned["runner_up_score"] > returned["score"] + workflow.WHOLE_RECORD_MARGIN
+    unstable = margins.get("open_loop_unstable")
+    if unstable is not None:
+        assert (unstable["choice"] == "unstable") == summary["open_loop_unstable"]["assumed"]
+        gap = unstable["score"] - unstable["runner_up_score"]
+        assert gap > workflow.UNSTABLE_MARGIN if unstable["choice"] == "unstable" else gap >= -workflow.UNSTABLE_MARGIN
+    if "order" in margins:
+        assert margins["order"]["choice"] == summary["order"]
+        if margins["order"]["runner_up_score"] is not None:
+            assert margins["order"]["score"] >= margins["order"]["runner_up_score"] - workflow.ORDER_TOLERANCE
+
+
+@pytest.mark.slow
+def test_a_healthy_run_warns_of_nothing_and_reports_its_margins(tmp_path):
+    """A stable third-order system, 2 % output noise, default options with a hold-out: no warning at all."""
+    truth = ModalModel(ModalStructure.default(3, 1, 1), [[-0.05, 0.2, 0], [-0.2, -0.05, 0], [0, 0, -0.03]],
+                       [[1.0], [0.4], [0.25]], [[1.0, 1.0, 1.0]], [[0.0]])
+    record = _record(truth, samples=2000, seed=5)
+    y = record.y + 0.02 * np.sqrt(np.mean(record.y**2)) * np.random.default_rng(6).standard_normal(record.y.shape)
+    path = tmp_path / "healthy.csv"
+    np.savetxt(path, np.column_stack([record.t, record.u, y]), delimiter=",", header="t,u,y", comments="")
+    done = subprocess.run([*VEHID, "identify", str(path), "--inputs", "u", "--outputs", "y", "--order", "2-4",
+                           "--validation", "0.3", "--json", "--quiet"], capture_output=True, text=True, check=False)
+    assert done.returncode == 0, done.stderr[-500:]
+    summary = json.loads(done.stdout)
+    assert summary["warnings"] == [], summary["warnings"]
+    assert summary["order"] == 3 and {"p", "model_returned", "order"} <= set(summary["decision_margins"])
+    _check_margins(summary)
+
+
+def _ballbeam(tmp_path: Path, fraction: float, *, perturbed: bool = False) -> dict:
+    file = BALLBEAM
+    if perturbed:  # every sample times (1 + 1e-6 N(0, 1)): far below the record's own noise
+        table = np.loadtxt(BALLBEAM, ndmin=2)
+        table = table * (1.0 + 1e-6 * np.random.default_rng(1).standard_normal(table.shape))
+        file = tmp_path / "ballbeam_perturbed.dat"
+        np.savetxt(file, table, fmt="%.17g")
+    done = subprocess.run([*VEHID, "identify", str(file), "--inputs", "1", "--outputs", "2", "--dt", "0.1",
+                           "--order", "2", "--validation", repr(fraction), "--json", "--quiet"],
+                          capture_output=True, text=True, check=False)
+    assert done.returncode == 0, done.stderr[-500:]
+    return json.loads(done.stdout)
+
+
+# Measured hold-out fits of order 2: 90.55 % at a fraction of 0.3, 90.55 % with every sample perturbed,
+# 93.01 % at 0.3333 (before this rule 90.6 and 23.2 %: the stability treatment and the returned model
+# switched). A perturbation far below the record's noise may move the fit by rounding only; 2 points is
+# the acceptance's bound. Another fraction scores another stretch of the record, which alone moves the
+# fit by a few points either way; a switched decision costs tens of points, so the test asks that the
+# fit not fall by more than the same 2 points and that the model class and the returned model be the same.
+FLIP_BOUND = 2.0
+
+
+@pytest.mark.slow
+def test_ballbeam_decisions_do_not_flip_with_the_holdout_fraction_or_a_perturbation(tmp_path):
+    runs = [_ballbeam(tmp_path, 0.3), _ballbeam(tmp_path, 0.3333), _ballbeam(tmp_path, 0.3, perturbed=True)]
+    for summary in runs:
+        _check_margins(summary)
+        assert summary["open_loop_unstable"]["assumed"], summary["decision_margins"]
+    base, moved, perturbed = (summary["validation_fit_percent"][0] for summary in runs)
+    assert abs(perturbed - base) <= FLIP_BOUND and moved >= base - FLIP_BOUND, (base, moved, perturbed)
+    choices = [{name: entry["choice"] for name, entry in summary["decision_margins"].items()} for summary in runs]
+    assert choices[2] == choices[0]  # the perturbation changes no choice
+    assert all(choices[1][name] == choices[0][name] for name in ("open_loop_unstable", "model_returned"))
