@@ -97,7 +97,7 @@ def estimate_gls(data_or_arrays: Any, *, na: int, nb: Any = None, nk: Any = 0, n
     passes = positive_int(iterations, "iterations")
     if not (np.isfinite(tolerance) and tolerance > 0):
         raise InputError(f"tolerance must be positive; got {tolerance}")
-    from scipy.signal import lfilter  # scipy.signal costs most of a second to import: paid by the first call, not by every import
+    from scipy.signal import lfilter  # a second to import: paid on first use
 
     fit = estimate_arx((u, y), na=na, nb=nb, nk=nk)  # step 1
     history = [fit.theta[:, 0].copy()]

@@ -719,7 +719,7 @@ def _section_from(numerator: np.ndarray, denominator: np.ndarray, drive: np.ndar
     scipy's section filter has a loop compiled per data type; ``lfilter``'s
     generic one takes about twice as long per complex sample.
     """
-    from scipy.signal import sosfilt  # scipy.signal costs most of a second to import: paid by the first call, not by every import
+    from scipy.signal import sosfilt  # a second to import: paid on first use
 
     coefficients = np.concatenate([numerator, denominator])
     # a real mode of a real drive runs in real arithmetic (about two thirds of the complex loop's time)

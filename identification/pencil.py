@@ -110,7 +110,7 @@ class PencilModel(StateSpaceModel):
         Exact for any number of outputs (for several outputs the common
         scalar denominator is not the smallest MIMO ARX form).
         """
-        from scipy.signal import ss2tf  # scipy.signal costs most of a second to import: paid by the first call, not by every import
+        from scipy.signal import ss2tf  # a second to import: paid on first use
 
         A, B, C, D, dt = self.to_statespace()
         n = A.shape[0]

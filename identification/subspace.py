@@ -93,7 +93,7 @@ def _hankel(signal: np.ndarray, rows: int, columns: int) -> np.ndarray:
 
 def _responses(A: np.ndarray, C: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Output regressors of x0 and of each B entry: shapes (N, n_y, n) and (N, n_y, n, n_u)."""
-    from scipy.signal import lfilter  # scipy.signal costs most of a second to import: paid by the first call, not by every import
+    from scipy.signal import lfilter  # a second to import: paid on first use
 
     values, vectors = np.linalg.eig(A)
     if np.linalg.cond(vectors) > 1e12:

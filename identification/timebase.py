@@ -85,7 +85,7 @@ def _stray(t: np.ndarray) -> np.ndarray:
 def _low_pass_onto(t: np.ndarray, values: np.ndarray, source_step: float, grid: np.ndarray, rate: float,
                    raw: RawRecord, channel: int) -> np.ndarray:
     """Anti-aliased resampling of one channel onto a grid of a lower rate."""
-    import scipy.signal  # scipy.signal costs most of a second to import: paid by the first call, not by every import
+    import scipy.signal  # a second to import: paid on first use
 
     count = int(math.floor((t[-1] - t[0]) / source_step + 1e-9)) + 1
     fine_t = t[0] + np.arange(count) * source_step
