@@ -17,7 +17,7 @@ from .archive import (
     write_record,
     write_run,
 )
-from .data import IOData, as_records, read_hdf5
+from .data import IOData, as_records, check_channels, read_hdf5
 from .readers import RawRecord, read_mat, read_mdf, read_raw, read_table
 from .timebase import JITTER_TOLERANCE, uniform_record
 from .preparation import (DETRENDS, Preparation, ReadSettings, RecordOffsets, estimate_preparation, load_records,
@@ -51,6 +51,7 @@ __all__ = [
     "IOData",
     "read_hdf5",
     "as_records",
+    "check_channels",
     "RawRecord",
     "read_raw",
     "read_table",
