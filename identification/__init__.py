@@ -43,7 +43,7 @@ from .recursive import RecursiveResult, estimate_arx_recursive, recursive_least_
 from .factorised import sqrt_step, ud_step
 from .statespace import (balanced_truncation, continuous_to_discrete, discrete_to_continuous,
                          modal_structure_for, to_modal)
-from .subspace import SubspaceResult, estimate_subspace
+from .subspace import SubspaceResult, estimate_subspace, largest_subspace_order
 from .residuals import ResidualTests, residual_tests
 from .uncertainty import FrequencyResponseBand, ModelUncertainty, ModeEstimate, model_uncertainty
 
@@ -153,6 +153,7 @@ __all__ = [
     "balanced_truncation",
     "SubspaceResult",
     "estimate_subspace",
+    "largest_subspace_order",
     "COMPARATORS",
     "ComparatorResult",
     "identify_with",
