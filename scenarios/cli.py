@@ -45,13 +45,16 @@ def one_line(text: str, limit: int = MESSAGE_LIMIT) -> str:
     message); a binary file or a library's multi-line report would otherwise
     print kilobytes or a stack of lines where one line is the contract.
     """
-    kept = []
+    kept: list[str] = []
+    after_frame = False
     for line in str(text).splitlines():
         stripped = line.strip()
         if stripped.startswith("Traceback (most recent call last)"):
             break  # what follows is the stack, not the message
-        if stripped.startswith('File "') or (line[:1].isspace() and kept):
-            continue  # a stack frame or the source line a warning quotes
+        quoted_source = after_frame and line[:1].isspace()
+        after_frame = stripped.startswith('File "')
+        if after_frame or quoted_source:
+            continue  # a stack frame and the source line it quotes
         if stripped:
             kept.append(stripped)
     joined = " ".join(kept)
@@ -154,7 +157,7 @@ def _asks_for_json(argv: Sequence[str]) -> bool:
     for token in argv:
         if token == "--":
             return False
-        if len(token) > 3 and "--json".startswith(token):
+        if len(token) >= 3 and "--json".startswith(token):
             return True
     return False
 

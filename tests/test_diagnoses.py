@@ -241,6 +241,9 @@ def test_a_long_message_becomes_one_readable_line():
     traced = one_line('failed\nTraceback (most recent call last):\n  File "x.py", line 1, in <module>\n    f()\nValueError')
     assert traced == "failed"
     assert one_line("short message") == "short message"
+    # a wrapped array in a message is part of it; a quoted stack frame and its source line are not
+    assert one_line("singular values [1.0 2.0\n 3.0]") == "singular values [1.0 2.0 3.0]"
+    assert one_line('bad value\n  File "m.py", line 3, in f\n    g()\nmore') == "bad value more"
 
 
 def test_a_python_warning_is_logged_as_one_line_without_its_source(monkeypatch, capsys):
