@@ -171,10 +171,10 @@ def supported_orders(orders: list[int], auto: bool, records: tuple[IOData, ...],
     if not orders or max(orders) > limit:
         samples = (f"{lengths[0]} estimation samples" if len(lengths) == 1
                    else f"{len(lengths)} records of {sum(lengths)} estimation samples")
-        supports = f"support orders up to {limit}" if limit else "support no order"
-        raise InputError(f"--order {text}: {samples} with {first.n_u} input(s) and {first.n_y} output(s) {supports} "
-                         "(the data start needs N >= 4 n (1 + n_u + n_y) - 1 samples per record): give a lower "
-                         "order or a longer record")
+        supports = f"they support orders up to {limit}" if limit else "they support no order"
+        raise InputError(f"--order {text}: {samples} with {first.n_u} input(s) and {first.n_y} output(s) cannot "
+                         f"identify a model of order {max(orders or [limit + 1])}; {supports} (the data start needs "
+                         "N >= 4 n (1 + n_u + n_y) - 1 samples per record): give a lower order or a longer record")
     return orders
 
 
