@@ -341,9 +341,9 @@ def as_records(data: "IOData | Sequence[IOData]") -> tuple[IOData, ...]:
 
 # The estimators form products of up to four signal values (a covariance of a gain between two channels is the
 # square of a ratio of squares); each stays a finite, normal double when every channel's magnitude lies within
-# the fourth roots of the largest and the smallest normal double, about 1e77 and 1e-77.
-LARGEST_MAGNITUDE = float(np.finfo(float).max) ** 0.25
-SMALLEST_MAGNITUDE = float(np.finfo(float).tiny) ** 0.25
+# the fourth roots of the largest and the smallest normal double (1.2e77 and 1.2e-77): the powers of ten inside.
+LARGEST_MAGNITUDE = 1e76
+SMALLEST_MAGNITUDE = 1e-76
 #: A channel whose variation is within this many rounding units (machine epsilon times its level) of a
 #: constant, or an output within as many of a multiple of an input, holds rounding noise where the
 #: estimators need a signal: after its offset is removed, rounding is more than a thousandth of what is left.
@@ -444,8 +444,8 @@ def check_channels(records: "IOData | Sequence[IOData]", *, detrend: str = "mean
         an input times a factor, plus an offset, to rounding error.
     InputError
         A channel whose largest magnitude lies outside
-        [:data:`SMALLEST_MAGNITUDE`, :data:`LARGEST_MAGNITUDE`] (about 1e-77 to
-        1e77), or that a scale factor makes overflow.
+        [:data:`SMALLEST_MAGNITUDE`, :data:`LARGEST_MAGNITUDE`] (1e-76 to
+        1e76), or that a scale factor makes overflow.
     """
     records = as_records(records)
     first = records[0]
