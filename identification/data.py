@@ -15,9 +15,10 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from .errors import InputError
+from .errors import ExcitationError, InputError
 
-__all__ = ["IOData", "as_records", "read_hdf5"]
+__all__ = ["IOData", "as_records", "read_hdf5", "check_channels", "LARGEST_MAGNITUDE", "SMALLEST_MAGNITUDE",
+           "ROUNDING_UNITS"]
 
 _UNIFORM_TOLERANCE = 1e-6  # relative spread of sample intervals accepted as uniform
 
@@ -336,3 +337,139 @@ def as_records(data: "IOData | Sequence[IOData]") -> tuple[IOData, ...]:
                 "resample them to one rate (--resample HZ)"
             )
     return records
+
+
+# The estimators form products of up to four signal values (a covariance of a gain between two channels is the
+# square of a ratio of squares); each stays a finite, normal double when every channel's magnitude lies within
+# the fourth roots of the largest and the smallest normal double (1.2e77 and 1.2e-77): the powers of ten inside.
+LARGEST_MAGNITUDE = 1e76
+SMALLEST_MAGNITUDE = 1e-76
+#: A channel whose variation is within this many rounding units (machine epsilon times its level) of a
+#: constant, or an output within as many of a multiple of an input, holds rounding noise where the
+#: estimators need a signal: after its offset is removed, rounding is more than a thousandth of what is left.
+ROUNDING_UNITS = 1000.0
+
+
+def _spread(t: np.ndarray, values: np.ndarray, detrend: str) -> float:
+    """RMS of what is left of a column once its offset (mean, or line in time with ``detrend="linear"``) is gone."""
+    if detrend == "linear" and values.size > 2:
+        elapsed = t - t[0]
+        design = np.column_stack([np.ones_like(elapsed), elapsed / max(float(elapsed[-1]), 1e-300)])
+        coefficients = np.linalg.lstsq(design, values, rcond=None)[0]
+        return float(np.sqrt(np.mean((values - design @ coefficients) ** 2)))
+    return float(np.std(values))
+
+
+def _power_of_ten(level: float) -> str:
+    return f"1e{-int(round(math.log10(level))):d}"
+
+
+def _channel_problem(kind: str, name: str, columns: list[np.ndarray], times: list[np.ndarray], detrend: str,
+                     scale: float) -> InputError | None:
+    """The error saying why one channel (its column in every record, scaled) cannot identify a model, or None."""
+    level = max(float(np.max(np.abs(column))) for column in columns)
+    every = " in every record" if len(columns) > 1 else ""
+    nothing = "nothing is excited" if kind == "input" else "there is no response to identify"
+    if level == 0.0:
+        return ExcitationError(f"{kind} {name!r} is zero throughout{every}: {nothing}")
+    raw = f" ({level / abs(scale):.3g} before --scale)" if scale != 1.0 else ""
+    if level > LARGEST_MAGNITUDE or level < SMALLEST_MAGNITUDE:
+        if level > LARGEST_MAGNITUDE:
+            found = f"reaches {level:.3g}{raw}: values beyond {LARGEST_MAGNITUDE:.0e} overflow"
+        else:
+            found = f"is at most {level:.3g}{raw} in magnitude: values below {SMALLEST_MAGNITUDE:.0e} underflow"
+        return InputError(f"{kind} {name!r} {found} the squares and products the estimators form; rescale it, "
+                          f"e.g. --scale {name}={_power_of_ten(level)}")
+    if all(np.all(column == column[0]) for column in columns):
+        values = ", ".join(f"{column[0]:.6g}" for column in columns[:3]) + (", ..." if len(columns) > 3 else "")
+        return ExcitationError(f"{kind} {name!r} is constant ({values} throughout{every}): {nothing}")
+    # the column divided by its level first: squares of the spread then stay representable
+    spread = max(_spread(t, column / level, detrend) for t, column in zip(times, columns))
+    rounding = ROUNDING_UNITS * np.finfo(float).eps
+    if spread <= rounding:
+        if detrend == "linear" and max(float(np.std(column / level)) for column in columns) > rounding:
+            return ExcitationError(f"{kind} {name!r} is a straight line in time{every}: --detrend linear leaves nothing "
+                                   f"of it; {nothing}")
+        return ExcitationError(f"{kind} {name!r} is nearly constant{every}: it varies by {spread:.1g} of its level "
+                               f"{level:.6g}, within rounding error; {nothing}")
+    return None
+
+
+def _copy_of_input(output: list[np.ndarray], inputs: list[list[np.ndarray]], input_names: Sequence[str]
+                   ) -> tuple[str, float] | None:
+    """The input an output is a multiple of (plus an offset) in every record, to rounding error, and the factor."""
+    tolerance = ROUNDING_UNITS * np.finfo(float).eps
+    for name, column in zip(input_names, inputs):
+        factors = []
+        for y, u in zip(output, column):
+            y_level, u_level = float(np.max(np.abs(y))), float(np.max(np.abs(u)))
+            y_part, u_part = (y - y.mean()) / y_level, (u - u.mean()) / u_level
+            power = float(np.dot(u_part, u_part))
+            if power == 0.0:
+                break
+            factor = float(np.dot(u_part, y_part)) / power
+            residual = float(np.sqrt(np.mean((y_part - factor * u_part) ** 2)))
+            if residual > tolerance * (1.0 + abs(factor)):
+                break
+            factors.append(factor * y_level / u_level)
+        else:
+            if factors and np.allclose(factors, factors[0], rtol=1e-9):
+                return name, factors[0]
+    return None
+
+
+def check_channels(records: "IOData | Sequence[IOData]", *, detrend: str = "mean",
+                   input_scale: Sequence[float] | None = None, output_scale: Sequence[float] | None = None) -> None:
+    """Refuse estimation records that cannot identify a model, naming the channel and the cause.
+
+    Run on the records as read (each channel multiplied by its scale factor),
+    before any offset is removed or any signal normalised, so that the cause
+    is named rather than the non-finite numbers it would lead to.
+
+    Parameters
+    ----------
+    records : IOData or sequence of IOData
+        The raw estimation records of one model (same channels).
+    detrend : {"mean", "linear", "none"}
+        The offsets that will be removed: with ``"linear"`` a straight line in
+        time is no excitation either.
+    input_scale, output_scale : sequence of float, optional
+        Factors the channels will be multiplied by (``--scale``); default 1.
+
+    Raises
+    ------
+    ExcitationError
+        A channel that is zero throughout, constant, or varies only within
+        :data:`ROUNDING_UNITS` rounding units of its level; an output that is
+        an input times a factor, plus an offset, to rounding error.
+    InputError
+        A channel whose largest magnitude lies outside
+        [:data:`SMALLEST_MAGNITUDE`, :data:`LARGEST_MAGNITUDE`] (1e-76 to
+        1e76), or that a scale factor makes overflow.
+    """
+    records = as_records(records)
+    first = records[0]
+    scales_u = np.ones(first.n_u) if input_scale is None else np.asarray(input_scale, dtype=float)
+    scales_y = np.ones(first.n_y) if output_scale is None else np.asarray(output_scale, dtype=float)
+    times = [record.t for record in records]
+    # a factor that overflows a value is named below, never propagated; underflow is measured as a tiny level
+    with np.errstate(over="ignore", under="ignore"):
+        inputs = [[record.u[:, i] * scales_u[i] for record in records] for i in range(first.n_u)]
+        outputs = [[record.y[:, j] * scales_y[j] for record in records] for j in range(first.n_y)]
+        for kind, names, columns, scales in (("input", first.input_names, inputs, scales_u),
+                                             ("output", first.output_names, outputs, scales_y)):
+            for name, column, scale in zip(names, columns, scales):
+                if not all(np.all(np.isfinite(c)) for c in column):
+                    raise InputError(f"{kind} {name!r} times its scale factor {scale:g} overflows: choose a smaller "
+                                     "factor")
+                problem = _channel_problem(kind, name, column, times, detrend, float(scale))
+                if problem is not None:
+                    raise problem
+        for name, column in zip(first.output_names, outputs):
+            copied = _copy_of_input(column, inputs, first.input_names)
+            if copied is not None:
+                source, factor = copied
+                how = "a copy of" if math.isclose(factor, 1.0, rel_tol=1e-9) else f"{factor:.6g} times"
+                raise ExcitationError(f"output {name!r} is {how} input {source!r} (plus an offset at most), to rounding "
+                                 "error: it copies the input, there are no dynamics to identify; check the channels "
+                                 "chosen as outputs")

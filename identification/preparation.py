@@ -17,7 +17,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from .data import IOData, as_records, read_hdf5
+from .data import IOData, as_records, check_channels, read_hdf5
 from .errors import InputError
 from .readers import RawRecord, read_raw
 from .timebase import JITTER_TOLERANCE, parse_segment, uniform_record
@@ -298,6 +298,17 @@ def _scales(names: tuple[str, ...], scale: Mapping[str, float]) -> np.ndarray:
     return np.array([scale.get(name, 1.0) for name in names], dtype=float)
 
 
+def _scale_factors(first: IOData, scale: Mapping[str, float]) -> tuple[np.ndarray, np.ndarray]:
+    """The factors of the record's inputs and outputs; a factor for another channel is an error."""
+    unknown = [name for name in scale if name not in first.input_names + first.output_names]
+    if unknown:
+        raise InputError(
+            f"--scale names {unknown[0]!r}, which is not a chosen channel; inputs: "
+            f"{', '.join(first.input_names)}; outputs: {', '.join(first.output_names)}"
+        )
+    return _scales(first.input_names, scale), _scales(first.output_names, scale)
+
+
 def _trend(t: np.ndarray, values: np.ndarray, detrend: str) -> tuple[np.ndarray, np.ndarray]:
     """Offset at the record's start and slope per second of each column."""
     if detrend == "none":
@@ -330,15 +341,8 @@ def estimate_preparation(
     records = as_records(records)
     if detrend not in DETRENDS:
         raise InputError(f"unknown detrend {detrend!r}; use one of {', '.join(DETRENDS)}")
-    scale = parse_scale(scale)
     first = records[0]
-    unknown = [name for name in scale if name not in first.input_names + first.output_names]
-    if unknown:
-        raise InputError(
-            f"--scale names {unknown[0]!r}, which is not a chosen channel; inputs: "
-            f"{', '.join(first.input_names)}; outputs: {', '.join(first.output_names)}"
-        )
-    input_scale, output_scale = _scales(first.input_names, scale), _scales(first.output_names, scale)
+    input_scale, output_scale = _scale_factors(first, parse_scale(scale))
     offsets = []
     for data in records:
         u_offset, u_slope = _trend(data.t, data.u * input_scale, detrend)
@@ -358,12 +362,25 @@ def prepare(
 ) -> tuple[tuple[IOData, ...], Preparation]:
     """Estimate the preparation of raw records and apply it to each with its own offsets.
 
+    The records are estimation records: before anything is removed or scaled,
+    :func:`~identification.data.check_channels` refuses channels that cannot
+    identify a model (constant, out of range, an output copying an input).
+
     Returns
     -------
     prepared : tuple of IOData
     preparation : Preparation
+
+    Raises
+    ------
+    InputError
+        Bad options, or records that cannot identify a model, naming the channel and the cause.
     """
     records = as_records(records)
+    if detrend not in DETRENDS:
+        raise InputError(f"unknown detrend {detrend!r}; use one of {', '.join(DETRENDS)}")
+    input_scale, output_scale = _scale_factors(records[0], parse_scale(scale))
+    check_channels(records, detrend=detrend, input_scale=input_scale, output_scale=output_scale)
     preparation = estimate_preparation(records, detrend=detrend, scale=scale, settings=settings)
     return tuple(preparation.apply(data, i) for i, data in enumerate(records)), preparation
 

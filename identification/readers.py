@@ -96,16 +96,53 @@ def _float(cell: str, decimal_comma: bool = False) -> float | None:
         return None
 
 
+_SNIFF_BYTES = 65536  # the head of a file judged for being text: a header and many rows, read at once
+# Leading bytes of formats that are saved under a text suffix by mistake, and what to do instead.
+_SIGNATURES = (
+    (b"\x89HDF\r\n\x1a\n", "it is an HDF5 file: give it the suffix .h5"),
+    (b"PK\x03\x04", "it is a ZIP archive (an .xlsx workbook?): export the sheet as CSV"),
+    (b"MATLAB", "it is a MATLAB file: give it the suffix .mat"),
+    (b"\xd0\xcf\x11\xe0", "it is an old Office file (an .xls workbook?): export the sheet as CSV"),
+    (b"%PDF", "it is a PDF document"),
+)
+_UTF16_MARKS = (b"\xff\xfe", b"\xfe\xff")
+# Text never holds control characters other than tab, line feed, vertical tab, form feed and carriage return;
+# in a table they are typos at most. A head with more than this share of them is not text.
+_CONTROL_SHARE = 0.01
+_CONTROL_BYTES = bytes(b for b in range(32) if b not in (9, 10, 11, 12, 13)) + b"\x7f"
+
+
+def _not_text(path: Path) -> str | None:
+    """Why the file cannot be a text table (from its first bytes), or None when it may be one."""
+    with path.open("rb") as handle:
+        head = handle.read(_SNIFF_BYTES)
+    for signature, reason in _SIGNATURES:
+        if head.startswith(signature):
+            return reason
+    if head.startswith(_UTF16_MARKS):
+        return None
+    controls = len(head) - len(head.translate(None, _CONTROL_BYTES))
+    if b"\x00" in head or controls > _CONTROL_SHARE * len(head):
+        return (f"it holds binary data ({controls} control bytes in its first {len(head)} bytes), "
+                "not rows of numbers")
+    return None
+
+
 def _text_lines(path: Path) -> tuple[list[str], str]:
     """The file's first lines (enough to find its header) and the encoding that reads it."""
-    for encoding in ("utf-8-sig", "latin-1"):
+    reason = _not_text(path)
+    if reason is not None:
+        raise InputError(f"{path.name} is not a text table: {reason}")
+    with path.open("rb") as handle:
+        utf16 = handle.read(2) in _UTF16_MARKS  # "Unicode text" as spreadsheets save it
+    for encoding in ("utf-16",) if utf16 else ("utf-8-sig", "latin-1"):
         try:
             with path.open(encoding=encoding, newline="") as handle:
                 head = [line for _, line in zip(range(200), handle)]
             return head, encoding
         except UnicodeDecodeError:
             continue
-    raise InputError(f"{path.name} is not a text file")  # pragma: no cover - latin-1 reads any bytes
+    raise InputError(f"{path.name} is not a text table: it is not valid UTF-16 text")
 
 
 def _split(line: str, delimiter: str | None) -> list[str]:

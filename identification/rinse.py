@@ -16,8 +16,8 @@ from typing import Callable, Generic, TypeVar
 
 import numpy as np
 
-from .data import IOData
-from .errors import DivergenceError, ExcitationError, InputError
+from .data import IOData, check_channels
+from .errors import DivergenceError, InputError
 from .filter_models import check_discretization
 from .iekf_pass import COVARIANCE_FORMS, pack_covariance, unpack_covariance
 
@@ -113,15 +113,7 @@ def check_records(records: tuple[IOData, ...], n_u: int, n_y: int, n_parameters:
     samples = sum(record.n_samples for record in records)
     if samples <= n_parameters:
         raise InputError(f"{samples} samples cannot identify {n_parameters} parameters: give more data or a lower order")
-    spread = np.max([record.u.std(axis=0) for record in records], axis=0)
-    largest = max(float(np.abs(record.u).max()) for record in records)
-    for name, value in zip(data.input_names, spread):
-        if not value > 1e-12 * max(1.0, largest):
-            raise ExcitationError(f"input {name!r} is constant: nothing is excited, the model cannot be identified")
-    energy = np.sum([np.sum(record.y**2, axis=0) for record in records], axis=0)
-    for name, value in zip(data.output_names, energy):
-        if value == 0:
-            raise ExcitationError(f"output {name!r} is identically zero: nothing to identify")
+    check_channels(records, detrend="none")  # the records' offsets are already removed, or are part of the data
 
 
 def parameters_settled(previous: np.ndarray, current: np.ndarray, previous_trace: float, current_trace: float,

@@ -46,7 +46,7 @@ from ._checks import io_arrays, positive_int
 from .errors import ExcitationError, InputError
 from .protocol import StateSpaceModel, sample_interval
 
-__all__ = ["SubspaceResult", "estimate_subspace"]
+__all__ = ["SubspaceResult", "estimate_subspace", "largest_subspace_order"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -83,6 +83,47 @@ class SubspaceResult(StateSpaceModel):
     def to_statespace(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
         """Discrete ``(A, B, C, D, dt)``."""
         return self.A, self.B, self.C, self.D, sample_interval(self.dt, "subspace model")
+
+
+def _default_block_rows(order: int) -> int:
+    return max(2 * order, order + 1)
+
+
+def _hankel_fits(lengths: list[int], block_rows: int, n_u: int, n_y: int) -> bool:
+    """Whether records of these lengths give the data matrix of ``block_rows`` at least as many columns as rows.
+
+    Each record contributes ``N_k - 2 s + 1`` columns (none spans two
+    records); the matrix ``[U_f; U_p; Y_p; Y_f]`` has ``2 s (n_u + n_y)``
+    rows, and its RQ factor spans the row space only with as many columns.
+    """
+    counts = [length - 2 * block_rows + 1 for length in lengths]
+    return min(counts) >= 1 and sum(counts) >= 2 * block_rows * (n_u + n_y)
+
+
+def largest_subspace_order(lengths: int | list[int], n_u: int, n_y: int) -> int:
+    """The largest order :func:`estimate_subspace` can identify from records of these lengths (default block rows).
+
+    With ``s = 2 n`` block rows, one record of ``N`` samples must satisfy
+    ``N - 4 n + 1 >= 4 n (n_u + n_y)``, i.e. ``n <= (N + 1) / (4 (1 + n_u + n_y))``;
+    several records pool their Hankel columns.
+
+    Parameters
+    ----------
+    lengths : int or list of int
+        Samples of each record.
+    n_u, n_y : int
+        Numbers of inputs and outputs.
+
+    Returns
+    -------
+    int
+        The largest order, 0 when the records are too short for any.
+    """
+    lengths = [int(lengths)] if np.isscalar(lengths) else [int(length) for length in lengths]
+    order = 0
+    while _hankel_fits(lengths, _default_block_rows(order + 1), n_u, n_y):
+        order += 1
+    return order
 
 
 def _hankel(signal: np.ndarray, rows: int, columns: int) -> np.ndarray:
@@ -155,12 +196,12 @@ def estimate_subspace(data_or_arrays: Any, *, order: int, block_rows: int | None
     experiments = [(u_e / input_scale, y_e / output_scale, dt_e) for u_e, y_e, dt_e in experiments]
     u, y, dt = experiments[0]
     n = positive_int(order, "order")
-    s = max(2 * n, n + 1) if block_rows is None else positive_int(block_rows, "block_rows")
+    s = _default_block_rows(n) if block_rows is None else positive_int(block_rows, "block_rows")
     n_u, n_y = u.shape[1], y.shape[1]
     if s * n_y < n:
         raise InputError(f"block_rows={s} with {n_y} outputs cannot reveal {n} states (need s * n_y >= order)")
     counts = [e[0].shape[0] - 2 * s + 1 for e in experiments]
-    if min(counts) < 1 or sum(counts) < 2 * s * (n_u + n_y):
+    if not _hankel_fits([e[0].shape[0] for e in experiments], s, n_u, n_y):
         samples = sum(e[0].shape[0] for e in experiments)
         raise InputError(f"{samples} samples are too few for {s} block rows: fewer columns than rows in the data matrix")
     su, sy = s * n_u, s * n_y

@@ -18,6 +18,7 @@ import json
 import logging
 import pkgutil
 import sys
+import warnings
 from pathlib import Path
 from typing import Any, Callable, NoReturn, Sequence
 
@@ -35,15 +36,55 @@ GROUPS = {
 }
 
 
+MESSAGE_LIMIT = 400  # characters of an error line: a message past this is cut, the cause is said in its first words
+
+
+def one_line(text: str, limit: int = MESSAGE_LIMIT) -> str:
+    """``text`` as one readable line: no traceback or source lines, no control characters, at most ``limit`` characters.
+
+    Messages quote what they were given (a column name, a library's own
+    message); a binary file or a library's multi-line report would otherwise
+    print kilobytes or a stack of lines where one line is the contract.
+    """
+    kept: list[str] = []
+    after_frame = False
+    for line in str(text).splitlines():
+        stripped = line.strip()
+        if stripped.startswith("Traceback (most recent call last)"):
+            break  # what follows is the stack, not the message
+        quoted_source = after_frame and line[:1].isspace()
+        after_frame = stripped.startswith('File "')
+        if after_frame or quoted_source:
+            continue  # a stack frame and the source line it quotes
+        if stripped:
+            kept.append(stripped)
+    joined = " ".join(kept)
+    readable = "".join(c if c.isprintable() else "?" for c in joined)
+    if len(readable) <= limit:
+        return readable
+    return readable[: limit - 30].rstrip() + f" ... ({len(readable) - limit + 30} characters cut)"
+
+
+class UsageError(SystemExit):
+    """A malformed command line: exit status 2, with the one line that says what is wrong."""
+
+    def __init__(self, line: str):
+        super().__init__(2)
+        self.line = line
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse with the workbench's error contract: one line on standard error, exit status 2.
 
     argparse's own ``error`` prints the whole usage block before the message;
-    the usage stays one ``--help`` away.
+    the usage stays one ``--help`` away. :func:`main` adds the JSON object
+    when the command line asks for ``--json``.
     """
 
     def error(self, message: str) -> NoReturn:
-        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+        line = one_line(f"{self.prog}: error: {message} (see {self.prog} --help)")
+        sys.stderr.write(line + "\n")
+        raise UsageError(line)
 
 
 def _common_options() -> argparse.ArgumentParser:
@@ -172,7 +213,23 @@ def _configure_logging(args: argparse.Namespace) -> None:
     root = logging.getLogger()
     root.handlers[:] = [handler]
     root.setLevel(level)
-    logging.captureWarnings(True)
+    warnings.showwarning = _show_warning
+
+
+def _show_warning(message: Warning | str, category: type[Warning], filename: str, lineno: int,
+                  file: Any = None, line: str | None = None) -> None:
+    """A Python warning as one logged line: its category and message, never the file, line number or source."""
+    logging.getLogger("py.warnings").warning("%s", one_line(f"{category.__name__}: {message}"))
+
+
+def _asks_for_json(argv: Sequence[str]) -> bool:
+    """Whether a command line, even one argparse refuses, asks for ``--json`` (or an abbreviation argparse accepts)."""
+    for token in argv:
+        if token == "--":
+            return False
+        if len(token) >= 3 and "--json".startswith(token):
+            return True
+    return False
 
 
 def _failed(args: argparse.Namespace, exc: BaseException, status: int, summary: dict | None = None,
@@ -180,7 +237,7 @@ def _failed(args: argparse.Namespace, exc: BaseException, status: int, summary: 
     """The exit status of a failed command; with ``--json`` still one JSON object on stdout."""
     if args.json:
         body = dict(summary or {})
-        body.update({"error": str(exc) if message is None else message, "exit_status": status})
+        body.update({"error": one_line(str(exc) if message is None else message), "exit_status": status})
         sys.stdout.write(json.dumps(to_jsonable(body), allow_nan=False) + "\n")
     return status
 
@@ -189,7 +246,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit status."""
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(argv)
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except UsageError as exc:  # the README's promise: with --json, one JSON object on every failure
+        if _asks_for_json(argv):
+            sys.stdout.write(json.dumps({"error": exc.line, "exit_status": exc.code}) + "\n")
+            sys.stdout.flush()
+        raise
     _configure_logging(args)
     handler: Callable[[argparse.Namespace], tuple[dict, str]] = args.handler
     try:
@@ -201,14 +264,14 @@ def main(argv: Sequence[str] | None = None) -> int:
             sys.stdout.write(exc.text.rstrip("\n") + "\n")
             sys.stdout.flush()
         for line in exc.warnings:
-            print(f"vehid: warning: {line}", file=sys.stderr)
+            print(f"vehid: warning: {one_line(line)}", file=sys.stderr)
         print("vehid: error: warnings under --strict", file=sys.stderr)
         return _failed(args, exc, exc.exit_status, exc.summary)
     except DivergenceError as exc:
-        print(f"vehid: diverged: {exc}", file=sys.stderr)
+        print(f"vehid: diverged: {one_line(str(exc))}", file=sys.stderr)
         return _failed(args, exc, exc.exit_status)
     except WorkbenchError as exc:
-        print(f"vehid: error: {exc}", file=sys.stderr)
+        print(f"vehid: error: {one_line(str(exc))}", file=sys.stderr)
         return _failed(args, exc, exc.exit_status)
     except KeyboardInterrupt as exc:
         name, status = signal_name(exc)
@@ -217,13 +280,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     except OSError as exc:  # a file read or written: its name and the cause, never "internal error"
         from vehid.identification.archive_safety import os_error_text  # h5py: imported when needed
         text = os_error_text(exc)
-        print(f"vehid: error: {text}", file=sys.stderr)
+        print(f"vehid: error: {one_line(text)}", file=sys.stderr)
         return _failed(args, exc, 2 if exc.errno in PATH_ERRNOS else 1, message=text)
     except Exception as exc:  # an unexpected failure: one line, traceback on request
         if args.verbose:
             log.exception("internal error")
         print(
-            f"vehid: internal error: {type(exc).__name__}: {exc} (rerun with --verbose for the traceback)",
+            one_line(f"vehid: internal error: {type(exc).__name__}: {exc}") + " (rerun with --verbose for the traceback)",
             file=sys.stderr,
         )
         return _failed(args, exc, 1)

@@ -175,6 +175,33 @@ def parse_orders(text: Any) -> tuple[list[int], bool]:
     return list(range(low, high + 1)), False
 
 
+def supported_orders(orders: list[int], auto: bool, records: tuple[IOData, ...], text: Any) -> list[int]:
+    """The orders the estimation records can support: ``--order auto`` is cut to them, any other beyond them refused.
+
+    The bound is the data start's (:func:`~identification.subspace.largest_subspace_order`:
+    a Hankel matrix of 2n block rows with as many columns as rows, N >= 4 n (1 + n_u + n_y) - 1
+    samples for one record) and the filter's (fewer parameters than samples): docs/measured_data.md, "Orders".
+    """
+    from vehid.identification.modal import ModalStructure
+    from vehid.identification.subspace import largest_subspace_order
+
+    first = records[0]
+    lengths = [record.n_samples for record in records]
+    limit = largest_subspace_order(lengths, first.n_u, first.n_y)
+    while limit > 0 and ModalStructure.default(limit, first.n_u, first.n_y).n_parameters >= sum(lengths):
+        limit -= 1
+    if auto:
+        orders = [order for order in orders if order <= limit]
+    if not orders or max(orders) > limit:
+        samples = (f"{lengths[0]} estimation samples" if len(lengths) == 1
+                   else f"{len(lengths)} records of {sum(lengths)} estimation samples")
+        supports = f"they support orders up to {limit}" if limit else "they support no order"
+        raise InputError(f"--order {text}: {samples} with {first.n_u} input(s) and {first.n_y} output(s) cannot "
+                         f"identify a model of order {max(orders or [limit + 1])}; {supports} (the data start needs "
+                         "N >= 4 n (1 + n_u + n_y) - 1 samples per record): give a lower order or a longer record")
+    return orders
+
+
 @dataclass(frozen=True, eq=False)
 class Plan:
     """The records and orders of one identify command.
@@ -269,6 +296,7 @@ def make_plan(args: argparse.Namespace, records: tuple[IOData, ...], load: Calla
     """The plan of one command: estimation records, their held-out parts and the validation files (``load`` reads one)."""
     orders, auto = parse_orders(args.order)
     first = records[0]
+    orders = supported_orders(orders, auto, records, args.order)
     validation = list(held_out)
     names = [f"last {fraction:g} of the record" if fraction is not None else "held-out part"] * len(held_out)
     if len(held_out) > 1:
