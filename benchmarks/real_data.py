@@ -2,7 +2,7 @@
 
     python benchmarks/real_data.py [--sets ballbeam,dryer] [--fractions 0.3,0.4] [--seeds 0,1]
         [--kernels Sandybridge] [--default-only] [--no-perturbations]
-        [--no-peers | --peers-from FILE] [--order-rule holdout|estimation-split]
+        [--no-peers | --peers-from FILE ...] [--workbench-from FILE] [--order-rule holdout|estimation-split]
 
 Records: the raw files under ``tests/data/`` (see each SOURCE.md), read and
 split as ``benchmarks/_real_records.py`` states: the first 70 % of a record
@@ -184,24 +184,47 @@ def run_peers(names: list[str], fractions: list[float], rule: str) -> dict:
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def saved_peers(path: Path, names: list[str], fractions: list[float], rule: str) -> dict:
-    """An earlier output of the peers' runner, checked to cover these records and fractions under this order rule."""
+def saved_peers(paths: list[Path], names: list[str], fractions: list[float], rule: str) -> dict:
+    """Earlier outputs of the peers' runner, merged and checked to cover these records and fractions by this rule."""
     from vehid.scenarios.identify_workflow import ORDER_TOLERANCE
 
-    try:
-        peers = json.loads(Path(path).read_text().strip().splitlines()[-1])
-    except (OSError, ValueError, IndexError) as exc:
-        raise ValueError(f"cannot read the peers' results {path}: {exc}") from None
-    settings = peers.get("settings") or {}
-    if settings.get("order_rule") != rule or settings.get("order_tolerance") != ORDER_TOLERANCE:
-        raise ValueError(f"{path} chose orders by {settings.get('order_rule')!r} within "
-                         f"{settings.get('order_tolerance')} points, not {rule!r} within {ORDER_TOLERANCE}")
+    merged: dict = {"sets": {}}
+    for path in paths:
+        try:
+            peers = json.loads(Path(path).read_text().strip().splitlines()[-1])
+        except (OSError, ValueError, IndexError) as exc:
+            raise ValueError(f"cannot read the peers' results {path}: {exc}") from None
+        settings = peers.get("settings") or {}
+        if settings.get("order_rule") != rule or settings.get("order_tolerance") != ORDER_TOLERANCE:
+            raise ValueError(f"{path} chose orders by {settings.get('order_rule')!r} within "
+                             f"{settings.get('order_tolerance')} points, not {rule!r} within {ORDER_TOLERANCE}")
+        merged.update(settings=settings, versions=peers.get("versions"))
+        merged["sets"].update(peers.get("sets") or {})
     for name in names:
         entry = records.record_set(name)
-        missing = {_fraction(entry, f) for f in fractions} - set((peers.get("sets") or {}).get(name, {}))
+        missing = {_fraction(entry, f) for f in fractions} - set(merged["sets"].get(name, {}))
         if missing:
-            raise ValueError(f"{path} has no peer results for {name} at {', '.join(sorted(missing))}")
-    return peers
+            raise ValueError(f"no peer results for {name} at {', '.join(sorted(missing))} in "
+                             f"{', '.join(map(str, paths))}")
+    return merged
+
+
+def saved_workbench(path: Path, names: list[str]) -> dict:
+    """The workbench's rows and perturbed runs of these records from an earlier ``benchmarks.json``."""
+    try:
+        saved = json.loads(Path(path).read_text())["real_data"]["sets"]
+    except (OSError, ValueError, KeyError) as exc:
+        raise SystemExit(f"real_data.py: no real_data records in {path}: {exc}") from None
+    sets = {}
+    for name in names:
+        if name not in saved:
+            raise SystemExit(f"real_data.py: {path} holds no workbench results for {name}")
+        rows = {k: v for k, v in saved[name].items() if not k.startswith("peer") and k != "perturbations"}
+        spread = saved[name].get("perturbations")
+        if spread:
+            rows["perturbations"] = spread["runs"] if isinstance(spread, dict) else spread
+        sets[name] = rows
+    return sets
 
 
 # -------------------------------------------------------------- perturbations
@@ -424,8 +447,12 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--default-only", action="store_true",
                         help="of the workbench's rows, run the default identify alone")
     parser.add_argument("--no-perturbations", action="store_true", help="skip the perturbed runs of the default")
-    parser.add_argument("--peers-from", type=Path,
-                        help="a JSON file holding an earlier output of _peers_runner.py, read instead of running it")
+    parser.add_argument("--peers-from", type=Path, nargs="+", metavar="FILE",
+                        help="JSON files holding earlier outputs of _peers_runner.py (records split between them), "
+                             "read instead of running it")
+    parser.add_argument("--workbench-from", type=Path, metavar="FILE",
+                        help="a benchmarks.json whose real_data section holds the workbench's rows and perturbed runs "
+                             "for these records, reused instead of running identify")
     parser.add_argument("--order-rule", choices=("holdout", "estimation-split"), default="holdout",
                         help="what chooses a peer's order: the held-out fits (as identify --validation F --order "
                              "2-8) or a split of the estimation part")
@@ -440,9 +467,9 @@ def main(argv: list[str] | None = None) -> dict:
     elif args.kernels is None:
         args.kernels = other_kernels()
     started = time.perf_counter()
-    sets: dict = {}
+    sets: dict = {} if args.workbench_from is None else saved_workbench(args.workbench_from, names)
     with tempfile.TemporaryDirectory(prefix="vehid-real-") as scratch:
-        for name in names:
+        for name in names if args.workbench_from is None else ():
             entry = records.record_set(name)
             print(f"== {name}", flush=True)
             workbench = run_workbench(entry, Path(scratch), args.default_only)
