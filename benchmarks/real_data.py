@@ -336,6 +336,9 @@ def perturbation_summary(runs: list[dict], peers_by_fraction: dict) -> dict:
                                         "default_minus_best_peer": gap}
     summary["by_fraction"] = by_fraction
     gaps = [entry["default_minus_best_peer"] for entry in by_fraction.values()]
+    # the held-out part itself changes with the fraction; the gap to the best peer on the same part does not
+    known = [g for g in gaps if g is not None]
+    summary["default_minus_best_peer_range"] = [min(known), max(known)] if known else None
     # a fraction without a default fit or without any peer's counts as not within
     summary["default_within_2_points_of_best_peer_at_every_fraction"] = (
         None if not peers_by_fraction else all(g is not None and g >= -CLOSE for g in gaps))
@@ -419,7 +422,9 @@ def print_perturbations(sets: dict) -> None:
             continue
         print(f"{name:<16} {_show(spread['default_min'])} to {_show(spread['default_max'])}, range "
               f"{_show(spread['default_range'])} over {len(spread['runs'])} runs"
-              + (f" ({spread['runs_without_fit']} without a fit)" if spread["runs_without_fit"] else ""))
+              + (f" ({spread['runs_without_fit']} without a fit)" if spread["runs_without_fit"] else "")
+              + ("" if not spread["default_minus_best_peer_range"] else
+                 ", default minus best peer {:+.1f} to {:+.1f}".format(*spread["default_minus_best_peer_range"])))
         for fraction, entry in spread["by_fraction"].items():
             gap = entry["default_minus_best_peer"]
             peer = (f", best peer {entry['best_peer']} {_show(entry['best_peer_fit'])} n={entry['best_peer_order']}"
