@@ -3,7 +3,7 @@
     benchmarks/.peers-venv/bin/python benchmarks/_peers_runner.py [--orders 2-8] [--fractions 0.3,0.35]
         [--rule holdout|estimation-split] [--tolerance 0.5] [--inner-holdout 0.3] SET [SET ...]
 
-prints one JSON object: ``{"settings": ..., "versions": ..., "sets": {set: {split: {method: {"order": n,
+prints, after each split, one JSON line holding the results so far (the last line: all of them): ``{"settings": ..., "versions": ..., "sets": {set: {split: {method: {"order": n,
 "validation_fit_percent": [...], "fit_by_order": {n: mean fit}, "seconds": s} or {"error": text}}}}}``, where
 ``split`` is the held-out fraction as text (``"0.3"``) or ``"published"`` for a record published with its own
 validation record. The peers (SIPPY, nfoursid, python-control, sysidentpy) are never imported by the
@@ -173,7 +173,8 @@ def splits(entry, fractions) -> list[tuple[str, float]]:
     return [(f"{fraction:g}", fraction) for fraction in fractions]
 
 
-def run(name: str, options) -> dict:
+def run(name: str, options, done=lambda results: None) -> dict:
+    """Every peer's order search on each split of the record; ``done(results)`` after each split."""
     entry = records.record_set(name)
     results: dict = {}
     for label, fraction in splits(entry, options.fractions):
@@ -187,6 +188,7 @@ def run(name: str, options) -> dict:
             rows[method] = {**search(method, estimation, (validation, offsets), options),
                             "seconds": time.perf_counter() - start}
         results[label] = rows
+        done(results)
     return results
 
 
@@ -234,8 +236,20 @@ def parse(argv: list[str] | None = None):
     return parser.parse_args(argv)
 
 
-if __name__ == "__main__":
+def main() -> None:
+    """Print the results so far as one JSON line after each split: the last line is the whole run, and a run
+    stopped early leaves what it finished."""
     options = parse()
-    json.dump({"settings": settings(options), "versions": versions(),
-               "sets": {name: run(name, options) for name in options.sets}}, sys.stdout)
-    sys.stdout.write("\n")
+    output = {"settings": settings(options), "versions": versions(), "sets": {}}
+
+    def show(results: dict, name: str) -> None:
+        output["sets"][name] = results
+        sys.stdout.write(json.dumps(output) + "\n")
+        sys.stdout.flush()
+
+    for name in options.sets:
+        run(name, options, lambda results, name=name: show(results, name))
+
+
+if __name__ == "__main__":
+    main()
