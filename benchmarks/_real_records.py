@@ -83,21 +83,64 @@ def _columns(path: Path) -> dict[str, np.ndarray]:
     return {str(i + 1): table[:, i] for i in range(table.shape[1])}
 
 
-def load(entry: RecordSet) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
-    """``(u_est, y_est), (u_val, y_val)``, each time-major (N, n), raw values."""
-    columns = _columns(entry.file)
+def load(entry: RecordSet, holdout: float = HOLDOUT, file: Path | None = None
+         ) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
+    """``(u_est, y_est), (u_val, y_val)``, each time-major (N, n), raw values.
+
+    ``holdout`` is the fraction of a single record held out (a separately
+    published validation record ignores it); ``file`` reads a copy of the
+    record (``perturbed_copy``) in place of the published one.
+    """
+    columns = _columns(entry.file if file is None else file)
     u = np.column_stack([columns[c] for c in entry.inputs])
     y = np.column_stack([columns[c] for c in entry.outputs])
     if entry.validation_path_columns is not None:
         val_in, val_out = entry.validation_path_columns
         return (u, y), (np.column_stack([columns[c] for c in val_in]), np.column_stack([columns[c] for c in val_out]))
-    n_est = split_index(len(u))
+    n_est = split_index(len(u), holdout)
     return (u[:n_est], y[:n_est]), (u[n_est:], y[n_est:])
 
 
-def split_index(n_samples: int) -> int:
-    """First validation sample of a single record: the last ``HOLDOUT`` of it is held out (as ``IOData.split``)."""
-    return int(round((1.0 - HOLDOUT) * n_samples))
+def split_index(n_samples: int, holdout: float = HOLDOUT) -> int:
+    """First validation sample of a single record: the last ``holdout`` of it is held out (as ``IOData.split``)."""
+    return int(round((1.0 - holdout) * n_samples))
+
+
+def perturbed_copy(entry: RecordSet, directory: Path, relative: float, seed: int) -> Path:
+    """A copy of the record's file with every number multiplied by ``1 + relative * N(0, 1)``, in ``directory``.
+
+    The copy keeps the file's format and variable names, so ``vehid identify``
+    reads it with the same options as the published file. Numbers are
+    written with 17 significant digits: the copy differs from the original by
+    the perturbation alone, not by rounding in the text.
+    """
+    rng = np.random.default_rng(seed)
+    target = Path(directory) / f"{entry.name}-perturbed-{relative:g}-seed{seed}{entry.file.suffix}"
+    if entry.file.suffix == ".mat":
+        from scipy.io import loadmat, savemat
+
+        variables = {k: np.asarray(v, dtype=float) for k, v in loadmat(entry.file).items() if not k.startswith("__")}
+        savemat(target, {k: v * (1.0 + relative * rng.standard_normal(v.shape)) for k, v in variables.items()})
+    else:
+        table = np.loadtxt(entry.file, ndmin=2)
+        np.savetxt(target, table * (1.0 + relative * rng.standard_normal(table.shape)), fmt="%.17g")
+    return target
+
+
+ORDER_TOLERANCE = 0.5  # points; identify's own (vehid.scenarios.identify_workflow), passed in by real_data.py
+
+
+def choose_order(mean_fits: dict[int, float | None], tolerance: float = ORDER_TOLERANCE) -> int | None:
+    """The smallest order within ``tolerance`` points of the best finite mean fit, as ``identify --order`` chooses.
+
+    Orders whose model has no fit (failed, or its simulation diverged) are
+    not eligible; None when no order is.
+    """
+    eligible = {order: fit for order, fit in mean_fits.items() if fit is not None and np.isfinite(fit)}
+    if not eligible:
+        return None
+    best = max(eligible.values())
+    return min(order for order, fit in eligible.items() if fit >= best - tolerance)
 
 
 def validation_offsets(entry: RecordSet, estimation: tuple[np.ndarray, np.ndarray],

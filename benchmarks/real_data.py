@@ -1,6 +1,8 @@
 """Hold-out fit of `vehid identify` on public measured records, against peer libraries, in one run.
 
-    python benchmarks/real_data.py [--sets ballbeam,dryer] [--no-peers]
+    python benchmarks/real_data.py [--sets ballbeam,dryer] [--fractions 0.3,0.4] [--seeds 0,1]
+        [--kernels Sandybridge] [--default-only] [--no-perturbations]
+        [--no-peers | --peers-from FILE ...] [--workbench-from FILE] [--order-rule holdout|estimation-split]
 
 Records: the raw files under ``tests/data/`` (see each SOURCE.md), read and
 split as ``benchmarks/_real_records.py`` states: the first 70 % of a record
@@ -26,7 +28,22 @@ Peers: SIPPY (N4SID, MOESP, CVA), nfoursid, python-control (Markov
 parameters + ERA) and sysidentpy (FROLS ARX and degree-2 NARX) run in their
 own virtual environment ``benchmarks/.peers-venv`` (created here on first
 use, or by ``make bench-real``), never in the workbench's, through
-``benchmarks/_peers_runner.py``.
+``benchmarks/_peers_runner.py``. Every peer gets the order search ``identify
+--order 2-8`` gets: each order 2-8 is identified and the smallest within
+identify's ``ORDER_TOLERANCE`` of the best is chosen; the fits that choose
+are the held-out fits, as ``identify --validation 0.3 --order 2-8`` ranks its
+orders (``--order-rule estimation-split`` chooses on a split of the
+estimation part instead). Each peer's chosen order is reported beside its
+fit.
+
+Perturbations: per record, the default ``identify`` run again with the
+held-out fraction at each of ``--fractions`` (a published validation record
+has no fraction to move), on copies of the record with every number
+multiplied by ``1 + 1e-6 N(0, 1)`` (``--seeds``), and under each OpenBLAS
+kernel this CPU runs other than the one it picks (``OPENBLAS_CORETYPE``, set
+for those subprocesses alone). The record's range is the spread of the
+default's mean hold-out fit over all these runs; beside each fraction, the
+best peer's fit at that fraction.
 
 The table goes to ``results/benchmarks.json`` under ``real_data``.
 """
@@ -66,11 +83,16 @@ WORKBENCH_METHODS = (  # label, options after the data arguments
 
 
 # ------------------------------------------------------------------ workbench
-def _cli(args: list[str], timeout: float = 900) -> tuple[int, dict, float]:
-    """Run ``python -m vehid.scenarios.cli`` with ``args`` (and --json); exit status, parsed JSON, wall seconds."""
+def _cli(args: list[str], timeout: float = 900, environment: dict[str, str] | None = None
+         ) -> tuple[int, dict, float]:
+    """Run ``python -m vehid.scenarios.cli`` with ``args`` (and --json); exit status, parsed JSON, wall seconds.
+
+    ``environment`` adds variables to this subprocess's environment alone.
+    """
     start = time.perf_counter()
     done = subprocess.run([sys.executable, "-m", "vehid.scenarios.cli", *args, "--json", "--quiet"], cwd=ROOT,
-                          capture_output=True, text=True, timeout=timeout)
+                          capture_output=True, text=True, timeout=timeout,
+                          env={**os.environ, **environment} if environment else None)
     seconds = time.perf_counter() - start
     try:
         summary = json.loads(done.stdout.strip().splitlines()[-1]) if done.stdout.strip() else {}
@@ -81,15 +103,20 @@ def _cli(args: list[str], timeout: float = 900) -> tuple[int, dict, float]:
     return done.returncode, summary, seconds
 
 
-def data_args(entry: records.RecordSet, scratch: Path) -> list[str]:
-    """The raw file, its channels, its sample interval and the hold-out, as a user gives them to ``identify``."""
-    args = [str(entry.file), "--inputs", ",".join(entry.inputs), "--outputs", ",".join(entry.outputs),
+def data_args(entry: records.RecordSet, scratch: Path, holdout: float = records.HOLDOUT,
+              file: Path | None = None) -> list[str]:
+    """The raw file, its channels, its sample interval and the hold-out, as a user gives them to ``identify``.
+
+    ``file`` replaces the published file by a copy of it (``records.perturbed_copy``).
+    """
+    file = entry.file if file is None else file
+    args = [str(file), "--inputs", ",".join(entry.inputs), "--outputs", ",".join(entry.outputs),
             "--dt", repr(entry.dt)]
     if entry.validation_path_columns is None:
-        return [*args, "--validation", repr(records.HOLDOUT)]
+        return [*args, "--validation", repr(holdout)]
     # the published validation variables of the same file, named as they are there
     inputs, outputs = entry.validation_path_columns
-    return [*args, "--validation-file", str(entry.file), "--validation-inputs", ",".join(inputs),
+    return [*args, "--validation-file", str(file), "--validation-inputs", ",".join(inputs),
             "--validation-outputs", ",".join(outputs)]
 
 
@@ -104,12 +131,13 @@ SUMMARY_KEYS = ("fit_percent", "estimation_fit_percent", "order", "passes_run", 
                 "warnings", "validation_R", "horizon")
 
 
-def run_workbench(entry: records.RecordSet, scratch: Path) -> dict:
-    """One row per workbench method: exit status, hold-out fit per output, seconds, and the run's own account."""
+def run_workbench(entry: records.RecordSet, scratch: Path, default_only: bool = False) -> dict:
+    """One row per workbench method (the default alone if asked): exit status, hold-out fit per output, seconds,
+    and the run's own account."""
     arguments = data_args(entry, scratch)
     shown = {str(entry.file): f"tests/data/{entry.path}"}
     rows: dict = {"command": "identify " + " ".join(shown.get(a, a) for a in arguments)}
-    for label, extra in methods(entry):
+    for label, extra in methods(entry)[:1] if default_only else methods(entry):
         status, summary, seconds = _cli(["identify", *arguments, *extra])
         row: dict = {"options": " ".join(extra) or "(defaults)", "seconds": seconds, "exit_status": status}
         if status not in (0, 3):
@@ -143,12 +171,178 @@ def peers_python() -> Path:
     return python
 
 
-def run_peers(names: list[str]) -> dict:
-    done = subprocess.run([str(peers_python()), str(HERE / "_peers_runner.py"), *names], capture_output=True,
-                          text=True, timeout=3600)
+def run_peers(names: list[str], fractions: list[float], rule: str) -> dict:
+    """The peers' order searches on the named records at each held-out fraction, by identify's own order rule."""
+    from vehid.scenarios.identify_workflow import AUTO_HOLDOUT, ORDER_TOLERANCE
+
+    done = subprocess.run([str(peers_python()), str(HERE / "_peers_runner.py"), *names,
+                           "--fractions", ",".join(repr(f) for f in fractions), "--rule", rule,
+                           "--tolerance", repr(ORDER_TOLERANCE), "--inner-holdout", repr(AUTO_HOLDOUT)],
+                          capture_output=True, text=True, timeout=3 * 3600)
     if done.returncode != 0:
         raise RuntimeError(f"peer runner failed: {done.stderr.strip()[-500:]}")
     return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def saved_peers(paths: list[Path], names: list[str], fractions: list[float], rule: str) -> dict:
+    """Earlier outputs of the peers' runner, merged and checked to cover these records and fractions by this rule."""
+    from vehid.scenarios.identify_workflow import ORDER_TOLERANCE
+
+    merged: dict = {"sets": {}}
+    for path in paths:
+        try:
+            peers = json.loads(Path(path).read_text().strip().splitlines()[-1])
+        except (OSError, ValueError, IndexError) as exc:
+            raise ValueError(f"cannot read the peers' results {path}: {exc}") from None
+        settings = peers.get("settings") or {}
+        if settings.get("order_rule") != rule or settings.get("order_tolerance") != ORDER_TOLERANCE:
+            raise ValueError(f"{path} chose orders by {settings.get('order_rule')!r} within "
+                             f"{settings.get('order_tolerance')} points, not {rule!r} within {ORDER_TOLERANCE}")
+        merged.update(settings=settings, versions=peers.get("versions"))
+        merged["sets"].update(peers.get("sets") or {})
+    for name in names:
+        entry = records.record_set(name)
+        missing = {_fraction(entry, f) for f in fractions} - set(merged["sets"].get(name, {}))
+        if missing:
+            raise ValueError(f"no peer results for {name} at {', '.join(sorted(missing))} in "
+                             f"{', '.join(map(str, paths))}")
+    return merged
+
+
+def saved_workbench(path: Path, names: list[str]) -> dict:
+    """The workbench's rows and perturbed runs of these records from an earlier ``benchmarks.json``."""
+    try:
+        saved = json.loads(Path(path).read_text())["real_data"]["sets"]
+    except (OSError, ValueError, KeyError) as exc:
+        raise SystemExit(f"real_data.py: no real_data records in {path}: {exc}") from None
+    sets = {}
+    for name in names:
+        if name not in saved:
+            raise SystemExit(f"real_data.py: {path} holds no workbench results for {name}")
+        rows = {k: v for k, v in saved[name].items() if not k.startswith("peer") and k != "perturbations"}
+        spread = saved[name].get("perturbations")
+        if spread:
+            rows["perturbations"] = spread["runs"] if isinstance(spread, dict) else spread
+        sets[name] = rows
+    return sets
+
+
+# -------------------------------------------------------------- perturbations
+PERTURBATION = 1e-6  # relative size of the noise on every number of a perturbed copy
+FRACTIONS = (0.3, 0.3333, 0.35, 0.4)
+SEEDS = (0, 1)
+# OpenBLAS's x86-64 kernel names, newest first; which of them this CPU runs is asked of OpenBLAS itself
+KERNEL_CANDIDATES = ("SkylakeX", "Cooperlake", "Zen", "Haswell", "Sandybridge", "Nehalem", "Core2", "Prescott")
+_CORENAME = """
+import ctypes, glob, os, numpy
+for library in glob.glob(os.path.join(os.path.dirname(numpy.__file__), os.pardir, "numpy.libs", "*openblas*")):
+    for symbol in ("scipy_openblas_get_corename64_", "scipy_openblas_get_corename", "openblas_get_corename64_",
+                   "openblas_get_corename"):
+        function = getattr(ctypes.CDLL(library), symbol, None)
+        if function is not None:
+            function.restype = ctypes.c_char_p
+            numpy.ones((64, 64)) @ numpy.ones((64, 64))  # a kernel this CPU cannot run stops the process here
+            print(function().decode())
+            raise SystemExit
+"""
+
+
+def _kernel_in_use(coretype: str | None) -> str | None:
+    """The OpenBLAS kernel NumPy uses in a subprocess with ``OPENBLAS_CORETYPE=coretype`` (None: not OpenBLAS)."""
+    environment = {**os.environ, "OPENBLAS_CORETYPE": coretype} if coretype else \
+        {k: v for k, v in os.environ.items() if k != "OPENBLAS_CORETYPE"}
+    done = subprocess.run([sys.executable, "-c", _CORENAME], capture_output=True, text=True, env=environment)
+    return done.stdout.strip() or None
+
+
+def other_kernels() -> list[str]:
+    """The ``OPENBLAS_CORETYPE`` values that make OpenBLAS run a kernel other than the one it picks on this CPU.
+
+    A name is kept only where the kernel OpenBLAS then reports is new and a
+    matrix product runs under it (some builds load a kernel the CPU cannot
+    execute, and the process dies on its first instruction).
+    """
+    chosen = _kernel_in_use(None)
+    if chosen is None:
+        return []
+    seen, kernels = {chosen.lower()}, []
+    for candidate in KERNEL_CANDIDATES:
+        reported = _kernel_in_use(candidate)
+        if reported and reported.lower() not in seen:
+            seen.add(reported.lower())
+            kernels.append(candidate)
+    return kernels
+
+
+def run_perturbations(entry: records.RecordSet, scratch: Path, default_row: dict, options) -> list[dict]:
+    """The default ``identify`` run under each perturbation: held-out fraction, 1e-6 noise, BLAS kernel."""
+    runs = [{"perturbation": "none", "fraction": _fraction(entry, records.HOLDOUT),
+             "validation_fit_percent": default_row.get("validation_fit_percent"), "order": default_row.get("order"),
+             "exit_status": default_row["exit_status"], "seconds": default_row["seconds"]}]
+    plans: list[tuple[str, float, list[str], dict | None]] = []
+    if entry.validation_path_columns is None:
+        plans += [(f"fraction {f:g}", f, data_args(entry, scratch, f), None)
+                  for f in options.fractions if f != records.HOLDOUT]
+    for seed in options.seeds:
+        copy = records.perturbed_copy(entry, scratch, PERTURBATION, seed)
+        plans.append((f"samples x (1 + {PERTURBATION:g} N(0,1)), seed {seed}", records.HOLDOUT,
+                      data_args(entry, scratch, file=copy), None))
+    plans += [(f"OPENBLAS_CORETYPE={kernel}", records.HOLDOUT, data_args(entry, scratch),
+               {"OPENBLAS_CORETYPE": kernel}) for kernel in options.kernels]
+    for label, fraction, arguments, environment in plans:
+        status, summary, seconds = _cli(["identify", *arguments], environment=environment)
+        run = {"perturbation": label, "fraction": _fraction(entry, fraction), "exit_status": status,
+               "seconds": seconds, "order": summary.get("order")}
+        if status in (0, 3):
+            run["validation_fit_percent"] = summary.get("validation_fit_percent")
+        else:
+            run["error"] = summary.get("error", "")
+        runs.append(run)
+        print(f"   default, {label:<40} {_show(_mean_fit(run)):>9}  ({seconds:.1f} s, exit {status})", flush=True)
+    return runs
+
+
+def _fraction(entry: records.RecordSet, fraction: float) -> str:
+    """A split's name, as the peers' runner names it: the fraction, or ``published``."""
+    return "published" if entry.validation_path_columns is not None else f"{fraction:g}"
+
+
+def _best_peer(peer_rows: dict) -> tuple[str | None, float | None, int | None]:
+    scored = [(m, _mean_fit(r), r.get("order")) for m, r in peer_rows.items()]
+    scored = [item for item in scored if item[1] is not None and np.isfinite(item[1])]
+    return max(scored, key=lambda item: item[1]) if scored else (None, None, None)
+
+
+def perturbation_summary(runs: list[dict], peers_by_fraction: dict) -> dict:
+    """The default's range over the perturbed runs, and the best peer against the default at each fraction."""
+    fits = [_mean_fit(run) for run in runs]
+    finite = [f for f in fits if f is not None and np.isfinite(f)]
+    summary: dict = {
+        "runs": runs,
+        "default_min": min(finite) if finite else None,
+        "default_max": max(finite) if finite else None,
+        "default_range": max(finite) - min(finite) if finite else None,
+        "runs_without_fit": len(fits) - len(finite),
+        "within_2_points_range": bool(finite) and len(finite) == len(fits) and max(finite) - min(finite) <= CLOSE,
+    }
+    by_fraction = {}
+    for run, fit in zip(runs, fits):
+        if run["perturbation"] != "none" and not run["perturbation"].startswith("fraction"):
+            continue
+        peer, peer_fit, peer_order = _best_peer(peers_by_fraction.get(run["fraction"], {}))
+        gap = None if fit is None or peer_fit is None or not np.isfinite(fit) else fit - peer_fit
+        by_fraction[run["fraction"]] = {"default_fit": fit, "default_order": run.get("order"), "best_peer": peer,
+                                        "best_peer_fit": peer_fit, "best_peer_order": peer_order,
+                                        "default_minus_best_peer": gap}
+    summary["by_fraction"] = by_fraction
+    gaps = [entry["default_minus_best_peer"] for entry in by_fraction.values()]
+    # the held-out part itself changes with the fraction; the gap to the best peer on the same part does not
+    known = [g for g in gaps if g is not None]
+    summary["default_minus_best_peer_range"] = [min(known), max(known)] if known else None
+    # a fraction without a default fit or without any peer's counts as not within
+    summary["default_within_2_points_of_best_peer_at_every_fraction"] = (
+        None if not peers_by_fraction else all(g is not None and g >= -CLOSE for g in gaps))
+    return summary
 
 
 # ---------------------------------------------------------------------- table
@@ -181,11 +375,12 @@ def summarise(sets: dict) -> dict:
             return max(scored, key=lambda item: item[1]) if scored else (None, None)
 
         peer, peer_fit = best("peer:")
+        peer_order = rows[peer].get("order") if peer else None
         workbench, workbench_fit = best("workbench:")
         default = _mean_fit(rows.get(f"workbench:{DEFAULT_ROW}", {}))
         gap = None if default is None or peer_fit is None or not np.isfinite(default) else default - peer_fit
         entry = {
-            "best_peer": peer, "best_peer_fit": peer_fit,
+            "best_peer": peer, "best_peer_fit": peer_fit, "best_peer_order": peer_order,
             "best_workbench": workbench, "best_workbench_fit": workbench_fit,
             "default_fit": default, "default_minus_best_peer": gap,
             "default_within_2_points": None if gap is None else gap >= -CLOSE,
@@ -208,32 +403,112 @@ def print_table(sets: dict) -> None:
     print("hold-out NRMSE fit % (mean over outputs); rows: method, columns: record")
     print(f"{'method':<36}" + "".join(f"{n:>15}" for n in names))
     for method in methods_seen:
-        cells = "".join(f"{_show(_mean_fit(sets[n][method])) if method in sets[n] else '-':>15}" for n in names)
+        cells = "".join(f"{_cell(sets[n][method]) if method in sets[n] else '-':>15}" for n in names)
         print(f"{method:<36}{cells}")
+
+
+def _cell(row: dict) -> str:
+    """A table cell: the mean hold-out fit and, where known, the order that gave it."""
+    order = row.get("order")
+    return _show(_mean_fit(row)) + (f" n={order}" if isinstance(order, int) else "")
+
+
+def print_perturbations(sets: dict) -> None:
+    print(f"default identify's mean hold-out fit % under perturbation (fractions, {PERTURBATION:g} noise, BLAS "
+          "kernels): range, and the best peer at each fraction")
+    for name, rows in sets.items():
+        spread = rows.get("perturbations")
+        if not spread:
+            continue
+        print(f"{name:<16} {_show(spread['default_min'])} to {_show(spread['default_max'])}, range "
+              f"{_show(spread['default_range'])} over {len(spread['runs'])} runs"
+              + (f" ({spread['runs_without_fit']} without a fit)" if spread["runs_without_fit"] else "")
+              + ("" if not spread["default_minus_best_peer_range"] else
+                 ", default minus best peer {:+.1f} to {:+.1f}".format(*spread["default_minus_best_peer_range"])))
+        for fraction, entry in spread["by_fraction"].items():
+            gap = entry["default_minus_best_peer"]
+            peer = (f", best peer {entry['best_peer']} {_show(entry['best_peer_fit'])} n={entry['best_peer_order']}"
+                    if entry["best_peer"] else "")
+            print(f"   {fraction:>9}: default {_show(entry['default_fit'])} n={entry['default_order']}{peer}"
+                  + ("" if gap is None else f", {gap:+.1f}"))
+
+
+def _numbers(kind):
+    return lambda text: [kind(item) for item in text.split(",") if item.strip()]
 
 
 def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sets", help="comma-separated record sets (default: all)")
     parser.add_argument("--no-peers", action="store_true", help="score the workbench only")
+    parser.add_argument("--fractions", type=_numbers(float), default=list(FRACTIONS),
+                        help=f"held-out fractions of the perturbation runs (default {','.join(map(str, FRACTIONS))})")
+    parser.add_argument("--seeds", type=_numbers(int), default=list(SEEDS),
+                        help=f"seeds of the {PERTURBATION:g} perturbed copies (default {','.join(map(str, SEEDS))}; "
+                             "empty for none)")
+    parser.add_argument("--kernels", type=_numbers(str), default=None,
+                        help="OPENBLAS_CORETYPE values to run the default under (default: every other kernel this "
+                             "CPU runs; empty for none)")
+    parser.add_argument("--default-only", action="store_true",
+                        help="of the workbench's rows, run the default identify alone")
+    parser.add_argument("--no-perturbations", action="store_true", help="skip the perturbed runs of the default")
+    parser.add_argument("--peers-from", type=Path, nargs="+", metavar="FILE",
+                        help="JSON files holding earlier outputs of _peers_runner.py (records split between them), "
+                             "read instead of running it")
+    parser.add_argument("--workbench-from", type=Path, metavar="FILE",
+                        help="a benchmarks.json whose real_data section holds the workbench's rows and perturbed runs "
+                             "for these records, reused instead of running identify")
+    parser.add_argument("--order-rule", choices=("holdout", "estimation-split"), default="holdout",
+                        help="what chooses a peer's order: the held-out fits (as identify --validation F --order "
+                             "2-8) or a split of the estimation part")
     args = parser.parse_args(argv)
     names = args.sets.split(",") if args.sets else [entry.name for entry in records.RECORD_SETS]
+    for name in names:
+        records.record_set(name)  # an unknown name stops here, before anything runs
+    if any(not 0 < f < 1 for f in args.fractions):
+        parser.error(f"--fractions must lie strictly between 0 and 1; got {args.fractions}")
+    if args.no_perturbations:
+        args.fractions, args.seeds, args.kernels = [], [], []
+    elif args.kernels is None:
+        args.kernels = other_kernels()
     started = time.perf_counter()
-    peers = {"sets": {}} if args.no_peers else run_peers(names)
-    sets: dict = {}
+    sets: dict = {} if args.workbench_from is None else saved_workbench(args.workbench_from, names)
     with tempfile.TemporaryDirectory(prefix="vehid-real-") as scratch:
-        for name in names:
+        for name in names if args.workbench_from is None else ():
             entry = records.record_set(name)
             print(f"== {name}", flush=True)
-            workbench = run_workbench(entry, Path(scratch))
+            workbench = run_workbench(entry, Path(scratch), args.default_only)
             command = workbench.pop("command")
-            rows = {f"workbench:{k}": v for k, v in workbench.items()}
-            rows.update({f"peer:{k}": v for k, v in peers["sets"].get(name, {}).items()})
             (u_est, _), (u_val, _) = records.load(entry)
             sets[name] = {
                 "file": entry.path, "dt": entry.dt, "dt_note": entry.dt_note, "command": command,
-                "estimation_samples": len(u_est), "validation_samples": len(u_val), **rows,
+                "estimation_samples": len(u_est), "validation_samples": len(u_val),
+                **{f"workbench:{k}": v for k, v in workbench.items()},
             }
+            if not args.no_perturbations:
+                sets[name]["perturbations"] = run_perturbations(entry, Path(scratch), workbench[DEFAULT_ROW], args)
+    # the peers after the workbench: their run does not depend on it, and may be one saved earlier
+    peer_fractions = sorted({records.HOLDOUT, *args.fractions})
+    try:
+        if args.no_peers:
+            peers = {"sets": {}}
+        elif args.peers_from:
+            peers = saved_peers(args.peers_from, names, peer_fractions, args.order_rule)
+        else:
+            peers = run_peers(names, peer_fractions, args.order_rule)
+    except (RuntimeError, ValueError, subprocess.SubprocessError) as exc:
+        # the workbench's figures took long to measure: they are written all the same, and the run fails after
+        print(f"real_data.py: no peer results: {exc}", file=sys.stderr)
+        peers = {"sets": {}, "error": str(exc)}
+    for name in names:
+        entry = records.record_set(name)
+        peers_by_fraction = peers["sets"].get(name, {})
+        sets[name].update({f"peer:{k}": v for k, v in peers_by_fraction.get(_fraction(entry, records.HOLDOUT),
+                                                                           {}).items()})
+        if "perturbations" in sets[name]:
+            sets[name]["perturbations"] = perturbation_summary(sets[name]["perturbations"], peers_by_fraction)
+        if peers_by_fraction:
+            sets[name]["peers_by_fraction"] = peers_by_fraction
     figures = {
         "score": "validation NRMSE fit % per output (MATLAB compare); linear models from the least-squares initial "
                  "state, the spline model from rest (identify --nonlinear), NARX from the first measured outputs",
@@ -241,8 +516,15 @@ def main(argv: list[str] | None = None) -> dict:
                  f"--validation {records.HOLDOUT} (cascaded tanks: published estimation and validation records)",
         "offsets": "identify removes the estimation part's means (a separate validation record: its own); "
                    "the peers get the same centred samples",
-        "order": "workbench: identify's default (4) unless the row says otherwise; peers: 4",
+        "order": "workbench: identify's default (4) unless the row says otherwise; peers: each searches orders "
+                 f"{(peers.get('settings') or {}).get('orders')} and is scored at the order it chooses (its "
+                 f"'order'), by the rule {args.order_rule!r}",
+        "perturbations": {"fractions": args.fractions, "seeds": args.seeds, "relative_noise": PERTURBATION,
+                          "openblas_kernels": args.kernels, "openblas_kernel_chosen": _kernel_in_use(None),
+                          "goal": f"range at most {CLOSE} points; default within {CLOSE} points of the best peer at "
+                                  "every fraction"},
         "peer_settings": peers.get("settings"),
+        **({"peers_error": peers["error"]} if "error" in peers else {}),
         "peer_versions": peers.get("versions"),
         "sets": sets,
         "summary": summarise(sets),
@@ -252,8 +534,9 @@ def main(argv: list[str] | None = None) -> dict:
     print_table(sets)
     for name, entry in figures["summary"].items():
         print(f"{name}: default {_show(entry['default_fit'])} against best peer {entry['best_peer']} "
-              f"{_show(entry['best_peer_fit'])}" + (f"; spline {_show(entry['spline_fit'])}" if "spline_fit" in entry
-                                                     else ""))
+              f"{_show(entry['best_peer_fit'])} n={entry['best_peer_order']}"
+              + (f"; spline {_show(entry['spline_fit'])}" if "spline_fit" in entry else ""))
+    print_perturbations(sets)
     from vehid.scenarios.benchmarking import record_figures
 
     print(f"figures written to {record_figures('real_data', figures)}")
@@ -261,4 +544,4 @@ def main(argv: list[str] | None = None) -> dict:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(1 if "peers_error" in main() else 0)
