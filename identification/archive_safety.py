@@ -441,15 +441,8 @@ def writing_report_folder(folder: str | Path, *, force: bool = False) -> Iterato
         earlier = (report_files(folder) or set()) if folder.is_dir() else set()
         if folder.is_dir() and (folder.is_symlink() or _foreign_entries(folder, earlier)):  # a link stays a link
             _merge_report(fresh, folder, written, earlier)
-        elif folder.exists() and _exchange(fresh, folder):
-            shutil.rmtree(fresh, ignore_errors=True)  # now the earlier report
-        elif folder.exists():
-            aside = folder.with_name(f".{folder.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.partial")
-            os.replace(folder, aside)
-            os.replace(fresh, folder)
-            shutil.rmtree(aside, ignore_errors=True)
         else:
-            os.replace(fresh, folder)
+            _swap_in(fresh, folder)
     finally:
         if fresh.exists():
             shutil.rmtree(fresh, ignore_errors=True)
@@ -586,19 +579,28 @@ def replacing_directory(folder: str | Path) -> Iterator[Path]:
         raise OutputTargetError(f"cannot write the folder {folder}: {os_error_text(exc)}") from None
     try:
         yield fresh
-        if folder.exists() and _exchange(fresh, folder):
-            shutil.rmtree(fresh, ignore_errors=True)  # now the old folder
-        else:
-            if folder.exists():
-                aside = folder.with_name(f".{folder.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.partial")
-                os.replace(folder, aside)
-                os.replace(fresh, folder)
-                shutil.rmtree(aside, ignore_errors=True)
-            else:
-                os.replace(fresh, folder)
+        _swap_in(fresh, folder)
     finally:
         if fresh.exists():
             shutil.rmtree(fresh, ignore_errors=True)
+
+
+def _swap_in(fresh: Path, folder: Path) -> None:
+    """Put the complete folder ``fresh`` in the place of ``folder`` (if any) and remove the old one.
+
+    On Linux the two change places in one ``renameat2`` call; elsewhere the
+    old folder is renamed aside first, so a crash in between leaves it under
+    a hidden name rather than half-replaced.
+    """
+    if folder.exists() and _exchange(fresh, folder):
+        shutil.rmtree(fresh, ignore_errors=True)  # now the old folder
+    elif folder.exists():
+        aside = folder.with_name(f".{folder.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.partial")
+        os.replace(folder, aside)
+        os.replace(fresh, folder)
+        shutil.rmtree(aside, ignore_errors=True)
+    else:
+        os.replace(fresh, folder)
 
 
 def _remove_dead_partials(folder: Path) -> None:
