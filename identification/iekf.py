@@ -84,12 +84,12 @@ TIMESCALES = ("seconds", "auto")
 INVARIANT_P = 1e-4
 
 #: The invariant settings' factor on Q from one pass to the next (module docstring, "Noise"): after
-#: 28 passes Q is 1 % of p's, where it stays (:data:`P_DECAY_FLOOR`).
-INVARIANT_P_DECAY = 0.85
+#: 26 passes Q is below 1e-4 of p's, where it stays (:data:`P_DECAY_FLOOR`).
+INVARIANT_P_DECAY = 0.7
 
 #: The smallest fraction of p's Q that ``p_decay`` leaves: Q never vanishes, so that P stays positive
 #: definite and the stop rule, which compares trace(P) from pass to pass, can be met.
-P_DECAY_FLOOR = 1e-2
+P_DECAY_FLOOR = 1e-4
 
 #: Restarts with a tenth of p after a divergence in the invariant settings: two take p from the top of
 #: the tuning grid to below its bottom.
