@@ -477,10 +477,13 @@ def identify_iekf(
     notes: list[str] = list(start_meta.get("notes", ()))
     q = q_first * BACK_OFF_FACTOR**backed_off
 
+    def shrink(index: int) -> float:
+        """The factor on p's Q of pass ``index`` (``p_decay``; restarts aside)."""
+        return max(options.p_decay ** (index - 1), P_DECAY_FLOOR) if options.p_decay < 1 else 1.0
+
     def prepare_pass(index: int) -> None:
         """Q of pass ``index``: shrunk ``index - 1`` times by ``p_decay``, and by every restart."""
-        shrink = max(options.p_decay ** (index - 1), P_DECAY_FLOOR) if options.p_decay < 1 else 1.0
-        q[:] = q_first * shrink * BACK_OFF_FACTOR**backed_off
+        q[:] = q_first * shrink(index) * BACK_OFF_FACTOR**backed_off
 
     def back_off(theta: np.ndarray, P: np.ndarray, index: int, message: str):
         """The last good pass's theta and P with the parameters' P a tenth, or None where no restart is left."""
@@ -587,9 +590,10 @@ def identify_iekf(
         return Assessment(theta_original, fit_filter, fit_exact, theta_filter, P_filter)
 
     def settled(previous: PassRecord, current: PassRecord) -> bool:
+        # while Q shrinks, P has no steady state to reach: parameters that no longer move decide alone
+        trace_tolerance = options.trace_tolerance if shrink(current.index) == shrink(previous.index) else math.inf
         return parameters_settled(relative_units(previous.parameters), relative_units(current.parameters),
-                                  previous.trace_p, current.trace_p, options.parameter_tolerance,
-                                  options.trace_tolerance)
+                                  previous.trace_p, current.trace_p, options.parameter_tolerance, trace_tolerance)
 
     hooks = RinseHooks(records, run_record, lambda: r, assess, settled, result, n,
                        hint="try a lower p, the joseph covariance form, or a lower order",
