@@ -10,8 +10,8 @@ settings on the identification record, noise-free and noisy, and scored by
 the NRMSE fit (initial state estimated) on the noise-free validation record:
 the model's error alone, not the noise's.
 
-Per run it prints and records whether it diverged (a DivergenceError: no
-model), how many restarts with a smaller p it took, its fit and the noisy
+Per run it prints and records whether it diverged (a DivergenceError; the
+model scored is then the last good pass's, as the command line returns it), how many restarts with a smaller p it took, its fit and the noisy
 run's loss against the noise-free run of the same record, order and p. The
 target: no divergence, and every loss below 3 points. Figures go to
 ``results/benchmarks.json`` under ``noisy_handling``.
@@ -49,13 +49,15 @@ def _numbers(text: str, kind: type) -> tuple:
 
 
 def identify(data, order: int, p: float):
-    """The IEKF result at the invariant settings (None where it diverged), its restarts and its stop reason."""
+    """The IEKF result at the invariant settings (where it diverged the last good pass's, or None before
+    the first), its restarts and its stop reason."""
     structure = ModalStructure.default(order, data.n_u, data.n_y)
     try:
         result = identify_iekf(data, structure, options=IEKFOptions.invariant(p=p, passes=PASSES),
                                parameter_covariance=False)
-    except DivergenceError as exc:
-        return None, -1, f"diverged: {exc}"
+    except DivergenceError as exc:  # as the command line does: the last good pass's model, if any
+        last = exc.last_good
+        return last, int(last.meta.get("backed_off", 0)) if last else -1, f"diverged: {exc}"
     return result, int(result.meta.get("backed_off", 0)), result.stop_reason
 
 
@@ -84,10 +86,11 @@ def main(argv: list[str] | None = None) -> dict:
                     row = {"excitation_seed": excitation_seed, "noise_seed": noise_seed, "order": order, "p": p,
                            "noise_free_fit_percent": reference_fit, "noise_free_stop_reason": reference_stop,
                            "fit_percent": fit, "loss_points": loss, "restarts": restarts, "stop_reason": stop,
-                           "diverged": result is None,
+                           "diverged": stop.startswith("diverged"),
                            "notes": list(result.meta.get("notes", ())) if result else []}
                     rows.append(row)
-                    shown = "diverged" if fit is None else f"{fit:6.2f} % (loss {loss:+.2f}, restarts {restarts})"
+                    shown = "no model" if fit is None else f"{fit:6.2f} % (loss {loss:+.2f}, restarts {restarts})"
+                    shown += " DIVERGED" if row["diverged"] else ""
                     print(f"seeds {excitation_seed}/{noise_seed} n = {order} p = {p:g}: noise-free "
                           f"{reference_fit if reference_fit is None else round(reference_fit, 2)} %, noisy {shown}",
                           flush=True)

@@ -95,7 +95,7 @@ P_DECAY_FLOOR = 1e-4
 #: the tuning grid to below its bottom.
 INVARIANT_BACK_OFF = 2
 
-#: The factor on p (on Q and on the parameters' P) of each restart after a divergence.
+#: The factor on p of each restart after a divergence: on Q, and on P0, from which P starts again.
 BACK_OFF_FACTOR = 0.1
 
 #: Smallest R per output of ``measurement_noise="data"`` (in units of the output's power) against the
@@ -157,7 +157,7 @@ class IEKFOptions:
         :data:`P_DECAY_FLOOR` of p's. 1 (default, the paper's): Q constant.
     back_off : int
         How many times a diverged pass runs again from the last good pass
-        with p (Q and the parameters' P) times :data:`BACK_OFF_FACTOR`;
+        with p times :data:`BACK_OFF_FACTOR` (Q, and P afresh from its P0);
         0 (default): the divergence stops the run.
     """
 
@@ -486,13 +486,17 @@ def identify_iekf(
         q[:] = q_first * shrink(index) * BACK_OFF_FACTOR**backed_off
 
     def back_off(theta: np.ndarray, P: np.ndarray, index: int, message: str):
-        """The last good pass's theta and P with the parameters' P a tenth, or None where no restart is left."""
+        """The last good pass's theta with P0 of the smaller p, or None where no restart is left.
+
+        P starts afresh rather than from the last good pass's: where Q has
+        shrunk over many passes that P is nearly singular, and a divergence
+        of the covariance would repeat from it.
+        """
         nonlocal backed_off
         if backed_off >= options.back_off:
             return None
         backed_off += 1
-        P = P.copy()
-        P[n:, n:] *= BACK_OFF_FACTOR
+        P = np.diag(np.concatenate([np.zeros(n), weights**2 * options.p * BACK_OFF_FACTOR**backed_off]))
         notes.append(f"pass {index} diverged ({message}): run again from "
                      f"{f'pass {index - 1}' if index > 1 else 'the start'} with p = "
                      f"{options.p * BACK_OFF_FACTOR**backed_off:.3g}")
