@@ -472,7 +472,8 @@ def identify_iekf(
     ratio = time_unit / time_constant
     weights = structure.time_weights(ratio)
     q_first = np.concatenate([np.zeros(n), weights**2 * ratio * options.p])  # Q of pass 1
-    # restarts after a divergence so far (module docstring, "Noise"); a resumed run keeps its smaller p
+    # restarts after a divergence so far (module docstring, "Noise"): a run resumed from its result keeps
+    # its smaller p; an archive does not store it, and a run resumed from one takes up options.p again
     backed_off = int(start_meta.get("backed_off", 0))
     notes: list[str] = list(start_meta.get("notes", ()))
     q = q_first * BACK_OFF_FACTOR**backed_off
@@ -501,6 +502,7 @@ def identify_iekf(
                      f"{f'pass {index - 1}' if index > 1 else 'the start'} with p = "
                      f"{options.p * BACK_OFF_FACTOR**backed_off:.3g}")
         return theta, P
+
     if P is None:
         P = np.diag(np.concatenate([np.zeros(n), weights**2 * options.p]))
     if options.measurement_noise == "data":
