@@ -44,7 +44,7 @@ import numpy as np
 from vehid.identification.data import IOData
 from vehid.identification.errors import DivergenceError, InputError, StrictWarningsError, WorkbenchError
 from vehid.identification.iekf import (INVARIANT_P, START_CHOICES, TIMESCALES, IEKFOptions, identify_iekf,
-                                      normalized_data_start, signal_scales, start_structure)
+                                      invariant_noise_settings, normalized_data_start, signal_scales, start_structure)
 from vehid.identification.discrete import DiscreteModel
 from vehid.identification.modal import ModalModel, ModalStructure
 from vehid.identification.uncertainty import simulation_error_covariance
@@ -621,9 +621,12 @@ def decision_notes(summary: dict[str, Any]) -> list[str]:
 def iekf_options(args: argparse.Namespace, default_passes: int) -> IEKFOptions:
     """IEKF settings of the command line: the unit-invariant ones unless asked otherwise."""
     p = args.p if args.p is not None else (INVARIANT_P if args.timescale == "auto" else 1.0)
+    # the unit-free time scale meets noise as IEKFOptions.invariant does; the paper's settings keep Q and R = I
+    noise = invariant_noise_settings() if args.timescale == "auto" else {}
     return IEKFOptions(
         p=p, passes=default_passes if args.passes is None else args.passes, discretization=args.discretization, covariance=args.covariance,
         start=args.start, normalize=args.normalize, timescale=args.timescale, allow_unstable=args.allow_unstable,
+        **noise,
     )
 
 

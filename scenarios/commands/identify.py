@@ -302,6 +302,8 @@ def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None)
         allow_unstable=allow_unstable, start_moved=start_moved, p_tuned=bool(summary.get("p_tried")),
         fit_history=[record.mean_fit_continuous for record in result.history] if result is not None else None,
     )
+    if result is not None and not start_returned:  # a pass that diverged and ran again with a smaller p
+        warnings += list(result.meta.get("notes", ()))
     if evaluation.horizon is not None and args.horizon is None:
         summary["scoring_note"] = (f"the model is unstable: scored by {evaluation.horizon}-step-ahead prediction, "
                                    "since its simulation diverges (--horizon K to choose K)")
