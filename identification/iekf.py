@@ -548,7 +548,7 @@ def identify_iekf(
             structure=structure, options=options, history=history,
             state=FilterState(theta.copy(), P.copy(), input_scale.copy(), output_scale.copy(), time_unit, time_constant),
             dt=dt, stop_reason=stop_reason, seconds=time.perf_counter() - started,
-            meta={**start_meta, "backed_off": backed_off, "notes": tuple(notes)},
+            meta={**start_meta, "backed_off": backed_off, "notes": list(notes)},
         )
 
     def sampled_pass(theta: np.ndarray, P: np.ndarray) -> np.ndarray:
