@@ -158,3 +158,27 @@ def test_study_linear_example_json(tmp_path):
 def test_help(command):
     completed = _vehid(*command, "--help")
     assert completed.returncode == 0 and "--json" in completed.stdout
+
+
+@pytest.mark.parametrize("schedule", list(Q_SCHEDULES))
+def test_the_archived_decisions_keep_the_Q_schedule(schedule, tmp_path):
+    """A resumed run reports the schedule its tuning chose; an archive written before schedules were kept
+    reads as the constant Q every run had then."""
+    from vehid.identification.archive import update_archive, write_archive
+    from vehid.scenarios.commands.identify import DECISIONS, _archive_decisions, _read_decisions
+    from vehid.scenarios.identify_workflow import PTuning
+
+    tried = tuple({"p": p, "q_schedule": q, "cv_fit_percent": 90.0, "seconds": 1.0} for p in P_GRID for q in Q_SCHEDULES)
+    tuning = PTuning(P_GRID[1], tried, 6.0, start_fit=80.0, q_schedule=schedule)
+    with write_archive(tmp_path / "run.h5", kind="identification") as handle:
+        _archive_decisions(handle, tuning, None)
+    with open_archive(tmp_path / "run.h5", kinds=["identification"]) as handle:
+        back, unstable = _read_decisions(handle)
+    assert back.q_schedule == schedule and back.p == tuning.p and unstable is None
+    assert back.summary()["p_tried"] == tuning.summary()["p_tried"]
+    with update_archive(tmp_path / "run.h5") as handle:  # as an older workbench wrote it
+        stored = json.loads(handle.attrs[DECISIONS])
+        del stored["tuning"]["q_schedule"]
+        handle.attrs[DECISIONS] = json.dumps(stored)
+    with open_archive(tmp_path / "run.h5", kinds=["identification"]) as handle:
+        assert _read_decisions(handle)[0].q_schedule == "constant"
