@@ -44,8 +44,9 @@ import numpy as np
 
 from vehid.identification.data import IOData
 from vehid.identification.errors import DivergenceError, InputError, StrictWarningsError, WorkbenchError
-from vehid.identification.iekf import (INVARIANT_P, INVARIANT_P_DECAY, START_CHOICES, TIMESCALES, IEKFOptions, identify_iekf,
-                                      invariant_noise_settings, normalized_data_start, signal_scales, start_structure)
+from vehid.identification.iekf import (INVARIANT_P, INVARIANT_P_DECAY, START_CHOICES, TIMESCALES, IEKFOptions,
+                                      identify_iekf, invariant_noise_settings, normalized_data_start, signal_scales,
+                                      start_structure)
 from vehid.identification.discrete import DiscreteModel
 from vehid.identification.modal import ModalModel, ModalStructure
 from vehid.identification.uncertainty import simulation_error_covariance

@@ -168,7 +168,8 @@ def test_the_archived_decisions_keep_the_Q_schedule(schedule, tmp_path):
     from vehid.scenarios.commands.identify import DECISIONS, _archive_decisions, _read_decisions
     from vehid.scenarios.identify_workflow import PTuning
 
-    tried = tuple({"p": p, "q_schedule": q, "cv_fit_percent": 90.0, "seconds": 1.0} for p in P_GRID for q in Q_SCHEDULES)
+    tried = tuple({"p": p, "q_schedule": q, "cv_fit_percent": 90.0, "seconds": 1.0}
+                  for p in P_GRID for q in Q_SCHEDULES)
     tuning = PTuning(P_GRID[1], tried, 6.0, start_fit=80.0, q_schedule=schedule)
     with write_archive(tmp_path / "run.h5", kind="identification") as handle:
         _archive_decisions(handle, tuning, None)
