@@ -14,6 +14,18 @@ removes the units: signals divided by their RMS, the start from the data
 start, carried to the filtered parameters by congruence (under which the
 Kalman filter is exact). The field defaults stay the paper's, so that stored
 runs and the paper's studies are unchanged.
+
+Noise. A constant ``Q`` models parameters that drift: at the end of the last
+pass the filter's parameters are an average over a window whose length ``Q``
+sets, and on a noisy record they follow its noise. The invariant settings
+therefore shrink ``Q`` from pass to pass (``p_decay``, down to
+:data:`P_DECAY_FLOOR` of ``p``): the early passes move the parameters from the
+start, the late ones average over the whole record. ``R`` is taken per output
+from the record's white noise (:func:`output_noise_variance`), so that a noisy
+output weighs less than a clean one (the noisiest keeping R = I's weight, on
+which p is tuned), and a pass that diverges runs again from
+the last good pass with a tenth of ``p`` (``back_off`` times at most), noted
+in the result's ``meta["notes"]``.
 """
 
 from __future__ import annotations
@@ -48,6 +60,9 @@ __all__ = [
     "start_structure",
     "normalized_data_start",
     "signal_scales",
+    "output_noise_variance",
+    "data_measurement_noise",
+    "invariant_noise_settings",
 ]
 
 #: Named start values: (sigma, omega, omega spread between pairs). The paper's sigma = -1 finds the
@@ -67,6 +82,31 @@ TIMESCALES = ("seconds", "auto")
 #: The relative tuning parameter of :meth:`IEKFOptions.invariant`: Q = p I per dominant time
 #: constant of the start model, on parameters of order 1 (chosen by measurement: docs/iekf_tuning.md).
 INVARIANT_P = 1e-4
+
+#: The invariant settings' factor on Q from one pass to the next (module docstring, "Noise"): after
+#: 26 passes Q is below 1e-4 of p's, where it stays (:data:`P_DECAY_FLOOR`).
+INVARIANT_P_DECAY = 0.7
+
+#: The smallest fraction of p's Q that ``p_decay`` leaves: Q never vanishes, so that P stays positive
+#: definite and the stop rule, which compares trace(P) from pass to pass, can be met.
+P_DECAY_FLOOR = 1e-4
+
+#: Restarts with a tenth of p after a divergence in the invariant settings: two take p from the top of
+#: the tuning grid to below its bottom.
+INVARIANT_BACK_OFF = 2
+
+#: The factor on p of each restart after a divergence: on Q, and on P0, from which P starts again.
+BACK_OFF_FACTOR = 0.1
+
+#: Smallest R per output of ``measurement_noise="data"`` (in units of the output's power) against the
+#: noisiest output's 1: an output whose relative noise variance is below a hundredth of the noisiest
+#: one's weighs a hundred times as much, no more, so that a noise-free output beside noisy ones does
+#: not get a gain that only the rounding of its samples would limit.
+NOISE_WEIGHT_FLOOR = 1e-2
+
+#: Relative noise variance below which ``measurement_noise="data"`` counts an output as noise-free: a
+#: noise below 1 % of the output's RMS. Outputs all below it keep R = I, whatever their samples' rounding.
+NOISE_FLOOR = 1e-4
 
 #: Points of the extra pass at which the filter's parameters are sampled for their covariance
 #: (:func:`~identification.uncertainty.iekf_parameter_covariance`): the sample covariance of 200
@@ -89,8 +129,12 @@ class IEKFOptions:
         ``euler`` is the paper's and converges to its Euler equivalent.
     covariance : {"joseph", "paper"}
         Covariance numerics (see :mod:`vehid.identification.iekf_pass`).
-    measurement_noise : float or None
-        ``R = measurement_noise * I`` in (normalised) output units; default 1 (the paper's R = I).
+    measurement_noise : float, "data" or None
+        ``R = measurement_noise * I`` in (normalised) output units; default 1
+        (the paper's R = I); ``"data"``: ``R`` diagonal, in units of each
+        output's power the ratio of its white noise's variance
+        (:func:`output_noise_variance`) to the noisiest output's, at least
+        :data:`NOISE_WEIGHT_FLOOR`: the noisiest output keeps R = I's weight.
     start : {"default", "paper", "data", "band"}
         Start values: fixed sigma/omega (:data:`START_VALUES`) or taken from
         the data (:mod:`vehid.identification.start`).
@@ -108,6 +152,13 @@ class IEKFOptions:
         Keep unstable modes (open-loop unstable plants) instead of stopping
         with a DivergenceError; the start is then not reflected into the
         left half-plane either.
+    p_decay : float
+        Factor on Q from one pass to the next, in (0, 1]; Q never falls below
+        :data:`P_DECAY_FLOOR` of p's. 1 (default, the paper's): Q constant.
+    back_off : int
+        How many times a diverged pass runs again from the last good pass
+        with p times :data:`BACK_OFF_FACTOR` (Q, and P afresh from its P0);
+        0 (default): the divergence stops the run.
     """
 
     p: float = 1.0
@@ -122,22 +173,33 @@ class IEKFOptions:
     min_passes: int = 2
     timescale: str = "seconds"
     allow_unstable: bool = False
+    p_decay: float = 1.0
+    back_off: int = 0
 
     @classmethod
     def invariant(cls, **changes: Any) -> "IEKFOptions":
         """Settings independent of units, scale, sample interval and record length (module docstring).
 
         Normalised signals, the start from the data, time in samples,
-        ``p = INVARIANT_P`` per dominant time constant; ``changes`` override any field.
+        ``p = INVARIANT_P`` per dominant time constant, shrinking by ``INVARIANT_P_DECAY``
+        per pass, R from the data's noise and :data:`INVARIANT_BACK_OFF` restarts after a
+        divergence; ``changes`` override any field.
         """
-        settings: dict[str, Any] = {"normalize": True, "start": "data", "timescale": "auto", "p": INVARIANT_P}
+        settings: dict[str, Any] = {"normalize": True, "start": "data", "timescale": "auto", "p": INVARIANT_P,
+                                    **invariant_noise_settings()}
         settings.update(changes)
         return cls(**settings)
 
     def __post_init__(self) -> None:
         check_filter_options(self.p, self.passes, self.discretization, self.covariance)
-        if self.measurement_noise is not None and not (math.isfinite(self.measurement_noise) and self.measurement_noise > 0):
-            raise InputError(f"measurement_noise must be positive; got {self.measurement_noise!r}")
+        if self.measurement_noise is not None and self.measurement_noise != "data" and not (
+                isinstance(self.measurement_noise, (int, float)) and math.isfinite(self.measurement_noise)
+                and self.measurement_noise > 0):
+            raise InputError(f"measurement_noise must be positive or 'data'; got {self.measurement_noise!r}")
+        if not (isinstance(self.p_decay, (int, float)) and 0 < self.p_decay <= 1):
+            raise InputError(f"p_decay must be in (0, 1]; got {self.p_decay!r}")
+        if isinstance(self.back_off, bool) or not isinstance(self.back_off, int) or self.back_off < 0:
+            raise InputError(f"back_off must be a whole number >= 0; got {self.back_off!r}")
         if self.start not in START_CHOICES:
             raise InputError(f"unknown start {self.start!r}; use one of {', '.join(START_CHOICES)}")
         if self.timescale not in TIMESCALES:
@@ -188,6 +250,47 @@ class IEKFResult(PassHistory):
     def fit_percent(self) -> np.ndarray:
         """R per output of the final continuous model simulated exactly."""
         return self.history[-1].fit_continuous
+
+
+def invariant_noise_settings() -> dict[str, Any]:
+    """The fields by which the invariant settings meet noise (module docstring, "Noise")."""
+    return {"measurement_noise": "data", "p_decay": INVARIANT_P_DECAY, "back_off": INVARIANT_BACK_OFF}
+
+
+def output_noise_variance(records: IOData | tuple[IOData, ...]) -> np.ndarray:
+    """The variance of each output's white noise, estimated from the records' k-th differences, k = 1, 2, 3.
+
+    Of white noise of variance s^2 the k-th difference has the mean square
+    ``binom(2k, k) s^2``; a smooth signal adds little to it where the record
+    is sampled fast against its dynamics, and never subtracts. Each k gives
+    an upper bound, pooled over the records; the smallest is returned (in
+    the outputs' units squared). Its relative standard error on N samples of
+    pure white noise is below ``sqrt(4.7 / N)`` (about 5 % at N = 2000).
+    """
+    records = as_records(records)
+    bounds = []
+    for k in (1, 2, 3):
+        squares = sum(np.sum(np.diff(record.y, k, axis=0) ** 2, axis=0) for record in records)
+        count = sum(max(record.n_samples - k, 0) for record in records)
+        bounds.append(squares / max(count, 1) / math.comb(2 * k, k))
+    return np.min(bounds, axis=0)
+
+
+def data_measurement_noise(records: IOData | tuple[IOData, ...]) -> np.ndarray:
+    """The diagonal of R of ``measurement_noise="data"``, in the outputs' units squared.
+
+    In units of each output's power (its mean square over all records): the
+    noisiest output's 1, R = I's on normalised signals, so that p keeps the
+    meaning the tuning grid gives it; every other output the ratio of its
+    relative noise variance (:func:`output_noise_variance`) to the noisiest
+    one's, at least :data:`NOISE_WEIGHT_FLOOR`. Noise below :data:`NOISE_FLOOR`
+    counts as that floor, so that outputs all free of noise keep R = I.
+    """
+    records = as_records(records)
+    power = np.sum([np.sum(record.y**2, axis=0) for record in records], axis=0) / sum(
+        record.n_samples for record in records)
+    relative = np.maximum(output_noise_variance(records) / power, NOISE_FLOOR)
+    return np.clip(relative / np.max(relative), NOISE_WEIGHT_FLOOR, 1.0) * power
 
 
 def signal_scales(data: IOData | tuple[IOData, ...], normalize: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -368,10 +471,45 @@ def identify_iekf(
     # the filter's time unit by the congruence of that change of parameters.
     ratio = time_unit / time_constant
     weights = structure.time_weights(ratio)
-    q = np.concatenate([np.zeros(n), weights**2 * ratio * options.p])
+    q_first = np.concatenate([np.zeros(n), weights**2 * ratio * options.p])  # Q of pass 1
+    # restarts after a divergence so far (module docstring, "Noise"): a run resumed from its result keeps
+    # its smaller p; an archive does not store it, and a run resumed from one takes up options.p again
+    backed_off = int(start_meta.get("backed_off", 0))
+    notes: list[str] = list(start_meta.get("notes", ()))
+    q = q_first * BACK_OFF_FACTOR**backed_off
+
+    def shrink(index: int) -> float:
+        """The factor on p's Q of pass ``index`` (``p_decay``; restarts aside)."""
+        return max(options.p_decay ** (index - 1), P_DECAY_FLOOR) if options.p_decay < 1 else 1.0
+
+    def prepare_pass(index: int) -> None:
+        """Q of pass ``index``: shrunk ``index - 1`` times by ``p_decay``, and by every restart."""
+        q[:] = q_first * shrink(index) * BACK_OFF_FACTOR**backed_off
+
+    def back_off(theta: np.ndarray, P: np.ndarray, index: int, message: str):
+        """The last good pass's theta with P0 of the smaller p, or None where no restart is left.
+
+        P starts afresh rather than from the last good pass's: where Q has
+        shrunk over many passes that P is nearly singular, and a divergence
+        of the covariance would repeat from it.
+        """
+        nonlocal backed_off
+        if backed_off >= options.back_off:
+            return None
+        backed_off += 1
+        P = np.diag(np.concatenate([np.zeros(n), weights**2 * options.p * BACK_OFF_FACTOR**backed_off]))
+        notes.append(f"pass {index} diverged ({message}): run again from "
+                     f"{f'pass {index - 1}' if index > 1 else 'the start'} with p = "
+                     f"{options.p * BACK_OFF_FACTOR**backed_off:.3g}")
+        return theta, P
+
     if P is None:
         P = np.diag(np.concatenate([np.zeros(n), weights**2 * options.p]))
-    r = np.eye(structure.n_y) * (1.0 if options.measurement_noise is None else options.measurement_noise)
+    if options.measurement_noise == "data":
+        r = np.diag(data_measurement_noise(records) / output_scale**2)
+    else:
+        r = np.eye(structure.n_y) * (1.0 if options.measurement_noise is None else options.measurement_noise)
+    start_meta["measurement_noise"] = np.diag(r) * output_scale**2  # R's diagonal in the outputs' units squared
     # unscaled data are passed as they are: a copy of a long record per channel is memory for nothing
     u_scaled = [record.u if np.all(input_scale == 1) else record.u / input_scale for record in records]
     y_scaled = [record.y if np.all(output_scale == 1) else record.y / output_scale for record in records]
@@ -409,7 +547,8 @@ def identify_iekf(
             ),
             structure=structure, options=options, history=history,
             state=FilterState(theta.copy(), P.copy(), input_scale.copy(), output_scale.copy(), time_unit, time_constant),
-            dt=dt, stop_reason=stop_reason, seconds=time.perf_counter() - started, meta=dict(start_meta),
+            dt=dt, stop_reason=stop_reason, seconds=time.perf_counter() - started,
+            meta={**start_meta, "backed_off": backed_off, "notes": list(notes)},
         )
 
     def sampled_pass(theta: np.ndarray, P: np.ndarray) -> np.ndarray:
@@ -457,11 +596,13 @@ def identify_iekf(
         return Assessment(theta_original, fit_filter, fit_exact, theta_filter, P_filter)
 
     def settled(previous: PassRecord, current: PassRecord) -> bool:
+        # while Q shrinks, P has no steady state to reach: parameters that no longer move decide alone
+        trace_tolerance = options.trace_tolerance if shrink(current.index) == shrink(previous.index) else math.inf
         return parameters_settled(relative_units(previous.parameters), relative_units(current.parameters),
-                                  previous.trace_p, current.trace_p, options.parameter_tolerance,
-                                  options.trace_tolerance)
+                                  previous.trace_p, current.trace_p, options.parameter_tolerance, trace_tolerance)
 
     hooks = RinseHooks(records, run_record, lambda: r, assess, settled, result, n,
-                       hint="try a lower p, the joseph covariance form, or a lower order")
+                       hint="try a lower p, the joseph covariance form, or a lower order",
+                       prepare_pass=prepare_pass, back_off=back_off)
     return rinse(hooks, theta, P, tuple(history), passes=options.passes, min_passes=options.min_passes,
                  check_covariance=options.covariance != "paper", on_pass=on_pass)

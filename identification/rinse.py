@@ -4,7 +4,8 @@ Best & Bogdanski 2017, sections 2-5: each pass starts the true states of every
 record at zero and carries the parameters and ``P`` on; after it the model is
 frozen and scored. The loop owns what every IEKF does alike (divergence with
 the last good result, one :class:`PassRecord` per pass, callback, stop rule);
-a filter supplies :class:`RinseHooks`.
+a filter supplies :class:`RinseHooks`, among them, optionally, a Q that
+changes from pass to pass and a smaller p to restart a diverged pass with.
 """
 
 from __future__ import annotations
@@ -103,6 +104,11 @@ class RinseHooks(Generic[ResultT]):
     n_x: int  # true states, reset to zero at the start of each record
     label: str = "pass"
     hint: str = "try a lower p"
+    # called with a pass's index before it runs: a filter whose Q changes from pass to pass sets it here
+    prepare_pass: Callable[[int], None] | None = None
+    # after a divergence, (theta, P, pass index, message) of the last good pass -> the theta and P to restart
+    # from with a smaller p, or None where no smaller p is left (the divergence then stands)
+    back_off: Callable[[np.ndarray, np.ndarray, int, str], tuple[np.ndarray, np.ndarray] | None] | None = None
 
 
 def check_records(records: tuple[IOData, ...], n_u: int, n_y: int, n_parameters: int, model: str = "the structure") -> None:
@@ -183,9 +189,15 @@ def rinse(hooks: RinseHooks[ResultT], theta: np.ndarray, P: np.ndarray, history:
     stop_reason = "passes"
     while len(history) < passes:
         index = len(history) + 1
+        if hooks.prepare_pass is not None:
+            hooks.prepare_pass(index)
         try:
             record, theta, P = one_pass(index)
         except DivergenceError as exc:
+            restart = hooks.back_off(theta, P, index, str(exc)) if hooks.back_off is not None else None
+            if restart is not None:
+                theta, P = restart  # the pass runs again from the last good one, with the smaller p
+                continue
             last_good = hooks.result(f"diverged at pass {index}", tuple(history), theta, P) if history else None
             raise DivergenceError(f"{hooks.label} {index}: {exc}", last_good=last_good) from exc
         previous = history[-1] if history else None

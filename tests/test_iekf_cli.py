@@ -13,7 +13,7 @@ import pytest
 
 from vehid.identification.archive import open_archive
 from vehid.identification.iekf_archive import read_iekf_run
-from vehid.scenarios.identify_workflow import P_GRID, P_TOLERANCE
+from vehid.scenarios.identify_workflow import P_GRID, P_TOLERANCE, Q_SCHEDULES
 from vehid.scenarios.linear_example import make_data
 
 VEHID = [sys.executable, "-m", "vehid.scenarios.cli"]
@@ -50,11 +50,14 @@ def test_identify_json_summary(short_record, tmp_path):
         assert min(abs(f - truth) for f in found) / abs(truth) < 0.02
     assert summary["fit_percent"][0] > 99.9
     assert json.loads((tmp_path / "model.json").read_text())["structure"]["n"] == 5
-    # no --p: each p of the grid cross-validated on the halves; the largest within the tolerance of the best taken
+    # no --p: each p of the grid cross-validated on the halves with each Q schedule; the largest p within the
+    # tolerance of the best taken, with a constant Q where that is within the tolerance too
     tried = summary["p_tried"]
-    assert [row["p"] for row in tried] == list(P_GRID)
-    fits = {row["p"]: row["cv_fit_percent"] for row in tried}
-    assert summary["p"] == max(p for p, fit in fits.items() if fit >= max(fits.values()) - P_TOLERANCE)
+    assert [(row["p"], row["q_schedule"]) for row in tried] == [(p, q) for p in P_GRID for q in Q_SCHEDULES]
+    fits = {(row["p"], row["q_schedule"]): row["cv_fit_percent"] for row in tried}
+    near = [key for key, fit in fits.items() if fit >= max(fits.values()) - P_TOLERANCE]
+    assert summary["p"] == max(p for p, _ in near)
+    assert summary["q_schedule"] == ("constant" if (summary["p"], "constant") in near else "shrinking")
     assert summary["tuning_seconds"] >= sum(row["seconds"] for row in tried) > 0
 
 
@@ -155,3 +158,28 @@ def test_study_linear_example_json(tmp_path):
 def test_help(command):
     completed = _vehid(*command, "--help")
     assert completed.returncode == 0 and "--json" in completed.stdout
+
+
+@pytest.mark.parametrize("schedule", list(Q_SCHEDULES))
+def test_the_archived_decisions_keep_the_Q_schedule(schedule, tmp_path):
+    """A resumed run reports the schedule its tuning chose; an archive written before schedules were kept
+    reads as the constant Q every run had then."""
+    from vehid.identification.archive import update_archive, write_archive
+    from vehid.scenarios.commands.identify import DECISIONS, _archive_decisions, _read_decisions
+    from vehid.scenarios.identify_workflow import PTuning
+
+    tried = tuple({"p": p, "q_schedule": q, "cv_fit_percent": 90.0, "seconds": 1.0}
+                  for p in P_GRID for q in Q_SCHEDULES)
+    tuning = PTuning(P_GRID[1], tried, 6.0, start_fit=80.0, q_schedule=schedule)
+    with write_archive(tmp_path / "run.h5", kind="identification") as handle:
+        _archive_decisions(handle, tuning, None)
+    with open_archive(tmp_path / "run.h5", kinds=["identification"]) as handle:
+        back, unstable = _read_decisions(handle)
+    assert back.q_schedule == schedule and back.p == tuning.p and unstable is None
+    assert back.summary()["p_tried"] == tuning.summary()["p_tried"]
+    with update_archive(tmp_path / "run.h5") as handle:  # as an older workbench wrote it
+        stored = json.loads(handle.attrs[DECISIONS])
+        del stored["tuning"]["q_schedule"]
+        handle.attrs[DECISIONS] = json.dumps(stored)
+    with open_archive(tmp_path / "run.h5", kinds=["identification"]) as handle:
+        assert _read_decisions(handle)[0].q_schedule == "constant"

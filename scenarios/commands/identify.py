@@ -190,7 +190,8 @@ def _read_decisions(archive) -> tuple:
         stored = json.loads(archive.attrs[DECISIONS])
         tuning = stored["tuning"]
         return (workflow.PTuning(p=float(tuning["p"]), tried=tuple(tuning["tried"]), seconds=float(tuning["seconds"]),
-                                 start_fit=tuning["start_fit"]), stored["open_loop_unstable"])
+                                 start_fit=tuning["start_fit"], q_schedule=tuning.get("q_schedule", "constant")),
+                stored["open_loop_unstable"])
     except (ValueError, KeyError, TypeError):
         raise InputError(f"{archive.filename} holds an unreadable record of the run's decisions") from None
 
@@ -207,6 +208,8 @@ def _identify(args: argparse.Namespace) -> tuple[dict, str]:
         plan, structure, options, previous, (tuning, unstable) = _resume(args)
         if tuning is None:  # an archive written before the tuning was kept: the run's own p, as archived
             tuning = workflow.given_p(options)
+        # the archived options run the passes; an archive written before the schedule was kept names it by them
+        tuning = dataclasses.replace(tuning, q_schedule=workflow.q_schedule_of(options))
         archive_path = Path(args.resume)
     else:
         if not args.data:
@@ -220,7 +223,7 @@ def _identify(args: argparse.Namespace) -> tuple[dict, str]:
         options, unstable = workflow.assume_unstable(args, plan, options, plan.orders[0])
         structure = workflow.structure_for(args, plan.orders[0], plan, options)
         tuning = workflow.tune_p(args, plan, options, structure) if workflow.tunes_p(args) else workflow.given_p(options)
-        options = dataclasses.replace(options, p=tuning.p)
+        options = tuning.applied(options)
         archive_path = Path(args.out) if args.out else None
         if archive_path is not None:
             with write_archive(archive_path, kind=ARCHIVE_KIND, config=options, seeds=[]) as archive:
@@ -302,6 +305,8 @@ def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None)
         allow_unstable=allow_unstable, start_moved=start_moved, p_tuned=bool(summary.get("p_tried")),
         fit_history=[record.mean_fit_continuous for record in result.history] if result is not None else None,
     )
+    if result is not None and not start_returned:  # a pass that diverged and ran again with a smaller p
+        warnings += list(result.meta.get("notes", ()))
     if evaluation.horizon is not None and args.horizon is None:
         summary["scoring_note"] = (f"the model is unstable: scored by {evaluation.horizon}-step-ahead prediction, "
                                    "since its simulation diverges (--horizon K to choose K)")
