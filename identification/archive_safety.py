@@ -428,12 +428,7 @@ def writing_report_folder(folder: str | Path, *, force: bool = False) -> Iterato
         a folder that is there.
     """
     folder = check_report_folder(folder, force=force)
-    try:
-        _remove_dead_partials(folder)
-        fresh = folder.with_name(f".{folder.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.partial")
-        fresh.mkdir()
-    except OSError as exc:
-        raise OutputTargetError(f"cannot write the report folder {folder}: {os_error_text(exc)}") from None
+    fresh = _new_partial(folder, "report folder")
     try:
         yield fresh
         written = sorted(name for name in _entries(fresh) if not (fresh / name).is_dir())
@@ -572,17 +567,31 @@ def replacing_directory(folder: str | Path) -> Iterator[Path]:
     folder = check_output_folder(folder, what="folder")
     try:
         folder.parent.mkdir(parents=True, exist_ok=True)
-        _remove_dead_partials(folder)
-        fresh = folder.with_name(f".{folder.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.partial")
-        fresh.mkdir()
     except OSError as exc:
         raise OutputTargetError(f"cannot write the folder {folder}: {os_error_text(exc)}") from None
+    fresh = _new_partial(folder, "folder")
     try:
         yield fresh
         _swap_in(fresh, folder)
     finally:
         if fresh.exists():
             shutil.rmtree(fresh, ignore_errors=True)
+
+
+def _partial_name(folder: Path) -> Path:
+    """A hidden sibling of ``folder`` that names this process, so that a later writer can tell it is dead."""
+    return folder.with_name(f".{folder.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.partial")
+
+
+def _new_partial(folder: Path, what: str) -> Path:
+    """A fresh hidden folder beside ``folder`` to write in, once dead writers' leftovers are removed."""
+    try:
+        _remove_dead_partials(folder)
+        fresh = _partial_name(folder)
+        fresh.mkdir()
+    except OSError as exc:
+        raise OutputTargetError(f"cannot write the {what} {folder}: {os_error_text(exc)}") from None
+    return fresh
 
 
 def _swap_in(fresh: Path, folder: Path) -> None:
@@ -595,7 +604,7 @@ def _swap_in(fresh: Path, folder: Path) -> None:
     if folder.exists() and _exchange(fresh, folder):
         shutil.rmtree(fresh, ignore_errors=True)  # now the old folder
     elif folder.exists():
-        aside = folder.with_name(f".{folder.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.partial")
+        aside = _partial_name(folder)
         os.replace(folder, aside)
         os.replace(fresh, folder)
         shutil.rmtree(aside, ignore_errors=True)
