@@ -1,9 +1,11 @@
 """From raw sample times to one uniform time base: segment, jitter, gaps, resampling, decimation.
 
-Applied to a :class:`~identification.readers.RawRecord` in this order: ``segment``; the checks that time
-increases with no gap (:data:`GAP_FACTOR`); sample times within ``jitter_tolerance`` of the uniform grid
-put on it; ``resample`` (linear interpolation, a faster channel low-passed first); ``decimate``. The
-rules are in docs/measured_data.md ("Time base"); what was done goes into ``meta["time_base"]``.
+Applied to a :class:`~identification.readers.RawRecord` in this order: ``segment`` (file time); time
+counted from the first sample; the checks that time increases with no gap (:data:`GAP_FACTOR`; with
+``resample`` a gap is bridged and reported instead); sample times within ``jitter_tolerance`` of the
+uniform grid put on it; ``resample`` (linear interpolation, a faster channel low-passed first);
+``decimate``. The rules are in docs/measured_data.md ("Time base"); what was done goes into
+``meta["time_base"]``.
 """
 
 from __future__ import annotations
@@ -26,6 +28,16 @@ GAP_FACTOR = 2.0
 #: Cut-off of the anti-aliasing low-pass before resampling to a lower rate, as a fraction of the new Nyquist frequency.
 ANTI_ALIAS_CUTOFF = 0.8
 _ANTI_ALIAS_ORDER = 8
+#: File time is kept as the record's time while it lies within this many steps of zero: its rounding then
+#: moves a sample by less than 1e-9 of a step. Further out (epoch stamps, 1.7e9 s at 0.02 s steps, carry
+#: only 2.4e-7 s of resolution) time counts from the first sample and ``time_offset`` says where that was.
+FILE_TIME_STEPS = 1e6
+#: Source and target rates within this fraction of each other count as one rate when resampling: jittered
+#: stamps put the median step a few 1e-7 off the nominal one, and folding the top 0.1 % of the band is nothing
+#: an anti-aliasing filter is needed for.
+_SAME_RATE = 1e-3
+#: Gaps bridged by resampling that are listed one by one (all are counted).
+_GAPS_LISTED = 20
 
 
 def parse_segment(text: str | Sequence[float] | None) -> tuple[float, float] | None:
@@ -53,8 +65,14 @@ def _row(rows: np.ndarray | None, k: int) -> int:
     return k if rows is None else int(rows[k])
 
 
-def _check_increasing(raw: RawRecord, channel: int, t: np.ndarray, rows: np.ndarray | None) -> float:
-    """The median step of ``t``, after checking that time increases without gaps."""
+def _check_increasing(raw: RawRecord, channel: int, t: np.ndarray, rows: np.ndarray | None, offset: float,
+                      bridge_gaps: bool) -> tuple[float, list[dict[str, Any]], int]:
+    """The median step of ``t`` (counted from ``offset``), after checking that time increases.
+
+    A gap (a step longer than :data:`GAP_FACTOR` median steps) is an error, unless ``bridge_gaps``
+    (resampling interpolates across it): then the gaps are returned, the first :data:`_GAPS_LISTED` of
+    them described, with their total count.
+    """
     if t.size < 2:
         raise InputError(f"{raw.source}: {raw.names[channel]!r} has fewer than 2 samples")
     steps = np.diff(t)
@@ -63,17 +81,21 @@ def _check_increasing(raw: RawRecord, channel: int, t: np.ndarray, rows: np.ndar
         k = int(falling[0])
         raise InputError(
             f"{raw.source}: time does not increase at {raw.locate(channel, _row(rows, k + 1))} "
-            f"({t[k + 1]:.9g} s after {t[k]:.9g} s)"
+            f"({t[k + 1] + offset:.9g} s after {t[k] + offset:.9g} s)"
         )
     median = float(np.median(steps))
     gaps = np.flatnonzero(steps > GAP_FACTOR * median)
-    if gaps.size:
+    if gaps.size and not bridge_gaps:
         k = int(gaps[0])
         raise InputError(
             f"{raw.source}: gap in time at {raw.locate(channel, _row(rows, k + 1))}: {steps[k]:.6g} s after the "
-            f"previous sample, {steps[k] / median:.1f} times the median step of {median:.6g} s"
+            f"previous sample, {steps[k] / median:.1f} times the median step of {median:.6g} s; --resample HZ "
+            "interpolates across it, --segment T0:T1 leaves it out"
         )
-    return median
+    described = [{"channel": raw.names[channel], "at_s": float(t[k + 1] + offset), "length_s": float(steps[k]),
+                  "steps": float(steps[k] / median), "location": raw.locate(channel, _row(rows, k + 1))}
+                 for k in gaps[:_GAPS_LISTED]]
+    return median, described, int(gaps.size)
 
 
 def _stray(t: np.ndarray) -> np.ndarray:
@@ -168,12 +190,21 @@ def uniform_record(
                     f"{raw.names[c]!r} in {raw.source}, whose time runs from {t.min():.6g} to {t.max():.6g} s"
                 )
             times[c], values[c], rows[c] = t[keep], values[c][keep], keep
+    # time from the first sample, before any check: epoch stamps keep their resolution in the differences
+    offset = min(float(t[0]) for t in times)
+    times = [t - offset for t in times]
     shared = raw.shares_time
-    steps = [_check_increasing(raw, c, times[c], rows[c]) for c in (range(1) if shared else range(len(times)))]
+    checked = [_check_increasing(raw, c, times[c], rows[c], offset, bridge_gaps=resample is not None)
+               for c in (range(1) if shared else range(len(times)))]
+    steps = [median for median, _, _ in checked]
     strays = [_stray(t) for t in (times[:1] if shared else times)]
     jitter = max(float(np.max(stray)) for stray in strays)
     report: dict[str, Any] = {"sample_jitter": jitter, "resample": None, "decimate": None,
                               "segment": None if segment is None else list(segment)}
+    gap_count = sum(count for _, _, count in checked)
+    if gap_count:
+        report["gaps"] = [gap for _, described, _ in checked for gap in described][:_GAPS_LISTED]
+        report["gap_count"] = gap_count
     if resample is None and shared:
         stray = strays[0]
         if jitter > jitter_tolerance:
@@ -183,8 +214,8 @@ def uniform_record(
                 f"{raw.locate(0, _row(rows[0], k))} (tolerance {jitter_tolerance:g}): resample with "
                 f"--resample HZ, or widen --jitter-tolerance"
             )
-        t0, count = times[0][0], times[0].size
-        t = t0 + np.arange(count) * ((times[0][-1] - t0) / (count - 1))
+        count = times[0].size
+        t = np.arange(count) * (times[0][-1] / (count - 1))
         columns = values
     else:
         rate = float(resample) if resample is not None else 1.0 / min(steps)
@@ -197,7 +228,7 @@ def uniform_record(
         columns, filtered = [], []
         for c, (tc, vc) in enumerate(zip(times, values)):
             source_step = steps[0] if shared else steps[c]
-            if rate * source_step < 1.0 - 1e-9:
+            if rate * source_step < 1.0 - _SAME_RATE:
                 columns.append(_low_pass_onto(tc, vc, source_step, t, rate, raw, c))
                 filtered.append(raw.names[c])
             else:
@@ -209,6 +240,10 @@ def uniform_record(
                               "new Nyquist frequency, zero phase") if filtered else None,
             "filtered_channels": filtered,
         }
+    step = float(t[1] - t[0])
+    if abs(offset) + float(t[-1]) <= FILE_TIME_STEPS * step:
+        t, offset = t + offset, 0.0  # near zero the file's own time is kept, exactly enough
+    report["time_offset"] = offset
     del strays
     table = _columns_of_one_table(columns)
     if decimate is not None and decimate > 1:

@@ -108,7 +108,8 @@ def test_time_base_rejections_name_the_first_offending_row(tmp_path):
     _rejects("f.csv: time does not increase at line 9 (0.6 s after 0.6 s)", _timed(tmp_path / "f.csv", falling),
              inputs=["u"], outputs=["y"])
     gap = np.concatenate([t[:10], t[10:] + 1.0])
-    _rejects("g.csv: gap in time at line 12: 1.1 s after the previous sample, 11.0 times the median step of 0.1 s",
+    _rejects("g.csv: gap in time at line 12: 1.1 s after the previous sample, 11.0 times the median step of 0.1 s; "
+             "--resample HZ interpolates across it, --segment T0:T1 leaves it out",
              _timed(tmp_path / "g.csv", gap), inputs=["u"], outputs=["y"])
     jitter = t.copy()
     jitter[5] += 0.02
