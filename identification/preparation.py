@@ -11,7 +11,7 @@ docs/measured_data.md ("Preparation") shows the workflow.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -19,7 +19,7 @@ import numpy as np
 
 from .data import IOData, as_records, check_channels, read_hdf5
 from .errors import InputError
-from .readers import RawRecord, read_raw
+from .readers import RawRecord, expand_channels, read_raw
 from .timebase import JITTER_TOLERANCE, parse_segment, uniform_record
 
 __all__ = [
@@ -34,6 +34,7 @@ __all__ = [
     "read_raw_records",
     "prepare_validation",
     "parse_scale",
+    "parse_steering_ratio",
 ]
 
 #: How offsets are estimated: each record's mean, a line through each record, or none.
@@ -116,9 +117,10 @@ def read_record(path: str | Path, settings: ReadSettings | None = None, **option
     else:
         if not settings.inputs or not settings.outputs:
             raise InputError(f"{path.name} needs --inputs and --outputs naming its columns")
-        raw = read_raw(path, channels=settings.inputs + settings.outputs, time_column=settings.time_column,
-                       dt=settings.dt)
-        n_inputs = len(settings.inputs)
+        # a MATLAB matrix named without a column stands for all of its columns
+        inputs, outputs = expand_channels(path, settings.inputs), expand_channels(path, settings.outputs)
+        raw = read_raw(path, channels=inputs + outputs, time_column=settings.time_column, dt=settings.dt)
+        n_inputs = len(inputs)
     return uniform_record(raw, n_inputs=n_inputs, dt=settings.dt, resample=settings.resample,
                           decimate=settings.decimate, segment=settings.segment,
                           jitter_tolerance=settings.jitter_tolerance)
@@ -158,22 +160,48 @@ class RecordOffsets:
     output_slope: np.ndarray
 
 
-def parse_scale(items: Mapping[str, float] | Sequence[str] | None) -> dict[str, float]:
-    """Scale factors from a mapping or from ``NAME=FACTOR`` strings (the CLI's ``--scale``)."""
+def _named_numbers(items: Any, what: str, form: str) -> list[tuple[str | None, str]]:
+    """``NAME=NUMBER`` items (strings, each possibly a comma-separated list) as (name, text) pairs.
+
+    A bare number, allowed only where ``form`` says so, comes back with the name None.
+    """
+    pairs: list[tuple[str | None, str]] = []
+    for item in [items] if isinstance(items, (str, int, float)) else items:
+        if isinstance(item, (int, float)) and not isinstance(item, bool):
+            pairs.append((None, repr(float(item))))
+            continue
+        for part in str(item).split(","):
+            name, equals, number = part.rpartition("=")
+            if not part.strip() or (equals and not name.strip()):
+                raise InputError(f"{what} is {form}; got {str(item)!r}")
+            pairs.append((name.strip() if equals else None, number.strip()))
+    return pairs
+
+
+def _number(text: str, what: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise InputError(f"{what} is not a number: {text!r}") from None
+    return value
+
+
+def parse_scale(items: Mapping[str, float] | Sequence[str] | str | None) -> dict[str, float]:
+    """Scale factors from a mapping or from ``NAME=FACTOR`` strings (the CLI's ``--scale``).
+
+    Each string may list several, ``"yawRate=0.0174533,ayCG=-1"``; a negative
+    factor turns a channel whose axis points the other way.
+    """
     if items is None:
         return {}
     if isinstance(items, Mapping):
         pairs = list(items.items())
     else:
         pairs = []
-        for item in items:
-            name, equals, factor = str(item).rpartition("=")
-            if not equals or not name.strip():
-                raise InputError(f"a scale is NAME=FACTOR; got {item!r}")
-            try:
-                pairs.append((name.strip(), float(factor)))
-            except ValueError:
-                raise InputError(f"the scale factor of {name.strip()!r} is not a number: {factor!r}") from None
+        for name, factor in _named_numbers(items, "a scale", "NAME=FACTOR"):
+            if name is None:
+                raise InputError(f"a scale is NAME=FACTOR; got {factor!r}")
+            pairs.append((name, _number(factor, f"the scale factor of {name!r}")))
     scale: dict[str, float] = {}
     for name, factor in pairs:
         if not (isinstance(factor, (int, float)) and math.isfinite(factor) and factor != 0):
@@ -182,6 +210,36 @@ def parse_scale(items: Mapping[str, float] | Sequence[str] | None) -> dict[str, 
             raise InputError(f"channel {name!r} is scaled twice")
         scale[str(name)] = float(factor)
     return scale
+
+
+def parse_steering_ratio(items: Mapping[str, float] | Sequence[str] | str | float | None,
+                         inputs: Sequence[str]) -> dict[str, float]:
+    """Steering ratios: ``RATIO`` for the only input, or ``NAME=RATIO`` (the CLI's ``--steering-ratio``).
+
+    A steering-wheel angle divided by the ratio is the road-wheel angle; the
+    ratio is positive (a flipped axis is a ``--scale`` of -1).
+    """
+    if items is None:
+        return {}
+    if isinstance(items, Mapping):
+        pairs = [(str(name), value) for name, value in items.items()]
+    else:
+        pairs = []
+        for name, ratio in _named_numbers(items, "a steering ratio", "RATIO or NAME=RATIO"):
+            if name is None:
+                if len(inputs) != 1:
+                    raise InputError(f"there are {len(inputs)} inputs ({', '.join(inputs)}): name the steering "
+                                     f"channel as --steering-ratio NAME={ratio}")
+                name = inputs[0]
+            pairs.append((name, _number(ratio, f"the steering ratio of {name!r}")))
+    ratios: dict[str, float] = {}
+    for name, ratio in pairs:
+        if not (isinstance(ratio, (int, float)) and math.isfinite(ratio) and ratio > 0):
+            raise InputError(f"the steering ratio of {name!r} must be a finite positive number; got {ratio!r}")
+        if name in ratios:
+            raise InputError(f"channel {name!r} has two steering ratios")
+        ratios[name] = float(ratio)
+    return ratios
 
 
 @dataclass(frozen=True, eq=False)
@@ -202,6 +260,11 @@ class Preparation:
         One per estimation record, in order.
     settings : ReadSettings or None
         How the estimation records were read (None for records given in memory).
+    conversions : dict
+        What each factor is made of, per converted channel: ``{"scale": f}``
+        (a unit or sign, ``--scale``) and ``{"steering_ratio": r}`` (the
+        factor divides by it); the factor is their product. Empty when no
+        channel is converted.
     """
 
     input_names: tuple[str, ...]
@@ -211,6 +274,7 @@ class Preparation:
     detrend: str
     offsets: tuple[RecordOffsets, ...]
     settings: ReadSettings | None = None
+    conversions: dict[str, dict[str, float]] = field(default_factory=dict)
 
     def _pooled(self, name: str) -> np.ndarray:
         weights = np.array([o.samples for o in self.offsets], dtype=float)
@@ -272,6 +336,13 @@ class Preparation:
         prepared = self.apply(data, record)
         return self.restore_outputs(model.simulate_outputs(prepared.u, prepared.dt, method=method), data.t, record)
 
+    def conversion_list(self) -> list[dict[str, Any]]:
+        """Each converted channel with its factor (multiplying the raw channel) and what the factor is made of."""
+        factors = dict(zip(self.input_names + self.output_names,
+                           (*map(float, self.input_scale), *map(float, self.output_scale))))
+        return [{"channel": name, "factor": factors.get(name, 1.0), **parts}
+                for name, parts in self.conversions.items()]
+
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready form (saved beside a model)."""
         return {
@@ -288,25 +359,48 @@ class Preparation:
                  "output_slope": o.output_slope.tolist()}
                 for o in self.offsets
             ],
+            "conversions": self.conversion_list(),
             "settings": None if self.settings is None else {
                 k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(self.settings).items()
             },
         }
 
 
-def _scales(names: tuple[str, ...], scale: Mapping[str, float]) -> np.ndarray:
-    return np.array([scale.get(name, 1.0) for name in names], dtype=float)
+def _named_channels(name: str, channels: tuple[str, ...]) -> list[str]:
+    """The channels a name stands for: itself, or every column ``name:k`` of a matrix variable."""
+    if name in channels:
+        return [name]
+    return [channel for channel in channels if channel.rpartition(":")[0] == name]
 
 
-def _scale_factors(first: IOData, scale: Mapping[str, float]) -> tuple[np.ndarray, np.ndarray]:
-    """The factors of the record's inputs and outputs; a factor for another channel is an error."""
-    unknown = [name for name in scale if name not in first.input_names + first.output_names]
-    if unknown:
-        raise InputError(
-            f"--scale names {unknown[0]!r}, which is not a chosen channel; inputs: "
-            f"{', '.join(first.input_names)}; outputs: {', '.join(first.output_names)}"
-        )
-    return _scales(first.input_names, scale), _scales(first.output_names, scale)
+def _conversions(first: IOData, scale: Mapping[str, float], steering_ratio: Mapping[str, float]
+                 ) -> dict[str, dict[str, float]]:
+    """Per channel, its scale and steering ratio; a name that is not a chosen channel is an error."""
+    channels = first.input_names + first.output_names
+    conversions: dict[str, dict[str, float]] = {}
+    for option, key, values in (("--scale", "scale", scale), ("--steering-ratio", "steering_ratio", steering_ratio)):
+        for name, value in values.items():
+            named = _named_channels(name, channels)
+            if not named:
+                raise InputError(
+                    f"{option} names {name!r}, which is not a chosen channel; inputs: "
+                    f"{', '.join(first.input_names)}; outputs: {', '.join(first.output_names)}"
+                )
+            for channel in named:
+                if key in conversions.setdefault(channel, {}):
+                    raise InputError(f"channel {channel!r} is given {option} twice (as {name!r})")
+                conversions[channel][key] = value
+    return {name: conversions[name] for name in channels if name in conversions}
+
+
+def _factor(parts: Mapping[str, float]) -> float:
+    return parts.get("scale", 1.0) / parts.get("steering_ratio", 1.0)
+
+
+def _scale_factors(first: IOData, conversions: Mapping[str, Mapping[str, float]]) -> tuple[np.ndarray, np.ndarray]:
+    """The factors of the record's inputs and outputs."""
+    return tuple(np.array([_factor(conversions.get(name, {})) for name in names], dtype=float)
+                 for names in (first.input_names, first.output_names))  # type: ignore[return-value]
 
 
 def _trend(t: np.ndarray, values: np.ndarray, detrend: str) -> tuple[np.ndarray, np.ndarray]:
@@ -325,6 +419,7 @@ def estimate_preparation(
     detrend: str = "mean",
     scale: Mapping[str, float] | Sequence[str] | None = None,
     settings: ReadSettings | None = None,
+    steering_ratio: Mapping[str, float] | Sequence[str] | str | float | None = None,
 ) -> Preparation:
     """Estimate the offsets of raw estimation records (after scaling).
 
@@ -334,15 +429,21 @@ def estimate_preparation(
         Raw records with the same channels.
     detrend : {"mean", "linear", "none"}
     scale : mapping or sequence of "NAME=FACTOR", optional
-        Factors for named channels (default 1).
+        Factors for named channels (default 1): units, signs. A matrix
+        variable's name scales each of its columns.
     settings : ReadSettings, optional
         How the records were read, kept so that the preparation can read raw files again.
+    steering_ratio : float, "NAME=RATIO" strings or mapping, optional
+        Steering ratios dividing steering-wheel angles into road-wheel angles
+        (a bare number: the only input). With a scale on the same channel
+        the factor is scale / ratio.
     """
     records = as_records(records)
     if detrend not in DETRENDS:
         raise InputError(f"unknown detrend {detrend!r}; use one of {', '.join(DETRENDS)}")
     first = records[0]
-    input_scale, output_scale = _scale_factors(first, parse_scale(scale))
+    conversions = _conversions(first, parse_scale(scale), parse_steering_ratio(steering_ratio, first.input_names))
+    input_scale, output_scale = _scale_factors(first, conversions)
     offsets = []
     for data in records:
         u_offset, u_slope = _trend(data.t, data.u * input_scale, detrend)
@@ -350,7 +451,7 @@ def estimate_preparation(
         offsets.append(RecordOffsets(str(data.meta.get("source", "record")), data.n_samples,
                                      u_offset, y_offset, u_slope, y_slope))
     return Preparation(first.input_names, first.output_names, input_scale, output_scale, detrend,
-                       tuple(offsets), settings)
+                       tuple(offsets), settings, conversions)
 
 
 def prepare(
@@ -359,8 +460,11 @@ def prepare(
     detrend: str = "mean",
     scale: Mapping[str, float] | Sequence[str] | None = None,
     settings: ReadSettings | None = None,
+    steering_ratio: Mapping[str, float] | Sequence[str] | str | float | None = None,
 ) -> tuple[tuple[IOData, ...], Preparation]:
     """Estimate the preparation of raw records and apply it to each with its own offsets.
+
+    ``scale`` and ``steering_ratio`` convert channels as in :func:`estimate_preparation`.
 
     The records are estimation records: before anything is removed or scaled,
     :func:`~identification.data.check_channels` refuses channels that cannot
@@ -379,9 +483,12 @@ def prepare(
     records = as_records(records)
     if detrend not in DETRENDS:
         raise InputError(f"unknown detrend {detrend!r}; use one of {', '.join(DETRENDS)}")
-    input_scale, output_scale = _scale_factors(records[0], parse_scale(scale))
+    conversions = _conversions(records[0], parse_scale(scale),
+                               parse_steering_ratio(steering_ratio, records[0].input_names))
+    input_scale, output_scale = _scale_factors(records[0], conversions)
     check_channels(records, detrend=detrend, input_scale=input_scale, output_scale=output_scale)
-    preparation = estimate_preparation(records, detrend=detrend, scale=scale, settings=settings)
+    preparation = estimate_preparation(records, detrend=detrend, scale=scale, settings=settings,
+                                       steering_ratio=steering_ratio)
     return tuple(preparation.apply(data, i) for i, data in enumerate(records)), preparation
 
 
@@ -391,15 +498,17 @@ def load_records(
     detrend: str = "mean",
     scale: Mapping[str, float] | Sequence[str] | None = None,
     settings: ReadSettings | None = None,
+    steering_ratio: Mapping[str, float] | Sequence[str] | str | float | None = None,
     **options: Any,
 ) -> tuple[tuple[IOData, ...], Preparation]:
     """Read raw files (:func:`read_record`) and prepare them (:func:`prepare`): the identify command's input.
 
     ``options`` are the fields of :class:`ReadSettings` (``inputs``, ``outputs``,
-    ``time_column``, ``dt``, ``resample``, ``decimate``, ``segment``, ``jitter_tolerance``).
+    ``time_column``, ``dt``, ``resample``, ``decimate``, ``segment``, ``jitter_tolerance``);
+    ``scale`` and ``steering_ratio`` are the command line's ``--scale`` and ``--steering-ratio``.
     """
     raw, settings = read_raw_records(paths, settings, **options)
-    return prepare(raw, detrend=detrend, scale=scale, settings=settings)
+    return prepare(raw, detrend=detrend, scale=scale, settings=settings, steering_ratio=steering_ratio)
 
 
 def read_raw_records(

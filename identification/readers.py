@@ -22,7 +22,7 @@ import numpy as np
 from .errors import InputError
 
 __all__ = ["RawRecord", "TEXT_SUFFIXES", "MAT_SUFFIXES", "MDF_SUFFIXES", "read_raw", "read_table",
-           "read_mat", "read_mdf"]
+           "read_mat", "read_mdf", "expand_channels"]
 
 TEXT_SUFFIXES = (".csv", ".dat", ".txt")
 MAT_SUFFIXES = (".mat",)
@@ -173,6 +173,27 @@ class _Layout:
     decimal_comma: bool = False  # "0,5": files written with a European locale (then ';' or tabs separate)
 
 
+def _uncommented(line: str) -> str:
+    text = line.strip()
+    marker = next(m for m in _COMMENTS if text.startswith(m))
+    return text[len(marker):].strip()
+
+
+def _comment_header(head: list[str], index: int, delimiter: str | None, width: int, comma: bool
+                    ) -> tuple[str, ...] | None:
+    """The header a logger wrote as the comment line just above the data (``# t(s),x(m)``, as NumPy's
+    ``savetxt`` does), when that line splits into as many cells as a data row and is not all numbers."""
+    above = index - 1
+    while above >= 0 and not head[above].strip():
+        above -= 1
+    if above < 0 or not _is_comment(head[above]):
+        return None
+    cells = _split(_uncommented(head[above]), delimiter)
+    if len(cells) != width or all(_float(cell, comma) is not None for cell in cells if cell):
+        return None
+    return tuple(cells)
+
+
 def _layout(path: Path) -> _Layout:
     head, encoding = _text_lines(path)
     index = 0
@@ -186,7 +207,8 @@ def _layout(path: Path) -> _Layout:
     nearby = [c for line in head[index: index + 3] for c in _split(line.rstrip("\r\n"), delimiter)]
     comma = delimiter != "," and any(_DECIMAL_COMMA.match(c) for c in nearby)
     if all(_float(cell, comma) is not None for cell in cells if cell):
-        return _Layout(delimiter, None, None, index, encoding, comma)
+        header = _comment_header(head, index, delimiter, len(cells), comma)
+        return _Layout(delimiter, header, None, index, encoding, comma)
     header = tuple(cells)
     if index + 1 < len(head):
         second = [c for c in _split(head[index + 1].rstrip("\r\n"), delimiter)]
@@ -195,9 +217,27 @@ def _layout(path: Path) -> _Layout:
     return _Layout(delimiter, header, None, index + 1, encoding, comma)
 
 
+_UNIT_SUFFIX = re.compile(r"^(?P<name>.*?)\s*(?:\((?P<paren>[^()]*)\)|\[(?P<bracket>[^\[\]]*)\])$")
+
+
+def _name_and_unit(cell: str) -> tuple[str, str | None]:
+    """A header cell ``yaw_rate(rad/s)`` or ``yaw_rate [rad/s]`` as its name and unit; other cells have no unit."""
+    found = _UNIT_SUFFIX.match(cell.strip())
+    if found is None or not found["name"]:
+        return cell.strip(), None
+    unit = found["paren"] if found["paren"] is not None else found["bracket"]
+    return found["name"], unit.strip()
+
+
+def _has_column(header: tuple[str, ...], name: str) -> bool:
+    return name in header or any(_name_and_unit(column)[0] == name for column in header)
+
+
 def _column_index(path: Path, header: tuple[str, ...] | None, name: str, kind: str) -> int:
     if header is not None:
         places = [i for i, column in enumerate(header) if column == name]
+        if not places:  # a header cell with its unit, "t(s)", is named by "t" as well
+            places = [i for i, column in enumerate(header) if _name_and_unit(column)[0] == name]
         if len(places) > 1:
             raise InputError(
                 f"column name {name!r} appears {len(places)} times in {path.name} "
@@ -291,7 +331,7 @@ def read_table(
     layout = _layout(path)
     names = [str(name).strip() for name in channels]
     indices = [_column_index(path, layout.header, name, "data") for name in names]
-    time_name = _time_name(path, layout.header is not None and "t" in layout.header, time_column, dt)
+    time_name = _time_name(path, layout.header is not None and _has_column(layout.header, "t"), time_column, dt)
     read_names = list(names)
     if time_name is not None:
         indices.append(_column_index(path, layout.header, time_name, "time"))
@@ -317,8 +357,7 @@ def read_table(
                          f"({table[row, column]}) at {locate(column, row)}")
     # columns stay views of the parsed table: a copy per column of a long file is memory for nothing
     t = table[:, -1] if time_name is not None else None
-    units = tuple(layout.units[i] if layout.units and i < len(layout.units) and layout.units[i] else "-"
-                  for i in indices[: len(names)])
+    units = tuple(_unit(layout, i) for i in indices[: len(names)])
     return RawRecord(
         source=path.name,
         names=tuple(names),
@@ -328,6 +367,17 @@ def read_table(
         time_name=time_name,
         locate=locate,
     )
+
+
+def _unit(layout: _Layout, column: int) -> str:
+    """A column's unit: from the units row, else from its header cell (``ay(m/s^2)``), else ``-``."""
+    if layout.units and column < len(layout.units) and layout.units[column]:
+        return layout.units[column]
+    if layout.header and column < len(layout.header):
+        unit = _name_and_unit(layout.header[column])[1]
+        if unit:
+            return unit
+    return "-"
 
 
 def _time_name(path: Path, has_t: bool, time_column: str | None, dt: float | None, kind: str = "column"
@@ -405,6 +455,39 @@ def _mat73_variables(path: Path) -> tuple[Callable[[str], Any], list[str]]:
             return np.asarray(dataset[()]).T
 
     return lookup, names
+
+
+def _mat_matrix_columns(lookup: Callable[[str], Any], name: str) -> int | None:
+    """The number of columns of variable ``name`` when it is a matrix (time along its longer side), else None."""
+    value = lookup(name)
+    if value is None:
+        return None
+    try:
+        shape = np.shape(np.asarray(value, dtype=float))
+    except (TypeError, ValueError):
+        return None
+    if len(shape) != 2 or min(shape) < 2:
+        return None
+    return min(shape) if shape[0] != shape[1] else shape[1]
+
+
+def expand_channels(path: str | Path, names: Sequence[str]) -> tuple[str, ...]:
+    """The channels that ``names`` stand for: a MATLAB matrix named without a column is all of its columns.
+
+    ``y`` of an N x 2 matrix becomes ``y:1, y:2``, as ``iddata`` users name
+    the outputs of a record; every other name (and every name of a file that
+    is not a ``.mat`` file) stands for itself.
+    """
+    path = Path(path)
+    names = [str(name).strip() for name in names]
+    if path.suffix.lower() not in MAT_SUFFIXES or not path.is_file() or all(":" in name for name in names):
+        return tuple(names)
+    lookup, _ = _mat_variables(path)
+    expanded: list[str] = []
+    for name in names:
+        columns = None if ":" in name else _mat_matrix_columns(lookup, name)
+        expanded += [name] if columns is None else [f"{name}:{k}" for k in range(1, columns + 1)]
+    return tuple(expanded)
 
 
 def _mat_column(path: Path, lookup: Callable[[str], Any], spec: str, available: list[str]) -> np.ndarray:

@@ -186,8 +186,12 @@ def test_mat_variables_struct_fields_and_matrix_columns(tmp_path):
     np.testing.assert_allclose(data.y[:, 0], 2 * np.cos(t))
     np.testing.assert_allclose(data.u[:, 0], np.sin(t))
     assert data.dt == pytest.approx(0.01)
+    # a matrix named alone is every column (as iddata users expect); as the time it must be one column
+    whole = read_record(path, inputs=["run.steer"], outputs=["Y"])
+    assert whole.output_names == ("Y:1", "Y:2")
+    np.testing.assert_allclose(whole.y, np.column_stack([np.cos(t), 2 * np.cos(t)]))
     _rejects("variable 'Y' in run.mat is a 30x2 matrix: choose a column as Y:1 ... Y:2", path,
-             inputs=["run.steer"], outputs=["Y"])
+             inputs=["run.steer"], outputs=["run.speed"], time_column="Y")
     _rejects("unknown variable 'yaw' in run.mat; variables: Y, run, t", path, inputs=["run.steer"], outputs=["yaw"])
 
 
