@@ -1,9 +1,11 @@
 """The command line's data options: reading, time base and preparation of one or several records.
 
 Commands that read measured data register them (:func:`register_data_options`),
-read with :func:`read_from_args`, report with :func:`records_summary` (public
-JSON keys ``records``, ``sample_jitter``, ``preparation``) and keep the
-prepared records and their preparation in an archive (:func:`archive_records`).
+read with :func:`read_from_args`, prepare with :func:`preparation_options`,
+report with :func:`records_summary` (public JSON keys ``records``,
+``sample_jitter``, ``preparation``, ``conversions``, ``time_offset``) and
+:func:`data_warnings`, and keep the prepared records and their preparation in
+an archive (:func:`archive_records`).
 """
 
 from __future__ import annotations
@@ -23,7 +25,8 @@ from vehid.identification.preparation import DETRENDS, Preparation, ReadSettings
 from vehid.identification.storage import read_value, write_value
 from vehid.identification.timebase import JITTER_TOLERANCE
 
-__all__ = ["channel_names", "register_data_options", "settings_from_args", "read_from_args", "records_summary", "record_names",
+__all__ = ["channel_names", "register_data_options", "settings_from_args", "read_from_args", "preparation_options",
+           "records_summary", "data_warnings", "record_names",
            "archive_records", "archived_preparation", "save_model", "RECORD_PREFIX",
            "record_series", "record_series_name", "write_record_series"]
 
@@ -56,7 +59,11 @@ def register_data_options(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--detrend", default="mean", choices=DETRENDS,
                        help="offsets removed per record and stored with the model (default: the means)")
     group.add_argument("--scale", action="append", metavar="NAME=FACTOR", default=None,
-                       help="multiply a channel by FACTOR before identification (repeatable)")
+                       help="multiply a channel by FACTOR before identification: a unit (yawRate=0.0174533 for "
+                            "deg/s), a sign (ay=-1 for an axis pointing right); repeatable or a comma list")
+    group.add_argument("--steering-ratio", action="append", metavar="[NAME=]RATIO", default=None,
+                       help="divide a steering-wheel angle by the steering ratio, giving the road-wheel angle "
+                            "(a bare RATIO: the only input); repeatable or a comma list")
 
 
 def settings_from_args(args: argparse.Namespace) -> ReadSettings:
@@ -82,6 +89,11 @@ def read_from_args(args: argparse.Namespace, paths: Sequence[str]) -> tuple[tupl
     return read_raw_records(list(paths), settings_from_args(args))
 
 
+def preparation_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The keywords of :func:`~identification.preparation.prepare` the options give (offsets and conversions)."""
+    return {"detrend": args.detrend, "scale": args.scale, "steering_ratio": getattr(args, "steering_ratio", None)}
+
+
 def record_names(records: Sequence[IOData]) -> list[str]:
     """Unique display names of records: their sources, numbered where one repeats."""
     names = [str(r.meta.get("source", f"record {i + 1}")) for i, r in enumerate(records)]
@@ -98,10 +110,29 @@ def records_summary(model: Any, records: Sequence[IOData], preparation: Preparat
     }
     if preparation is not None:
         summary["preparation"] = preparation.as_dict()
+        summary["conversions"] = preparation.conversion_list()
+    offsets = [float(r.meta.get("time_base", {}).get("time_offset", 0.0)) for r in records]
+    if any(offsets):  # time counted from each record's first sample: where that was in the file's time
+        summary["time_offset"] = offsets
     resampled = [r.meta.get("time_base", {}).get("resample") for r in records]
     if any(resampled):
         summary["resample"] = next(r for r in resampled if r)
     return summary
+
+
+def data_warnings(records: Sequence[IOData]) -> list[str]:
+    """One line per record whose gaps in time were bridged by resampling, naming where they were."""
+    lines = []
+    for name, record in zip(record_names(records), records):
+        base = record.meta.get("time_base", {})
+        gaps, count = base.get("gaps") or [], int(base.get("gap_count", 0))
+        if not count:
+            continue
+        shown = ", ".join(f"{gap['length_s']:.3g} s at {gap['at_s']:.9g} s ({gap['location']})" for gap in gaps[:3])
+        more = f" and {count - 3} more" if count > 3 else ""
+        lines.append(f"{name}: {count} gap{'s' if count > 1 else ''} in time bridged by straight lines when "
+                     f"resampling ({shown}{more}): the model sees no data there; --segment T0:T1 leaves a gap out")
+    return lines
 
 
 def record_series_name(prefix: str, index: int) -> str:

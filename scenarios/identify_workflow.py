@@ -259,7 +259,7 @@ def load_plan(args: argparse.Namespace, paths: list[str]) -> Plan:
     are the estimation part's own (the held-out part plays no role in them).
     """
     from vehid.identification.preparation import prepare, prepare_validation
-    from vehid.scenarios.data_options import read_from_args
+    from vehid.scenarios.data_options import preparation_options, read_from_args
 
     fraction, note = holdout_fraction(args)
     raw, settings = read_from_args(args, paths)
@@ -267,7 +267,7 @@ def load_plan(args: argparse.Namespace, paths: list[str]) -> Plan:
     if fraction is not None:
         parts = [split_holdout(record, fraction) for record in raw]
         raw, held_raw = tuple(part[0] for part in parts), tuple(part[1] for part in parts)
-    records, preparation = prepare(raw, detrend=args.detrend, scale=args.scale, settings=settings)
+    records, preparation = prepare(raw, settings=settings, **preparation_options(args))
     held = tuple(prepare_validation(part, preparation, record=i) for i, part in enumerate(held_raw))
     channels = validation_channels(args, preparation)
     # a validation file is another experiment: its offsets are its own, as each estimation record's are

@@ -76,7 +76,7 @@ from vehid.identification.preparation import prepare_validation, read_record
 from vehid.identification.storage import write_value
 from vehid.scenarios import identify_workflow as workflow
 from vehid.scenarios.data_options import (RECORD_PREFIX, archive_records, archived_preparation, record_series,
-                                          check_model_target, records_summary, register_data_options, save_model,
+                                          check_model_target, data_warnings, records_summary, register_data_options, save_model,
                                           settings_from_args, write_record_series)
 from vehid.scenarios.model_checks import uncertainty_lines, uncertainty_summary
 from vehid.scenarios.paths import HDF5_SUFFIXES, OUT_RULE, run_digest
@@ -324,6 +324,7 @@ def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None)
             stop_reason=outcome.result.stop_reason, start_fit=float(np.mean(outcome.result.start_fit)),
             final_fit=float(np.mean(outcome.result.fit_percent)), allow_unstable=True, label="nonlinear")
         warnings += workflow.nonlinear_warnings(outcome, evaluation)
+    warnings += data_warnings(plan.records)
     summary["warnings"] = list(warnings)
     if archive_path is not None:
         summary["archive"] = str(archive_path)
