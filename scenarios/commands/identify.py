@@ -76,8 +76,8 @@ from vehid.identification.preparation import prepare_validation, read_record
 from vehid.identification.storage import write_value
 from vehid.scenarios import identify_workflow as workflow
 from vehid.scenarios.data_options import (RECORD_PREFIX, archive_records, archived_preparation, record_series,
-                                          check_model_target, data_warnings, records_summary, register_data_options, save_model,
-                                          settings_from_args, write_record_series)
+                                          check_model_target, records_summary, register_data_options, save_model,
+                                          settings_from_args, write_record_series, data_warnings)
 from vehid.scenarios.model_checks import uncertainty_lines, uncertainty_summary
 from vehid.scenarios.paths import HDF5_SUFFIXES, OUT_RULE, run_digest
 from vehid.scenarios.progress import Progress
