@@ -189,6 +189,8 @@ def _comment_header(head: list[str], index: int, delimiter: str | None, width: i
     if above < 0 or not _is_comment(head[above]):
         return None
     cells = _split(_uncommented(head[above]), delimiter)
+    while cells and not cells[-1]:  # a trailing delimiter on the header line, or on the data rows, is no column
+        cells.pop()
     if len(cells) != width or all(_float(cell, comma) is not None for cell in cells if cell):
         return None
     return tuple(cells)
@@ -207,7 +209,10 @@ def _layout(path: Path) -> _Layout:
     nearby = [c for line in head[index: index + 3] for c in _split(line.rstrip("\r\n"), delimiter)]
     comma = delimiter != "," and any(_DECIMAL_COMMA.match(c) for c in nearby)
     if all(_float(cell, comma) is not None for cell in cells if cell):
-        header = _comment_header(head, index, delimiter, len(cells), comma)
+        width = len(cells)
+        while width and not cells[width - 1]:
+            width -= 1
+        header = _comment_header(head, index, delimiter, width, comma)
         return _Layout(delimiter, header, None, index, encoding, comma)
     header = tuple(cells)
     if index + 1 < len(head):

@@ -101,6 +101,11 @@ def test_header_written_as_a_comment_names_the_columns_with_their_units(tmp_path
     np.savetxt(spaced, table, header="time[s] delta[rad] omega[rad/s] vx[m/s]", fmt="%.17g")
     data = read_record(spaced, inputs=["delta"], outputs=["omega"], time_column="time")
     np.testing.assert_array_equal(data.y[:, 0], table[:, 2])
+    # a trailing delimiter on the header line or on the data rows is no column
+    for text in ("# t,u,y\n0,1,2,\n0.1,2,5,\n0.2,3,4,\n", "# t,u,y,\n0,1,2\n0.1,2,5\n0.2,3,4\n"):
+        trailing = tmp_path / "trailing.csv"
+        trailing.write_text(text)
+        np.testing.assert_array_equal(read_record(trailing, inputs=["u"], outputs=["y"]).y[:, 0], [2, 5, 4])
     # a comment above the data that is prose, not a header, leaves the table without names
     prose = tmp_path / "notes.csv"
     prose.write_text("# logged on the skid pad\n0,1,2\n0.1,2,3\n0.2,3,5\n")
