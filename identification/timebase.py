@@ -98,6 +98,22 @@ def _check_increasing(raw: RawRecord, channel: int, t: np.ndarray, rows: np.ndar
     return median, described, int(gaps.size)
 
 
+def _merge_repeated_stamps(t: np.ndarray, values: np.ndarray, rows: np.ndarray | None
+                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, int]:
+    """Samples that share a time stamp as one sample, their mean; how many were merged away.
+
+    Falling time is left for :func:`_check_increasing` to name; only runs of equal stamps are merged.
+    """
+    same = np.diff(t) == 0
+    if not same.any():
+        return t, values, rows, 0
+    first = np.concatenate([[True], ~same])
+    group = np.cumsum(first) - 1
+    mean = np.bincount(group, weights=values) / np.bincount(group)
+    places = np.flatnonzero(first)
+    return t[first], mean, places if rows is None else rows[places], int(same.sum())
+
+
 def _stray(t: np.ndarray) -> np.ndarray:
     """Distance of each sample time from the uniform grid through the first and last, in steps."""
     step = (t[-1] - t[0]) / (t.size - 1)
@@ -194,6 +210,11 @@ def uniform_record(
     offset = min(float(t[0]) for t in times)
     times = [t - offset for t in times]
     shared = raw.shares_time
+    repeated = 0
+    if resample is not None:  # loggers stamp coarsely: samples sharing a stamp become their mean there
+        for c in range(len(times)):
+            times[c], values[c], rows[c], merged = _merge_repeated_stamps(times[c], values[c], rows[c])
+            repeated = max(repeated, merged)
     checked = [_check_increasing(raw, c, times[c], rows[c], offset, bridge_gaps=resample is not None)
                for c in (range(1) if shared else range(len(times)))]
     steps = [median for median, _, _ in checked]
@@ -201,6 +222,8 @@ def uniform_record(
     jitter = max(float(np.max(stray)) for stray in strays)
     report: dict[str, Any] = {"sample_jitter": jitter, "resample": None, "decimate": None,
                               "segment": None if segment is None else list(segment)}
+    if repeated:
+        report["repeated_stamps"] = repeated
     gap_count = sum(count for _, _, count in checked)
     if gap_count:
         report["gaps"] = [gap for _, described, _ in checked for gap in described][:_GAPS_LISTED]

@@ -141,6 +141,23 @@ def test_resampling_bridges_gaps_and_says_where_they_were(tmp_path):
     assert "(line 602)" in warning
 
 
+def test_resampling_takes_samples_sharing_a_stamp_as_their_mean(tmp_path):
+    """A coarse logger clock stamps two samples alike: resampled, they are one sample, their mean."""
+    t = np.round(np.arange(300) * 0.01, 2)
+    u, y = np.sin(3 * t), np.cos(2 * t)
+    t[101] = t[100]  # the clock did not tick: two samples at 1.00 s, none at 1.01 s
+    path = tmp_path / "coarse.csv"
+    np.savetxt(path, np.column_stack([t, u, y]), delimiter=",", header="t,u,y", comments="", fmt="%.17g")
+    _rejects("coarse.csv: time does not increase at line 103 (1 s after 1 s)", read_record, path, inputs=["u"],
+             outputs=["y"])
+    data = read_record(path, inputs=["u"], outputs=["y"], resample=100.0)
+    assert data.meta["time_base"]["repeated_stamps"] == 1 and data.n_samples == 300
+    assert data.u[100, 0] == pytest.approx((u[100] + u[101]) / 2, rel=1e-12)  # the grid meets the stamp
+    # 1.01 s lies halfway between the merged sample and the next: a straight line between them
+    assert data.u[101, 0] == pytest.approx(((u[100] + u[101]) / 2 + u[102]) / 2, rel=1e-12)
+    np.testing.assert_array_equal(data.y[102:, 0], y[102:])  # elsewhere nothing moved
+
+
 # ----------------------------------------------------------------- MATLAB matrices
 @pytest.mark.parametrize("transposed", [False, True])
 def test_matrix_variable_named_alone_is_every_column(tmp_path, transposed):
