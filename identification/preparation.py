@@ -24,6 +24,7 @@ from .timebase import JITTER_TOLERANCE, parse_segment, uniform_record
 
 __all__ = [
     "DETRENDS",
+    "TIME_UNITS",
     "ReadSettings",
     "RecordOffsets",
     "Preparation",
@@ -41,6 +42,10 @@ __all__ = [
 DETRENDS = ("mean", "linear", "none")
 
 _HDF5_SUFFIXES = (".h5", ".hdf5", ".hdf")
+
+#: Seconds per unit, for the units a file may give its time column (its header ``t(ms)`` or units row).
+TIME_UNITS = {"s": 1.0, "sec": 1.0, "secs": 1.0, "second": 1.0, "seconds": 1.0, "ms": 1e-3, "msec": 1e-3,
+              "us": 1e-6, "µs": 1e-6, "μs": 1e-6, "usec": 1e-6, "ns": 1e-9, "min": 60.0, "h": 3600.0}
 
 
 @dataclass(frozen=True)
@@ -64,6 +69,9 @@ class ReadSettings:
         Only ``T0 <= t <= T1`` (file time, s).
     jitter_tolerance : float
         Largest stray of a sample time from the uniform grid, as a fraction of a step.
+    time_scale : float or None
+        Seconds per unit of the time column (0.001 for milliseconds); None:
+        from the unit the file gives the column (:data:`TIME_UNITS`), else 1.
     """
 
     inputs: tuple[str, ...] = ()
@@ -74,6 +82,7 @@ class ReadSettings:
     decimate: int | None = None
     segment: tuple[float, float] | None = None
     jitter_tolerance: float = JITTER_TOLERANCE
+    time_scale: float | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "inputs", tuple(str(n).strip() for n in self.inputs))
@@ -85,6 +94,13 @@ class ReadSettings:
         both = [n for n in self.inputs if n in self.outputs]
         if both:
             raise InputError(f"column {both[0]!r} is named both as an input and as an output")
+        if self.time_scale is not None:
+            if not (isinstance(self.time_scale, (int, float)) and math.isfinite(self.time_scale)
+                    and self.time_scale > 0):
+                raise InputError(f"the time scale is a positive number of seconds per unit of the time column; "
+                                 f"got {self.time_scale!r}")
+            if self.dt is not None:
+                raise InputError("--time-scale converts a time column; --dt is already in seconds")
 
 
 def read_record(path: str | Path, settings: ReadSettings | None = None, **options: Any) -> IOData:
@@ -121,14 +137,31 @@ def read_record(path: str | Path, settings: ReadSettings | None = None, **option
         inputs, outputs = expand_channels(path, settings.inputs), expand_channels(path, settings.outputs)
         raw = read_raw(path, channels=inputs + outputs, time_column=settings.time_column, dt=settings.dt)
         n_inputs = len(inputs)
-    return uniform_record(raw, n_inputs=n_inputs, dt=settings.dt, resample=settings.resample,
+    raw, time_scale = _time_in_seconds(raw, settings.time_scale)
+    data = uniform_record(raw, n_inputs=n_inputs, dt=settings.dt, resample=settings.resample,
                           decimate=settings.decimate, segment=settings.segment,
                           jitter_tolerance=settings.jitter_tolerance)
+    data.meta["time_base"]["time_scale"] = time_scale
+    return data
+
+
+def _time_in_seconds(raw: RawRecord, time_scale: float | None) -> tuple[RawRecord, float]:
+    """The record with its time in seconds: times ``time_scale``, or as the file's unit for the column says."""
+    if raw.times[0] is None:
+        return raw, 1.0
+    if time_scale is None:
+        time_scale = TIME_UNITS.get((raw.time_unit or "").strip(), 1.0)
+    if time_scale == 1.0:
+        return raw, 1.0
+    scaled: dict[int, np.ndarray] = {}  # channels sharing one array of times keep sharing one
+    times = tuple(scaled.setdefault(id(t), t * time_scale) for t in raw.times)
+    return replace(raw, times=times), float(time_scale)
 
 
 def _hdf5_record(path: Path, settings: ReadSettings) -> IOData:
-    if settings.dt is not None:
-        raise InputError("--dt applies to files without time; an HDF5 record carries its own time base")
+    if settings.dt is not None or settings.time_scale is not None:
+        option = "--dt" if settings.dt is not None else "--time-scale"
+        raise InputError(f"{option} applies to files' time columns; an HDF5 record carries its own time base")
     data = read_hdf5(path)
     if settings.inputs:
         data = data.select_inputs(settings.inputs)

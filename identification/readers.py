@@ -52,6 +52,9 @@ class RawRecord:
         The column or channel the time came from.
     locate : callable
         ``locate(channel_index, sample_index) -> str``, e.g. ``"line 57"``.
+    time_unit : str or None
+        The time column's unit as the file states it (units row or header
+        cell, ``t(ms)``); None where the file does not say.
     """
 
     source: str
@@ -61,6 +64,7 @@ class RawRecord:
     units: tuple[str, ...]
     time_name: str | None = None
     locate: Callable[[int, int], str] = field(default=lambda channel, k: f"sample {k + 1}")
+    time_unit: str | None = None
 
     @property
     def shares_time(self) -> bool:
@@ -371,6 +375,7 @@ def read_table(
         units=units,
         time_name=time_name,
         locate=locate,
+        time_unit=_unit(layout, indices[-1]) if time_name is not None else None,
     )
 
 

@@ -50,6 +50,9 @@ def register_data_options(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--time-column", metavar="NAME",
                        help="time column or variable (default: t when present; 'none' disables it)")
     group.add_argument("--dt", type=float, help="sample interval in s, for files without a time column")
+    group.add_argument("--time-scale", type=float, metavar="FACTOR",
+                       help="seconds per unit of the time column, 0.001 for ms (default: from the column's unit, "
+                            "t(ms) or a units row, else 1)")
     group.add_argument("--resample", type=float, metavar="HZ",
                        help="interpolate every channel linearly onto a uniform grid at HZ (low-passed first when the rate falls)")
     group.add_argument("--decimate", type=int, metavar="K", help="keep every K-th sample after an anti-aliasing FIR filter")
@@ -71,7 +74,7 @@ def settings_from_args(args: argparse.Namespace) -> ReadSettings:
     return ReadSettings(
         inputs=channel_names(args.inputs), outputs=channel_names(args.outputs), time_column=args.time_column, dt=args.dt,
         resample=args.resample, decimate=args.decimate, segment=args.segment,
-        jitter_tolerance=args.jitter_tolerance,
+        jitter_tolerance=args.jitter_tolerance, time_scale=getattr(args, "time_scale", None),
     )
 
 

@@ -113,6 +113,29 @@ def test_header_written_as_a_comment_names_the_columns_with_their_units(tmp_path
              prose, inputs=["u"], outputs=["3"], time_column="1")
 
 
+def test_time_in_milliseconds_is_read_in_seconds(tmp_path):
+    ms = np.arange(100) * 20  # a 50 Hz logger counting milliseconds
+    u, y = np.sin(ms / 300.0), np.cos(ms / 200.0)
+    suffixed = tmp_path / "ms.csv"
+    np.savetxt(suffixed, np.column_stack([ms, u, y]), delimiter=",", header="time(ms),u,y", comments="",
+               fmt="%.17g")
+    data = read_record(suffixed, inputs=["u"], outputs=["y"], time_column="time")
+    assert data.dt == pytest.approx(0.02, rel=1e-12) and data.meta["time_base"]["time_scale"] == 1e-3
+    np.testing.assert_array_equal(data.y[:, 0], y)
+    # a segment speaks seconds
+    assert read_record(suffixed, inputs=["u"], outputs=["y"], time_column="time", segment="1:1.5").n_samples == 26
+    unstated = tmp_path / "plain.csv"
+    np.savetxt(unstated, np.column_stack([ms, u, y]), delimiter=",", header="t,u,y", comments="", fmt="%.17g")
+    assert read_record(unstated, inputs=["u"], outputs=["y"]).dt == pytest.approx(20.0)  # unstated: seconds
+    assert read_record(unstated, inputs=["u"], outputs=["y"], time_scale=1e-3).dt == pytest.approx(0.02, rel=1e-12)
+    # given, the factor overrides the file's unit
+    assert read_record(suffixed, inputs=["u"], outputs=["y"], time_column="time", time_scale=1.0).dt == 20.0
+    _rejects("--time-scale converts a time column; --dt is already in seconds", read_record, unstated,
+             inputs=["u"], outputs=["y"], time_column="none", dt=0.02, time_scale=1e-3)
+    _rejects("the time scale is a positive number of seconds per unit of the time column; got -1.0", read_record,
+             unstated, inputs=["u"], outputs=["y"], time_scale=-1.0)
+
+
 # ------------------------------------------------------------------------------ gaps
 def test_resampling_bridges_gaps_and_says_where_they_were(tmp_path):
     path, stamps = _epoch_log(tmp_path / "gap.csv", gap=(600, 0.5), jitter=0.0)
