@@ -164,39 +164,55 @@ def _transfer(A, B, C, D, dt, f_hz: np.ndarray) -> np.ndarray:
     """``H(f)`` (n_f, n_y) of the one input B (n,): ``C (sI - A)^-1 B + D``, ``z = exp(s dt)`` if discrete."""
     s = 2j * np.pi * np.asarray(f_hz, dtype=float)
     points = s if dt is None else np.exp(s * dt)
-    eye = np.eye(A.shape[0])
-    return np.array([C @ np.linalg.solve(p * eye - A, B) + D for p in points])
+    systems = points[:, None, None] * np.eye(A.shape[0])[None] - A[None]  # one batched solve for all frequencies
+    right = np.broadcast_to(B.astype(complex), (points.size, B.size))[..., None]
+    return np.linalg.solve(systems, right)[..., 0] @ C.T + D[None, :]
 
 
 def _step_response(A, B, C, D, dt) -> tuple[np.ndarray, np.ndarray]:
     """Unit step response from rest: times (n_t,) and outputs (n_t, n_y), the step at t = 0.
 
-    Continuous time: exact, by the matrix exponential of the augmented system
-    over a grid of ``_STEP_POINTS`` (a ZOH step of a constant input is exact);
-    the horizon is ten times the slowest time constant, within 1-30 s.
-    Discrete time: the recursion at the model's own sample interval.
+    Continuous time: exact, on a grid of ``_STEP_POINTS`` over ten times the
+    slowest time constant (within 1-30 s): by modes, ``x(t) = V diag((exp(l t)
+    - 1) / l) V^-1 B``, where A is diagonalisable with a well-conditioned
+    eigenvector matrix, else by the exact zero-order-hold step repeated.
+    Discrete time: ``x[k] = sum_{j<k} A^j B`` at the model's sample interval,
+    by modes likewise.
     """
-    eigenvalues = np.linalg.eigvals(A)
+    eigenvalues, vectors = np.linalg.eig(A)
     if dt is None:
         rates = np.abs(eigenvalues.real)
         rates = rates[rates > 1e-9]
         horizon = float(np.clip(10.0 / rates.min(), 1.0, 30.0)) if rates.size else 30.0
-        step = horizon / _STEP_POINTS
-        n = A.shape[0]
-        block = expm(np.block([[A, B[:, None]], [np.zeros((1, n + 1))]]) * step)
-        ad, bd = block[:n, :n], block[:n, n]
-        count = _STEP_POINTS
+        times = np.linspace(0.0, horizon, _STEP_POINTS + 1)
     else:
         magnitudes = np.abs(eigenvalues)
         slowest = magnitudes[(magnitudes < 1 - 1e-12) & (magnitudes > 0)]
         rate = -np.log(slowest.max()) / dt if slowest.size else 1.0
-        horizon = float(np.clip(10.0 / rate, 1.0, 30.0))
-        step, ad, bd = dt, A, B
-        count = int(math.ceil(horizon / dt))
-    states = np.zeros((count + 1, A.shape[0]))
-    for k in range(count):
+        times = dt * np.arange(int(math.ceil(float(np.clip(10.0 / rate, 1.0, 30.0)) / dt)) + 1)
+    if np.linalg.cond(vectors) < 1e8:
+        weights = np.linalg.solve(vectors, B.astype(complex))
+        if dt is None:
+            exponent = np.outer(times, eigenvalues)
+            small = np.abs(eigenvalues) < 1e-12
+            with np.errstate(divide="ignore", invalid="ignore"):
+                growth = np.where(small, times[:, None], np.expm1(exponent) / np.where(small, 1.0, eigenvalues))
+        else:
+            steps = np.arange(times.size)[:, None]
+            near_one = np.abs(eigenvalues - 1) < 1e-12
+            with np.errstate(divide="ignore", invalid="ignore"):
+                growth = np.where(near_one, steps, (1 - eigenvalues**steps) / np.where(near_one, 2.0, 1 - eigenvalues))
+        states = (growth * weights[None, :]) @ vectors.T
+        return times, states.real @ C.T + D[None, :]
+    n = A.shape[0]
+    if dt is None:
+        block = expm(np.block([[A, B[:, None]], [np.zeros((1, n + 1))]]) * (times[1] - times[0]))
+        ad, bd = block[:n, :n], block[:n, n]
+    else:
+        ad, bd = A, B
+    states = np.zeros((times.size, n))
+    for k in range(times.size - 1):
         states[k + 1] = ad @ states[k] + bd
-    times = step * np.arange(count + 1)
     return times, states @ C.T + D[None, :]  # the input is 1 from t = 0 on: D acts from the first sample
 
 
