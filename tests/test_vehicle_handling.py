@@ -357,3 +357,65 @@ def test_handling_command_on_a_model_file(capsys, tmp_path):
 def test_handling_command_bad_input_exits_2(capsys, argv, message):
     assert main(argv) == 2
     assert message in capsys.readouterr().err
+
+
+# --- the report's handling page ------------------------------------------------------------------
+
+def _scheduled_car(grid=(10.0, 20.0, 30.0)):
+    models = {}
+    for speed in grid:
+        A, B, C, D, _ = Bicycle(speed).to_statespace()
+        models[speed] = dataclasses.replace(to_modal(A, B, C[:2], D[:2]), input_names=("steer",),
+                                            output_names=("yaw_rate", "lateral_acceleration"))
+    family = schedule_models(models)
+    return dataclasses.replace(family, meta={"wheelbase": WHEELBASE})
+
+
+def test_handling_page_draws_bands_where_there_is_a_spread():
+    from vehid.scenarios.report import handling_page
+
+    covariance = np.diag([3000.0, 4000.0, 150.0]) ** 2
+    identified = [handling_metrics(Bicycle(v, parameter_covariance=covariance), v, wheelbase=WHEELBASE)[0]
+                  for v in (10.0, 20.0, 30.0)]
+    source = source_handling(baseline(), [10.0, 20.0, 30.0], simulate=False).linearisation
+    fig = handling_page({"identified": identified, "source model": source})
+    assert len(fig.axes) == 3  # yaw-rate gain, lateral-acceleration gain, understeer gradient
+    for ax in fig.axes:
+        assert len(ax.lines) == 2
+        assert len(ax.collections) == 1  # one band: the identified model's; the source model has no spread
+    understeer_line = fig.axes[2].lines[0]
+    np.testing.assert_allclose(understeer_line.get_ydata(), gradient() * DEG_PER_G, rtol=1e-9)
+
+
+def test_report_gains_a_handling_page_for_a_speed_scheduled_model():
+    """An archive whose run holds a speed-scheduled model with a yaw-rate output gets the page, at the
+    grid speeds, with the wheelbase its metadata gives; other archives do not."""
+    from vehid.identification.archive import RunRecord
+    from vehid.scenarios.report import archive_figures, archive_handling
+
+    archive = type("ArchiveLike", (), {})()
+    archive.kind, archive.summary, archive.records = "identification", None, {}
+    archive.runs = {"scheduled": RunRecord("scheduled", {}, {}, model=_scheduled_car())}
+    curves = archive_handling(archive)
+    (metrics,) = curves.values()
+    assert [m.speed for m in metrics] == [10.0, 20.0, 30.0]
+    np.testing.assert_allclose([m.understeer_gradient_deg_per_g for m in metrics], gradient() * DEG_PER_G, rtol=1e-7)
+    assert "handling" in archive_figures(archive)
+    archive.runs = {"plain": RunRecord("plain", {}, {}, model=None)}
+    assert archive_handling(archive) == {}
+
+
+def test_handling_command_writes_the_page(capsys, tmp_path):
+    family = _scheduled_car()
+    path = tmp_path / "family.json"
+    path.write_text(json.dumps(family.to_dict(), default=lambda a: np.asarray(a).tolist()))
+    figure = tmp_path / "handling.png"
+    argv = ["handling", str(path), "--wheelbase", str(WHEELBASE), "--beside-source", "baseline",
+            "--figure", str(figure), "--json"]
+    assert main(argv) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["scheduled"] is True and [row["speed"] for row in summary["metrics"]] == [10.0, 20.0, 30.0]
+    assert [row["speed"] for row in summary["source_model"]["linearisation"]] == [10.0, 20.0, 30.0]
+    assert figure.stat().st_size > 0 and summary["figure"] == str(figure)
+    assert main(argv) == 2  # the page exists: not replaced without --force
+    assert "exists" in capsys.readouterr().err

@@ -56,6 +56,13 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--step-lateral-acceleration", type=float, default=None,
                         help="with --source: steady lateral acceleration of the simulated step in m/s^2 "
                              "(default 4, as ISO 7401)")
+    parser.add_argument("--beside-source", default=None, metavar="VEHICLE",
+                        help="with MODEL: also the source model's linearisation at the same speeds "
+                             "(baseline, understeer, or a .toml/.json vehicle file)")
+    parser.add_argument("--figure", default=None,
+                        help="write the handling page (gains and understeer gradient against speed, "
+                             "+/- 2 std bands) to this .png, .pdf or .svg file")
+    parser.add_argument("--force", action="store_true", help="let --figure replace an existing file")
     parser.add_argument("--strict", action="store_true", help="exit with status 3 when the result has warnings")
     parser.set_defaults(handler=run)
 
@@ -218,25 +225,60 @@ def metrics_table(title: str, metrics: tuple) -> list[str]:
     return lines
 
 
+_FIGURE_SUFFIXES = (".png", ".pdf", ".svg")
+
+
+def _check_figure_target(args: argparse.Namespace) -> Path | None:
+    """The --figure path, checked before any work: a figure suffix, an existing folder, no file unless --force."""
+    if args.figure is None:
+        return None
+    path = Path(args.figure)
+    if path.suffix.lower() not in _FIGURE_SUFFIXES:
+        raise InputError(f"--figure takes a {', '.join(_FIGURE_SUFFIXES)} file; got {args.figure!r}")
+    if not path.parent.is_dir():
+        raise InputError(f"--figure: no folder {str(path.parent)!r}")
+    if path.is_dir() or (path.exists() and not args.force):
+        raise InputError(f"--figure {args.figure!r} exists: choose another name or give --force")
+    return path
+
+
+def _write_figure(path: Path | None, curves: dict[str, Any], title: str) -> str | None:
+    if path is None:
+        return None
+    from vehid.scenarios.report import handling_page
+
+    handling_page(curves, title=title).savefig(path)
+    return str(path)
+
+
 def _run_source(args: argparse.Namespace) -> tuple[dict, str, list[str]]:
     from vehid.vehicle import named_vehicle
     from vehid.vehicle.handling import ISO_7401_LATERAL_ACCELERATION, source_handling
 
     if args.model is not None:
         raise InputError("--source reports the source model: give no MODEL")
-    for option in ("yaw_rate", "lateral_acceleration", "sideslip", "steer", "wheelbase", "scale", "run"):
+    for option in ("yaw_rate", "lateral_acceleration", "sideslip", "steer", "wheelbase", "scale", "run",
+                   "beside_source"):
         if getattr(args, option) is not None:
             raise InputError(f"--{option.replace('_', '-')} applies to an identified MODEL, not to --source")
     speeds = parse_speeds(args.speeds) if args.speeds is not None else [10.0, 20.0, 30.0]
     level = ISO_7401_LATERAL_ACCELERATION if args.step_lateral_acceleration is None else args.step_lateral_acceleration
     params = named_vehicle(args.vehicle)
+    figure = _check_figure_target(args)
     result = source_handling(params, speeds, simulate=not args.no_simulation, step_lateral_acceleration=level)
     summary = {"source": True, **result.as_dict(), "warnings": []}
+    curves = {"linearisation": result.linearisation,
+              **({f"simulation (step to {level:g} m/s^2)": result.simulation} if result.simulation else {})}
+    written = _write_figure(figure, curves, f"Handling of the source model {result.vehicle}")
+    if written:
+        summary["figure"] = written
     lines = [f"source model {result.vehicle} (wheelbase {result.wheelbase:g} m)",
              *metrics_table("linearisation:", result.linearisation)]
     if result.simulation:
         lines += metrics_table(f"simulation (step to {level:g} m/s^2, 1 Hz sine dwell of the same steer):",
                                result.simulation)
+    if written:
+        lines.append(f"wrote {written}")
     return summary, "\n".join(lines), []
 
 
@@ -250,10 +292,21 @@ def _run_model(args: argparse.Namespace) -> tuple[dict, str, list[str]]:
         if given:
             raise InputError(f"{option} applies to --source only")
     scales = parse_scales(args.scale)
+    figure = _check_figure_target(args)
+    source_params = None
+    if args.beside_source is not None:
+        from vehid.vehicle import named_vehicle
+
+        source_params = named_vehicle(args.beside_source)  # a bad vehicle file is bad input before any work
     model, origin = load_model(args.model, args.run)
     speeds = parse_speeds(args.speeds) if args.speeds is not None else _default_speeds(model, origin)
     metrics = handling_metrics(model, speeds, yaw_rate=args.yaw_rate, lateral_acceleration=args.lateral_acceleration,
                                sideslip=args.sideslip, steer=args.steer, wheelbase=args.wheelbase, scales=scales)
+    source = None
+    if source_params is not None:
+        from vehid.vehicle.handling import source_handling
+
+        source = source_handling(source_params, speeds, simulate=False)
     warnings = []
     if args.wheelbase is None:
         warnings.append("no --wheelbase: the understeer gradient and the characteristic speed are not computed")
@@ -263,6 +316,15 @@ def _run_model(args: argparse.Namespace) -> tuple[dict, str, list[str]]:
                "wheelbase": args.wheelbase, "scales": scales, "metrics": [m.as_dict() for m in metrics],
                "warnings": warnings}
     lines = metrics_table(f"{Path(args.model).name}:", metrics)
+    curves: dict[str, Any] = {"identified": metrics}
+    if source is not None:
+        summary["source_model"] = source.as_dict()
+        lines += metrics_table(f"source model {source.vehicle} (linearisation):", source.linearisation)
+        curves[f"source model {source.vehicle} (linearisation)"] = source.linearisation
+    written = _write_figure(figure, curves, f"Handling of {Path(args.model).name}")
+    if written:
+        summary["figure"] = written
+        lines.append(f"wrote {written}")
     return summary, "\n".join(lines), warnings
 
 
