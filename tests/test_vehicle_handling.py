@@ -419,3 +419,27 @@ def test_handling_command_writes_the_page(capsys, tmp_path):
     assert figure.stat().st_size > 0 and summary["figure"] == str(figure)
     assert main(argv) == 2  # the page exists: not replaced without --force
     assert "exists" in capsys.readouterr().err
+
+
+def test_unstable_and_integrating_models():
+    """Above its critical speed an oversteering car is unstable: its steady gains are those of the
+    unstable equilibrium (the closed forms still hold, K u^2 < -L makes them negative) and it has no step
+    metrics; a model with a pole at rest has no steady state at all (a failed computation, not bad input)."""
+    from vehid.identification.errors import ConversionError
+
+    cf, cr = STIFF_REAR, STIFF_FRONT * 0.8
+    K = gradient(cf, cr)
+    speed = 1.5 * math.sqrt(-WHEELBASE / K)
+    (metrics,) = handling_metrics(Bicycle(speed, cf, cr), speed, wheelbase=WHEELBASE)
+    assert metrics.yaw_rate_gain == pytest.approx(speed / (WHEELBASE + K * speed**2), rel=1e-9)
+    assert metrics.yaw_rate_gain < 0
+    assert math.isnan(metrics.yaw_rate_response_time_s) and math.isnan(metrics.yaw_rate_overshoot)
+
+    class Integrator(StateSpaceModel):
+        output_names, input_names = ("yaw_rate",), ("steer",)
+
+        def to_statespace(self):
+            return np.zeros((1, 1)), np.ones((1, 1)), np.ones((1, 1)), np.zeros((1, 1)), None
+
+    with pytest.raises(ConversionError, match="pole at zero"):
+        handling_metrics(Integrator(), 20.0)

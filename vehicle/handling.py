@@ -50,7 +50,7 @@ import numpy as np
 from scipy.linalg import expm
 from scipy.optimize import brentq
 
-from vehid.identification.errors import InputError
+from vehid.identification.errors import ConversionError, InputError
 from vehid.identification.uncertainty import propagate_by_differences
 
 from .parameters import GRAVITY, VehicleParameters, named_vehicle
@@ -296,26 +296,45 @@ def linear_handling(
         Rows of C for these outputs; without a lateral-acceleration output its
         steady gain is taken as ``V r / delta`` (a steady turn) and its
         transient metrics are NaN.
+
+    An unstable model (an oversteering car above its critical speed) keeps
+    its steady-state and frequency-response metrics, those of its unstable
+    equilibrium, but has no step metrics (NaN).
+
+    Raises
+    ------
+    ConversionError
+        When the model has a pole at rest (an integrator) or no yaw-rate gain:
+        there is no steady state to measure against.
     """
     A = np.asarray(A, dtype=float)
     B = np.asarray(B, dtype=float).reshape(A.shape[0], -1)[:, 0]
     C = np.asarray(C, dtype=float).reshape(-1, A.shape[0])
     D = np.asarray(D, dtype=float).reshape(C.shape[0], -1)[:, 0]
     rows = [yaw_rate] + [r for r in (lateral_acceleration, sideslip) if r is not None]
+    eigenvalues = np.linalg.eigvals(A)
+    at_rest = np.abs(eigenvalues if dt is None else eigenvalues - 1)
+    if np.any(at_rest < 1e-10 * max(1.0, float(np.max(np.abs(eigenvalues), initial=0.0)))):
+        raise ConversionError(f"the model at {speed:g} m/s has a pole at {'zero' if dt is None else 'z = 1'} "
+                              "(an integrator): it has no steady state, so no handling metrics")
     steady = _transfer(A, B, C[rows], D[rows], dt, np.array([0.0]))[0].real
     yaw_gain = float(steady[0])
     if yaw_gain == 0 or not math.isfinite(yaw_gain):
-        raise InputError("the model's steady yaw-rate gain is zero or not finite: no handling metrics")
+        raise ConversionError(f"the model's steady yaw-rate gain at {speed:g} m/s is zero or not finite: "
+                              "no handling metrics")
+    stable = bool(np.all(eigenvalues.real < 0) if dt is None else np.all(np.abs(eigenvalues) < 1))
     lateral_gain = float(steady[1]) if lateral_acceleration is not None else speed * yaw_gain
     sideslip_gain = float(steady[-1]) if sideslip is not None else math.nan
     steady_metrics = _steady_metrics(speed, wheelbase, yaw_gain, lateral_gain)
 
-    times, response = _step_response(A, B, C[rows], D[rows], dt)
-    yaw_ratio = response[:, 0] / yaw_gain
-    yaw_time = _crossing(times, yaw_ratio, _RESPONSE_LEVEL)
-    peak_time, overshoot = _first_peak(times, yaw_ratio)
-    lateral_time = (_crossing(times, response[:, 1] / lateral_gain, _RESPONSE_LEVEL)
-                    if lateral_acceleration is not None else math.nan)
+    yaw_time = peak_time = overshoot = lateral_time = math.nan  # an unstable model has no step response to time
+    if stable:
+        times, response = _step_response(A, B, C[rows], D[rows], dt)
+        yaw_ratio = response[:, 0] / yaw_gain
+        yaw_time = _crossing(times, yaw_ratio, _RESPONSE_LEVEL)
+        peak_time, overshoot = _first_peak(times, yaw_ratio)
+        lateral_time = (_crossing(times, response[:, 1] / lateral_gain, _RESPONSE_LEVEL)
+                        if lateral_acceleration is not None else math.nan)
 
     one_hz = _transfer(A, B, C[rows], D[rows], dt, np.array([1.0]))[0]
     lateral_phase = math.degrees(np.angle(one_hz[1])) if lateral_acceleration is not None else math.nan

@@ -312,6 +312,10 @@ def _run_model(args: argparse.Namespace) -> tuple[dict, str, list[str]]:
         warnings.append("no --wheelbase: the understeer gradient and the characteristic speed are not computed")
     if all(not math.isfinite(m.std["yaw_rate_gain"]) for m in metrics):
         warnings.append("the model carries no parameter covariance: the metrics have no error bars")
+    unstable = [m.speed for m in metrics if not math.isfinite(m.yaw_rate_response_time_s)]
+    if unstable:
+        warnings.append("the model is unstable or never reaches 90 % of its steady yaw rate at "
+                        f"{', '.join(f'{v:g}' for v in unstable)} m/s: no step metrics there")
     summary = {"source": False, "model": args.model, **origin, "scheduled": hasattr(model, "model_at"),
                "wheelbase": args.wheelbase, "scales": scales, "metrics": [m.as_dict() for m in metrics],
                "warnings": warnings}
