@@ -32,7 +32,7 @@ central differences (:func:`vehid.identification.uncertainty.propagate_by_differ
 
 :func:`source_handling` does the same for the source model: its exact
 linearisation at each speed (heading, which is ignorable, removed), and its
-nonlinear simulation under an ISO 7401 step and a 1 Hz sine dwell.
+nonlinear simulation under an ISO 7401 step, a 1 Hz sine dwell and a sine sweep.
 
 Units: steer in rad at the road wheel, yaw rate rad/s, lateral acceleration
 m/s^2, sideslip rad, unless ``scales`` says how a model's channels convert
@@ -86,7 +86,7 @@ _RAD_PER_MPS2_TO_DEG_PER_G = GRAVITY * 180.0 / math.pi
 ISO_7401_LATERAL_ACCELERATION = 4.0  # [m/s^2] ISO 7401's steady-state level for the step steer test
 _RESPONSE_LEVEL = 0.9  # ISO 7401: response time to 90 % of the steady-state value
 _BANDWIDTH_RATIO = 1.0 / math.sqrt(2.0)  # -3 dB
-_STEP_POINTS = 20000  # samples of a continuous model's step response: 0.5-1.5 ms over its horizon
+_STEP_POINTS = 20000  # samples of a continuous model's step response: 0.05-1.5 ms apart over its 1-30 s horizon
 _OVERSHOOT_FLOOR = 1e-6  # a peak this little above the steady value is round-off, not overshoot
 
 
@@ -493,9 +493,9 @@ class SourceHandling:
         From the exact linearisation at each speed (steer zero).
     simulation : tuple of HandlingMetrics
         From the nonlinear model: an ISO 7401 step steer to ``step_lateral_acceleration``
-        (steady gains, understeer gradient and transient metrics) and a 1 Hz
-        sine dwell of the same amplitude (gain and phase at 1 Hz); no bandwidth.
-        Empty if not simulated.
+        (steady gains, understeer gradient and transient metrics), a 1 Hz
+        sine dwell of the same amplitude (gain and phase at 1 Hz) and a sine
+        sweep of it, 0.2-6 Hz (bandwidth). Empty if not simulated.
     step_lateral_acceleration : float
         Steady lateral acceleration (m/s^2) the step was sized for by the linear gain.
     """
@@ -554,6 +554,47 @@ def _sine_response(params: VehicleParameters, speed: float, amplitude: float, dt
     return np.array([phasor(data.output(name)) / reference for name in ("yaw_rate", "lateral_acceleration")])
 
 
+_SWEEP_HZ = (0.2, 6.0)  # the simulated sweep's band: past the yaw-rate bandwidth of a car at 10-50 m/s
+_SWEEP_SECONDS = 40.0  # ~7 s per Hz: each frequency is passed slowly enough to be near its steady response
+_SWEEP_SMOOTHING_HZ = 0.1  # half-width of the band over which the sweep's spectra are averaged
+
+
+def _sweep_bandwidth(params: VehicleParameters, speed: float, amplitude: float, steady_gain: float,
+                     dt: float) -> float:
+    """Yaw-rate bandwidth (Hz) from a simulated sine sweep: where ``|r/delta|`` falls to 1/sqrt(2) of ``steady_gain``.
+
+    A linear sweep over :data:`_SWEEP_HZ`, faded in and out over 1 s; the
+    frequency response is the ratio of cross- to auto-spectrum averaged over
+    +/- 0.1 Hz (the empirical transfer function, smoothed), evaluated on a
+    0.01 Hz grid and its first crossing interpolated linearly. NaN if the
+    gain stays above the level within the band.
+    """
+    from .manoeuvres import Manoeuvre
+    from .simulation import simulate
+
+    t = dt * np.arange(int(round(_SWEEP_SECONDS / dt)) + 1)
+    low, high = _SWEEP_HZ
+    envelope = np.clip(np.minimum(t, t[-1] - t), 0.0, 1.0)
+    steer = amplitude * (0.5 - 0.5 * np.cos(np.pi * envelope)) * np.sin(
+        2 * np.pi * (low * t + 0.5 * (high - low) / t[-1] * t**2))
+    data = simulate(params, Manoeuvre("sine-sweep", steer, dt, {"sweep_hz": list(_SWEEP_HZ)}), speed=speed)
+    yaw = data.output("yaw_rate") - data.output("yaw_rate")[0]
+    frequencies = np.fft.rfftfreq(t.size, dt)
+    inputs, outputs = np.fft.rfft(steer), np.fft.rfft(yaw)
+    cross, power = outputs * np.conj(inputs), np.abs(inputs) ** 2
+    grid = np.arange(low + 2 * _SWEEP_SMOOTHING_HZ, high - 2 * _SWEEP_SMOOTHING_HZ, 0.01)
+    ratio = np.empty(grid.size)
+    for k, f in enumerate(grid):
+        band = np.abs(frequencies - f) <= _SWEEP_SMOOTHING_HZ
+        ratio[k] = abs(cross[band].sum() / power[band].sum()) / abs(steady_gain)
+    below = np.flatnonzero(ratio < _BANDWIDTH_RATIO)
+    if below.size == 0 or below[0] == 0:
+        return math.nan
+    k = int(below[0])
+    r0, r1 = ratio[k - 1], ratio[k]
+    return float(grid[k - 1] + (_BANDWIDTH_RATIO - r0) / (r1 - r0) * (grid[k] - grid[k - 1]))
+
+
 def _source_simulation(params: VehicleParameters, speed: float, linear: np.ndarray,
                        lateral_acceleration: float) -> np.ndarray:
     from .manoeuvres import step
@@ -580,11 +621,12 @@ def _source_simulation(params: VehicleParameters, speed: float, linear: np.ndarr
     yaw_ratio = yaw[after] / yaw[tail].mean()
     peak_time, overshoot = _first_peak(times[after], yaw_ratio)
     one_hz = _sine_response(params, speed, amplitude, DEFAULT_DT)
+    bandwidth = _sweep_bandwidth(params, speed, amplitude, yaw_gain, DEFAULT_DT)
     return np.array([
         yaw_gain, lateral_gain, sideslip_gain, *_steady_metrics(speed, wheelbase, yaw_gain, lateral_gain),
         _crossing(times[after], yaw_ratio, _RESPONSE_LEVEL), peak_time, overshoot,
         _crossing(times[after], lateral[after] / lateral[tail].mean(), _RESPONSE_LEVEL),
-        abs(one_hz[0]), math.degrees(np.angle(one_hz[0])), math.degrees(np.angle(one_hz[1])), math.nan,
+        abs(one_hz[0]), math.degrees(np.angle(one_hz[0])), math.degrees(np.angle(one_hz[1])), bandwidth,
     ])
 
 
@@ -604,7 +646,7 @@ def source_handling(
     speeds : float or sequence of float
         Speeds (m/s) within the model's valid range.
     simulate : bool
-        Also run the nonlinear step and sine dwell at each speed (about 0.1 s each).
+        Also run the nonlinear step, sine dwell and sweep at each speed (about 0.5 s together).
     step_lateral_acceleration : float
         Steady lateral acceleration (m/s^2) of the simulated step, reached by
         sizing the steer with the linear gain (ISO 7401: 4 m/s^2). Lower

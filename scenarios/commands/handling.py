@@ -11,7 +11,7 @@ MODEL is a model file written by ``vehid identify --save-model`` (.json) or an
 identification archive (``--out``, .h5: its returned model); a scheduled
 model is evaluated at each of --speeds, a model of one speed at the one speed
 given. ``--source`` reports the source model instead: its linearisation and
-its simulated ISO 7401 step and 1 Hz sine dwell. Warnings (no wheelbase for the
+its simulated ISO 7401 step, 1 Hz sine dwell and sine sweep. Warnings (no wheelbase for the
 understeer gradient, no covariance for error bars) exit 3 under --strict.
 """
 
@@ -52,7 +52,7 @@ def register(parser: argparse.ArgumentParser) -> None:
                              "(steer to road-wheel rad; yaw rate to rad/s; lateral acceleration to m/s^2)")
     parser.add_argument("--run", default=None, help="the archive's run whose model to use (default: the returned one)")
     parser.add_argument("--no-simulation", action="store_true",
-                        help="with --source: the linearisation only, no simulated step and sine dwell")
+                        help="with --source: the linearisation only, no simulated step, sine dwell and sweep")
     parser.add_argument("--step-lateral-acceleration", type=float, default=None,
                         help="with --source: steady lateral acceleration of the simulated step in m/s^2 "
                              "(default 4, as ISO 7401)")
@@ -275,7 +275,7 @@ def _run_source(args: argparse.Namespace) -> tuple[dict, str, list[str]]:
     lines = [f"source model {result.vehicle} (wheelbase {result.wheelbase:g} m)",
              *metrics_table("linearisation:", result.linearisation)]
     if result.simulation:
-        lines += metrics_table(f"simulation (step to {level:g} m/s^2, 1 Hz sine dwell of the same steer):",
+        lines += metrics_table(f"simulation (step to {level:g} m/s^2; 1 Hz sine dwell and sweep of that steer):",
                                result.simulation)
     if written:
         lines.append(f"wrote {written}")
