@@ -29,6 +29,8 @@ __all__ = [
     "archive_verdict",
     "verdict_lines",
     "verdict_page",
+    "handling_page",
+    "archive_handling",
 ]
 
 _SAFE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
@@ -320,7 +322,9 @@ def archive_figures(archive: Any, *, window: tuple[float, float] | None = None, 
         ``residuals_<record>_<run>`` and ``residual_tests_<record>_<run>``
         (whiteness and input cross-correlation with 99 % bands);
         ``innovation_consistency_<run>`` for IEKF runs that recorded their
-        NIS beside an ``identification`` record.
+        NIS beside an ``identification`` record; ``handling`` where a run's
+        model is scheduled on speed with a ``yaw_rate`` output
+        (:func:`archive_handling`).
     """
     figures: dict[str, Figure] = {}
     runs = archive.runs
@@ -381,6 +385,9 @@ def archive_figures(archive: Any, *, window: tuple[float, float] | None = None, 
             figures[_stem("fits", record_name)] = plots.plot_time_fits(
                 shown.t, shown.y, predictions, shown.output_names, shown.output_units, window=window,
                 title=f"Model fits to {record_name} ({_rule_text(rule)})", scores=scores)
+    curves = archive_handling(archive)
+    if curves:
+        figures["handling"] = handling_page(curves)
     return figures
 
 
@@ -475,3 +482,77 @@ def verdict_page(lines: Sequence[str], title: str = "Verdict of the identify com
     fig.suptitle(title)
     fig.text(0.02, 1.0 - 0.6 / height, "\n".join(wrapped), va="top", ha="left", fontsize=9, linespacing=1.35)
     return fig
+
+
+_HANDLING_PANELS = (
+    ("yaw_rate_gain", "yaw-rate gain r/delta (1/s)", 1.0),
+    ("lateral_acceleration_gain", "lateral acc. gain (m/s^2 per deg)", math.pi / 180),
+    ("understeer_gradient_deg_per_g", "understeer gradient (deg/g)", 1.0),
+)
+_BAND_SIGMAS = 2.0  # bands of +/- 2 std: about 95 % under the delta method's normal approximation
+
+
+def handling_page(curves: Mapping[str, Sequence[Any]], *, title: str = "Handling against speed") -> Figure:
+    """Gains and understeer gradient against speed, one line per model, +/- 2 std bands where known.
+
+    Parameters
+    ----------
+    curves : mapping of str to sequence of HandlingMetrics
+        Label (``identified``, ``source model (linearisation)``, ...) to the
+        metrics at each speed (:func:`vehid.vehicle.handling.handling_metrics`).
+    title : str
+
+    Returns
+    -------
+    Figure
+        Three panels sharing the speed axis; a panel whose metric no curve has is left out.
+    """
+    if not curves:
+        raise InputError("a handling page needs at least one model's metrics")
+    panels = [panel for panel in _HANDLING_PANELS
+              if any(math.isfinite(getattr(m, panel[0])) for metrics in curves.values() for m in metrics)]
+    fig = plots.new_figure((plots.REPORT_SIZE[0], max(plots.REPORT_SIZE[1], 1.2 + 1.8 * len(panels))))
+    axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0]
+    for ax, (name, label, factor) in zip(axes, panels):
+        ax.grid(True, alpha=0.3)
+        for curve, metrics in curves.items():
+            ordered = sorted(metrics, key=lambda m: m.speed)
+            speed = np.array([m.speed for m in ordered])
+            value = np.array([getattr(m, name) for m in ordered]) * factor
+            std = np.array([m.std[name] for m in ordered]) * factor
+            (line,) = ax.plot(speed, value, marker="o", label=curve)
+            if np.any(np.isfinite(std)):
+                ax.fill_between(speed, value - _BAND_SIGMAS * std, value + _BAND_SIGMAS * std,
+                                color=line.get_color(), alpha=0.2, linewidth=0)
+        ax.set_ylabel(label, fontsize=9)
+    axes[0].legend(fontsize=9, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0)
+    axes[-1].set_xlabel("speed (m/s)")
+    fig.suptitle(f"{title} (bands: +/- {_BAND_SIGMAS:g} std)")
+    return fig
+
+
+def archive_handling(archive: Any) -> dict[str, tuple[Any, ...]]:
+    """Handling metrics of an archive's speed-scheduled models at their grid speeds, by run.
+
+    A run qualifies when its model offers ``model_at`` (a family scheduled on
+    speed) and has an output named ``yaw_rate``; its metrics are computed with
+    the wheelbase its metadata gives (``wheelbase``, m), else without the
+    understeer gradient. A model they cannot be computed for is left out.
+    """
+    from vehid.vehicle.handling import handling_metrics
+
+    curves = {}
+    for name, run in archive.runs.items():
+        model = run.model
+        if not hasattr(model, "model_at") or "yaw_rate" not in tuple(getattr(model, "output_names", None) or ()):
+            continue
+        if str(getattr(model, "variable", "speed")).lower() not in ("speed", "vx", "v", "velocity"):
+            continue
+        wheelbase = (getattr(model, "meta", None) or {}).get("wheelbase")
+        try:
+            curves[f"{name} (identified)"] = handling_metrics(
+                model, list(model.grid), wheelbase=float(wheelbase) if isinstance(wheelbase, (int, float)) else None)
+        except (InputError, np.linalg.LinAlgError):
+            continue
+    return curves
+

@@ -21,6 +21,7 @@ from vehid.scenarios.cli import main
 COMMANDS = {  # every subcommand; test_every_command_is_covered fails when one is added without a row below
     ("identify",), ("report",), ("simulate",), ("linearize",), ("study", "handling"),
     ("study", "linear-example"), ("study", "textbook"), ("bench", "iekf"), ("study", "envelope"),
+    ("handling",),
 }
 
 
@@ -63,6 +64,7 @@ def _corrupt_archive(tmp_path):
     "simulate-missing-vehicle", "linearize-missing-vehicle", "handling-resume-missing", "handling-bad-orders",
     "linear-example-bad-passes", "textbook-unwritable", "bench-unwritable", "identify-save-model-directory",
     "report-out-is-a-file", "envelope-bad-speeds", "envelope-out-is-a-directory",
+    "vehicle-handling-missing", "vehicle-handling-corrupt", "vehicle-handling-bad-speeds",
 ])
 def test_bad_input_exits_2(case, tmp_path, capsys, monkeypatch):
     monkeypatch.setenv("VEHID_RESULTS_DIR", str(tmp_path / "results"))
@@ -101,6 +103,12 @@ def test_bad_input_exits_2(case, tmp_path, capsys, monkeypatch):
         (tmp_path / "campaign.h5").mkdir()
         _check(capsys, ["study", "envelope", "--speeds", "15", "--orders", "2", "--linear-only",
                         "--out", str(tmp_path / "campaign.h5")], 2, "campaign.h5", "directory")
+    elif case == "vehicle-handling-missing":
+        _check(capsys, ["handling", missing, "--speeds", "20"], 2, "absent.h5")
+    elif case == "vehicle-handling-corrupt":
+        _check(capsys, ["handling", str(_corrupt_archive(tmp_path)), "--speeds", "20"], 2, "corrupt.h5")
+    elif case == "vehicle-handling-bad-speeds":
+        _check(capsys, ["handling", "--source", "--speeds", "20,fast"], 2, "fast")
     elif case == "linear-example-bad-passes":
         _check(capsys, ["study", "linear-example", "--passes", "0"], 2, "passes")
     elif case == "identify-save-model-directory":  # IsADirectoryError after the work: the path and the cause
@@ -163,6 +171,9 @@ def test_a_failed_computation_exits_1(command, tmp_path, capsys, monkeypatch):
     elif command == ("study", "envelope"):
         monkeypatch.setattr("vehid.scenarios.commands.study_envelope.run_campaign", diverge)
         argv += ["--speeds", "15", "--orders", "2", "--linear-only"]
+    elif command == ("handling",):
+        monkeypatch.setattr("vehid.vehicle.handling.source_handling", diverge)
+        argv += ["--source", "--speeds", "20"]
     else:
         monkeypatch.setattr("vehid.scenarios.commands.bench_iekf.measure_iekf", diverge)
     _check(capsys, argv, 1, "non-finite")

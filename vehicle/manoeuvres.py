@@ -5,6 +5,13 @@ Every manoeuvre is a function with the same keyword-only signature
 :class:`Manoeuvre` whose ``steer`` (rad, shape (N,)) starts at zero, so that a
 simulation starts at the straight-running trim. Amplitudes are road-wheel
 angles in radians; the defaults are sized for the baseline saloon at 20 m/s.
+
+Most manoeuvres run at the constant speed the simulation is given. Those
+named ``speed-*`` carry their own reference speed (``Manoeuvre.speed``, m/s,
+one value per sample), which the car's speed hold tracks: a ramp from 10 to
+35 m/s and an accelerate-brake cycle, both under random steer within the
+linear range, so that records of varying speed exist for speed-scheduled
+identification. :func:`with_speed_profile` gives any steer series a profile.
 """
 
 from __future__ import annotations
@@ -18,7 +25,7 @@ import numpy as np
 
 from vehid.identification.errors import InputError
 
-from .simulation import DEFAULT_DT, check_record_memory, check_steer
+from .simulation import DEFAULT_DT, check_record_memory, check_speed_profile, check_steer
 
 __all__ = [
     "Manoeuvre",
@@ -27,6 +34,9 @@ __all__ = [
     "step",
     "sweep",
     "ramp",
+    "speed_ramp",
+    "speed_cycle",
+    "with_speed_profile",
     "MANOEUVRES",
     "make_manoeuvre",
     "band_limited_noise",
@@ -48,17 +58,25 @@ class Manoeuvre:
         Sample interval (s).
     meta : mapping
         How it was made: amplitude (rad), duration (s), seed, and shape details.
+    speed : numpy.ndarray, shape (N,), optional
+        Reference speed (m/s) per sample for the speed hold to track; None
+        where the simulation's constant speed applies.
     """
 
     name: str
     steer: np.ndarray
     dt: float
     meta: Mapping[str, Any] = field(default_factory=dict)
+    speed: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         steer = check_steer(self.steer).copy()
         steer.setflags(write=False)
         object.__setattr__(self, "steer", steer)
+        if self.speed is not None:
+            speed = check_speed_profile(self.speed, steer.size).copy()
+            speed.setflags(write=False)
+            object.__setattr__(self, "speed", speed)
         object.__setattr__(self, "meta", MappingProxyType({"manoeuvre": self.name, **dict(self.meta)}))
 
     @property
@@ -251,12 +269,121 @@ def ramp(
                      {"amplitude": amplitude, "duration": duration, "seed": seed})
 
 
+_SCHEDULE_SPEED = 20.0  # [m/s] the speed at which a speed manoeuvre's steer amplitude holds
+
+
+def _speed_scaled_steer(t: np.ndarray, speed: np.ndarray, amplitude: float, dt: float,
+                        rng: np.random.Generator) -> np.ndarray:
+    """Random steer (0-3 Hz, RMS ``amplitude`` at 20 m/s) scaled by ``(20 / V)^2``, faded in over 1 s.
+
+    A car's lateral-acceleration gain grows about as V^2 (exactly so for a
+    neutral car, ``V^2 / L``), so this scaling keeps the lateral acceleration
+    of about the same size across the speed range: within the linear range at
+    the top speed, still well above noise at the bottom.
+    """
+    noise = band_limited_noise(t.size, dt, 3.0, rng)
+    return amplitude * (_SCHEDULE_SPEED / speed) ** 2 * _fade(t, 1.0) * noise
+
+
+def _speed_from_accelerations(t: np.ndarray, start_speed: float,
+                              segments: list[tuple[float, float, float]], edge: float) -> np.ndarray:
+    """Speed (N,) from ``start_speed`` under acceleration pulses ``(start s, length s, m/s^2)``.
+
+    Each pulse rises and falls linearly over ``edge`` seconds (limited jerk), so
+    the reference's rate, the speed hold's feed-forward, is continuous. The
+    speed is the exact integral of the piecewise-linear acceleration.
+    """
+    def ramp_integral(x: np.ndarray) -> np.ndarray:  # integral of clip(x / edge, 0, 1) dx
+        x = np.maximum(x, 0.0)
+        return np.where(x < edge, x**2 / (2 * edge), x - edge / 2)
+
+    speed = np.full(t.size, float(start_speed))
+    for start, length, acceleration in segments:
+        # a pulse = ramp up at start minus ramp up at start + length (each then held)
+        speed += acceleration * (ramp_integral(t - start) - ramp_integral(t - start - length))
+    return speed
+
+
+def with_speed_profile(manoeuvre: Manoeuvre, speed: Any, *, name: str | None = None) -> Manoeuvre:
+    """``manoeuvre`` with a reference speed profile (m/s, one value per sample, or a constant)."""
+    profile = np.broadcast_to(np.asarray(speed, dtype=float), manoeuvre.steer.shape)
+    return Manoeuvre(name or manoeuvre.name, manoeuvre.steer, manoeuvre.dt, dict(manoeuvre.meta), profile)
+
+
+def speed_ramp(
+    *, amplitude: float | None = None, duration: float | None = None, dt: float = DEFAULT_DT, seed: int = 0
+) -> Manoeuvre:
+    """Speed ramp from 10 to 35 m/s under random steer within the linear range.
+
+    The reference holds 10 m/s for the first tenth of the record, rises at a
+    constant rate (reached and left with a jerk-limited 2 s edge) to 35 m/s
+    by nine tenths and holds it; default 60 s, so about 0.52 m/s^2. The steer
+    is band-limited noise (0-3 Hz) of RMS ``amplitude`` (default 0.5 deg) at
+    20 m/s, scaled by ``(20 / V)^2``: about 1 m/s^2 RMS lateral acceleration
+    for the baseline saloon throughout, peaks within 0.4 g.
+    """
+    amplitude = _check_amplitude(0.5 * _DEG if amplitude is None else amplitude)
+    seed = _check_seed(seed)
+    duration = 60.0 if duration is None else duration
+    n = _samples(duration, dt)
+    t = dt * np.arange(n)
+    low, high = 10.0, 35.0
+    edge = min(2.0, 0.1 * duration)
+    rise_start, rise_length = 0.1 * duration, 0.8 * duration - edge
+    rate = (high - low) / rise_length  # the pulse's integral: rate * (rise_length) exactly
+    speed = _speed_from_accelerations(t, low, [(rise_start, rise_length, rate)], edge)
+    rng = np.random.default_rng(seed)
+    steer = _speed_scaled_steer(t, speed, amplitude, dt, rng)
+    return Manoeuvre(
+        "speed-ramp", steer, dt,
+        {"amplitude": amplitude, "duration": duration, "seed": seed, "speed_range": [low, high],
+         "acceleration": rate, "steer_band_hz": [0.0, 3.0], "steer_scaled_at_speed": _SCHEDULE_SPEED},
+        speed,
+    )
+
+
+def speed_cycle(
+    *, amplitude: float | None = None, duration: float | None = None, dt: float = DEFAULT_DT, seed: int = 0
+) -> Manoeuvre:
+    """Accelerate-brake cycle under random steer: 20 m/s, up to 30, braked to 12, back to 20.
+
+    In fractions of the record (default 40 s): accelerate at 1.5 m/s^2 from
+    0.1, brake at 3 m/s^2 (0.3 g, faster than coasting, so all four wheels
+    brake) from 0.45, accelerate again at 1.5 m/s^2 from 0.75; each pulse's
+    length is set so the speeds are reached exactly (6.7, 6 and 5.3 s), its
+    edges jerk-limited over 0.5 s; a record shorter than about 36 s ends
+    before the cycle does (the pulses then overlap, the speed stays within
+    12-30 m/s). Steer as in :func:`speed_ramp`.
+    """
+    amplitude = _check_amplitude(0.5 * _DEG if amplitude is None else amplitude)
+    seed = _check_seed(seed)
+    duration = 40.0 if duration is None else duration
+    n = _samples(duration, dt)
+    t = dt * np.arange(n)
+    edge = min(0.5, 0.02 * duration)
+    changes = [(0.10, 30.0 - 20.0, 1.5), (0.45, 12.0 - 30.0, -3.0), (0.75, 20.0 - 12.0, 1.5)]
+    # a pulse of level a and length T changes the speed by a T: T = change / a
+    segments = [(fraction * duration, change / level, level) for fraction, change, level in changes]
+    speed = _speed_from_accelerations(t, 20.0, segments, edge)
+    rng = np.random.default_rng(seed)
+    steer = _speed_scaled_steer(t, speed, amplitude, dt, rng)
+    return Manoeuvre(
+        "speed-cycle", steer, dt,
+        {"amplitude": amplitude, "duration": duration, "seed": seed, "speeds": [20.0, 30.0, 12.0, 20.0],
+         "accelerations": [1.5, -3.0, 1.5], "steer_band_hz": [0.0, 3.0],
+         "steer_scaled_at_speed": _SCHEDULE_SPEED},
+        speed,
+    )
+
+
 MANOEUVRES: dict[str, Callable[..., Manoeuvre]] = {
     "identification": identification,
     "validation": validation,
     "step": step,
     "sweep": sweep,
     "ramp": ramp,
+    "speed-ramp": speed_ramp,
+    "speed-cycle": speed_cycle,
 }
 
 

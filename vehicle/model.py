@@ -40,6 +40,19 @@ from its static height, m); phi, theta, psi (rad); omega_fl, omega_fr,
 omega_rl, omega_rr (rad/s); alpha_fl ... alpha_rr (lagged lateral slip, -);
 kappa_fl ... kappa_rr (lagged slip ratio, -); speed_error_integral (m).
 Input: steer (road-wheel angle, rad). Parameter: reference_speed (m/s).
+
+Speed hold. The PI law acts on the speed error; a speed profile adds the
+reference's rate as feed-forward (:attr:`VehicleModel.tracking_dynamics`,
+parameters ``(reference_speed, reference_acceleration)``): the wheel torque
+that accelerates the car and its four wheels at that rate,
+``(m R_e + 4 I_w / R_e) dV_ref/dt``. Positive demand drives the front wheels.
+When the reference falls (this model has no rolling resistance or drag, so a
+coasting car keeps its speed and any falling reference needs the brakes), the
+braking part of the demand is shared with the rear wheels in proportion to the
+static axle loads, blended in over the first 0.5 m/s^2 of deceleration so that
+the torques stay continuous in the reference. At a constant reference the rate
+is zero, the feed-forward and the rear torque vanish identically and
+:attr:`VehicleModel.dynamics` is the plain PI hold on the front wheels.
 """
 
 from __future__ import annotations
@@ -103,6 +116,8 @@ OUTPUT_UNITS = ("m/s^2", "rad/s", "rad", "rad", "m/s", *("N",) * 4, "m/s^2")
 
 _EPS_SPEED = 0.1  # [m/s] smoothing of |V_cx|: 2.5e-4 relative error at 20 m/s
 _EPS_LOAD = 1.0  # [N] smoothing of max(F_z, 0): 6e-5 N bias at a static corner load of ~3-4 kN
+_EPS_DEMAND = 0.01  # [m/s^2] smoothing of min(demand, 0): brake torque at zero demand 0.5 % of a 1 m/s^2 stop
+_BRAKE_BLEND = 0.5  # [m/s^2] falling reference rate over which the rear brakes take their full share
 
 
 def _smooth_abs(x, eps):
@@ -130,9 +145,14 @@ class VehicleModel:
     xdot, y : casadi.SX
         State derivative (23,) and outputs (10,).
     dynamics : casadi.Function
-        ``dynamics(x, u, p) -> xdot``.
+        ``dynamics(x, u, p) -> xdot`` at a constant reference speed ``p``.
     outputs : casadi.Function
         ``outputs(x, u, p) -> y``.
+    reference_acceleration : casadi.SX
+        Symbol of the reference's rate dV_ref/dt (m/s^2), which ``xdot`` does not contain.
+    tracking_dynamics : casadi.Function
+        ``tracking_dynamics(x, u, p) -> xdot`` with ``p = (V_ref, dV_ref/dt)`` (2,):
+        the speed hold with feed-forward and four-wheel braking (module notes).
     state_names, state_units, input_names, input_units, output_names, output_units : tuple of str
     """
 
@@ -144,6 +164,8 @@ class VehicleModel:
     y: ca.SX
     dynamics: ca.Function
     outputs: ca.Function
+    reference_acceleration: ca.SX | None = None
+    tracking_dynamics: ca.Function | None = None
     state_names: tuple[str, ...] = STATE_NAMES
     state_units: tuple[str, ...] = STATE_UNITS
     input_names: tuple[str, ...] = INPUT_NAMES
@@ -346,10 +368,23 @@ def build_vehicle_model(params: VehicleParameters) -> VehicleModel:
     load = [(f + _smooth_abs(f, _EPS_LOAD)) / 2 for f in strut_force]
 
     speed_error = reference_speed - s["u"]
-    drive_torque_front = 0.5 * m * tyre.rolling_radius * (
+    reference_acceleration = ca.SX.sym("reference_acceleration")
+    # Demanded acceleration (m/s^2): PI on the speed error, plus the reference's rate scaled
+    # so that the torque also spins up the four wheels' inertia.
+    wheel_inertia_share = 4 * tyre.wheel_inertia / (m * tyre.rolling_radius**2)
+    demand = (
         drive.speed_gain * speed_error + drive.speed_integral_gain * s["speed_error_integral"]
+        + (1 + wheel_inertia_share) * reference_acceleration
     )
-    drive_torque = (drive_torque_front, drive_torque_front, 0, 0)
+    braking_demand = (demand - _smooth_abs(demand, _EPS_DEMAND)) / 2  # smooth min(demand, 0)
+    # Brakes balanced to the static axle loads, blended in as the reference starts to fall:
+    # exactly zero rear torque at a constant or rising reference.
+    rear_brake_share = rear_static / (front_static + rear_static) * ca.fmin(
+        ca.fmax(-reference_acceleration / _BRAKE_BLEND, 0), 1
+    )
+    rear_axle_torque = m * tyre.rolling_radius * rear_brake_share * braking_demand
+    drive_torque_front = 0.5 * m * tyre.rolling_radius * demand - 0.5 * rear_axle_torque
+    drive_torque = (drive_torque_front, drive_torque_front, 0.5 * rear_axle_torque, 0.5 * rear_axle_torque)
 
     force_body = ca.SX.zeros(3)
     moment_body = ca.SX.zeros(3)
@@ -421,10 +456,18 @@ def build_vehicle_model(params: VehicleParameters) -> VehicleModel:
         *load,
         force_body[1] / m,  # specific force along body y: what a body-fixed accelerometer reads
     )
+    tracking_dynamics = ca.Function(
+        "vehicle_tracking_dynamics", [x, steer, ca.vertcat(reference_speed, reference_acceleration)], [xdot],
+        ["x", "u", "p"], ["xdot"],
+    )
+    # At a constant reference the rate is zero: substituting it folds the feed-forward and
+    # the rear brake torque away, leaving the plain PI hold the paper's studies ran with.
+    xdot = ca.substitute(xdot, reference_acceleration, ca.SX(0))
     dynamics = ca.Function(
         "vehicle_dynamics", [x, steer, reference_speed], [xdot], ["x", "u", "p"], ["xdot"]
     )
     outputs = ca.Function("vehicle_outputs", [x, steer, reference_speed], [y], ["x", "u", "p"], ["y"])
     return VehicleModel(
-        params=params, x=x, u=steer, p=reference_speed, xdot=xdot, y=y, dynamics=dynamics, outputs=outputs
+        params=params, x=x, u=steer, p=reference_speed, xdot=xdot, y=y, dynamics=dynamics, outputs=outputs,
+        reference_acceleration=reference_acceleration, tracking_dynamics=tracking_dynamics,
     )

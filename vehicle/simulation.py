@@ -27,6 +27,13 @@ needs are checked before any work.
 Timing convention: ``u[k]`` is held on the interval that ends at ``t[k]``, so
 ``x[k] = step(x[k-1], u[k])``; the record starts at the exact trim of the
 first steer sample (zero in every manoeuvre of :mod:`vehid.vehicle.manoeuvres`).
+
+Speed profiles: a reference speed given per sample (a manoeuvre's ``speed``
+or an array) is tracked by the PI hold with the reference's rate as
+feed-forward (:attr:`vehid.vehicle.model.VehicleModel.tracking_dynamics`); the
+rate is the profile's central difference, and both are held on the interval
+ending at their sample, as the steer is. A constant reference runs the plain
+hold, as before.
 """
 
 from __future__ import annotations
@@ -56,6 +63,7 @@ __all__ = [
     "DEFAULT_DT",
     "BLOCK_SAMPLES",
     "check_steer",
+    "check_speed_profile",
     "check_record_memory",
     "CROSS_CHECK_TOLERANCE",
     "reference_outputs",
@@ -94,26 +102,47 @@ def check_steer(steer: Any) -> np.ndarray:
     return values
 
 
-def _rk4_step(model: VehicleModel, dt: float) -> ca.Function:
+def check_speed_profile(speed: Any, n_samples: int) -> np.ndarray:
+    """Return a reference speed series (m/s) as a float array (N,), or raise InputError naming the problem."""
+    values = np.asarray(speed, dtype=float)
+    if values.ndim == 2 and values.shape[1] == 1:
+        values = values[:, 0]
+    if values.shape != (n_samples,):
+        raise InputError(f"a speed profile needs one reference speed per steer sample ({n_samples}); "
+                         f"got shape {values.shape}")
+    bad = np.flatnonzero(~np.isfinite(values))
+    if bad.size:
+        raise InputError(f"the speed profile contains a non-finite value (NaN or inf) at sample {bad[0]}")
+    for index in (int(np.argmin(values)), int(np.argmax(values))):
+        try:
+            check_speed(values[index])
+        except InputError as exc:
+            raise InputError(f"the speed profile at sample {index}: {exc}") from None
+    return values
+
+
+def _rk4_step(model: VehicleModel, dt: float, tracking: bool = False) -> ca.Function:
     """One RK4 step from ``x[k]`` under ``u[k+1]``, also returning ``y[k] = h(x[k], u[k])``.
 
     Outputting ``y[k]`` rather than ``y[k+1]`` lets the tyre forces at ``x[k]``
     (which depend on the state only) serve both the output and the first RK4
     stage: common subexpressions are merged, saving a fifth of the work.
+    With ``tracking``, ``p`` is ``(V_ref, dV_ref/dt)`` of the interval and the
+    speed hold follows it (:attr:`VehicleModel.tracking_dynamics`).
     """
     x = ca.SX.sym("x", model.n_x)
     u_now = ca.SX.sym("u_now", model.n_u)
     u_next = ca.SX.sym("u_next", model.n_u)
-    p = ca.SX.sym("p", 1)
-    f = model.dynamics
+    p = ca.SX.sym("p", 2 if tracking else 1)
+    f = model.tracking_dynamics if tracking else model.dynamics
     k1 = f(x, u_next, p)
     k2 = f(x + dt / 2 * k1, u_next, p)
     k3 = f(x + dt / 2 * k2, u_next, p)
     k4 = f(x + dt * k3, u_next, p)
     x_next = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-    y_now = model.outputs(x, u_now, p)
+    y_now = model.outputs(x, u_now, p[0])
     return ca.Function(
-        "vehicle_rk4_step",
+        "vehicle_rk4_tracking_step" if tracking else "vehicle_rk4_step",
         [x, u_now, u_next, p],
         [x_next, y_now],
         ["x", "u_now", "u_next", "p"],
@@ -122,15 +151,16 @@ def _rk4_step(model: VehicleModel, dt: float) -> ca.Function:
     )
 
 
-def build_rk4_block(params: VehicleParameters, dt: float = DEFAULT_DT) -> ca.Function:
+def build_rk4_block(params: VehicleParameters, dt: float = DEFAULT_DT, *, tracking: bool = False) -> ca.Function:
     """The (uncompiled) block simulator: the RK4 step lifted over ``BLOCK_SAMPLES`` with mapaccum.
 
     ``vehicle_rk4_block(x0 (23,), u_now (1, B), u_next (1, B), p (1, B)) -> (x (23, B), y (10, B))``
     with ``B = BLOCK_SAMPLES``: ``x[:, k]`` is the state after step k, ``y[:, k]``
-    the output before it.
+    the output before it. With ``tracking`` (``vehicle_rk4_tracking_block``),
+    ``p`` is ``(2, B)``: reference speed and its rate on each interval.
     """
-    step = _rk4_step(build_vehicle_model(params), dt)
-    return step.mapaccum("vehicle_rk4_block", BLOCK_SAMPLES)
+    step = _rk4_step(build_vehicle_model(params), dt, tracking)
+    return step.mapaccum("vehicle_rk4_tracking_block" if tracking else "vehicle_rk4_block", BLOCK_SAMPLES)
 
 
 def reference_outputs(params: VehicleParameters, steer: np.ndarray, dt: float = DEFAULT_DT, *,
@@ -155,13 +185,13 @@ def reference_outputs(params: VehicleParameters, steer: np.ndarray, dt: float = 
 
 
 @functools.lru_cache(maxsize=16)
-def rk4_simulator(params: VehicleParameters, dt: float = DEFAULT_DT) -> ca.Function:
+def rk4_simulator(params: VehicleParameters, dt: float = DEFAULT_DT, tracking: bool = False) -> ca.Function:
     """:func:`build_rk4_block` compiled to native code (built once, cached in memory and on disk)."""
-    return compile_function(build_rk4_block(params, dt), optimisation=COMPILE_FLAGS)
+    return compile_function(build_rk4_block(params, dt, tracking=tracking), optimisation=COMPILE_FLAGS)
 
 
 def _run_rk4(params: VehicleParameters, dt: float, x0: np.ndarray, steer: np.ndarray, speed: float,
-             monitor=None):
+             monitor=None, reference: np.ndarray | None = None):
     """States x[1:] and outputs y[:-1] of the record (the caller adds x[0] and y[-1]), and the
     first envelope violation found by ``monitor(states, outputs, start)`` after each block (or None);
     the run stops at the block holding it.
@@ -171,23 +201,32 @@ def _run_rk4(params: VehicleParameters, dt: float, x0: np.ndarray, steer: np.nda
     ``B`` C-ordered rows of a time-major ``(N, n)`` array, so nothing is converted
     or copied. (Converting each block's result to NumPy through CasADi's DM
     instead costs some 40 ms per 30 s record, about as much as the integration.)
+    ``reference`` (N, 2), if given, is the speed profile and its rate per sample;
+    step k runs under row k + 1, as under steer k + 1.
     """
-    simulator = rk4_simulator(params, dt)
+    simulator = rk4_simulator(params, dt, reference is not None)
     n_steps = steer.size - 1
     n_blocks = -(-n_steps // BLOCK_SAMPLES)
     padded = np.zeros(n_blocks * BLOCK_SAMPLES + 1)
     padded[: steer.size] = steer
     speeds = np.full(BLOCK_SAMPLES, float(speed))
+    if reference is not None:
+        profile = np.empty((n_blocks * BLOCK_SAMPLES + 1, 2))
+        profile[: steer.size] = reference
+        profile[steer.size:] = reference[-1]  # padding: steps past the record, never returned
     states = np.empty((n_blocks * BLOCK_SAMPLES, simulator.size1_out(0)))
     outputs = np.empty((n_blocks * BLOCK_SAMPLES, simulator.size1_out(1)))
     buffer, evaluate = simulator.buffer()
-    buffer.set_arg(3, memoryview(speeds))
+    if reference is None:
+        buffer.set_arg(3, memoryview(speeds))
     state = np.array(x0, dtype=float)  # a contiguous copy: the first block's initial state
     for start in range(0, n_blocks * BLOCK_SAMPLES, BLOCK_SAMPLES):
         stop = start + BLOCK_SAMPLES
         buffer.set_arg(0, memoryview(state))
         buffer.set_arg(1, memoryview(padded[start:stop]))
         buffer.set_arg(2, memoryview(padded[start + 1:stop + 1]))
+        if reference is not None:
+            buffer.set_arg(3, memoryview(profile[start + 1:stop + 1]))
         buffer.set_res(0, memoryview(states[start:stop]))
         buffer.set_res(1, memoryview(outputs[start:stop]))
         evaluate()
@@ -202,24 +241,30 @@ def _run_rk4(params: VehicleParameters, dt: float, x0: np.ndarray, steer: np.nda
 
 
 @functools.lru_cache(maxsize=8)
-def _cvodes_interval(params: VehicleParameters, dt: float, tolerance: float) -> ca.Function:
+def _cvodes_interval(params: VehicleParameters, dt: float, tolerance: float, tracking: bool = False) -> ca.Function:
     """CVODES over one sample interval at constant steer: each call starts afresh (CVodeReInit)."""
     model = build_vehicle_model(params)
-    dae = {"x": model.x, "u": model.u, "p": model.p, "ode": model.xdot}
+    if tracking:
+        p = ca.vertcat(model.p, model.reference_acceleration)
+        dae = {"x": model.x, "u": model.u, "p": p, "ode": model.tracking_dynamics(model.x, model.u, p)}
+    else:
+        dae = {"x": model.x, "u": model.u, "p": model.p, "ode": model.xdot}
     options = {"abstol": tolerance, "reltol": tolerance, "max_num_steps": 100000}
     return ca.integrator("vehicle_cvodes", "cvodes", dae, 0.0, dt, options)
 
 
-def _run_cvodes(params, dt, x0, steer, speed, tolerance=CROSS_CHECK_TOLERANCE):
+def _run_cvodes(params, dt, x0, steer, speed, tolerance=CROSS_CHECK_TOLERANCE, reference=None):
     """States x[1:] and outputs y[1:]: the interval integrator chained over the record by mapaccum."""
     model = build_vehicle_model(params)
     n_steps = steer.size - 1
-    chain = _cvodes_interval(params, dt, tolerance).mapaccum("vehicle_cvodes_record", n_steps, ["x0"], ["xf"])
+    interval = _cvodes_interval(params, dt, tolerance, reference is not None)
+    chain = interval.mapaccum("vehicle_cvodes_record", n_steps, ["x0"], ["xf"])
+    p = speed if reference is None else reference[1:].T
     try:
-        states = np.asarray(chain(x0=x0, u=steer[None, 1:], p=speed)["xf"])
+        states = np.asarray(chain(x0=x0, u=steer[None, 1:], p=p)["xf"])
     except RuntimeError as exc:
         raise SimulationError(f"the CVODES cross-check failed: {str(exc).splitlines()[-1]}") from None
-    outputs = np.asarray(model.outputs.map(n_steps)(states, steer[None, 1:], speed))
+    outputs = np.asarray(model.outputs.map(n_steps)(states, steer[None, 1:], p if reference is None else p[:1]))
     return states.T, outputs.T
 
 
@@ -228,7 +273,7 @@ def simulate(
     steer: Any = None,
     dt: float | None = None,
     *,
-    speed: float = DEFAULT_SPEED,
+    speed: Any = None,
     method: str = "rk4",
     meta: dict | None = None,
 ) -> IOData:
@@ -244,8 +289,11 @@ def simulate(
         an IOData its input named ``steer`` (or its only input) and its time base.
     dt : float, optional
         Sample interval (s); default that of the IOData, else 1/500 s.
-    speed : float
-        Reference speed of the PI speed hold and of the initial trim (m/s).
+    speed : float or array_like (N,), optional
+        Reference speed of the PI speed hold and of the initial trim (m/s),
+        default 20; or a speed profile, one reference per steer sample,
+        tracked with feed-forward of its rate (module notes). A manoeuvre with
+        its own profile (``Manoeuvre.speed``) takes no ``speed``.
     method : {"rk4", "cvodes"}
         Compiled fixed-step RK4 (one step per sample), or CVODES at tolerance
         1e-12, restarted at every sample, as a cross-check (much slower).
@@ -259,7 +307,8 @@ def simulate(
         plane, m/s^2), ``yaw_rate`` (rad/s), ``roll_angle`` (rad), ``sideslip``
         (rad), ``speed`` (m/s), ``tyre_load_fl/fr/rl/rr`` (N),
         ``lateral_acceleration_accelerometer`` (m/s^2); ``x`` (N, 23) all
-        states; ``meta`` with ``vehicle``, ``speed``, ``method``, ``seconds``
+        states; ``meta`` with ``vehicle``, ``speed`` (the initial reference
+        under a profile, with ``speed_profile_range`` its least and greatest), ``method``, ``seconds``
         (wall time of the integration alone) and ``cpu_seconds`` (its processor
         time, which waiting for a shared core does not inflate).
 
@@ -295,11 +344,23 @@ def simulate(
             raise InputError(f"dt {dt} s contradicts the manoeuvre's sample interval {steer.dt} s")
         dt = steer.dt
         extra = dict(steer.meta)
+        if getattr(steer, "speed", None) is not None:
+            if speed is not None:
+                raise InputError(f"the {steer.name} manoeuvre carries its own speed profile: give no speed")
+            speed = steer.speed
         steer = steer.steer
     if steer is None:
         raise InputError("give a steer series (rad)")
     values = check_steer(steer)
     dt = positive_number(DEFAULT_DT if dt is None else dt, "dt", "s")
+    reference = None
+    if speed is None:
+        speed = DEFAULT_SPEED
+    if np.ndim(speed):
+        profile = check_speed_profile(speed, values.size)
+        rate = np.gradient(profile, dt, edge_order=2) if profile.size > 2 else np.gradient(profile, dt)
+        reference = np.column_stack([profile, rate])
+        speed = float(profile[0])
     speed = check_speed(speed)
     if method not in ("rk4", "cvodes"):
         raise InputError(f"unknown simulation method {method!r}; use 'rk4' or 'cvodes'")
@@ -311,21 +372,30 @@ def simulate(
     if method == "rk4":
         state_matrix = np.asarray(linearization_function(model)(x0, values[0], speed)[0])
         check_rk4_step(np.linalg.eigvals(state_matrix), dt, speed)
-        rk4_simulator(params, dt)  # build and compile outside the timed section
+        if reference is not None and reference[:, 0].max() > speed:
+            # the fastest modes (slip lags, -V/sigma) grow with speed: check the step at the top too
+            top = float(reference[:, 0].max())
+            fastest = np.asarray(linearization_function(model)(model.trim(top), 0.0, top)[0])
+            check_rk4_step(np.linalg.eigvals(fastest), dt, top)
+        rk4_simulator(params, dt, reference is not None)  # build and compile outside the timed section
+
+    def target(first: int, count: int) -> float | np.ndarray:
+        return speed if reference is None else reference[first:first + count, 0]
 
     def monitor(state_block: np.ndarray, output_block: np.ndarray, first_step: int) -> Violation | None:
         # Step k (from 0) ends at sample k + 1; the output beside it belongs to sample k.
-        return first_violation(state_block, model.state_names, output_block, model.output_names, speed,
+        return first_violation(state_block, model.state_names, output_block, model.output_names,
+                               target(first_step, output_block.shape[0]),
                                state_offset=first_step + 1, output_offset=first_step)
 
     start, cpu_start = time.perf_counter(), time.process_time()
     if method == "rk4":
-        states, outputs, violation = _run_rk4(params, dt, x0, values, speed, monitor)
+        states, outputs, violation = _run_rk4(params, dt, x0, values, speed, monitor, reference)
     else:
-        states, outputs = _run_cvodes(params, dt, x0, values, speed)
+        states, outputs = _run_cvodes(params, dt, x0, values, speed, reference=reference)
         # States and outputs both of samples 1 ... N - 1 here.
-        violation = first_violation(states, model.state_names, outputs, model.output_names, speed,
-                                    state_offset=1, output_offset=1)
+        violation = first_violation(states, model.state_names, outputs, model.output_names,
+                                    target(1, outputs.shape[0]), state_offset=1, output_offset=1)
     seconds = time.perf_counter() - start
     cpu_seconds = time.process_time() - cpu_start
     states = np.vstack([x0, states])
@@ -342,6 +412,8 @@ def simulate(
         **(meta or {}),
         "vehicle": params.name,
         "speed": speed,
+        **({} if reference is None else {"speed_profile_range": [float(reference[:, 0].min()),
+                                                                 float(reference[:, 0].max())]}),
         "method": method,
         "seconds": seconds,
         "cpu_seconds": cpu_seconds,

@@ -128,7 +128,7 @@ def first_violation(
     state_names: Sequence[str],
     outputs: np.ndarray,
     output_names: Sequence[str],
-    reference_speed: float,
+    reference_speed: float | np.ndarray,
     *,
     state_offset: int = 0,
     output_offset: int = 0,
@@ -142,12 +142,15 @@ def first_violation(
     outputs : ndarray (m, 10)
         Outputs of samples ``output_offset ... output_offset + m - 1`` (the
         simulator computes each output one step behind its state).
-    reference_speed : float
-        The speed hold's target (m/s).
+    reference_speed : float or ndarray (m,)
+        The speed hold's target (m/s): one value, or one per output sample of a speed profile.
 
     Vectorised over the block: a few array operations per call, none per sample.
     """
     corners = ("fl", "fr", "rl", "rr")
+    reference = np.asarray(reference_speed, dtype=float)
+    if reference.ndim:  # a profile: one target per output row
+        reference = reference.reshape(-1, 1)
     checks = [
         ("roll angle", states, state_offset, _columns(state_names, ["phi"]), 0.0, 1.0),
         ("pitch angle", states, state_offset, _columns(state_names, ["theta"]), 0.0, 1.0),
@@ -157,7 +160,7 @@ def first_violation(
         ("longitudinal tyre slip", states, state_offset,
          _columns(state_names, [f"kappa_{c}" for c in corners]), 0.0, 1.0),
         ("speed departure", outputs, output_offset, _columns(output_names, ["speed"]),
-         reference_speed, 1.0 / reference_speed),
+         reference, 1.0 / reference),
         ("heave", states, state_offset, _columns(state_names, ["z"]), 0.0, 1.0),
         # psi grows without bound while the car turns: it is ignorable and left out
         ("state magnitude", states, state_offset,

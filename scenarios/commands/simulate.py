@@ -34,8 +34,9 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--amplitude-deg", type=float, default=None,
                         help="road-wheel steer amplitude in degrees (default: the manoeuvre's own)")
     parser.add_argument("--duration", type=float, default=None, help="record length in seconds")
-    parser.add_argument("--speed", type=float, default=20.0,
-                        help="trim and reference speed in m/s (default 20; the model is valid from 3 to 50)")
+    parser.add_argument("--speed", type=float, default=None,
+                        help="trim and reference speed in m/s (default 20; the model is valid from 3 to 50); "
+                             "the speed-* manoeuvres carry their own speed profile")
     parser.add_argument("--vehicle", default="baseline",
                         help="baseline, understeer, or a .toml/.json vehicle file")
     parser.add_argument("--seed", type=int, default=0, help="seed of the random parts of the input")
@@ -99,12 +100,16 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     if args.duration is not None:
         options["duration"] = args.duration
     manoeuvre = make_manoeuvre(args.manoeuvre, **options)
+    if manoeuvre.speed is not None and args.speed is not None:
+        raise InputError(f"the {args.manoeuvre} manoeuvre carries its own speed profile: give no --speed")
+    if manoeuvre.speed is None and args.speed is None:
+        args.speed = 20.0
     run = run_digest(args)
     if args.out:  # before the simulation: an HDF5 name, no directory, no input file, nothing of the user's
         check_output_target(args.out, inputs=[args.vehicle], force=args.force, what="record", kind=RECORD_KIND,
                             run=run, suffixes=HDF5_SUFFIXES)
     try:
-        data = simulate(params, manoeuvre, speed=args.speed, method=args.method)
+        data = simulate(params, manoeuvre, speed=args.speed, method=args.method)  # speed None under a profile
     except SimulationError as exc:
         if not args.out or exc.partial is None:
             raise
@@ -118,7 +123,7 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     summary = {
         "manoeuvre": args.manoeuvre,
         "vehicle": params.name,
-        "speed": args.speed,
+        "speed": float(data.meta["speed"]),  # the initial reference under a speed profile
         "samples": data.n_samples,
         "dt": data.dt,
         "method": args.method,
@@ -127,16 +132,23 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
         "max_speed": float(np.max(speed)),
         "seconds": float(data.meta["seconds"]),
     }
+    if manoeuvre.speed is not None:
+        summary["reference_speed_range"] = [float(np.min(manoeuvre.speed)), float(np.max(manoeuvre.speed))]
+        summary["max_speed_tracking_error"] = float(np.max(np.abs(speed - manoeuvre.speed)))
     if args.manoeuvre == "step":
         summary.update(step_gains(data, float(manoeuvre.meta["amplitude"])))
     if args.out:
         summary["out"] = str(_write_record(data, args, run))
+    at_speed = (f"at {args.speed:g} m/s" if manoeuvre.speed is None else
+                "reference {0:g}-{1:g} m/s".format(*summary["reference_speed_range"]))
     lines = [
-        f"{args.manoeuvre} on {params.name} at {args.speed:g} m/s: {data.n_samples} samples, "
+        f"{args.manoeuvre} on {params.name} {at_speed}: {data.n_samples} samples, "
         f"{data.duration:g} s simulated in {summary['seconds'] * 1000:.1f} ms ({args.method})",
         f"peak lateral acceleration {summary['peak_lateral_acceleration']:.3f} m/s^2, "
         f"speed {summary['min_speed']:.3f}-{summary['max_speed']:.3f} m/s",
     ]
+    if manoeuvre.speed is not None:
+        lines.append(f"speed follows its reference within {summary['max_speed_tracking_error']:.3g} m/s")
     if args.manoeuvre == "step":
         lines.append(
             f"steady state: yaw rate {summary['yaw_rate_gain']:.4f} 1/s, lateral acceleration "
