@@ -153,7 +153,8 @@ def render_figures(figures: dict[str, Any], source_name: str) -> list[str]:
     """The generated part of the page: one heading per section of the figures file."""
     if not figures:
         return [f"The figures file ``{source_name}`` holds no sections yet.", ""]
-    lines = [f"Generated from ``{source_name}`` ({len(figures)} sections).", ""]
+    count = f"{len(figures)} section" + ("" if len(figures) == 1 else "s")
+    lines = [f"Generated from ``{source_name}`` ({count}).", ""]
     for name in sorted(figures):
         section = figures[name]
         lines += _heading(_label(name), 0)
@@ -179,8 +180,10 @@ def _substitute(app: Any, docname: str, source: list[str]) -> None:
         return
     path = Path(app.config.benchmarks_json)
     name = _display_name(path, Path(app.confdir).parent)
+    # Noted even while missing: Sphinx then reads this page again at every build,
+    # until the file appears, and after that whenever it changes.
+    app.env.note_dependency(str(path))
     if path.exists():
-        app.env.note_dependency(str(path))
         try:
             figures = json.loads(path.read_text())
         except json.JSONDecodeError as error:
