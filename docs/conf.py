@@ -89,6 +89,7 @@ html_theme_options = {
     "footer_start": ["copyright"],
     "footer_end": [],
 }
+templates_path = ["_templates"]
 html_static_path: list[str] = []
 html_show_sourcelink = False
 
