@@ -23,7 +23,7 @@ PACKAGES = {
     "vehid.identification": "Identification: models, estimators, metrics, data and archives",
     "vehid.vehicle": "The vehicle: parameters, symbolic model, simulation, manoeuvres",
 }
-_HELP_WIDTH = "88"
+_HELP_WIDTH = "78"  # what the page's code blocks show without scrolling
 
 
 def _defining_module(package: Any, name: str) -> str:
