@@ -8,7 +8,7 @@ VENV ?= .venv
 VPY := $(VENV)/bin/python
 STAMP := $(VENV)/.vehid-installed
 
-.PHONY: study test bench bench-real clean-cache setup
+.PHONY: study test bench bench-real clean-cache setup docs
 
 setup: $(STAMP)
 
@@ -22,6 +22,11 @@ study: $(STAMP)
 
 test: $(STAMP)
 	$(VPY) -m pytest
+
+# The documentation site, into docs/_build/html (warnings are errors; the gallery's
+# examples run in full here, on shortened records in the test suite)
+docs: $(STAMP)
+	$(VPY) -m sphinx -W --keep-going -b html docs docs/_build/html
 
 bench: $(STAMP)
 	$(VPY) benchmarks/run_all.py

@@ -265,7 +265,7 @@ def write_archive(
     --------
     >>> import tempfile, pathlib
     >>> target = pathlib.Path(tempfile.mkdtemp()) / "example.h5"
-    >>> from identification.storage import write_value
+    >>> from vehid.identification.storage import write_value
     >>> with write_archive(target, kind="example", config={"order": 4}, seeds=[0]) as archive:
     ...     write_value(archive["config"], "note", "a doctest")
     >>> read_archive(target).config

@@ -432,7 +432,7 @@ def identify_with(data: IOData, *, method: str, order: int, **options: Any) -> C
 
     Examples
     --------
-    >>> from identification import IOData, identify_with
+    >>> from vehid.identification import IOData, identify_with
     >>> import numpy as np
     >>> t = np.arange(400) * 0.01
     >>> u = np.sin(3 * t) + np.sin(11 * t)
