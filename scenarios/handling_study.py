@@ -15,7 +15,7 @@ three outputs are zero, which is the models' rest state too. The order is
 chosen by :func:`vehid.identification.order.assess_orders` on the linear runs.
 
 What to expect (paper, Table 5): R rises with the order and the nonlinear
-model beats the linear one. The measured results are in the README, the
+model beats the linear one. The measured results are in docs/measurements.md, the
 measurements behind the settings in ``docs/study_measurements.md``.
 """
 

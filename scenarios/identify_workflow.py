@@ -133,7 +133,7 @@ UNSTABLE_MARGIN = 5.0
 # and one fold's runaway prediction (fits of -100 % and less) must not outvote the other fold
 FIT_FLOOR = 0.0
 NONLINEAR_P = 1e-7  # the spline model's p without validation data
-# with validation data: no one p suits every sample interval (README, cascaded tanks)
+# with validation data: no one p suits every sample interval (docs/measurements.md, cascaded tanks)
 NONLINEAR_P_GRID = (1e-7, 1e-8, 1e-9)
 
 
