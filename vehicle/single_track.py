@@ -53,7 +53,7 @@ __all__ = [
 ]
 
 GRAVITY = 9.81  # m/s^2, as the vehicle parameters use it
-MIN_SPEED = 1.0  # m/s: the smooth floor under the speed (module docstring)
+MIN_SPEED = 0.1  # m/s: the smooth floor under the speed (module docstring); 5e-5 of the speed at 10 m/s
 
 #: The outputs the model offers: name -> unit.
 QUANTITIES = {"yaw_rate": "rad/s", "lateral_acceleration": "m/s^2", "sideslip": "rad", "lateral_velocity": "m/s"}
