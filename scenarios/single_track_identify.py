@@ -141,8 +141,10 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     _refuse_other_options(args)
     if not args.data:
         raise InputError("give a DATA file")
+    from vehid.scenarios.data_options import channel_names
+
+    config = _config(args, len(channel_names(args.outputs)))  # before the file is read: a bad option costs nothing
     estimation, validation = _read(args)
-    config = _config(args, estimation.n_y)
     model = single_track_model(config)
     options = GreyBoxOptions(**({"p": args.p} if args.p is not None else {}),
                              **({"passes": args.passes} if args.passes is not None else {}))
