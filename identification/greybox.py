@@ -106,6 +106,9 @@ class GreyBoxModel:
     state_names, input_names, schedule_names, output_names : sequence of str
     description : str
         What the model is (for reports); its text enters the cache key.
+    parameter_scale : sequence of float
+        The typical size of each parameter (for instance a sensor offset's), which sets its scale
+        where the start is zero; empty: every start must be non-zero and sets the scale itself.
     """
 
     dynamics: ca.Function
@@ -118,10 +121,11 @@ class GreyBoxModel:
     schedule_names: tuple[str, ...] = ()
     output_names: tuple[str, ...] = ()
     description: str = ""
+    parameter_scale: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         for name in ("parameter_names", "parameter_units", "positive", "state_names", "input_names",
-                     "schedule_names", "output_names"):
+                     "schedule_names", "output_names", "parameter_scale"):
             object.__setattr__(self, name, tuple(getattr(self, name)))
         object.__setattr__(self, "dynamics", _as_sx_function(self.dynamics, "dynamics", 4))
         object.__setattr__(self, "output", _as_sx_function(self.output, "output", 4))
@@ -138,6 +142,9 @@ class GreyBoxModel:
                              f"{len(self.output_names)} output names were given")
         if not (len(self.parameter_units) == len(self.positive) == self.n_theta):
             raise InputError("give one unit and one positivity flag per parameter")
+        if self.parameter_scale and (len(self.parameter_scale) != self.n_theta or not all(
+                math.isfinite(v) and v > 0 for v in self.parameter_scale)):
+            raise InputError("parameter_scale needs one positive size per parameter")
 
     @property
     def n_x(self) -> int:
@@ -164,7 +171,7 @@ class GreyBoxModel:
         digest = hashlib.sha256()
         for part in (self.dynamics.serialize(), self.output.serialize(), repr(self.parameter_names),
                      repr(self.positive), repr(self.state_names), repr(self.input_names),
-                     repr(self.schedule_names), self.description):
+                     repr(self.schedule_names), self.description, repr(self.parameter_scale)):
             digest.update(part.encode())
             digest.update(b"\0")
         return digest.hexdigest()
@@ -331,7 +338,8 @@ class GreyBoxOptions:
     passes, min_passes : int
         Largest number of passes; no early stop before ``min_passes``.
     parameter_tolerance : float
-        Stop when no parameter changes by more than this fraction of itself from one pass to the next.
+        Stop when no parameter changes by more than this fraction of itself (or of its scale, where
+        that is larger) from one pass to the next.
     discretization : {"rk4", "euler"}
     substeps : int
         Runge-Kutta steps per sample.
@@ -518,15 +526,16 @@ def identify_greybox(
     check_channels(tuple(IOData(t=r.t, u=r.u[:, : model.n_u], y=r.y, input_names=model.input_names,
                                 output_names=r.output_names) for r in records), detrend="none")
     start = model.check_parameters(start)
-    if np.any(start == 0):
-        raise InputError(f"parameter {model.parameter_names[int(np.flatnonzero(start == 0)[0])]!r} starts at zero: "
+    typical = np.asarray(model.parameter_scale, dtype=float) if model.parameter_scale else np.zeros(model.n_theta)
+    scale = np.where(start != 0, np.abs(start), typical)
+    if np.any(scale == 0):
+        raise InputError(f"parameter {model.parameter_names[int(np.flatnonzero(scale == 0)[0])]!r} starts at zero: "
                          "give a start of its expected size (it sets the parameter's scale)")
     n, n_theta = model.n_x, model.n_theta
     m = n + n_theta
     if options.initial_state_std is not None and len(options.initial_state_std) != n:
         raise InputError(f"initial_state_std needs {n} values (one per state); got {len(options.initial_state_std)}")
 
-    scale = np.abs(start)
     positive = np.array(model.positive, dtype=bool)
 
     def physical(phi: np.ndarray) -> np.ndarray:
@@ -617,7 +626,8 @@ def identify_greybox(
         return Assessment(theta, fit, fit, phi, P)
 
     def settled(previous: PassRecord, current: PassRecord) -> bool:
-        change = np.abs(current.parameters - previous.parameters) / np.maximum(np.abs(current.parameters), 1e-300)
+        # relative to each parameter, or to its scale where it is smaller (an offset near zero)
+        change = np.abs(current.parameters - previous.parameters) / np.maximum(np.abs(current.parameters), scale)
         return bool(np.max(change) < options.parameter_tolerance)
 
     def covariance_pass(phi: np.ndarray, carried: np.ndarray) -> tuple[np.ndarray, float]:

@@ -9,7 +9,8 @@ from ``--mass``, ``--lf``, ``--lr`` or a vehicle file (``--vehicle``; the option
 
 JSON (public contract): ``structure``, ``physical_parameters`` (``cornering_stiffness_front``,
 ``cornering_stiffness_rear``, ``yaw_inertia`` and, with ``--saturation``, ``axle_friction``, each
-``{value, std, unit}``), ``parameter_correlation``, ``handling`` (``understeer_gradient_deg_per_g``,
+``{value, std, unit}``), with ``--offsets`` ``sensor_offsets`` (``steer_offset`` and
+``<quantity>_offset``, alike), ``parameter_correlation`` (in the order of ``parameter_names``), ``handling`` (``understeer_gradient_deg_per_g``,
 ``characteristic_speed_m_s`` or ``critical_speed_m_s``, each with ``_std``, and ``yaw_rate_gain`` at
 speeds spanning the log), ``fit_percent`` (R, eq. 17), ``estimation_fit_percent``,
 ``validation_fit_percent`` (NRMSE), ``speed_range_m_s``, ``passes_run``, ``stop_reason``,
@@ -56,6 +57,8 @@ def register_options(parser: argparse.ArgumentParser) -> None:
                        help="tyre relaxation length: slip angles lag the kinematic ones (default: no lag)")
     group.add_argument("--saturation", action="store_true",
                        help="saturating axle characteristic mu F_z tanh(C alpha / (mu F_z)), mu estimated")
+    group.add_argument("--offsets", action="store_true",
+                       help="estimate constant sensor offsets of the steer and of each output as well")
 
 
 def _config(args: argparse.Namespace, n_outputs: int):
@@ -81,7 +84,8 @@ def _config(args: argparse.Namespace, n_outputs: int):
         raise InputError(f"the single-track structure needs the car's mass and axle distances: give "
                          f"{', '.join(missing)} (or --vehicle FILE)")
     return SingleTrackConfig(**geometry, quantities=quantities, steering_ratio=args.steering_ratio,
-                             relaxation_length=args.relaxation_length, saturation=args.saturation)
+                             relaxation_length=args.relaxation_length, saturation=args.saturation,
+                             offsets=args.offsets)
 
 
 def _refuse_other_options(args: argparse.Namespace) -> None:
@@ -153,8 +157,10 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
 
     names, units = config.parameter_names, model.parameter_units
     std = result.std
-    parameters = {name: {"value": float(value), "std": float(s), "unit": unit}
-                  for name, value, s, unit in zip(names, result.parameters, std, units)}
+    entries = [(name, {"value": float(value), "std": float(s), "unit": unit})
+               for name, value, s, unit in zip(names, result.parameters, std, units)]
+    parameters = dict(entries[: config.n_physical])
+    offsets = dict(entries[config.n_physical:])
     speeds = estimation.u[:, 1]
     grid = sorted({float(v) for v in np.round(np.linspace(speeds.min(), speeds.max(), 3))})
     handling = single_track_handling(config, result.parameters, result.covariance, speeds=grid)
@@ -179,7 +185,7 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
             if abs(correlation[i, j]) > CORRELATION_WARNING:
                 warnings.append(f"the log hardly separates {names[i]} from {names[j]} (correlation "
                                 f"{correlation[i, j]:.3f}): excite more, or add a measured quantity (sideslip)")
-    for name, value, s in zip(names, result.parameters, std):
+    for name, value, s in list(zip(names, result.parameters, std))[: config.n_physical]:  # an offset may be ~0
         if not s < abs(value):
             warnings.append(f"{name} is not determined by the log (std {s:.3g} against {value:.3g})")
     if float(np.min(speeds)) < MIN_LOG_SPEED:
@@ -194,7 +200,9 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
         "method": "iekf",
         "structure": "single-track",
         "physical_parameters": parameters,
+        **({"sensor_offsets": offsets} if offsets else {}),
         "parameter_correlation": correlation,
+        "parameter_names": list(names),
         "handling": handling.as_dict(),
         "quantities": list(config.quantities),
         "schedule": args.schedule.strip(),
@@ -230,7 +238,7 @@ def _text(summary: dict[str, Any], outputs: tuple[str, ...], validated: bool) ->
     lines = [f"single-track model (grey-box IEKF): {summary['passes_run']} passes, {summary['stop_reason']}, "
              f"speed {summary['speed_range_m_s'][0]:.1f}-{summary['speed_range_m_s'][1]:.1f} m/s, "
              f"{summary['seconds']:.2f} s"]
-    for name, entry in summary["physical_parameters"].items():
+    for name, entry in {**summary["physical_parameters"], **summary.get("sensor_offsets", {})}.items():
         lines.append(f"  {name:<27} {entry['value']:>12.5g} +/- {2 * entry['std']:.3g} {entry['unit']} (2 sigma)")
     handling = summary["handling"]
     lines.append(f"  {'understeer gradient':<27} {handling['understeer_gradient_deg_per_g']:>12.4g} +/- "

@@ -150,6 +150,22 @@ def test_a_measured_sideslip_tightens_every_parameter(twin_record):
     assert np.all(std[("yaw_rate", "sideslip")] < 0.5 * std[("yaw_rate",)])
 
 
+def test_sensor_offsets_are_estimated_with_the_parameters(twin_record):
+    """A steer sensor reading 0.3 deg high and a yaw-rate gyro and accelerometer with biases: estimated
+    with the car's parameters, from a start of no offset, each within three reported std."""
+    offsets = np.array([0.005, 0.01, -0.1])  # rad, rad/s, m/s^2
+    steer = twin_record.u[:, 0]
+    data = twin_record.replace(u=np.column_stack([steer + offsets[0], twin_record.u[:, 1]]),
+                               y=twin_record.y + offsets[1:])
+    config = SingleTrackConfig(MASS, LF, LR, offsets=True)
+    assert config.parameter_names[3:] == ("steer_offset", "yaw_rate_offset", "lateral_acceleration_offset")
+    start = np.concatenate([TRUTH * np.array([1.3, 0.7, 1.3]), np.zeros(3)])
+    result = identify_greybox(data, single_track_model(config), start)
+    truth = np.concatenate([TRUTH, offsets])
+    assert np.all(np.abs(result.parameters - truth) < 3 * result.std)  # 99.7 % each
+    assert np.all(np.abs(result.parameters[:3] / TRUTH - 1) < 0.01)  # as without offsets
+
+
 def test_steering_wheel_input_with_a_ratio_is_the_road_wheel_model():
     n, dt = 500, 0.01
     steer = 0.01 * np.sin(np.arange(n) * dt * 2.0)

@@ -104,3 +104,17 @@ def test_speed_channel_is_required(log, capsys):
     status = main(["identify", str(log), "--structure", "single-track", "--inputs", "delta",
                    "--outputs", "yawRate,ayCG", *GEOMETRY])
     assert status == 2 and "--schedule" in capsys.readouterr().err
+
+
+def test_sensor_offsets_have_their_own_key(log, capsys):
+    status = main(["identify", str(log), "--structure", "single-track", "--inputs", "delta", "--schedule", "vx",
+                   "--outputs", "yawRate,ayCG", "--scale", f"yawRate={DEG!r}", *GEOMETRY, "--offsets", "--json"])
+    captured = capsys.readouterr()
+    assert status == 0, captured.err
+    summary = json.loads(captured.out)
+    assert set(summary["physical_parameters"]) == set(TRUTH)  # the car's parameters only
+    offsets = summary["sensor_offsets"]
+    assert set(offsets) == {"steer_offset", "yaw_rate_offset", "lateral_acceleration_offset"}  # named by quantity
+    # the log has none: each offset within three of its std of zero
+    assert all(abs(entry["value"]) < 3 * entry["std"] for entry in offsets.values())
+    assert len(summary["parameter_correlation"]) == len(summary["parameter_names"]) == 6

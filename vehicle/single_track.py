@@ -16,7 +16,8 @@ Options: a tyre relaxation length ``sigma`` turns each axle's slip angle into a 
 kinematic one (``d alpha/dt = v_x / sigma (alpha_kinematic - alpha)``, Pacejka 2012, section 7.2.2); a
 saturating axle characteristic ``F = mu F_z tanh(C alpha / (mu F_z))`` (``F_z`` the static axle load),
 initial slope ``C``, limit ``mu F_z``, adds the axle friction coefficient ``mu`` as a fourth parameter.
-Below :data:`MIN_SPEED` the model is not meant to be used: the speed enters as
+With ``offsets`` constant sensor offsets of the steer channel and of each output join the parameters
+(``measured = true + offset``). Below :data:`MIN_SPEED` the model is not meant to be used: the speed enters as
 ``sqrt(v_x^2 + MIN_SPEED^2)``, smooth and never zero.
 
 Handling (Pacejka 2012, chapter 1; Gillespie 1992, chapter 6): understeer gradient
@@ -62,6 +63,11 @@ QUANTITIES = {"yaw_rate": "rad/s", "lateral_acceleration": "m/s^2", "sideslip": 
 PARAMETER_NAMES = ("cornering_stiffness_front", "cornering_stiffness_rear", "yaw_inertia", "axle_friction")
 PARAMETER_UNITS = ("N/rad", "N/rad", "kg m^2", "-")
 
+#: The typical size of a sensor offset (the prior's standard deviation on it): half a degree of
+#: road-wheel angle, half a degree per second of yaw rate, 0.1 m/s^2, 0.2 degrees of sideslip.
+OFFSET_SIZES = {"steer": 0.0087, "yaw_rate": 0.0087, "lateral_acceleration": 0.1, "sideslip": 0.0035,
+                "lateral_velocity": 0.05}
+
 
 def _positive(name: str, value: Any) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
@@ -87,6 +93,9 @@ class SingleTrackConfig:
         Tyre relaxation length ``sigma`` (m), the same on both axles; None: no lag.
     saturation : bool
         The saturating (tanh) axle characteristic with the axle friction coefficient as a parameter.
+    offsets : bool
+        Estimate constant sensor offsets too: of the steer channel (``steer_offset``, in its units) and
+        of each quantity (``<quantity>_offset``): ``measured = true + offset``.
     """
 
     mass: float
@@ -96,6 +105,7 @@ class SingleTrackConfig:
     steering_ratio: float = 1.0
     relaxation_length: float | None = None
     saturation: bool = False
+    offsets: bool = False
 
     def __post_init__(self) -> None:
         _positive("the mass", self.mass)
@@ -127,7 +137,15 @@ class SingleTrackConfig:
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
-        return PARAMETER_NAMES if self.saturation else PARAMETER_NAMES[:3]
+        physical = PARAMETER_NAMES if self.saturation else PARAMETER_NAMES[:3]
+        if not self.offsets:
+            return physical
+        return physical + ("steer_offset",) + tuple(f"{q}_offset" for q in self.quantities)
+
+    @property
+    def n_physical(self) -> int:
+        """How many of the parameters are the car's (the rest are sensor offsets)."""
+        return 4 if self.saturation else 3
 
 
 def config_from_vehicle(params: Any, **changes: Any) -> SingleTrackConfig:
@@ -155,13 +173,15 @@ def single_track_model(config: SingleTrackConfig) -> GreyBoxModel:
     lf, lr, mass = config.cg_to_front_axle, config.cg_to_rear_axle, config.mass
     lagged = config.relaxation_length is not None
     n_theta = len(config.parameter_names)
+    physical = config.n_physical
     x = ca.SX.sym("x", 4 if lagged else 2)
     u = ca.SX.sym("u", 1)
     theta = ca.SX.sym("theta", n_theta)
     s = ca.SX.sym("s", 1)
     vy, r = x[0], x[1]
     speed = ca.sqrt(s[0] ** 2 + MIN_SPEED**2)
-    delta = u[0] / config.steering_ratio
+    steer = u[0] - theta[physical] if config.offsets else u[0]
+    delta = steer / config.steering_ratio
     kinematic_f = delta - (vy + lf * r) / speed
     kinematic_r = -(vy - lr * r) / speed
     alpha_f, alpha_r = (x[2], x[3]) if lagged else (kinematic_f, kinematic_r)
@@ -174,20 +194,30 @@ def single_track_model(config: SingleTrackConfig) -> GreyBoxModel:
     values = {"yaw_rate": r, "lateral_acceleration": lateral_acceleration, "sideslip": ca.atan(vy / speed),
               "lateral_velocity": vy}
     y = ca.vertcat(*[values[q] for q in config.quantities])
+    if config.offsets:
+        y = y + theta[physical + 1:]
     names = ["x", "u", "theta", "s"]
     dynamics = ca.Function("single_track_dynamics", [x, u, theta, s], [ca.vertcat(*rates)], names, ["xdot"])
     output = ca.Function("single_track_output", [x, u, theta, s], [y], names, ["y"])
     states = ("lateral_velocity", "yaw_rate") + (("slip_angle_front", "slip_angle_rear") if lagged else ())
+    units, positive, sizes = PARAMETER_UNITS[:physical], (True,) * physical, ()
+    if config.offsets:
+        units += ("rad",) + tuple(QUANTITIES[q] for q in config.quantities)
+        positive += (False,) * (n_theta - physical)
+        start = single_track_start(config)
+        sizes = tuple(start[:physical]) + (OFFSET_SIZES["steer"] * config.steering_ratio,) + tuple(
+            OFFSET_SIZES[q] for q in config.quantities)
     return GreyBoxModel(
         dynamics=dynamics, output=output, parameter_names=config.parameter_names,
-        parameter_units=PARAMETER_UNITS[:n_theta], positive=(True,) * n_theta, state_names=states,
+        parameter_units=units, positive=positive, parameter_scale=sizes, state_names=states,
         input_names=("steer",), schedule_names=("speed",), output_names=config.quantities,
         description=f"single-track {config!r}",
     )
 
 
 def single_track_start(config: SingleTrackConfig) -> np.ndarray:
-    """Start values from mass and geometry alone: ``C = 12 F_z`` per axle, ``I_z = m l_f l_r``, ``mu = 1``.
+    """Start values from mass and geometry alone: ``C = 12 F_z`` per axle, ``I_z = m l_f l_r``, ``mu = 1``
+    (offsets 0).
 
     A cornering stiffness of 10-20 times the axle load per radian is the usual range of car tyres;
     ``m l_f l_r`` is the yaw inertia of the two-mass equivalent (a yaw radius of gyration of
@@ -195,7 +225,8 @@ def single_track_start(config: SingleTrackConfig) -> np.ndarray:
     """
     load_f, load_r = config.axle_loads
     start = [12.0 * load_f, 12.0 * load_r, config.mass * config.cg_to_front_axle * config.cg_to_rear_axle, 1.0]
-    return np.array(start[: len(config.parameter_names)])
+    offsets = [0.0] * (len(config.parameter_names) - config.n_physical)  # sensor offsets start at none
+    return np.array(start[: config.n_physical] + offsets)
 
 
 @dataclass(frozen=True)
