@@ -29,7 +29,7 @@ from vehid.identification.data import IOData
 from vehid.identification.errors import InputError
 from vehid.identification.metrics import nrmse_fit
 
-__all__ = ["register_options", "run", "MIN_LOG_SPEED", "CORRELATION_WARNING", "LINEAR_LIMIT_G"]
+__all__ = ["register_options", "run", "MIN_LOG_SPEED", "CORRELATION_WARNING", "LINEAR_LIMIT_G", "MAX_SUBSTEPS"]
 
 #: Below this speed (m/s) slip angles of a rolling car are not small and the model is not meant to hold.
 MIN_LOG_SPEED = 5.0
@@ -37,6 +37,8 @@ MIN_LOG_SPEED = 5.0
 CORRELATION_WARNING = 0.98
 #: Lateral acceleration (g) beyond which a linear axle characteristic averages over saturation.
 LINEAR_LIMIT_G = 0.5
+#: Most Runge-Kutta steps per sample; a log needing more reaches standstill (:func:`_substeps`).
+MAX_SUBSTEPS = 20
 STRUCTURES = ("modal", "single-track")
 
 
@@ -127,7 +129,7 @@ def _read(args: argparse.Namespace) -> tuple[IOData, IOData | None]:
     check_channels(IOData(t=record.t, u=record.u[:, :1], y=record.y, input_names=record.input_names[:1],
                           output_names=record.output_names), detrend="none")
     slowest = float(np.min(record.u[:, 1]))
-    if slowest <= 0:
+    if slowest < 0:
         raise InputError(f"the speed channel {speed!r} falls to {slowest:.3g}: the single-track model needs a car "
                          "moving forwards (m/s; convert with --scale)")
     if args.validation is None:
@@ -150,7 +152,8 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     config = _config(args, len(channel_names(args.outputs)))  # before the file is read: a bad option costs nothing
     estimation, validation = _read(args)
     model = single_track_model(config)
-    options = GreyBoxOptions(**({"p": args.p} if args.p is not None else {}),
+    substeps = _substeps(config, *[record for record in (estimation, validation) if record is not None])
+    options = GreyBoxOptions(substeps=substeps, **({"p": args.p} if args.p is not None else {}),
                              **({"passes": args.passes} if args.passes is not None else {}))
     result, divergence = workflow.last_good_on_divergence(
         lambda: identify_greybox(estimation, model, single_track_start(config), options=options))
@@ -224,6 +227,32 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     text = _text(summary, estimation.output_names, validation is not None)
     workflow.emit(summary, warnings, args)
     return summary, text
+
+
+def _substeps(config: Any, *records: IOData) -> int:
+    """Runge-Kutta steps per sample that keep every mode well inside RK4's stability region.
+
+    The fastest rate is bounded by the trace of the bicycle's system matrix at the lowest speed with
+    twice the start stiffnesses and half its yaw inertia (``(C_f + C_r) / (m v) + (l_f^2 C_f + l_r^2 C_r)
+    / (I_z v)``) and, with a
+    relaxation length, by ``v / sigma`` at the highest speed; a step covers at most half a time
+    constant (RK4 is stable to 2.8). A log that would need more than :data:`MAX_SUBSTEPS` reaches
+    standstill, where the model does not hold: InputError.
+    """
+    from vehid.vehicle.single_track import MIN_SPEED, single_track_start
+
+    speeds = np.concatenate([record.u[:, 1] for record in records])
+    low, high = max(float(np.min(speeds)), MIN_SPEED), float(np.max(speeds))
+    c_f, c_r, inertia = single_track_start(config)[:3] * [2.0, 2.0, 0.5]
+    lf, lr = config.cg_to_front_axle, config.cg_to_rear_axle
+    rate = (c_f + c_r) / (config.mass * low) + (lf**2 * c_f + lr**2 * c_r) / (inertia * low)
+    if config.relaxation_length is not None:
+        rate = max(rate, high / config.relaxation_length)
+    needed = int(np.ceil(rate * records[0].dt / 0.5))
+    if needed > MAX_SUBSTEPS:
+        raise InputError(f"the log's speed falls to {np.min(speeds):.3g} m/s, where the single-track model's modes are "
+                         f"too fast for its {records[0].dt:g} s samples: cut the slow parts with --segment")
+    return max(needed, 1)
 
 
 class _Scores:
