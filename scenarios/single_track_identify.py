@@ -118,8 +118,20 @@ def _read(args: argparse.Namespace) -> tuple[IOData, IOData | None]:
     if args.validation is not None and not 0 < args.validation < 1:
         raise InputError(f"--validation takes a fraction between 0 and 1; got {args.validation}")
     speed = args.schedule.strip()
-    reading = argparse.Namespace(**{**vars(args), "inputs": f"{args.inputs},{speed}"})
-    (record,), _ = read_from_args(reading, args.data)
+    try:  # a text table's columns are all alike; a workbench record keeps its speed among its outputs
+        reading = argparse.Namespace(**{**vars(args), "inputs": f"{args.inputs},{speed}"})
+        (record,), _ = read_from_args(reading, args.data)
+    except InputError:
+        reading = argparse.Namespace(**{**vars(args), "outputs": f"{args.outputs},{speed}"})
+        try:
+            (raw,), _ = read_from_args(reading, args.data)
+        except InputError:
+            raise InputError(f"no channel {speed!r} (the speed, --schedule) among the file's inputs or outputs") \
+                from None
+        record = raw.replace(u=np.column_stack([raw.u, raw.y[:, -1]]), y=raw.y[:, :-1],
+                             input_names=(*raw.input_names, speed), output_names=raw.output_names[:-1],
+                             input_units=(*raw.input_units, raw.output_units[-1]),
+                             output_units=raw.output_units[:-1])
     scale = parse_scale(args.scale)
     unknown = [name for name in scale if name not in record.input_names + record.output_names]
     if unknown:

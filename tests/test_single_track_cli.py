@@ -146,3 +146,26 @@ def test_slow_parts_take_substeps_and_standstill_is_refused(tmp_path, capsys):
             assert any("below 5 m/s" in line for line in summary["warnings"])
         else:
             assert "--segment" in captured.err
+
+
+def test_a_workbench_record_gives_its_speed_output_as_the_schedule(tmp_path, capsys):
+    """The source car's own record (HDF5): steer is its input, speed one of its outputs."""
+    assert main(["simulate", "--manoeuvre", "sweep", "--amplitude-deg", "0.3", "--duration", "20",
+                 "--out", str(tmp_path / "sweep.h5"), "--quiet"]) == 0
+    capsys.readouterr()
+    status = main(["identify", str(tmp_path / "sweep.h5"), "--structure", "single-track", "--inputs", "steer",
+                   "--schedule", "speed", "--outputs", "yaw_rate,lateral_acceleration", "--vehicle", "baseline",
+                   "--json"])
+    captured = capsys.readouterr()
+    assert status == 0, captured.err
+    summary = json.loads(captured.out)
+    assert summary["speed_range_m_s"] == pytest.approx([20.0, 20.0], abs=0.1)  # the speed hold's 20 m/s
+    # a plausible car: stiffnesses of 5-30 times each axle's static load per radian, the yaw inertia
+    # within a factor 2 of the car's 2500 kg m^2
+    loads = (1450 * 9.81 * 1.62 / 2.7, 1450 * 9.81 * 1.08 / 2.7)
+    for name, load in zip(("cornering_stiffness_front", "cornering_stiffness_rear"), loads):
+        assert 5 * load < summary["physical_parameters"][name]["value"] < 30 * load
+    assert 1250 < summary["physical_parameters"]["yaw_inertia"]["value"] < 5000
+    status = main(["identify", str(tmp_path / "sweep.h5"), "--structure", "single-track", "--inputs", "steer",
+                   "--schedule", "vx", "--outputs", "yaw_rate", "--vehicle", "baseline", "--quantities", "yaw_rate"])
+    assert status == 2 and "no channel 'vx'" in capsys.readouterr().err
