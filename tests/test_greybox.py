@@ -104,3 +104,21 @@ def test_a_divergence_names_the_pass(lag_record):
     with pytest.raises(DivergenceError, match="pass 1.*non-finite") as caught:
         identify_greybox(data, model, [1e-9, -1.5], options=GreyBoxOptions(measurement_noise="data"))
     assert caught.value.last_good is None  # nothing was finished before the first pass
+
+
+def test_an_mx_model_is_the_same_model(lag_record):
+    """Models built with CasADi's MX (as larger models are) are expanded to SX for the filter: same numbers."""
+    data, _ = lag_record
+    x, u, theta, s = ca.MX.sym("x"), ca.MX.sym("u"), ca.MX.sym("theta", 2), ca.MX.sym("s")
+    names = ["x", "u", "theta", "s"]
+    sx = _scheduled_first_order()
+    mx = GreyBoxModel(
+        dynamics=ca.Function("lag_dynamics_mx", [x, u, theta, s], [-x / theta[0] + theta[1] * s * u], names, ["xdot"]),
+        output=ca.Function("lag_output_mx", [x, u, theta, s], [x], names, ["y"]),
+        parameter_names=sx.parameter_names, parameter_units=sx.parameter_units, positive=sx.positive,
+        state_names=sx.state_names, input_names=sx.input_names, schedule_names=sx.schedule_names,
+        output_names=sx.output_names,
+    )
+    expected, _ = simulate_greybox(sx, [0.4, -2.0], data)
+    found, _ = simulate_greybox(mx, [0.4, -2.0], data)
+    assert np.max(np.abs(found - expected)) <= 1e-12 * np.max(np.abs(expected))  # algebra: rounding only
