@@ -165,7 +165,13 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     estimation, validation = _read(args)
     model = single_track_model(config)
     substeps = _substeps(config, *[record for record in (estimation, validation) if record is not None])
-    options = GreyBoxOptions(substeps=substeps, **({"p": args.p} if args.p is not None else {}),
+    # a log starts mid-drive, not at rest: the states' prior at its start (a sideslip of up to 0.1 rad,
+    # yaw rates of 0.5 rad/s, slip angles of 0.1 rad), so the filter estimates them rather than taking the
+    # first second's transient for a property of the car
+    start_std = {"lateral_velocity": 0.1 * max(float(estimation.u[0, 1]), MIN_LOG_SPEED), "yaw_rate": 0.5,
+                 "slip_angle_front": 0.1, "slip_angle_rear": 0.1}
+    options = GreyBoxOptions(substeps=substeps, initial_state_std=tuple(start_std[name] for name in model.state_names),
+                             **({"p": args.p} if args.p is not None else {}),
                              **({"passes": args.passes} if args.passes is not None else {}))
     result, divergence = workflow.last_good_on_divergence(
         lambda: identify_greybox(estimation, model, single_track_start(config), options=options))
