@@ -6,13 +6,15 @@ time-varying parameter (``--schedule``), identified by the grey-box IEKF
 model has no operating point to remove, and a track log's mean yaw rate (a circuit driven one way round)
 is response, not offset; ``--detrend`` other than the default is refused. Mass and axle distances come
 from ``--mass``, ``--lf``, ``--lr`` or a vehicle file (``--vehicle``; the options override it).
+``--p`` is the grey-box filter's (the random-walk variance of a scaled parameter over the first
+pass, :class:`~identification.greybox.GreyBoxOptions`), ``--passes`` its largest number of passes.
 
 JSON (public contract): ``structure``, ``physical_parameters`` (``cornering_stiffness_front``,
 ``cornering_stiffness_rear``, ``yaw_inertia`` and, with ``--saturation``, ``axle_friction``, each
 ``{value, std, unit}``), with ``--offsets`` ``sensor_offsets`` (``steer_offset`` and
-``<quantity>_offset``, alike), ``parameter_correlation`` (in the order of ``parameter_names``), ``handling`` (``understeer_gradient_deg_per_g``,
-``characteristic_speed_m_s`` or ``critical_speed_m_s``, each with ``_std``, and ``yaw_rate_gain`` at
-speeds spanning the log), ``fit_percent`` (R, eq. 17), ``estimation_fit_percent``,
+``<quantity>_offset``, alike), ``parameter_correlation`` (in the order of ``parameter_names``),
+``handling`` (``understeer_gradient_deg_per_g``, ``characteristic_speed_m_s`` or
+``critical_speed_m_s``, each with ``_std``, and ``yaw_rate_gain`` at speeds spanning the log), ``fit_percent`` (R, eq. 17), ``estimation_fit_percent``,
 ``validation_fit_percent`` (NRMSE), ``speed_range_m_s``, ``passes_run``, ``stop_reason``,
 ``trace_p``, ``notes``, ``warnings``, ``seconds``.
 """
