@@ -329,8 +329,8 @@ class GreyBoxOptions:
         parameter drift by 1 % over the record: enough to leave a start 30 % off within a few passes
         (``P0`` does most of that), small enough that a model which cannot follow every part of a
         record (one lacking a mode the record's fastest part excites) is not dragged by its last
-        seconds into an unstable one, as 1e-2 was (measured on a two-state model of a record with a
-        lightly damped third mode swept through).
+        seconds into an unstable one, as 1e-2 was (measured: a two-state model of a sine sweep whose
+        last seconds excite modes the model lacks).
     p_decay : float
         Factor on ``Q`` from one pass to the next, in (0, 1]; never below ``P_DECAY_FLOOR`` of ``p``.
     prior_std : float
