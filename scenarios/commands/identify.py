@@ -75,6 +75,7 @@ from vehid.identification.multirecord import pooled_simulation_fit
 from vehid.identification.preparation import prepare_validation, read_record
 from vehid.identification.storage import write_value
 from vehid.scenarios import identify_workflow as workflow
+from vehid.scenarios import single_track_identify as single_track
 from vehid.scenarios.data_options import (RECORD_PREFIX, archive_records, archived_preparation, record_series,
                                           check_model_target, records_summary, register_data_options, save_model,
                                           settings_from_args, write_record_series, data_warnings)
@@ -117,8 +118,13 @@ def register(parser: argparse.ArgumentParser) -> None:
                         help="with --method n4sid: residual-bootstrap replicates for its parameter covariance, each "
                              "one subspace fit (default: none, the asymptotic covariance of its simulation errors; "
                              "0 for no covariance)")
+    parser.add_argument("--structure", default="modal", choices=single_track.STRUCTURES,
+                        help="model structure: modal (default) or single-track (a car's physical parameters)")
+    parser.add_argument("--schedule", metavar="CHANNEL",
+                        help="the measured scheduling channel; with --structure single-track the speed (m/s)")
     register_data_options(parser)
     workflow.register_options(parser)
+    single_track.register_options(parser)
     parser.set_defaults(handler=run)
 
 
@@ -156,6 +162,8 @@ def _resume(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> tuple[dict, str]:
+    if args.structure == "single-track":
+        return single_track.run(args)
     if args.resume and args.out:
         raise InputError("--resume continues in its own archive: give no --out")
     inputs = [*args.data, *args.validation_file, args.resume]

@@ -1,0 +1,303 @@
+"""`vehid identify --structure single-track`: a car's cornering stiffnesses and yaw inertia from its log.
+
+The physical single-track model (:mod:`vehid.vehicle.single_track`) with the log's speed as a measured
+time-varying parameter (``--schedule``), identified by the grey-box IEKF
+(:mod:`vehid.identification.greybox`). Signals are taken as recorded, times ``--scale``: a physical
+model has no operating point to remove, and a track log's mean yaw rate (a circuit driven one way round)
+is response, not offset; ``--detrend`` other than the default is refused. Mass and axle distances come
+from ``--mass``, ``--lf``, ``--lr`` or a vehicle file (``--vehicle``; the options override it).
+``--p`` is the grey-box filter's (the random-walk variance of a scaled parameter over the first
+pass, :class:`~identification.greybox.GreyBoxOptions`), ``--passes`` its largest number of passes.
+
+JSON (public contract): ``structure``, ``physical_parameters`` (``cornering_stiffness_front``,
+``cornering_stiffness_rear``, ``yaw_inertia`` and, with ``--saturation``, ``axle_friction``, each
+``{value, std, unit}``), with ``--offsets`` ``sensor_offsets`` (``steer_offset`` and
+``<quantity>_offset``, alike), ``parameter_correlation`` (in the order of ``parameter_names``),
+``handling`` (``understeer_gradient_deg_per_g``, ``characteristic_speed_m_s`` or
+``critical_speed_m_s``, each with ``_std``, and ``yaw_rate_gain`` at speeds spanning the log), ``fit_percent`` (R, eq. 17), ``estimation_fit_percent``,
+``validation_fit_percent`` (NRMSE), ``speed_range_m_s``, ``passes_run``, ``stop_reason``,
+``trace_p``, ``notes``, ``warnings``, ``seconds``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from typing import Any
+
+import numpy as np
+
+from vehid.identification.data import IOData
+from vehid.identification.errors import InputError
+from vehid.identification.metrics import nrmse_fit
+
+__all__ = ["register_options", "run", "MIN_LOG_SPEED", "CORRELATION_WARNING", "LINEAR_LIMIT_G", "MAX_SUBSTEPS"]
+
+#: Below this speed (m/s) slip angles of a rolling car are not small and the model is not meant to hold.
+MIN_LOG_SPEED = 5.0
+#: |correlation| above which two parameters are named as not separated by the log.
+CORRELATION_WARNING = 0.98
+#: Lateral acceleration (g) beyond which a linear axle characteristic averages over saturation.
+LINEAR_LIMIT_G = 0.5
+#: Most Runge-Kutta steps per sample; a log needing more reaches standstill (:func:`_substeps`).
+MAX_SUBSTEPS = 20
+STRUCTURES = ("modal", "single-track")
+
+
+def register_options(parser: argparse.ArgumentParser) -> None:
+    """The single-track options of `vehid identify` (``--structure`` and ``--schedule`` are registered beside them)."""
+    group = parser.add_argument_group("single-track structure (--structure single-track)")
+    group.add_argument("--quantities", metavar="NAMES",
+                       help="what each --outputs channel measures, in order: yaw_rate (rad/s), lateral_acceleration "
+                            "(m/s^2), sideslip (rad), lateral_velocity (m/s) (default yaw_rate,lateral_acceleration)")
+    group.add_argument("--mass", type=float, metavar="KG", help="vehicle mass (kg)")
+    group.add_argument("--lf", type=float, metavar="M", help="CG to front axle (m)")
+    group.add_argument("--lr", type=float, metavar="M", help="CG to rear axle (m)")
+    group.add_argument("--vehicle", metavar="FILE",
+                       help="vehicle parameter file (.toml/.json) or name for mass and axle distances")
+    group.add_argument("--steering-ratio", type=float, default=1.0, metavar="RATIO",
+                       help="steering-wheel angle per road-wheel angle, where --inputs is the steering wheel (default 1)")
+    group.add_argument("--relaxation-length", type=float, metavar="M",
+                       help="tyre relaxation length: slip angles lag the kinematic ones (default: no lag)")
+    group.add_argument("--saturation", action="store_true",
+                       help="saturating axle characteristic mu F_z tanh(C alpha / (mu F_z)), mu estimated")
+    group.add_argument("--offsets", action="store_true",
+                       help="estimate constant sensor offsets of the steer and of each output as well")
+
+
+def _config(args: argparse.Namespace, n_outputs: int):
+    from vehid.vehicle.single_track import SingleTrackConfig
+
+    quantities = tuple(q.strip() for q in (args.quantities or "yaw_rate,lateral_acceleration").split(",") if q.strip())
+    if len(quantities) != n_outputs:
+        raise InputError(f"--quantities names {len(quantities)} quantities for {n_outputs} --outputs channels: "
+                         "name what each output measures, in order")
+    geometry: dict[str, Any] = {}
+    if args.vehicle:
+        from vehid.vehicle.parameters import named_vehicle
+
+        chassis = named_vehicle(args.vehicle).chassis
+        geometry = {"mass": chassis.mass, "cg_to_front_axle": chassis.cg_to_front_axle,
+                    "cg_to_rear_axle": chassis.cg_to_rear_axle}
+    for option, key in (("mass", "mass"), ("lf", "cg_to_front_axle"), ("lr", "cg_to_rear_axle")):
+        if getattr(args, option) is not None:
+            geometry[key] = getattr(args, option)
+    missing = [f"--{o}" for o, k in (("mass", "mass"), ("lf", "cg_to_front_axle"), ("lr", "cg_to_rear_axle"))
+               if k not in geometry]
+    if missing:
+        raise InputError(f"the single-track structure needs the car's mass and axle distances: give "
+                         f"{', '.join(missing)} (or --vehicle FILE)")
+    return SingleTrackConfig(**geometry, quantities=quantities, steering_ratio=args.steering_ratio,
+                             relaxation_length=args.relaxation_length, saturation=args.saturation,
+                             offsets=args.offsets)
+
+
+def _refuse_other_options(args: argparse.Namespace) -> None:
+    """Options of the modal structure that mean nothing here: named, not silently ignored."""
+    given = [name for name, value, default in (
+        ("--out", args.out, None), ("--resume", args.resume, None), ("--save-model", args.save_model, None),
+        ("--nonlinear", args.nonlinear, False), ("--method", args.method, "iekf"),
+        ("--detrend", args.detrend, "mean"), ("--horizon", args.horizon, None), ("--pattern", args.pattern, None),
+        ("--validation-file", args.validation_file, []), ("--bootstrap", args.bootstrap, None),
+    ) if value != default]
+    if given:
+        raise InputError(f"{given[0]} does not apply to --structure single-track")
+    if not args.schedule:
+        raise InputError("--structure single-track needs the speed channel: give --schedule CHANNEL (m/s)")
+    if not args.inputs or len([n for n in args.inputs.split(",") if n.strip()]) != 1:
+        raise InputError("--structure single-track takes one input, the steer angle (rad): give --inputs CHANNEL")
+
+
+def _read(args: argparse.Namespace) -> tuple[IOData, IOData | None]:
+    """The raw record (steer, speed -> outputs), times --scale, and its held-out tail where asked."""
+    from vehid.identification.data import check_channels
+    from vehid.identification.preparation import parse_scale
+    from vehid.identification.validation import split_holdout
+    from vehid.scenarios.data_options import read_from_args
+
+    if len(args.data) != 1:
+        raise InputError("--structure single-track identifies from one data file")
+    if args.validation is not None and not 0 < args.validation < 1:
+        raise InputError(f"--validation takes a fraction between 0 and 1; got {args.validation}")
+    speed = args.schedule.strip()
+    try:  # a text table's columns are all alike; a workbench record keeps its speed among its outputs
+        reading = argparse.Namespace(**{**vars(args), "inputs": f"{args.inputs},{speed}"})
+        (record,), _ = read_from_args(reading, args.data)
+    except InputError:
+        reading = argparse.Namespace(**{**vars(args), "outputs": f"{args.outputs},{speed}"})
+        try:
+            (raw,), _ = read_from_args(reading, args.data)
+        except InputError:
+            raise InputError(f"no channel {speed!r} (the speed, --schedule) among the file's inputs or outputs") \
+                from None
+        record = raw.replace(u=np.column_stack([raw.u, raw.y[:, -1]]), y=raw.y[:, :-1],
+                             input_names=(*raw.input_names, speed), output_names=raw.output_names[:-1],
+                             input_units=(*raw.input_units, raw.output_units[-1]),
+                             output_units=raw.output_units[:-1])
+    scale = parse_scale(args.scale)
+    unknown = [name for name in scale if name not in record.input_names + record.output_names]
+    if unknown:
+        raise InputError(f"--scale names {unknown[0]!r}, which is not a chosen channel")
+    record = record.replace(u=record.u * [scale.get(n, 1.0) for n in record.input_names],
+                            y=record.y * [scale.get(n, 1.0) for n in record.output_names])
+    check_channels(IOData(t=record.t, u=record.u[:, :1], y=record.y, input_names=record.input_names[:1],
+                          output_names=record.output_names), detrend="none")
+    slowest = float(np.min(record.u[:, 1]))
+    if slowest < 0:
+        raise InputError(f"the speed channel {speed!r} falls to {slowest:.3g}: the single-track model needs a car "
+                         "moving forwards (m/s; convert with --scale)")
+    if args.validation is None:
+        return record, None
+    return split_holdout(record, args.validation)
+
+
+def run(args: argparse.Namespace) -> tuple[dict, str]:
+    """Identify the single-track model and summarise it (module docstring)."""
+    from vehid.identification.greybox import GreyBoxOptions, identify_greybox, simulate_greybox
+    from vehid.scenarios import identify_workflow as workflow
+    from vehid.vehicle.single_track import GRAVITY, single_track_handling, single_track_model, single_track_start
+
+    started = time.perf_counter()
+    _refuse_other_options(args)
+    if not args.data:
+        raise InputError("give a DATA file")
+    from vehid.scenarios.data_options import channel_names
+
+    config = _config(args, len(channel_names(args.outputs)))  # before the file is read: a bad option costs nothing
+    estimation, validation = _read(args)
+    model = single_track_model(config)
+    substeps = _substeps(config, *[record for record in (estimation, validation) if record is not None])
+    # a log starts mid-drive, not at rest: the states' prior at its start (a sideslip of up to 0.1 rad,
+    # yaw rates of 0.5 rad/s, slip angles of 0.1 rad), so the filter estimates them rather than taking the
+    # first second's transient for a property of the car
+    start_std = {"lateral_velocity": 0.1 * max(float(estimation.u[0, 1]), MIN_LOG_SPEED), "yaw_rate": 0.5,
+                 "slip_angle_front": 0.1, "slip_angle_rear": 0.1}
+    options = GreyBoxOptions(substeps=substeps, initial_state_std=tuple(start_std[name] for name in model.state_names),
+                             **({"p": args.p} if args.p is not None else {}),
+                             **({"passes": args.passes} if args.passes is not None else {}))
+    result, divergence = workflow.last_good_on_divergence(
+        lambda: identify_greybox(estimation, model, single_track_start(config), options=options))
+
+    names, units = config.parameter_names, model.parameter_units
+    std = result.std
+    entries = [(name, {"value": float(value), "std": float(s), "unit": unit})
+               for name, value, s, unit in zip(names, result.parameters, std, units)]
+    parameters = dict(entries[: config.n_physical])
+    offsets = dict(entries[config.n_physical:])
+    speeds = estimation.u[:, 1]
+    grid = sorted({float(v) for v in np.round(np.linspace(speeds.min(), speeds.max(), 3))})
+    handling = single_track_handling(config, result.parameters, result.covariance, speeds=grid)
+
+    def fit_on(record: IOData) -> np.ndarray:
+        y_hat, _ = simulate_greybox(model, result.parameters, record, substeps=options.substeps)
+        return nrmse_fit(record.y, y_hat)
+
+    estimation_fit = fit_on(estimation)
+    validation_fit = fit_on(validation) if validation is not None else None
+    notes = ["signals taken as recorded (no offsets removed): a physical model has no operating point"]
+    warnings = workflow.run_warnings(
+        model=None, evaluation=workflow.Evaluation(
+            _Scores(estimation_fit), estimation_fit, tuple(_Scores(f) for f in [validation_fit] if f is not None),
+            None),
+        stop_reason=result.stop_reason if divergence is None else f"{result.stop_reason}: {divergence}",
+        start_fit=None, final_fit=None, allow_unstable=True,
+        fit_history=[record.mean_fit_filter for record in result.history])
+    correlation = result.correlation
+    for i in range(len(names)):
+        for j in range(i + 1, len(names)):
+            if abs(correlation[i, j]) > CORRELATION_WARNING:
+                warnings.append(f"the log hardly separates {names[i]} from {names[j]} (correlation "
+                                f"{correlation[i, j]:.3f}): excite more, or add a measured quantity (sideslip)")
+    for name, value, s in list(zip(names, result.parameters, std))[: config.n_physical]:  # an offset may be ~0
+        if not s < abs(value):
+            warnings.append(f"{name} is not determined by the log (std {s:.3g} against {value:.3g})")
+    if float(np.min(speeds)) < MIN_LOG_SPEED:
+        warnings.append(f"the log's speed falls to {np.min(speeds):.2f} m/s, below {MIN_LOG_SPEED:g} m/s where the "
+                        "single-track model holds: cut the slow parts with --segment")
+    if "lateral_acceleration" in config.quantities and not config.saturation:
+        peak = float(np.max(np.abs(estimation.y[:, config.quantities.index("lateral_acceleration")]))) / GRAVITY
+        if peak > LINEAR_LIMIT_G:
+            warnings.append(f"the log reaches {peak:.2f} g, beyond the linear axle's range (about {LINEAR_LIMIT_G} g): "
+                            "the cornering stiffnesses average over saturation; try --saturation")
+    summary: dict[str, Any] = {
+        "method": "iekf",
+        "structure": "single-track",
+        "physical_parameters": parameters,
+        **({"sensor_offsets": offsets} if offsets else {}),
+        "parameter_correlation": correlation,
+        "parameter_names": list(names),
+        "handling": handling.as_dict(),
+        "quantities": list(config.quantities),
+        "schedule": args.schedule.strip(),
+        "speed_range_m_s": [float(np.min(speeds)), float(np.max(speeds))],
+        "fit_percent": result.fit_percent,
+        "estimation_fit_percent": estimation_fit,
+        "validation_fit_percent": validation_fit,
+        "passes_run": result.passes_run,
+        "stop_reason": result.stop_reason,
+        "trace_p": result.trace_p,
+        "measurement_noise": result.measurement_noise,
+        "start": dict(zip(names, result.start.tolist())),
+        "covariance_source": result.meta.get("covariance_source"),
+        "notes": notes,
+        "seconds": time.perf_counter() - started,
+    }
+    if divergence:
+        summary["divergence"] = divergence
+    text = _text(summary, estimation.output_names, validation is not None)
+    workflow.emit(summary, warnings, args)
+    return summary, text
+
+
+def _substeps(config: Any, *records: IOData) -> int:
+    """Runge-Kutta steps per sample that keep every mode well inside RK4's stability region.
+
+    The fastest rate is bounded by the trace of the bicycle's system matrix at the lowest speed with
+    twice the start stiffnesses and half its yaw inertia (``(C_f + C_r) / (m v) + (l_f^2 C_f + l_r^2 C_r)
+    / (I_z v)``) and, with a
+    relaxation length, by ``v / sigma`` at the highest speed; a step covers at most half a time
+    constant (RK4 is stable to 2.8). A log that would need more than :data:`MAX_SUBSTEPS` reaches
+    standstill, where the model does not hold: InputError.
+    """
+    from vehid.vehicle.single_track import MIN_SPEED, single_track_start
+
+    speeds = np.concatenate([record.u[:, 1] for record in records])
+    low, high = max(float(np.min(speeds)), MIN_SPEED), float(np.max(speeds))
+    c_f, c_r, inertia = single_track_start(config)[:3] * [2.0, 2.0, 0.5]
+    lf, lr = config.cg_to_front_axle, config.cg_to_rear_axle
+    rate = (c_f + c_r) / (config.mass * low) + (lf**2 * c_f + lr**2 * c_r) / (inertia * low)
+    if config.relaxation_length is not None:
+        rate = max(rate, high / config.relaxation_length)
+    needed = int(np.ceil(rate * records[0].dt / 0.5))
+    if needed > MAX_SUBSTEPS:
+        raise InputError(f"the log's speed falls to {np.min(speeds):.3g} m/s, where the single-track model's modes are "
+                         f"too fast for its {records[0].dt:g} s samples: cut the slow parts with --segment")
+    return max(needed, 1)
+
+
+class _Scores:
+    """The two fields of a score that the shared warnings read."""
+
+    def __init__(self, fit: np.ndarray):
+        self.fit = np.asarray(fit, dtype=float)
+        self.R = self.fit
+
+
+def _text(summary: dict[str, Any], outputs: tuple[str, ...], validated: bool) -> str:
+    lines = [f"single-track model (grey-box IEKF): {summary['passes_run']} passes, {summary['stop_reason']}, "
+             f"speed {summary['speed_range_m_s'][0]:.1f}-{summary['speed_range_m_s'][1]:.1f} m/s, "
+             f"{summary['seconds']:.2f} s"]
+    for name, entry in {**summary["physical_parameters"], **summary.get("sensor_offsets", {})}.items():
+        lines.append(f"  {name:<27} {entry['value']:>12.5g} +/- {2 * entry['std']:.3g} {entry['unit']} (2 sigma)")
+    handling = summary["handling"]
+    lines.append(f"  {'understeer gradient':<27} {handling['understeer_gradient_deg_per_g']:>12.4g} +/- "
+                 f"{2 * handling['understeer_gradient_deg_per_g_std']:.3g} deg/g")
+    for kind in ("characteristic", "critical"):
+        key = f"{kind}_speed_m_s"
+        if key in handling:
+            label = f"{kind} speed"
+            lines.append(f"  {label:<27} {handling[key]:>12.4g} +/- {2 * handling[key + '_std']:.3g} m/s")
+    for name, est, val in zip(outputs, summary["estimation_fit_percent"],
+                              summary["validation_fit_percent"] if validated else [None] * len(outputs)):
+        lines.append(f"  NRMSE fit % {name:<15} estimation {est:7.2f}   validation {'-' if val is None else f'{val:.2f}'}")
+    return "\n".join(lines)

@@ -1,0 +1,318 @@
+"""The linear single-track (bicycle) model as a grey-box model, and its handling numbers in closed form.
+
+Axes and signs follow ISO 8855 (docs/conventions.md): x forward, y left, z up; a left turn has road-wheel
+angle, yaw rate, lateral acceleration and lateral velocity positive. Cornering stiffnesses are positive
+(axle force ``F_y = C alpha`` with the slip angles below), and an understeering car has ``K > 0``.
+
+States ``v_y`` (lateral velocity of the CG, m/s) and ``r`` (yaw rate, rad/s); speed ``v_x`` (m/s) is a
+measured time-varying parameter. With road-wheel angle ``delta`` (steering-wheel angle over the steering
+ratio):
+
+* slip angles ``alpha_f = delta - (v_y + l_f r) / v_x``, ``alpha_r = -(v_y - l_r r) / v_x``
+* ``m (dv_y/dt + v_x r) = F_f + F_r``, ``I_z dr/dt = l_f F_f - l_r F_r``, ``a_y = (F_f + F_r) / m``
+* sideslip at the CG ``beta = atan(v_y / v_x)``.
+
+Options: a tyre relaxation length ``sigma`` turns each axle's slip angle into a state lagging the
+kinematic one (``d alpha/dt = v_x / sigma (alpha_kinematic - alpha)``, Pacejka 2012, section 7.2.2); a
+saturating axle characteristic ``F = mu F_z tanh(C alpha / (mu F_z))`` (``F_z`` the static axle load),
+initial slope ``C``, limit ``mu F_z``, adds the axle friction coefficient ``mu`` as a fourth parameter.
+With ``offsets`` constant sensor offsets of the steer channel and of each output join the parameters
+(``measured = true + offset``). Below :data:`MIN_SPEED` the model is not meant to be used: the speed enters as
+``sqrt(v_x^2 + MIN_SPEED^2)``, smooth and never zero.
+
+Handling (Pacejka 2012, chapter 1; Gillespie 1992, chapter 6): understeer gradient
+``K = (m / L) (l_r / C_f - l_f / C_r)`` (rad per m/s^2; times ``g 180/pi`` in deg/g), characteristic
+speed ``sqrt(L / K)`` for ``K > 0``, critical speed ``sqrt(-L / K)`` for ``K < 0``, steady-state yaw-rate
+gain ``r / delta = v / (L + K v^2)``; standard deviations by the delta method with exact CasADi
+derivatives.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Sequence
+
+import casadi as ca
+import numpy as np
+
+from vehid.identification.errors import InputError
+from vehid.identification.greybox import GreyBoxModel
+
+__all__ = [
+    "GRAVITY",
+    "MIN_SPEED",
+    "QUANTITIES",
+    "PARAMETER_NAMES",
+    "SingleTrackConfig",
+    "SingleTrackHandling",
+    "HandlingValue",
+    "single_track_model",
+    "single_track_start",
+    "single_track_handling",
+    "config_from_vehicle",
+]
+
+GRAVITY = 9.81  # m/s^2, as the vehicle parameters use it
+MIN_SPEED = 0.1  # m/s: the smooth floor under the speed (module docstring); 5e-5 of the speed at 10 m/s
+
+#: The outputs the model offers: name -> unit.
+QUANTITIES = {"yaw_rate": "rad/s", "lateral_acceleration": "m/s^2", "sideslip": "rad", "lateral_velocity": "m/s"}
+
+#: The parameters estimated, in order, with their units; ``axle_friction`` only with saturation.
+PARAMETER_NAMES = ("cornering_stiffness_front", "cornering_stiffness_rear", "yaw_inertia", "axle_friction")
+PARAMETER_UNITS = ("N/rad", "N/rad", "kg m^2", "-")
+
+#: The typical size of a sensor offset (the prior's standard deviation on it): half a degree of
+#: road-wheel angle, half a degree per second of yaw rate, 0.1 m/s^2, 0.2 degrees of sideslip.
+OFFSET_SIZES = {"steer": 0.0087, "yaw_rate": 0.0087, "lateral_acceleration": 0.1, "sideslip": 0.0035,
+                "lateral_velocity": 0.05}
+
+
+def _positive(name: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+        raise InputError(f"{name} must be a positive number; got {value!r}")
+    return float(value)
+
+
+@dataclass(frozen=True)
+class SingleTrackConfig:
+    """What is known of the car and how the model is built.
+
+    Parameters
+    ----------
+    mass : float
+        kg.
+    cg_to_front_axle, cg_to_rear_axle : float
+        ``l_f``, ``l_r`` (m).
+    quantities : sequence of str
+        The outputs, in order: names of :data:`QUANTITIES`.
+    steering_ratio : float
+        Steering-wheel angle per road-wheel angle; 1 where the input is the road-wheel angle.
+    relaxation_length : float or None
+        Tyre relaxation length ``sigma`` (m), the same on both axles; None: no lag.
+    saturation : bool
+        The saturating (tanh) axle characteristic with the axle friction coefficient as a parameter.
+    offsets : bool
+        Estimate constant sensor offsets too: of the steer channel (``steer_offset``, in its units) and
+        of each quantity (``<quantity>_offset``): ``measured = true + offset``.
+    """
+
+    mass: float
+    cg_to_front_axle: float
+    cg_to_rear_axle: float
+    quantities: tuple[str, ...] = ("yaw_rate", "lateral_acceleration")
+    steering_ratio: float = 1.0
+    relaxation_length: float | None = None
+    saturation: bool = False
+    offsets: bool = False
+
+    def __post_init__(self) -> None:
+        _positive("the mass", self.mass)
+        _positive("the CG to front axle distance", self.cg_to_front_axle)
+        _positive("the CG to rear axle distance", self.cg_to_rear_axle)
+        if isinstance(self.steering_ratio, (int, float)) and self.steering_ratio < 0:
+            raise InputError(f"the steering ratio must be positive (flip the channel's sign with --scale); "
+                             f"got {self.steering_ratio!r}")
+        _positive("the steering ratio", self.steering_ratio)
+        if self.relaxation_length is not None:
+            _positive("the relaxation length", self.relaxation_length)
+        quantities = tuple(str(q).strip() for q in self.quantities)
+        unknown = [q for q in quantities if q not in QUANTITIES]
+        if unknown:
+            raise InputError(f"unknown quantity {unknown[0]!r}; use {', '.join(QUANTITIES)}")
+        if not quantities or len(set(quantities)) != len(quantities):
+            raise InputError("name each quantity once, at least one")
+        object.__setattr__(self, "quantities", quantities)
+
+    @property
+    def wheelbase(self) -> float:
+        return self.cg_to_front_axle + self.cg_to_rear_axle
+
+    @property
+    def axle_loads(self) -> tuple[float, float]:
+        """Static front and rear axle loads (N)."""
+        weight = self.mass * GRAVITY
+        return weight * self.cg_to_rear_axle / self.wheelbase, weight * self.cg_to_front_axle / self.wheelbase
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        physical = PARAMETER_NAMES if self.saturation else PARAMETER_NAMES[:3]
+        if not self.offsets:
+            return physical
+        return physical + ("steer_offset",) + tuple(f"{q}_offset" for q in self.quantities)
+
+    @property
+    def n_physical(self) -> int:
+        """How many of the parameters are the car's (the rest are sensor offsets)."""
+        return 4 if self.saturation else 3
+
+
+def config_from_vehicle(params: Any, **changes: Any) -> SingleTrackConfig:
+    """The mass and axle distances of a :class:`~vehicle.parameters.VehicleParameters`, with other fields."""
+    chassis = params.chassis
+    return SingleTrackConfig(mass=chassis.mass, cg_to_front_axle=chassis.cg_to_front_axle,
+                             cg_to_rear_axle=chassis.cg_to_rear_axle, **changes)
+
+
+def _axle_forces(config: SingleTrackConfig, alpha_f: Any, alpha_r: Any, theta: Any) -> tuple[Any, Any]:
+    if not config.saturation:
+        return theta[0] * alpha_f, theta[1] * alpha_r
+    load_f, load_r = config.axle_loads
+    limit_f, limit_r = theta[3] * load_f, theta[3] * load_r
+    return limit_f * ca.tanh(theta[0] * alpha_f / limit_f), limit_r * ca.tanh(theta[1] * alpha_r / limit_r)
+
+
+def single_track_model(config: SingleTrackConfig) -> GreyBoxModel:
+    """The single-track model of ``config`` as a :class:`~identification.greybox.GreyBoxModel`.
+
+    Input: the steer channel (road-wheel angle times the steering ratio, rad); scheduling signal:
+    the speed ``v_x`` (m/s); parameters ``C_f``, ``C_r`` (N/rad), ``I_z`` (kg m^2) and, with
+    saturation, the axle friction coefficient; outputs: ``config.quantities``.
+    """
+    lf, lr, mass = config.cg_to_front_axle, config.cg_to_rear_axle, config.mass
+    lagged = config.relaxation_length is not None
+    n_theta = len(config.parameter_names)
+    physical = config.n_physical
+    x = ca.SX.sym("x", 4 if lagged else 2)
+    u = ca.SX.sym("u", 1)
+    theta = ca.SX.sym("theta", n_theta)
+    s = ca.SX.sym("s", 1)
+    vy, r = x[0], x[1]
+    speed = ca.sqrt(s[0] ** 2 + MIN_SPEED**2)
+    steer = u[0] - theta[physical] if config.offsets else u[0]
+    delta = steer / config.steering_ratio
+    kinematic_f = delta - (vy + lf * r) / speed
+    kinematic_r = -(vy - lr * r) / speed
+    alpha_f, alpha_r = (x[2], x[3]) if lagged else (kinematic_f, kinematic_r)
+    force_f, force_r = _axle_forces(config, alpha_f, alpha_r, theta)
+    lateral_acceleration = (force_f + force_r) / mass
+    rates = [lateral_acceleration - speed * r, (lf * force_f - lr * force_r) / theta[2]]
+    if lagged:
+        rate = speed / config.relaxation_length
+        rates += [rate * (kinematic_f - x[2]), rate * (kinematic_r - x[3])]
+    values = {"yaw_rate": r, "lateral_acceleration": lateral_acceleration, "sideslip": ca.atan(vy / speed),
+              "lateral_velocity": vy}
+    y = ca.vertcat(*[values[q] for q in config.quantities])
+    if config.offsets:
+        y = y + theta[physical + 1:]
+    names = ["x", "u", "theta", "s"]
+    dynamics = ca.Function("single_track_dynamics", [x, u, theta, s], [ca.vertcat(*rates)], names, ["xdot"])
+    output = ca.Function("single_track_output", [x, u, theta, s], [y], names, ["y"])
+    states = ("lateral_velocity", "yaw_rate") + (("slip_angle_front", "slip_angle_rear") if lagged else ())
+    units, positive, sizes = PARAMETER_UNITS[:physical], (True,) * physical, ()
+    if config.offsets:
+        units += ("rad",) + tuple(QUANTITIES[q] for q in config.quantities)
+        positive += (False,) * (n_theta - physical)
+        start = single_track_start(config)
+        sizes = tuple(start[:physical]) + (OFFSET_SIZES["steer"] * config.steering_ratio,) + tuple(
+            OFFSET_SIZES[q] for q in config.quantities)
+    return GreyBoxModel(
+        dynamics=dynamics, output=output, parameter_names=config.parameter_names,
+        parameter_units=units, positive=positive, parameter_scale=sizes, state_names=states,
+        input_names=("steer",), schedule_names=("speed",), output_names=config.quantities,
+        description=f"single-track {config!r}",
+    )
+
+
+def single_track_start(config: SingleTrackConfig) -> np.ndarray:
+    """Start values from mass and geometry alone: ``C = 12 F_z`` per axle, ``I_z = m l_f l_r``, ``mu = 1``
+    (offsets 0).
+
+    A cornering stiffness of 10-20 times the axle load per radian is the usual range of car tyres;
+    ``m l_f l_r`` is the yaw inertia of the two-mass equivalent (a yaw radius of gyration of
+    ``sqrt(l_f l_r)``, within some 10 % of measured saloons).
+    """
+    load_f, load_r = config.axle_loads
+    start = [12.0 * load_f, 12.0 * load_r, config.mass * config.cg_to_front_axle * config.cg_to_rear_axle, 1.0]
+    offsets = [0.0] * (len(config.parameter_names) - config.n_physical)  # sensor offsets start at none
+    return np.array(start[: config.n_physical] + offsets)
+
+
+@dataclass(frozen=True)
+class HandlingValue:
+    """One handling number with its standard deviation and unit."""
+
+    value: float
+    std: float
+    unit: str
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"value": self.value, "std": self.std, "unit": self.unit}
+
+
+@dataclass(frozen=True)
+class SingleTrackHandling:
+    """Handling numbers of a single-track model (module docstring), each with its standard deviation.
+
+    ``understeer_gradient`` in deg/g; ``limit_speed`` is the characteristic speed where ``K > 0``
+    and the critical speed where ``K < 0`` (``limit_speed_kind`` says which; None for a neutral car);
+    ``yaw_rate_gains`` maps speed (m/s) to the steady-state ``r / delta`` (1/s, per road-wheel angle).
+    """
+
+    understeer_gradient: HandlingValue
+    limit_speed: HandlingValue | None
+    limit_speed_kind: str | None
+    yaw_rate_gains: tuple[tuple[float, HandlingValue], ...]
+
+    def as_dict(self) -> dict[str, Any]:
+        """The JSON entry ``handling``: ``understeer_gradient_deg_per_g`` and the limit speed with their std."""
+        summary: dict[str, Any] = {
+            "understeer_gradient_deg_per_g": self.understeer_gradient.value,
+            "understeer_gradient_deg_per_g_std": self.understeer_gradient.std,
+        }
+        if self.limit_speed is not None:
+            key = f"{self.limit_speed_kind}_speed_m_s"
+            summary[key] = self.limit_speed.value
+            summary[f"{key}_std"] = self.limit_speed.std
+        summary["yaw_rate_gain"] = [{"speed_m_s": speed, "value": gain.value, "std": gain.std, "unit": gain.unit}
+                                    for speed, gain in self.yaw_rate_gains]
+        return summary
+
+
+def _delta_method(expression: Any, theta: Any, values: np.ndarray, covariance: np.ndarray) -> tuple[float, float]:
+    function = ca.Function("handling_value", [theta], [expression, ca.jacobian(expression, theta)])
+    value, gradient = (np.asarray(v, dtype=float) for v in function(values))
+    gradient = gradient.ravel()
+    variance = float(gradient @ covariance @ gradient)
+    return float(value.ravel()[0]), math.sqrt(max(variance, 0.0)) if math.isfinite(variance) else float("nan")
+
+
+def single_track_handling(config: SingleTrackConfig, parameters: Any, covariance: Any = None,
+                          speeds: Sequence[float] = (10.0, 20.0, 30.0)) -> SingleTrackHandling:
+    """Understeer gradient, characteristic or critical speed and yaw-rate gains, with the delta method.
+
+    Parameters
+    ----------
+    config : SingleTrackConfig
+    parameters : array_like
+        ``C_f``, ``C_r`` (N/rad), ``I_z`` (and ``mu``), as :func:`single_track_model` orders them.
+    covariance : array_like, optional
+        Their covariance (default: none, std 0).
+    speeds : sequence of float
+        Speeds (m/s) of the steady-state yaw-rate gains.
+    """
+    values = np.asarray(parameters, dtype=float).ravel()
+    n = len(config.parameter_names)
+    if values.size != n:
+        raise InputError(f"the single-track model has {n} parameters; got {values.size}")
+    covariance = np.zeros((n, n)) if covariance is None else np.asarray(covariance, dtype=float)
+    if not np.all(np.isfinite(covariance)):
+        covariance = np.full((n, n), np.nan)
+    theta = ca.SX.sym("theta", n)
+    lf, lr, wheelbase = config.cg_to_front_axle, config.cg_to_rear_axle, config.wheelbase
+    gradient = config.mass / wheelbase * (lr / theta[0] - lf / theta[1])  # rad per m/s^2
+    per_g = GRAVITY * 180.0 / math.pi
+    k_value, k_std = _delta_method(gradient * per_g, theta, values, covariance)
+    k_rad = k_value / per_g
+    limit, kind = None, None
+    if k_rad > 0:
+        limit, kind = HandlingValue(*_delta_method(ca.sqrt(wheelbase / gradient), theta, values, covariance), "m/s"), \
+            "characteristic"
+    elif k_rad < 0:
+        limit, kind = HandlingValue(*_delta_method(ca.sqrt(-wheelbase / gradient), theta, values, covariance), "m/s"), \
+            "critical"
+    gains = tuple((float(v), HandlingValue(*_delta_method(v / (wheelbase + gradient * v**2), theta, values, covariance),
+                                           "1/s"))
+                  for v in speeds)
+    return SingleTrackHandling(HandlingValue(k_value, k_std, "deg/g"), limit, kind, gains)
