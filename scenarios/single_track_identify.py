@@ -14,7 +14,7 @@ JSON (public contract): ``structure``, ``physical_parameters`` (``cornering_stif
 ``{value, std, unit}``), with ``--offsets`` ``sensor_offsets`` (``steer_offset`` and
 ``<quantity>_offset``, alike), ``parameter_correlation`` (in the order of ``parameter_names``),
 ``handling`` (``understeer_gradient_deg_per_g``, ``characteristic_speed_m_s`` or
-``critical_speed_m_s``, each with ``_std``, and ``yaw_rate_gain`` at speeds spanning the log), ``fit_percent`` (R, eq. 17), ``estimation_fit_percent``,
+``critical_speed_m_s``, each ``{value, std, unit}``, and ``yaw_rate_gain`` at speeds spanning the log), ``fit_percent`` (R, eq. 17), ``estimation_fit_percent``,
 ``validation_fit_percent`` (NRMSE), ``speed_range_m_s``, ``passes_run``, ``stop_reason``,
 ``trace_p``, ``notes``, ``warnings``, ``seconds``.
 """
@@ -55,8 +55,6 @@ def register_options(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--lr", type=float, metavar="M", help="CG to rear axle (m)")
     group.add_argument("--vehicle", metavar="FILE",
                        help="vehicle parameter file (.toml/.json) or name for mass and axle distances")
-    group.add_argument("--steering-ratio", type=float, default=1.0, metavar="RATIO",
-                       help="steering-wheel angle per road-wheel angle, where --inputs is the steering wheel (default 1)")
     group.add_argument("--relaxation-length", type=float, metavar="M",
                        help="tyre relaxation length: slip angles lag the kinematic ones (default: no lag)")
     group.add_argument("--saturation", action="store_true",
@@ -87,7 +85,12 @@ def _config(args: argparse.Namespace, n_outputs: int):
     if missing:
         raise InputError(f"the single-track structure needs the car's mass and axle distances: give "
                          f"{', '.join(missing)} (or --vehicle FILE)")
-    return SingleTrackConfig(**geometry, quantities=quantities, steering_ratio=args.steering_ratio,
+    from vehid.identification.preparation import parse_steering_ratio
+
+    # --steering-ratio is the data options' (a steering-wheel angle on the one input); the model divides by it
+    steer = (args.inputs or "").split(",")[0].strip()
+    steering_ratio = parse_steering_ratio(getattr(args, "steering_ratio", None), [steer]).get(steer, 1.0)
+    return SingleTrackConfig(**geometry, quantities=quantities, steering_ratio=steering_ratio,
                              relaxation_length=args.relaxation_length, saturation=args.saturation,
                              offsets=args.offsets)
 
@@ -290,13 +293,13 @@ def _text(summary: dict[str, Any], outputs: tuple[str, ...], validated: bool) ->
     for name, entry in {**summary["physical_parameters"], **summary.get("sensor_offsets", {})}.items():
         lines.append(f"  {name:<27} {entry['value']:>12.5g} +/- {2 * entry['std']:.3g} {entry['unit']} (2 sigma)")
     handling = summary["handling"]
-    lines.append(f"  {'understeer gradient':<27} {handling['understeer_gradient_deg_per_g']:>12.4g} +/- "
-                 f"{2 * handling['understeer_gradient_deg_per_g_std']:.3g} deg/g")
+    lines.append(f"  {'understeer gradient':<27} {handling['understeer_gradient_deg_per_g']['value']:>12.4g} +/- "
+                 f"{2 * handling['understeer_gradient_deg_per_g']['std']:.3g} deg/g")
     for kind in ("characteristic", "critical"):
         key = f"{kind}_speed_m_s"
         if key in handling:
             label = f"{kind} speed"
-            lines.append(f"  {label:<27} {handling[key]:>12.4g} +/- {2 * handling[key + '_std']:.3g} m/s")
+            lines.append(f"  {label:<27} {handling[key]['value']:>12.4g} +/- {2 * handling[key]['std']:.3g} m/s")
     for name, est, val in zip(outputs, summary["estimation_fit_percent"],
                               summary["validation_fit_percent"] if validated else [None] * len(outputs)):
         lines.append(f"  NRMSE fit % {name:<15} estimation {est:7.2f}   validation {'-' if val is None else f'{val:.2f}'}")

@@ -59,10 +59,11 @@ def test_json_contract_and_recovery(log):
         assert abs(entry["value"] - truth) < 3 * entry["std"] and abs(entry["value"] / truth - 1) < 0.01
     handling = summary["handling"]
     gradient = 1500.0 / 2.7 * (1.5 / 80_000.0 - 1.2 / 100_000.0) * 9.81 * 180.0 / np.pi  # 2.108 deg/g
-    assert handling["understeer_gradient_deg_per_g"] == pytest.approx(gradient, rel=0.01)
-    assert handling["understeer_gradient_deg_per_g_std"] > 0
-    assert handling["characteristic_speed_m_s"] == pytest.approx(np.sqrt(720.0), rel=0.01)
-    assert handling["characteristic_speed_m_s_std"] > 0 and "critical_speed_m_s" not in handling
+    assert handling["understeer_gradient_deg_per_g"]["value"] == pytest.approx(gradient, rel=0.01)
+    assert handling["understeer_gradient_deg_per_g"]["std"] > 0
+    assert handling["understeer_gradient_deg_per_g"]["unit"] == "deg/g"
+    assert handling["characteristic_speed_m_s"]["value"] == pytest.approx(np.sqrt(720.0), rel=0.01)
+    assert handling["characteristic_speed_m_s"]["std"] > 0 and "critical_speed_m_s" not in handling
     # the held-out tail (24-30 m/s, faster than any estimation sample) is predicted as well as the noise
     # allows: the NRMSE fit of a 3 % noise is near 97 % (measured 95.1 and 96.9 %)
     assert len(summary["validation_fit_percent"]) == 2 and min(summary["validation_fit_percent"]) > 90.0

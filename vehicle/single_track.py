@@ -257,14 +257,10 @@ class SingleTrackHandling:
 
     def as_dict(self) -> dict[str, Any]:
         """The JSON entry ``handling``: ``understeer_gradient_deg_per_g`` and the limit speed with their std."""
-        summary: dict[str, Any] = {
-            "understeer_gradient_deg_per_g": self.understeer_gradient.value,
-            "understeer_gradient_deg_per_g_std": self.understeer_gradient.std,
-        }
+        # each number as {value, std, unit}, as physical_parameters and the handling command give them
+        summary: dict[str, Any] = {"understeer_gradient_deg_per_g": self.understeer_gradient.as_dict()}
         if self.limit_speed is not None:
-            key = f"{self.limit_speed_kind}_speed_m_s"
-            summary[key] = self.limit_speed.value
-            summary[f"{key}_std"] = self.limit_speed.std
+            summary[f"{self.limit_speed_kind}_speed_m_s"] = self.limit_speed.as_dict()
         summary["yaw_rate_gain"] = [{"speed_m_s": speed, "value": gain.value, "std": gain.std, "unit": gain.unit}
                                     for speed, gain in self.yaw_rate_gains]
         return summary
