@@ -21,9 +21,14 @@ family identified from one varying-schedule record (:mod:`vehid.identification.s
 simulates as it was identified. At a frozen schedule value the input gauge and the canonical form of
 :meth:`ScheduledModalModel.model_at` are one model.
 
+Each grid value also has an output offset, added to the outputs (zero for models identified at fixed
+operating points): the operating point of a linear-parameter-varying system moves with its schedule,
+so a record whose means were removed keeps an offset that depends on it (a steering offset passes
+through a gain that changes with speed).
+
 Parameters of the family (:attr:`ScheduledModalModel.parameters`, the layout of its covariance), grid
 value by grid value: sigma/omega of every mode, the input-gauge B without its first column (fixed),
-C and D, each row-major.
+C, D (each row-major) and the output offset (:func:`knot_size` in all).
 """
 
 from __future__ import annotations
@@ -40,7 +45,7 @@ from .errors import InputError
 from .modal import ModalModel, ModalStructure
 
 __all__ = ["ModeMatch", "ScheduledModalModel", "canonical_modal_model", "schedule_models", "gauge_parameters",
-           "gauge_matrices", "interpolation_weights", "scheduled_matrices"]
+           "gauge_matrices", "interpolation_weights", "scheduled_matrices", "knot_size"]
 
 
 def _input_gauge(model: ModalModel, order: list[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -179,11 +184,17 @@ def interpolation_weights(value: Any, grid: Any) -> Any:
     return weights
 
 
-def scheduled_matrices(structure: ModalStructure, theta: Any, weights: list[Any]) -> tuple[Any, Any, Any, Any]:
-    """Symbolic sigma/omega, B, C, D (input gauge) of the family's parameters ``theta`` (SX, K m) at ``weights``."""
-    m = structure.n_parameters
-    blended = sum(weight * theta[k * m:(k + 1) * m] for k, weight in enumerate(weights))
-    return gauge_matrices(structure, blended, ca.SX)
+def knot_size(structure: ModalStructure) -> int:
+    """Parameters per grid value: the structure's and an offset per output."""
+    return structure.n_parameters + structure.n_y
+
+
+def scheduled_matrices(structure: ModalStructure, theta: Any, weights: list[Any]) -> tuple[Any, Any, Any, Any, Any]:
+    """Symbolic sigma/omega, B, C, D (input gauge) and output offset of the family's parameters ``theta``
+    (SX, K :func:`knot_size`) at ``weights``."""
+    size = knot_size(structure)
+    blended = sum(weight * theta[k * size:(k + 1) * size] for k, weight in enumerate(weights))
+    return (*gauge_matrices(structure, blended[:structure.n_parameters], ca.SX), blended[structure.n_parameters:])
 
 
 def scheduled_step(structure: ModalStructure, x: Any, u0: Any, u1: Any, theta: Any, grid: Any, dt: float,
@@ -198,11 +209,12 @@ def scheduled_step(structure: ModalStructure, x: Any, u0: Any, u1: Any, theta: A
 
     n_u = structure.n_u
     count = grid.numel() if isinstance(grid, (ca.SX, ca.MX, ca.DM)) else len(grid)
-    modal, B, C, D = scheduled_matrices(structure, theta, interpolation_weights(u0[n_u], [grid[k] for k in range(count)]))
+    modal, B, C, D, offset = scheduled_matrices(structure, theta, interpolation_weights(
+        u0[n_u], [grid[k] for k in range(count)]))
     drive0 = ca.mtimes(B, u0[:n_u])
     drive1 = ca.mtimes(B, u1[:n_u])
     x_next = modal_transition(structure, modal, x, drive0, drive1, dt, discretization)
-    return x_next, ca.mtimes(C, x) + ca.mtimes(D, u0[:n_u])
+    return x_next, ca.mtimes(C, x) + ca.mtimes(D, u0[:n_u]) + offset
 
 
 _HOLDS = {"foh": "exact", "zoh": "exact-zoh", "euler": "euler"}
@@ -216,8 +228,9 @@ def _simulator(structure: ModalStructure, count: int, dt: float, discretization:
     x = ca.SX.sym("x", structure.n)
     u0 = ca.SX.sym("u0", structure.n_u + 1)
     u1 = ca.SX.sym("u1", structure.n_u + 1)
-    params = ca.SX.sym("params", count * structure.n_parameters + count)
-    theta, grid = params[: count * structure.n_parameters], params[count * structure.n_parameters:]
+    size = count * knot_size(structure)
+    params = ca.SX.sym("params", size + count)
+    theta, grid = params[:size], params[size:]
     x_next, y = scheduled_step(structure, x, u0, u1, theta, grid, dt, discretization)
     step = ca.Function("scheduled_modal_step", [x, u0, u1, params], [x_next, y], ["x", "u0", "u1", "params"],
                        ["x_next", "y"], {"cse": True})
@@ -309,8 +322,10 @@ class ScheduledModalModel:
         Name of the scheduling variable (``speed``, or the record's channel), for exports and messages.
     input_names, output_names : tuple of str, optional
     meta : dict, optional
-    parameter_covariance : ndarray (n_grid m, n_grid m), optional
+    parameter_covariance : ndarray, optional
         Covariance of :attr:`parameters` (module notes), where an estimator gave one.
+    offset : ndarray (n_grid, n_y), optional
+        The output offset at each grid value (module notes); zero by default.
     """
 
     structure: ModalStructure
@@ -325,6 +340,7 @@ class ScheduledModalModel:
     output_names: tuple[str, ...] | None = None
     meta: dict[str, Any] = field(default_factory=dict)
     parameter_covariance: np.ndarray | None = None
+    offset: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         s = self.structure
@@ -339,6 +355,11 @@ class ScheduledModalModel:
                 raise InputError(f"{name} must be finite with shape {(grid.size, *shape)}; got {array.shape}")
             array.setflags(write=False)
             object.__setattr__(self, name, array)
+        offset = np.zeros((grid.size, s.n_y)) if self.offset is None else np.array(self.offset, dtype=float)
+        if offset.shape != (grid.size, s.n_y) or not np.all(np.isfinite(offset)):
+            raise InputError(f"offset must be finite with shape {(grid.size, s.n_y)}; got {offset.shape}")
+        offset.setflags(write=False)
+        object.__setattr__(self, "offset", offset)
         object.__setattr__(self, "meta", dict(self.meta))
         if self.parameter_covariance is not None:
             from .uncertainty import checked_covariance
@@ -353,27 +374,28 @@ class ScheduledModalModel:
                         matching: tuple[ModeMatch, ...] | None = None) -> "ScheduledModalModel":
         """The family of ``structure`` on ``grid`` with parameters ``theta`` laid out as :attr:`parameters`."""
         grid = np.asarray(grid, dtype=float).ravel()
-        m = structure.n_parameters
+        m, size = structure.n_parameters, knot_size(structure)
         theta = np.asarray(theta, dtype=float).ravel()
-        if theta.size != grid.size * m:
-            raise InputError(f"a family of {grid.size} grid values takes {grid.size * m} parameters; got {theta.size}")
-        parts = [gauge_matrices(structure, theta[k * m:(k + 1) * m]) for k in range(grid.size)]
+        if theta.size != grid.size * size:
+            raise InputError(f"a family of {grid.size} grid values takes {grid.size * size} parameters; got {theta.size}")
+        parts = [gauge_matrices(structure, theta[k * size:k * size + m]) for k in range(grid.size)]
+        offset = np.array([theta[k * size + m:(k + 1) * size] for k in range(grid.size)])
         if matching is None:
             identity = tuple(range(len(structure.mode_states())))
             matching = tuple(ModeMatch(float(value), identity, 0.0) for value in grid)
         return cls(structure, grid, *(np.array([part[i] for part in parts]) for i in range(4)), matching, variable,
-                   input_names, output_names, dict(meta or {}), parameter_covariance)
+                   input_names, output_names, dict(meta or {}), parameter_covariance, offset)
 
     @property
     def n_parameters(self) -> int:
-        """Length of :attr:`parameters`: the structure's count at every grid value."""
-        return self.grid.size * self.structure.n_parameters
+        """Length of :attr:`parameters`: :func:`knot_size` at every grid value."""
+        return self.grid.size * knot_size(self.structure)
 
     @property
     def parameters(self) -> np.ndarray:
         """The family's parameters, grid value by grid value (module notes)."""
-        return np.concatenate([gauge_parameters(self.modal[k], self.B[k], self.C[k], self.D[k])
-                               for k in range(self.grid.size)])
+        return np.concatenate([np.concatenate([gauge_parameters(self.modal[k], self.B[k], self.C[k], self.D[k]),
+                                               self.offset[k]]) for k in range(self.grid.size)])
 
     def with_parameters(self, theta: Any, parameter_covariance: Any = None, **meta: Any) -> "ScheduledModalModel":
         """The same family with other parameters (and covariance)."""
@@ -407,7 +429,9 @@ class ScheduledModalModel:
             _, jacobian = _canonical_function(self.structure)(gauge_parameters(modal, np.column_stack(
                 [_first_input_column(self.structure), np.tensordot(w, self.B, axes=1)[:, 1:]]),
                 np.tensordot(w, self.C, axes=1), D))
-            chain = np.asarray(jacobian) @ np.kron(w[None, :], np.eye(self.structure.n_parameters))
+            m = self.structure.n_parameters
+            select = np.eye(m, knot_size(self.structure))  # a grid value's parameters without its offset
+            chain = np.asarray(jacobian) @ np.kron(w[None, :], select)
             covariance = chain @ self.parameter_covariance @ chain.T
         return ModalModel(self.structure, A, B, C, D, input_names=self.input_names, output_names=self.output_names,
                           meta={**self.meta, self.variable: float(value), "scheduled": True},
@@ -501,11 +525,12 @@ class ScheduledModalModel:
         u = ca.SX.sym("u", s.n_u)
         v = ca.SX.sym(self.variable)
         weights = interpolation_weights(v, [float(g) for g in self.grid])
-        modal, B, C, D = scheduled_matrices(s, ca.DM(self.parameters), weights)
+        modal, B, C, D, offset = scheduled_matrices(s, ca.DM(self.parameters), weights)
         A = s.matrices(ca.vertcat(modal, ca.SX.zeros(s.n_parameters - s.n)), backend=ca.SX)[0]
         if gauge == "canonical":
             A, B, C = _structure_gauge(s, A, B, C)
-        return ca.Function(name, [x, u, v], [ca.mtimes(A, x) + ca.mtimes(B, u), ca.mtimes(C, x) + ca.mtimes(D, u)],
+        return ca.Function(name, [x, u, v], [ca.mtimes(A, x) + ca.mtimes(B, u),
+                                             ca.mtimes(C, x) + ca.mtimes(D, u) + offset],
                            ["x", "u", self.variable], ["xdot", "y"])
 
     def to_dict(self) -> dict[str, Any]:
@@ -516,6 +541,7 @@ class ScheduledModalModel:
             "matching": [{"value": m.value, "order": list(m.order), "cost": m.cost} for m in self.matching],
             "input_names": None if self.input_names is None else list(self.input_names),
             "output_names": None if self.output_names is None else list(self.output_names), "meta": self.meta,
+            "offset": self.offset.tolist(),
             **({} if self.parameter_covariance is None
                else {"parameter_covariance": self.parameter_covariance.tolist()}),
         }
@@ -529,7 +555,8 @@ class ScheduledModalModel:
         covariance = values.get("parameter_covariance")
         return cls(ModalStructure.from_dict(values["structure"]), *(np.asarray(values[k]) for k in ("grid", "modal", "B", "C", "D")),
                    matching, str(values["variable"]), **names, meta=dict(values.get("meta") or {}),
-                   parameter_covariance=None if covariance is None else np.asarray(covariance, dtype=float))
+                   parameter_covariance=None if covariance is None else np.asarray(covariance, dtype=float),
+                   offset=None if values.get("offset") is None else np.asarray(values["offset"], dtype=float))
 
     def save_json(self, path: Any) -> Any:
         """Write :meth:`to_dict` as JSON; returns the path."""
@@ -549,7 +576,7 @@ class ScheduledModalModel:
         from scipy.io import savemat
 
         path = Path(path)
-        savemat(path, {"grid": self.grid, "modal": self.modal, "B": self.B, "C": self.C, "D": self.D,
+        savemat(path, {"grid": self.grid, "modal": self.modal, "B": self.B, "C": self.C, "D": self.D, "offset": self.offset,
                        "variable": self.variable,
                        **({} if self.parameter_covariance is None else {"parameter_covariance": self.parameter_covariance})})
         return path

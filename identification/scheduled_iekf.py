@@ -9,7 +9,8 @@ pass of :mod:`vehid.identification.iekf_pass`. Piecewise-linear interpolation of
 between knots is what :class:`~identification.scheduled.ScheduledModalModel` does between grid models,
 so the result is one: the knots are its grid, the ordinates its grid models.
 
-* **Start**: an unscheduled model identified on the same record, the same at every knot.
+* **Start**: an unscheduled model identified on the same record, the same at every knot; the output
+  offsets at the knots (module notes of :mod:`vehid.identification.scheduled`) start at zero.
 * **Knots**: by default at evenly spaced quantiles of the schedule (:func:`default_grid`), so that
   every knot is supported by data; the coefficients are held at the end knots' values beyond them.
 * **Units**: as the linear filter's invariant settings (:mod:`vehid.identification.iekf`): signals
@@ -38,7 +39,7 @@ from .iekf_pass import compiled_pass
 from .metrics import percentage_explanation
 from .modal import ModalModel, ModalStructure
 from .rinse import Assessment, PassHistory, PassRecord, RinseHooks, check_filter_options, check_records, rinse
-from .scheduled import (ScheduledModalModel, _input_gauge, gauge_parameters, interpolation_weights,
+from .scheduled import (ScheduledModalModel, _input_gauge, gauge_parameters, interpolation_weights, knot_size,
                         scheduled_matrices, scheduled_step)
 from .uncertainty import gauss_newton_covariance
 
@@ -115,7 +116,7 @@ class ScheduledFilterModel(FilterModel):
 
     @property
     def n_theta(self) -> int:
-        return self.knots * self.structure.n_parameters
+        return self.knots * knot_size(self.structure)
 
     @property
     def n_u(self) -> int:
@@ -140,8 +141,8 @@ class ScheduledFilterModel(FilterModel):
     def output(self, x: ca.SX, theta: ca.SX, u: ca.SX, constants: ca.SX) -> ca.SX:
         n_u = self.structure.n_u
         weights = interpolation_weights(u[n_u], [constants[k] for k in range(self.knots)])
-        _, _, C, D = scheduled_matrices(self.structure, theta, weights)
-        return ca.mtimes(C, x) + ca.mtimes(D, u[:n_u])
+        _, _, C, D, offset = scheduled_matrices(self.structure, theta, weights)
+        return ca.mtimes(C, x) + ca.mtimes(D, u[:n_u]) + offset
 
 
 @dataclass(frozen=True)
@@ -219,13 +220,14 @@ def _unit_scale(structure: ModalStructure, input_scale: np.ndarray, output_scale
     B = np.column_stack([np.ones(n), np.tile(input_scale[0] / input_scale[1:], (n, 1))])
     C = np.tile((output_scale / (input_scale[0] * dt))[:, None], (1, n))
     D = output_scale[:, None] / input_scale[None, :]
-    return gauge_parameters(modal, B, C, D)
+    return np.concatenate([gauge_parameters(modal, B, C, D), output_scale])
 
 
 def _time_weights(structure: ModalStructure, ratio: float) -> np.ndarray:
     """Per parameter of one knot: how it scales with the unit of time (input gauge: sigma, omega and C)."""
     n, n_u, n_y = structure.n, structure.n_u, structure.n_y
-    return gauge_parameters(np.full(n, ratio), np.ones((n, n_u)), np.full((n_y, n), ratio), np.ones((n_y, n_u)))
+    return np.concatenate([gauge_parameters(np.full(n, ratio), np.ones((n, n_u)), np.full((n_y, n), ratio),
+                                            np.ones((n_y, n_u))), np.ones(n_y)])
 
 
 def scheduled_simulation_covariance(model: ScheduledModalModel, data: IOData, schedule: np.ndarray,
@@ -238,7 +240,6 @@ def scheduled_simulation_covariance(model: ScheduledModalModel, data: IOData, sc
     kind where it is near zero). None where the simulation is not finite.
     """
     theta = model.parameters
-    m = model.structure.n_parameters
     kinds = np.tile(_kinds(model.structure), model.grid.size)
     typical = {kind: float(np.max(np.abs(theta[kinds == kind]), initial=0.0)) for kind in set(kinds)}
     steps = _DIFFERENCE_STEP * np.maximum(np.abs(theta), np.array([max(typical[k], 1e-12) for k in kinds]))
@@ -255,14 +256,14 @@ def scheduled_simulation_covariance(model: ScheduledModalModel, data: IOData, sc
     residuals = base - data.y
     if not (np.all(np.isfinite(jacobian)) and np.all(np.isfinite(residuals))):
         return None
-    del m
     return gauss_newton_covariance(jacobian.reshape(-1, theta.size), residuals)
 
 
 def _kinds(structure: ModalStructure) -> np.ndarray:
-    """The kind (0 modal, 1 B, 2 C, 3 D) of each parameter of one knot."""
+    """The kind (0 modal, 1 B, 2 C, 3 D, 4 offset) of each parameter of one knot."""
     n, n_u, n_y = structure.n, structure.n_u, structure.n_y
-    return np.concatenate([np.zeros(n, int), np.ones(n * (n_u - 1), int), np.full(n_y * n, 2), np.full(n_y * n_u, 3)])
+    return np.concatenate([np.zeros(n, int), np.ones(n * (n_u - 1), int), np.full(n_y * n, 2), np.full(n_y * n_u, 3),
+                           np.full(n_y, 4)])
 
 
 def identify_scheduled(
@@ -321,7 +322,7 @@ def identify_scheduled(
     A, B, C = _input_gauge(start, list(range(len(structure.mode_states()))))
     modal = np.array([A[s[0], s[0]] if k == 0 else abs(A[s[0], s[1]])
                       for s in structure.mode_states() for k in range(len(s))])
-    knot_theta = gauge_parameters(modal, B, C, start.D)
+    knot_theta = np.concatenate([gauge_parameters(modal, B, C, start.D), np.zeros(structure.n_y)])
     family = ScheduledModalModel.from_parameters(
         structure, grid, np.tile(knot_theta, count), variable=variable, input_names=start.input_names,
         output_names=start.output_names, meta={"estimator": "scheduled-iekf", "dt": dt})
