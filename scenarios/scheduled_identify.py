@@ -28,7 +28,12 @@ from vehid.identification.data import IOData
 from vehid.identification.errors import InputError
 from vehid.identification.modal import ModalModel
 
-__all__ = ["ScheduleData", "register_options", "read_with_schedule", "schedule_loader", "scheduled_records",
+# said where --nonlinear and --schedule are given together (JSON ``notes``)
+NONLINEAR_NOTE = ("--nonlinear with --schedule: the spline-nonlinear model ('nonlinear') is identified from the "
+                  "unscheduled model, beside the scheduled one; a model whose coefficients follow both the schedule "
+                  "and the amplitude is not available")
+
+__all__ = ["NONLINEAR_NOTE", "ScheduleData", "register_options", "read_with_schedule", "schedule_loader", "scheduled_records",
            "identify_scheduled_model", "ScheduledOutcome", "text_lines"]
 
 

@@ -333,6 +333,8 @@ def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None)
         scheduled = scheduled_identify.identify_scheduled_model(model, plan, args, evaluation)
         summary.update(scheduled.scores, scheduled=scheduled.summary)
         warnings += scheduled.warnings
+        if nonlinear is not None:
+            summary["notes"].append(scheduled_identify.NONLINEAR_NOTE)
         model = scheduled.model
     summary["warnings"] = list(warnings)
     if archive_path is not None:
