@@ -202,13 +202,16 @@ def _vehid(*args):
                           check=False)
 
 
-@pytest.fixture(scope="module")
-def speed_log(tmp_path_factory):
-    data, speed = single_track_record(seed=5)
-    path = tmp_path_factory.mktemp("logs") / "log.csv"
+def _write_log(path, seed):
+    data, speed = single_track_record(seed=seed)
     np.savetxt(path, np.column_stack([data.t, data.u[:, 0], speed * 3.6, data.y]), delimiter=",",
                header="t,delta,vx_kmh,yawRate,ayCG", comments="")
     return path
+
+
+@pytest.fixture(scope="module")
+def speed_log(tmp_path_factory):
+    return _write_log(tmp_path_factory.mktemp("logs") / "log.csv", 5)
 
 
 def test_identify_schedule_json_contract_and_model_file(speed_log, tmp_path):
@@ -218,7 +221,7 @@ def test_identify_schedule_json_contract_and_model_file(speed_log, tmp_path):
     completed = _vehid("identify", str(speed_log), "--inputs", "delta", "--outputs", "yawRate,ayCG", "--schedule",
                        "vx_kmh", "--scale", "vx_kmh=0.2777777777777778", "--schedule-grid", ",".join(map(str, GRID)),
                        "--order", "2", "--p", "1e-5", "--passes", "20", "--validation", "0.3", "--json", "--quiet",
-                       "--save-model", str(model_file))
+                       "--save-model", str(model_file), "--validation-file", str(_write_log(tmp_path / "other.csv", 6)))
     assert completed.returncode == 0, completed.stderr
     summary = json.loads(completed.stdout)
     entry = summary["scheduled"]
@@ -232,7 +235,9 @@ def test_identify_schedule_json_contract_and_model_file(speed_log, tmp_path):
         # tolerances of the test above hold (measured on this record: 0.7 % and 0.024 at most)
         assert mode["frequency_hz"] == pytest.approx(frequency, rel=0.05)
         assert mode["damping"] == pytest.approx(damping, abs=0.05)
-    # the returned model's hold-out fit is the scheduled one, ahead of the unscheduled start on every output
+    # the returned model's validation fit (held-out part and another drive, each with its own speed) is the
+    # scheduled one, ahead of the unscheduled start on every output
+    assert len(summary["validation_records"]) == 2
     assert np.all(np.array(summary["validation_fit_percent"]) > np.array(entry["unscheduled"]["validation_fit_percent"]))
     saved = ScheduledModalModel.from_dict(json.loads(model_file.read_text()))
     assert saved.variable == "vx_kmh" and saved.parameter_covariance is not None
