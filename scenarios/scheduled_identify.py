@@ -11,7 +11,7 @@ JSON (public): the score keys (``fit_percent``, ``estimation_fit_percent``, ``va
 ``validation_R``, ``records``) describe the scheduled model; ``scheduled`` holds ``channel``, ``grid``,
 ``modes_at`` (per grid value ``value`` and its ``modes``, each with ``frequency_hz``,
 ``frequency_hz_std``, ``damping``, ``damping_std``), the run (``passes_run``, ``stop_reason``,
-``p``, ``seconds``) and ``unscheduled``: the scores of the start, whose matrices, eigenvalues and
+``p`` and ``p_tried``, chosen on validation data as the IEKF's p is, ``seconds``) and ``unscheduled``: the scores of the start, whose matrices, eigenvalues and
 modes are the summary's other keys.
 """
 
@@ -60,8 +60,14 @@ def register_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--schedule-knots", type=int, default=DEFAULT_KNOTS,
                         help=f"number of knots at the channel's quantiles, {MIN_KNOTS}-{MAX_KNOTS} "
                              f"(default {DEFAULT_KNOTS})")
-    parser.add_argument("--schedule-p", type=float, default=DEFAULT_P,
-                        help=f"tuning parameter of the scheduled filter, per dominant time constant (default {DEFAULT_P:g})")
+    parser.add_argument("--schedule-p", type=float, action="append", metavar="P",
+                        help=f"tuning parameter(s) of the scheduled filter, per dominant time constant; several are "
+                             f"tried and one chosen on validation data (default {DEFAULT_P:g}, or "
+                             f"{', '.join(f'{p:g}' for p in P_GRID)} with validation data)")
+
+
+#: p of the scheduled filter tried on validation data, largest first (the default alone without them)
+P_GRID = (1e-2, 1e-3)
 
 
 def _grid(text: str | None) -> tuple[float, ...] | None:
@@ -84,7 +90,9 @@ def check_options(args: argparse.Namespace) -> None:
         raise InputError("--schedule needs --inputs naming the inputs (the schedule is read beside them)")
     from vehid.identification.scheduled_iekf import ScheduledIEKFOptions
 
-    ScheduledIEKFOptions(knots=args.schedule_knots, grid=_grid(args.schedule_grid), p=args.schedule_p)
+    for p in args.schedule_p or [None]:
+        ScheduledIEKFOptions(knots=args.schedule_knots, grid=_grid(args.schedule_grid),
+                             **({} if p is None else {"p": p}))
 
 
 def _without_schedule(args: argparse.Namespace) -> dict[str, float]:
@@ -157,34 +165,52 @@ def identify_scheduled_model(start: Any, plan: Any, args: argparse.Namespace, un
     ``unscheduled`` is the start's :class:`~vehid.scenarios.identify_workflow.Evaluation`.
     """
     from vehid.identification.errors import DivergenceError
-    from vehid.identification.scheduled_iekf import ScheduledIEKFOptions, identify_scheduled
+    from vehid.identification.scheduled_iekf import DEFAULT_P, ScheduledIEKFOptions, identify_scheduled
     from vehid.scenarios import identify_workflow as workflow
     from vehid.scenarios.data_options import records_summary
 
     if not isinstance(start, ModalModel):
         raise InputError("--schedule starts from a continuous-time modal model; this unscheduled model is "
                          "discrete-time (a pole on the negative real axis): use --method iekf or another order")
+
     schedule = plan.schedule
-    options = ScheduledIEKFOptions(knots=args.schedule_knots, grid=_grid(args.schedule_grid), p=args.schedule_p,
-                                   discretization=args.discretization)
-    try:
-        result, divergence = workflow.last_good_on_divergence(
-            lambda: identify_scheduled(plan.records[0], schedule.estimation[0], start, variable=schedule.channel,
-                                       options=options))
-    except DivergenceError as exc:
-        raise DivergenceError(f"the scheduled model: {exc} (give a smaller --schedule-p)") from exc
-    family = result.model
     scheduled_plan = dataclasses.replace(
         plan, records=scheduled_records(plan.records, schedule.estimation, schedule.channel),
         validation=scheduled_records(plan.validation, schedule.validation, schedule.channel))
-    evaluation = workflow.evaluate(family, scheduled_plan, args)
+    grid = args.schedule_p or (list(P_GRID) if plan.validation else [DEFAULT_P])
+    tried, candidates = [], []
+    for p in grid:
+        options = ScheduledIEKFOptions(knots=args.schedule_knots, grid=_grid(args.schedule_grid), p=p,
+                                       discretization=args.discretization)
+        try:
+            result, divergence = workflow.last_good_on_divergence(
+                lambda: identify_scheduled(plan.records[0], schedule.estimation[0], start, variable=schedule.channel,
+                                           options=options))
+        except DivergenceError as exc:
+            tried.append({"p": p, "error": str(exc)})
+            continue
+        evaluation = workflow.evaluate(result.model, scheduled_plan, args)
+        row = {"p": p, "estimation_fit_percent": evaluation.estimation.fit,
+               "validation_fit_percent": evaluation.validation_fit, "ranking_fit": evaluation.ranking_fit(),
+               "seconds": result.seconds}
+        tried.append(row)
+        if np.isfinite(row["ranking_fit"]):
+            candidates.append((result, divergence, evaluation, row))
+    if not candidates:
+        raise DivergenceError("the scheduled model diverged at every p tried: " + "; ".join(
+            f"p = {row['p']:g}: {row.get('error', 'no finite fit')}" for row in tried) + " (give a smaller --schedule-p)")
+    # as for the IEKF's p: the largest within the tolerance of the best
+    top = max(c[3]["ranking_fit"] for c in candidates)
+    result, divergence, evaluation, chosen = max(
+        (c for c in candidates if c[3]["ranking_fit"] >= top - workflow.P_TOLERANCE), key=lambda c: c[3]["p"])
+    family = result.model
     scores = {**workflow.scores_summary(evaluation, result.fit_percent),
               **records_summary(family, scheduled_plan.records, plan.preparation)}
     scores.pop("preparation", None)  # the unscheduled preparation stands: the schedule is never offset
     entry = {
         "channel": schedule.channel, "grid": family.grid,
-        "modes_at": [{"value": row["value"], "modes": row["modes"]} for row in family.modes_at(family.grid)],
-        "knots": int(family.grid.size), "p": options.p, "passes_run": result.passes_run,
+        "modes_at": [{"value": at["value"], "modes": at["modes"]} for at in family.modes_at(family.grid)],
+        "knots": int(family.grid.size), "p": chosen["p"], "p_tried": tried, "passes_run": result.passes_run,
         "stop_reason": result.stop_reason if divergence is None else f"{result.stop_reason}: {divergence}",
         "start_fit_percent": result.start_fit, "seconds": result.seconds,
         "unscheduled": {"fit_percent": unscheduled_fit(plan, start),
