@@ -46,6 +46,8 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
     "subspace": ("SubspaceResult", "estimate_subspace", "largest_subspace_order"),
     "residuals": ("ResidualTests", "residual_tests"),
     "uncertainty": ("FrequencyResponseBand", "ModelUncertainty", "ModeEstimate", "model_uncertainty"),
+    "scheduled": ("ModeMatch", "ScheduledModalModel", "schedule_models"),
+    "scheduled_iekf": ("ScheduledIEKFOptions", "ScheduledIEKFResult", "identify_scheduled"),
 }
 _MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
 
@@ -185,4 +187,10 @@ __all__ = [
     "ModelUncertainty",
     "FrequencyResponseBand",
     "model_uncertainty",
+    "ModeMatch",
+    "ScheduledModalModel",
+    "schedule_models",
+    "ScheduledIEKFOptions",
+    "ScheduledIEKFResult",
+    "identify_scheduled",
 ]

@@ -12,10 +12,28 @@ defined. Entry-by-entry interpolation needs every grid model in the same coordin
 * **mode matching**: walking the grid upwards, each model's modes are assigned to its neighbour's by
   the least total relative eigenvalue distance (pairs among pairs, real poles among real poles),
   kept in :attr:`ScheduledModalModel.matching`.
+
+The family's coefficients are piecewise linear in the scheduling variable and held at the end values
+beyond the grid. For a record whose schedule varies, :meth:`ScheduledModalModel.simulate_outputs`
+runs the family in the input gauge: each mode's state is driven by the first input at unit gain at
+every schedule value, so the coefficients that are interpolated are the ones the states see, and a
+family identified from one varying-schedule record (:mod:`vehid.identification.scheduled_iekf`)
+simulates as it was identified. At a frozen schedule value the input gauge and the canonical form of
+:meth:`ScheduledModalModel.model_at` are one model.
+
+Each grid value also has an output offset, added to the outputs (zero for models identified at fixed
+operating points): the operating point of a linear-parameter-varying system moves with its schedule,
+so a record whose means were removed keeps an offset that depends on it (a steering offset passes
+through a gain that changes with speed).
+
+Parameters of the family (:attr:`ScheduledModalModel.parameters`, the layout of its covariance), grid
+value by grid value: sigma/omega of every mode, the input-gauge B without its first column (fixed),
+C, D (each row-major) and the output offset (:func:`knot_size` in all).
 """
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
@@ -26,7 +44,8 @@ from scipy.optimize import linear_sum_assignment
 from .errors import InputError
 from .modal import ModalModel, ModalStructure
 
-__all__ = ["ModeMatch", "ScheduledModalModel", "canonical_modal_model", "schedule_models"]
+__all__ = ["ModeMatch", "ScheduledModalModel", "canonical_modal_model", "schedule_models", "gauge_parameters",
+           "gauge_matrices", "interpolation_weights", "scheduled_matrices", "knot_size"]
 
 
 def _input_gauge(model: ModalModel, order: list[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -90,6 +109,144 @@ def _structure_gauge(structure: ModalStructure, A: Any, B: Any, C: Any) -> tuple
             ba, bb = B[a, k], B[b, k]
             B[a, k], B[b, k] = (p * ba - q * bb) / det, (q * ba + p * bb) / det
     return A, B, C
+
+
+def _first_input_column(structure: ModalStructure) -> np.ndarray:
+    """The input gauge's fixed first column of B: 1 on each mode's first state, 0 on a pair's second."""
+    column = np.zeros(structure.n)
+    for states in structure.mode_states():
+        column[states[0]] = 1.0
+    return column
+
+
+def gauge_parameters(modal: Any, B: Any, C: Any, D: Any) -> np.ndarray:
+    """One grid value's parameters in the input gauge: sigma/omega, B without its first column, C, D (row-major)."""
+    return np.concatenate([np.ravel(modal), np.asarray(B, dtype=float)[:, 1:].ravel(), np.ravel(C), np.ravel(D)])
+
+
+def gauge_matrices(structure: ModalStructure, theta: Any, backend: Any = np) -> tuple[Any, Any, Any, Any]:
+    """sigma/omega (n,), B (n, n_u), C (n_y, n) and D (n_y, n_u) of one grid value's input-gauge parameters.
+
+    NumPy arrays, or (``backend=casadi.SX``, ``theta`` an SX column) symbolic
+    matrices built from its elements, so that derivatives are exact.
+    """
+    n, n_u, n_y = structure.n, structure.n_u, structure.n_y
+    b_start = n
+    c_start = b_start + n * (n_u - 1)
+    d_start = c_start + n_y * n
+    first = _first_input_column(structure)
+    if backend is np:
+        theta = np.asarray(theta, dtype=float).ravel()
+        if theta.size != structure.n_parameters:
+            raise InputError(f"one grid value takes {structure.n_parameters} parameters; got {theta.size}")
+        B = np.column_stack([first, theta[b_start:c_start].reshape(n, n_u - 1)])
+        return theta[:n].copy(), B, theta[c_start:d_start].reshape(n_y, n), theta[d_start:].reshape(n_y, n_u)
+    B, C, D = backend.zeros(n, n_u), backend.zeros(n_y, n), backend.zeros(n_y, n_u)
+    for i in range(n):
+        B[i, 0] = float(first[i])
+        for j in range(1, n_u):
+            B[i, j] = theta[b_start + i * (n_u - 1) + j - 1]
+    for i in range(n_y):
+        for j in range(n):
+            C[i, j] = theta[c_start + i * n + j]
+        for j in range(n_u):
+            D[i, j] = theta[d_start + i * n_u + j]
+    return theta[:n], B, C, D
+
+
+def interpolation_weights(value: Any, grid: Any) -> Any:
+    """Weights of the grid values at ``value``: piecewise linear, held at the end values beyond the grid.
+
+    Written as ``c(s) = c_0 + sum_k t_k(s) (c_k+1 - c_k)`` with
+    ``t_k = clip((s - s_k) / (s_k+1 - s_k), 0, 1)``, which needs no interval
+    search and is the same expression in NumPy and CasADi.
+
+    Parameters
+    ----------
+    value : array_like (N,), or casadi.SX scalar
+    grid : array_like (K,) increasing, or K CasADi expressions
+
+    Returns
+    -------
+    ndarray (N, K), or a list of K SX weights
+    """
+    if isinstance(value, (ca.SX, ca.MX)):
+        count = grid.numel() if isinstance(grid, (ca.SX, ca.MX, ca.DM)) else len(grid)
+        steps = [ca.fmin(ca.fmax((value - grid[k]) / (grid[k + 1] - grid[k]), 0.0), 1.0) for k in range(count - 1)]
+        return [1.0 - steps[0], *[steps[k - 1] - steps[k] for k in range(1, count - 1)], steps[-1]]
+    value = np.atleast_1d(np.asarray(value, dtype=float))
+    grid = np.asarray(grid, dtype=float)
+    steps = np.clip((value[:, None] - grid[None, :-1]) / np.diff(grid)[None, :], 0.0, 1.0)
+    weights = np.empty((value.size, grid.size))
+    weights[:, 0] = 1.0 - steps[:, 0]
+    weights[:, 1:-1] = steps[:, :-1] - steps[:, 1:]
+    weights[:, -1] = steps[:, -1]
+    return weights
+
+
+def knot_size(structure: ModalStructure) -> int:
+    """Parameters per grid value: the structure's and an offset per output."""
+    return structure.n_parameters + structure.n_y
+
+
+def scheduled_matrices(structure: ModalStructure, theta: Any, weights: list[Any]) -> tuple[Any, Any, Any, Any, Any]:
+    """Symbolic sigma/omega, B, C, D (input gauge) and output offset of the family's parameters ``theta``
+    (SX, K :func:`knot_size`) at ``weights``."""
+    size = knot_size(structure)
+    blended = sum(weight * theta[k * size:(k + 1) * size] for k, weight in enumerate(weights))
+    return (*gauge_matrices(structure, blended[:structure.n_parameters], ca.SX), blended[structure.n_parameters:])
+
+
+def scheduled_step(structure: ModalStructure, x: Any, u0: Any, u1: Any, theta: Any, grid: Any, dt: float,
+                   discretization: str) -> tuple[Any, Any]:
+    """``(x_next, y)`` in SX of the family over one sample, its coefficients frozen at the sample's start.
+
+    ``u0``, ``u1`` hold the inputs and, last, the schedule at the sample's two
+    ends; states are the input gauge's (module notes). The family's parameters
+    ``theta`` (K m) and ``grid`` (K) may be symbols.
+    """
+    from .filter_models import modal_transition
+
+    n_u = structure.n_u
+    count = grid.numel() if isinstance(grid, (ca.SX, ca.MX, ca.DM)) else len(grid)
+    modal, B, C, D, offset = scheduled_matrices(structure, theta, interpolation_weights(
+        u0[n_u], [grid[k] for k in range(count)]))
+    drive0 = ca.mtimes(B, u0[:n_u])
+    drive1 = ca.mtimes(B, u1[:n_u])
+    x_next = modal_transition(structure, modal, x, drive0, drive1, dt, discretization)
+    return x_next, ca.mtimes(C, x) + ca.mtimes(D, u0[:n_u]) + offset
+
+
+_HOLDS = {"foh": "exact", "zoh": "exact-zoh", "euler": "euler"}
+
+
+@functools.lru_cache(maxsize=16)
+def _simulator(structure: ModalStructure, count: int, dt: float, discretization: str) -> Any:
+    """Compiled simulation of a family of ``count`` grid values: params = [theta; grid]."""
+    from .compiled import CompiledRecursion
+
+    x = ca.SX.sym("x", structure.n)
+    u0 = ca.SX.sym("u0", structure.n_u + 1)
+    u1 = ca.SX.sym("u1", structure.n_u + 1)
+    size = count * knot_size(structure)
+    params = ca.SX.sym("params", size + count)
+    theta, grid = params[:size], params[size:]
+    x_next, y = scheduled_step(structure, x, u0, u1, theta, grid, dt, discretization)
+    step = ca.Function("scheduled_modal_step", [x, u0, u1, params], [x_next, y], ["x", "u0", "u1", "params"],
+                       ["x_next", "y"], {"cse": True})
+    return CompiledRecursion(step, optimisation="-O1")
+
+
+@functools.lru_cache(maxsize=16)
+def _canonical_function(structure: ModalStructure) -> ca.Function:
+    """One grid value's input-gauge parameters -> the canonical parameters of :meth:`ModalStructure.pack`, and the Jacobian."""
+    q = ca.SX.sym("q", structure.n_parameters)
+    modal, B, C, D = gauge_matrices(structure, q, ca.SX)
+    A = structure.matrices(ca.vertcat(modal, ca.SX.zeros(structure.n_parameters - structure.n)), backend=ca.SX)[0]
+    A, B, C = _structure_gauge(structure, A, B, C)
+    free_c = [C[i, j] for i, j in structure.free_c]
+    theta = ca.vertcat(modal, ca.vec(B.T), *free_c, ca.vec(D.T))
+    return ca.Function("vehid_canonical_of_gauge", [q], [theta, ca.jacobian(theta, q)], ["q"], ["theta", "J"])
 
 
 def canonical_modal_model(model: ModalModel, order: list[int] | None = None) -> ModalModel:
@@ -162,7 +319,13 @@ class ScheduledModalModel:
     matching : tuple of ModeMatch
         The mode assignment at each grid value (the first is the identity).
     variable : str
-        Name of the scheduling variable (``speed``), for exports and messages.
+        Name of the scheduling variable (``speed``, or the record's channel), for exports and messages.
+    input_names, output_names : tuple of str, optional
+    meta : dict, optional
+    parameter_covariance : ndarray, optional
+        Covariance of :attr:`parameters` (module notes), where an estimator gave one.
+    offset : ndarray (n_grid, n_y), optional
+        The output offset at each grid value (module notes); zero by default.
     """
 
     structure: ModalStructure
@@ -176,6 +339,8 @@ class ScheduledModalModel:
     input_names: tuple[str, ...] | None = None
     output_names: tuple[str, ...] | None = None
     meta: dict[str, Any] = field(default_factory=dict)
+    parameter_covariance: np.ndarray | None = None
+    offset: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         s = self.structure
@@ -190,62 +355,195 @@ class ScheduledModalModel:
                 raise InputError(f"{name} must be finite with shape {(grid.size, *shape)}; got {array.shape}")
             array.setflags(write=False)
             object.__setattr__(self, name, array)
+        offset = np.zeros((grid.size, s.n_y)) if self.offset is None else np.array(self.offset, dtype=float)
+        if offset.shape != (grid.size, s.n_y) or not np.all(np.isfinite(offset)):
+            raise InputError(f"offset must be finite with shape {(grid.size, s.n_y)}; got {offset.shape}")
+        offset.setflags(write=False)
+        object.__setattr__(self, "offset", offset)
+        object.__setattr__(self, "meta", dict(self.meta))
+        if self.parameter_covariance is not None:
+            from .uncertainty import checked_covariance
+
+            object.__setattr__(self, "parameter_covariance",
+                               checked_covariance(self.parameter_covariance, self.n_parameters))
+
+    @classmethod
+    def from_parameters(cls, structure: ModalStructure, grid: Any, theta: Any, *, variable: str = "speed",
+                        input_names: tuple[str, ...] | None = None, output_names: tuple[str, ...] | None = None,
+                        meta: dict[str, Any] | None = None, parameter_covariance: Any = None,
+                        matching: tuple[ModeMatch, ...] | None = None) -> "ScheduledModalModel":
+        """The family of ``structure`` on ``grid`` with parameters ``theta`` laid out as :attr:`parameters`."""
+        grid = np.asarray(grid, dtype=float).ravel()
+        m, size = structure.n_parameters, knot_size(structure)
+        theta = np.asarray(theta, dtype=float).ravel()
+        if theta.size != grid.size * size:
+            raise InputError(f"a family of {grid.size} grid values takes {grid.size * size} parameters; got {theta.size}")
+        parts = [gauge_matrices(structure, theta[k * size:k * size + m]) for k in range(grid.size)]
+        offset = np.array([theta[k * size + m:(k + 1) * size] for k in range(grid.size)])
+        if matching is None:
+            identity = tuple(range(len(structure.mode_states())))
+            matching = tuple(ModeMatch(float(value), identity, 0.0) for value in grid)
+        return cls(structure, grid, *(np.array([part[i] for part in parts]) for i in range(4)), matching, variable,
+                   input_names, output_names, dict(meta or {}), parameter_covariance, offset)
+
+    @property
+    def n_parameters(self) -> int:
+        """Length of :attr:`parameters`: :func:`knot_size` at every grid value."""
+        return self.grid.size * knot_size(self.structure)
+
+    @property
+    def parameters(self) -> np.ndarray:
+        """The family's parameters, grid value by grid value (module notes)."""
+        return np.concatenate([np.concatenate([gauge_parameters(self.modal[k], self.B[k], self.C[k], self.D[k]),
+                                               self.offset[k]]) for k in range(self.grid.size)])
+
+    def with_parameters(self, theta: Any, parameter_covariance: Any = None, **meta: Any) -> "ScheduledModalModel":
+        """The same family with other parameters (and covariance)."""
+        return ScheduledModalModel.from_parameters(
+            self.structure, self.grid, theta, variable=self.variable, input_names=self.input_names,
+            output_names=self.output_names, meta={**self.meta, **meta}, parameter_covariance=parameter_covariance,
+            matching=self.matching)
 
     def _weights(self, value: float) -> np.ndarray:
         value = float(value)
         low, high = float(self.grid[0]), float(self.grid[-1])
         if not low <= value <= high:
             raise InputError(f"{self.variable} {value:g} lies outside the scheduled range {low:g}..{high:g}")
-        return np.array([np.interp(value, self.grid, np.eye(self.grid.size)[k]) for k in range(self.grid.size)])
+        return interpolation_weights([value], self.grid)[0]
 
     def model_at(self, value: float) -> ModalModel:
-        """The modal model at ``value`` of the scheduling variable (within the grid's range), canonical form."""
+        """The modal model at ``value`` of the scheduling variable (within the grid's range), canonical form.
+
+        Where the family has a parameter covariance, the model carries the
+        covariance of its own parameters (delta method through the
+        interpolation and the change to the canonical form, exact CasADi
+        derivatives), so that its modes and gains have standard deviations.
+        """
         w = self._weights(value)
-        modal, B, C, D = (np.tensordot(w, array, axes=1) for array in (self.modal, self.B, self.C, self.D))
+        modal, B, C, D = (np.tensordot(w, array, axes=1)
+                          for array in (self.modal, self.B, self.C, self.D))
         A = self.structure.matrices(np.concatenate([modal, np.zeros(self.structure.n_parameters - self.structure.n)]))[0]
         A, B, C = _structure_gauge(self.structure, A, B, C)
+        covariance = None
+        if self.parameter_covariance is not None:
+            _, jacobian = _canonical_function(self.structure)(gauge_parameters(modal, np.column_stack(
+                [_first_input_column(self.structure), np.tensordot(w, self.B, axes=1)[:, 1:]]),
+                np.tensordot(w, self.C, axes=1), D))
+            m = self.structure.n_parameters
+            select = np.eye(m, knot_size(self.structure))  # a grid value's parameters without its offset
+            chain = np.asarray(jacobian) @ np.kron(w[None, :], select)
+            covariance = chain @ self.parameter_covariance @ chain.T
         return ModalModel(self.structure, A, B, C, D, input_names=self.input_names, output_names=self.output_names,
-                          meta={**self.meta, self.variable: float(value), "scheduled": True})
+                          meta={**self.meta, self.variable: float(value), "scheduled": True},
+                          parameter_covariance=None if covariance is None else 0.5 * (covariance + covariance.T))
 
-    def to_casadi(self, name: str = "scheduled_modal_model") -> ca.Function:
+    def modes_at(self, values: Any, *, level: float = 0.95) -> list[dict[str, Any]]:
+        """Per value of the scheduling variable: ``{value, modes}``, each mode's ``frequency_hz``,
+        ``frequency_hz_std``, ``damping``, ``damping_std`` and eigenvalue (std NaN without a covariance)."""
+        rows = []
+        for value in np.atleast_1d(np.asarray(values, dtype=float)):
+            modes = self.model_at(float(value)).uncertainty(level=level).modes
+            rows.append({"value": float(value), "modes": [mode.as_dict() for mode in modes]})
+        return rows
+
+    def is_stable(self) -> bool:
+        """Every mode in the open left half-plane at every grid value (the frozen models between are
+        interpolated, so their real parts lie between)."""
+        real = np.array([[self.modal[k, s[0]] for s in self.structure.mode_states()] for k in range(self.grid.size)])
+        return bool(np.all(real < 0))
+
+    @property
+    def record_inputs(self) -> int:
+        """Input columns of a record the family simulates: its inputs and, last, the schedule."""
+        return self.structure.n_u + 1
+
+    def simulate_outputs(self, u: Any, dt: float, *, schedule: Any = None, method: str = "foh", x0: Any = None,
+                         return_states: bool = False) -> Any:
+        """Outputs (N, n_y) of the family driven by ``u`` along a measured schedule, compiled.
+
+        Parameters
+        ----------
+        u : array_like (N, n_u), or (N, n_u + 1) with the schedule last
+        dt : float
+            Sample interval (s).
+        schedule : array_like (N,), optional
+            The scheduling variable at each sample; without it, ``u``'s last column.
+        method : {"foh", "zoh", "euler"}
+            Each mode advanced exactly over a sample (inputs linear or held
+            between samples), or by Euler's step, with the coefficients of
+            the sample's start.
+        x0 : array_like (n,), optional
+            Initial state in the input gauge (default rest).
+        return_states : bool
+            Also return the input-gauge states (N, n).
+        """
+        s = self.structure
+        u = np.asarray(u, dtype=float)
+        if u.ndim == 1:
+            u = u[:, None]
+        if schedule is not None:
+            schedule = np.asarray(schedule, dtype=float).ravel()
+            if u.ndim != 2 or u.shape[1] != s.n_u or schedule.shape != (u.shape[0],):
+                raise InputError(f"u must have shape (N, {s.n_u}) and the schedule (N,); got {u.shape} and "
+                                 f"{schedule.shape}")
+            u = np.column_stack([u, schedule])
+        if u.ndim != 2 or u.shape[1] != s.n_u + 1:
+            raise InputError(f"u must have shape (N, {s.n_u + 1}) with the {self.variable} schedule last, or give "
+                             f"schedule=; got {u.shape}")
+        if not np.all(np.isfinite(u)):
+            raise InputError("u or the schedule contains a non-finite value (NaN or inf)")
+        if not (dt is not None and dt > 0 and np.isfinite(dt)):
+            raise InputError(f"dt must be positive; got {dt}")
+        if method not in _HOLDS:
+            raise InputError(f"unknown simulation method {method!r}; use one of {', '.join(_HOLDS)}")
+        x0 = np.zeros(s.n) if x0 is None else np.asarray(x0, dtype=float).ravel()
+        if x0.shape != (s.n,):
+            raise InputError(f"x0 must have {s.n} entries; got {x0.shape}")
+        simulator = _simulator(s, self.grid.size, float(dt), _HOLDS[method])
+        y, x = simulator(x0, u, np.concatenate([self.parameters, self.grid]))
+        return (y, x) if return_states else y
+
+    def simulate(self, record: Any, **options: Any) -> Any:
+        """``record`` (inputs, then the schedule) with its outputs replaced by the family's, from rest."""
+        return record.replace(y=self.simulate_outputs(record.u, record.dt, **options))
+
+    def to_casadi(self, name: str = "scheduled_modal_model", *, gauge: str = "canonical") -> ca.Function:
         """One CasADi Function ``(x, u, <variable>) -> (xdot, y)`` of the continuous-time family.
 
-        Its states are those of :meth:`model_at` (the structure's canonical
-        form). The interpolated entries are piecewise-linear functions of the
-        scheduling variable (``casadi.pw_lin``; linear continuation beyond the
-        grid, where the family is not validated), so the Function
-        differentiates and generates C like any other (for MPC).
+        With ``gauge="canonical"`` its states are those of :meth:`model_at`
+        (the structure's canonical form); with ``gauge="input"`` those of
+        :meth:`simulate_outputs`, the form to use where the schedule varies
+        (module notes). The interpolated entries are piecewise-linear
+        functions of the scheduling variable, held at the end values beyond
+        the grid, so the Function differentiates and generates C like any
+        other (for MPC).
         """
+        if gauge not in ("canonical", "input"):
+            raise InputError(f"gauge is 'canonical' or 'input'; got {gauge!r}")
         s = self.structure
         x = ca.SX.sym("x", s.n)
         u = ca.SX.sym("u", s.n_u)
         v = ca.SX.sym(self.variable)
-        grid = ca.DM(self.grid)
-
-        def interpolated(array: np.ndarray) -> ca.SX:
-            flat = array.reshape(array.shape[0], -1)
-            values = [ca.pw_lin(v, grid, ca.DM(flat[:, k])) for k in range(flat.shape[1])]
-            return ca.reshape(ca.vertcat(*values), array.shape[2], array.shape[1]).T if array.ndim == 3 else ca.vertcat(*values)
-
-        modal = interpolated(self.modal)
-        A = ca.SX.zeros(s.n, s.n)
-        for states in s.mode_states():
-            a = states[0]
-            A[a, a] = modal[a]
-            if len(states) == 2:
-                A[a, a + 1], A[a + 1, a], A[a + 1, a + 1] = modal[a + 1], -modal[a + 1], modal[a]
-        B, C = interpolated(self.B), interpolated(self.C)
-        D = interpolated(self.D)
-        A, B, C = _structure_gauge(s, A, B, C)
-        return ca.Function(name, [x, u, v], [ca.mtimes(A, x) + ca.mtimes(B, u), ca.mtimes(C, x) + ca.mtimes(D, u)],
+        weights = interpolation_weights(v, [float(g) for g in self.grid])
+        modal, B, C, D, offset = scheduled_matrices(s, ca.DM(self.parameters), weights)
+        A = s.matrices(ca.vertcat(modal, ca.SX.zeros(s.n_parameters - s.n)), backend=ca.SX)[0]
+        if gauge == "canonical":
+            A, B, C = _structure_gauge(s, A, B, C)
+        return ca.Function(name, [x, u, v], [ca.mtimes(A, x) + ca.mtimes(B, u),
+                                             ca.mtimes(C, x) + ca.mtimes(D, u) + offset],
                            ["x", "u", self.variable], ["xdot", "y"])
 
     def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form (lists), with ``parameter_covariance`` where there is one."""
         return {
-            "structure": self.structure.to_dict(), "grid": self.grid, "modal": self.modal, "B": self.B, "C": self.C,
-            "D": self.D, "variable": self.variable,
+            "structure": self.structure.to_dict(), "grid": self.grid.tolist(), "modal": self.modal.tolist(),
+            "B": self.B.tolist(), "C": self.C.tolist(), "D": self.D.tolist(), "variable": self.variable,
             "matching": [{"value": m.value, "order": list(m.order), "cost": m.cost} for m in self.matching],
-            "input_names": self.input_names, "output_names": self.output_names, "meta": self.meta,
+            "input_names": None if self.input_names is None else list(self.input_names),
+            "output_names": None if self.output_names is None else list(self.output_names), "meta": self.meta,
+            "offset": self.offset.tolist(),
+            **({} if self.parameter_covariance is None
+               else {"parameter_covariance": self.parameter_covariance.tolist()}),
         }
 
     @classmethod
@@ -254,8 +552,34 @@ class ScheduledModalModel:
                          for m in values["matching"])
         names = {key: tuple(values[key]) if values.get(key) is not None else None
                  for key in ("input_names", "output_names")}
+        covariance = values.get("parameter_covariance")
         return cls(ModalStructure.from_dict(values["structure"]), *(np.asarray(values[k]) for k in ("grid", "modal", "B", "C", "D")),
-                   matching, str(values["variable"]), **names, meta=dict(values.get("meta") or {}))
+                   matching, str(values["variable"]), **names, meta=dict(values.get("meta") or {}),
+                   parameter_covariance=None if covariance is None else np.asarray(covariance, dtype=float),
+                   offset=None if values.get("offset") is None else np.asarray(values["offset"], dtype=float))
+
+    def save_json(self, path: Any) -> Any:
+        """Write :meth:`to_dict` as JSON; returns the path."""
+        import json
+        from pathlib import Path
+
+        from .jsonable import to_jsonable
+
+        path = Path(path)
+        path.write_text(json.dumps(to_jsonable(self.to_dict()), indent=2) + "\n")
+        return path
+
+    def save_mat(self, path: Any) -> Any:
+        """Write the grid and the input-gauge arrays (grid value first) to a MATLAB file; returns the path."""
+        from pathlib import Path
+
+        from scipy.io import savemat
+
+        path = Path(path)
+        savemat(path, {"grid": self.grid, "modal": self.modal, "B": self.B, "C": self.C, "D": self.D, "offset": self.offset,
+                       "variable": self.variable,
+                       **({} if self.parameter_covariance is None else {"parameter_covariance": self.parameter_covariance})})
+        return path
 
 
 def schedule_models(models: Mapping[float, ModalModel], *, variable: str = "speed") -> ScheduledModalModel:

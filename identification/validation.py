@@ -91,6 +91,8 @@ def _sizes(model: Any) -> tuple[int, int]:
         return model.structure.n_u, model.structure.n_y
     if isinstance(model, DiscreteModel):
         return model.n_u, model.n_y
+    if hasattr(model, "record_inputs"):  # a scheduled family: its inputs and, last, the schedule
+        return model.record_inputs, model.structure.n_y
     linear = model.structure.linear
     return linear.n_u, linear.n_y
 
@@ -206,8 +208,9 @@ def predict(model: Any, data: IOData, *, initial_state: str = "estimate", horizo
 
     Parameters
     ----------
-    model : ModalModel or SplineModalModel
-        Spline models are simulated from rest in their own time base.
+    model : ModalModel, SplineModalModel or ScheduledModalModel
+        Spline models are simulated from rest in their own time base; a
+        scheduled family from rest along the record's last input column, its schedule.
     data : IOData
     initial_state : {"zero", "estimate"}
         Linear models only; ``estimate`` by :func:`estimate_initial_state`.
@@ -218,7 +221,7 @@ def predict(model: Any, data: IOData, *, initial_state: str = "estimate", horizo
     if initial_state not in INITIAL_STATES:
         raise InputError(f"unknown initial state {initial_state!r}; use one of {', '.join(INITIAL_STATES)}")
     if not _linear(model):
-        return model.simulate_outputs(data.u)
+        return model.simulate_outputs(data.u, data.dt)
     if horizon is not None:
         if isinstance(horizon, bool) or int(horizon) != horizon or horizon < 1:
             raise InputError(f"the prediction horizon must be a whole number of samples >= 1; got {horizon!r}")

@@ -226,6 +226,7 @@ class Plan:
     notes: tuple[str, ...] = ()
     preparation: Any = None
     held_out_count: int = 0  # the first validation records are held-out parts of the estimation records
+    schedule: Any = None  # with --schedule: the channel's samples per record (scenarios.scheduled_identify)
 
     @property
     def estimation(self) -> IOData | tuple[IOData, ...]:
@@ -262,18 +263,32 @@ def load_plan(args: argparse.Namespace, paths: list[str]) -> Plan:
     from vehid.scenarios.data_options import preparation_options, read_from_args
 
     fraction, note = holdout_fraction(args)
-    raw, settings = read_from_args(args, paths)
+    scale, schedules = args.scale, None
+    if getattr(args, "schedule", None):  # the schedule channel is read beside the inputs, kept apart and never offset
+        from vehid.scenarios import scheduled_identify
+
+        raw, settings, schedules, scale = scheduled_identify.read_with_schedule(args, paths)
+    else:
+        raw, settings = read_from_args(args, paths)
     held_raw: tuple[IOData, ...] = ()
     if fraction is not None:
         parts = [split_holdout(record, fraction) for record in raw]
         raw, held_raw = tuple(part[0] for part in parts), tuple(part[1] for part in parts)
-    records, preparation = prepare(raw, settings=settings, **preparation_options(args))
+    records, preparation = prepare(raw, settings=settings, **{**preparation_options(args), "scale": scale})
     held = tuple(prepare_validation(part, preparation, record=i) for i, part in enumerate(held_raw))
     channels = validation_channels(args, preparation)
     # a validation file is another experiment: its offsets are its own, as each estimation record's are
-    return make_plan(args, records, lambda path: prepare_validation(path, preparation, own_offsets=True,
-                                                                    channels=channels), held_out=held,
-                     fraction=fraction, note=note, preparation=preparation)
+    load = lambda path: prepare_validation(path, preparation, own_offsets=True, channels=channels)  # noqa: E731
+    if schedules is not None:
+        found: list[np.ndarray] = []
+        load = scheduled_identify.schedule_loader(args, preparation, channels, found)
+    plan = make_plan(args, records, load, held_out=held, fraction=fraction, note=note, preparation=preparation)
+    if schedules is not None:
+        cut = [record.n_samples for record in records]
+        plan = dataclasses.replace(plan, schedule=scheduled_identify.ScheduleData(
+            args.schedule.strip(), tuple(s[:n] for s, n in zip(schedules, cut)),
+            tuple(s[n:] for s, n in zip(schedules, cut))[:len(held)] + tuple(found)))
+    return plan
 
 
 def validation_channels(args: argparse.Namespace, preparation: Any) -> tuple[tuple[str, ...], tuple[str, ...]] | None:

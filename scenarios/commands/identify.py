@@ -75,6 +75,7 @@ from vehid.identification.multirecord import pooled_simulation_fit
 from vehid.identification.preparation import prepare_validation, read_record
 from vehid.identification.storage import write_value
 from vehid.scenarios import identify_workflow as workflow
+from vehid.scenarios import scheduled_identify
 from vehid.scenarios import single_track_identify as single_track
 from vehid.scenarios.data_options import (RECORD_PREFIX, archive_records, archived_preparation, record_series,
                                           check_model_target, records_summary, register_data_options, save_model,
@@ -120,10 +121,9 @@ def register(parser: argparse.ArgumentParser) -> None:
                              "0 for no covariance)")
     parser.add_argument("--structure", default="modal", choices=single_track.STRUCTURES,
                         help="model structure: modal (default) or single-track (a car's physical parameters)")
-    parser.add_argument("--schedule", metavar="CHANNEL",
-                        help="the measured scheduling channel; with --structure single-track the speed (m/s)")
     register_data_options(parser)
     workflow.register_options(parser)
+    scheduled_identify.register_options(parser)
     single_track.register_options(parser)
     parser.set_defaults(handler=run)
 
@@ -166,6 +166,8 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
         return single_track.run(args)
     if args.resume and args.out:
         raise InputError("--resume continues in its own archive: give no --out")
+    if args.schedule:
+        scheduled_identify.check_options(args)
     inputs = [*args.data, *args.validation_file, args.resume]
     # the run's identity, kept with the archive: a rerun of the same run may replace it, another may not
     args = argparse.Namespace(**vars(args), output_run=run_digest(args))
@@ -333,6 +335,14 @@ def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None)
             final_fit=float(np.mean(outcome.result.fit_percent)), allow_unstable=True, label="nonlinear")
         warnings += workflow.nonlinear_warnings(outcome, evaluation)
     warnings += data_warnings(plan.records)
+    scheduled, unscheduled = None, model
+    if args.schedule:  # the scheduled family, started from the model above, is the model returned
+        scheduled = scheduled_identify.identify_scheduled_model(model, plan, args, evaluation)
+        summary.update(scheduled.scores, scheduled=scheduled.summary)
+        warnings += scheduled.warnings
+        if nonlinear is not None:
+            summary["notes"].append(scheduled_identify.NONLINEAR_NOTE)
+        model = scheduled.model
     summary["warnings"] = list(warnings)
     if archive_path is not None:
         summary["archive"] = str(archive_path)
@@ -340,18 +350,22 @@ def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None)
             if nonlinear is not None:
                 write_run(archive, "nonlinear", model=nonlinear)
                 write_pass_history(archive, "nonlinear", outcome.result.history)
+            if scheduled is not None:
+                write_run(archive, "scheduled", model=scheduled.model)
             if start_returned:
-                write_run(archive, "start", model=model)
+                write_run(archive, "start", model=unscheduled)
             if tests is not None:
                 write_value(run_group(archive, RUN_NAME if result is not None else args.method),
                             "residual_tests", tests)
-            _archive_verdict(archive, summary, args, returned="start" if start_returned else (
-                RUN_NAME if result is not None else args.method))
+            _archive_verdict(archive, summary, args, returned="scheduled" if scheduled is not None else (
+                "start" if start_returned else (RUN_NAME if result is not None else args.method)))
     if args.save_model:
         summary["model_file"] = str(save_model(model, args.save_model, plan.preparation))
     text = workflow.text_summary(summary, data, plan)
     if "modes" in summary:
         text += "\n" + "\n".join(uncertainty_lines(summary, data.output_names))
+    if scheduled is not None:
+        text += "\n" + "\n".join(scheduled_identify.text_lines(summary["scheduled"], data.output_names))
     try:
         workflow.emit(summary, warnings, args)
     except StrictWarningsError as exc:  # the summary is printed all the same, then the exit status says "warnings"

@@ -1,0 +1,259 @@
+"""`vehid identify --schedule CHANNEL`: a speed-scheduled modal model from one varying-schedule record.
+
+The scheduling channel (a car's speed) is read beside the inputs, scaled by ``--scale`` where one names
+it and never offset (the model's coefficients are functions of its measured value). The unscheduled
+model of the default pipeline starts the scheduled IEKF
+(:mod:`vehid.identification.scheduled_iekf`) at every knot; the family returned is a
+:class:`~vehid.identification.scheduled.ScheduledModalModel`, scored like every model on the
+estimation and held-out data, simulated from rest along their measured schedules.
+
+JSON (public): the score keys (``fit_percent``, ``estimation_fit_percent``, ``validation_fit_percent``,
+``validation_R``, ``records``) describe the scheduled model; ``scheduled`` holds ``channel``, ``grid``,
+``modes_at`` (per grid value ``value`` and its ``modes``, each with ``frequency_hz``,
+``frequency_hz_std``, ``damping``, ``damping_std``), the run (``passes_run``, ``stop_reason``,
+``p`` and ``p_tried``, chosen on validation data as the IEKF's p is, ``seconds``) and ``unscheduled``: the scores of the start, whose matrices, eigenvalues and
+modes are the summary's other keys.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+import numpy as np
+
+from vehid.identification.data import IOData
+from vehid.identification.errors import InputError
+from vehid.identification.modal import ModalModel
+
+# said where --nonlinear and --schedule are given together (JSON ``notes``)
+NONLINEAR_NOTE = ("--nonlinear with --schedule: the spline-nonlinear model ('nonlinear') is identified from the "
+                  "unscheduled model, beside the scheduled one; a model whose coefficients follow both the schedule "
+                  "and the amplitude is not available")
+
+__all__ = ["NONLINEAR_NOTE", "ScheduleData", "register_options", "read_with_schedule", "schedule_loader", "scheduled_records",
+           "identify_scheduled_model", "ScheduledOutcome", "text_lines"]
+
+
+@dataclass(frozen=True, eq=False)
+class ScheduleData:
+    """The schedule channel of a plan's records: its name and its samples per estimation and validation record."""
+
+    channel: str
+    estimation: tuple[np.ndarray, ...]
+    validation: tuple[np.ndarray, ...]
+
+
+def register_options(parser: argparse.ArgumentParser) -> None:
+    """``--schedule`` and the scheduled model's settings."""
+    from vehid.identification.scheduled_iekf import DEFAULT_KNOTS, DEFAULT_P, MAX_KNOTS, MIN_KNOTS
+
+    parser.add_argument("--schedule", metavar="CHANNEL",
+                        help="scheduling channel (a speed such as vx), read beside the inputs and never offset: "
+                             "identify a model whose coefficients vary with it (modal: piecewise linear over "
+                             "--schedule-grid; --structure single-track: the speed in m/s)")
+    parser.add_argument("--schedule-grid", metavar="VALUES",
+                        help=f"knots of the scheduled modal model, comma-separated and increasing (default: "
+                             f"--schedule-knots at evenly spaced quantiles of the channel)")
+    parser.add_argument("--schedule-knots", type=int, default=DEFAULT_KNOTS,
+                        help=f"number of knots at the channel's quantiles, {MIN_KNOTS}-{MAX_KNOTS} "
+                             f"(default {DEFAULT_KNOTS})")
+    parser.add_argument("--schedule-p", type=float, action="append", metavar="P",
+                        help=f"tuning parameter(s) of the scheduled filter, per dominant time constant; several are "
+                             f"tried and one chosen on validation data (default {DEFAULT_P:g}, or "
+                             f"{', '.join(f'{p:g}' for p in P_GRID)} with validation data)")
+
+
+#: p of the scheduled filter tried on validation data, largest first (the default alone without them)
+P_GRID = (1e-2, 1e-3)
+
+
+def _grid(text: str | None) -> tuple[float, ...] | None:
+    if text is None:
+        return None
+    try:
+        values = tuple(float(part) for part in text.split(",") if part.strip())
+    except ValueError:
+        raise InputError(f"--schedule-grid takes comma-separated numbers; got {text!r}") from None
+    return values
+
+
+def check_options(args: argparse.Namespace) -> None:
+    """Refuse combinations the scheduled model does not support, before any work."""
+    if args.resume:
+        raise InputError("--schedule runs are not checkpointed: give no --resume")
+    if len(args.data) > 1:
+        raise InputError("--schedule identifies the scheduled model from one record; give one data file")
+    if not args.inputs:
+        raise InputError("--schedule needs --inputs naming the inputs (the schedule is read beside them)")
+    from vehid.identification.scheduled_iekf import ScheduledIEKFOptions
+
+    for p in args.schedule_p or [None]:
+        ScheduledIEKFOptions(knots=args.schedule_knots, grid=_grid(args.schedule_grid),
+                             **({} if p is None else {"p": p}))
+
+
+def _without_schedule(args: argparse.Namespace) -> dict[str, float]:
+    from vehid.identification.preparation import parse_scale
+
+    return {name: factor for name, factor in parse_scale(args.scale).items() if name != args.schedule}
+
+
+def read_with_schedule(args: argparse.Namespace, paths: Sequence[str]) -> tuple[tuple[IOData, ...], Any, list[np.ndarray], dict]:
+    """Raw records without the schedule, their reading settings, each record's schedule (scaled) and
+    the ``--scale`` factors of the other channels."""
+    from vehid.identification.preparation import parse_scale, read_raw_records
+    from vehid.scenarios.data_options import settings_from_args
+
+    check_options(args)
+    settings = settings_from_args(args)
+    channel = args.schedule.strip()
+    if channel in settings.inputs or channel in settings.outputs:
+        raise InputError(f"--schedule {channel} is also named among --inputs or --outputs: the schedule is a "
+                         "channel of its own")
+    raw, full_settings = read_raw_records(list(paths), dataclasses.replace(settings, inputs=settings.inputs + (channel,)))
+    factor = parse_scale(args.scale).get(channel, 1.0)
+    schedules = [record.u[:, -1] * factor for record in raw]
+    inputs = full_settings.inputs[:-1]
+    return (tuple(record.select_inputs(inputs) for record in raw), dataclasses.replace(full_settings, inputs=inputs),
+            schedules, _without_schedule(args))
+
+
+def schedule_loader(args: argparse.Namespace, preparation: Any, channels: Any, found: list[np.ndarray]):
+    """A validation-file loader that also reads the file's schedule (appended to ``found``, in order)."""
+    from vehid.identification.preparation import parse_scale, prepare_validation, read_record
+
+    channel = args.schedule.strip()
+    factor = parse_scale(args.scale).get(channel, 1.0)
+
+    def load(path: str) -> IOData:
+        inputs, outputs = channels if channels is not None else (preparation.settings.inputs, preparation.settings.outputs)
+        settings = dataclasses.replace(preparation.settings, inputs=tuple(inputs) + (channel,),
+                                       outputs=tuple(outputs), segment=None)
+        raw = read_record(path, settings)
+        found.append(raw.u[:, -1] * factor)
+        raw = raw.select_inputs(tuple(inputs)).replace(input_names=preparation.input_names,
+                                                       output_names=preparation.output_names)
+        return prepare_validation(raw, preparation, own_offsets=True)
+
+    return load
+
+
+def scheduled_records(records: Sequence[IOData], schedules: Sequence[np.ndarray], channel: str) -> tuple[IOData, ...]:
+    """The records with their schedule as a last input column, as a scheduled model simulates them."""
+    return tuple(record.replace(u=np.column_stack([record.u, schedule]), input_names=record.input_names + (channel,),
+                                input_units=record.input_units + ("-",))
+                 for record, schedule in zip(records, schedules))
+
+
+@dataclass
+class ScheduledOutcome:
+    """The scheduled family, its summary entry, the score keys it replaces and its warnings."""
+
+    model: Any
+    summary: dict[str, Any]
+    scores: dict[str, Any]
+    warnings: list[str] = field(default_factory=list)
+    result: Any = None
+
+
+def identify_scheduled_model(start: Any, plan: Any, args: argparse.Namespace, unscheduled: Any) -> ScheduledOutcome:
+    """The scheduled family started from ``start`` (the unscheduled model returned), scored on the plan's records.
+
+    ``unscheduled`` is the start's :class:`~vehid.scenarios.identify_workflow.Evaluation`.
+    """
+    from vehid.identification.errors import DivergenceError
+    from vehid.identification.scheduled_iekf import DEFAULT_P, ScheduledIEKFOptions, identify_scheduled
+    from vehid.scenarios import identify_workflow as workflow
+    from vehid.scenarios.data_options import records_summary
+
+    if not isinstance(start, ModalModel):
+        raise InputError("--schedule starts from a continuous-time modal model; this unscheduled model is "
+                         "discrete-time (a pole on the negative real axis): use --method iekf or another order")
+
+    schedule = plan.schedule
+    scheduled_plan = dataclasses.replace(
+        plan, records=scheduled_records(plan.records, schedule.estimation, schedule.channel),
+        validation=scheduled_records(plan.validation, schedule.validation, schedule.channel))
+    grid = args.schedule_p or (list(P_GRID) if plan.validation else [DEFAULT_P])
+    tried, candidates = [], []
+    for p in grid:
+        options = ScheduledIEKFOptions(knots=args.schedule_knots, grid=_grid(args.schedule_grid), p=p,
+                                       discretization=args.discretization)
+        try:
+            result, divergence = workflow.last_good_on_divergence(
+                lambda: identify_scheduled(plan.records[0], schedule.estimation[0], start, variable=schedule.channel,
+                                           options=options))
+        except DivergenceError as exc:
+            tried.append({"p": p, "error": str(exc)})
+            continue
+        evaluation = workflow.evaluate(result.model, scheduled_plan, args)
+        row = {"p": p, "estimation_fit_percent": evaluation.estimation.fit,
+               "validation_fit_percent": evaluation.validation_fit, "ranking_fit": evaluation.ranking_fit(),
+               "seconds": result.seconds}
+        tried.append(row)
+        if np.isfinite(row["ranking_fit"]):
+            candidates.append((result, divergence, evaluation, row))
+    if not candidates:
+        raise DivergenceError("the scheduled model diverged at every p tried: " + "; ".join(
+            f"p = {row['p']:g}: {row.get('error', 'no finite fit')}" for row in tried) + " (give a smaller --schedule-p)")
+    # as for the IEKF's p: the largest within the tolerance of the best
+    top = max(c[3]["ranking_fit"] for c in candidates)
+    result, divergence, evaluation, chosen = max(
+        (c for c in candidates if c[3]["ranking_fit"] >= top - workflow.P_TOLERANCE), key=lambda c: c[3]["p"])
+    family = result.model
+    scores = {**workflow.scores_summary(evaluation, result.fit_percent),
+              **records_summary(family, scheduled_plan.records, plan.preparation)}
+    scores.pop("preparation", None)  # the unscheduled preparation stands: the schedule is never offset
+    entry = {
+        "channel": schedule.channel, "grid": family.grid,
+        "modes_at": [{"value": at["value"], "modes": at["modes"]} for at in family.modes_at(family.grid)],
+        "knots": int(family.grid.size), "p": chosen["p"], "p_tried": tried, "passes_run": result.passes_run,
+        "stop_reason": result.stop_reason if divergence is None else f"{result.stop_reason}: {divergence}",
+        "start_fit_percent": result.start_fit, "seconds": result.seconds,
+        "unscheduled": {"fit_percent": unscheduled_fit(plan, start),
+                        "estimation_fit_percent": unscheduled.estimation.fit,
+                        "validation_fit_percent": unscheduled.validation_fit},
+    }
+    warnings = workflow.run_warnings(
+        model=family, evaluation=evaluation, stop_reason=entry["stop_reason"], start_fit=None,
+        final_fit=float(np.mean(result.fit_percent)), allow_unstable=True, label="scheduled",
+        fit_history=[record.mean_fit_continuous for record in result.history])
+    if not (args.allow_unstable or family.is_stable()):
+        warnings.append("scheduled: the model is unstable at some grid value where stability was asked: give "
+                        "fewer --schedule-knots or a smaller --schedule-p")
+    if evaluation.validation and unscheduled.validation_fit is not None and (
+            np.mean(evaluation.validation_fit) < np.mean(unscheduled.validation_fit)):
+        warnings.append(f"scheduled: the scheduled model validates worse than the unscheduled one (mean fit "
+                        f"{np.mean(evaluation.validation_fit):.2f} % against {np.mean(unscheduled.validation_fit):.2f} "
+                        "%): the schedule does not explain these data; give fewer --schedule-knots")
+    return ScheduledOutcome(family, entry, scores, warnings, result)
+
+
+def unscheduled_fit(plan: Any, start: Any) -> Any:
+    """R per output of the unscheduled model from rest on the estimation records (as ``fit_percent``)."""
+    from vehid.identification.multirecord import pooled_simulation_fit
+
+    return pooled_simulation_fit(start, plan.records)
+
+
+def text_lines(entry: dict[str, Any], output_names: Sequence[str]) -> list[str]:
+    """The text face of the ``scheduled`` entry: the run, the unscheduled scores and the modes at each grid value."""
+    unscheduled = entry["unscheduled"]
+    validation = unscheduled.get("validation_fit_percent")
+    lines = [
+        f"scheduled on {entry['channel']} ({entry['knots']} knots, p {entry['p']:g}, {entry['passes_run']} passes, "
+        f"{'converged' if entry['stop_reason'] == 'converged' else 'NOT converged'}): the scores above are its own; "
+        "unscheduled start: estimation "
+        + ", ".join(f"{n} {v:.2f}" for n, v in zip(output_names, unscheduled["estimation_fit_percent"]))
+        + ("" if validation is None else "; validation " + ", ".join(
+            f"{n} {v:.2f}" for n, v in zip(output_names, validation))),
+        f"modes at {entry['channel']} (frequency Hz, damping; +/- 2 sigma):",
+    ]
+    for row in entry["modes_at"]:
+        modes = "; ".join(f"{mode['frequency_hz']:.4g} +/- {2 * mode['frequency_hz_std']:.2g} Hz, "
+                          f"{mode['damping']:.3f} +/- {2 * mode['damping_std']:.2g}" for mode in row["modes"])
+        lines.append(f"  {entry['channel']} = {row['value']:.4g}: {modes}")
+    return lines
