@@ -321,22 +321,36 @@ class SplineModalModel(StateSpaceModel):
         x0 = np.zeros(self.structure.linear.n) if x0 is None else x0
         return sim(x0, u_normalised, np.concatenate([self.theta, self.constants]))
 
-    def simulate_outputs(self, u: Any, dt: float | None = None, *, return_states: bool = False) -> Any:
-        """Outputs (N, n_y) in original units from rest, for inputs (N, n_u) in original units.
+    #: Nonlinear: its state-space form is the linearisation at rest, and scores simulate it from rest.
+    is_linear = False
+
+    @property
+    def n_u(self) -> int:
+        """Number of inputs."""
+        return self.structure.linear.n_u
+
+    @property
+    def n_y(self) -> int:
+        """Number of outputs."""
+        return self.structure.linear.n_y
+
+    @property
+    def n_states(self) -> int:
+        """Number of states (the order n)."""
+        return self.structure.linear.n
+
+    def simulate_outputs(self, u: Any, dt: float | None = None, *, x0: Any = None,
+                         return_states: bool = False) -> Any:
+        """Outputs (N, n_y) in original units from ``x0`` (original units; default rest), for inputs (N, n_u).
 
         ``dt`` must equal the sample interval the model was identified at
         (its discrete-time behaviour is tied to it).
         """
-        u = np.asarray(u, dtype=float)
-        if u.ndim == 1:
-            u = u[:, None]
-        if u.ndim != 2 or u.shape[1] != self.structure.linear.n_u:
-            raise InputError(f"u must have shape (N, {self.structure.linear.n_u}); got {u.shape}")
-        if not np.all(np.isfinite(u)):
-            raise InputError("u contains a non-finite value (NaN or inf)")
+        u = self.checked_input(u)
         if dt is not None and not np.isclose(dt, self.dt, rtol=1e-9):
             raise InputError(f"this model was identified at dt = {self.dt} s; got {dt} s")
-        y, x = self.simulate_normalised(u / self.input_scale)
+        start = self.checked_state(x0) / self.state_scale()
+        y, x = self.simulate_normalised(u / self.input_scale, start)
         y = y * self.output_scale
         return (y, x * self.state_scale()) if return_states else y
 
