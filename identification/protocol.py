@@ -245,9 +245,11 @@ class StateSpaceModel:
         return path
 
     def save_json(self, path: str | Path) -> Path:
-        """Write ``to_dict()`` as JSON."""
+        """Write ``to_dict()`` as JSON, with the time domain and ``dt`` of :meth:`to_statespace` first."""
         path = Path(path)
-        path.write_text(json.dumps(self.to_dict(), indent=2, default=str) + "\n")
+        dt = self.to_statespace()[4]
+        values = {"time_domain": "continuous" if dt is None else "discrete", "dt": dt, **self.to_dict()}
+        path.write_text(json.dumps(values, indent=2, default=str) + "\n")
         return path
 
 

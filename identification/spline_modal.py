@@ -486,7 +486,8 @@ class SplineModalModel(StateSpaceModel):
     def to_casadi(self, n_samples: int | None = None) -> ca.Function:
         """A self-contained CasADi Function in original units, splines, ranges and scales embedded.
 
-        Without ``n_samples``: one step ``vehid_spline_step(x, u0, u1) -> (x_next, y)``;
+        Without ``n_samples``: one step ``vehid_spline_step(x, u0, u1) -> (x_next, y)``, the state in
+        original units (those of the output each state is tied to, as :meth:`simulate_outputs`' ``x0``);
         with it: ``vehid_spline_model(u (n_u, N)) -> y (n_y, N)``, the
         simulation from rest. Save it with ``Function.save(path)`` and load it
         with ``casadi.Function.load`` where the workbench is not installed.
@@ -499,10 +500,12 @@ class SplineModalModel(StateSpaceModel):
         constants = ca.DM(self.constants)
         scale_in = ca.DM(1.0 / self.input_scale)
         u0n, u1n = u0 * scale_in, u1 * scale_in
+        state_scale = ca.DM(self.state_scale())  # the state in original units, as simulate_outputs' x0
+        xn = x / state_scale
         step = ca.Function(
             "vehid_spline_step", [x, u0, u1],
-            [model.transition(x, theta, u0n, u1n, self.dt, self.discretization, constants),
-             model.output(x, theta, u0n, constants) * ca.DM(self.output_scale)],
+            [model.transition(xn, theta, u0n, u1n, self.dt, self.discretization, constants) * state_scale,
+             model.output(xn, theta, u0n, constants) * ca.DM(self.output_scale)],
             ["x", "u0", "u1"], ["x_next", "y"],
         )
         if n_samples is None:
