@@ -386,3 +386,13 @@ def test_the_identify_command_archives_a_discrete_model_and_reads_it_back(tmp_pa
     fit = percentage_explanation(record.y, run.model.simulate(record).y)
     np.testing.assert_allclose(fit, summary["fit_percent"], rtol=0, atol=1e-9)
     np.testing.assert_allclose(run.metrics.percentage_explanation, summary["fit_percent"], rtol=0, atol=1e-12)
+
+
+def test_the_uncertainty_band_is_centred_on_the_model_s_own_response():
+    """The delta-method band (its own CasADi expression, for the Jacobians) has the protocol's response at its centre."""
+    model = _model("modal", True)[0]
+    f_hz = np.array([0.1, 0.95, 3.2, 12.0])
+    band = model.frequency_response_band(f_hz)
+    response = model.frequency_response(f_hz)
+    np.testing.assert_allclose(band.magnitude, np.abs(response), rtol=1e-12)
+    np.testing.assert_allclose(np.radians(band.phase_deg), np.unwrap(np.angle(response), axis=0), rtol=0, atol=1e-12)
