@@ -389,7 +389,7 @@ def test_the_identify_command_archives_a_discrete_model_and_reads_it_back(tmp_pa
 
 
 def test_the_uncertainty_band_is_centred_on_the_model_s_own_response():
-    """The delta-method band (its own CasADi expression, for the Jacobians) has the protocol's response at its centre."""
+    """The delta-method band (its own CasADi expression, for Jacobians) is centred on the protocol's response."""
     model = _model("modal", True)[0]
     f_hz = np.array([0.1, 0.95, 3.2, 12.0])
     band = model.frequency_response_band(f_hz)
