@@ -324,7 +324,7 @@ def output_error_comparator(data: IOData, *, order: int, **options: Any) -> Moda
         try:  # each record simulated from rest
             model = ModalModel(structure, A, B, C, D)
             with np.errstate(over="ignore", invalid="ignore"):
-                error = np.concatenate([((model.simulate_outputs(record.u, dt, method="foh") - record.y)
+                error = np.concatenate([((model.simulate_outputs(record.u, dt) - record.y)
                                          * weights).ravel() for record in records])
         except InputError:
             return np.full(size, limit)
@@ -450,8 +450,8 @@ def identify_with(data: IOData, *, method: str, order: int, **options: Any) -> C
     model = COMPARATORS[method](data if isinstance(data, IOData) else records, order=order, **options)
     seconds = time.perf_counter() - start
     if len(records) == 1:
-        metrics = fit_metrics(records[0].y, model.simulate_outputs(records[0].u, records[0].dt, method="foh"))
+        metrics = fit_metrics(records[0].y, model.simulate_outputs(records[0].u, records[0].dt))
     else:  # each record from rest, all records scored together
-        simulated = [model.simulate_outputs(record.u, record.dt, method="foh") for record in records]
+        simulated = [model.simulate_outputs(record.u, record.dt) for record in records]
         metrics = fit_metrics(np.vstack([record.y for record in records]), np.vstack(simulated))
     return ComparatorResult(method, model, metrics, seconds, {"order": order, "records": len(records)})

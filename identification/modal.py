@@ -487,14 +487,31 @@ class ModalModel(StateSpaceModel):
         """Every eigenvalue in the open left half-plane."""
         return bool(np.all(self.mode_eigenvalues().real < 0))
 
-    def simulate_outputs(self, u: Any, dt: float, *, method: str = "foh", x0: Any = None, return_states: bool = False) -> Any:
+    @property
+    def n_u(self) -> int:
+        """Number of inputs."""
+        return self.structure.n_u
+
+    @property
+    def n_y(self) -> int:
+        """Number of outputs."""
+        return self.structure.n_y
+
+    @property
+    def n_states(self) -> int:
+        """Number of states (the order n)."""
+        return self.structure.n
+
+    def simulate_outputs(self, u: Any, dt: float | None = None, *, x0: Any = None, method: str = "foh",
+                         return_states: bool = False) -> Any:
         """Output of the model driven by ``u`` from state ``x0`` (default zero).
 
         Parameters
         ----------
         u : array_like, shape (N, n_u)
         dt : float
-            Sample interval (s).
+            Sample interval (s); required (the argument is optional only in the protocol's signature).
+        x0 : array_like, shape (n,), optional
         method : {"foh", "zoh", "euler"}
             ``foh``: exact, inputs linear between samples (the continuous model
             simulated exactly for such inputs); ``zoh``: exact, inputs held;
@@ -515,9 +532,7 @@ class ModalModel(StateSpaceModel):
         """
         s = self.structure
         u = self._checked_input(u, dt, method)
-        x0 = np.zeros(s.n) if x0 is None else np.asarray(x0, dtype=float).ravel()
-        if x0.shape != (s.n,):
-            raise InputError(f"x0 must have {s.n} entries; got {x0.shape}")
+        x0 = self.checked_state(x0)
         # without states asked for, y gathers each mode in turn: no (N, n) state array held for a long record
         x = np.empty((u.shape[0], s.n)) if return_states else None
         y = None if return_states else u @ self.D.T
@@ -547,16 +562,11 @@ class ModalModel(StateSpaceModel):
             return y
         return x @ self.C.T + u @ self.D.T, x
 
-    def _checked_input(self, u: Any, dt: float, method: str) -> np.ndarray:
+    def _checked_input(self, u: Any, dt: float | None, method: str) -> np.ndarray:
         """u as a float (N, n_u) array; InputError naming what is wrong with u, dt or method."""
-        u = np.asarray(u, dtype=float)
-        if u.ndim == 1:
-            u = u[:, None]
-        n_u = self.structure.n_u
-        if u.ndim != 2 or u.shape[1] != n_u:
-            raise InputError(f"u must have shape (N, {n_u}); got {u.shape}")
-        if not np.all(np.isfinite(u)):
-            raise InputError("u contains a non-finite value (NaN or inf)")
+        u = self.checked_input(u)
+        if dt is None:
+            raise InputError("a continuous-time model needs the sample interval dt of its input")
         if not (dt > 0 and np.isfinite(dt)):
             raise InputError(f"dt must be positive; got {dt}")
         if method not in SIMULATION_METHODS:

@@ -32,13 +32,22 @@ def pooled_percentage_explanation(pairs: Iterable[tuple[np.ndarray, np.ndarray]]
     return (1.0 - error / energy) * 100.0
 
 
-def pooled_simulation_fit(model: Any, records: Sequence[IOData], method: str = "foh") -> np.ndarray:
+def _simulation_options(method: str | None) -> dict[str, Any]:
+    """No options for the protocol's own simulation; ``method`` only where a caller asks a modal model for another."""
+    return {} if method is None else {"method": method}
+
+
+def pooled_simulation_fit(model: Any, records: Sequence[IOData], method: str | None = None) -> np.ndarray:
     """R per output of ``model`` simulated from rest over each record in turn, pooled.
 
+    ``method`` (a :class:`~identification.modal.ModalModel`'s simulation method)
+    is passed only where given; by default each model simulates as the
+    protocol says (exactly, inputs linear between samples, for a continuous one).
     ``-inf`` where a simulation overflowed (an unstable model, where one is allowed).
     """
+    options = _simulation_options(method)
     with np.errstate(all="ignore"):
-        fit = pooled_percentage_explanation((record.y, model.simulate_outputs(record.u, record.dt, method=method))
+        fit = pooled_percentage_explanation((record.y, model.simulate_outputs(record.u, record.dt, **options))
                                             for record in records)
     return np.where(np.isfinite(fit), fit, -np.inf)
 
@@ -73,16 +82,17 @@ class MultiRecordFit:
     fit_percent: np.ndarray
 
 
-def score_records(model: Any, data: IOData | Sequence[IOData], *, method: str = "foh",
+def score_records(model: Any, data: IOData | Sequence[IOData], *, method: str | None = None,
                   names: Sequence[str] | None = None) -> MultiRecordFit:
     """Simulate ``model`` on each record from rest and score it per record and pooled.
 
     Parameters
     ----------
-    model : ModalModel (anything with ``simulate(u, dt, method=...)``)
+    model : IdentifiedModel
     data : IOData or sequence of IOData
-    method : str
-        Simulation method, ``foh`` (exact, inputs linear between samples) by default.
+    method : str, optional
+        A modal model's simulation method; by default the model's own
+        (exact, inputs linear between samples, for a continuous model).
     names : sequence of str, optional
         Record names; default each record's ``meta["source"]`` or ``record k``.
 
@@ -92,7 +102,7 @@ def score_records(model: Any, data: IOData | Sequence[IOData], *, method: str = 
     records = as_records(data)
     fits, pairs = [], []
     for index, record in enumerate(records):
-        simulated = model.simulate_outputs(record.u, record.dt, method=method)
+        simulated = model.simulate_outputs(record.u, record.dt, **_simulation_options(method))
         name = names[index] if names is not None else str(record.meta.get("source", f"record {index + 1}"))
         fits.append(RecordFit(name, record.n_samples, FitMetrics(
             *(_defined(metric, record.y, simulated) for metric in (percentage_explanation, nrmse_fit, r_squared)))))

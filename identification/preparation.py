@@ -364,10 +364,10 @@ class Preparation:
         elapsed = (np.asarray(t) - t[0])[:, None]
         return (np.asarray(y) + offsets.output_offset + elapsed * offsets.output_slope) / self.output_scale
 
-    def simulate(self, model: Any, data: IOData, record: int | None = None, method: str = "foh") -> np.ndarray:
-        """The model's outputs on a raw record, in raw units: prepare the inputs, simulate, restore."""
+    def simulate(self, model: Any, data: IOData, record: int | None = None) -> np.ndarray:
+        """The model's outputs on a raw record, in raw units: prepare the inputs, simulate from rest, restore."""
         prepared = self.apply(data, record)
-        return self.restore_outputs(model.simulate_outputs(prepared.u, prepared.dt, method=method), data.t, record)
+        return self.restore_outputs(model.simulate_outputs(prepared.u, prepared.dt), data.t, record)
 
     def conversion_list(self) -> list[dict[str, Any]]:
         """Each converted channel with its factor (multiplying the raw channel) and what the factor is made of."""

@@ -1,11 +1,29 @@
 """What every identified model offers, whatever estimated it.
 
-:class:`IdentifiedModel` is the one surface that reports, metrics and
-exports rely on: simulate a record, eigenvalues and modes (frequency in Hz,
-damping ratio), frequency response, the state-space matrices and exports to
-python-control, CasADi, MATLAB and JSON. :class:`StateSpaceModel` implements
-it from ``to_statespace()`` (and, in continuous time, ``simulate_outputs``),
-so a model class supplies only what is its own.
+:class:`IdentifiedModel` is the one surface that reports, metrics, scores,
+archives and exports rely on, and the only one callers that take any model use:
+
+* ``n_states``, ``n_u``, ``n_y``; ``is_linear`` (False where the model is
+  nonlinear: scores then simulate it from rest, and its state-space form is
+  a linearisation);
+* ``simulate_outputs(u, dt=None, *, x0=None)``: outputs (N, n_y) driven by
+  ``u`` (N, n_u) from the state ``x0`` (default rest); ``simulate(record)``
+  does the same for an :class:`~identification.data.IOData` record. A class
+  may add keyword-only options of its own, which such callers never pass;
+* ``eigenvalues()`` (s-plane if continuous, z-plane if discrete),
+  ``modes()`` (frequency in Hz, damping ratio) and ``is_stable()``;
+* ``frequency_response(f_hz)``: ``C (p I - A)^-1 B + D`` at ``p = j 2 pi f``
+  in continuous time and ``p = exp(j 2 pi f dt)`` in discrete time;
+* ``to_statespace()`` giving ``(A, B, C, D, dt)`` (``dt`` None if
+  continuous), ``to_control()``, ``to_casadi()``, ``save_mat(path)``,
+  ``save_json(path)``;
+* a codec registered in :mod:`vehid.identification.storage`, so that an
+  archive holds the model and gives it back.
+
+:class:`StateSpaceModel` implements all of it from ``to_statespace()`` and
+the class's ``n_u`` and ``n_y``, discrete-time simulation included, so a
+model class supplies only what is its own (a continuous-time class its
+``simulate_outputs``).
 
 Modes are stated in continuous time: a discrete eigenvalue ``z`` at sample
 interval ``dt`` is the continuous ``lambda = log(z) / dt`` (principal branch).
@@ -57,9 +75,22 @@ class Mode:
 class IdentifiedModel(Protocol):
     """The protocol every identified model meets (see the module docstring)."""
 
-    def simulate(self, record: IOData, **options: Any) -> IOData: ...
+    is_linear: bool
 
-    def simulate_outputs(self, u: Any, dt: float | None = None, **options: Any) -> np.ndarray: ...
+    @property
+    def n_states(self) -> int: ...
+
+    @property
+    def n_u(self) -> int: ...
+
+    @property
+    def n_y(self) -> int: ...
+
+    def simulate(self, record: IOData) -> IOData: ...
+
+    def simulate_outputs(self, u: Any, dt: float | None = None, *, x0: Any = None) -> np.ndarray: ...
+
+    def is_stable(self) -> bool: ...
 
     def eigenvalues(self) -> np.ndarray: ...
 
@@ -82,35 +113,70 @@ class StateSpaceModel:
     """The protocol's methods from ``to_statespace`` (continuous models add ``simulate_outputs``)."""
 
     output_names: tuple[str, ...] | None = None
+    #: False for a model whose state-space form is only a linearisation (scores simulate it from rest).
+    is_linear = True
 
     def to_statespace(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float | None]:
         """``(A, B, C, D, dt)``; ``dt`` is None for a continuous-time model."""
         raise NotImplementedError
 
-    def simulate_outputs(self, u: Any, dt: float | None = None, *, method: str | None = None,
-                         x0: Any = None) -> np.ndarray:
-        """Outputs (N, n_y) driven by ``u`` (N, n_u) from ``x0`` (default zero).
+    @property
+    def n_states(self) -> int:
+        """Number of states (the order n)."""
+        return int(self.to_statespace()[0].shape[0])
 
-        This form serves discrete-time models: ``dt``, if given, must be the
-        model's, and ``method`` (a hold for continuous models) is ignored.
-        """
-        from scipy.signal import dlsim
-
-        A, B, C, D, model_dt = self.to_statespace()
-        if model_dt is None:
-            raise NotImplementedError("a continuous-time model simulates itself")
+    def checked_input(self, u: Any) -> np.ndarray:
+        """``u`` as a finite float (N, n_u) array (1-D: one input); InputError naming what is wrong."""
         u = np.asarray(u, dtype=float)
         if u.ndim == 1:
             u = u[:, None]
-        if u.ndim != 2 or u.shape[1] != B.shape[1]:
-            raise InputError(f"u must have shape (N, {B.shape[1]}); got {u.shape}")
+        if u.ndim != 2 or u.shape[1] != self.n_u:
+            raise InputError(f"u must have shape (N, {self.n_u}); got {u.shape}")
+        if not np.all(np.isfinite(u)):
+            raise InputError("u contains a non-finite value (NaN or inf)")
+        return u
+
+    def checked_state(self, x0: Any) -> np.ndarray:
+        """``x0`` as an (n,) array, zero where None; InputError for another length or a non-finite entry."""
+        n = self.n_states
+        if x0 is None:
+            return np.zeros(n)
+        x0 = np.asarray(x0, dtype=float).ravel()
+        if x0.shape != (n,) or not np.all(np.isfinite(x0)):
+            raise InputError(f"x0 must hold {n} finite entries; got shape {x0.shape}")
+        return x0
+
+    def simulate_outputs(self, u: Any, dt: float | None = None, *, x0: Any = None) -> np.ndarray:
+        """Outputs (N, n_y) driven by ``u`` (N, n_u) from ``x0`` (default zero).
+
+        This form serves discrete-time models, ``x(k+1) = A x(k) + B u(k)``,
+        ``y(k) = C x(k) + D u(k)``: ``dt``, if given, must be the model's.
+        """
+        A, B, C, D, model_dt = self.to_statespace()
+        if model_dt is None:
+            raise NotImplementedError("a continuous-time model simulates itself")
         if dt is not None and not np.isclose(dt, model_dt, rtol=1e-6):
             raise InputError(f"this discrete model has dt = {model_dt} s; the record has {dt} s")
-        x0 = np.zeros(A.shape[0]) if x0 is None else np.asarray(x0, dtype=float).ravel()
-        if u.shape[0] == 1:
-            return (C @ x0 + D @ u[0])[None, :]
-        _, y, _ = dlsim((A, B, C, D, model_dt), u, x0=x0)
-        return np.asarray(y).reshape(u.shape[0], C.shape[0])
+        u = self.checked_input(u)
+        x = self.checked_state(x0)
+        states = np.empty((u.shape[0], A.shape[0]))
+        drive = u @ B.T
+        for k in range(u.shape[0]):
+            states[k] = x
+            x = A @ x + drive[k]
+        return states @ C.T + u @ D.T
+
+    def simulate(self, record: IOData, *, x0: Any = None) -> IOData:
+        """``record`` with its outputs replaced by the model's, driven by its inputs from ``x0`` (default rest)."""
+        y = self.simulate_outputs(record.u, record.dt, x0=x0)
+        names = self.output_names if self.output_names and len(self.output_names) == y.shape[1] else None
+        return IOData(t=record.t, u=record.u, y=y, input_names=record.input_names, output_names=names,
+                      input_units=record.input_units, meta=dict(record.meta))
+
+    def is_stable(self) -> bool:
+        """Every eigenvalue in the open left half-plane (continuous) or strictly inside the unit circle (discrete)."""
+        values, dt = np.asarray(self.eigenvalues(), dtype=complex), self.to_statespace()[4]
+        return bool(np.all(values.real < 0)) if dt is None else bool(np.all(np.abs(values) < 1))
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready state-space form: time domain, dt, matrices, eigenvalues as [re, im]."""
@@ -118,16 +184,6 @@ class StateSpaceModel:
         return {"time_domain": "continuous" if dt is None else "discrete", "dt": dt, "A": A.tolist(),
                 "B": B.tolist(), "C": C.tolist(), "D": D.tolist(),
                 "eigenvalues": [[float(v.real), float(v.imag)] for v in self.eigenvalues()]}
-
-    def simulate(self, record: IOData, **options: Any) -> IOData:
-        """``record`` with its outputs replaced by the model's, driven by its inputs from rest.
-
-        Options go to :meth:`simulate_outputs`.
-        """
-        y = self.simulate_outputs(record.u, record.dt, **options)
-        names = self.output_names if self.output_names and len(self.output_names) == y.shape[1] else None
-        return IOData(t=record.t, u=record.u, y=y, input_names=record.input_names, output_names=names,
-                      input_units=record.input_units, meta=dict(record.meta))
 
     def eigenvalues(self) -> np.ndarray:
         """Eigenvalues of A (s-plane for continuous models, z-plane for discrete ones)."""
@@ -152,8 +208,9 @@ class StateSpaceModel:
             raise InputError("f_hz must be a finite 1-D array of frequencies (Hz)")
         s = 2j * np.pi * f_hz
         points = s if dt is None else np.exp(s * dt)
-        eye = np.eye(A.shape[0])
-        return np.array([C @ np.linalg.solve(p * eye - A, B) + D for p in points]).reshape(f_hz.size, *D.shape)
+        resolvent = points[:, None, None] * np.eye(A.shape[0]) - A
+        states = np.linalg.solve(resolvent, np.broadcast_to(B.astype(complex), (f_hz.size, *B.shape)))
+        return C @ states + D
 
     def to_control(self) -> Any:
         """A ``control.StateSpace`` (python-control, imported only here)."""
@@ -188,9 +245,11 @@ class StateSpaceModel:
         return path
 
     def save_json(self, path: str | Path) -> Path:
-        """Write ``to_dict()`` as JSON."""
+        """Write ``to_dict()`` as JSON, with the time domain and ``dt`` of :meth:`to_statespace` first."""
         path = Path(path)
-        path.write_text(json.dumps(self.to_dict(), indent=2, default=str) + "\n")
+        dt = self.to_statespace()[4]
+        values = {"time_domain": "continuous" if dt is None else "discrete", "dt": dt, **self.to_dict()}
+        path.write_text(json.dumps(values, indent=2, default=str) + "\n")
         return path
 
 

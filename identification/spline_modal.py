@@ -321,22 +321,36 @@ class SplineModalModel(StateSpaceModel):
         x0 = np.zeros(self.structure.linear.n) if x0 is None else x0
         return sim(x0, u_normalised, np.concatenate([self.theta, self.constants]))
 
-    def simulate_outputs(self, u: Any, dt: float | None = None, *, return_states: bool = False) -> Any:
-        """Outputs (N, n_y) in original units from rest, for inputs (N, n_u) in original units.
+    #: Nonlinear: its state-space form is the linearisation at rest, and scores simulate it from rest.
+    is_linear = False
+
+    @property
+    def n_u(self) -> int:
+        """Number of inputs."""
+        return self.structure.linear.n_u
+
+    @property
+    def n_y(self) -> int:
+        """Number of outputs."""
+        return self.structure.linear.n_y
+
+    @property
+    def n_states(self) -> int:
+        """Number of states (the order n)."""
+        return self.structure.linear.n
+
+    def simulate_outputs(self, u: Any, dt: float | None = None, *, x0: Any = None,
+                         return_states: bool = False) -> Any:
+        """Outputs (N, n_y) in original units from ``x0`` (original units; default rest), for inputs (N, n_u).
 
         ``dt`` must equal the sample interval the model was identified at
         (its discrete-time behaviour is tied to it).
         """
-        u = np.asarray(u, dtype=float)
-        if u.ndim == 1:
-            u = u[:, None]
-        if u.ndim != 2 or u.shape[1] != self.structure.linear.n_u:
-            raise InputError(f"u must have shape (N, {self.structure.linear.n_u}); got {u.shape}")
-        if not np.all(np.isfinite(u)):
-            raise InputError("u contains a non-finite value (NaN or inf)")
+        u = self.checked_input(u)
         if dt is not None and not np.isclose(dt, self.dt, rtol=1e-9):
             raise InputError(f"this model was identified at dt = {self.dt} s; got {dt} s")
-        y, x = self.simulate_normalised(u / self.input_scale)
+        start = self.checked_state(x0) / self.state_scale()
+        y, x = self.simulate_normalised(u / self.input_scale, start)
         y = y * self.output_scale
         return (y, x * self.state_scale()) if return_states else y
 
@@ -472,7 +486,8 @@ class SplineModalModel(StateSpaceModel):
     def to_casadi(self, n_samples: int | None = None) -> ca.Function:
         """A self-contained CasADi Function in original units, splines, ranges and scales embedded.
 
-        Without ``n_samples``: one step ``vehid_spline_step(x, u0, u1) -> (x_next, y)``;
+        Without ``n_samples``: one step ``vehid_spline_step(x, u0, u1) -> (x_next, y)``, the state in
+        original units (those of the output each state is tied to, as :meth:`simulate_outputs`' ``x0``);
         with it: ``vehid_spline_model(u (n_u, N)) -> y (n_y, N)``, the
         simulation from rest. Save it with ``Function.save(path)`` and load it
         with ``casadi.Function.load`` where the workbench is not installed.
@@ -485,10 +500,12 @@ class SplineModalModel(StateSpaceModel):
         constants = ca.DM(self.constants)
         scale_in = ca.DM(1.0 / self.input_scale)
         u0n, u1n = u0 * scale_in, u1 * scale_in
+        state_scale = ca.DM(self.state_scale())  # the state in original units, as simulate_outputs' x0
+        xn = x / state_scale
         step = ca.Function(
             "vehid_spline_step", [x, u0, u1],
-            [model.transition(x, theta, u0n, u1n, self.dt, self.discretization, constants),
-             model.output(x, theta, u0n, constants) * ca.DM(self.output_scale)],
+            [model.transition(xn, theta, u0n, u1n, self.dt, self.discretization, constants) * state_scale,
+             model.output(xn, theta, u0n, constants) * ca.DM(self.output_scale)],
             ["x", "u0", "u1"], ["x_next", "y"],
         )
         if n_samples is None:

@@ -23,6 +23,7 @@ from .modal import ModalModel, ModalStructure
 __all__ = [
     "HOLDS",
     "continuous_to_discrete",
+    "hold_state_shift",
     "discrete_to_continuous",
     "modal_structure_for",
     "to_modal",
@@ -87,6 +88,19 @@ def continuous_to_discrete(A: Any, B: Any, C: Any, D: Any, dt: float, *, hold: s
     g1 = dt * (phi1 - phi2) @ B
     g2 = dt * phi2 @ B
     return phi, g1 + phi @ g2, C.copy(), D + C @ g2
+
+
+def hold_state_shift(A: Any, B: Any, dt: float) -> np.ndarray:
+    """``G2 = T phi2(AT) B`` (n, n_u): the first-order-hold equivalent's state is ``xi = x - G2 u``.
+
+    A continuous state ``x0`` at the first sample is ``xi0 = x0 - G2 u(0)``
+    in the discrete model :func:`continuous_to_discrete` returns for ``foh``.
+    """
+    A, B = finite_matrix("A", A), finite_matrix("B", B)
+    if A.shape != (A.shape[0], A.shape[0]) or B.shape[0] != A.shape[0]:
+        raise InputError(f"A {A.shape} and B {B.shape} do not make a state-space model")
+    _check_hold("foh", dt)
+    return dt * _phi_matrices(A, dt)[2] @ B
 
 
 def _diagonalise(A: np.ndarray, what: str) -> tuple[np.ndarray, np.ndarray]:

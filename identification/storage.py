@@ -106,6 +106,10 @@ def register_codec(cls: type, schema: str, version: int = 1, *, legacy_path: str
 def _register_identification_types() -> None:
     # On first use, not at import: these modules load the numerics, which storing a dict does not need.
     from . import data, iekf, metrics, modal, preparation, residuals, scheduled, spline_iekf, spline_modal
+    from .discrete import ContinuousModel, DiscreteModel
+    from .least_squares import ArxModel  # by name: the package's ``least_squares`` is the function
+    from .pencil import PencilModel
+    from .subspace import SubspaceResult
 
     for cls, schema, legacy_path in (
         (data.IOData, "io_data", "identification.data:IOData"),
@@ -125,6 +129,15 @@ def _register_identification_types() -> None:
          "identification.spline_modal:SplineModalStructure"),
     ):
         register_codec(cls, schema, legacy_path=legacy_path)
+    # every other identified model class: dataclasses, one member per field (never archived before schemas)
+    for cls, schema in (
+        (DiscreteModel, "discrete_model"),
+        (ContinuousModel, "continuous_model"),
+        (ArxModel, "arx_model"),
+        (PencilModel, "pencil_model"),
+        (SubspaceResult, "subspace_model"),
+    ):
+        register_codec(cls, schema)
 
 
 def _check_reserved(name: str) -> None:

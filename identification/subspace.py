@@ -80,6 +80,16 @@ class SubspaceResult(StateSpaceModel):
     block_rows: int
     dt: float | None
 
+    @property
+    def n_u(self) -> int:
+        """Number of inputs."""
+        return int(self.B.shape[1])
+
+    @property
+    def n_y(self) -> int:
+        """Number of outputs."""
+        return int(self.C.shape[0])
+
     def to_statespace(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
         """Discrete ``(A, B, C, D, dt)``."""
         return self.A, self.B, self.C, self.D, sample_interval(self.dt, "subspace model")

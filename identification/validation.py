@@ -19,8 +19,7 @@ import scipy.linalg
 from .data import IOData
 from .errors import InputError
 from .metrics import nrmse_fit, percentage_explanation
-from .discrete import DiscreteModel
-from .modal import ModalModel
+from .statespace import continuous_to_discrete, hold_state_shift
 
 __all__ = [
     "INITIAL_STATES",
@@ -81,43 +80,29 @@ class Scores:
 def _check(model: Any, data: IOData) -> None:
     if not isinstance(data, IOData):
         raise InputError("scores need an IOData record")
-    n_u, n_y = _sizes(model)
-    if (data.n_u, data.n_y) != (n_u, n_y):
-        raise InputError(f"the model has {n_u} inputs and {n_y} outputs; the record has {data.n_u} and {data.n_y}")
+    if (data.n_u, data.n_y) != (model.n_u, model.n_y):
+        raise InputError(f"the model has {model.n_u} inputs and {model.n_y} outputs; "
+                         f"the record has {data.n_u} and {data.n_y}")
 
 
-def _sizes(model: Any) -> tuple[int, int]:
-    if isinstance(model, ModalModel):
-        return model.structure.n_u, model.structure.n_y
-    if isinstance(model, DiscreteModel):
-        return model.n_u, model.n_y
-    if hasattr(model, "record_inputs"):  # a scheduled family: its inputs and, last, the schedule
-        return model.record_inputs, model.structure.n_y
-    linear = model.structure.linear
-    return linear.n_u, linear.n_y
-
-
-def _linear(model: Any) -> bool:
-    return isinstance(model, (ModalModel, DiscreteModel))
-
-
-def estimate_initial_state(model: ModalModel | DiscreteModel, data: IOData, *, method: str = "foh") -> np.ndarray:
-    """The initial state ``x0`` (n,) that fits the record best, by linear least squares.
+def estimate_initial_state(model: Any, data: IOData) -> np.ndarray:
+    """The initial state ``x0`` (n,) of a linear model that fits the record best, by linear least squares.
 
     The regressors are the free responses of the model's states (one
     simulation from each unit state with zero input); each output is
     weighted by the inverse of its RMS so that units do not matter.
+    ``model`` is any linear :class:`~identification.protocol.IdentifiedModel`.
     """
     _check(model, data)
-    n = model.n_states if isinstance(model, DiscreteModel) else model.structure.n
+    n = model.n_states
     weights = 1.0 / np.maximum(np.sqrt(np.mean(data.y**2, axis=0)), 1e-300)
     window = _free_response_samples(model, data)
     u, y = data.u[:window], data.y[:window]
     with np.errstate(all="ignore"):
-        forced = model.simulate_outputs(u, data.dt, method=method)
+        forced = model.simulate_outputs(u, data.dt)
         zero = np.zeros_like(u)
         free = np.column_stack([
-            (model.simulate_outputs(zero, data.dt, method=method, x0=np.eye(n)[i]) * weights).ravel() for i in range(n)
+            (model.simulate_outputs(zero, data.dt, x0=np.eye(n)[i]) * weights).ravel() for i in range(n)
         ])
     target = ((y - forced) * weights).ravel()
     if not (np.all(np.isfinite(free)) and np.all(np.isfinite(target))):
@@ -128,15 +113,16 @@ def estimate_initial_state(model: ModalModel | DiscreteModel, data: IOData, *, m
 _FREE_RESPONSE_TIME_CONSTANTS = 10  # e^-10: beyond this the initial state's response is below rounding of the fit
 
 
-def _free_response_samples(model: ModalModel | DiscreteModel, data: IOData) -> int:
+def _free_response_samples(model: Any, data: IOData) -> int:
     """The samples over which the initial state still shows: ten time constants of the slowest stable mode.
 
     Past them the free responses are below 5e-5 of their start, so the least-squares fit over the
     rest of a long record would only cost memory (an (N n_y, n) regressor). An unstable or
     undamped model keeps the whole record.
     """
-    if isinstance(model, DiscreteModel):
-        largest = float(np.max(np.abs(np.linalg.eigvals(model.A)))) if model.n_states else 0.0
+    if model.to_statespace()[4] is not None:  # discrete: eigenvalues in the z-plane
+        values = np.asarray(model.eigenvalues())
+        largest = float(np.max(np.abs(values))) if values.size else 0.0
         if largest >= 1.0:
             return data.n_samples
         samples = _FREE_RESPONSE_TIME_CONSTANTS / max(-np.log(max(largest, 1e-300)), 1e-300)
@@ -150,19 +136,16 @@ def _free_response_samples(model: ModalModel | DiscreteModel, data: IOData) -> i
 
 def default_horizon(model: Any) -> int | None:
     """None for a stable model (simulate); for an unstable one a short k-step-ahead horizon."""
-    if _linear(model) and not model.is_stable():
+    if model.is_linear and not model.is_stable():
         return UNSTABLE_HORIZON
     return None
 
 
-def _k_step(model: ModalModel, data: IOData, horizon: int) -> np.ndarray:
+def _k_step(model: Any, data: IOData, horizon: int) -> np.ndarray:
     """Outputs predicted ``horizon`` samples ahead of a steady-state Kalman filter's state; the first ``horizon`` from rest."""
-    from .statespace import _phi_matrices, continuous_to_discrete
-
-    if isinstance(model, DiscreteModel):
-        Ad, Bd, Cd, Dd = model.A, model.B, model.C, model.D
-    else:
-        Ad, Bd, Cd, Dd = continuous_to_discrete(model.A, model.B, model.C, model.D, data.dt, hold="foh")
+    A, B, C, D, model_dt = model.to_statespace()
+    continuous = model_dt is None
+    Ad, Bd, Cd, Dd = continuous_to_discrete(A, B, C, D, data.dt, hold="foh") if continuous else (A, B, C, D)
     scale = np.maximum(np.sqrt(np.mean(data.y**2, axis=0)), 1e-300)
     Cn, Dn = Cd / scale[:, None], Dd / scale[:, None]
     yn = data.y / scale
@@ -185,8 +168,8 @@ def _k_step(model: ModalModel, data: IOData, horizon: int) -> np.ndarray:
     window = data if model.is_stable() else data[: min(N, max(_UNSTABLE_WINDOW, 10 * n))]
     if window.n_samples > n:
         x = estimate_initial_state(model, window)
-        if isinstance(model, ModalModel):
-            x = x - data.dt * _phi_matrices(model.A, data.dt)[2] @ model.B @ u[0]
+        if continuous:
+            x = x - hold_state_shift(A, B, data.dt) @ u[0]
     observer = Ad - gain @ Cn
     drive = u @ (Bd - gain @ Dn).T + yn @ gain.T
     for k in range(N):  # the one-step predictor's state x(k|k-1)
@@ -208,9 +191,9 @@ def predict(model: Any, data: IOData, *, initial_state: str = "estimate", horizo
 
     Parameters
     ----------
-    model : ModalModel, SplineModalModel or ScheduledModalModel
-        Spline models are simulated from rest in their own time base; a
-        scheduled family from rest along the record's last input column, its schedule.
+    model : IdentifiedModel
+        A nonlinear model (``is_linear`` False) is simulated from rest; a scheduled
+        family (also ``is_linear`` False) along the record's last input column, its schedule.
     data : IOData
     initial_state : {"zero", "estimate"}
         Linear models only; ``estimate`` by :func:`estimate_initial_state`.
@@ -220,7 +203,7 @@ def predict(model: Any, data: IOData, *, initial_state: str = "estimate", horizo
     _check(model, data)
     if initial_state not in INITIAL_STATES:
         raise InputError(f"unknown initial state {initial_state!r}; use one of {', '.join(INITIAL_STATES)}")
-    if not _linear(model):
+    if not model.is_linear:
         return model.simulate_outputs(data.u, data.dt)
     if horizon is not None:
         if isinstance(horizon, bool) or int(horizon) != horizon or horizon < 1:
@@ -241,7 +224,7 @@ def score(model: Any, data: IOData, *, initial_state: str = "estimate", horizon:
             fit, R = nrmse_fit(y, y_hat), percentage_explanation(y, y_hat)
         else:
             fit = R = np.full(data.n_y, -np.inf)
-    return Scores(fit, R, initial_state if _linear(model) and horizon is None else "zero",
+    return Scores(fit, R, initial_state if model.is_linear and horizon is None else "zero",
                   horizon, int(y.shape[0]))
 
 

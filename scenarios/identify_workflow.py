@@ -47,7 +47,6 @@ from vehid.identification.errors import DivergenceError, InputError, StrictWarni
 from vehid.identification.iekf import (INVARIANT_P, INVARIANT_P_DECAY, START_CHOICES, TIMESCALES, IEKFOptions,
                                       identify_iekf, invariant_noise_settings, normalized_data_start, signal_scales,
                                       start_structure)
-from vehid.identification.discrete import DiscreteModel
 from vehid.identification.modal import ModalModel, ModalStructure
 from vehid.identification.uncertainty import simulation_error_covariance
 from vehid.identification.validation import (INITIAL_STATES, UNSTABLE_HORIZON, Scores, default_horizon, score,
@@ -102,7 +101,6 @@ __all__ = [
 ]
 
 AUTO_MAX_ORDER = 8
-LINEAR_MODELS = (ModalModel, DiscreteModel)
 ORDER_TOLERANCE = 0.5  # points of mean validation fit
 AUTO_HOLDOUT = 0.3  # fraction held out to choose an order when no validation data are given
 START_HELP = ("start values: data (a subspace model of the record, default), band (modes across the record's band), "
@@ -776,7 +774,7 @@ def run_warnings(*, model: Any, evaluation: Evaluation, stop_reason: str | None,
     if start_moved is False and not p_tuned and final_fit is not None and final_fit < NOTHING_TO_GAIN:
         lines.append(f"{prefix}the model is no better than its start: its modes stayed at their start values "
                      f"(mean R {final_fit:.3f} %); give a larger --p")
-    if isinstance(model, LINEAR_MODELS) and not allow_unstable and not model.is_stable():
+    if model.is_linear and not allow_unstable and not model.is_stable():
         lines.append(f"{prefix}the model is unstable where stability was asked: lower the order, or give "
                      "--allow-unstable for an open-loop unstable plant")
     scored = [("estimation", evaluation.estimation)] + [("validation", s) for s in evaluation.validation]
@@ -839,7 +837,7 @@ def search_orders(plan: Plan, fit_one: Callable[[int], tuple[Any, dict[str, Any]
             continue
         evaluation = evaluate(model, plan, args)
         assumed = (extra.get("open_loop_unstable") or {}).get("assumed", False)  # as --allow-unstable
-        stable_enough = args.allow_unstable or assumed or not isinstance(model, LINEAR_MODELS) or model.is_stable()
+        stable_enough = args.allow_unstable or assumed or not model.is_linear or model.is_stable()
         row.update(
             fit_percent=extra.get("fit_percent"),
             estimation_fit_percent=evaluation.estimation.fit,

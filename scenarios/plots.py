@@ -437,31 +437,36 @@ def plot_splines(
     return fig
 
 
-def _state_space(model: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    if all(hasattr(model, name) for name in "ABCD"):
-        matrices = (model.A, model.B, model.C, model.D)
-    else:
-        matrices = tuple(model)
-        if len(matrices) != 4:
-            raise InputError("a model must be a ModalModel or an (A, B, C, D) tuple")
+def _as_model(model: Any) -> Any:
+    """``model`` itself where it offers a frequency response; an ``(A, B, C, D)`` tuple as a continuous model."""
+    if hasattr(model, "frequency_response") and hasattr(model, "to_statespace"):
+        return model
+    from vehid.identification.discrete import ContinuousModel
+
+    matrices = tuple(model) if isinstance(model, (tuple, list)) else ()
+    if len(matrices) != 4:
+        raise InputError("a model must meet the identified-model protocol or be an (A, B, C, D) tuple")
     A, B, C, D = (np.atleast_2d(np.asarray(m, dtype=float)) for m in matrices)
-    n = A.shape[0]
-    if A.shape != (n, n) or B.shape[0] != n or C.shape[1] != n or D.shape != (C.shape[0], B.shape[1]):
-        raise InputError(f"inconsistent state-space shapes A {A.shape}, B {B.shape}, C {C.shape}, D {D.shape}")
-    return A, B, C, D
+    try:
+        return ContinuousModel(A, B, C, D)
+    except InputError as exc:
+        raise InputError(f"inconsistent state-space shapes A {A.shape}, B {B.shape}, C {C.shape}, D {D.shape}: "
+                         f"{exc}") from None
 
 
 def frequency_response(model: Any, frequencies_hz: Any, input_index: int = 0) -> np.ndarray:
-    """``G(j w) = C (j w I - A)^-1 B + D`` for one input column.
+    """The model's own frequency response from one input: column ``input_index`` of ``model.frequency_response``.
+
+    A discrete-time model's response is its own, at ``z = exp(j 2 pi f dt)``.
 
     Parameters
     ----------
-    model : ModalModel or (A, B, C, D)
-        A continuous-time state-space model.
+    model : IdentifiedModel or (A, B, C, D)
+        A tuple is a continuous-time state-space model.
     frequencies_hz : array_like, shape (n_f,)
         Frequencies in Hz (``w = 2 pi f``).
     input_index : int
-        The column of B and D.
+        The input (column of B and D).
 
     Returns
     -------
@@ -473,15 +478,10 @@ def frequency_response(model: Any, frequencies_hz: Any, input_index: int = 0) ->
     >>> np.round(g, 6)
     array([[0.5-0.5j]])
     """
-    A, B, C, D = _state_space(model)
-    if not 0 <= input_index < B.shape[1]:
-        raise InputError(f"input_index {input_index} out of range for {B.shape[1]} inputs")
-    omega = 2 * np.pi * np.asarray(frequencies_hz, dtype=float).ravel()
-    n = A.shape[0]
-    resolvent = 1j * omega[:, None, None] * np.eye(n) - A
-    column = np.broadcast_to(B[:, [input_index]].astype(complex), (omega.size, n, 1))
-    states = np.linalg.solve(resolvent, column)[..., 0]  # (n_f, n)
-    return states @ C.T + D[:, input_index]
+    model = _as_model(model)
+    if not 0 <= input_index < model.n_u:
+        raise InputError(f"input_index {input_index} out of range for {model.n_u} inputs")
+    return model.frequency_response(np.asarray(frequencies_hz, dtype=float).ravel())[:, :, input_index]
 
 
 def plot_bode(

@@ -174,6 +174,26 @@ def test_frequency_response_matches_scipy():
         plots.frequency_response(model, f, 1)
 
 
+def test_a_discrete_model_is_plotted_with_its_own_response():
+    """At z = exp(j 2 pi f dt): periodic in 1/dt, and near the continuous system's well below it."""
+    from vehid.identification.discrete import DiscreteModel
+    from vehid.identification.statespace import continuous_to_discrete
+
+    model, dt = _model(n_y=1), 0.05
+    discrete = DiscreteModel(*continuous_to_discrete(model.A, model.B, model.C, model.D, dt), dt)
+    f = np.array([0.02, 0.2, 2.0, 7.0])
+    got = plots.frequency_response(discrete, f)
+    np.testing.assert_array_equal(got, discrete.frequency_response(f)[:, :, 0])
+    np.testing.assert_allclose(plots.frequency_response(discrete, f + 1 / dt), got, rtol=1e-9)
+    # at f dt = 1e-3 the first-order-hold equivalent departs from the continuous response by O((2 pi f dt)^2)
+    np.testing.assert_allclose(got[0], plots.frequency_response(model, f[:1])[0], rtol=(2 * np.pi * 1e-3) ** 2)
+    # while at 7 Hz (f dt = 0.35) the two differ clearly: a plot evaluating the discrete model at s would be wrong
+    assert abs(got[3, 0] - plots.frequency_response(model, f[3:])[0, 0]) > 0.01 * abs(got[3, 0])
+    fig = plots.plot_bode({"discrete": discrete}, reference=model, frequencies=f)
+    magnitude = fig.axes[0].get_lines()[0].get_ydata()
+    np.testing.assert_allclose(magnitude, np.abs(got[:, 0]), rtol=1e-12)
+
+
 def test_bode_magnitude_and_phase_per_output():
     model = _model()
     fig = plots.plot_bode({"identified": model}, reference=(model.A * 1.1, model.B, model.C, model.D),

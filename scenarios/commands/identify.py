@@ -457,7 +457,7 @@ def _run_comparator(args: argparse.Namespace, plan) -> tuple[dict, str]:
 def _archive_comparator(args: argparse.Namespace, plan, outcome) -> Path:
     """The records and the comparator's model and fit, as ``runs/<method>`` of an identification archive."""
     path = Path(args.out)
-    config = {"method": args.method, "order": outcome.model.structure.n}
+    config = {"method": args.method, "order": outcome.model.n_states}
     with write_archive(path, kind=ARCHIVE_KIND, config=config, seeds=[]) as archive:
         archive.attrs[RUN_ATTRIBUTE] = args.output_run
         _archive_plan(archive, plan)
