@@ -39,7 +39,18 @@ States (in this order): u, v, w (m/s); p, q, r (rad/s); z (heave of the CG
 from its static height, m); phi, theta, psi (rad); omega_fl, omega_fr,
 omega_rl, omega_rr (rad/s); alpha_fl ... alpha_rr (lagged lateral slip, -);
 kappa_fl ... kappa_rr (lagged slip ratio, -); speed_error_integral (m).
-Input: steer (road-wheel angle, rad). Parameter: reference_speed (m/s).
+Input: steer (rad): the steering-wheel angle over the steering ratio, which is
+the road-wheel angle when the steering is rigid (compliance zero, as in the
+baseline). Parameter: reference_speed (m/s).
+
+Steering. With a steering compliance ``c`` (:class:`~vehid.vehicle.parameters.SteeringParameters`), the
+road wheels stand at ``delta = steer + c M`` with ``M`` the sum over the two
+front wheels of the Magic Formula aligning moment and of ``-t_m F_y``, the
+lateral force at the caster trail ``t_m`` (ISO signs: in a left turn ``M`` is
+negative and the wheels yield towards straight ahead). The moments depend on
+the lagged slips and the loads, which are states or algebraic in states, so
+the massless steering needs no state of its own: quasi-static, the state count
+stays 23.
 
 Speed hold. The PI law acts on the speed error; a speed profile adds the
 reference's rate as feed-forward (:attr:`VehicleModel.tracking_dynamics`,
@@ -67,7 +78,7 @@ import numpy as np
 from vehid.identification.errors import DivergenceError, InputError
 
 from .parameters import GRAVITY, VehicleParameters, static_axle_loads
-from .tyre import combined_forces
+from .tyre import aligning_moment, combined_forces
 from .validity import check_speed_range
 
 __all__ = [
@@ -386,11 +397,31 @@ def build_vehicle_model(params: VehicleParameters) -> VehicleModel:
     drive_torque_front = 0.5 * m * tyre.rolling_radius * demand - 0.5 * rear_axle_torque
     drive_torque = (drive_torque_front, drive_torque_front, 0.5 * rear_axle_torque, 0.5 * rear_axle_torque)
 
+    # Tyre forces from the lagged slips and the loads: they do not depend on the steer.
+    tyre_forces = [
+        combined_forces(s[f"kappa_{corner}"], s[f"alpha_{corner}"], load[i], tyre,
+                        scale=cornering_scale[i], mirrored=corner_y[i] < 0)
+        for i, corner in enumerate(CORNERS)
+    ]
+    road_wheel_angle = steer
+    if params.steering.compliance > 0:
+        # Quasi-static steering compliance: the road wheels yield to the moments about the steering
+        # axes, the aligning moment plus the lateral force at the caster trail. Both are functions of
+        # the lagged slips (states), so the road-wheel angle is explicit and no state is added.
+        kingpin_moment = 0
+        for i, corner in enumerate(CORNERS):
+            if steered[i]:
+                fx, fy = tyre_forces[i]
+                moment = aligning_moment(s[f"kappa_{corner}"], s[f"alpha_{corner}"], load[i], tyre,
+                                         scale=cornering_scale[i], mirrored=corner_y[i] < 0, lateral_force=fy)
+                kingpin_moment = kingpin_moment + moment - params.steering.mechanical_trail * fy
+        road_wheel_angle = steer + params.steering.compliance * kingpin_moment
+
     force_body = ca.SX.zeros(3)
     moment_body = ca.SX.zeros(3)
     lateral_force_road = 0
     slip_lateral_rate, slip_longitudinal_rate, wheel_acceleration = [], [], []
-    cos_steer, sin_steer = ca.cos(steer), ca.sin(steer)
+    cos_steer, sin_steer = ca.cos(road_wheel_angle), ca.sin(road_wheel_angle)
     for i, corner in enumerate(CORNERS):
         # The wheel follows the body point at static ground level below its strut
         # (roll and pitch axes at the ground), horizontally only: its contact point
@@ -409,9 +440,7 @@ def build_vehicle_model(params: VehicleParameters) -> VehicleModel:
         slip_longitudinal_rate.append(
             (tyre.rolling_radius * omega - v_cx - abs_v_cx * kappa) / longitudinal_relaxation[i]
         )
-        fx, fy = combined_forces(
-            kappa, alpha, load[i], tyre, scale=cornering_scale[i], mirrored=corner_y[i] < 0
-        )
+        fx, fy = tyre_forces[i]
         wheel_acceleration.append((drive_torque[i] - tyre.rolling_radius * fx) / tyre.wheel_inertia)
         force_road = ca.vertcat(cd * fx - sd * fy, sd * fx + cd * fy, load[i])
         lateral_force_road = lateral_force_road + force_road[1]
