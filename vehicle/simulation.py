@@ -276,6 +276,7 @@ def simulate(
     speed: Any = None,
     method: str = "rk4",
     meta: dict | None = None,
+    t0: float | None = None,
 ) -> IOData:
     """Simulate the 23-state vehicle from its trim under a road-wheel steer series.
 
@@ -299,6 +300,8 @@ def simulate(
         1e-12, restarted at every sample, as a cross-check (much slower).
     meta : dict, optional
         Extra metadata to store with the record (manoeuvre, seed, ...).
+    t0 : float, optional
+        Time of the first sample (s), default 0 (an IOData's own first time).
 
     Returns
     -------
@@ -327,6 +330,7 @@ def simulate(
         record up to that sample (meta ``partial`` and ``stop_reason``).
     """
     params = named_vehicle(params)
+    start_time = t0
     t0 = 0.0
     extra: dict[str, Any] = {}
     if isinstance(steer, IOData):
@@ -351,6 +355,10 @@ def simulate(
         steer = steer.steer
     if steer is None:
         raise InputError("give a steer series (rad)")
+    if start_time is not None:
+        t0 = float(start_time)
+        if not math.isfinite(t0):
+            raise InputError(f"the start time must be finite; got {start_time}")
     values = check_steer(steer)
     dt = positive_number(DEFAULT_DT if dt is None else dt, "dt", "s")
     reference = None

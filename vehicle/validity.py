@@ -185,7 +185,10 @@ def first_violation(
             row = int(np.argmax(rows))
             column = int(np.argmax(np.where(np.isfinite(values[row]), values[row], -np.inf)))
             names = state_names if array is states else output_names
-            signed = float((array[row, columns[column]] - centre) * scale)
+            # a speed profile's centre and scale are one per row
+            row_centre = centre[row, 0] if np.ndim(centre) else centre
+            row_scale = scale[row, 0] if np.ndim(scale) else scale
+            signed = float((array[row, columns[column]] - row_centre) * row_scale)
             found.append((offset + row, priority, Violation(
                 quantity, signed, offset + row, _LIMITS[quantity], names[columns[column]])))
     if not found:
