@@ -156,14 +156,18 @@ def test_vehicle_files_without_a_steering_section_stay_rigid():
             ("chassis", "suspension", "tyre", "drive")}
     for name in ("friction_scale", "QBZ1", "QDZ1"):  # written before these fields existed
         del data["tyre"][name]
+    del data["drive"]["front_drive_share"]
     params = vehicle_from_mapping(data)
     assert params.steering.compliance == 0 and params.tyre.friction_scale == 1.0
+    assert params.drive.front_drive_share == 1.0
     steered = vehicle_from_mapping({"base": "baseline", "steering": {"compliance": 5e-5, "ratio": 14.0}})
     assert steered.steering.ratio == 14.0
     with pytest.raises(InputError, match="steering.compliance must not be negative"):
         vehicle_from_mapping({"base": "baseline", "steering": {"compliance": -1e-5}})
     with pytest.raises(InputError, match="friction_scale must be positive"):
         vehicle_from_mapping({"base": "baseline", "tyre": {"friction_scale": 0.0}})
+    with pytest.raises(InputError, match="front_drive_share is a share of the drive torque, at most 1"):
+        vehicle_from_mapping({"base": "baseline", "drive": {"front_drive_share": 1.5}})
 
 
 def test_the_steered_saloon_understeers_like_a_production_car():

@@ -5,7 +5,8 @@ through quarter-car struts (Best & Bogdanski, section 6). Lateral and
 longitudinal tyre forces come from the combined-slip, load-dependent Magic
 Formula (:mod:`vehid.vehicle.tyre`) evaluated on first-order relaxation-lagged slips;
 each wheel spins; a PI controller holds the forward speed with the drive torque
-split equally between the front wheels.
+split equally between the front wheels (or, by ``front_drive_share``, between
+the axles).
 
 Modelling choices (documented here once):
 
@@ -394,7 +395,13 @@ def build_vehicle_model(params: VehicleParameters) -> VehicleModel:
         ca.fmax(-reference_acceleration / _BRAKE_BLEND, 0), 1
     )
     rear_axle_torque = m * tyre.rolling_radius * rear_brake_share * braking_demand
-    drive_torque_front = 0.5 * m * tyre.rolling_radius * demand - 0.5 * rear_axle_torque
+    if drive.front_drive_share == 1:  # front-wheel drive: the paper's car, its expressions as they were
+        drive_torque_front = 0.5 * m * tyre.rolling_radius * demand - 0.5 * rear_axle_torque
+    else:
+        # The driving part of the demand is split between the axles; braking stays as above.
+        rear_drive = (1 - drive.front_drive_share) * m * tyre.rolling_radius * (demand - braking_demand)
+        drive_torque_front = 0.5 * m * tyre.rolling_radius * demand - 0.5 * rear_axle_torque - 0.5 * rear_drive
+        rear_axle_torque = rear_axle_torque + rear_drive
     drive_torque = (drive_torque_front, drive_torque_front, 0.5 * rear_axle_torque, 0.5 * rear_axle_torque)
 
     # Tyre forces from the lagged slips and the loads: they do not depend on the steer.

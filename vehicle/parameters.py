@@ -162,10 +162,12 @@ class TyreParameters:
 
 @dataclass(frozen=True)
 class DriveParameters:
-    """PI speed hold; the drive torque is split equally between the front wheels."""
+    """PI speed hold; the drive torque is split between the axles, equally between an axle's wheels."""
 
     speed_gain: float = _p(2.0, "1/s", "k_p: torque = m R_e (k_p e + k_i e_I); holds 20 m/s within about 0.1 m/s")
     speed_integral_gain: float = _p(1.0, "1/s^2", "k_i of the PI speed hold")
+    front_drive_share: float = _p(1.0, "-", "share of the drive torque on the front axle: 1 front-wheel drive, "
+                                            "0 rear-wheel drive, between: a fixed all-wheel-drive split")
 
 
 @dataclass(frozen=True)
@@ -213,6 +215,7 @@ _SECTIONS = {
 # friction scaling, the aligning moment of the published tyre) keep files written before them valid.
 _OPTIONAL_SECTIONS = ("steering",)
 _OPTIONAL_FIELDS = {
+    "drive": ("front_drive_share",),
     "tyre": ("friction_scale", "QBZ1", "QBZ2", "QBZ3", "QCZ1", "QDZ1", "QDZ2", "QEZ1", "QEZ2", "QEZ3", "QEZ4",
              "unloaded_radius"),
 }
@@ -232,7 +235,7 @@ _POSITIVE = {
 # ... and those that may be zero (a car without a rear bar, a frictionless damper, no speed hold).
 _NON_NEGATIVE = {
     "suspension": ("front_damping", "rear_damping", "front_anti_roll_bar", "rear_anti_roll_bar"),
-    "drive": ("speed_gain", "speed_integral_gain"),
+    "drive": ("speed_gain", "speed_integral_gain", "front_drive_share"),
     "steering": ("compliance", "mechanical_trail"),
 }
 
@@ -257,6 +260,9 @@ def _validate(params: VehicleParameters) -> None:
                 raise InputError(
                     f"vehicle parameter {section}.{item.name} must not be negative; got {value} {unit}"
                 )
+    if params.drive.front_drive_share > 1:
+        raise InputError(f"vehicle parameter drive.front_drive_share is a share of the drive torque, at most 1; "
+                         f"got {params.drive.front_drive_share}")
     if params.tyre.PKY1 >= 0:
         raise InputError("vehicle parameter tyre.PKY1 must be negative (ISO sign: F_y opposes slip)")
     chassis = params.chassis

@@ -120,6 +120,7 @@ def _write_record(data, args: argparse.Namespace, run: str) -> Path:
     return path
 
 
+_STEER_WORDS = {"road": "road-wheel angle", "wheel": "steering-wheel angle"}
 _MANOEUVRE_OPTIONS = ("manoeuvre", "amplitude_deg", "duration", "speed")
 _REPLAY_OPTIONS = ("steer_channel", "speed_channel", "compare", "time_column", "time_scale", "segment", "resample",
                    "scale")
@@ -293,7 +294,7 @@ def run_replay(args: argparse.Namespace) -> tuple[dict, str]:
     if args.out:
         summary["out"] = str(_write_record(record, args, run))
     lines = [
-        f"replay of {log.name} ({args.steer_channel} as {args.steer_is}-wheel angle, speed {args.speed_channel}) "
+        f"replay of {log.name} ({args.steer_channel} as {_STEER_WORDS[args.steer_is]}, speed {args.speed_channel}) "
         f"on {params.name}: {record.n_samples} samples at {1 / record.dt:g} Hz, "
         f"{summary['replay']['substeps']} RK4 step(s) per sample, {summary['seconds']:.2f} s",
         f"peak lateral acceleration {summary['peak_lateral_acceleration']:.3f} m/s^2, speed "
