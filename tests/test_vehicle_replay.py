@@ -140,7 +140,7 @@ def test_replay_command_on_a_logged_twin(capsys, tmp_path):
         (["--replay", RACE_LOG, "--steer-channel", "delta", "--speed-channel", "vx", "--compare", "yaw=yawRate"],
          "no output 'yaw'"),
         (["--replay", RACE_LOG, "--steer-channel", "delta", "--speed-channel", "vx"],
-         "above the model's valid range"),
+         "leaves the model's valid range (3-50 m/s) at t = 398.13 s"),
         (["--replay", RACE_LOG, "--steer-channel", "delta", "--speed-channel", "vx", "--speed", "20"],
          "--speed does not go with --replay"),
         (["--steer-channel", "delta"], "--steer-channel belongs to --replay"),

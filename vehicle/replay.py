@@ -42,7 +42,7 @@ from .linearize import linearization_function
 from .model import build_vehicle_model
 from .parameters import VehicleParameters, named_vehicle
 from .simulation import check_speed_profile, simulate
-from .validity import largest_stable_step
+from .validity import MAX_SPEED, MIN_SPEED, largest_stable_step
 
 __all__ = ["STEER_KINDS", "ReplayFit", "replay", "replay_substeps", "channel_fits"]
 
@@ -127,9 +127,18 @@ def replay(
     steer = np.asarray(steer, dtype=float).ravel()
     if steer.size < 2:
         raise InputError("a replay needs at least two samples")
-    profile = check_speed_profile(np.asarray(speed, dtype=float).ravel(), steer.size)
     if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
         raise InputError(f"the sample interval must be a positive number of seconds; got {dt!r}")
+    measured = np.asarray(speed, dtype=float).ravel()
+    outside = np.flatnonzero((measured < MIN_SPEED) | (measured > MAX_SPEED))
+    if outside.size and measured.shape == steer.shape:
+        first = int(outside[0])
+        raise InputError(
+            f"the log's speed leaves the model's valid range ({MIN_SPEED:g}-{MAX_SPEED:g} m/s) at "
+            f"t = {t0 + first * dt:.6g} s ({measured[first]:.4g} m/s; {outside.size} of {measured.size} samples): "
+            "replay a segment inside it"
+        )
+    profile = check_speed_profile(measured, steer.size)
     if steer_is == "wheel":
         steer = steer / params.steering.ratio
     substeps = replay_substeps(params, float(dt), float(profile.max()))
