@@ -2,7 +2,7 @@
 
 Every field carries its unit and source in the dataclass field metadata
 (``unit``, ``source``); :func:`describe` lists them. Named vehicles are
-constructors (:func:`baseline`, :func:`understeer`) or data files
+constructors (:func:`baseline`, :func:`understeer`, :func:`saloon`) or data files
 (:func:`load_vehicle`); change one value with :func:`dataclasses.replace`.
 
 The baseline is a generic mid-size front-drive saloon; the tyre is the TNO
@@ -334,6 +334,7 @@ def understeer() -> VehicleParameters:
     With road-wheel steer as input and no compliance, tyre load sensitivity is the
     only understeer source; the scale stands in for steering compliance and
     brings the understeer gradient into the 2-4 deg/g range of real saloons.
+    :func:`saloon` models the compliance itself.
     """
     base = baseline()
     return dataclasses.replace(
@@ -390,7 +391,7 @@ def vehicle_from_mapping(data: Mapping[str, Any], *, origin: str = "vehicle data
     Sections are ``chassis``, ``suspension``, ``tyre``, ``drive`` and ``steering``
     (which may be left out: a rigid steering system); top-level
     ``name`` is optional. Every field of every section must be given unless a
-    top-level ``base`` names a vehicle (``baseline`` or ``understeer``) whose
+    top-level ``base`` names a vehicle (``baseline``, ``understeer`` or ``saloon``) whose
     values fill the gaps. Unknown sections or fields are an error.
     """
     if not isinstance(data, Mapping):

@@ -283,9 +283,11 @@ def simulate(
     Parameters
     ----------
     params : VehicleParameters or str
-        The vehicle, or a name (``baseline``, ``understeer``) or TOML/JSON file.
+        The vehicle, or a name (``baseline``, ``understeer``, ``saloon``) or TOML/JSON file.
     steer : array_like (N,) or (N, 1), Manoeuvre or IOData
-        Road-wheel steer angle (rad), positive left. A
+        Steer (rad), positive left: the steering-wheel angle over the steering
+        ratio, which is the road-wheel angle of a rigid steering (the
+        baseline's; see :mod:`vehid.vehicle.model`). A
         :class:`vehid.vehicle.manoeuvres.Manoeuvre` gives its steer, dt and metadata;
         an IOData its input named ``steer`` (or its only input) and its time base.
     dt : float, optional
