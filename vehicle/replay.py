@@ -86,6 +86,7 @@ def replay(
     *,
     steer_is: str = "road",
     t0: float = 0.0,
+    method: str = "rk4",
     meta: Mapping[str, Any] | None = None,
 ) -> IOData:
     """Simulate the source model under a measured steer while it follows a measured speed trace.
@@ -104,6 +105,9 @@ def replay(
         What the steer is (module notes).
     t0 : float
         Time of the first sample (s), kept on the record.
+    method : {"rk4", "cvodes"}
+        The simulator's (:func:`vehid.vehicle.simulation.simulate`); CVODES, a
+        cross-check, takes the same substeps.
     meta : mapping, optional
         Extra metadata for the record.
 
@@ -149,7 +153,7 @@ def replay(
     fine_steer = np.interp(fine, samples, steer)
     fine_speed = np.interp(fine, samples, profile)
     try:
-        record = simulate(params, fine_steer, dt / substeps, speed=fine_speed, t0=t0,
+        record = simulate(params, fine_steer, dt / substeps, speed=fine_speed, t0=t0, method=method,
                           meta={**(meta or {}), "replay_substeps": substeps, "steer_is": steer_is})
     except SimulationError as exc:
         # the partial record on the log's samples, when it reaches two of them

@@ -263,7 +263,7 @@ def run_replay(args: argparse.Namespace) -> tuple[dict, str]:
     measured = {output: (name, channel(name)) for output, name in compare.items()}
     try:
         record = replay(params, channel(args.steer_channel), channel(args.speed_channel), data.dt,
-                        steer_is=args.steer_is, t0=float(data.t[0]), meta=meta)
+                        steer_is=args.steer_is, t0=float(data.t[0]), method=args.method, meta=meta)
     except SimulationError as exc:
         if exc.partial is None:
             raise
@@ -296,7 +296,7 @@ def run_replay(args: argparse.Namespace) -> tuple[dict, str]:
     lines = [
         f"replay of {log.name} ({args.steer_channel} as {_STEER_WORDS[args.steer_is]}, speed {args.speed_channel}) "
         f"on {params.name}: {record.n_samples} samples at {1 / record.dt:g} Hz, "
-        f"{summary['replay']['substeps']} RK4 step(s) per sample, {summary['seconds']:.2f} s",
+        f"{summary['replay']['substeps']} step(s) per sample ({args.method}), {summary['seconds']:.2f} s",
         f"peak lateral acceleration {summary['peak_lateral_acceleration']:.3f} m/s^2, speed "
         f"{summary['min_speed']:.2f}-{summary['max_speed']:.2f} m/s, following the log within "
         f"{summary['max_speed_tracking_error']:.3g} m/s",
