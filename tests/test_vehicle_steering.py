@@ -178,3 +178,50 @@ def test_the_steered_saloon_understeers_like_a_production_car():
         yaw, lateral = _steady_gains(params, steer, speed)
         gradient = (1 - params.chassis.wheelbase * yaw / speed) / lateral
         assert low < math.degrees(gradient) * GRAVITY < high
+
+
+def _aero_saloon():
+    return vehicle_from_mapping({"base": "saloon", "name": "saloon-aero", "aerodynamics": {
+        "drag_area": 0.7, "front_downforce_area": 0.3, "rear_downforce_area": 0.5}})
+
+
+def test_aerodynamic_forces_in_a_steady_straight_run():
+    """At 60 m/s: the tyres carry the weight plus the downforce (vertical balance, exact), each axle its
+    share plus its own downforce, less or plus the drag's transfer ``D (h + z) / L``; the feed-forward
+    carries the drag, so the PI integral stays near zero.
+
+    Tolerances: the vertical balance 1e-6 relative (algebra, but the dynamic pressure takes u |u| with
+    the smoothed |u|, which adds eps^2 / (2 u^2) = 1.4e-6 of the downforce, 1.5e-7 of the total).
+    The axle split 0.5 % of the axle load: the contact points follow the body points at ground level
+    below the struts, which move by ``h sin(theta)`` (5 mm at the 0.5 deg pitch here) when the body
+    pitches, shifting some 30 N between axles.
+    """
+    params = _aero_saloon()
+    model = build_vehicle_model(params)
+    speed = 60.0
+    x = model.trim(speed)
+    y = np.asarray(model.outputs(x, 0.0, speed)).ravel()
+    load = {c: y[model.output_index(f"tyre_load_{c}")] for c in ("fl", "fr", "rl", "rr")}
+    q = 0.5 * params.aerodynamics.air_density * speed**2
+    drag = params.aerodynamics.drag_area * q
+    front_static, rear_static = static_axle_loads(params)
+    weight = params.chassis.mass * GRAVITY
+    total = sum(load.values())
+    assert total == pytest.approx(weight + (params.aerodynamics.front_downforce_area + params.aerodynamics.rear_downforce_area) * q,
+                                  rel=1e-6)
+    transfer = drag * (params.chassis.cg_height + x[model.state_index("z")]) / params.chassis.wheelbase
+    front = front_static + params.aerodynamics.front_downforce_area * q - transfer
+    assert load["fl"] + load["fr"] == pytest.approx(front, rel=5e-3)
+    assert abs(x[model.state_index("speed_error_integral")] * params.drive.speed_integral_gain) < 1e-3 * drag / (
+        params.chassis.mass)
+
+
+def test_aerodynamics_extend_the_speed_range():
+    from vehid.vehicle.validity import MAX_SPEED, MAX_SPEED_AERO
+
+    with pytest.raises(InputError, match=f"above the model's valid range \\(3-{MAX_SPEED:g} m/s\\)"):
+        build_vehicle_model(saloon()).trim(60.0)
+    x = build_vehicle_model(_aero_saloon()).trim(60.0)
+    assert x[0] == pytest.approx(60.0, rel=1e-3)
+    with pytest.raises(InputError, match=f"\\(3-{MAX_SPEED_AERO:g} m/s\\)"):
+        build_vehicle_model(_aero_saloon()).trim(MAX_SPEED_AERO + 1)

@@ -29,6 +29,7 @@ from .parameters import (
     ChassisParameters,
     DriveParameters,
     SuspensionParameters,
+    AeroParameters,
     SteeringParameters,
     TyreParameters,
     VehicleParameters,
@@ -39,7 +40,7 @@ from .parameters import (
     understeer,
 )
 from .simulation import DEFAULT_DT, rk4_simulator, simulate
-from .validity import ENVELOPE, MAX_SPEED, MIN_SPEED
+from .validity import ENVELOPE, MAX_SPEED, MAX_SPEED_AERO, MIN_SPEED
 
 __all__ = [
     "Linearization",
@@ -59,6 +60,7 @@ __all__ = [
     "ChassisParameters",
     "DriveParameters",
     "SuspensionParameters",
+    "AeroParameters",
     "SteeringParameters",
     "TyreParameters",
     "VehicleParameters",
@@ -72,4 +74,5 @@ __all__ = [
     "ENVELOPE",
     "MIN_SPEED",
     "MAX_SPEED",
+    "MAX_SPEED_AERO",
 ]

@@ -78,9 +78,9 @@ import numpy as np
 
 from vehid.identification.errors import DivergenceError, InputError
 
-from .parameters import GRAVITY, VehicleParameters, static_axle_loads
+from .parameters import GRAVITY, VehicleParameters, has_aerodynamics, static_axle_loads
 from .tyre import aligning_moment, combined_forces
-from .validity import check_speed_range
+from .validity import MAX_SPEED, MAX_SPEED_AERO, check_speed_range
 
 __all__ = [
     "VehicleModel",
@@ -95,6 +95,7 @@ __all__ = [
     "DEFAULT_SPEED",
     "MAX_STEER",
     "check_speed",
+    "speed_limit",
     "positive_number",
 ]
 
@@ -228,7 +229,7 @@ class VehicleModel:
         DivergenceError
             When no steady state is found (e.g. beyond the grip limit).
         """
-        check_speed(speed)
+        check_speed(speed, self.params)
         steer = float(steer)
         if not np.isfinite(steer) or abs(steer) > MAX_STEER:
             raise InputError(f"trim steer must be finite and within +/-30 deg; got {np.rad2deg(steer):.3g} deg")
@@ -303,10 +304,17 @@ def positive_number(value: float, name: str, unit: str) -> float:
     return number
 
 
-def check_speed(speed: float) -> float:
+def check_speed(speed: float, params: VehicleParameters | None = None) -> float:
     """Return ``speed`` (m/s) as a float, or raise InputError if it is not positive and finite
-    or lies outside the model's valid range (:data:`vehid.vehicle.validity.MIN_SPEED` to ``MAX_SPEED``)."""
-    return check_speed_range(positive_number(speed, "speed", "m/s"))
+    or lies outside the model's valid range (:data:`vehid.vehicle.validity.MIN_SPEED` to ``MAX_SPEED``,
+    or ``MAX_SPEED_AERO`` for ``params`` with aerodynamic forces)."""
+    value, limit = positive_number(speed, "speed", "m/s"), speed_limit(params)
+    return check_speed_range(value) if limit == MAX_SPEED else check_speed_range(value, limit)
+
+
+def speed_limit(params: VehicleParameters | None) -> float:
+    """The top of the valid speed range of ``params`` (m/s): higher for a vehicle with aerodynamic forces."""
+    return MAX_SPEED_AERO if params is not None and has_aerodynamics(params) else MAX_SPEED
 
 
 @functools.lru_cache(maxsize=8)
@@ -388,6 +396,12 @@ def build_vehicle_model(params: VehicleParameters) -> VehicleModel:
         drive.speed_gain * speed_error + drive.speed_integral_gain * s["speed_error_integral"]
         + (1 + wheel_inertia_share) * reference_acceleration
     )
+    aero = params.aerodynamics
+    with_aero = has_aerodynamics(params) or aero.front_downforce_area or aero.rear_downforce_area
+    if with_aero:
+        dynamic_pressure = 0.5 * aero.air_density * s["u"] * _smooth_abs(s["u"], _EPS_SPEED)
+        drag = aero.drag_area * dynamic_pressure
+        demand = demand + drag / m  # feed-forward of the drag: the PI hold is left the transients
     braking_demand = (demand - _smooth_abs(demand, _EPS_DEMAND)) / 2  # smooth min(demand, 0)
     # Brakes balanced to the static axle loads, blended in as the reference starts to fall:
     # exactly zero rear torque at a constant or rising reference.
@@ -454,6 +468,15 @@ def build_vehicle_model(params: VehicleParameters) -> VehicleModel:
         force_body = force_body + ca.mtimes(to_road.T, force_road)
         moment_body = moment_body + ca.mtimes(to_road.T, ca.cross(contact_road, force_road))
 
+    if with_aero:
+        # Drag at the CG, horizontal (the air meets the car along the road); each axle's downforce
+        # presses the body down above that axle.
+        force_body = force_body + ca.mtimes(to_road.T, ca.vertcat(-drag, 0, 0))
+        for axle_x, area in ((a, aero.front_downforce_area), (-b, aero.rear_downforce_area)):
+            if area:
+                downforce = ca.mtimes(to_road.T, ca.vertcat(0, 0, -area * dynamic_pressure))
+                force_body = force_body + downforce
+                moment_body = moment_body + ca.cross(ca.vertcat(axle_x, 0, 0), downforce)
     gravity_body = ca.mtimes(to_road.T, ca.vertcat(0, 0, -g))
     acceleration = force_body / m + gravity_body  # inertial acceleration of the CG in body axes
     velocity_rate = acceleration - ca.cross(rates, velocity)

@@ -31,6 +31,7 @@ __all__ = [
     "TyreParameters",
     "DriveParameters",
     "SteeringParameters",
+    "AeroParameters",
     "VehicleParameters",
     "GRAVITY",
     "baseline",
@@ -44,6 +45,7 @@ __all__ = [
     "roll_stiffness",
     "peak_lateral_friction",
     "static_stability_factor",
+    "has_aerodynamics",
     "NAMED_VEHICLES",
 ]
 
@@ -190,6 +192,22 @@ class SteeringParameters:
 
 
 @dataclass(frozen=True)
+class AeroParameters:
+    """Aerodynamic drag and downforce, from the dynamic pressure ``q = rho u^2 / 2`` of the forward speed.
+
+    Drag ``C_d A q`` acts at the CG against the forward speed; downforce
+    ``C_z A q`` on each axle presses the body down above that axle (a negative
+    area is lift). None on the baseline, whose speed range stops where they stop
+    being small (:mod:`vehid.vehicle.validity`).
+    """
+
+    air_density: float = _p(1.2, "kg/m^3", "dry air at 20 deg C and sea-level pressure")
+    drag_area: float = _p(0.0, "m^2", f"C_d A; a mid-size saloon about 0.6-0.7 ({_GILLESPIE.replace('6 and 8', '4')})")
+    front_downforce_area: float = _p(0.0, "m^2", "C_z A on the front axle (negative: lift)")
+    rear_downforce_area: float = _p(0.0, "m^2", "C_z A on the rear axle (negative: lift)")
+
+
+@dataclass(frozen=True)
 class VehicleParameters:
     """A whole vehicle: chassis, suspension, tyre and drive, plus a name for reports."""
 
@@ -199,6 +217,7 @@ class VehicleParameters:
     drive: DriveParameters = field(default_factory=DriveParameters)
     name: str = "baseline"
     steering: SteeringParameters = field(default_factory=SteeringParameters)
+    aerodynamics: AeroParameters = field(default_factory=AeroParameters)
 
     def __post_init__(self) -> None:
         _validate(self)
@@ -210,10 +229,11 @@ _SECTIONS = {
     "tyre": TyreParameters,
     "drive": DriveParameters,
     "steering": SteeringParameters,
+    "aerodynamics": AeroParameters,
 }
 # Sections and fields a vehicle file may leave out: their defaults (a rigid steering system, unit
 # friction scaling, the aligning moment of the published tyre) keep files written before them valid.
-_OPTIONAL_SECTIONS = ("steering",)
+_OPTIONAL_SECTIONS = ("steering", "aerodynamics")
 _OPTIONAL_FIELDS = {
     "drive": ("front_drive_share",),
     "tyre": ("friction_scale", "QBZ1", "QBZ2", "QBZ3", "QCZ1", "QDZ1", "QDZ2", "QEZ1", "QEZ2", "QEZ3", "QEZ4",
@@ -231,12 +251,14 @@ _POSITIVE = {
              "PCY1", "PDY1", "PKY2", "PKY4", "friction_scale", "unloaded_radius"),
     "drive": (),
     "steering": ("ratio",),
+    "aerodynamics": ("air_density",),
 }
 # ... and those that may be zero (a car without a rear bar, a frictionless damper, no speed hold).
 _NON_NEGATIVE = {
     "suspension": ("front_damping", "rear_damping", "front_anti_roll_bar", "rear_anti_roll_bar"),
     "drive": ("speed_gain", "speed_integral_gain", "front_drive_share"),
     "steering": ("compliance", "mechanical_trail"),
+    "aerodynamics": ("drag_area",),
 }
 
 
@@ -284,6 +306,11 @@ def peak_lateral_friction(params: VehicleParameters) -> float:
     tyre = params.tyre
     corner_load = params.chassis.mass * GRAVITY / 4
     return tyre.friction_scale * (tyre.PDY1 + tyre.PDY2 * (corner_load - tyre.nominal_load) / tyre.nominal_load)
+
+
+def has_aerodynamics(params: VehicleParameters) -> bool:
+    """True when the vehicle carries aerodynamic drag (its speed range then reaches further)."""
+    return params.aerodynamics.drag_area > 0
 
 
 def static_stability_factor(params: VehicleParameters) -> float:
@@ -388,8 +415,9 @@ def named_vehicle(spec: str | Path | VehicleParameters) -> VehicleParameters:
 def vehicle_from_mapping(data: Mapping[str, Any], *, origin: str = "vehicle data") -> VehicleParameters:
     """Build a vehicle from a nested mapping ``{section: {field: value}}``.
 
-    Sections are ``chassis``, ``suspension``, ``tyre``, ``drive`` and ``steering``
-    (which may be left out: a rigid steering system); top-level
+    Sections are ``chassis``, ``suspension``, ``tyre``, ``drive``, ``steering``
+    and ``aerodynamics`` (the last two may be left out: a rigid steering system, no
+    aerodynamic forces); top-level
     ``name`` is optional. Every field of every section must be given unless a
     top-level ``base`` names a vehicle (``baseline``, ``understeer`` or ``saloon``) whose
     values fill the gaps. Unknown sections or fields are an error.
@@ -481,4 +509,5 @@ register_codec(SuspensionParameters, "vehicle_suspension", legacy_path="vehicle.
 register_codec(TyreParameters, "vehicle_tyres", legacy_path="vehicle.parameters:TyreParameters")
 register_codec(DriveParameters, "vehicle_drive", legacy_path="vehicle.parameters:DriveParameters")
 register_codec(SteeringParameters, "vehicle_steering")
+register_codec(AeroParameters, "vehicle_aerodynamics")
 register_codec(VehicleParameters, "vehicle_parameters", legacy_path="vehicle.parameters:VehicleParameters")

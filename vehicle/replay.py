@@ -39,10 +39,10 @@ from vehid.identification.errors import InputError, SimulationError
 from vehid.identification.metrics import nrmse_fit
 
 from .linearize import linearization_function
-from .model import build_vehicle_model
-from .parameters import VehicleParameters, named_vehicle
+from .model import build_vehicle_model, speed_limit
+from .parameters import VehicleParameters, has_aerodynamics, named_vehicle
 from .simulation import check_speed_profile, simulate
-from .validity import MAX_SPEED, MIN_SPEED, largest_stable_step
+from .validity import MIN_SPEED, largest_stable_step
 
 __all__ = ["STEER_KINDS", "ReplayFit", "replay", "replay_substeps", "channel_fits"]
 
@@ -134,15 +134,17 @@ def replay(
     if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
         raise InputError(f"the sample interval must be a positive number of seconds; got {dt!r}")
     measured = np.asarray(speed, dtype=float).ravel()
-    outside = np.flatnonzero((measured < MIN_SPEED) | (measured > MAX_SPEED))
+    top = speed_limit(params)
+    outside = np.flatnonzero((measured < MIN_SPEED) | (measured > top))
     if outside.size and measured.shape == steer.shape:
         first = int(outside[0])
         raise InputError(
-            f"the log's speed leaves the model's valid range ({MIN_SPEED:g}-{MAX_SPEED:g} m/s) at "
+            f"the log's speed leaves the model's valid range ({MIN_SPEED:g}-{top:g} m/s) at "
             f"t = {t0 + first * dt:.6g} s ({measured[first]:.4g} m/s; {outside.size} of {measured.size} samples): "
             "replay a segment inside it"
+            + ("" if has_aerodynamics(params) else " or give the vehicle its aerodynamics ([aerodynamics] drag_area)")
         )
-    profile = check_speed_profile(measured, steer.size)
+    profile = check_speed_profile(measured, steer.size, params)
     if steer_is == "wheel":
         steer = steer / params.steering.ratio
     substeps = replay_substeps(params, float(dt), float(profile.max()))

@@ -102,8 +102,10 @@ def check_steer(steer: Any) -> np.ndarray:
     return values
 
 
-def check_speed_profile(speed: Any, n_samples: int) -> np.ndarray:
-    """Return a reference speed series (m/s) as a float array (N,), or raise InputError naming the problem."""
+def check_speed_profile(speed: Any, n_samples: int, params: VehicleParameters | None = None) -> np.ndarray:
+    """Return a reference speed series (m/s) as a float array (N,), or raise InputError naming the problem.
+
+    The valid range is that of ``params`` (:func:`vehid.vehicle.model.check_speed`)."""
     values = np.asarray(speed, dtype=float)
     if values.ndim == 2 and values.shape[1] == 1:
         values = values[:, 0]
@@ -115,7 +117,7 @@ def check_speed_profile(speed: Any, n_samples: int) -> np.ndarray:
         raise InputError(f"the speed profile contains a non-finite value (NaN or inf) at sample {bad[0]}")
     for index in (int(np.argmin(values)), int(np.argmax(values))):
         try:
-            check_speed(values[index])
+            check_speed(values[index], params)
         except InputError as exc:
             raise InputError(f"the speed profile at sample {index}: {exc}") from None
     return values
@@ -179,7 +181,7 @@ def reference_outputs(params: VehicleParameters, steer: np.ndarray, dt: float = 
     for _ in range(substeps):
         x_next = substep(x_next, u, u, p)[0]
     sample = ca.Function("vehicle_rk4_reference_step", [x, u, p], [x_next])
-    x0 = model.trim(check_speed(speed), steer[0])
+    x0 = model.trim(check_speed(speed, params), steer[0])
     states = sample.mapaccum("vehicle_rk4_reference", steer.size - 1)(x0, steer[None, 1:], speed)
     return np.asarray(model.outputs.map(steer.size - 1)(states, steer[None, 1:], speed)).T
 
@@ -367,11 +369,11 @@ def simulate(
     if speed is None:
         speed = DEFAULT_SPEED
     if np.ndim(speed):
-        profile = check_speed_profile(speed, values.size)
+        profile = check_speed_profile(speed, values.size, params)
         rate = np.gradient(profile, dt, edge_order=2) if profile.size > 2 else np.gradient(profile, dt)
         reference = np.column_stack([profile, rate])
         speed = float(profile[0])
-    speed = check_speed(speed)
+    speed = check_speed(speed, params)
     if method not in ("rk4", "cvodes"):
         raise InputError(f"unknown simulation method {method!r}; use 'rk4' or 'cvodes'")
 
