@@ -27,7 +27,7 @@ from vehid.identification.spline_iekf import SplineIEKFOptions
 from vehid.identification.storage import read_value, write_value
 from vehid.scenarios.cli import main
 from vehid.vehicle.linearize import linearize
-from vehid.vehicle.parameters import baseline
+from vehid.vehicle.parameters import AeroParameters, baseline, saloon
 
 ARCHIVES = Path(__file__).parent / "data" / "archives"
 
@@ -115,7 +115,8 @@ def test_every_registered_type_round_trips(tmp_path):
         "spline_iekf_options": SplineIEKFOptions(),
         "io_data": read_archive(ARCHIVES / "identify_n4sid.h5").records["identification"],
         "vehicle_parameters": vehicle, "vehicle_chassis": vehicle.chassis, "vehicle_suspension": vehicle.suspension,
-        "vehicle_tyres": vehicle.tyre, "vehicle_drive": vehicle.drive,
+        "vehicle_tyres": vehicle.tyre, "vehicle_drive": vehicle.drive, "vehicle_steering": saloon().steering,
+        "vehicle_aerodynamics": AeroParameters(drag_area=0.7, rear_downforce_area=0.4),
     })
     linearisation = linearize(vehicle, speed=20.0)
     values.update({"vehicle_linearization": linearisation, "vehicle_mode": linearisation.modes[0]})

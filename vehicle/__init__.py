@@ -29,15 +29,18 @@ from .parameters import (
     ChassisParameters,
     DriveParameters,
     SuspensionParameters,
+    AeroParameters,
+    SteeringParameters,
     TyreParameters,
     VehicleParameters,
     baseline,
+    saloon,
     load_vehicle,
     named_vehicle,
     understeer,
 )
 from .simulation import DEFAULT_DT, rk4_simulator, simulate
-from .validity import ENVELOPE, MAX_SPEED, MIN_SPEED
+from .validity import ENVELOPE, MAX_SPEED, MAX_SPEED_AERO, MIN_SPEED
 
 __all__ = [
     "Linearization",
@@ -57,10 +60,13 @@ __all__ = [
     "ChassisParameters",
     "DriveParameters",
     "SuspensionParameters",
+    "AeroParameters",
+    "SteeringParameters",
     "TyreParameters",
     "VehicleParameters",
     "baseline",
     "understeer",
+    "saloon",
     "load_vehicle",
     "named_vehicle",
     "simulate",
@@ -68,4 +74,5 @@ __all__ = [
     "ENVELOPE",
     "MIN_SPEED",
     "MAX_SPEED",
+    "MAX_SPEED_AERO",
 ]

@@ -152,7 +152,7 @@ def linearize(
         A, B, C, D (exact Jacobians), the trim and the modes.
     """
     params = named_vehicle(params)
-    speed = check_speed(speed)
+    speed = check_speed(speed, params)
     model = build_vehicle_model(params)
     x0 = model.trim(speed, steer)
     A, B, C, D = (np.asarray(m) for m in linearization_function(model)(x0, steer, speed))

@@ -5,7 +5,8 @@ through quarter-car struts (Best & Bogdanski, section 6). Lateral and
 longitudinal tyre forces come from the combined-slip, load-dependent Magic
 Formula (:mod:`vehid.vehicle.tyre`) evaluated on first-order relaxation-lagged slips;
 each wheel spins; a PI controller holds the forward speed with the drive torque
-split equally between the front wheels.
+split equally between the front wheels (or, by ``front_drive_share``, between
+the axles).
 
 Modelling choices (documented here once):
 
@@ -39,7 +40,18 @@ States (in this order): u, v, w (m/s); p, q, r (rad/s); z (heave of the CG
 from its static height, m); phi, theta, psi (rad); omega_fl, omega_fr,
 omega_rl, omega_rr (rad/s); alpha_fl ... alpha_rr (lagged lateral slip, -);
 kappa_fl ... kappa_rr (lagged slip ratio, -); speed_error_integral (m).
-Input: steer (road-wheel angle, rad). Parameter: reference_speed (m/s).
+Input: steer (rad): the steering-wheel angle over the steering ratio, which is
+the road-wheel angle when the steering is rigid (compliance zero, as in the
+baseline). Parameter: reference_speed (m/s).
+
+Steering. With a steering compliance ``c`` (:class:`~vehid.vehicle.parameters.SteeringParameters`), the
+road wheels stand at ``delta = steer + c M`` with ``M`` the sum over the two
+front wheels of the Magic Formula aligning moment and of ``-t_m F_y``, the
+lateral force at the caster trail ``t_m`` (ISO signs: in a left turn ``M`` is
+negative and the wheels yield towards straight ahead). The moments depend on
+the lagged slips and the loads, which are states or algebraic in states, so
+the massless steering needs no state of its own: quasi-static, the state count
+stays 23.
 
 Speed hold. The PI law acts on the speed error; a speed profile adds the
 reference's rate as feed-forward (:attr:`VehicleModel.tracking_dynamics`,
@@ -66,9 +78,9 @@ import numpy as np
 
 from vehid.identification.errors import DivergenceError, InputError
 
-from .parameters import GRAVITY, VehicleParameters, static_axle_loads
-from .tyre import combined_forces
-from .validity import check_speed_range
+from .parameters import GRAVITY, VehicleParameters, has_aerodynamics, static_axle_loads
+from .tyre import aligning_moment, combined_forces
+from .validity import MAX_SPEED, MAX_SPEED_AERO, check_speed_range
 
 __all__ = [
     "VehicleModel",
@@ -83,6 +95,7 @@ __all__ = [
     "DEFAULT_SPEED",
     "MAX_STEER",
     "check_speed",
+    "speed_limit",
     "positive_number",
 ]
 
@@ -216,7 +229,7 @@ class VehicleModel:
         DivergenceError
             When no steady state is found (e.g. beyond the grip limit).
         """
-        check_speed(speed)
+        check_speed(speed, self.params)
         steer = float(steer)
         if not np.isfinite(steer) or abs(steer) > MAX_STEER:
             raise InputError(f"trim steer must be finite and within +/-30 deg; got {np.rad2deg(steer):.3g} deg")
@@ -291,10 +304,17 @@ def positive_number(value: float, name: str, unit: str) -> float:
     return number
 
 
-def check_speed(speed: float) -> float:
+def check_speed(speed: float, params: VehicleParameters | None = None) -> float:
     """Return ``speed`` (m/s) as a float, or raise InputError if it is not positive and finite
-    or lies outside the model's valid range (:data:`vehid.vehicle.validity.MIN_SPEED` to ``MAX_SPEED``)."""
-    return check_speed_range(positive_number(speed, "speed", "m/s"))
+    or lies outside the model's valid range (:data:`vehid.vehicle.validity.MIN_SPEED` to ``MAX_SPEED``,
+    or ``MAX_SPEED_AERO`` for ``params`` with aerodynamic forces)."""
+    value, limit = positive_number(speed, "speed", "m/s"), speed_limit(params)
+    return check_speed_range(value) if limit == MAX_SPEED else check_speed_range(value, limit)
+
+
+def speed_limit(params: VehicleParameters | None) -> float:
+    """The top of the valid speed range of ``params`` (m/s): higher for a vehicle with aerodynamic forces."""
+    return MAX_SPEED_AERO if params is not None and has_aerodynamics(params) else MAX_SPEED
 
 
 @functools.lru_cache(maxsize=8)
@@ -376,6 +396,12 @@ def build_vehicle_model(params: VehicleParameters) -> VehicleModel:
         drive.speed_gain * speed_error + drive.speed_integral_gain * s["speed_error_integral"]
         + (1 + wheel_inertia_share) * reference_acceleration
     )
+    aero = params.aerodynamics
+    with_aero = has_aerodynamics(params) or aero.front_downforce_area or aero.rear_downforce_area
+    if with_aero:
+        dynamic_pressure = 0.5 * aero.air_density * s["u"] * _smooth_abs(s["u"], _EPS_SPEED)
+        drag = aero.drag_area * dynamic_pressure
+        demand = demand + drag / m  # feed-forward of the drag: the PI hold is left the transients
     braking_demand = (demand - _smooth_abs(demand, _EPS_DEMAND)) / 2  # smooth min(demand, 0)
     # Brakes balanced to the static axle loads, blended in as the reference starts to fall:
     # exactly zero rear torque at a constant or rising reference.
@@ -383,14 +409,40 @@ def build_vehicle_model(params: VehicleParameters) -> VehicleModel:
         ca.fmax(-reference_acceleration / _BRAKE_BLEND, 0), 1
     )
     rear_axle_torque = m * tyre.rolling_radius * rear_brake_share * braking_demand
-    drive_torque_front = 0.5 * m * tyre.rolling_radius * demand - 0.5 * rear_axle_torque
+    if drive.front_drive_share == 1:  # front-wheel drive: the paper's car, its expressions as they were
+        drive_torque_front = 0.5 * m * tyre.rolling_radius * demand - 0.5 * rear_axle_torque
+    else:
+        # The driving part of the demand is split between the axles; braking stays as above.
+        rear_drive = (1 - drive.front_drive_share) * m * tyre.rolling_radius * (demand - braking_demand)
+        drive_torque_front = 0.5 * m * tyre.rolling_radius * demand - 0.5 * rear_axle_torque - 0.5 * rear_drive
+        rear_axle_torque = rear_axle_torque + rear_drive
     drive_torque = (drive_torque_front, drive_torque_front, 0.5 * rear_axle_torque, 0.5 * rear_axle_torque)
+
+    # Tyre forces from the lagged slips and the loads: they do not depend on the steer.
+    tyre_forces = [
+        combined_forces(s[f"kappa_{corner}"], s[f"alpha_{corner}"], load[i], tyre,
+                        scale=cornering_scale[i], mirrored=corner_y[i] < 0)
+        for i, corner in enumerate(CORNERS)
+    ]
+    road_wheel_angle = steer
+    if params.steering.compliance > 0:
+        # Quasi-static steering compliance: the road wheels yield to the moments about the steering
+        # axes, the aligning moment plus the lateral force at the caster trail. Both are functions of
+        # the lagged slips (states), so the road-wheel angle is explicit and no state is added.
+        kingpin_moment = 0
+        for i, corner in enumerate(CORNERS):
+            if steered[i]:
+                fx, fy = tyre_forces[i]
+                moment = aligning_moment(s[f"kappa_{corner}"], s[f"alpha_{corner}"], load[i], tyre,
+                                         scale=cornering_scale[i], mirrored=corner_y[i] < 0, lateral_force=fy)
+                kingpin_moment = kingpin_moment + moment - params.steering.mechanical_trail * fy
+        road_wheel_angle = steer + params.steering.compliance * kingpin_moment
 
     force_body = ca.SX.zeros(3)
     moment_body = ca.SX.zeros(3)
     lateral_force_road = 0
     slip_lateral_rate, slip_longitudinal_rate, wheel_acceleration = [], [], []
-    cos_steer, sin_steer = ca.cos(steer), ca.sin(steer)
+    cos_steer, sin_steer = ca.cos(road_wheel_angle), ca.sin(road_wheel_angle)
     for i, corner in enumerate(CORNERS):
         # The wheel follows the body point at static ground level below its strut
         # (roll and pitch axes at the ground), horizontally only: its contact point
@@ -409,15 +461,22 @@ def build_vehicle_model(params: VehicleParameters) -> VehicleModel:
         slip_longitudinal_rate.append(
             (tyre.rolling_radius * omega - v_cx - abs_v_cx * kappa) / longitudinal_relaxation[i]
         )
-        fx, fy = combined_forces(
-            kappa, alpha, load[i], tyre, scale=cornering_scale[i], mirrored=corner_y[i] < 0
-        )
+        fx, fy = tyre_forces[i]
         wheel_acceleration.append((drive_torque[i] - tyre.rolling_radius * fx) / tyre.wheel_inertia)
         force_road = ca.vertcat(cd * fx - sd * fy, sd * fx + cd * fy, load[i])
         lateral_force_road = lateral_force_road + force_road[1]
         force_body = force_body + ca.mtimes(to_road.T, force_road)
         moment_body = moment_body + ca.mtimes(to_road.T, ca.cross(contact_road, force_road))
 
+    if with_aero:
+        # Drag at the CG, horizontal (the air meets the car along the road); each axle's downforce
+        # presses the body down above that axle.
+        force_body = force_body + ca.mtimes(to_road.T, ca.vertcat(-drag, 0, 0))
+        for axle_x, area in ((a, aero.front_downforce_area), (-b, aero.rear_downforce_area)):
+            if area:
+                downforce = ca.mtimes(to_road.T, ca.vertcat(0, 0, -area * dynamic_pressure))
+                force_body = force_body + downforce
+                moment_body = moment_body + ca.cross(ca.vertcat(axle_x, 0, 0), downforce)
     gravity_body = ca.mtimes(to_road.T, ca.vertcat(0, 0, -g))
     acceleration = force_body / m + gravity_body  # inertial acceleration of the CG in body axes
     velocity_rate = acceleration - ca.cross(rates, velocity)

@@ -2,7 +2,7 @@
 
 Every field carries its unit and source in the dataclass field metadata
 (``unit``, ``source``); :func:`describe` lists them. Named vehicles are
-constructors (:func:`baseline`, :func:`understeer`) or data files
+constructors (:func:`baseline`, :func:`understeer`, :func:`saloon`) or data files
 (:func:`load_vehicle`); change one value with :func:`dataclasses.replace`.
 
 The baseline is a generic mid-size front-drive saloon; the tyre is the TNO
@@ -30,10 +30,13 @@ __all__ = [
     "SuspensionParameters",
     "TyreParameters",
     "DriveParameters",
+    "SteeringParameters",
+    "AeroParameters",
     "VehicleParameters",
     "GRAVITY",
     "baseline",
     "understeer",
+    "saloon",
     "named_vehicle",
     "load_vehicle",
     "vehicle_from_mapping",
@@ -42,6 +45,7 @@ __all__ = [
     "roll_stiffness",
     "peak_lateral_friction",
     "static_stability_factor",
+    "has_aerodynamics",
     "NAMED_VEHICLES",
 ]
 
@@ -49,6 +53,8 @@ GRAVITY = 9.81  # [m/s^2] standard gravity, rounded as in vehicle-dynamics texts
 
 _TNO = "TNO MF-Tyre 6.2 sample 205/60R15"
 _SALOON = "generic mid-size front-drive saloon (workbench vehicle spec)"
+_PACEJKA_A3 = "Pacejka, Tire and Vehicle Dynamics, 3rd ed. (2012), appendix 3, 205/60R15 car tyre"
+_GILLESPIE = "Gillespie, Fundamentals of Vehicle Dynamics (1992), ch. 6 and 8"
 
 
 def _p(value: float, unit: str, source: str) -> Any:
@@ -140,14 +146,65 @@ class TyreParameters:
     rear_longitudinal_relaxation: float = _p(0.157, "m", "K_xk / longitudinal stiffness at static rear load (PCFX1)")
     # Scale of the front cornering stiffness: a stand-in for steering compliance.
     front_cornering_scale: float = _p(1.0, "-", "LKY on the front tyres; 0.75 in the 'understeer' variant")
+    # Friction scaling: raise it for sticky (track) tyres, lower it for a wet road.
+    friction_scale: float = _p(1.0, "-", "LMUX = LMUY on all four tyres: peak forces scale, slip stiffnesses do not")
+    # Aligning moment (eq. 4.E31-4.E49 and 4.E71-4.E78 at gamma = 0, no shifts): the pneumatic trail
+    QBZ1: float = _p(12.035, "-", f"trail slope factor B_t at FNOMIN; {_PACEJKA_A3}")
+    QBZ2: float = _p(-1.33, "-", f"variation of B_t with load; {_PACEJKA_A3}")
+    QBZ3: float = _p(0.0, "-", f"variation of B_t with load squared; {_PACEJKA_A3}")
+    QCZ1: float = _p(1.2923, "-", f"shape factor C_t of the trail; {_PACEJKA_A3}")
+    QDZ1: float = _p(0.09068, "-", f"peak trail D_t = QDZ1 R0 F_z / FNOMIN; {_PACEJKA_A3}")
+    QDZ2: float = _p(-0.00565, "-", f"variation of the peak trail with load; {_PACEJKA_A3}")
+    QEZ1: float = _p(-1.7924, "-", f"curvature E_t of the trail; {_PACEJKA_A3}")
+    QEZ2: float = _p(0.8975, "-", f"variation of E_t with load; {_PACEJKA_A3}")
+    QEZ3: float = _p(0.0, "-", f"variation of E_t with load squared; {_PACEJKA_A3}")
+    QEZ4: float = _p(0.2895, "-", f"variation of E_t with the sign of the slip; {_PACEJKA_A3}")
+    unloaded_radius: float = _p(0.3135, "m", f"R0, the length that scales the trail; {_TNO}")
 
 
 @dataclass(frozen=True)
 class DriveParameters:
-    """PI speed hold; the drive torque is split equally between the front wheels."""
+    """PI speed hold; the drive torque is split between the axles, equally between an axle's wheels."""
 
     speed_gain: float = _p(2.0, "1/s", "k_p: torque = m R_e (k_p e + k_i e_I); holds 20 m/s within about 0.1 m/s")
     speed_integral_gain: float = _p(1.0, "1/s^2", "k_i of the PI speed hold")
+    front_drive_share: float = _p(1.0, "-", "share of the drive torque on the front axle: 1 front-wheel drive, "
+                                            "0 rear-wheel drive, between: a fixed all-wheel-drive split")
+
+
+@dataclass(frozen=True)
+class SteeringParameters:
+    """The steering system: ratio, and the compliance between steering wheel and road wheels.
+
+    The model's input ``steer`` is the steering-wheel angle divided by ``ratio``
+    (the road-wheel angle of a rigid steering system). A torsional spring of
+    compliance ``compliance`` between the steering wheel and the road wheels
+    yields, quasi-statically, to the moments about the steering axes: the road
+    wheels stand at ``steer + compliance * M`` with ``M`` the sum over both front
+    wheels of the tyre's aligning moment and of its lateral force acting at the
+    mechanical (caster) trail behind the steering axis. A compliance of zero is
+    a rigid steering system (the road-wheel angle is the input).
+    """
+
+    ratio: float = _p(16.0, "-", f"overall ratio, steering wheel to road wheel; passenger cars 15-20 ({_GILLESPIE})")
+    compliance: float = _p(0.0, "rad/(N m)", "road-wheel angle per kingpin moment, both wheels; 0: rigid")
+    mechanical_trail: float = _p(0.02, "m", f"caster trail at the ground; passenger cars 10-30 mm ({_GILLESPIE})")
+
+
+@dataclass(frozen=True)
+class AeroParameters:
+    """Aerodynamic drag and downforce, from the dynamic pressure ``q = rho u^2 / 2`` of the forward speed.
+
+    Drag ``C_d A q`` acts at the CG against the forward speed; downforce
+    ``C_z A q`` on each axle presses the body down above that axle (a negative
+    area is lift). None on the baseline, whose speed range stops where they stop
+    being small (:mod:`vehid.vehicle.validity`).
+    """
+
+    air_density: float = _p(1.2, "kg/m^3", "dry air at 20 deg C and sea-level pressure")
+    drag_area: float = _p(0.0, "m^2", f"C_d A; a mid-size saloon about 0.6-0.7 ({_GILLESPIE.replace('6 and 8', '4')})")
+    front_downforce_area: float = _p(0.0, "m^2", "C_z A on the front axle (negative: lift)")
+    rear_downforce_area: float = _p(0.0, "m^2", "C_z A on the rear axle (negative: lift)")
 
 
 @dataclass(frozen=True)
@@ -159,6 +216,8 @@ class VehicleParameters:
     tyre: TyreParameters = field(default_factory=TyreParameters)
     drive: DriveParameters = field(default_factory=DriveParameters)
     name: str = "baseline"
+    steering: SteeringParameters = field(default_factory=SteeringParameters)
+    aerodynamics: AeroParameters = field(default_factory=AeroParameters)
 
     def __post_init__(self) -> None:
         _validate(self)
@@ -169,6 +228,16 @@ _SECTIONS = {
     "suspension": SuspensionParameters,
     "tyre": TyreParameters,
     "drive": DriveParameters,
+    "steering": SteeringParameters,
+    "aerodynamics": AeroParameters,
+}
+# Sections and fields a vehicle file may leave out: their defaults (a rigid steering system, unit
+# friction scaling, the aligning moment of the published tyre) keep files written before them valid.
+_OPTIONAL_SECTIONS = ("steering", "aerodynamics")
+_OPTIONAL_FIELDS = {
+    "drive": ("front_drive_share",),
+    "tyre": ("friction_scale", "QBZ1", "QBZ2", "QBZ3", "QCZ1", "QDZ1", "QDZ2", "QEZ1", "QEZ2", "QEZ3", "QEZ4",
+             "unloaded_radius"),
 }
 
 # Fields that must be strictly positive (masses, inertias, lengths, stiffnesses) ...
@@ -179,13 +248,17 @@ _POSITIVE = {
     "tyre": ("nominal_load", "rolling_radius", "wheel_inertia", "front_lateral_relaxation",
              "rear_lateral_relaxation", "front_longitudinal_relaxation",
              "rear_longitudinal_relaxation", "front_cornering_scale", "PCX1", "PDX1", "PKX1",
-             "PCY1", "PDY1", "PKY2", "PKY4"),
+             "PCY1", "PDY1", "PKY2", "PKY4", "friction_scale", "unloaded_radius"),
     "drive": (),
+    "steering": ("ratio",),
+    "aerodynamics": ("air_density",),
 }
 # ... and those that may be zero (a car without a rear bar, a frictionless damper, no speed hold).
 _NON_NEGATIVE = {
     "suspension": ("front_damping", "rear_damping", "front_anti_roll_bar", "rear_anti_roll_bar"),
-    "drive": ("speed_gain", "speed_integral_gain"),
+    "drive": ("speed_gain", "speed_integral_gain", "front_drive_share"),
+    "steering": ("compliance", "mechanical_trail"),
+    "aerodynamics": ("drag_area",),
 }
 
 
@@ -209,6 +282,9 @@ def _validate(params: VehicleParameters) -> None:
                 raise InputError(
                     f"vehicle parameter {section}.{item.name} must not be negative; got {value} {unit}"
                 )
+    if params.drive.front_drive_share > 1:
+        raise InputError(f"vehicle parameter drive.front_drive_share is a share of the drive torque, at most 1; "
+                         f"got {params.drive.front_drive_share}")
     if params.tyre.PKY1 >= 0:
         raise InputError("vehicle parameter tyre.PKY1 must be negative (ISO sign: F_y opposes slip)")
     chassis = params.chassis
@@ -226,10 +302,15 @@ def roll_stiffness(params: VehicleParameters) -> float:
 
 
 def peak_lateral_friction(params: VehicleParameters) -> float:
-    """The tyres' peak lateral friction ``mu_y = PDY1 + PDY2 dfz`` at the mean static corner load (eq. 4.E23)."""
+    """The tyres' peak lateral friction ``mu_y = (PDY1 + PDY2 dfz) LMUY`` at the mean static corner load (eq. 4.E23)."""
     tyre = params.tyre
     corner_load = params.chassis.mass * GRAVITY / 4
-    return tyre.PDY1 + tyre.PDY2 * (corner_load - tyre.nominal_load) / tyre.nominal_load
+    return tyre.friction_scale * (tyre.PDY1 + tyre.PDY2 * (corner_load - tyre.nominal_load) / tyre.nominal_load)
+
+
+def has_aerodynamics(params: VehicleParameters) -> bool:
+    """True when the vehicle carries aerodynamic drag (its speed range then reaches further)."""
+    return params.aerodynamics.drag_area > 0
 
 
 def static_stability_factor(params: VehicleParameters) -> float:
@@ -280,6 +361,7 @@ def understeer() -> VehicleParameters:
     With road-wheel steer as input and no compliance, tyre load sensitivity is the
     only understeer source; the scale stands in for steering compliance and
     brings the understeer gradient into the 2-4 deg/g range of real saloons.
+    :func:`saloon` models the compliance itself.
     """
     base = baseline()
     return dataclasses.replace(
@@ -287,7 +369,32 @@ def understeer() -> VehicleParameters:
     )
 
 
-NAMED_VEHICLES = {"baseline": baseline, "understeer": understeer}
+# Steering compliance of the saloon (rad per N m of kingpin moment, both wheels): a stiffness of
+# 20 kN m/rad at the road wheels, about 78 N m/rad (1.4 N m/deg) at the steering wheel through the
+# 16:1 ratio. With the front axle's lateral force acting at the pneumatic plus mechanical trail
+# (about 28 + 20 mm) it adds W_f (t_p + t_m) / K_s = 8.5 kN * 0.048 m / 20 kN m/rad, about 1.2 deg/g,
+# to the understeer gradient (the steering-compliance term of Gillespie 1992, ch. 6), which takes
+# the near-neutral baseline (0.7 deg/g) to about 1.9 deg/g.
+_SALOON_STEERING_COMPLIANCE = 1 / 20_000.0
+
+
+def saloon() -> VehicleParameters:
+    """The baseline with its steering system: ratio 16, compliance, aligning moment fed back.
+
+    The default car for new work. Its road-wheel angles yield to the front tyres'
+    aligning moments and to their lateral forces at the caster trail, so its
+    understeer gradient is that of a production saloon rather than the
+    near-neutral baseline's (:func:`vehid.vehicle.handling.source_handling`
+    reports it). The model's input stays the steering-wheel angle over the
+    ratio; the paper's studies keep the baseline, whose steering is rigid.
+    """
+    base = baseline()
+    return dataclasses.replace(
+        base, steering=dataclasses.replace(base.steering, compliance=_SALOON_STEERING_COMPLIANCE), name="saloon"
+    )
+
+
+NAMED_VEHICLES = {"baseline": baseline, "understeer": understeer, "saloon": saloon}
 
 
 def named_vehicle(spec: str | Path | VehicleParameters) -> VehicleParameters:
@@ -308,9 +415,11 @@ def named_vehicle(spec: str | Path | VehicleParameters) -> VehicleParameters:
 def vehicle_from_mapping(data: Mapping[str, Any], *, origin: str = "vehicle data") -> VehicleParameters:
     """Build a vehicle from a nested mapping ``{section: {field: value}}``.
 
-    Sections are ``chassis``, ``suspension``, ``tyre`` and ``drive``; top-level
+    Sections are ``chassis``, ``suspension``, ``tyre``, ``drive``, ``steering``
+    and ``aerodynamics`` (the last two may be left out: a rigid steering system, no
+    aerodynamic forces); top-level
     ``name`` is optional. Every field of every section must be given unless a
-    top-level ``base`` names a vehicle (``baseline`` or ``understeer``) whose
+    top-level ``base`` names a vehicle (``baseline``, ``understeer`` or ``saloon``) whose
     values fill the gaps. Unknown sections or fields are an error.
     """
     if not isinstance(data, Mapping):
@@ -329,6 +438,9 @@ def vehicle_from_mapping(data: Mapping[str, Any], *, origin: str = "vehicle data
     base = NAMED_VEHICLES[base_name]() if base_name else None
     groups: dict[str, Any] = {}
     for section, cls in _SECTIONS.items():
+        if section in _OPTIONAL_SECTIONS and section not in data and base is None:
+            groups[section] = cls()
+            continue
         values = data.get(section, {})
         if not isinstance(values, Mapping):
             raise InputError(f"{origin}: section {section!r} must be a table of fields")
@@ -339,7 +451,7 @@ def vehicle_from_mapping(data: Mapping[str, Any], *, origin: str = "vehicle data
                 f"{origin}: unknown field(s) in [{section}]: {', '.join(sorted(extra))}"
             )
         if base is None:
-            missing = names - set(values)
+            missing = names - set(values) - set(_OPTIONAL_FIELDS.get(section, ()))
             if missing:
                 raise InputError(
                     f"{origin}: missing field(s) in [{section}]: {', '.join(sorted(missing))} "
@@ -396,4 +508,6 @@ register_codec(ChassisParameters, "vehicle_chassis", legacy_path="vehicle.parame
 register_codec(SuspensionParameters, "vehicle_suspension", legacy_path="vehicle.parameters:SuspensionParameters")
 register_codec(TyreParameters, "vehicle_tyres", legacy_path="vehicle.parameters:TyreParameters")
 register_codec(DriveParameters, "vehicle_drive", legacy_path="vehicle.parameters:DriveParameters")
+register_codec(SteeringParameters, "vehicle_steering")
+register_codec(AeroParameters, "vehicle_aerodynamics")
 register_codec(VehicleParameters, "vehicle_parameters", legacy_path="vehicle.parameters:VehicleParameters")

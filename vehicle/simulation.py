@@ -102,8 +102,10 @@ def check_steer(steer: Any) -> np.ndarray:
     return values
 
 
-def check_speed_profile(speed: Any, n_samples: int) -> np.ndarray:
-    """Return a reference speed series (m/s) as a float array (N,), or raise InputError naming the problem."""
+def check_speed_profile(speed: Any, n_samples: int, params: VehicleParameters | None = None) -> np.ndarray:
+    """Return a reference speed series (m/s) as a float array (N,), or raise InputError naming the problem.
+
+    The valid range is that of ``params`` (:func:`vehid.vehicle.model.check_speed`)."""
     values = np.asarray(speed, dtype=float)
     if values.ndim == 2 and values.shape[1] == 1:
         values = values[:, 0]
@@ -115,7 +117,7 @@ def check_speed_profile(speed: Any, n_samples: int) -> np.ndarray:
         raise InputError(f"the speed profile contains a non-finite value (NaN or inf) at sample {bad[0]}")
     for index in (int(np.argmin(values)), int(np.argmax(values))):
         try:
-            check_speed(values[index])
+            check_speed(values[index], params)
         except InputError as exc:
             raise InputError(f"the speed profile at sample {index}: {exc}") from None
     return values
@@ -179,7 +181,7 @@ def reference_outputs(params: VehicleParameters, steer: np.ndarray, dt: float = 
     for _ in range(substeps):
         x_next = substep(x_next, u, u, p)[0]
     sample = ca.Function("vehicle_rk4_reference_step", [x, u, p], [x_next])
-    x0 = model.trim(check_speed(speed), steer[0])
+    x0 = model.trim(check_speed(speed, params), steer[0])
     states = sample.mapaccum("vehicle_rk4_reference", steer.size - 1)(x0, steer[None, 1:], speed)
     return np.asarray(model.outputs.map(steer.size - 1)(states, steer[None, 1:], speed)).T
 
@@ -276,15 +278,18 @@ def simulate(
     speed: Any = None,
     method: str = "rk4",
     meta: dict | None = None,
+    t0: float | None = None,
 ) -> IOData:
     """Simulate the 23-state vehicle from its trim under a road-wheel steer series.
 
     Parameters
     ----------
     params : VehicleParameters or str
-        The vehicle, or a name (``baseline``, ``understeer``) or TOML/JSON file.
+        The vehicle, or a name (``baseline``, ``understeer``, ``saloon``) or TOML/JSON file.
     steer : array_like (N,) or (N, 1), Manoeuvre or IOData
-        Road-wheel steer angle (rad), positive left. A
+        Steer (rad), positive left: the steering-wheel angle over the steering
+        ratio, which is the road-wheel angle of a rigid steering (the
+        baseline's; see :mod:`vehid.vehicle.model`). A
         :class:`vehid.vehicle.manoeuvres.Manoeuvre` gives its steer, dt and metadata;
         an IOData its input named ``steer`` (or its only input) and its time base.
     dt : float, optional
@@ -299,6 +304,8 @@ def simulate(
         1e-12, restarted at every sample, as a cross-check (much slower).
     meta : dict, optional
         Extra metadata to store with the record (manoeuvre, seed, ...).
+    t0 : float, optional
+        Time of the first sample (s), default 0 (an IOData's own first time).
 
     Returns
     -------
@@ -327,6 +334,7 @@ def simulate(
         record up to that sample (meta ``partial`` and ``stop_reason``).
     """
     params = named_vehicle(params)
+    start_time = t0
     t0 = 0.0
     extra: dict[str, Any] = {}
     if isinstance(steer, IOData):
@@ -351,17 +359,21 @@ def simulate(
         steer = steer.steer
     if steer is None:
         raise InputError("give a steer series (rad)")
+    if start_time is not None:
+        t0 = float(start_time)
+        if not math.isfinite(t0):
+            raise InputError(f"the start time must be finite; got {start_time}")
     values = check_steer(steer)
     dt = positive_number(DEFAULT_DT if dt is None else dt, "dt", "s")
     reference = None
     if speed is None:
         speed = DEFAULT_SPEED
     if np.ndim(speed):
-        profile = check_speed_profile(speed, values.size)
+        profile = check_speed_profile(speed, values.size, params)
         rate = np.gradient(profile, dt, edge_order=2) if profile.size > 2 else np.gradient(profile, dt)
         reference = np.column_stack([profile, rate])
         speed = float(profile[0])
-    speed = check_speed(speed)
+    speed = check_speed(speed, params)
     if method not in ("rk4", "cvodes"):
         raise InputError(f"unknown simulation method {method!r}; use 'rk4' or 'cvodes'")
 

@@ -21,6 +21,18 @@ mounted mirrored (their characteristic is the left tyre's reflected,
 ``F_y,R(alpha) = -F_y,L(-alpha)``), which keeps the car exactly left/right
 symmetric.
 
+The aligning moment (:func:`aligning_moment`) is the pneumatic trail times
+the lateral force, ``M_z = -t F_y`` (eq. 4.E31-4.E44 at pure slip, 4.E71-4.E78
+in combined slip, where the trail falls with the equivalent slip
+``sqrt(alpha^2 + (K_xk / K_ya)^2 kappa^2)``). At zero camber the residual
+moment ``M_zr`` is a constant offset of about 2 N m (QDZ6) and the ``s F_x``
+term a left/right asymmetry; both are shift-like and, like the shift terms,
+left out.
+
+``friction_scale`` (LMUX = LMUY) multiplies both peak forces; the slip
+stiffnesses stay (eq. 4.E13, 4.E25), so a sticky tyre grips more without
+cornering harder at small slip.
+
 The functions take CasADi SX (or plain floats) and return the same kind.
 """
 
@@ -38,6 +50,8 @@ __all__ = [
     "lateral_force_pure",
     "longitudinal_force_pure",
     "combined_forces",
+    "pneumatic_trail",
+    "aligning_moment",
 ]
 
 SIGN_SMOOTHING_SLIP = 1e-3  # width of the smooth sgn(x) on slip (-, rad)
@@ -77,7 +91,7 @@ def longitudinal_force_pure(kappa, fz, tyre: TyreParameters):
     """``F_x0`` (N) under pure longitudinal slip, eq. 4.E9-4.E18."""
     dfz = load_increment(fz, tyre)
     c = tyre.PCX1
-    d = (tyre.PDX1 + tyre.PDX2 * dfz) * fz
+    d = (tyre.PDX1 + tyre.PDX2 * dfz) * tyre.friction_scale * fz
     e = (tyre.PEX1 + tyre.PEX2 * dfz + tyre.PEX3 * dfz**2) * (1 - tyre.PEX4 * _smooth_sign(kappa))
     b = longitudinal_slip_stiffness(fz, tyre) / (c * d + _EPS_FORCE)
     return _magic(b, c, d, e, kappa)
@@ -91,7 +105,7 @@ def lateral_force_pure(alpha, fz, tyre: TyreParameters, *, scale: float = 1.0, m
     """
     dfz = load_increment(fz, tyre)
     c = tyre.PCY1
-    d = (tyre.PDY1 + tyre.PDY2 * dfz) * fz
+    d = (tyre.PDY1 + tyre.PDY2 * dfz) * tyre.friction_scale * fz
     side = -1.0 if mirrored else 1.0
     e = (tyre.PEY1 + tyre.PEY2 * dfz) * (1 - tyre.PEY3 * _smooth_sign(side * alpha))
     b = cornering_stiffness(fz, tyre, scale) / (c * d + _EPS_FORCE)
@@ -135,3 +149,40 @@ def combined_forces(kappa, alpha, fz, tyre: TyreParameters, *, scale: float = 1.
     b_yk = tyre.RBY1 / ca.sqrt(1 + (tyre.RBY2 * (alpha - tyre.RBY3)) ** 2)
     g_yk = _weight(b_yk, tyre.RCY1, tyre.REY1 + tyre.REY2 * dfz, kappa)
     return g_xa * fx0, g_yk * fy0
+
+
+def pneumatic_trail(kappa, alpha, fz, tyre: TyreParameters, *, scale: float = 1.0, mirrored: bool = False):
+    """Pneumatic trail ``t`` (m) under combined slip, eq. 4.E33-4.E44 and 4.E73-4.E78 at gamma = 0.
+
+    At pure slip (``kappa = 0``) it is the trail of eq. 4.E33; a slip ratio
+    lowers it through the equivalent slip ``alpha_eq``, built here as
+    ``alpha sqrt(1 + (K_xk / K_ya)^2 kappa^2 / (alpha^2 + eps^2))``: equal to
+    ``alpha`` at pure slip and to ``sgn(alpha) sqrt(alpha^2 + (K_xk / K_ya)^2
+    kappa^2)`` of eq. 4.E77 beyond the smoothing width, without the kink of a sign.
+    """
+    dfz = load_increment(fz, tyre)
+    fz0 = tyre.nominal_load
+    b = (tyre.QBZ1 + tyre.QBZ2 * dfz + tyre.QBZ3 * dfz**2) * scale / tyre.friction_scale
+    c = tyre.QCZ1
+    d = fz * tyre.unloaded_radius / fz0 * (tyre.QDZ1 + tyre.QDZ2 * dfz)
+    side = -1.0 if mirrored else 1.0
+    e = (tyre.QEZ1 + tyre.QEZ2 * dfz + tyre.QEZ3 * dfz**2) * (1 + tyre.QEZ4 * (2 / ca.pi) * ca.atan(b * c * side * alpha))
+    stiffness_ratio = longitudinal_slip_stiffness(fz, tyre) / (-cornering_stiffness(fz, tyre, scale) + _EPS_FORCE)
+    width = SIGN_SMOOTHING_SLIP**2
+    alpha_eq = alpha * ca.sqrt(1 + (stiffness_ratio * kappa) ** 2 / (alpha * alpha + width))
+    # cos'(alpha) = V_cx / V_c, with alpha the slip tan(alpha)
+    return _weight(b, c, e, alpha_eq) * d / ca.sqrt(1 + alpha * alpha)
+
+
+def aligning_moment(kappa, alpha, fz, tyre: TyreParameters, *, scale: float = 1.0, mirrored: bool = False,
+                    lateral_force=None):
+    """Self-aligning moment ``M_z = -t F_y`` (N m, ISO: positive about z up), eq. 4.E31 and 4.E71.
+
+    Parameters are those of :func:`combined_forces`; ``lateral_force`` is its
+    ``F_y`` when already at hand. For small slip the moment turns the wheel
+    towards its direction of travel: a positive slip (contact point moving to
+    the wheel's left) gives a negative force and a positive moment.
+    """
+    if lateral_force is None:
+        lateral_force = combined_forces(kappa, alpha, fz, tyre, scale=scale, mirrored=mirrored)[1]
+    return -pneumatic_trail(kappa, alpha, fz, tyre, scale=scale, mirrored=mirrored) * lateral_force

@@ -5,7 +5,8 @@ say so rather than return numbers. Three kinds of check, each with its limits
 stated here once (and in ``docs/conventions.md``):
 
 * Up front, on the input (:class:`~identification.errors.InputError`, exit
-  status 2): the speed range (:data:`MIN_SPEED`, :data:`MAX_SPEED`), the RK4
+  status 2): the speed range (:data:`MIN_SPEED`, :data:`MAX_SPEED`, or
+  :data:`MAX_SPEED_AERO` for a vehicle with aerodynamic drag), the RK4
   step against the fastest modes at trim (:func:`check_rk4_step`), and the
   memory a record will take (:func:`check_memory`). The vehicle's own static
   stability is checked when its parameters are built
@@ -32,6 +33,7 @@ from vehid.identification.errors import InputError
 __all__ = [
     "MIN_SPEED",
     "MAX_SPEED",
+    "MAX_SPEED_AERO",
     "MEMORY_FRACTION",
     "EnvelopeLimit",
     "ENVELOPE",
@@ -58,6 +60,10 @@ MIN_SPEED = 3.0  # [m/s]
 # (C_d A about 0.7 m^2: 1.1 kN, 7 % of the weight at 50 m/s) and lift (axle load
 # changes of several per cent), and the PI speed hold is tuned at 20 m/s.
 MAX_SPEED = 50.0  # [m/s], 180 km/h
+# A vehicle with aerodynamic drag and downforce (vehicle.parameters.AeroParameters) has what the
+# limit above is about; its range reaches track speeds. Beyond them the PI speed hold, tuned at
+# 20 m/s, and the slip lags' RK4 step (sized at the top speed of a record) are the limits.
+MAX_SPEED_AERO = 75.0  # [m/s], 270 km/h
 # A record's arrays may take at most this share of the memory available when it starts.
 MEMORY_FRACTION = 0.5
 _PEAK_COPIES = 3  # the integrator's arrays, their stacked copy and the record's own copy
@@ -185,7 +191,10 @@ def first_violation(
             row = int(np.argmax(rows))
             column = int(np.argmax(np.where(np.isfinite(values[row]), values[row], -np.inf)))
             names = state_names if array is states else output_names
-            signed = float((array[row, columns[column]] - centre) * scale)
+            # a speed profile's centre and scale are one per row
+            row_centre = centre[row, 0] if np.ndim(centre) else centre
+            row_scale = scale[row, 0] if np.ndim(scale) else scale
+            signed = float((array[row, columns[column]] - row_centre) * row_scale)
             found.append((offset + row, priority, Violation(
                 quantity, signed, offset + row, _LIMITS[quantity], names[columns[column]])))
     if not found:
@@ -193,17 +202,21 @@ def first_violation(
     return min(found, key=lambda item: item[:2])[2]
 
 
-def check_speed_range(speed: float) -> float:
-    """Return ``speed`` if it lies in the model's valid range, else raise InputError with the reason."""
+def check_speed_range(speed: float, maximum: float = MAX_SPEED) -> float:
+    """Return ``speed`` if it lies in the model's valid range, else raise InputError with the reason.
+
+    ``maximum`` is :data:`MAX_SPEED`, or :data:`MAX_SPEED_AERO` for a vehicle with aerodynamic forces.
+    """
     if speed < MIN_SPEED:
         raise InputError(
-            f"speed {speed:g} m/s is below the model's valid range ({MIN_SPEED:g}-{MAX_SPEED:g} m/s): "
+            f"speed {speed:g} m/s is below the model's valid range ({MIN_SPEED:g}-{maximum:g} m/s): "
             "the tyre's slip lags lose their damping and the smoothed slip its accuracy at low speed"
         )
-    if speed > MAX_SPEED:
+    if speed > maximum:
+        reason = ("the model has no aerodynamic drag or lift, which are no longer small there"
+                  if maximum <= MAX_SPEED else "the PI speed hold and the tyre data are not meant for it")
         raise InputError(
-            f"speed {speed:g} m/s is above the model's valid range ({MIN_SPEED:g}-{MAX_SPEED:g} m/s): "
-            "the model has no aerodynamic drag or lift, which are no longer small there"
+            f"speed {speed:g} m/s is above the model's valid range ({MIN_SPEED:g}-{maximum:g} m/s): {reason}"
         )
     return speed
 

@@ -1,4 +1,4 @@
-"""Simulate the 23-state full-vehicle model under a steer manoeuvre.
+"""Simulate the 23-state full-vehicle model under a steer manoeuvre, or replay a measured drive.
 
 Prints peak lateral acceleration, speed range, wall time and, for a step, the
 steady-state gains; --out writes the record to HDF5 (a relative path is taken
@@ -6,6 +6,13 @@ from the working directory, so `vehid identify` finds it under the same name).
 An existing file is replaced only if it is the record of the same simulation,
 or with --force. A run that leaves the model's physical envelope fails (exit
 status 1), writing with --out the record up to that sample.
+
+--replay LOG reads a measured log (text table or record, through the
+workbench's readers), and simulates the model sample for sample at the log's
+rate under its steer channel (--steer-channel, a road-wheel or a steering-wheel
+angle as --steer-is says) while it follows its speed channel
+(--speed-channel); --compare OUTPUT=CHANNEL,... sets model outputs beside the
+channels that measured them and reports each fit.
 """
 
 from __future__ import annotations
@@ -20,6 +27,7 @@ from vehid.identification.archive_safety import KIND_ATTRIBUTE, RUN_ATTRIBUTE, c
 from vehid.identification.errors import InputError, SimulationError
 from vehid.scenarios.paths import HDF5_SUFFIXES, OUT_RULE, run_digest
 from vehid.vehicle import MANOEUVRES, make_manoeuvre, named_vehicle, simulate
+from vehid.vehicle.replay import STEER_KINDS, channel_fits, replay
 
 NAME = "simulate"
 GROUP = None
@@ -29,7 +37,7 @@ _STEADY_WINDOW = 0.5  # [s] the end of a step record averaged as its steady stat
 
 
 def register(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--manoeuvre", default="identification", choices=sorted(MANOEUVRES),
+    parser.add_argument("--manoeuvre", default=None, choices=sorted(MANOEUVRES),
                         help="steer input (default: identification)")
     parser.add_argument("--amplitude-deg", type=float, default=None,
                         help="road-wheel steer amplitude in degrees (default: the manoeuvre's own)")
@@ -37,14 +45,36 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--speed", type=float, default=None,
                         help="trim and reference speed in m/s (default 20; the model is valid from 3 to 50); "
                              "the speed-* manoeuvres carry their own speed profile")
-    parser.add_argument("--vehicle", default="baseline",
-                        help="baseline, understeer, or a .toml/.json vehicle file")
+    parser.add_argument("--vehicle", default=None,
+                        help="baseline, understeer, saloon, or a .toml/.json vehicle file "
+                             "(default: baseline; saloon for --replay)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the random parts of the input")
     parser.add_argument("--method", default="rk4", choices=("rk4", "cvodes"),
                         help="compiled fixed-step RK4 (default) or the CVODES cross-check")
     parser.add_argument("--out", default=None, help=f"write the record to this HDF5 file ({OUT_RULE})")
     parser.add_argument("--force", action="store_true",
                         help="let --out replace an existing file that is not this simulation's record")
+    replay_group = parser.add_argument_group("replaying a measured drive")
+    replay_group.add_argument("--replay", metavar="LOG", default=None,
+                              help="simulate the log's steer and speed sample for sample")
+    replay_group.add_argument("--steer-channel", metavar="NAME", help="the log's steer channel (rad, positive left)")
+    replay_group.add_argument("--speed-channel", metavar="NAME", help="the log's forward speed channel (m/s)")
+    replay_group.add_argument("--steer-is", default="road", choices=STEER_KINDS,
+                              help="road: a road-wheel angle (the steering's compliance is already in it); "
+                                   "wheel: a steering-wheel angle, divided by the vehicle's steering ratio "
+                                   "(default: road)")
+    replay_group.add_argument("--compare", metavar="OUTPUT=CHANNEL,...", default=None,
+                              help="model outputs and the log channels that measured them, e.g. "
+                                   "yaw_rate=yawRate,lateral_acceleration=ayCG,sideslip=beta_true")
+    replay_group.add_argument("--time-column", metavar="NAME",
+                              help="the log's time column (default: t when present)")
+    replay_group.add_argument("--time-scale", type=float, metavar="FACTOR",
+                              help="seconds per unit of the time column (default: from its unit)")
+    replay_group.add_argument("--segment", metavar="T0:T1", help="replay only T0 <= t <= T1 (s, log time)")
+    replay_group.add_argument("--resample", type=float, metavar="HZ",
+                              help="interpolate the log onto a uniform grid at HZ first")
+    replay_group.add_argument("--scale", action="append", metavar="NAME=FACTOR", default=None,
+                              help="multiply a log channel by FACTOR (a unit or a sign); repeatable or a comma list")
     parser.set_defaults(handler=run)
 
 
@@ -90,7 +120,23 @@ def _write_record(data, args: argparse.Namespace, run: str) -> Path:
     return path
 
 
+_STEER_WORDS = {"road": "road-wheel angle", "wheel": "steering-wheel angle"}
+_MANOEUVRE_OPTIONS = ("manoeuvre", "amplitude_deg", "duration", "speed")
+_REPLAY_OPTIONS = ("steer_channel", "speed_channel", "compare", "time_column", "time_scale", "segment", "resample",
+                   "scale")
+
+
 def run(args: argparse.Namespace) -> tuple[dict, str]:
+    if args.replay is not None:
+        return run_replay(args)
+    given = [name for name in _REPLAY_OPTIONS if getattr(args, name) is not None] + (
+        ["steer_is"] if args.steer_is != "road" else [])
+    if given:
+        raise InputError(f"--{given[0].replace('_', '-')} belongs to --replay LOG")
+    if args.manoeuvre is None:
+        args.manoeuvre = "identification"
+    if args.vehicle is None:
+        args.vehicle = "baseline"
     params = named_vehicle(args.vehicle)
     options = {"seed": args.seed}
     if args.amplitude_deg is not None:
@@ -154,6 +200,110 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
             f"steady state: yaw rate {summary['yaw_rate_gain']:.4f} 1/s, lateral acceleration "
             f"{summary['lateral_acceleration_gain']:.4f} m/s^2/deg, roll {summary['roll_gain']:.4f} deg/deg"
         )
+    if args.out:
+        lines.append(f"wrote {summary['out']}")
+    return summary, "\n".join(lines)
+
+
+def _compare_pairs(text: str | None) -> dict[str, str]:
+    """``OUTPUT=CHANNEL,...`` as a mapping, each output a model output named once."""
+    from vehid.vehicle.model import OUTPUT_NAMES
+
+    pairs: dict[str, str] = {}
+    for item in (text or "").split(","):
+        if not item.strip():
+            continue
+        output, equals, channel = (part.strip() for part in item.partition("="))
+        if not equals or not output or not channel:
+            raise InputError(f"--compare takes OUTPUT=CHANNEL pairs; got {item.strip()!r}")
+        if output not in OUTPUT_NAMES:
+            raise InputError(f"--compare: the model has no output {output!r}; it has {', '.join(OUTPUT_NAMES)}")
+        if output in pairs:
+            raise InputError(f"--compare: output {output!r} is named twice")
+        pairs[output] = channel
+    return pairs
+
+
+def run_replay(args: argparse.Namespace) -> tuple[dict, str]:
+    """``--replay LOG``: the measured steer and speed through the model, on the log's samples."""
+    from vehid.identification.preparation import ReadSettings, parse_scale, read_record
+
+    for name in _MANOEUVRE_OPTIONS:
+        if getattr(args, name) is not None:
+            raise InputError(f"--{name.replace('_', '-')} does not go with --replay: the log gives steer and speed")
+    if not args.steer_channel or not args.speed_channel:
+        raise InputError("--replay needs --steer-channel NAME and --speed-channel NAME")
+    log = Path(args.replay)
+    if not log.is_file():
+        raise InputError(f"no such log: {log}")
+    compare = _compare_pairs(args.compare)
+    channels = [args.speed_channel, *compare.values()]
+    if args.steer_channel in channels or len(set(channels)) != len(channels):
+        raise InputError("a log channel is named twice among --steer-channel, --speed-channel and --compare")
+    if args.vehicle is None:
+        args.vehicle = "saloon"
+    params = named_vehicle(args.vehicle)
+    data = read_record(log, ReadSettings(inputs=(args.steer_channel,), outputs=tuple(channels),
+                                         time_column=args.time_column, resample=args.resample, segment=args.segment,
+                                         time_scale=args.time_scale))
+    scale = parse_scale(args.scale)
+    unknown = sorted(set(scale) - {args.steer_channel, *channels})
+    if unknown:
+        raise InputError(f"--scale names {unknown[0]!r}, which is not a replayed channel")
+
+    def channel(name: str) -> np.ndarray:
+        values = data.u[:, 0] if name == args.steer_channel else data.y[:, data.output_names.index(name)]
+        return values * scale.get(name, 1.0)
+
+    run = run_digest(args)
+    if args.out:
+        check_output_target(args.out, inputs=[args.vehicle, args.replay], force=args.force, what="record",
+                            kind=RECORD_KIND, run=run, suffixes=HDF5_SUFFIXES)
+    meta = {"replay_log": log.name, "steer_channel": args.steer_channel, "speed_channel": args.speed_channel}
+    measured = {output: (name, channel(name)) for output, name in compare.items()}
+    try:
+        record = replay(params, channel(args.steer_channel), channel(args.speed_channel), data.dt,
+                        steer_is=args.steer_is, t0=float(data.t[0]), method=args.method, meta=meta)
+    except SimulationError as exc:
+        if exc.partial is None:
+            raise
+        partial = exc.partial
+        fits = channel_fits(partial, {k: (n, v[:partial.n_samples]) for k, (n, v) in measured.items()})
+        shown = ", ".join(f"{name} {value:.1f} %" for name, value in fits.fit_percent.items())
+        where = f"; the record up to it ({partial.n_samples} samples) is in {_write_record(partial, args, run)}" \
+            if args.out else ""
+        raise SimulationError(f"{exc}{where}" + (f"; fit up to there: {shown}" if shown else ""),
+                              partial, quantity=exc.quantity, value=exc.value, time=exc.time) from None
+    fits = channel_fits(record, measured)
+    speed = record.output("speed")
+    summary = {
+        "replay": {"log": str(log), "steer_channel": args.steer_channel, "speed_channel": args.speed_channel,
+                   "steer_is": args.steer_is, "substeps": int(record.meta["replay_substeps"]),
+                   "t_start": float(record.t[0]), "t_end": float(record.t[-1])},
+        "vehicle": params.name,
+        "samples": record.n_samples,
+        "dt": record.dt,
+        "method": args.method,
+        "peak_lateral_acceleration": float(np.max(np.abs(record.output("lateral_acceleration")))),
+        "min_speed": float(np.min(speed)),
+        "max_speed": float(np.max(speed)),
+        "max_speed_tracking_error": float(np.max(np.abs(speed - channel(args.speed_channel)))),
+        "seconds": float(record.meta["seconds"]),
+        "fits": fits.as_dict(),
+    }
+    if args.out:
+        summary["out"] = str(_write_record(record, args, run))
+    lines = [
+        f"replay of {log.name} ({args.steer_channel} as {_STEER_WORDS[args.steer_is]}, speed {args.speed_channel}) "
+        f"on {params.name}: {record.n_samples} samples at {1 / record.dt:g} Hz, "
+        f"{summary['replay']['substeps']} step(s) per sample ({args.method}), {summary['seconds']:.2f} s",
+        f"peak lateral acceleration {summary['peak_lateral_acceleration']:.3f} m/s^2, speed "
+        f"{summary['min_speed']:.2f}-{summary['max_speed']:.2f} m/s, following the log within "
+        f"{summary['max_speed_tracking_error']:.3g} m/s",
+    ]
+    for output, row in summary["fits"].items():
+        lines.append(f"{output} against {row['channel']}: fit {row['fit_percent']:.1f} %, "
+                     f"rms error {row['rms_error']:.4g}")
     if args.out:
         lines.append(f"wrote {summary['out']}")
     return summary, "\n".join(lines)
