@@ -157,6 +157,33 @@ class ScheduledOutcome:
     scores: dict[str, Any]
     warnings: list[str] = field(default_factory=list)
     result: Any = None
+    returned: bool = True  # the scheduled family is the model returned (else the unscheduled start)
+    margin: dict[str, Any] | None = None  # the decision, as an entry of ``decision_margins``
+
+
+#: points of mean validation fit by which the scheduled family must beat the unscheduled model to be returned:
+#: as a larger order must beat a smaller one (it has several times the parameters)
+VALIDATION_MARGIN = 0.5
+
+
+def schedule_margin(evaluation: Any, unscheduled: Any) -> dict[str, Any]:
+    """The scheduled family's and the unscheduled model's ranking fits, the measure and the margin to beat.
+
+    On validation data the mean validation fit with :data:`VALIDATION_MARGIN`; without, the estimation
+    fit, where the family fitted its own record with many more parameters, so it must win by the
+    start-or-filter rule's :data:`~vehid.scenarios.identify_workflow.WHOLE_RECORD_MARGIN`.
+    """
+    from vehid.scenarios import identify_workflow as workflow
+
+    def number(value: Any) -> float | None:
+        return float(value) if value is not None and np.isfinite(value) else None
+
+    held_out = bool(evaluation.validation) and unscheduled.validation_fit is not None
+    margin = VALIDATION_MARGIN if held_out else workflow.WHOLE_RECORD_MARGIN
+    return {"score": number(evaluation.ranking_fit()), "runner_up_score": number(unscheduled.ranking_fit()),
+            "margin": margin,
+            "measure": "mean validation NRMSE fit %" if held_out else "mean estimation NRMSE fit %",
+            "rule": f"the scheduled model where it beats the unscheduled one by more than {margin} points"}
 
 
 def identify_scheduled_model(start: Any, plan: Any, args: argparse.Namespace, unscheduled: Any) -> ScheduledOutcome:
@@ -181,7 +208,7 @@ def identify_scheduled_model(start: Any, plan: Any, args: argparse.Namespace, un
     tried, candidates = [], []
     for p in grid:
         options = ScheduledIEKFOptions(knots=args.schedule_knots, grid=_grid(args.schedule_grid), p=p,
-                                       discretization=args.discretization)
+                                       discretization=args.discretization, stable=not args.allow_unstable)
         try:
             result, divergence = workflow.last_good_on_divergence(
                 lambda: identify_scheduled(plan.records[0], schedule.estimation[0], start, variable=schedule.channel,
@@ -221,15 +248,31 @@ def identify_scheduled_model(start: Any, plan: Any, args: argparse.Namespace, un
         model=family, evaluation=evaluation, stop_reason=entry["stop_reason"], start_fit=None,
         final_fit=float(np.mean(result.fit_percent)), allow_unstable=True, label="scheduled",
         fit_history=[record.mean_fit_continuous for record in result.history])
-    if not (args.allow_unstable or family.is_stable()):
+    stable = args.allow_unstable or family.is_stable()
+    if not stable:  # only where the filter was left free to go unstable and the family did
         warnings.append("scheduled: the model is unstable at some grid value where stability was asked: give "
                         "fewer --schedule-knots or a smaller --schedule-p")
-    if evaluation.validation and unscheduled.validation_fit is not None and (
-            np.mean(evaluation.validation_fit) < np.mean(unscheduled.validation_fit)):
-        warnings.append(f"scheduled: the scheduled model validates worse than the unscheduled one (mean fit "
-                        f"{np.mean(evaluation.validation_fit):.2f} % against {np.mean(unscheduled.validation_fit):.2f} "
-                        "%): the schedule does not explain these data; give fewer --schedule-knots")
-    return ScheduledOutcome(family, entry, scores, warnings, result)
+    margin = schedule_margin(evaluation, unscheduled)
+    returned = stable and margin["score"] is not None and (
+        margin["runner_up_score"] is None or margin["score"] > margin["runner_up_score"] + margin["margin"])
+    margin = workflow._margin(*(("scheduled", margin["score"], "unscheduled", margin["runner_up_score"]) if returned
+                                else ("unscheduled", margin["runner_up_score"], "scheduled", margin["score"])),
+                              measure=margin["measure"], rule=margin["rule"])
+    entry.update(model_returned="scheduled" if returned else "unscheduled",
+                 estimation_fit_percent=evaluation.estimation.fit, validation_fit_percent=evaluation.validation_fit)
+    if not returned:
+        scheduled_fit, other_fit = margin["runner_up_score"], margin["score"]
+        warnings.append(
+            "scheduled: the scheduled model " + ("is unstable at some grid value" if not stable else (
+                f"does not beat the unscheduled one by the margin ({margin['measure']} "
+                f"{_or_nan(scheduled_fit):.2f} against {_or_nan(other_fit):.2f})"))
+            + ": the unscheduled model is returned; the schedule does not explain these data better (try fewer "
+            "--schedule-knots or another --schedule-p)")
+    return ScheduledOutcome(family, entry, scores, warnings, result, returned, margin)
+
+
+def _or_nan(value: float | None) -> float:
+    return float("nan") if value is None else value
 
 
 def unscheduled_fit(plan: Any, start: Any) -> Any:
@@ -245,8 +288,9 @@ def text_lines(entry: dict[str, Any], output_names: Sequence[str]) -> list[str]:
     validation = unscheduled.get("validation_fit_percent")
     lines = [
         f"scheduled on {entry['channel']} ({entry['knots']} knots, p {entry['p']:g}, {entry['passes_run']} passes, "
-        f"{'converged' if entry['stop_reason'] == 'converged' else 'NOT converged'}): the scores above are its own; "
-        "unscheduled start: estimation "
+        f"{'converged' if entry['stop_reason'] == 'converged' else 'NOT converged'}): "
+        + ("the scores above are its own; unscheduled start: estimation " if entry.get("model_returned") != "unscheduled"
+           else "NOT returned (the scores above are the unscheduled model's); unscheduled: estimation ")
         + ", ".join(f"{n} {v:.2f}" for n, v in zip(output_names, unscheduled["estimation_fit_percent"]))
         + ("" if validation is None else "; validation " + ", ".join(
             f"{n} {v:.2f}" for n, v in zip(output_names, validation))),
