@@ -224,6 +224,8 @@ class ScheduledIEKFResult(PassHistory):
     @property
     def fit_percent(self) -> np.ndarray:
         """R per output (eq. 17) of the final family simulated from rest along the record's schedule."""
+        if "fit_percent" in self.meta:  # refined after the passes
+            return self.meta["fit_percent"]
         return self.history[-1].fit_continuous if self.history else self.start_fit
 
 
@@ -295,14 +297,17 @@ def _simulation_jacobian(model: ScheduledModalModel, data: IOData, schedule: np.
 
 
 def refine_by_simulation(model: ScheduledModalModel, data: IOData, schedule: np.ndarray, *, method: str = "foh",
-                         iterations: int = 15, stable: bool = True) -> tuple[ScheduledModalModel, int]:
+                         iterations: int = 15, stable: bool = True,
+                         on_step: Callable[[ScheduledModalModel, int], None] | None = None
+                         ) -> tuple[ScheduledModalModel, int]:
     """Levenberg-Marquardt steps on the family's simulation errors from rest, each output weighted by its spread.
 
     The filter minimises one-step prediction errors, which its measurement updates keep small even
     where a knot's coefficients simulate poorly; the family is judged (and returned or not) by its
     simulation. A step is taken only where it lowers the weighted sum of squares, keeps every knot
     stable (where asked) and the simulation finite; the damping grows until one does or the
-    iterations end. Returns the family and the number of steps taken.
+    iterations end. Returns the family and the number of steps taken; ``on_step`` sees the family
+    before the first step (0) and after each step taken (a caller may stop early on held-out data).
     """
     spread = np.std(data.y, axis=0)
     spread = np.where(spread > 0, spread, 1.0)
@@ -318,6 +323,8 @@ def refine_by_simulation(model: ScheduledModalModel, data: IOData, schedule: np.
     current = cost(model)
     if not np.isfinite(current):
         return model, 0
+    if on_step is not None:
+        on_step(model, 0)
     damping, taken = 1e-3, 0
     for _ in range(int(iterations)):
         base, jacobian = _simulation_jacobian(model, data, schedule, method, central=False)
@@ -335,6 +342,8 @@ def refine_by_simulation(model: ScheduledModalModel, data: IOData, schedule: np.
             if trial < current:
                 model, current, taken = candidate, trial, taken + 1
                 damping = max(damping / 10, 1e-9)
+                if on_step is not None:
+                    on_step(model, taken)
                 break
             damping *= 10
         else:
@@ -363,6 +372,7 @@ def identify_scheduled(
     variable: str = "schedule",
     options: ScheduledIEKFOptions | None = None,
     on_pass: Callable[[PassRecord, ScheduledIEKFResult], None] | None = None,
+    on_refine: Callable[[ScheduledModalModel, int], None] | None = None,
 ) -> ScheduledIEKFResult:
     """Identify a scheduled modal family from one record along its measured schedule.
 
@@ -380,6 +390,9 @@ def identify_scheduled(
     options : ScheduledIEKFOptions, optional
     on_pass : callable, optional
         Called after every pass with its record and the result so far.
+    on_refine : callable, optional
+        Called with the family and the step count before and after each refinement step
+        (:func:`refine_by_simulation`).
 
     Returns
     -------
@@ -471,8 +484,10 @@ def identify_scheduled(
             base = final if origin == "filter" else start_family.with_parameters(
                 start_family.parameters, passes=len(history), stop_reason=stop_reason)
             final, steps = refine_by_simulation(base, data, schedule, method=method,
-                                                iterations=options.refine_iterations, stable=options.stable)
-            refined = {"refined_from": origin, "refine_steps": steps}
+                                                iterations=options.refine_iterations, stable=options.stable,
+                                                on_step=on_refine)
+            refined = {"refined_from": origin, "refine_steps": steps,
+                       "fit_percent": percentage_explanation(data.y, simulate(final))}
         if stop_reason != "running" and history:
             covariance = scheduled_simulation_covariance(final, data, schedule, method)
             if covariance is not None:
