@@ -44,7 +44,7 @@ from scipy.optimize import linear_sum_assignment
 from .errors import InputError
 from .modal import ModalModel, ModalStructure
 
-__all__ = ["ModeMatch", "ScheduledModalModel", "canonical_modal_model", "schedule_models", "gauge_parameters",
+__all__ = ["ModeMatch", "OutputMap", "ScheduledModalModel", "canonical_modal_model", "schedule_models", "gauge_parameters",
            "gauge_matrices", "interpolation_weights", "scheduled_matrices", "knot_size"]
 
 
@@ -304,6 +304,93 @@ def _match(reference: np.ndarray, candidate: np.ndarray, n_pairs: int) -> tuple[
 
 
 @dataclass(frozen=True, eq=False)
+class OutputMap:
+    """A static piecewise-linear map of each output of a linear model: ``y_i = g_i(z_i)`` (a Wiener model).
+
+    ``g_i`` interpolates ``ordinates[i]`` linearly between ``nodes[i]`` and continues its end segments
+    beyond them, so an output the linear model overshoots (a lateral acceleration at the grip limit)
+    is bent back wherever it lands. The identity map has its ordinates at its nodes.
+
+    Parameters
+    ----------
+    nodes, ordinates : ndarray (n_y, n_nodes)
+        Per output, strictly increasing nodes (in the linear output's units) and the map's values there.
+    """
+
+    nodes: np.ndarray
+    ordinates: np.ndarray
+
+    def __post_init__(self) -> None:
+        nodes, ordinates = (np.array(getattr(self, name), dtype=float) for name in ("nodes", "ordinates"))
+        if nodes.ndim != 2 or nodes.shape != ordinates.shape or nodes.shape[1] < 2:
+            raise InputError(f"an output map needs nodes and ordinates of one shape (n_y, >= 2); got {nodes.shape} "
+                             f"and {ordinates.shape}")
+        if not (np.all(np.isfinite(nodes)) and np.all(np.isfinite(ordinates)) and np.all(np.diff(nodes, axis=1) > 0)):
+            raise InputError("an output map's nodes must be finite and strictly increasing, its ordinates finite")
+        for name, array in (("nodes", nodes), ("ordinates", ordinates)):
+            array.setflags(write=False)
+            object.__setattr__(self, name, array)
+
+    @staticmethod
+    def basis(z: np.ndarray, nodes: np.ndarray) -> np.ndarray:
+        """Hat functions (N, n_nodes) of ``z`` at ``nodes``, the end segments continued linearly."""
+        segment = np.clip(np.searchsorted(nodes, z) - 1, 0, nodes.size - 2)
+        share = (z - nodes[segment]) / (nodes[segment + 1] - nodes[segment])
+        phi = np.zeros((z.size, nodes.size))
+        rows = np.arange(z.size)
+        phi[rows, segment] = 1.0 - share
+        phi[rows, segment + 1] = share
+        return phi
+
+    @classmethod
+    def fit(cls, z: Any, y: Any, count: int, *, ridge: float = 1e-3) -> "OutputMap":
+        """The map from a linear model's outputs ``z`` (N, n_y) to the measured ``y`` by least squares.
+
+        Nodes at evenly spaced quantiles of each ``z_i`` from its 0.5th to its 99.5th percentile; the
+        ordinates minimise ``|y_i - g_i(z_i)|^2 + ridge N |ordinates - nodes|^2``: the ridge pulls a
+        node that few samples reach towards the identity, not towards noise.
+        """
+        z, y = np.asarray(z, dtype=float), np.asarray(y, dtype=float)
+        if z.ndim != 2 or z.shape != y.shape or not (np.all(np.isfinite(z)) and np.all(np.isfinite(y))):
+            raise InputError(f"an output map is fitted to finite z and y of one shape (N, n_y); got {z.shape}, {y.shape}")
+        nodes, ordinates = [], []
+        for zi, yi in zip(z.T, y.T):
+            at = np.quantile(zi, np.linspace(0.005, 0.995, int(count)))
+            if np.any(np.diff(at) <= 1e-12 * max(np.max(np.abs(at)), 1e-300)):
+                at = np.linspace(at[0], at[-1], int(count)) if at[-1] > at[0] else at[0] + np.arange(int(count))
+            phi = cls.basis(zi, at)
+            weight = ridge * zi.size
+            ordinates.append(np.linalg.solve(phi.T @ phi + weight * np.eye(at.size), phi.T @ yi + weight * at))
+            nodes.append(at)
+        return cls(np.array(nodes), np.array(ordinates))
+
+    def apply(self, z: Any) -> np.ndarray:
+        """``g(z)`` for linear outputs ``z`` (N, n_y)."""
+        z = np.asarray(z, dtype=float)
+        return np.column_stack([self.basis(z[:, i], self.nodes[i]) @ self.ordinates[i] for i in range(z.shape[1])])
+
+    def apply_casadi(self, z: Any) -> Any:
+        """``g(z)`` of a CasADi column ``z`` (n_y): the same map, differentiable."""
+        out = []
+        for i in range(self.nodes.shape[0]):
+            nodes, values = self.nodes[i], self.ordinates[i]
+            slopes = np.diff(values) / np.diff(nodes)
+            # first segment's line, then each interior node adds its change of slope past it
+            g = values[0] + slopes[0] * (z[i] - nodes[0])
+            for k in range(1, nodes.size - 1):
+                g += (slopes[k] - slopes[k - 1]) * ca.fmax(z[i] - nodes[k], 0)
+            out.append(g)
+        return ca.vertcat(*out)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"nodes": self.nodes.tolist(), "ordinates": self.ordinates.tolist()}
+
+    @classmethod
+    def from_dict(cls, values: Mapping[str, Any]) -> "OutputMap":
+        return cls(np.asarray(values["nodes"], dtype=float), np.asarray(values["ordinates"], dtype=float))
+
+
+@dataclass(frozen=True, eq=False)
 class ScheduledModalModel:
     """A family of modal models scheduled on one variable (e.g. speed): a frozen value.
 
@@ -326,6 +413,9 @@ class ScheduledModalModel:
         Covariance of :attr:`parameters` (module notes), where an estimator gave one.
     offset : ndarray (n_grid, n_y), optional
         The output offset at each grid value (module notes); zero by default.
+    output_map : OutputMap, optional
+        A static map applied to the simulated outputs (``--schedule`` with ``--nonlinear``); the frozen
+        models of :meth:`model_at`, their modes and :attr:`parameters` are the linear part's.
     """
 
     structure: ModalStructure
@@ -341,9 +431,12 @@ class ScheduledModalModel:
     meta: dict[str, Any] = field(default_factory=dict)
     parameter_covariance: np.ndarray | None = None
     offset: np.ndarray | None = None
+    output_map: OutputMap | None = None
 
     def __post_init__(self) -> None:
         s = self.structure
+        if self.output_map is not None and self.output_map.nodes.shape[0] != s.n_y:
+            raise InputError(f"the output map has {self.output_map.nodes.shape[0]} outputs; the family {s.n_y}")
         grid = np.array(self.grid, dtype=float).ravel()
         if grid.size < 2 or np.any(np.diff(grid) <= 0) or not np.all(np.isfinite(grid)):
             raise InputError(f"a scheduled model needs at least two increasing grid values; got {grid.tolist()}")
@@ -371,7 +464,8 @@ class ScheduledModalModel:
     def from_parameters(cls, structure: ModalStructure, grid: Any, theta: Any, *, variable: str = "speed",
                         input_names: tuple[str, ...] | None = None, output_names: tuple[str, ...] | None = None,
                         meta: dict[str, Any] | None = None, parameter_covariance: Any = None,
-                        matching: tuple[ModeMatch, ...] | None = None) -> "ScheduledModalModel":
+                        matching: tuple[ModeMatch, ...] | None = None,
+                        output_map: OutputMap | None = None) -> "ScheduledModalModel":
         """The family of ``structure`` on ``grid`` with parameters ``theta`` laid out as :attr:`parameters`."""
         grid = np.asarray(grid, dtype=float).ravel()
         m, size = structure.n_parameters, knot_size(structure)
@@ -384,7 +478,7 @@ class ScheduledModalModel:
             identity = tuple(range(len(structure.mode_states())))
             matching = tuple(ModeMatch(float(value), identity, 0.0) for value in grid)
         return cls(structure, grid, *(np.array([part[i] for part in parts]) for i in range(4)), matching, variable,
-                   input_names, output_names, dict(meta or {}), parameter_covariance, offset)
+                   input_names, output_names, dict(meta or {}), parameter_covariance, offset, output_map)
 
     @property
     def n_parameters(self) -> int:
@@ -402,7 +496,7 @@ class ScheduledModalModel:
         return ScheduledModalModel.from_parameters(
             self.structure, self.grid, theta, variable=self.variable, input_names=self.input_names,
             output_names=self.output_names, meta={**self.meta, **meta}, parameter_covariance=parameter_covariance,
-            matching=self.matching)
+            matching=self.matching, output_map=self.output_map)
 
     def _weights(self, value: float) -> np.ndarray:
         value = float(value)
@@ -501,6 +595,8 @@ class ScheduledModalModel:
             raise InputError(f"x0 must have {s.n} entries; got {x0.shape}")
         simulator = _simulator(s, self.grid.size, float(dt), _HOLDS[method])
         y, x = simulator(x0, u, np.concatenate([self.parameters, self.grid]))
+        if self.output_map is not None:
+            y = self.output_map.apply(y)
         return (y, x) if return_states else y
 
     def simulate(self, record: Any, **options: Any) -> Any:
@@ -529,8 +625,10 @@ class ScheduledModalModel:
         A = s.matrices(ca.vertcat(modal, ca.SX.zeros(s.n_parameters - s.n)), backend=ca.SX)[0]
         if gauge == "canonical":
             A, B, C = _structure_gauge(s, A, B, C)
-        return ca.Function(name, [x, u, v], [ca.mtimes(A, x) + ca.mtimes(B, u),
-                                             ca.mtimes(C, x) + ca.mtimes(D, u) + offset],
+        y = ca.mtimes(C, x) + ca.mtimes(D, u) + offset
+        if self.output_map is not None:
+            y = self.output_map.apply_casadi(y)
+        return ca.Function(name, [x, u, v], [ca.mtimes(A, x) + ca.mtimes(B, u), y],
                            ["x", "u", self.variable], ["xdot", "y"])
 
     def to_dict(self) -> dict[str, Any]:
@@ -542,6 +640,7 @@ class ScheduledModalModel:
             "input_names": None if self.input_names is None else list(self.input_names),
             "output_names": None if self.output_names is None else list(self.output_names), "meta": self.meta,
             "offset": self.offset.tolist(),
+            **({} if self.output_map is None else {"output_map": self.output_map.to_dict()}),
             **({} if self.parameter_covariance is None
                else {"parameter_covariance": self.parameter_covariance.tolist()}),
         }
@@ -556,7 +655,8 @@ class ScheduledModalModel:
         return cls(ModalStructure.from_dict(values["structure"]), *(np.asarray(values[k]) for k in ("grid", "modal", "B", "C", "D")),
                    matching, str(values["variable"]), **names, meta=dict(values.get("meta") or {}),
                    parameter_covariance=None if covariance is None else np.asarray(covariance, dtype=float),
-                   offset=None if values.get("offset") is None else np.asarray(values["offset"], dtype=float))
+                   offset=None if values.get("offset") is None else np.asarray(values["offset"], dtype=float),
+                   output_map=None if values.get("output_map") is None else OutputMap.from_dict(values["output_map"]))
 
     def save_json(self, path: Any) -> Any:
         """Write :meth:`to_dict` as JSON; returns the path."""
@@ -578,6 +678,8 @@ class ScheduledModalModel:
         path = Path(path)
         savemat(path, {"grid": self.grid, "modal": self.modal, "B": self.B, "C": self.C, "D": self.D, "offset": self.offset,
                        "variable": self.variable,
+                       **({} if self.output_map is None else {"output_map_nodes": self.output_map.nodes,
+                                                               "output_map_ordinates": self.output_map.ordinates}),
                        **({} if self.parameter_covariance is None else {"parameter_covariance": self.parameter_covariance})})
         return path
 

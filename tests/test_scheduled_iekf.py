@@ -12,6 +12,8 @@ the exact discretisation of that system over each sample (A(v) frozen at the sam
 linear between samples), so the modes at each speed are the closed-form eigenvalues of A(v).
 """
 
+import dataclasses
+
 import numpy as np
 import pytest
 import scipy.linalg
@@ -22,7 +24,7 @@ from vehid.identification.errors import InputError
 from vehid.identification.iekf import IEKFOptions, identify_iekf
 from vehid.identification.metrics import nrmse_fit
 from vehid.identification.modal import ModalStructure
-from vehid.identification.scheduled import ScheduledModalModel
+from vehid.identification.scheduled import OutputMap, ScheduledModalModel
 from vehid.identification.scheduled_iekf import ScheduledIEKFOptions, default_grid, identify_scheduled
 from vehid.identification.storage import read_value, write_value
 from vehid.identification.validation import score, split_holdout
@@ -50,9 +52,10 @@ def closed_form_mode(v: float) -> tuple[float, float]:
     return abs(eigenvalue) / (2 * np.pi), -eigenvalue.real / abs(eigenvalue)
 
 
-def single_track_record(seed: int = 0, noise: float = 0.01) -> tuple[IOData, np.ndarray]:
+def single_track_record(seed: int = 0, noise: float = 0.01, frozen: float | None = None) -> tuple[IOData, np.ndarray]:
     """Steer (band-limited to 2 Hz, 0.02 rad RMS), speed 20 - 10 cos(2 pi t / 40) m/s, outputs with white noise
-    of ``noise`` times their RMS; returns the record and the speed."""
+    of ``noise`` times their RMS; returns the record and the speed. With ``frozen`` the car's dynamics are
+    those at that speed throughout, while the speed returned still varies (a channel they do not depend on)."""
     rng = np.random.default_rng(seed)
     samples = int(DURATION / DT)
     t = np.arange(samples) * DT
@@ -64,7 +67,7 @@ def single_track_record(seed: int = 0, noise: float = 0.01) -> tuple[IOData, np.
     outputs = np.empty((samples, 2, 2))
     feedthrough = np.empty((samples, 2))
     for k in range(samples):
-        A, B, C, D = bicycle(speed[k])
+        A, B, C, D = bicycle(speed[k] if frozen is None else frozen)
         blocks[k, :2, :2], blocks[k, :2, 2], blocks[k, 2, 3] = A * DT, B * DT, 1.0
         outputs[k], feedthrough[k] = C, D
     E = _exponential(blocks)
@@ -139,6 +142,44 @@ def test_scheduled_model_beats_the_unscheduled_one_on_held_out_data(identified):
     # (5 points) and to a floor (90 %) well inside that spread
     assert np.all(scheduled > unscheduled + 5.0)
     assert np.all(scheduled > 90.0)
+
+
+def test_output_map_reproduces_an_affine_map_and_its_casadi_twin():
+    import casadi as ca
+
+    rng = np.random.default_rng(3)
+    z = rng.standard_normal((400, 2)) * [1.0, 5.0]
+    y = z * [0.8, -1.5] + [0.1, 2.0]  # piecewise-linear maps hold every affine one exactly
+    fitted = OutputMap.fit(z, y, 5, ridge=0.0)
+    assert np.allclose(fitted.apply(z), y, rtol=0, atol=1e-9)
+    # beyond the end nodes the end segments continue: still the affine map
+    far = np.array([[10.0, -40.0], [-10.0, 40.0]])
+    assert np.allclose(fitted.apply(far), far * [0.8, -1.5] + [0.1, 2.0], rtol=0, atol=1e-9)
+    saturating = OutputMap(np.array([[-1.0, 0.0, 1.0]]), np.array([[-0.5, 0.0, 0.5]]))
+    symbol = ca.SX.sym("z", 1)
+    twin = ca.Function("g", [symbol], [saturating.apply_casadi(symbol)])
+    points = np.linspace(-3.0, 3.0, 61)
+    assert np.allclose([float(twin(p)) for p in points], saturating.apply(points[:, None])[:, 0], rtol=0, atol=1e-12)
+    assert OutputMap.from_dict(fitted.to_dict()).ordinates.tolist() == fitted.ordinates.tolist()
+
+
+def test_output_map_does_not_lose_on_a_linear_truth(identified):
+    # --schedule --nonlinear on a car that is linear in amplitude: the map fitted on the estimation part
+    # must keep the scheduled model's hold-out fit. Seeds 0-1 measured a change of -0.01 to +0.3 points;
+    # it may lose at most the 0.5 points the command asks a map to win by before it keeps one
+    result, _, validation, speed = identified
+    family = result.model
+    data, whole_speed = single_track_record()  # the fixture's record, rebuilt: its estimation part
+    estimation, _ = split_holdout(data, 0.3)
+    linear = nrmse_fit(validation.y, family.simulate_outputs(validation.u, validation.dt, schedule=speed))
+    outputs = family.simulate_outputs(estimation.u, estimation.dt, schedule=whole_speed[:estimation.n_samples])
+    for count in (3, 5):
+        mapped = dataclasses.replace(family, output_map=OutputMap.fit(outputs, estimation.y, count))
+        fit = nrmse_fit(validation.y, mapped.simulate_outputs(validation.u, validation.dt, schedule=speed))
+        assert np.all(fit > linear - 0.5), (count, fit, linear)
+        again = ScheduledModalModel.from_dict(mapped.to_dict())
+        assert np.array_equal(again.simulate_outputs(validation.u, validation.dt, schedule=speed),
+                              mapped.simulate_outputs(validation.u, validation.dt, schedule=speed))
 
 
 def test_covariance_travels_and_the_family_round_trips(identified, tmp_path):
@@ -239,8 +280,52 @@ def test_identify_schedule_json_contract_and_model_file(speed_log, tmp_path):
     # scheduled one, ahead of the unscheduled start on every output
     assert len(summary["validation_records"]) == 2
     assert np.all(np.array(summary["validation_fit_percent"]) > np.array(entry["unscheduled"]["validation_fit_percent"]))
+    assert entry["model_returned"] == "scheduled" and summary["decision_margins"]["schedule"]["choice"] == "scheduled"
     saved = ScheduledModalModel.from_dict(json.loads(model_file.read_text()))
     assert saved.variable == "vx_kmh" and saved.parameter_covariance is not None
+
+
+def test_identify_schedule_returns_the_unscheduled_model_where_the_dynamics_ignore_the_channel(tmp_path):
+    import json
+
+    # a car whose dynamics are those at 20 m/s throughout, logged with a varying speed channel: the
+    # unscheduled model is right, so the family must not win by the margin; its return says so,
+    # as a warning (exit 3 under --strict)
+    data, speed = single_track_record(seed=2, frozen=20.0)
+    path = tmp_path / "frozen.csv"
+    np.savetxt(path, np.column_stack([data.t, data.u[:, 0], speed, data.y]), delimiter=",",
+               header="t,delta,vx,yawRate,ayCG", comments="")
+    completed = _vehid("identify", str(path), "--inputs", "delta", "--outputs", "yawRate,ayCG", "--schedule", "vx",
+                       "--order", "2", "--p", "1e-5", "--passes", "20", "--validation", "0.3", "--json", "--quiet",
+                       "--strict")
+    assert completed.returncode == 3, completed.stderr
+    summary = json.loads(completed.stdout)
+    assert summary["scheduled"]["model_returned"] == "unscheduled"
+    assert summary["decision_margins"]["schedule"]["choice"] == "unscheduled"
+    assert summary["validation_fit_percent"] == summary["scheduled"]["unscheduled"]["validation_fit_percent"]
+    assert any("unscheduled model is returned" in line for line in summary["warnings"])
+
+
+def test_identify_schedule_on_a_race_cars_log_is_stable_at_every_knot():
+    import json
+    from pathlib import Path
+
+    # a real car's lap (tests/data/race_car_250lm/SOURCE.md): the filter once let the slowest knot drift
+    # to an unstable real pole (estimation fit -15138 %). Properties, not figures: every knot stable,
+    # the family's simulation explains more than the outputs' means, and the decision follows its rule
+    log = Path(__file__).parent / "data" / "race_car_250lm" / "20140222_01_01_03_250lm.csv"
+    completed = _vehid("identify", str(log), "--inputs", "delta", "--outputs", "yawRate,ayCG", "--schedule", "vx",
+                       "--order", "2", "--validation", "0.4", "--json", "--quiet")
+    assert completed.returncode == 0, completed.stderr
+    summary = json.loads(completed.stdout)
+    entry = summary["scheduled"]
+    assert all(mode["damping"] > 0 for row in entry["modes_at"] for mode in row["modes"])
+    assert np.all(np.array(entry["estimation_fit_percent"]) > 0)
+    margin = summary["decision_margins"]["schedule"]
+    family = float(np.mean(entry["validation_fit_percent"]))
+    unscheduled = float(np.mean(entry["unscheduled"]["validation_fit_percent_from_rest"]))
+    assert (entry["model_returned"] == "scheduled") == (family > unscheduled + 0.5)
+    assert margin["choice"] == entry["model_returned"]
 
 
 def test_identify_schedule_refuses_bad_input(speed_log, capsys):

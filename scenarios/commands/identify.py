@@ -336,13 +336,16 @@ def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None)
         warnings += workflow.nonlinear_warnings(outcome, evaluation)
     warnings += data_warnings(plan.records)
     scheduled, unscheduled = None, model
-    if args.schedule:  # the scheduled family, started from the model above, is the model returned
+    if args.schedule:  # the scheduled family, started from the model above, returned where it validates better
         scheduled = scheduled_identify.identify_scheduled_model(model, plan, args, evaluation)
-        summary.update(scheduled.scores, scheduled=scheduled.summary)
+        summary.update(scheduled=scheduled.summary)
+        summary.setdefault("decision_margins", {})["schedule"] = scheduled.margin
         warnings += scheduled.warnings
         if nonlinear is not None:
             summary["notes"].append(scheduled_identify.NONLINEAR_NOTE)
-        model = scheduled.model
+        if scheduled.returned:
+            summary.update(scheduled.scores)
+            model = scheduled.model
     summary["warnings"] = list(warnings)
     if archive_path is not None:
         summary["archive"] = str(archive_path)
@@ -357,7 +360,8 @@ def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None)
             if tests is not None:
                 write_value(run_group(archive, RUN_NAME if result is not None else args.method),
                             "residual_tests", tests)
-            _archive_verdict(archive, summary, args, returned="scheduled" if scheduled is not None else (
+            returned_scheduled = scheduled is not None and scheduled.returned
+            _archive_verdict(archive, summary, args, returned="scheduled" if returned_scheduled else (
                 "start" if start_returned else (RUN_NAME if result is not None else args.method)))
     if args.save_model:
         summary["model_file"] = str(save_model(model, args.save_model, plan.preparation))
