@@ -11,6 +11,7 @@ their commands (divergence, model conversion, an order that diverges).
 from __future__ import annotations
 
 import errno
+import importlib
 import json
 
 import pytest
@@ -84,7 +85,7 @@ def test_bad_input_exits_2(case, tmp_path, capsys, monkeypatch):
 
         with write_archive(tmp_path / "a.h5", kind="identification"):
             pass
-        monkeypatch.setattr("vehid.scenarios.commands.report.archive_figures", None)  # drawing would fail loudly
+        monkeypatch.setattr("vehid.scenarios.report.archive_figures", None)  # drawing would fail loudly
         _check(capsys, ["report", str(tmp_path / "a.h5"), "--out", str(foreign)], 2, "foreign.csv", "Not a directory")
         assert foreign.read_text() == "t,u,y\n0,0,0\n"
     elif case == "report-corrupt":
@@ -125,10 +126,10 @@ def test_bad_input_exits_2(case, tmp_path, capsys, monkeypatch):
             raise PermissionError(errno.EACCES, "Permission denied", target)
 
         if case == "textbook-unwritable":
-            monkeypatch.setattr("vehid.scenarios.commands.study_textbook.run_all", refused)
+            monkeypatch.setattr("vehid.scenarios.textbook.run_all", refused)
             _check(capsys, ["study", "textbook"], 2, target, "Permission denied")
         else:
-            monkeypatch.setattr("vehid.scenarios.commands.bench_iekf.measure_iekf", refused)
+            monkeypatch.setattr("vehid.scenarios.iekf_benchmark.measure_iekf", refused)
             _check(capsys, ["bench", "iekf", "--repeats", "1"], 2, target, "Permission denied")
 
 
@@ -150,7 +151,7 @@ def test_a_failed_computation_exits_1(command, tmp_path, capsys, monkeypatch):
         data.write_text("t,u,y\n" + "".join(f"{k * 0.01},{(-1) ** k},{k % 3}\n" for k in range(100)))
         argv += [str(data), "--inputs", "u", "--outputs", "y", "--order", "2"]
     elif command == ("report",):
-        monkeypatch.setattr("vehid.scenarios.commands.report.archive_figures", diverge)
+        monkeypatch.setattr("vehid.scenarios.report.archive_figures", diverge)
         archive = tmp_path / "a.h5"
         with write_archive(archive, kind="identification"):
             pass
@@ -159,7 +160,7 @@ def test_a_failed_computation_exits_1(command, tmp_path, capsys, monkeypatch):
         monkeypatch.setattr("vehid.scenarios.commands.simulate.simulate", diverge)
         argv += ["--duration", "1"]
     elif command == ("linearize",):
-        monkeypatch.setattr("vehid.scenarios.commands.linearize.linearize", diverge)
+        monkeypatch.setattr(importlib.import_module("vehid.vehicle.linearize"), "linearize", diverge)
     elif command == ("study", "handling"):
         monkeypatch.setattr("vehid.scenarios.commands.study_handling.run_study", diverge)
         monkeypatch.setattr("vehid.scenarios.commands.study_handling.make_records", lambda config: {})
@@ -167,7 +168,7 @@ def test_a_failed_computation_exits_1(command, tmp_path, capsys, monkeypatch):
     elif command == ("study", "linear-example"):
         monkeypatch.setattr("vehid.scenarios.commands.study_linear_example.run_case", diverge)
     elif command == ("study", "textbook"):
-        monkeypatch.setattr("vehid.scenarios.commands.study_textbook.run_all", diverge)
+        monkeypatch.setattr("vehid.scenarios.textbook.run_all", diverge)
     elif command == ("study", "envelope"):
         monkeypatch.setattr("vehid.scenarios.commands.study_envelope.run_campaign", diverge)
         argv += ["--speeds", "15", "--orders", "2", "--linear-only"]
@@ -175,7 +176,7 @@ def test_a_failed_computation_exits_1(command, tmp_path, capsys, monkeypatch):
         monkeypatch.setattr("vehid.vehicle.handling.source_handling", diverge)
         argv += ["--source", "--speeds", "20"]
     else:
-        monkeypatch.setattr("vehid.scenarios.commands.bench_iekf.measure_iekf", diverge)
+        monkeypatch.setattr("vehid.scenarios.iekf_benchmark.measure_iekf", diverge)
     _check(capsys, argv, 1, "non-finite")
 
 
@@ -218,6 +219,6 @@ def test_an_interrupt_still_prints_one_json_object(tmp_path, capsys, monkeypatch
     def stopped(**options):
         raise Interrupted(signal.SIGTERM)
 
-    monkeypatch.setattr("vehid.scenarios.commands.study_textbook.run_all", stopped)
+    monkeypatch.setattr("vehid.scenarios.textbook.run_all", stopped)
     body = _check(capsys, ["study", "textbook"], 128 + signal.SIGTERM, "interrupted by SIGTERM")
     assert body["error"] == "interrupted by SIGTERM"

@@ -6,6 +6,8 @@ import json
 import subprocess
 import sys
 
+import pytest
+
 HEAVY = ("numpy", "scipy", "casadi", "h5py", "matplotlib")
 
 
@@ -22,6 +24,13 @@ def test_help_and_the_package_import_none_of_the_heavy_libraries():
     assert _imported_after("import vehid.identification") == []
     # a public name still arrives from the package, importing its own module only
     assert "casadi" not in _imported_after("from vehid.identification import nrmse_fit")
+
+
+@pytest.mark.parametrize("words", [("report",), ("linearize",), ("study", "textbook"), ("bench", "iekf")])
+def test_a_commands_help_imports_none_of_what_it_computes_with(words):
+    """These commands import their plotting, filters and archives when they run: their ``--help`` needs
+    argparse alone (``report --help`` took 3.8 s of CPU when it imported matplotlib on the way)."""
+    assert _imported_after(f"from vehid.scenarios.cli import build_parser\nbuild_parser({[*words, '--help']!r})") == []
 
 
 def test_the_command_list_read_from_source_is_the_one_the_modules_define():

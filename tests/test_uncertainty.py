@@ -307,6 +307,7 @@ def test_intervals_are_calibrated_on_the_known_system_lean():
         assert 0.4 < np.mean(np.square(z)) < 2.2, (method, np.mean(np.square(z)))
 
 
+@pytest.mark.slow  # 1500 sampled models' modes at 7 amplitudes, in Python: 76-80 s on a quiet machine
 def test_spline_bands_match_monte_carlo_sampling():
     """Spline coefficient and first-mode frequency/damping std against 1500 samples of the ordinates (relative error of a sampled std 1.8 %: 6 % is 3.3 of it)."""
     from vehid.identification.spline_modal import SplineModalModel

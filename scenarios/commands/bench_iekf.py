@@ -7,9 +7,6 @@ from __future__ import annotations
 
 import argparse
 
-from vehid.scenarios.benchmarking import record_figures
-from vehid.scenarios.iekf_benchmark import measure_iekf, report_text
-
 NAME = "iekf"
 GROUP = "bench"
 HELP = "seconds per IEKF pass, compiled vs the NumPy reference"
@@ -21,6 +18,10 @@ def register(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> tuple[dict, str]:
+    # the filter and its compiler when the command runs, not for its --help
+    from vehid.scenarios.benchmarking import record_figures
+    from vehid.scenarios.iekf_benchmark import measure_iekf, report_text
+
     figures = measure_iekf(repeats=max(args.repeats, 1))
     path = record_figures("iekf_linear", figures)
     return figures, report_text(figures) + f"\nwrote {path}"

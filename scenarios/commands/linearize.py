@@ -9,9 +9,6 @@ from __future__ import annotations
 
 import argparse
 
-from vehid.vehicle import named_vehicle
-from vehid.vehicle.linearize import linearize
-
 NAME = "linearize"
 GROUP = None
 HELP = "linearise the full-vehicle model at trim and list its modes"
@@ -26,6 +23,9 @@ def register(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> tuple[dict, str]:
+    from vehid.vehicle.linearize import linearize  # CasADi when the command runs, not for its --help
+    from vehid.vehicle.parameters import named_vehicle
+
     params = named_vehicle(args.vehicle)
     result = linearize(params, speed=args.speed)
     summary = {

@@ -20,12 +20,8 @@ import argparse
 import math
 from pathlib import Path
 
-from vehid.identification.archive import read_archive
-from vehid.identification.archive_safety import check_report_folder, writing_report_folder
 from vehid.identification.errors import InputError
 from vehid.scenarios.paths import OUT_RULE, results_path
-from vehid.scenarios.report import (archive_figures, archive_table, archive_verdict, markdown_table, verdict_lines,
-                                    verdict_page, write_report)
 
 NAME = "report"
 GROUP = None
@@ -47,6 +43,12 @@ def register(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> tuple[dict, str]:
+    # matplotlib and h5py when the command runs, not when its --help is asked for
+    from vehid.identification.archive import read_archive
+    from vehid.identification.archive_safety import check_report_folder, writing_report_folder
+    from vehid.scenarios.report import (archive_figures, archive_table, archive_verdict, markdown_table, verdict_lines,
+                                        verdict_page, write_report)
+
     if args.max_lag < 1:
         raise InputError(f"--max-lag must be at least 1; got {args.max_lag}")
     if not 20 <= args.dpi <= 600:

@@ -10,8 +10,6 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from vehid.scenarios.textbook import run_all
-
 NAME = "textbook"
 GROUP = "study"
 HELP = "run the textbook appendix's examples (LS, RLS, GLS, Kalman, EKF, pencil, UD') and print their numbers"
@@ -58,5 +56,7 @@ def _text(summary: dict[str, Any]) -> str:
 
 
 def run(args: argparse.Namespace) -> tuple[dict, str]:
+    from vehid.scenarios.textbook import run_all  # SciPy and CasADi when the command runs, not for its --help
+
     summary = run_all(compiled=args.compiled)
     return summary, _text(summary)
