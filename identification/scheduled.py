@@ -551,6 +551,23 @@ class ScheduledModalModel:
         """Input columns of a record the family simulates: its inputs and, last, the schedule."""
         return self.structure.n_u + 1
 
+    #: the family is linear at each schedule value but varies along a record: simulated from rest, as a
+    #: nonlinear model is, by the scorers of the model protocol
+    is_linear = False
+
+    @property
+    def n_u(self) -> int:
+        """Input columns of a record, the schedule last (:attr:`record_inputs`); ``model_at`` has ``structure.n_u``."""
+        return self.record_inputs
+
+    @property
+    def n_y(self) -> int:
+        return self.structure.n_y
+
+    @property
+    def n_states(self) -> int:
+        return self.structure.n
+
     def simulate_outputs(self, u: Any, dt: float, *, schedule: Any = None, method: str = "foh", x0: Any = None,
                          return_states: bool = False) -> Any:
         """Outputs (N, n_y) of the family driven by ``u`` along a measured schedule, compiled.
