@@ -774,7 +774,7 @@ def run_warnings(*, model: Any, evaluation: Evaluation, stop_reason: str | None,
     if start_moved is False and not p_tuned and final_fit is not None and final_fit < NOTHING_TO_GAIN:
         lines.append(f"{prefix}the model is no better than its start: its modes stayed at their start values "
                      f"(mean R {final_fit:.3f} %); give a larger --p")
-    if model.is_linear and not allow_unstable and not model.is_stable():
+    if model is not None and model.is_linear and not allow_unstable and not model.is_stable():
         lines.append(f"{prefix}the model is unstable where stability was asked: lower the order, or give "
                      "--allow-unstable for an open-loop unstable plant")
     scored = [("estimation", evaluation.estimation)] + [("validation", s) for s in evaluation.validation]

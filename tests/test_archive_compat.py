@@ -17,12 +17,17 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+import scipy.signal
 
 from vehid.identification import storage
 from vehid.identification import archive as archive_module
 from vehid.identification.archive import read_archive
 from vehid.identification.archive_safety import write_checksums
+from vehid.identification import ArxModel, DiscreteModel, IOData, estimate_subspace
+from vehid.identification.discrete import ContinuousModel
+from vehid.identification.pencil import PencilModel
 from vehid.identification.scheduled import schedule_models
+from vehid.identification.statespace import continuous_to_discrete
 from vehid.identification.spline_iekf import SplineIEKFOptions
 from vehid.identification.storage import read_value, write_value
 from vehid.scenarios.cli import main
@@ -117,6 +122,19 @@ def test_every_registered_type_round_trips(tmp_path):
         "vehicle_parameters": vehicle, "vehicle_chassis": vehicle.chassis, "vehicle_suspension": vehicle.suspension,
         "vehicle_tyres": vehicle.tyre, "vehicle_drive": vehicle.drive, "vehicle_steering": saloon().steering,
         "vehicle_aerodynamics": AeroParameters(drag_area=0.7, rear_downforce_area=0.4),
+    })
+    # every protocol class, built from the legacy modal model: the same system as each class holds it
+    dt = 0.01
+    Ad, Bd, Cd, Dd = continuous_to_discrete(linear.A, linear.B, linear.C, linear.D, dt, hold="foh")
+    numerator, denominator = scipy.signal.ss2tf(Ad, Bd[:, :1], Cd[:1], Dd[:1, :1])
+    u = np.random.default_rng(0).standard_normal((400, Bd.shape[1]))
+    y = DiscreteModel(Ad, Bd, Cd, Dd, dt).simulate_outputs(u)
+    values.update({
+        "continuous_model": ContinuousModel(linear.A, linear.B, linear.C, linear.D),
+        "discrete_model": DiscreteModel(Ad, Bd, Cd, Dd, dt),
+        "arx_model": ArxModel(denominator.reshape(-1, 1, 1), numerator.reshape(-1, 1, 1), dt),
+        "pencil_model": PencilModel.from_state_space(Ad, Bd, Cd, Dd, dt=dt),
+        "subspace_model": estimate_subspace(IOData(t=np.arange(400) * dt, u=u, y=y), order=Ad.shape[0]),
     })
     linearisation = linearize(vehicle, speed=20.0)
     values.update({"vehicle_linearization": linearisation, "vehicle_mode": linearisation.modes[0]})
