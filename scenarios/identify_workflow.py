@@ -751,7 +751,8 @@ def _mean_scores(model: Any, records: tuple[IOData, ...], **options: Any) -> Sco
 
 def run_warnings(*, model: Any, evaluation: Evaluation, stop_reason: str | None, start_fit: float | None,
                  final_fit: float | None, allow_unstable: bool, label: str = "", start_moved: bool | None = None,
-                 p_tuned: bool = False, fit_history: Sequence[float] | None = None) -> list[str]:
+                 p_tuned: bool = False, fit_history: Sequence[float] | None = None,
+                 below_zero_remedy: str = "try another order") -> list[str]:
     """One line per problem of the model returned, each naming one cause and one remedy (module docstring).
 
     A model worse than its start is not among them: the start is then
@@ -783,7 +784,7 @@ def run_warnings(*, model: Any, evaluation: Evaluation, stop_reason: str | None,
         if bad.size:
             lines.append(f"{prefix}fit below zero on {where} data for output(s) {', '.join(str(i + 1) for i in bad)} "
                          f"({', '.join(f'{scores.fit[i]:.1f} %' for i in bad)}): the model explains less than the "
-                         "output's mean; try another order, or check that the inputs drive these outputs")
+                         f"output's mean; {below_zero_remedy}, or check that the inputs drive these outputs")
             break
     return lines
 

@@ -204,7 +204,10 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
             None),
         stop_reason=result.stop_reason if divergence is None else f"{result.stop_reason}: {divergence}",
         start_fit=None, final_fit=None, allow_unstable=True,
-        fit_history=[record.mean_fit_filter for record in result.history])
+        fit_history=[record.mean_fit_filter for record in result.history],
+        # a physical structure has no order to change: its options are what an engineer can change
+        below_zero_remedy="the structure does not fit this log (try --saturation, --relaxation-length or a --segment "
+                          "within the linear range)")
     correlation = result.correlation
     for i in range(len(names)):
         for j in range(i + 1, len(names)):
@@ -287,7 +290,8 @@ class _Scores:
 
 
 def _text(summary: dict[str, Any], outputs: tuple[str, ...], validated: bool) -> str:
-    lines = [f"single-track model (grey-box IEKF): {summary['passes_run']} passes, {summary['stop_reason']}, "
+    lines = [f"single-track model (grey-box IEKF): {summary['passes_run']} passes, "
+             f"{'pass budget reached' if summary['stop_reason'] == 'passes' else summary['stop_reason']}, "
              f"speed {summary['speed_range_m_s'][0]:.1f}-{summary['speed_range_m_s'][1]:.1f} m/s, "
              f"{summary['seconds']:.2f} s"]
     for name, entry in {**summary["physical_parameters"], **summary.get("sensor_offsets", {})}.items():
