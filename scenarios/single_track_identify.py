@@ -14,7 +14,8 @@ JSON (public contract): ``structure``, ``physical_parameters`` (``cornering_stif
 ``{value, std, unit}``), with ``--offsets`` ``sensor_offsets`` (``steer_offset`` and
 ``<quantity>_offset``, alike), ``parameter_correlation`` (in the order of ``parameter_names``),
 ``handling`` (``understeer_gradient_deg_per_g``, ``characteristic_speed_m_s`` or
-``critical_speed_m_s``, each ``{value, std, unit}``, and ``yaw_rate_gain`` at speeds spanning the log), ``fit_percent`` (R, eq. 17), ``estimation_fit_percent``,
+``critical_speed_m_s``, each ``{value, std, unit}``, and ``yaw_rate_gain`` at speeds spanning the
+log), ``fit_percent`` (R, eq. 17), ``estimation_fit_percent``,
 ``validation_fit_percent`` (NRMSE), ``speed_range_m_s``, ``passes_run``, ``stop_reason``,
 ``trace_p``, ``notes``, ``warnings``, ``seconds``.
 """
