@@ -275,7 +275,15 @@ def uniform_record(
             raise InputError(f"{raw.source}: {table.shape[0]} samples are too few to decimate by {factor}")
         import scipy.signal  # imported here for the reason given in _low_pass_onto
 
-        table = scipy.signal.decimate(table, factor, ftype="fir", axis=0, zero_phase=True)
+        # decimate pads with zeros, which pulls a channel far from zero (a speed) towards it near both
+        # ends; an odd reflection about the end samples, a whole number of factors long, keeps the ends
+        # and the sample alignment
+        pad = factor * min(20, (table.shape[0] - 1) // factor)
+        padded = np.concatenate([2 * table[:1] - table[pad:0:-1], table,
+                                 2 * table[-1:] - table[-2:-pad - 2:-1]], axis=0)
+        kept = -(-table.shape[0] // factor)
+        table = scipy.signal.decimate(padded, factor, ftype="fir", axis=0, zero_phase=True)[
+            pad // factor:pad // factor + kept]
         t = t[::factor]
         report["decimate"] = {"factor": factor, "filter": f"FIR, Hamming window, order {20 * factor}, zero phase"}
     names, units = raw.names, raw.units

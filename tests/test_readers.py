@@ -151,6 +151,22 @@ def test_resampling_and_decimation_remove_what_would_alias(tmp_path, how):
         assert data.meta["time_base"]["resample"]["filtered_channels"] == ["u", "y"]
 
 
+def test_decimation_keeps_a_channel_far_from_zero_at_both_ends(tmp_path):
+    """A speed of 10-35 m/s decimated by 5 starts near 10 and ends near 35: the filter's padding used to
+    pull both ends towards zero (a ramp at 500 Hz once began at 6 m/s after decimation)."""
+    t = np.arange(3001) * 0.002
+    speed = 10.0 + 25.0 * t / t[-1]  # a straight ramp: any linear filter with unit gain leaves it as it is
+    steer = 0.01 * np.sin(2 * np.pi * 1.0 * t)
+    path = tmp_path / "ramp.csv"
+    np.savetxt(path, np.column_stack([t, steer, speed]), delimiter=",", header="t,steer,speed", comments="",
+               fmt="%.12g")
+    data = read_record(path, inputs=["steer"], outputs=["speed"], decimate=5)
+    # an odd reflection about the end samples continues a straight line exactly, so the ends keep the ramp to
+    # rounding; 1e-6 m/s leaves room for the FIR's own ripple on a ramp (flat to far better than that)
+    np.testing.assert_allclose(data.y[:, 0], speed[::5], atol=1e-6)
+    assert data.n_samples == len(t[::5])
+
+
 # -------------------------------------------------------------- whitespace tables
 def test_daisy_style_dat_by_column_number(tmp_path):
     t = np.arange(50) * 0.5
