@@ -52,13 +52,15 @@ def model_functions(filter_step: Any) -> tuple[ca.Function, ca.Function, dict[st
     """
     fs = filter_step
     z, u0, u1, c = (ca.SX.sym(name, size) for name, size in (("z", fs.n_z), ("u0", fs.n_u), ("u1", fs.n_u), ("c", fs.n_c)))
-    z_next, Phi, h, H = fs.model(z, u0, u1, c)
+    dt = ca.SX.sym("dt")
+    z_next, Phi, h, H = fs.timed_model(z, u0, u1, c, dt)
     h_values, h_pointers, h_columns = _row_major_nonzeros(H)
     e_values, e_pointers, e_columns = _row_major_nonzeros(Phi[: fs.n_x, :], minus_identity_rows=fs.n_x)
     measure = ca.Function("iekf_measure", [z, u0, c], [h, ca.vertcat(*h_values)], ["z", "u0", "c"], ["h", "H_nz"],
                           {"cse": True})
-    predict = ca.Function("iekf_predict", [z, u0, u1, c], [z_next[: fs.n_x], ca.vertcat(*e_values)],
-                          ["z", "u0", "u1", "c"], ["x_next", "E_nz"], {"cse": True})
+    # The sample time is an input, so that one library serves every sample time.
+    predict = ca.Function("iekf_predict", [z, u0, u1, c, dt], [z_next[: fs.n_x], ca.vertcat(*e_values)],
+                          ["z", "u0", "u1", "c", "dt"], ["x_next", "E_nz"], {"cse": True})
     tables = {"h_pointers": h_pointers, "h_columns": h_columns, "e_pointers": e_pointers, "e_columns": e_columns}
     return measure, predict, tables
 
@@ -83,7 +85,7 @@ static int vehid_work_size(casadi_int* sz_arg, casadi_int* sz_res, casadi_int* s
   if (r > *sz_res) *sz_res = r;
   if (i > *sz_iw) *sz_iw = i;
   if (w > *sz_w) *sz_w = w;
-  if (*sz_arg < 4) *sz_arg = 4;
+  if (*sz_arg < 5) *sz_arg = 5;
   if (*sz_res < 2) *sz_res = 2;
   return 0;
 }
@@ -130,7 +132,7 @@ static inline double sparse_dot(const double* column, const long long* index, co
 
 int vehid_iekf_pass(long long int n_samples, long long int n_u, long long int n_y,
                     long long int n_state, const double* u, const double* y,
-                    const double* q, const double* r, const double* c,
+                    const double* q, const double* r, const double* c, const double* dt,
                     double* state, double* innovations) {
   const long long m = N_Z, nx = N_X;
   casadi_int sz_arg, sz_res, sz_iw, sz_w;
@@ -220,7 +222,7 @@ int vehid_iekf_pass(long long int n_samples, long long int n_u, long long int n_
       }
     }
     /* z <- phi(z) + K e, prediction at the prior state */
-    arg[0] = z; arg[1] = u0; arg[2] = u1; arg[3] = c;
+    arg[0] = z; arg[1] = u0; arg[2] = u1; arg[3] = c; arg[4] = dt;
     res[0] = x_next; res[1] = Enz;
     if (iekf_predict(arg, res, iw, w, 0)) { status = k < 2147483646LL ? (int)(k + 1) : 2147483647; break; }
     for (i = 0; i < nx; ++i) z[i] = x_next[i];
@@ -249,7 +251,7 @@ int vehid_iekf_pass(long long int n_samples, long long int n_u, long long int n_
     }
     /* z+ = z + K e, then the prediction at z+ */
     for (o = 0; o < n_y; ++o) for (i = 0; i < m; ++i) z[i] += K[o * m + i] * e[o];
-    arg[0] = z; arg[1] = u0; arg[2] = u1; arg[3] = c;
+    arg[0] = z; arg[1] = u0; arg[2] = u1; arg[3] = c; arg[4] = dt;
     res[0] = x_next; res[1] = Enz;
     if (iekf_predict(arg, res, iw, w, 0)) { status = k < 2147483646LL ? (int)(k + 1) : 2147483647; break; }
     for (i = 0; i < nx; ++i) z[i] = x_next[i];
@@ -284,7 +286,7 @@ int vehid_iekf_pass(long long int n_samples, long long int n_u, long long int n_
         P[UP(a, b)] += v;
       }
     }
-    for (i = 0; i < m; ++i) P[UP(i, i)] += DT * q[i];
+    for (i = 0; i < m; ++i) P[UP(i, i)] += dt[0] * q[i];
   }
   free(arg); free(res); free(iw); free(w); free(h); free(Hnz); free(Enz); free(x_next); free(W); free(K);
   free(V); free(S); free(S_work); free(S_inverse); free(G); free(e);
@@ -298,7 +300,7 @@ def structured_pass_source(filter_step: Any) -> tuple[str, list[ca.Function]]:
     and the generated functions it calls.
 
     The driver has the signature of the generated-step pass
-    (``vehid_iekf_pass(n_samples, n_u, n_y, n_state, u, y, q, r, c, state, innovations)``)
+    (``vehid_iekf_pass(n_samples, n_u, n_y, n_state, u, y, q, r, c, dt, state, innovations)``)
     and updates ``state = [z; upper(P)]`` in place.
     """
     fs = filter_step
@@ -307,7 +309,7 @@ def structured_pass_source(filter_step: Any) -> tuple[str, list[ca.Function]]:
         "#include <math.h>\n"
         f"#define N_Z {fs.n_z}LL\n#define N_X {fs.n_x}LL\n#define N_Y {fs.n_y}LL\n"
         f"#define NNZ_H {len(tables['h_columns'])}\n#define NNZ_E {len(tables['e_columns'])}\n"
-        f"#define DT {fs.dt!r}\n#define PAPER_FORM {1 if fs.covariance == 'paper' else 0}\n"
+        f"#define PAPER_FORM {1 if fs.covariance == 'paper' else 0}\n"
         + _table("H_POINTERS", tables["h_pointers"]) + _table("H_COLUMNS", tables["h_columns"])
         + _table("E_POINTERS", tables["e_pointers"]) + _table("E_COLUMNS", tables["e_columns"])
     )

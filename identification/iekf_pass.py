@@ -76,7 +76,10 @@ class FilterStep:
     ``s = [z; vech_upper(P)]`` and ``c`` the model's constants (for example
     spline node ranges, which change between passes without recompiling);
     ``model(z, u0, u1, c) -> (z_next, Phi, h, H)`` evaluates the model and
-    its exact Jacobians alone.
+    its exact Jacobians alone; both at the sample time ``dt``.
+    ``timed_step`` and ``timed_model`` are the same with the sample time as a
+    last input ``dt``: the compiled pass is generated from these, so that one
+    library serves every record of a structure whatever its sample time.
     """
 
     step: ca.Function
@@ -89,6 +92,8 @@ class FilterStep:
     dt: float
     discretization: str
     covariance: str
+    timed_step: ca.Function
+    timed_model: ca.Function
 
     @property
     def n_state(self) -> int:
@@ -96,11 +101,9 @@ class FilterStep:
         return self.n_z + self.n_z * (self.n_z + 1) // 2
 
 
-def build_filter_step(filter_model: FilterModel, dt: float, discretization: str, covariance: str) -> FilterStep:
-    """Build the SX filter step for a filter model (see :mod:`vehid.identification.filter_models`)."""
-    check_discretization(discretization)
-    if covariance not in COVARIANCE_FORMS:
-        raise ValueError(f"unknown covariance form {covariance!r}; use one of {', '.join(COVARIANCE_FORMS)}")
+@functools.lru_cache(maxsize=32)
+def _timed_functions(filter_model: FilterModel, discretization: str, covariance: str) -> tuple[ca.Function, ca.Function]:
+    """The model and the filter step with the sample time a symbolic input ``dt`` (their last)."""
     n_x, n_theta, n_u, n_y = filter_model.n_x, filter_model.n_theta, filter_model.n_u, filter_model.n_y
     n_c = filter_model.n_constants
     m = n_x + n_theta
@@ -110,15 +113,16 @@ def build_filter_step(filter_model: FilterModel, dt: float, discretization: str,
     u0 = ca.SX.sym("u0", n_u)
     u1 = ca.SX.sym("u1", n_u)
     c = ca.SX.sym("c", n_c)
+    dt = ca.SX.sym("dt")
     x, theta = z[:n_x], z[n_x:]
     x_next = filter_model.transition(x, theta, u0, u1, dt, discretization, c)
     z_next = ca.vertcat(x_next, theta)
     h = filter_model.output(x, theta, u0, c)
     model = ca.Function(
         "iekf_model",
-        [z, u0, u1, c],
+        [z, u0, u1, c, dt],
         [z_next, ca.jacobian(z_next, z), h, ca.jacobian(h, z)],
-        ["z", "u0", "u1", "c"],
+        ["z", "u0", "u1", "c", "dt"],
         ["z_next", "Phi", "h", "H"],
     )
 
@@ -129,13 +133,13 @@ def build_filter_step(filter_model: FilterModel, dt: float, discretization: str,
     r = ca.SX.sym("r", n_y, n_y)
     zk = s[:m]
     P = ca.triu2symm(ca.SX(upper, s[m:]))
-    _, _, h_k, H = model(zk, u0, u1, c)
+    _, _, h_k, H = model(zk, u0, u1, c, dt)
     innovation = y - h_k
     W = ca.mtimes(P, H.T)
     S = ca.mtimes(H, W) + r
     K = ca.mtimes(W, ca.inv(S)) if n_y > 1 else W / S
     if covariance == "paper":
-        z_pred, Phi, _, _ = model(zk, u0, u1, c)
+        z_pred, Phi, _, _ = model(zk, u0, u1, c, dt)
         P_updated = P - ca.mtimes(K, W.T)
         F_dt = Phi - ca.SX.eye(m)  # T F of eq. 13
         P_next = P_updated + ca.mtimes(F_dt, P_updated) + ca.mtimes(P_updated, F_dt.T) + dt * ca.diag(q)
@@ -144,18 +148,40 @@ def build_filter_step(filter_model: FilterModel, dt: float, discretization: str,
         V = W - 0.5 * ca.mtimes(K, S)
         P_updated = P - ca.mtimes(K, V.T) - ca.mtimes(V, K.T)
         z_post = zk + ca.mtimes(K, innovation)
-        z_out, Phi, _, _ = model(z_post, u0, u1, c)
+        z_out, Phi, _, _ = model(z_post, u0, u1, c, dt)
         P_next = ca.mtimes(ca.mtimes(Phi, P_updated), Phi.T) + dt * ca.diag(q)
     P_next_upper = ca.vertcat(*[P_next[i, j] for j in range(m) for i in range(j + 1)])
     step = ca.Function(
         "iekf_step",
-        [s, u0, u1, y, q, r, c],
+        [s, u0, u1, y, q, r, c, dt],
         [ca.vertcat(z_out, P_next_upper), innovation],
-        ["s", "u0", "u1", "y", "q", "r", "c"],
+        ["s", "u0", "u1", "y", "q", "r", "c", "dt"],
         ["s_next", "innovation"],
         {"cse": True},
     )
-    return FilterStep(step, model, m, n_x, n_u, n_y, n_c, float(dt), discretization, covariance)
+    return step, model
+
+
+def _at_sample_time(timed: ca.Function, dt: float) -> ca.Function:
+    """``timed`` with its last input, the sample time, fixed at ``dt``."""
+    inputs = [ca.SX.sym(timed.name_in(i), timed.sparsity_in(i)) for i in range(timed.n_in() - 1)]
+    outputs = timed(*inputs, dt)
+    outputs = list(outputs) if isinstance(outputs, (tuple, list)) else [outputs]
+    return ca.Function(timed.name(), inputs, outputs, timed.name_in()[:-1], timed.name_out(), {"cse": True})
+
+
+def build_filter_step(filter_model: FilterModel, dt: float, discretization: str, covariance: str) -> FilterStep:
+    """Build the SX filter step for a filter model (see :mod:`vehid.identification.filter_models`)."""
+    check_discretization(discretization)
+    if covariance not in COVARIANCE_FORMS:
+        raise ValueError(f"unknown covariance form {covariance!r}; use one of {', '.join(COVARIANCE_FORMS)}")
+    timed_step, timed_model = _timed_functions(filter_model, discretization, covariance)
+    m = filter_model.n_x + filter_model.n_theta
+    return FilterStep(
+        _at_sample_time(timed_step, float(dt)), _at_sample_time(timed_model, float(dt)), m, filter_model.n_x,
+        filter_model.n_u, filter_model.n_y, filter_model.n_constants, float(dt), discretization, covariance,
+        timed_step, timed_model,
+    )
 
 
 _DRIVER = r"""
@@ -166,11 +192,11 @@ _DRIVER = r"""
 #include <string.h>
 int vehid_iekf_pass(long long int n_samples, long long int n_u, long long int n_y,
                     long long int n_state, const double* u, const double* y,
-                    const double* q, const double* r, const double* c,
+                    const double* q, const double* r, const double* c, const double* dt,
                     double* state, double* innovations) {
   casadi_int sz_arg, sz_res, sz_iw, sz_w;
   STEP_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
-  const casadi_real** arg = malloc(sizeof(casadi_real*) * (sz_arg > 7 ? sz_arg : 7));
+  const casadi_real** arg = malloc(sizeof(casadi_real*) * (sz_arg > 8 ? sz_arg : 8));
   casadi_real** res = malloc(sizeof(casadi_real*) * (sz_res > 2 ? sz_res : 2));
   casadi_int* iw = malloc(sizeof(casadi_int) * (sz_iw > 0 ? sz_iw : 1));
   casadi_real* w = malloc(sizeof(casadi_real) * (sz_w > 0 ? sz_w : 1));
@@ -188,6 +214,7 @@ int vehid_iekf_pass(long long int n_samples, long long int n_u, long long int n_
     arg[4] = q;
     arg[5] = r;
     arg[6] = c;
+    arg[7] = dt;
     res[0] = next;
     res[1] = innovations + k * n_y;
     /* A failed step reports the sample it failed at (1-based), so the caller never takes a half-advanced state for a finished pass. */
@@ -229,7 +256,7 @@ class _CompiledPass:
         status = self._function(
             n, fs.n_u, fs.n_y, state.size, as_p(u), as_p(y), as_p(q), as_p(r),
             as_p(c if c.size else np.zeros(1)),  # a valid pointer even where the model has no constants
-            as_p(state), as_p(innovations),
+            as_p(np.array([fs.dt])), as_p(state), as_p(innovations),
         )
         if status < 0:
             raise MemoryError("the compiled IEKF pass could not allocate its work arrays")
@@ -254,6 +281,24 @@ class _VirtualMachinePass:
 
 
 @functools.lru_cache(maxsize=32)
+def _compiled_library(filter_model: FilterModel, discretization: str, covariance: str, kernel: str):
+    """The loaded pass of a structure, its sample time a run-time argument: compiled once per structure."""
+    timed_step, _ = _timed_functions(filter_model, discretization, covariance)
+    tag = hashlib.sha256(filter_model.cache_key().encode()).hexdigest()[:8]
+    large = timed_step.n_instructions() > LARGE_STEP_INSTRUCTIONS
+    if kernel == "structured" or (kernel == "auto" and large):
+        source, functions = structured_pass_source(build_filter_step(filter_model, 1.0, discretization, covariance))
+        return compile_driver(
+            tuple(functions), source, library_name=f"iekf_loops_{tag}", entry="vehid_iekf_pass",
+            n_integers=4, n_arrays=8, optimisation=PASS_COMPILE_FLAGS,
+        )
+    return compile_driver(
+        timed_step, _DRIVER, library_name=f"iekf_pass_{tag}", entry="vehid_iekf_pass",
+        n_integers=4, n_arrays=8, optimisation=LARGE_STEP_COMPILE_FLAGS if large else PASS_COMPILE_FLAGS,
+    )
+
+
+@functools.lru_cache(maxsize=32)
 def _pass_for(filter_model: FilterModel, dt: float, discretization: str, covariance: str, kernel: str):
     filter_step = build_filter_step(filter_model, dt, discretization, covariance)
     if find_c_compiler() is None:
@@ -264,20 +309,7 @@ def _pass_for(filter_model: FilterModel, dt: float, discretization: str, covaria
             stacklevel=3,
         )
         return _VirtualMachinePass(filter_step)
-    tag = hashlib.sha256(filter_model.cache_key().encode()).hexdigest()[:8]
-    large = filter_step.step.n_instructions() > LARGE_STEP_INSTRUCTIONS
-    if kernel == "structured" or (kernel == "auto" and large):
-        source, functions = structured_pass_source(filter_step)
-        function = compile_driver(
-            tuple(functions), source, library_name=f"iekf_loops_{tag}", entry="vehid_iekf_pass",
-            n_integers=4, n_arrays=7, optimisation=PASS_COMPILE_FLAGS,
-        )
-        return _CompiledPass(function, filter_step)
-    function = compile_driver(
-        filter_step.step, _DRIVER, library_name=f"iekf_pass_{tag}", entry="vehid_iekf_pass",
-        n_integers=4, n_arrays=7, optimisation=LARGE_STEP_COMPILE_FLAGS if large else PASS_COMPILE_FLAGS,
-    )
-    return _CompiledPass(function, filter_step)
+    return _CompiledPass(_compiled_library(filter_model, discretization, covariance, kernel), filter_step)
 
 
 def compiled_pass(filter_model: FilterModel, dt: float, discretization: str, covariance: str, kernel: str = "auto"):
