@@ -44,9 +44,12 @@ __all__ = [
 COVARIANCE_FORMS = ("joseph", "paper")
 KERNELS = ("auto", "structured", "generated")
 
-# Flags and threshold chosen by measurement (docs/iekf_tuning.md); the library is cached per CPU.
+# Flags and threshold chosen by measurement (docs/iekf_tuning.md, benchmarks/iekf_compile_levels.py); the
+# library is cached per CPU. The structured loops compile in a few seconds at any size, the generated step
+# in time growing with its instructions (about 20 s at 7,000, 35 s at 13,000) to save at most a third of a
+# pass: past a few thousand instructions the compile costs more than the passes of a whole run save.
 PASS_COMPILE_FLAGS = "-O3 -march=native"
-LARGE_STEP_INSTRUCTIONS = 30_000
+LARGE_STEP_INSTRUCTIONS = 4_000
 LARGE_STEP_COMPILE_FLAGS = "-O1"
 
 
