@@ -221,16 +221,19 @@ _HOLDS = {"foh": "exact", "zoh": "exact-zoh", "euler": "euler"}
 
 
 @functools.lru_cache(maxsize=16)
-def _simulator(structure: ModalStructure, count: int, dt: float, discretization: str) -> Any:
-    """Compiled simulation of a family of ``count`` grid values: params = [theta; grid]."""
+def _simulator(structure: ModalStructure, count: int, discretization: str) -> Any:
+    """Compiled simulation of a family of ``count`` grid values: params = [theta; grid; dt].
+
+    The sample time is a parameter rather than a constant of the code, so that one library serves
+    every record of the family's shape."""
     from .compiled import CompiledRecursion
 
     x = ca.SX.sym("x", structure.n)
     u0 = ca.SX.sym("u0", structure.n_u + 1)
     u1 = ca.SX.sym("u1", structure.n_u + 1)
     size = count * knot_size(structure)
-    params = ca.SX.sym("params", size + count)
-    theta, grid = params[:size], params[size:]
+    params = ca.SX.sym("params", size + count + 1)
+    theta, grid, dt = params[:size], params[size:-1], params[-1]
     x_next, y = scheduled_step(structure, x, u0, u1, theta, grid, dt, discretization)
     step = ca.Function("scheduled_modal_step", [x, u0, u1, params], [x_next, y], ["x", "u0", "u1", "params"],
                        ["x_next", "y"], {"cse": True})
@@ -610,8 +613,8 @@ class ScheduledModalModel:
         x0 = np.zeros(s.n) if x0 is None else np.asarray(x0, dtype=float).ravel()
         if x0.shape != (s.n,):
             raise InputError(f"x0 must have {s.n} entries; got {x0.shape}")
-        simulator = _simulator(s, self.grid.size, float(dt), _HOLDS[method])
-        y, x = simulator(x0, u, np.concatenate([self.parameters, self.grid]))
+        simulator = _simulator(s, self.grid.size, _HOLDS[method])
+        y, x = simulator(x0, u, np.concatenate([self.parameters, self.grid, [float(dt)]]))
         if self.output_map is not None:
             y = self.output_map.apply(y)
         return (y, x) if return_states else y

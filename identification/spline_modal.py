@@ -217,14 +217,17 @@ class SplineModalFilterModel(FilterModel):
 
 
 @functools.lru_cache(maxsize=16)
-def _simulator(structure: SplineModalStructure, dt: float, discretization: str) -> CompiledRecursion:
-    """Compiled simulation of the normalised model: params = [theta; constants]."""
+def _simulator(structure: SplineModalStructure, discretization: str) -> CompiledRecursion:
+    """Compiled simulation of the normalised model: params = [theta; constants; dt].
+
+    The sample time is a parameter rather than a constant of the code, so that one library serves
+    every record of the structure."""
     model = SplineModalFilterModel(structure)
     x = ca.SX.sym("x", model.n_x)
     u0 = ca.SX.sym("u0", model.n_u)
     u1 = ca.SX.sym("u1", model.n_u)
-    params = ca.SX.sym("params", model.n_theta + model.n_constants)
-    theta, constants = params[: model.n_theta], params[model.n_theta:]
+    params = ca.SX.sym("params", model.n_theta + model.n_constants + 1)
+    theta, constants, dt = params[: model.n_theta], params[model.n_theta:-1], params[-1]
     step = ca.Function(
         "spline_modal_step",
         [x, u0, u1, params],
@@ -317,9 +320,9 @@ class SplineModalModel(StateSpaceModel):
 
     def simulate_normalised(self, u_normalised: np.ndarray, x0: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """(y, x) in normalised units from normalised inputs, compiled."""
-        sim = _simulator(self.structure, float(self.dt), self.discretization)
+        sim = _simulator(self.structure, self.discretization)
         x0 = np.zeros(self.structure.linear.n) if x0 is None else x0
-        return sim(x0, u_normalised, np.concatenate([self.theta, self.constants]))
+        return sim(x0, u_normalised, np.concatenate([self.theta, self.constants, [float(self.dt)]]))
 
     #: Nonlinear: its state-space form is the linearisation at rest, and scores simulate it from rest.
     is_linear = False
