@@ -132,7 +132,7 @@ def _print(figures: dict[str, Any]) -> None:
             for metric in handling:
                 gain, gradient = metric["yaw_rate_gain"], metric["understeer_gradient_deg_per_g"]
                 print(f"      at {metric['speed']:4.0f} m/s: yaw-rate gain {gain['value']:.3g} +/- {gain['std']:.2g} 1/s, "
-                      f"understeer gradient {gradient['value']} +/- {gradient['std']} deg/g")
+                      f"understeer gradient {gradient['value']:.3g} +/- {gradient['std']:.2g} deg/g")
         elif handling:
             print(f"      handling: {handling}")
 
