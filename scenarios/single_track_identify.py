@@ -207,7 +207,8 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
         start_fit=None, final_fit=None, allow_unstable=True,
         fit_history=[record.mean_fit_filter for record in result.history],
         # a physical structure has no order to change: its options are what an engineer can change
-        below_zero_remedy="the structure does not fit this log (try --saturation, --relaxation-length or a --segment "
+        below_zero_remedy="the structure does not fit this log (try "
+                          f"{'' if config.saturation else '--saturation, '}--relaxation-length or a --segment "
                           "within the linear range)")
     correlation = result.correlation
     for i in range(len(names)):
@@ -226,6 +227,8 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
         if peak > LINEAR_LIMIT_G:
             warnings.append(f"the log reaches {peak:.2f} g, beyond the linear axle's range (about {LINEAR_LIMIT_G} g): "
                             "the cornering stiffnesses average over saturation; try --saturation")
+    if "lateral_acceleration" in config.quantities and config.saturation:
+        warnings.extend(_friction_warnings(config, result.parameters, estimation, validation))
     summary: dict[str, Any] = {
         "method": "iekf",
         "structure": "single-track",
@@ -254,6 +257,41 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     text = _text(summary, estimation.output_names, validation is not None)
     workflow.emit(summary, warnings, args)
     return summary, text
+
+
+def _friction_warnings(config: Any, parameters: np.ndarray, estimation: IOData,
+                       validation: IOData | None) -> list[str]:
+    """Warnings when the log corners harder than the estimated saturating axles can.
+
+    With static axle loads, ``mu F_z tanh(.)`` on both axles bounds the model's lateral acceleration
+    by ``mu g``. A friction below the estimation part's own peak contradicts the data it came from:
+    the filter's state corrections have carried the cornering the axles cannot, and the model's
+    simulated response is capped (on the committed race car's full lap the estimate falls to
+    ``mu`` 0.5 against a peak of 1.38 g, from starts of 1, 1.5 and 2 alike). A held-out part that
+    corners beyond ``mu g`` is predicted capped there, its fit can fall far below the linear model's,
+    which has no cap, and the friction is extrapolated. Each warning says so with the figures.
+    """
+    from vehid.vehicle.single_track import GRAVITY
+
+    column = config.quantities.index("lateral_acceleration")
+    friction = float(parameters[config.parameter_names.index("axle_friction")])
+    peak_estimation = float(np.max(np.abs(estimation.y[:, column]))) / GRAVITY
+    warnings = []
+    if peak_estimation > friction:
+        warnings.append(f"the estimated axle_friction {friction:.2f} is below the {peak_estimation:.2f} g the "
+                        "estimation data itself reaches: the saturating axles cannot produce the log's cornering "
+                        "and their simulated response is capped at that friction (the friction is not identified "
+                        "by this log); prefer the linear axles")
+    if validation is not None:
+        peak_validation = float(np.max(np.abs(validation.y[:, column]))) / GRAVITY
+        if peak_validation > friction:
+            beyond = float(np.mean(np.abs(validation.y[:, column]) > friction * GRAVITY)) * 100.0
+            warnings.append(f"the validation part reaches {peak_validation:.2f} g ({beyond:.0f} % of it beyond "
+                            f"{friction:.2f} g), but the saturating axles cap the model at the estimated axle_friction "
+                            f"{friction:.2f} g, identified from an estimation part that reaches only "
+                            f"{peak_estimation:.2f} g: the friction is extrapolated (hold out a part within the "
+                            "estimation part's range, or use the linear axles)")
+    return warnings
 
 
 def _substeps(config: Any, *records: IOData) -> int:

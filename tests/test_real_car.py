@@ -67,3 +67,53 @@ def test_a_measured_sideslip_tightens_every_parameter(yaw_and_lateral, with_side
     for name, entry in yaw_and_lateral["physical_parameters"].items():
         assert with_sideslip["physical_parameters"][name]["std"] < entry["std"], name
     assert all(fit > 0 for fit in with_sideslip["validation_fit_percent"])
+
+
+def test_saturating_axles_that_cannot_reach_the_logged_cornering_say_so():
+    # the lap's held-out 40 % corners to 1.38 g (a third of it beyond 0.9 g) while the estimation part
+    # reaches 1.05 g: the friction is at best bounded from below by the estimation part, and the
+    # filter's estimate (measured 0.96) caps the simulated response below the held-out cornering, so
+    # the hold-out fit falls far below the linear axles' (measured -22 / -12 % against 68 / 71 %).
+    # Whatever the estimate, a fit below the linear model's must come with a warning that says why.
+    summary = _single_track("yawRate,ayCG", "yaw_rate,lateral_acceleration", extra=("--saturation",))
+    friction = summary["physical_parameters"]["axle_friction"]["value"]
+    data = np.genfromtxt(LOG, delimiter=",", skip_header=2)
+    held_out_peak = np.max(np.abs(data[int(round(0.6 * len(data))):, 4])) / 9.81  # g as the single-track model takes it
+    if friction < held_out_peak:
+        assert any("friction is extrapolated" in warning for warning in summary["warnings"])
+    if min(summary["validation_fit_percent"]) < 0:
+        assert any("axle_friction" in warning for warning in summary["warnings"])
+
+
+def _modal(*options: str) -> dict:
+    completed = subprocess.run(
+        [*VEHID, "identify", str(LOG), "--inputs", "delta", "--outputs", "yawRate,ayCG", "--validation", "0.4",
+         "--json", *options], capture_output=True, text=True, check=False)
+    assert completed.returncode == 0, completed.stderr
+    return json.loads(completed.stdout)
+
+
+@pytest.fixture(scope="module")
+def default_and_scheduled():
+    return _modal("--order", "auto"), _modal("--schedule", "vx")
+
+
+@pytest.mark.slow  # the scheduled family's fit takes about a minute of one core
+def test_default_and_scheduled_paths_explain_the_held_out_lap(default_and_scheduled):
+    # hold-out NRMSE fit (yaw rate, lateral acceleration) measured with the hold-out fraction moved over
+    # 0.35 / 0.40 / 0.45 and the data perturbed at 1e-9 relative: default 68.8-71.5 / 63.0-64.1 %,
+    # scheduled 71.4-73.9 / 70.7-73.5 %. Floors sit about 5 points below the lowest, beyond that
+    # spread and the difference between machines seen so far (1.6 points on the scheduled yaw rate)
+    default, scheduled = default_and_scheduled
+    assert np.all(np.asarray(default["validation_fit_percent"]) > [63.0, 58.0])
+    assert np.all(np.asarray(scheduled["validation_fit_percent"]) > [66.0, 66.0])
+
+
+@pytest.mark.slow  # the scheduled family's fit takes about a minute of one core
+def test_speed_scheduling_explains_the_lateral_acceleration_better(default_and_scheduled):
+    # the lateral-acceleration gain of a car grows with the square of speed below the characteristic
+    # speed, so a model that follows speed must explain it better than one that cannot: measured 7.7-9.5
+    # points ahead over the perturbations above; asserted 3 points ahead. (On the yaw rate the lead
+    # was 0.5-2.9 points, within the spread, and is not asserted.)
+    default, scheduled = default_and_scheduled
+    assert scheduled["validation_fit_percent"][1] > default["validation_fit_percent"][1] + 3.0

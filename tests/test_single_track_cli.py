@@ -170,3 +170,31 @@ def test_a_workbench_record_gives_its_speed_output_as_the_schedule(tmp_path, cap
     status = main(["identify", str(tmp_path / "sweep.h5"), "--structure", "single-track", "--inputs", "steer",
                    "--schedule", "vx", "--outputs", "yaw_rate", "--vehicle", "baseline", "--quantities", "yaw_rate"])
     assert status == 2 and "no channel 'vx'" in capsys.readouterr().err
+
+
+def _lateral_record(peak_g: float) -> IOData:
+    from vehid.vehicle.single_track import GRAVITY
+
+    t = np.arange(200) * 0.01
+    ay = peak_g * GRAVITY * np.sin(2 * np.pi * t)  # reaches its peak within the record (t = 0.25 s)
+    return IOData(t=t, u=np.column_stack([0.01 * np.sin(2 * np.pi * t), np.full_like(t, 20.0)]),
+                  y=np.column_stack([ay / 20.0, ay]))
+
+
+@pytest.mark.parametrize(("friction", "peak_estimation", "peak_validation", "expected"), [
+    (1.2, 0.9, 1.0, ()),  # both parts within the friction limit mu g: nothing to say
+    (1.2, 0.9, 1.4, ("validation part reaches 1.40 g",)),  # held-out cornering beyond mu g: extrapolated
+    (0.5, 0.9, 0.4, ("below the 0.90 g",)),  # the estimate contradicts its own data
+])
+def test_friction_below_the_logged_cornering_is_named(friction, peak_estimation, peak_validation, expected):
+    from vehid.scenarios.single_track_identify import _friction_warnings
+
+    # the saturating axles bound the model's lateral acceleration by mu g (static loads, |tanh| < 1):
+    # a log cornering beyond that cannot be reproduced, and the warning must say which part does
+    config = SingleTrackConfig(1500.0, 1.2, 1.5, saturation=True)
+    parameters = np.array([60e3, 60e3, 1500.0, friction])
+    warnings = _friction_warnings(config, parameters, _lateral_record(peak_estimation),
+                                  _lateral_record(peak_validation))
+    assert len(warnings) == len(expected)
+    for warning, text in zip(warnings, expected):
+        assert text in warning and f"{friction:.2f}" in warning
