@@ -49,8 +49,8 @@ path = Path(vehid.__file__).resolve().parent / "tests" / "data" / "race_car_250l
 raw = read_record(path, inputs=("delta", "vx"), outputs=("yawRate", "ayCG"))
 speed = raw.u[:, 1]
 raw = raw.select_inputs(("delta",))
-cut = int(round(0.6 * raw.n_samples))
 raw_estimation, raw_validation = raw.split(0.6)
+cut = raw_estimation.n_samples
 (estimation,), preparation = prepare(raw_estimation)
 validation = prepare_validation(raw_validation, preparation)
 speed_estimation, speed_validation = speed[:cut], speed[cut:]
