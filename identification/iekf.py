@@ -537,7 +537,7 @@ def identify_iekf(
             finished = stop_reason != "running"
             covariance = iekf_parameter_covariance(
                 structure, P[n:, n:], input_scale, output_scale, history[-1].nis / structure.n_y, time_unit=time_unit,
-                parameters=last, records=records if finished else None,
+                estimate=ModalModel.from_parameters(structure, last), records=records if finished else None,
                 pass_parameters=sampled_pass(theta, P) if finished else None)
         return IEKFResult(
             model=ModalModel.from_parameters(

@@ -263,7 +263,8 @@ class ArxResult:
         return self.fit.residuals
 
 
-def _orders(n_u: int, n_y: int, na: Any, nb: Any, nk: Any) -> tuple[int, tuple[int, ...], tuple[int, ...]]:
+def arx_orders(n_u: int, n_y: int, na: Any, nb: Any, nk: Any) -> tuple[int, tuple[int, ...], tuple[int, ...]]:
+    """``na`` and per-input ``nb`` and ``nk`` of an ARX model, checked (``nb`` defaults to ``na``)."""
     na = non_negative_int(na, "na")
     nb_t = per_input(na if nb is None else nb, n_u, "nb")
     nk_t = per_input(nk, n_u, "nk")
@@ -303,7 +304,7 @@ def arx_regressors(u: Any, y: Any, *, na: int, nb: Any = None, nk: Any = 0
         raise InputError(f"u has {u.shape[0]} samples but y has {y.shape[0]}: lengths must match")
     n, n_u = u.shape
     n_y = y.shape[1]
-    na, nb, nk = _orders(n_u, n_y, na, nb, nk)
+    na, nb, nk = arx_orders(n_u, n_y, na, nb, nk)
     k0 = max([na] + [nk[j] + nb[j] - 1 for j in range(n_u)])
     rows = n - k0
     n_p = na * n_y + sum(nb)
@@ -394,7 +395,7 @@ def estimate_arx(data_or_arrays: Any, *, na: int, nb: Any = None, nk: Any = 0,
         else [io_arrays(data_or_arrays)]
     u, y, dt = experiments[0]
     phi, target, names, k0 = stacked_arx_regressors([(e[0], e[1]) for e in experiments], na=na, nb=nb, nk=nk)
-    na_i, nb_t, nk_t = _orders(u.shape[1], y.shape[1], na, nb, nk)
+    na_i, nb_t, nk_t = arx_orders(u.shape[1], y.shape[1], na, nb, nk)
     fit = least_squares(phi, target, names=names, condition_limit=condition_limit)
     model = model_from_theta(fit.theta, u.shape[1], y.shape[1], na_i, nb_t, nk_t, dt)
     return ArxResult(model, na_i, nb_t, nk_t, fit, names, {"method": "least squares", "first_sample": k0})

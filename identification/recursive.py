@@ -22,7 +22,7 @@ import numpy as np
 from ._checks import finite_matrix, forgetting_factor, io_arrays, non_negative_int
 from .errors import InputError
 from .factorised import sqrt_step, ud_covariance, ud_factor, ud_step
-from .least_squares import ArxModel, _orders, arx_regressors, least_squares, model_from_theta
+from .least_squares import ArxModel, arx_orders, arx_regressors, least_squares, model_from_theta
 
 __all__ = ["FORMS", "RecursiveResult", "rls_step", "recursive_least_squares", "estimate_arx_recursive"]
 
@@ -208,7 +208,7 @@ def estimate_arx_recursive(data_or_arrays: Any, *, na: int, nb: Any = None, nk: 
     """
     u, y, dt = io_arrays(data_or_arrays)
     phi, target, names, k0 = arx_regressors(u, y, na=na, nb=nb, nk=nk)
-    na_i, nb_t, nk_t = _orders(u.shape[1], y.shape[1], na, nb, nk)
+    na_i, nb_t, nk_t = arx_orders(u.shape[1], y.shape[1], na, nb, nk)
     result = recursive_least_squares(phi, target, forgetting=forgetting, window=window, form=form,
                                      P0=P0, theta0=theta0, keep_history=keep_history)
     model = model_from_theta(result.theta, u.shape[1], y.shape[1], na_i, nb_t, nk_t, dt)

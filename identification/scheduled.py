@@ -48,7 +48,7 @@ __all__ = ["ModeMatch", "OutputMap", "ScheduledModalModel", "canonical_modal_mod
            "gauge_matrices", "interpolation_weights", "scheduled_matrices", "knot_size"]
 
 
-def _input_gauge(model: ModalModel, order: list[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def input_gauge(model: ModalModel, order: list[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A, B, C with the modes in ``order``, omega > 0, and each mode's first-input B entries (1, 0) or 1.
 
     In this gauge a mode's C columns are its residues for the first input
@@ -264,7 +264,7 @@ def canonical_modal_model(model: ModalModel, order: list[int] | None = None) -> 
     order = list(range(len(modes))) if order is None else list(order)
     if sorted(order) != list(range(len(modes))) or any(len(modes[o]) != len(modes[s]) for s, o in enumerate(order)):
         raise InputError(f"a mode order must permute the modes within their kind; got {order}")
-    A, B, C = _structure_gauge(structure, *_input_gauge(model, order))
+    A, B, C = _structure_gauge(structure, *input_gauge(model, order))
     return ModalModel(structure, A, B, C, model.D.copy(), model.input_names, model.output_names, dict(model.meta))
 
 
@@ -727,11 +727,11 @@ def schedule_models(models: Mapping[float, ModalModel], *, variable: str = "spee
         if model.structure != structure:
             raise InputError(f"the model at {variable} {value:g} has another structure than the first")
     identity = list(range(len(structure.mode_states())))
-    gauged = [_input_gauge(ordered[0], identity)]
+    gauged = [input_gauge(ordered[0], identity)]
     matching = [ModeMatch(values[0], tuple(identity), 0.0)]
     for value, model in zip(values[1:], ordered[1:]):
         order, cost = _match(_block_eigenvalues(structure, gauged[-1][0]), _mode_eigenvalues(model), structure.n_complex_pairs)
-        gauged.append(_input_gauge(model, order))
+        gauged.append(input_gauge(model, order))
         matching.append(ModeMatch(value, tuple(order), cost))
     modal = np.array([[A[s[0], s[0]] if k == 0 else A[s[0], s[1]] for s in structure.mode_states() for k in range(len(s))]
                       for A, _, _ in gauged])

@@ -39,7 +39,7 @@ from .iekf_pass import compiled_pass
 from .metrics import percentage_explanation
 from .modal import ModalModel, ModalStructure
 from .rinse import Assessment, PassHistory, PassRecord, RinseHooks, check_filter_options, check_records, rinse
-from .scheduled import (ScheduledModalModel, _input_gauge, gauge_parameters, interpolation_weights, knot_size,
+from .scheduled import (ScheduledModalModel, gauge_parameters, input_gauge, interpolation_weights, knot_size,
                         scheduled_matrices, scheduled_step)
 from .uncertainty import gauss_newton_covariance
 
@@ -421,7 +421,7 @@ def identify_scheduled(
     dt = data.dt
     method = HOLD_OF[options.discretization]
 
-    A, B, C = _input_gauge(start, list(range(len(structure.mode_states()))))
+    A, B, C = input_gauge(start, list(range(len(structure.mode_states()))))
     modal = np.array([A[s[0], s[0]] if k == 0 else abs(A[s[0], s[1]])
                       for s in structure.mode_states() for k in range(len(s))])
     knot_theta = np.concatenate([gauge_parameters(modal, B, C, start.D), np.zeros(structure.n_y)])

@@ -333,7 +333,7 @@ def iekf_parameter_covariance(
     noise_ratio: float,
     *,
     time_unit: float = 1.0,
-    parameters: np.ndarray | None = None,
+    estimate: Any = None,
     records: Any = None,
     pass_parameters: np.ndarray | None = None,
 ) -> np.ndarray:
@@ -354,15 +354,15 @@ def iekf_parameter_covariance(
     time_unit : float
         The filter's unit of time in seconds (the sample interval when it
         counts time in samples): sigma, omega and B are rescaled to 1/s.
-    parameters : ndarray, optional
-        The estimate in original units; with ``records``, the covariance of
-        the fit at it enters (Notes).
+    estimate : ModalModel, optional
+        The model at the estimate (original units); with ``records``, the
+        covariance of the fit at it enters (Notes).
     records : sequence of IOData, optional
         The records the filter ran over.
     pass_parameters : ndarray, shape (n_samples, n_theta), optional
         The filter's parameters (original units) at evenly spaced points of
         one more pass over ``records`` from its final state: with
-        ``parameters`` and ``records``, the covariance is the fit's plus
+        ``estimate`` and ``records``, the covariance is the fit's plus
         their mean square deviation from the fit's minimiser (Notes).
 
     Notes
@@ -415,18 +415,16 @@ def iekf_parameter_covariance(
     P_parameters = np.asarray(P_parameters, dtype=float)
     covariance = 0.5 * noise_ratio * jacobian @ P_parameters @ jacobian.T
     covariance = 0.5 * (covariance + covariance.T)
-    if parameters is None or records is None:
+    if estimate is None or records is None:
         return covariance
-    from .modal import ModalModel
-
-    found = simulation_error_covariance(ModalModel.from_parameters(structure, parameters), records, with_step=True)
+    found = simulation_error_covariance(estimate, records, with_step=True)
     if found is None:
         return covariance
     fit, step = found
     if pass_parameters is not None:
         samples = np.asarray(pass_parameters, dtype=float)
         if samples.ndim == 2 and samples.shape[0] >= 2 and samples.shape[1] == n_theta and np.all(np.isfinite(samples)):
-            deviations = samples - (np.asarray(parameters, dtype=float) + step)
+            deviations = samples - (estimate.parameters + step)
             total = fit + deviations.T @ deviations / samples.shape[0]
             return 0.5 * (total + total.T)
     return upper_envelope(covariance, fit)

@@ -45,8 +45,8 @@ from vehid.identification.storage import read_value, write_value
 from vehid.vehicle import DEFAULT_DT, linearize, make_manoeuvre, named_vehicle, simulate
 from vehid.vehicle.parameters import VehicleParameters
 
-from .handling_study import (COMPARED_MODES, OUTPUTS, check_orders, identify_order, percent_text, positive_number,
-                             score, spline_options, study_linear_options, whole_number)
+from .handling_study import (COMPARED_MODES, OUTPUTS, check_orders, explained_percent, identify_order, percent_text,
+                             positive_number, spline_options, study_linear_options, whole_number)
 from .paths import results_path
 from .shutdown import run_in_workers
 
@@ -352,9 +352,9 @@ def run_job(job: EnvelopeJob) -> JobOutcome:
     nonlinear_model = None if nonlinear is None else nonlinear.model
     fits: dict[str, float | None] = dict.fromkeys(("li", "lv", "ni", "nv"))
     if linear_model is not None:
-        fits["li"], fits["lv"] = (float(np.mean(score(linear_model, r))) for r in (identification, validation))
+        fits["li"], fits["lv"] = (float(np.mean(explained_percent(linear_model, r))) for r in (identification, validation))
     if nonlinear_model is not None:
-        fits["ni"], fits["nv"] = (float(np.mean(score(nonlinear_model, r))) for r in (identification, validation))
+        fits["ni"], fits["nv"] = (float(np.mean(explained_percent(nonlinear_model, r))) for r in (identification, validation))
     return JobOutcome(
         key=job.key, vehicle=job.vehicle, speed=job.speed, order=job.order, seed=job.seed, grid=job.grid,
         amplitude=grip.amplitude(job.amplitude_fraction), grip_lateral_acceleration=grip.lateral_acceleration,
@@ -507,8 +507,8 @@ def _schedule(config: EnvelopeConfig, outcomes: dict[str, JobOutcome], jobs: lis
                                    == (vehicle, order, seed, speed)), None)
                     off_grid.append({
                         "vehicle": vehicle, "order": order, "seed": seed, "speed": speed,
-                        "validation_R": float(np.mean(score(model, records["validation"]))),
-                        "identification_R": float(np.mean(score(model, records["identification"]))),
+                        "validation_R": float(np.mean(explained_percent(model, records["validation"]))),
+                        "identification_R": float(np.mean(explained_percent(model, records["identification"]))),
                         "direct_validation_R": None if direct is None else direct.linear_validation_R,
                         "modes": [{"frequency_hz": f, "damping": d} for f, d in _mode_pairs(model)],
                     })

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from .figure_style import _legend, _style, new_figure
+from .figure_style import add_legend, new_figure, style_axes
 
 __all__ = ["envelope_figures", "write_envelope_report"]
 
@@ -56,8 +56,8 @@ def envelope_figures(result: Any) -> dict[str, Figure]:
         damp_ax.set_xlabel("speed (m/s)")
         freq_ax.set_title(f"{vehicle}: modes against speed (lines: scheduled model)")
         for ax in (freq_ax, damp_ax):
-            _style(ax)
-        _legend(freq_ax)
+            style_axes(ax)
+        add_legend(freq_ax)
         figures[f"{vehicle}_modes"] = fig
 
         fig = new_figure((9.0, 4.5))
@@ -75,8 +75,8 @@ def envelope_figures(result: Any) -> dict[str, Figure]:
         ax.set_xlabel("speed (m/s)")
         ax.set_ylabel("validation R (%)")
         ax.set_title(f"{vehicle}: fit on validation data per job")
-        _style(ax)
-        _legend(ax)
+        style_axes(ax)
+        add_legend(ax)
         figures[f"{vehicle}_fits"] = fig
     return figures
 

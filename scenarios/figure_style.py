@@ -15,7 +15,8 @@ from matplotlib.figure import Figure
 
 from vehid.identification.errors import InputError
 
-__all__ = ["REPORT_SIZE", "new_figure", "channel_label", "display_samples"]
+__all__ = ["REPORT_SIZE", "new_figure", "figure_of_size", "style_axes", "add_legend", "figure_legend", "known_unit", "with_unit",
+           "channel_label", "display_samples"]
 
 #: Default figure size in inches: legible on an A4 page at 100 % with 9-10 pt text.
 REPORT_SIZE = (7.0, 4.5)
@@ -31,7 +32,7 @@ def new_figure(size: tuple[float, float] = REPORT_SIZE) -> Figure:
     return fig
 
 
-def _figure(fig: Figure | None, size: tuple[float, float]) -> Figure:
+def figure_of_size(fig: Figure | None, size: tuple[float, float]) -> Figure:
     if fig is None:
         return new_figure(size)
     if fig.axes:
@@ -39,13 +40,13 @@ def _figure(fig: Figure | None, size: tuple[float, float]) -> Figure:
     return fig
 
 
-def _style(ax: Axes) -> Axes:
+def style_axes(ax: Axes) -> Axes:
     ax.grid(True, alpha=0.3)
     ax.tick_params(labelsize=_TICK_SIZE)
     return ax
 
 
-def _legend(ax: Axes, **options: Any) -> None:
+def add_legend(ax: Axes, **options: Any) -> None:
     """The axis's legend beside it, right of the frame, so that it never hides a stretch of the data."""
     handles, labels = ax.get_legend_handles_labels()
     if 0 < len(handles) <= _MAX_LEGEND_ENTRIES:
@@ -53,7 +54,7 @@ def _legend(ax: Axes, **options: Any) -> None:
                      "borderaxespad": 0.0, **options})
 
 
-def _figure_legend(fig: Figure, ax: Axes) -> None:
+def figure_legend(fig: Figure, ax: Axes) -> None:
     """One legend for the whole figure, right of every axis, from the entries of ``ax``.
 
     For grids whose axes share the same lines: a legend beside one axis would
@@ -64,14 +65,14 @@ def _figure_legend(fig: Figure, ax: Axes) -> None:
         fig.legend(handles, labels, loc="outside right center", fontsize=_LEGEND_SIZE)  # clear of a long title
 
 
-def _known_unit(unit: str | None) -> str:
+def known_unit(unit: str | None) -> str:
     """A channel's unit for a label, or "" where none was given ("-" is what a record without units holds)."""
     unit = "" if unit is None else str(unit).strip()
     return "" if unit in ("", "-") else unit
 
 
-def _with_unit(label: str, unit: str | None) -> str:
-    unit = _known_unit(unit)
+def with_unit(label: str, unit: str | None) -> str:
+    unit = known_unit(unit)
     return f"{label} ({unit})" if unit else label
 
 

@@ -27,7 +27,7 @@ from vehid.identification.residuals import residual_tests
 from vehid.identification.uncertainty import normal_quantile
 
 from . import plots
-from .figure_style import _legend
+from .figure_style import add_legend
 from .report import format_eigenvalues, markdown_table, write_report
 
 __all__ = ["handling_figures", "handling_table", "write_handling_report"]
@@ -132,7 +132,7 @@ def handling_figures(archive: Archive | str | Path) -> dict[str, Figure]:
         damping_axis.set_ylabel("damping ratio (-)")
         damping_axis.set_xlabel("first mode's amplitude (normalised state units)")
         frequency_axis.set_title("First mode of the nonlinear models against its amplitude")
-        _legend(frequency_axis)
+        add_legend(frequency_axis)
         for axis in (frequency_axis, damping_axis):
             axis.grid(True, alpha=0.3)
         figures["mode_amplitude"] = figure
@@ -155,7 +155,7 @@ def handling_figures(archive: Archive | str | Path) -> dict[str, Figure]:
     axis.set_title("Handling study: explanation per order (Table 5)")
     axis.set_xticks(orders)
     axis.grid(True, alpha=0.3)
-    _legend(axis)
+    add_legend(axis)
     figures["orders"] = figure
 
     if chosen in linear:

@@ -23,8 +23,8 @@ from vehid.identification.storage import read_group, read_value
 from .handling_study import (
     ORDERS_DONE,
     HandlingConfig,
-    NonlinearOutcome,
     OrderOutcome,
+    SplineStudyRun,
     start_archive,
     write_order,
 )
@@ -66,7 +66,7 @@ def _config(stored: Any, path: Path, workers: int | None) -> HandlingConfig:
         raise ArchiveError(f"{path} holds settings this workbench does not know ({exc})") from None
 
 
-def _nonlinear(run: Any) -> NonlinearOutcome:
+def _nonlinear(run: Any) -> SplineStudyRun:
     stored = read_run(run)
     history, metrics = stored.history, stored.metrics
     curves = {}
@@ -74,7 +74,7 @@ def _nonlinear(run: Any) -> NonlinearOutcome:
     while f"mode{mode}_frequency" in run:
         curves[mode] = (read_value(run, f"mode{mode}_frequency"), read_value(run, f"mode{mode}_damping"))
         mode += 1
-    return NonlinearOutcome(
+    return SplineStudyRun(
         model=stored.model,
         fit_identification=np.asarray(metrics["identification_R"]),
         fit_validation=np.asarray(metrics["validation_R"]),

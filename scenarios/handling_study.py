@@ -47,7 +47,7 @@ from vehid.identification.protocol import Mode as ModelMode
 from vehid.identification.order import OrderAssessment, OrderRow, assess_orders
 from vehid.identification.storage import write_value
 from vehid.vehicle import DEFAULT_DT, DEFAULT_SPEED, linearize, make_manoeuvre, named_vehicle, simulate
-from vehid.vehicle.linearize import Mode
+from vehid.vehicle.linearize import VehicleMode
 
 from .paths import results_path
 from .shutdown import run_in_workers
@@ -66,7 +66,7 @@ __all__ = [
     "RecordArrays",
     "OrderJob",
     "OrderOutcome",
-    "NonlinearOutcome",
+    "SplineStudyRun",
     "TableRow",
     "LinearRun",
     "NonlinearRun",
@@ -340,7 +340,7 @@ def with_sensor_noise(records: Mapping[str, IOData], seed: int,
     return noisy
 
 
-def score(model: Any, data: IOData) -> np.ndarray:
+def explained_percent(model: Any, data: IOData) -> np.ndarray:
     """R (eq. 17, percent) per output of ``model`` simulated from rest over ``data``, in original units."""
     return percentage_explanation(data.y, model.simulate_outputs(data.u, data.dt))
 
@@ -366,7 +366,7 @@ class OrderJob:
 
 
 @dataclass(frozen=True, eq=False)
-class NonlinearOutcome:
+class SplineStudyRun:
     """What the study keeps of a spline-nonlinear IEKF run (plain arrays, so it crosses processes and archives).
 
     ``fit_filter (n_pass, n_y)`` and ``trace_p (n_pass,)`` per pass;
@@ -393,12 +393,12 @@ class OrderOutcome:
     linear_fit_identification: np.ndarray | None
     linear_fit_validation: np.ndarray | None
     linear_error: str | None
-    nonlinear: NonlinearOutcome | None
+    nonlinear: SplineStudyRun | None
     nonlinear_error: str | None
     seconds: float
 
 
-def _nonlinear_outcome(result: Any, identification: IOData, validation: IOData, n_pairs: int) -> NonlinearOutcome:
+def _nonlinear_outcome(result: Any, identification: IOData, validation: IOData, n_pairs: int) -> SplineStudyRun:
     model = result.model
     curves = {}
     modes = [model.modes(amplitude)[:n_pairs] for amplitude in MODE_AMPLITUDES]
@@ -407,10 +407,10 @@ def _nonlinear_outcome(result: Any, identification: IOData, validation: IOData, 
     tables = {name: {key: value if isinstance(value, str) else np.asarray(value, dtype=float)
                      for key, value in table.items()}
               for name, table in model.spline_tables().items()}
-    return NonlinearOutcome(
+    return SplineStudyRun(
         model=model,
-        fit_identification=score(model, identification),
-        fit_validation=score(model, validation),
+        fit_identification=explained_percent(model, identification),
+        fit_validation=explained_percent(model, validation),
         fit_filter=np.array([record.fit_filter for record in result.history], dtype=float),
         trace_p=np.array([record.trace_p for record in result.history], dtype=float),
         spline_tables=tables,
@@ -465,7 +465,8 @@ def run_order(job: OrderJob, report: Callable[[PassEvent], None] | None = None) 
     if linear is None:
         return OrderOutcome(job.order, None, None, None, linear_error, None, "no linear model to start from",
                             time.perf_counter() - started)
-    fit_identification, fit_validation = score(linear.model, identification), score(linear.model, validation)
+    fit_identification = explained_percent(linear.model, identification)
+    fit_validation = explained_percent(linear.model, validation)
     if job.spline_options is None:
         nonlinear_error = "not asked for"
     elif nonlinear_error is not None:
@@ -568,7 +569,7 @@ class HandlingResult:
     config: HandlingConfig
     records: dict[str, IOData]
     outcomes: dict[int, OrderOutcome]
-    vehicle_modes: dict[str, Mode]
+    vehicle_modes: dict[str, VehicleMode]
     vehicle_linearization: dict[str, np.ndarray]
     assessment: OrderAssessment
     nonlinear_status: str
@@ -580,7 +581,7 @@ class HandlingResult:
     workers: int
 
 
-def compare_modes(order: int, eigenvalues: Any, vehicle_modes: Mapping[str, Mode]) -> tuple[ModeComparison, ...]:
+def compare_modes(order: int, eigenvalues: Any, vehicle_modes: Mapping[str, VehicleMode]) -> tuple[ModeComparison, ...]:
     """For each vehicle mode, the identified mode of ``order`` nearest to it in the complex plane.
 
     ``eigenvalues``: one per identified mode (a conjugate counts as its pair).
@@ -605,7 +606,7 @@ def _mean(values: np.ndarray | None) -> float | None:
     return None if values is None else float(np.mean(values))
 
 
-def _rows(outcome: OrderOutcome, assessed: OrderRow | None, vehicle_modes: Mapping[str, Mode]
+def _rows(outcome: OrderOutcome, assessed: OrderRow | None, vehicle_modes: Mapping[str, VehicleMode]
           ) -> tuple[TableRow, LinearRun, NonlinearRun, tuple[ModeComparison, ...]]:
     """One order's rows of the study's table, runs and mode comparison."""
     order, linear, nonlinear = outcome.order, outcome.linear, outcome.nonlinear
@@ -692,7 +693,7 @@ def run_study(
 NONLINEAR_HISTORY_UNITS = {"fit_filter": "%", "trace_p": "normalised units"}
 
 
-def _write_nonlinear_run(archive: Any, name: str, outcome: NonlinearOutcome) -> None:
+def _write_nonlinear_run(archive: Any, name: str, outcome: SplineStudyRun) -> None:
     """Store a nonlinear run as ``runs/<name>``: per-pass fit and trace(P), the model, scores,
     spline tables and mode curves (the model alone is enough to redraw or export it)."""
     history_run = run_group(archive, name)
@@ -748,6 +749,28 @@ def start_archive(path: str | Path, config: HandlingConfig, records: Mapping[str
         yield archive
 
 
+def summary_of(result: HandlingResult) -> dict[str, Any]:
+    """The study's JSON summary (before :func:`vehid.identification.jsonable.to_jsonable`): its keys are a public contract."""
+    return {
+        "table": list(result.table),
+        "chosen_order": result.assessment.chosen_order,
+        "seconds": result.seconds,
+        "vehicle_modes": {label: {"eigenvalue": mode.eigenvalue, "frequency_hz": mode.frequency_hz,
+                                  "damping": mode.damping, "label": mode.label}
+                          for label, mode in result.vehicle_modes.items()},
+        "vehicle_linearization": result.vehicle_linearization,
+        "mode_comparison": list(result.mode_comparison),
+        "linear_runs": list(result.linear_runs),
+        "nonlinear_runs": list(result.nonlinear_runs),
+        "nonlinear": result.nonlinear_status,
+        "order_assessment": [row.as_dict() for row in result.assessment.rows],
+        "outputs": list(OUTPUTS),
+        "config": result.config.as_dict(),
+        "workers": result.workers,
+        "paper": {str(order): values for order, values in PAPER.items()},
+    }
+
+
 def write_archive_for(result: HandlingResult, out: str | Path | None = None) -> Path:
     """Write the study's archive (kind ``handling-study``, layout in results/RESULTS_LAYOUT.md) under ``--out``."""
     return write_study_archive(result, archive_path(out))
@@ -755,8 +778,6 @@ def write_archive_for(result: HandlingResult, out: str | Path | None = None) -> 
 
 def write_study_archive(result: HandlingResult, path: str | Path, *, run: str | None = None) -> Path:
     """Write the study's archive to exactly ``path`` (see :func:`write_archive_for`; ``run`` as :func:`start_archive`)."""
-    from .commands.study_handling import summary_of
-
     path = Path(path)
     with start_archive(path, result.config, result.records, run=run) as archive:
         for order, outcome in result.outcomes.items():

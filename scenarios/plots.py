@@ -26,15 +26,15 @@ from vehid.identification.uncertainty import frequency_response as response_band
 # The shared style and the pole map live in their own modules; they stay part of this module's API.
 from .figure_style import (  # noqa: F401
     REPORT_SIZE,
-    _figure,
-    _figure_legend,
-    _known_unit,
-    _legend,
-    _style,
-    _with_unit,
+    add_legend,
     channel_label,
     display_samples,
+    figure_legend,
+    figure_of_size,
+    known_unit,
     new_figure,
+    style_axes,
+    with_unit,
 )
 from .pole_map import ELLIPSE_SCALE, eigenvalue_view, plot_eigenvalue_map  # noqa: F401
 
@@ -155,15 +155,15 @@ def plot_parameter_history(
             raise InputError(f"group {label!r} indexes beyond the {n_theta} parameters")
     x = _pass_axis(passes, values.shape[0])
     count = len(groups)
-    fig = _figure(fig, (REPORT_SIZE[0], max(REPORT_SIZE[1], 1.0 + 1.9 * count)))
+    fig = figure_of_size(fig, (REPORT_SIZE[0], max(REPORT_SIZE[1], 1.0 + 1.9 * count)))
     axes = fig.subplots(count, 1, sharex=True, squeeze=False)[:, 0]
     for ax, (label, indices) in zip(axes, groups.items()):
-        _style(ax)
+        style_axes(ax)
         for index in indices:
             ax.plot(x, values[:, index], label=names[index], linewidth=1.2)
         ax.set_ylabel(_GROUP_LABELS.get(label, "value"), fontsize=10)
         ax.set_title(f"{label} ({len(indices)} parameters)" if label in _GROUP_LABELS else label, fontsize=10)
-        _legend(ax, loc="center left", bbox_to_anchor=(1.02, 0.5), ncols=1 + len(indices) // 7)
+        add_legend(ax, loc="center left", bbox_to_anchor=(1.02, 0.5), ncols=1 + len(indices) // 7)
     axes[-1].set_xlabel(x_label)
     fig.suptitle(title)
     return fig
@@ -207,8 +207,8 @@ def plot_convergence(
     if trace.size != fit.shape[0]:
         raise InputError(f"trace_p has {trace.size} passes but fit_filter {fit.shape[0]}")
     x = _pass_axis(passes, fit.shape[0])
-    fig = _figure(fig, REPORT_SIZE)
-    ax_fit, ax_trace = (_style(ax) for ax in fig.subplots(2, 1, sharex=True))
+    fig = figure_of_size(fig, REPORT_SIZE)
+    ax_fit, ax_trace = (style_axes(ax) for ax in fig.subplots(2, 1, sharex=True))
     if fit.shape[1] > 1:
         for name, column in zip(_names(output_names, fit.shape[1], "y"), fit.T):
             ax_fit.plot(x, column, linewidth=0.8, alpha=0.7, label=f"filter, {channel_label(name)}")
@@ -222,7 +222,7 @@ def plot_convergence(
                     label="simulated model" + (" (mean)" if continuous.shape[1] > 1 else ""))
     ax_fit.set_ylabel("R (%)")
     ax_fit.set_title("(a) percentage explanation R (eq. 17)", fontsize=10)
-    _legend(ax_fit)
+    add_legend(ax_fit)
     ax_trace.semilogy(x, trace, color="tab:blue", linewidth=1.8, label="trace(P)")
     if min_eig_p is not None:
         smallest = np.asarray(min_eig_p, dtype=float).ravel()
@@ -233,7 +233,7 @@ def plot_convergence(
     ax_trace.set_ylabel("parameter covariance (-)")
     ax_trace.set_xlabel("pass")
     ax_trace.set_title("(b) trace of the parameter covariance P", fontsize=10)
-    _legend(ax_trace)
+    add_legend(ax_trace)
     fig.suptitle(title)
     return fig
 
@@ -274,15 +274,15 @@ def plot_order_study(
         if len(series) != len(orders):
             raise InputError(f"{label.split(') ')[1]}: {len(series)} entries for {len(orders)} orders")
     histories = np.ndim(mean_r[0]) > 0 if len(mean_r) else False
-    fig = _figure(fig, (REPORT_SIZE[0], max(REPORT_SIZE[1], 1.5 + 1.8 * len(panels))))
+    fig = figure_of_size(fig, (REPORT_SIZE[0], max(REPORT_SIZE[1], 1.5 + 1.8 * len(panels))))
     axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0]
     for ax, (label, y_label, series, log) in zip(axes, panels):
-        _style(ax)
+        style_axes(ax)
         if histories:
             for n, values in zip(orders, series):
                 values = np.asarray(values, dtype=float).ravel()
                 ax.plot(np.arange(1, values.size + 1), values, linewidth=1.4, label=f"n = {n}")
-            _legend(ax, loc="center left", bbox_to_anchor=(1.02, 0.5))
+            add_legend(ax, loc="center left", bbox_to_anchor=(1.02, 0.5))
         else:
             ax.plot(orders, np.asarray(series, dtype=float), marker="o", linewidth=1.4)
             ax.set_xticks(orders)
@@ -350,10 +350,10 @@ def plot_time_fits(
     shown = np.ones(t.size, dtype=bool) if window is None else (t >= window[0]) & (t <= window[1])
     if not np.any(shown):
         raise InputError(f"window {window} holds no samples of t ({t[0]:g}..{t[-1]:g} s)")
-    fig = _figure(fig, (REPORT_SIZE[0], max(REPORT_SIZE[1], 1.0 + 1.7 * n_y)))
+    fig = figure_of_size(fig, (REPORT_SIZE[0], max(REPORT_SIZE[1], 1.0 + 1.7 * n_y)))
     axes = fig.subplots(n_y, 1, sharex=True, squeeze=False)[:, 0]
     for i, ax in enumerate(axes):
-        _style(ax)
+        style_axes(ax)
         ax.plot(*display_samples(t[shown], y[shown, i]), color="k", linewidth=1.6, label="measured")
         for label, value in predicted.items():
             if scores is not None and label in scores:
@@ -362,8 +362,8 @@ def plot_time_fits(
             else:
                 text = f"{label} (R = {fits[label][i]:.2f} %)"
             ax.plot(*display_samples(t[shown], value[shown, i]), linewidth=1.2, label=text)
-        ax.set_ylabel(_with_unit(channel_label(names[i]), units[i]))
-        _legend(ax)
+        ax.set_ylabel(with_unit(channel_label(names[i]), units[i]))
+        add_legend(ax)
     axes[-1].set_xlabel("time (s)")
     fig.suptitle(title)
     return fig
@@ -410,13 +410,13 @@ def plot_splines(
         x_labels = [x_labels or "x (-)"] * count
     columns = 1 if count == 1 else 2 if count <= 4 else 3
     rows = -(-count // columns)
-    fig = _figure(fig, (REPORT_SIZE[0], max(REPORT_SIZE[1], 2.2 * rows)))
+    fig = figure_of_size(fig, (REPORT_SIZE[0], max(REPORT_SIZE[1], 2.2 * rows)))
     axes = fig.subplots(rows, columns, squeeze=False).ravel()
     for i, ax in enumerate(axes):
         if i >= count:
             ax.set_visible(False)
             continue
-        _style(ax)
+        style_axes(ax)
         grid = np.asarray(x[i], dtype=float).ravel()
         curve = np.asarray(values[i], dtype=float).ravel()
         nodes_x = np.asarray(node_x[i], dtype=float).ravel()
@@ -432,7 +432,7 @@ def plot_splines(
         ax.set_xlabel(x_labels[i])
         ax.set_ylabel(labels[i])
         ax.set_title(labels[i], fontsize=10)
-    _figure_legend(fig, axes[0])
+    figure_legend(fig, axes[0])
     fig.suptitle(title)
     return fig
 
@@ -545,10 +545,10 @@ def plot_bode(
     if input_name is None:
         known = getattr(next(iter(models.values()), None), "input_names", None)
         input_name = known[input_index] if known is not None and len(known) > input_index else f"u{input_index + 1}"
-    fig = _figure(fig, (max(REPORT_SIZE[0], 2.6 * n_y), REPORT_SIZE[1]))
+    fig = figure_of_size(fig, (max(REPORT_SIZE[0], 2.6 * n_y), REPORT_SIZE[1]))
     axes = fig.subplots(2, n_y, sharex=True, squeeze=False)
     for i in range(n_y):
-        ax_mag, ax_phase = _style(axes[0, i]), _style(axes[1, i])
+        ax_mag, ax_phase = style_axes(axes[0, i]), style_axes(axes[1, i])
         for label, g in curves.items():
             style = {"color": "k", "linestyle": "--"} if label == "reference" else {}
             lines = ax_mag.loglog(frequencies, np.abs(g[:, i]), linewidth=1.4, label=label, **style)
@@ -566,7 +566,7 @@ def plot_bode(
         ax_mag.set_ylabel(_gain_label(units[i], input_unit))
         ax_phase.set_ylabel("phase (deg)")
         ax_phase.set_xlabel("frequency (Hz)")
-    _figure_legend(fig, axes[0, 0])
+    figure_legend(fig, axes[0, 0])
     fig.suptitle(title or f"Frequency response from {channel_label(input_name)}")
     return fig
 
@@ -586,7 +586,7 @@ def _log_ticks(ax: Axes) -> None:
 
 def _gain_label(output_unit: str, input_unit: str) -> str:
     """``|G| (out/in)``, saying so where a unit is unknown instead of printing ``(-/-)``."""
-    output_unit, input_unit = _known_unit(output_unit), _known_unit(input_unit)
+    output_unit, input_unit = known_unit(output_unit), known_unit(input_unit)
     if not (output_unit or input_unit):
         return "|G|"
     if not input_unit:
@@ -632,17 +632,17 @@ def plot_residual_autocorrelation(
     names = _names(output_names, n_y, "y")
     band = 1.96 / np.sqrt(n_samples)
     lags = np.arange(max_lag + 1) * (dt if dt else 1.0)
-    fig = _figure(fig, (REPORT_SIZE[0], max(REPORT_SIZE[1], 1.0 + 1.6 * n_y)))
+    fig = figure_of_size(fig, (REPORT_SIZE[0], max(REPORT_SIZE[1], 1.0 + 1.6 * n_y)))
     axes = fig.subplots(n_y, 1, sharex=True, squeeze=False)[:, 0]
     for i, ax in enumerate(axes):
-        _style(ax)
+        style_axes(ax)
         ax.axhspan(-band, band, color="tab:blue", alpha=0.15, label=f"95 % band (\u00b1{band:.3f})")
         ax.vlines(lags, 0.0, r[:, i], color="k", linewidth=1.2)
         ax.plot(lags, r[:, i], linestyle="none", marker="o", markersize=3, color="k", label="autocorrelation")
         outside = np.count_nonzero(np.abs(r[1:, i]) > band)
         ax.set_ylabel("autocorrelation (-)")
         ax.set_title(f"{channel_label(names[i])}: {outside} of {max_lag} lags outside the band", fontsize=10)
-    _figure_legend(fig, axes[0])
+    figure_legend(fig, axes[0])
     axes[-1].set_xlabel("lag (s)" if dt else "lag (samples)")
     fig.suptitle(title)
     return fig
@@ -668,7 +668,7 @@ def plot_residual_tests(tests: Any, *, dt: float | None = None, title: str = "Re
     """
     n_y = len(tests.output_names)
     scale = dt if dt else 1.0
-    fig = _figure(fig, (REPORT_SIZE[0], max(REPORT_SIZE[1], 1.2 + 1.9 * n_y)))
+    fig = figure_of_size(fig, (REPORT_SIZE[0], max(REPORT_SIZE[1], 1.2 + 1.9 * n_y)))
     axes = fig.subplots(n_y, 2, squeeze=False)
     band = tests.bound
     level = f"{100 * tests.level:g} %"
@@ -680,7 +680,7 @@ def plot_residual_tests(tests: Any, *, dt: float | None = None, title: str = "Re
     axes[0, 1].annotate("cross-correlation with the inputs", (0.5, 1.0), xycoords="axes fraction",
                         xytext=(0, 18), textcoords="offset points", ha="center", va="bottom", fontsize=10)
     for i, name in enumerate(tests.output_names):
-        left, right = _style(axes[i, 0]), _style(axes[i, 1])
+        left, right = style_axes(axes[i, 0]), style_axes(axes[i, 1])
         for ax in (left, right):
             ax.axhspan(-band, band, color="tab:blue", alpha=0.15)
         auto = tests.autocorrelation[1:, i]
@@ -694,7 +694,7 @@ def plot_residual_tests(tests: Any, *, dt: float | None = None, title: str = "Re
         independent = "independent" if tests.independent[i] else "NOT independent"
         right.set_title(f"p = {tests.input_correlation_p[i]:.3g}: {independent}", fontsize=9)
         if len(tests.input_names) > 1 and i == 0:
-            _legend(right, fontsize=7)
+            add_legend(right, fontsize=7)
     for ax in axes[-1]:
         ax.set_xlabel("lag (s)" if dt else "lag (samples)")
     fig.suptitle(f"{title} ({level} bands, N = {tests.samples})")
@@ -718,13 +718,13 @@ def plot_innovation_consistency(nis: Any, band: tuple[float, float], *, title: s
         Above the band the filter's R is too small for the data, below it too large.
     """
     nis = np.asarray(nis, dtype=float).ravel()
-    fig = _figure(fig, REPORT_SIZE)
-    ax = _style(fig.subplots())
+    fig = figure_of_size(fig, REPORT_SIZE)
+    ax = style_axes(fig.subplots())
     passes = np.arange(1, nis.size + 1)
     ax.axhspan(band[0], band[1], color="tab:green", alpha=0.2, label="99 % band of a consistent filter")
     ax.semilogy(passes, nis, marker="o", color="k", label="mean NIS")
     ax.set_xlabel("pass")
     ax.set_ylabel("mean e' R^-1 e (-)")
     ax.set_title(title)
-    _legend(ax)
+    add_legend(ax)
     return fig

@@ -18,7 +18,7 @@ from matplotlib.text import Text
 from matplotlib.transforms import Bbox
 from scipy.stats import chi2
 
-from .figure_style import REPORT_SIZE, _legend, _style, new_figure
+from .figure_style import REPORT_SIZE, add_legend, new_figure, style_axes
 
 __all__ = ["eigenvalue_view", "plot_eigenvalue_map", "ELLIPSE_SCALE"]
 
@@ -231,7 +231,7 @@ def plot_eigenvalue_map(
         frequency ``|lambda| / 2 pi`` (Hz) and damping ratio ``-Re(lambda)/|lambda|``.
     """
     fig = new_figure(REPORT_SIZE) if ax is None else ax.figure
-    ax = _style(fig.subplots() if ax is None else ax)
+    ax = style_axes(fig.subplots() if ax is None else ax)
     markers = "xs^Dv<>p"
     eigenvalues = {label: _eigenvalues(model) for label, model in models.items()}
     reference = None if reference_eigenvalues is None else np.asarray(reference_eigenvalues, dtype=complex).ravel()
@@ -299,7 +299,7 @@ def plot_eigenvalue_map(
     ax.set_xlabel(x_label)
     ax.set_ylabel("imaginary part (rad/s)")
     ax.set_title(title)
-    _legend(ax)
+    add_legend(ax)
     if notes:
         _place_labels(ax, notes, np.asarray(anchors, dtype=complex))
     return fig

@@ -29,7 +29,7 @@ from vehid.identification import (
 from vehid.identification import archive as archive_module
 from vehid.identification.modal import ModalModel, ModalStructure
 from vehid.vehicle import baseline
-from vehid.vehicle.linearize import Linearization, Mode
+from vehid.vehicle.linearize import Linearization, VehicleMode
 
 
 def _round_trip(tmp_path, value, **options):
@@ -172,8 +172,8 @@ def test_nested_dataclasses_round_trip(tmp_path):
     vehicle = baseline()
     assert _round_trip(tmp_path, vehicle) == vehicle  # four nested parameter dataclasses
     modes = (
-        Mode(complex(-2.4, 2.5), 0.55, 0.69, "yaw-sideslip", ("yaw_rate", "lateral_velocity")),
-        Mode(complex(-8.0, 0.0), 1.27, 1.0, "roll", ()),
+        VehicleMode(complex(-2.4, 2.5), 0.55, 0.69, "yaw-sideslip", ("yaw_rate", "lateral_velocity")),
+        VehicleMode(complex(-8.0, 0.0), 1.27, 1.0, "roll", ()),
     )
     rng = np.random.default_rng(2)
     linear = Linearization(

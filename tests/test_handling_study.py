@@ -106,7 +106,7 @@ def test_archive_round_trip(study):
         assert np.allclose(stored, reported, rtol=1e-12)
         # the stored model, simulated again over the stored record, scores what the summary says
         record = archive.records["validation"]
-        again = np.mean(handling_study.score(run.model, record))
+        again = np.mean(handling_study.explained_percent(run.model, record))
         assert again == pytest.approx(by_order[order]["linear_validation_R"], abs=1e-9)
         assert np.mean(run.metrics["identification_R"]) == pytest.approx(by_order[order]["linear_identification_R"], abs=1e-12)
     assert archive.config["orders"] == [2, 3] and archive.config["passes"] == 20
@@ -150,9 +150,9 @@ def test_linear_modes_near_the_vehicle_modes():
 
 
 def test_compare_modes_picks_the_nearest_mode():
-    from vehid.vehicle.linearize import Mode
+    from vehid.vehicle.linearize import VehicleMode
 
-    roll = Mode(complex(-5, 7), abs(complex(-5, 7)) / (2 * np.pi), 5 / abs(complex(-5, 7)), "roll", ("phi",))
+    roll = VehicleMode(complex(-5, 7), abs(complex(-5, 7)) / (2 * np.pi), 5 / abs(complex(-5, 7)), "roll", ("phi",))
     (found,) = compare_modes(3, [complex(-20, 0), complex(-4, -6.5)], {"roll": roll})  # a conjugate counts as its pair
     assert (found.order, found.mode) == (3, "roll")
     assert found.identified_eigenvalue == complex(-4, 6.5)
@@ -283,7 +283,7 @@ def test_nonlinear_call_site_with_a_stand_in(monkeypatch, tmp_path):
                                                     ("nonlinear", 1), ("nonlinear", 2), ("nonlinear", 3)]
     row = result.table[0]
     outcome = result.outcomes[2]
-    assert row.nonlinear_identification_R == pytest.approx(np.mean(handling_study.score(
+    assert row.nonlinear_identification_R == pytest.approx(np.mean(handling_study.explained_percent(
         outcome.nonlinear.model, result.records["identification"])), abs=1e-12)
     assert row.nonlinear_validation_R is not None
     run = result.nonlinear_runs[0]

@@ -14,7 +14,7 @@ A run that leaves the model's physical envelope (:data:`ENVELOPE`) raises
 speeds outside ``MIN_SPEED``-``MAX_SPEED`` (m/s) are input errors.
 """
 
-from .linearize import Linearization, Mode, linearize
+from .linearize import Linearization, VehicleMode, linearize
 from .manoeuvres import MANOEUVRES, Manoeuvre, make_manoeuvre
 from .model import (
     CORNERS,
@@ -44,7 +44,7 @@ from .validity import ENVELOPE, MAX_SPEED, MAX_SPEED_AERO, MIN_SPEED
 
 __all__ = [
     "Linearization",
-    "Mode",
+    "VehicleMode",
     "linearize",
     "MANOEUVRES",
     "Manoeuvre",

@@ -25,7 +25,7 @@ from vehid.identification.storage import register_codec
 from .model import DEFAULT_SPEED, VehicleModel, build_vehicle_model, check_speed
 from .parameters import VehicleParameters, named_vehicle
 
-__all__ = ["Mode", "Linearization", "linearize", "linearization_function", "MODE_GROUPS", "modes_of"]
+__all__ = ["VehicleMode", "Linearization", "linearize", "linearization_function", "MODE_GROUPS", "modes_of"]
 
 # Which states make which kind of motion; a mode is labelled by the group with
 # the largest share of its participation.
@@ -44,7 +44,7 @@ _DOMINANT_SHARE = 0.1  # a state is listed as dominant above this share of a mod
 
 
 @dataclass(frozen=True)
-class Mode:
+class VehicleMode:
     """One mode of the linearised vehicle.
 
     Attributes
@@ -99,15 +99,15 @@ class Linearization:
     state_names: tuple[str, ...]
     input_names: tuple[str, ...]
     output_names: tuple[str, ...]
-    modes: tuple[Mode, ...]
+    modes: tuple[VehicleMode, ...]
     vehicle: str
 
-    def modes_labelled(self, label: str) -> tuple[Mode, ...]:
+    def modes_labelled(self, label: str) -> tuple[VehicleMode, ...]:
         """The modes carrying ``label``, slowest first."""
         return tuple(mode for mode in self.modes if mode.label == label)
 
 
-def modes_of(A: np.ndarray, state_names: tuple[str, ...]) -> tuple[Mode, ...]:
+def modes_of(A: np.ndarray, state_names: tuple[str, ...]) -> tuple[VehicleMode, ...]:
     """Modes of a state matrix: eigenvalues, frequencies, damping, dominant states, labels; slowest first."""
     eigenvalues, right = np.linalg.eig(A)
     left = np.linalg.inv(right)
@@ -125,7 +125,7 @@ def modes_of(A: np.ndarray, state_names: tuple[str, ...]) -> tuple[Mode, ...]:
         magnitude = abs(value)
         damping = -value.real / magnitude if magnitude > 0 else math.nan
         eigenvalue = complex(value.real, value.imag if abs(value.imag) > 0 else 0.0)
-        modes.append(Mode(eigenvalue, magnitude / (2 * math.pi), float(damping), label, dominant))
+        modes.append(VehicleMode(eigenvalue, magnitude / (2 * math.pi), float(damping), label, dominant))
     return tuple(sorted(modes, key=lambda mode: (mode.frequency_hz, mode.label)))
 
 
@@ -163,5 +163,9 @@ def linearize(
     )
 
 
-register_codec(Mode, "vehicle_mode", legacy_path="vehicle.linearize:Mode")
+#: The former name, kept so that code written against it keeps working; ``VehicleMode`` does not
+#: collide with the identified models' :class:`vehid.identification.Mode`.
+Mode = VehicleMode
+
+register_codec(VehicleMode, "vehicle_mode", legacy_path="vehicle.linearize:Mode")
 register_codec(Linearization, "vehicle_linearization", legacy_path="vehicle.linearize:Linearization")

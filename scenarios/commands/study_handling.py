@@ -28,7 +28,7 @@ from vehid.identification.spline_iekf import SplineIEKFOptions
 from vehid.scenarios.handling_resume import StudyCheckpoint, read_progress
 from vehid.scenarios.handling_study import (OUTPUTS, PAPER, HandlingConfig, HandlingResult, archive_path, make_records,
                                             parse_orders, percent_text, planned_passes, run_study, spline_options,
-                                            study_linear_options, write_study_archive)
+                                            study_linear_options, summary_of, write_study_archive)
 from vehid.scenarios.paths import HDF5_SUFFIXES, OUT_RULE, run_digest
 from vehid.scenarios.progress import Progress
 
@@ -149,28 +149,6 @@ def _study(args, config, path, records, finished, checkpoint, run) -> tuple[dict
         summary["report"] = str(folder)
         text += f"\nwrote {len(written)} report files to {folder}"
     return summary, text
-
-
-def summary_of(result: HandlingResult) -> dict[str, Any]:
-    """The study's JSON summary (before :func:`vehid.identification.jsonable.to_jsonable`): its keys are a public contract."""
-    return {
-        "table": list(result.table),
-        "chosen_order": result.assessment.chosen_order,
-        "seconds": result.seconds,
-        "vehicle_modes": {label: {"eigenvalue": mode.eigenvalue, "frequency_hz": mode.frequency_hz,
-                                  "damping": mode.damping, "label": mode.label}
-                          for label, mode in result.vehicle_modes.items()},
-        "vehicle_linearization": result.vehicle_linearization,
-        "mode_comparison": list(result.mode_comparison),
-        "linear_runs": list(result.linear_runs),
-        "nonlinear_runs": list(result.nonlinear_runs),
-        "nonlinear": result.nonlinear_status,
-        "order_assessment": [row.as_dict() for row in result.assessment.rows],
-        "outputs": list(OUTPUTS),
-        "config": result.config.as_dict(),
-        "workers": result.workers,
-        "paper": {str(order): values for order, values in PAPER.items()},
-    }
 
 
 def text_of(result: HandlingResult) -> str:
