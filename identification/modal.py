@@ -34,7 +34,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from .errors import InputError
-from .protocol import Mode, StateSpaceModel
+from .protocol import Mode, StateSpaceModel, eigenvalues_stable
 
 __all__ = [
     "ModalStructure",
@@ -484,8 +484,8 @@ class ModalModel(StateSpaceModel):
         return tuple(Mode.of(value) for value in self.mode_eigenvalues())
 
     def is_stable(self) -> bool:
-        """Every eigenvalue in the open left half-plane."""
-        return bool(np.all(self.mode_eigenvalues().real < 0))
+        """Every eigenvalue in the left half-plane, within rounding (:func:`~.protocol.eigenvalues_stable`)."""
+        return eigenvalues_stable(self.mode_eigenvalues())
 
     @property
     def n_u(self) -> int:
