@@ -2,6 +2,7 @@
 
 import argparse
 import math
+import re
 from types import SimpleNamespace
 
 import numpy as np
@@ -71,11 +72,16 @@ def noisy_example():
 
 
 def test_a_diverging_pass_runs_again_with_a_smaller_p_and_says_so(noisy_example):
-    """At p = 100 per dominant time constant the first pass makes the eq. 15 model unstable; a tenth and a
-    hundredth of it are tried in turn, from the start, and the run goes on where one of them holds."""
+    """At p = 100 per dominant time constant an early pass makes the eq. 15 model unstable; a tenth and a
+    hundredth of it are tried in turn, from the start, and the run goes on where one of them holds.
+
+    Which early pass is the first to diverge depends on rounding (measured: pass 1 with one OpenBLAS
+    kernel, pass 2 or 3 with another or with one thread), so the test asserts that some pass diverges
+    without the back-off and what the back-off says and does, not the pass's number.
+    """
     data, structure = noisy_example
     settings = dict(p=100.0, passes=3)
-    with pytest.raises(DivergenceError, match="pass 1"):
+    with pytest.raises(DivergenceError, match=r"pass [123]"):
         identify_iekf(data, structure, options=IEKFOptions.invariant(back_off=0, **settings), parameter_covariance=False)
     result = identify_iekf(data, structure, options=IEKFOptions.invariant(back_off=2, **settings),
                            parameter_covariance=False)
@@ -83,7 +89,8 @@ def test_a_diverging_pass_runs_again_with_a_smaller_p_and_says_so(noisy_example)
     assert result.passes_run == 3 and not result.stop_reason.startswith("diverged")
     assert 1 <= len(notes) <= 2 and result.meta["backed_off"] == len(notes)
     for k, note in enumerate(notes, start=1):
-        assert note.startswith("pass 1 diverged") and "from the start" in note
+        # a first pass that diverges runs again "from the start", a later one "from pass k" (its last good state)
+        assert re.match(r"pass [123] diverged", note) and re.search(r"from (the start|pass \d)", note)
         assert f"p = {100.0 * BACK_OFF_FACTOR**k:.3g}" in note
     assert result.model.is_stable()
 
