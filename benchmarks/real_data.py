@@ -43,7 +43,9 @@ multiplied by ``1 + 1e-6 N(0, 1)`` (``--seeds``), and under each OpenBLAS
 kernel this CPU runs other than the one it picks (``OPENBLAS_CORETYPE``, set
 for those subprocesses alone). The record's range is the spread of the
 default's mean hold-out fit over all these runs; beside each fraction, the
-best peer's fit at that fraction.
+best peer's fit at that fraction, and the fit of one fixed model (the
+default's at the usual fraction) on that fraction's held-out part, whose
+range is what the scored samples alone move (``fixed_model_range``).
 
 The table goes to ``results/benchmarks.json`` under ``real_data``.
 """
@@ -149,6 +151,9 @@ def run_workbench(entry: records.RecordSet, scratch: Path, default_only: bool = 
             # the spline model's own hold-out fit; validation_fit_percent stays the linear start's
             row["linear_validation_fit_percent"] = row["validation_fit_percent"]
             row["validation_fit_percent"] = _nonlinear_validation_fit(summary)
+        if label == DEFAULT_ROW and status in (0, 3):
+            # the default's model, to score on every other fraction's held-out part (not written out)
+            row[FIXED_MODEL] = {key: summary.get(key) for key in ("method", "A", "B", "C", "D", "preparation")}
         rows[label] = row
         print(f"   {label:<24} {_show(_mean_fit(row)):>9}  ({seconds:.1f} s, exit {status})", flush=True)
     return rows
@@ -274,6 +279,38 @@ def other_kernels() -> list[str]:
     return kernels
 
 
+FIXED_MODEL = "_model"  # a default row's key holding its model in memory; dropped before the results are written
+
+
+def fixed_model_fits(entry: records.RecordSet, model: dict | None, fractions: list[float]) -> dict[str, float] | None:
+    """Mean hold-out fit % of one fixed model, the default's at the usual fraction, on each fraction's held-out part.
+
+    Moving the fraction changes which samples are scored as well as the data
+    the default identifies from; a fixed model's spread over the same held-out
+    parts is the part of the default's range that the samples alone make. The
+    model is scored as ``identify`` scores it (first-order hold, least-squares
+    initial state; k-step prediction where it is unstable), on the samples
+    centred by the estimation part's means of its own run. None where the
+    record has a published validation record, or the run gave no continuous
+    IEKF model.
+    """
+    if entry.validation_path_columns is not None or not model or model.get("method") != "iekf" or not model.get("A"):
+        return None
+    from vehid.identification.data import IOData
+    from vehid.identification.discrete import ContinuousModel
+    from vehid.identification.validation import default_horizon, score
+
+    fixed = ContinuousModel(*(np.asarray(model[key], dtype=float) for key in "ABCD"))
+    input_offset = np.asarray(model["preparation"]["input_offset"], dtype=float)
+    output_offset = np.asarray(model["preparation"]["output_offset"], dtype=float)
+    fits = {}
+    for fraction in sorted({records.HOLDOUT, *fractions}):
+        _, (u, y) = records.load(entry, fraction)
+        held_out = IOData(t=np.arange(len(u)) * entry.dt, u=u - input_offset, y=y - output_offset)
+        fits[f"{fraction:g}"] = float(np.mean(score(fixed, held_out, horizon=default_horizon(fixed)).fit))
+    return fits
+
+
 def run_perturbations(entry: records.RecordSet, scratch: Path, default_row: dict, options) -> list[dict]:
     """The default ``identify`` run under each perturbation: held-out fraction, 1e-6 noise, BLAS kernel."""
     runs = [{"perturbation": "none", "fraction": _fraction(entry, records.HOLDOUT),
@@ -313,8 +350,13 @@ def _best_peer(peer_rows: dict) -> tuple[str | None, float | None, int | None]:
     return max(scored, key=lambda item: item[1]) if scored else (None, None, None)
 
 
-def perturbation_summary(runs: list[dict], peers_by_fraction: dict) -> dict:
-    """The default's range over the perturbed runs, and the best peer against the default at each fraction."""
+def perturbation_summary(runs: list[dict], peers_by_fraction: dict, fixed_fits: dict[str, float] | None = None
+                         ) -> dict:
+    """The default's range over the perturbed runs, and the best peer against the default at each fraction.
+
+    ``fixed_fits`` (:func:`fixed_model_fits`) adds the fixed model's fit at
+    each fraction and its range: the spread the scored samples make alone.
+    """
     fits = [_mean_fit(run) for run in runs]
     finite = [f for f in fits if f is not None and np.isfinite(f)]
     summary: dict = {
@@ -334,6 +376,10 @@ def perturbation_summary(runs: list[dict], peers_by_fraction: dict) -> dict:
         by_fraction[run["fraction"]] = {"default_fit": fit, "default_order": run.get("order"), "best_peer": peer,
                                         "best_peer_fit": peer_fit, "best_peer_order": peer_order,
                                         "default_minus_best_peer": gap}
+    if fixed_fits:
+        for fraction, fit in fixed_fits.items():
+            by_fraction.setdefault(fraction, {})["fixed_model_fit"] = fit
+        summary["fixed_model_range"] = max(fixed_fits.values()) - min(fixed_fits.values())
     summary["by_fraction"] = by_fraction
     gaps = [entry["default_minus_best_peer"] for entry in by_fraction.values()]
     # the held-out part itself changes with the fraction; the gap to the best peer on the same part does not
@@ -425,12 +471,19 @@ def print_perturbations(sets: dict) -> None:
               + (f" ({spread['runs_without_fit']} without a fit)" if spread["runs_without_fit"] else "")
               + ("" if not spread["default_minus_best_peer_range"] else
                  ", default minus best peer {:+.1f} to {:+.1f}".format(*spread["default_minus_best_peer_range"])))
+        if spread.get("fixed_model_range") is not None:
+            print(f"{'':<16} the default's model at {records.HOLDOUT:g}, held fixed, on each fraction's held-out part: "
+                  f"range {_show(spread['fixed_model_range'])}")
         for fraction, entry in spread["by_fraction"].items():
+            if "default_fit" not in entry:
+                continue
             gap = entry["default_minus_best_peer"]
             peer = (f", best peer {entry['best_peer']} {_show(entry['best_peer_fit'])} n={entry['best_peer_order']}"
                     if entry["best_peer"] else "")
+            fixed = (f", fixed model {_show(entry['fixed_model_fit'])}" if entry.get("fixed_model_fit") is not None
+                     else "")
             print(f"   {fraction:>9}: default {_show(entry['default_fit'])} n={entry['default_order']}{peer}"
-                  + ("" if gap is None else f", {gap:+.1f}"))
+                  + ("" if gap is None else f", {gap:+.1f}") + fixed)
 
 
 def _numbers(kind):
@@ -485,8 +538,10 @@ def main(argv: list[str] | None = None) -> dict:
                 "estimation_samples": len(u_est), "validation_samples": len(u_val),
                 **{f"workbench:{k}": v for k, v in workbench.items()},
             }
+            model = sets[name][f"workbench:{DEFAULT_ROW}"].pop(FIXED_MODEL, None)
             if not args.no_perturbations:
                 sets[name]["perturbations"] = run_perturbations(entry, Path(scratch), workbench[DEFAULT_ROW], args)
+                sets[name]["fixed_model_fits"] = fixed_model_fits(entry, model, args.fractions)
     # the peers after the workbench: their run does not depend on it, and may be one saved earlier
     peer_fractions = sorted({records.HOLDOUT, *args.fractions})
     try:
@@ -506,7 +561,8 @@ def main(argv: list[str] | None = None) -> dict:
         sets[name].update({f"peer:{k}": v for k, v in peers_by_fraction.get(_fraction(entry, records.HOLDOUT),
                                                                            {}).items()})
         if "perturbations" in sets[name]:
-            sets[name]["perturbations"] = perturbation_summary(sets[name]["perturbations"], peers_by_fraction)
+            sets[name]["perturbations"] = perturbation_summary(sets[name]["perturbations"], peers_by_fraction,
+                                                               sets[name].pop("fixed_model_fits", None))
         if peers_by_fraction:
             sets[name]["peers_by_fraction"] = peers_by_fraction
     figures = {

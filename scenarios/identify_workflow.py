@@ -43,6 +43,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from vehid.identification.data import IOData
+from vehid.identification.decisions import SCHEDULE_MARGIN, ScheduleCandidate, choose_p_and_schedule
 from vehid.identification.errors import DivergenceError, InputError, StrictWarningsError, WorkbenchError
 from vehid.identification.iekf import (INVARIANT_P, INVARIANT_P_DECAY, START_CHOICES, TIMESCALES, IEKFOptions,
                                       identify_iekf, invariant_noise_settings, normalized_data_start, signal_scales,
@@ -113,9 +114,11 @@ SETTLED_FIT = 0.1
 SETTLED_PASSES = 5
 P_GRID = (1e-4, 1e-5, 1e-6)  # p per dominant time constant tried by cross-validation, largest first
 P_TOLERANCE = 0.1  # points of cross-validated fit within which the largest p is taken
-# Q schedules tried at each p, as IEKFOptions.p_decay, the one preferred on a tie first. A constant Q keeps
-# following the record and suits clean data (a shrinking one cost the heat exchanger 4.7 points of hold-out
-# fit); a shrinking Q stops the parameters chasing sensor noise (it saves 10-36 points on noisy handling records)
+# Q schedules tried at each p, as IEKFOptions.p_decay. A shrinking Q averages the parameters over the whole
+# record and stops them chasing sensor noise (it saves 10-36 points on noisy handling records); a constant Q
+# keeps following the record's last part, so its hold-out fit moves with the record's length (the heat
+# exchanger: 49.5-65.4 % over held-out fractions 0.3-0.4) and it is chosen only where it scores clearly
+# better (identification.decisions.SCHEDULE_MARGIN)
 Q_SCHEDULES = {"constant": 1.0, "shrinking": INVARIANT_P_DECAY}
 # points of estimation fit by which the start must beat the filter's model on the whole record to be returned
 # in its place. Both models were fitted to that record, the start for its simulation fit, so the start looks
@@ -387,7 +390,8 @@ class PTuning:
         return {"choice": f"p {self.p:g}", "q_schedule": self.q_schedule, "score": scored.get(chosen),
                 "runner_up": runner_up[0], "runner_up_score": runner_up[1],
                 "measure": "two-fold cross-validated NRMSE fit %",
-                "rule": f"the largest p within {P_TOLERANCE} points of the best, a constant Q where both are"}
+                "rule": f"a shrinking Q unless a constant one scores more than {SCHEDULE_MARGIN:g} points better; "
+                        f"at that schedule the largest p within {P_TOLERANCE} points of its best"}
 
 
 START_RETURNED = "the data start scores better than the filter's model in cross-validation; the start model is returned"
@@ -431,10 +435,13 @@ def tune_p(args: argparse.Namespace, plan: Plan, options: IEKFOptions, structure
     Each record is cut in halves; a model identified on the first halves is scored on the second and
     the reverse, and the two NRMSE fits averaged. Each p of the grid :data:`P_GRID` is tried with
     each schedule of :data:`Q_SCHEDULES` (only the constant one where ``options`` keep Q constant).
-    Of the candidates whose fit is within :data:`P_TOLERANCE` points of the best, the largest p
-    wins: a larger p moves the parameters faster, so the run converges in fewer passes, and the
-    difference below the tolerance is noise. At that p a constant Q wins where it is within the
-    tolerance too: a shrinking Q must earn its place by a better fit (noise it stops chasing).
+    The shrinking Q is run unless a constant Q's best candidate beats its best by more than
+    :data:`~vehid.identification.decisions.SCHEDULE_MARGIN` points: cross-validated fits that
+    close do not rank the hold-out fits, and the constant Q's outcome moves with the record
+    (:func:`~vehid.identification.decisions.choose_p_and_schedule`). Of that schedule's
+    candidates within :data:`P_TOLERANCE` points of its best, the largest p wins: a larger p
+    moves the parameters faster, so the run converges in fewer passes, and the difference below
+    the tolerance is noise.
     """
     started = time.perf_counter()
     try:
@@ -472,15 +479,10 @@ def tune_p(args: argparse.Namespace, plan: Plan, options: IEKFOptions, structure
         else:
             row["cv_fit_percent"] = float(np.mean(fits)) if np.all(np.isfinite(fits)) else None
         rows.append(row)
-    scored = [row for row in rows if row["cv_fit_percent"] is not None]
-    if scored:
-        best = max(row["cv_fit_percent"] for row in scored)
-        near = [row for row in scored if row["cv_fit_percent"] >= best - P_TOLERANCE]
-        chosen = max(row["p"] for row in near)
-        schedule = next(name for name in schedules if any(row["p"] == chosen and row["q_schedule"] == name
-                                                           for row in near))
-    else:  # no candidate scored on the other half: the default, whose own run then says what went wrong
-        chosen, schedule = options.p, q_schedule_of(options)
+    choice = choose_p_and_schedule([ScheduleCandidate(row["p"], row["q_schedule"], row["cv_fit_percent"])
+                                    for row in rows if row["cv_fit_percent"] is not None], P_TOLERANCE)
+    # no candidate scored on the other half: the default, whose own run then says what went wrong
+    chosen, schedule = choice if choice is not None else (options.p, q_schedule_of(options))
     start_fit = float(np.mean(list(start_fits.values()))) if len(start_fits) == 2 else None
     return PTuning(chosen, tuple(rows), time.perf_counter() - started,
                    start_fit if start_fit is not None and np.isfinite(start_fit) else None, schedule)
@@ -909,8 +911,8 @@ def text_summary(summary: dict[str, Any], data: IOData, plan: Plan) -> str:
                           + ("failed" if row["cv_fit_percent"] is None else f"{row['cv_fit_percent']:.2f}")
                           for row in summary["p_tried"])
         lines.append(f"p {summary['p']:g}, {summary.get('q_schedule', 'constant')} Q, by two-fold cross-validation "
-                     f"(fit %: {tried}; the largest p within {P_TOLERANCE} points of the best, a constant Q where "
-                     f"both are), {summary['tuning_seconds']:.1f} s")
+                     f"(fit %: {tried}; a shrinking Q unless a constant one is {SCHEDULE_MARGIN:g} points better, "
+                     f"the largest p within {P_TOLERANCE} points of its best), {summary['tuning_seconds']:.1f} s")
     if summary.get("scoring_note"):
         lines.append(f"note: {summary['scoring_note']}")
     for note in plan.notes:

@@ -19,11 +19,13 @@ import numpy as np
 import pytest
 
 from vehid.identification.data import IOData
+from vehid.identification.decisions import SCHEDULE_MARGIN, ScheduleCandidate, choose_p_and_schedule
 from vehid.identification.modal import ModalModel, ModalStructure
 from vehid.scenarios import identify_workflow as workflow
 
 ROOT = Path(__file__).resolve().parent.parent
 BALLBEAM = ROOT / "tests" / "data" / "ballbeam" / "ballbeam.dat"
+DRYER = ROOT / "tests" / "data" / "dryer" / "dryer.dat"
 VEHID = [sys.executable, "-m", "vehid.scenarios.cli"]
 
 
@@ -123,7 +125,12 @@ def _check_margins(summary: dict) -> None:
     if "p" in margins:
         assert margins["p"]["choice"] == f"p {summary['p']:g}"
         if margins["p"]["runner_up_score"] is not None and margins["p"]["runner_up"].startswith("p "):
-            assert margins["p"]["score"] >= margins["p"]["runner_up_score"] - workflow.P_TOLERANCE
+            # a candidate of the same schedule may beat the choice by the p tolerance, the other schedule's
+            # by the schedule margin where the choice is the shrinking Q (by the tolerance where it is constant)
+            same = margins["p"]["runner_up"].endswith(f"{margins['p']['q_schedule']} Q")
+            allowed = (workflow.P_TOLERANCE if same or margins["p"]["q_schedule"] == "constant"
+                       else SCHEDULE_MARGIN + workflow.P_TOLERANCE)
+            assert margins["p"]["score"] >= margins["p"]["runner_up_score"] - allowed
     returned = margins.get("model_returned")
     if returned is not None:
         assert returned["choice"] == summary.get("model_returned", "filter")
@@ -192,3 +199,59 @@ def test_ballbeam_decisions_do_not_flip_with_the_holdout_fraction_or_a_perturbat
     choices = [{name: entry["choice"] for name, entry in summary["decision_margins"].items()} for summary in runs]
     assert choices[2] == choices[0]  # the perturbation changes no choice
     assert all(choices[1][name] == choices[0][name] for name in ("open_loop_unstable", "model_returned"))
+
+
+def _candidates(fits: dict) -> list[ScheduleCandidate]:
+    return [ScheduleCandidate(p, schedule, fit) for (p, schedule), fit in fits.items()]
+
+
+def test_a_constant_Q_is_chosen_only_where_it_scores_clearly_better():
+    """Below the margin the shrinking Q's best candidate runs; above it the constant Q's."""
+    shrinking = {(1e-4, "shrinking"): 80.0, (1e-5, "shrinking"): 80.5, (1e-6, "shrinking"): 80.45}
+    close = {**shrinking, (1e-4, "constant"): 80.5 + 0.9 * SCHEDULE_MARGIN}
+    clear = {**shrinking, (1e-4, "constant"): 80.5 + 1.1 * SCHEDULE_MARGIN}
+    # within the tolerance of the schedule's own best (80.5): 1e-5 and 1e-6; the larger p is taken
+    assert choose_p_and_schedule(_candidates(close), p_tolerance=0.1) == (1e-5, "shrinking")
+    assert choose_p_and_schedule(_candidates(clear), p_tolerance=0.1) == (1e-4, "constant")
+
+
+def test_the_largest_p_is_taken_within_the_tolerance_of_its_schedules_best():
+    """Not within the tolerance of another schedule's best: a p is compared with its own schedule's candidates."""
+    fits = {(1e-4, "shrinking"): 79.0, (1e-5, "shrinking"): 79.95, (1e-6, "shrinking"): 80.0,
+            (1e-4, "constant"): 80.5}
+    assert choose_p_and_schedule(_candidates(fits), p_tolerance=0.1) == (1e-5, "shrinking")
+    assert choose_p_and_schedule(_candidates(fits), p_tolerance=0.01) == (1e-6, "shrinking")
+
+
+def test_a_single_schedule_or_none_is_taken_as_it_is():
+    constant_only = {(1e-4, "constant"): 70.0, (1e-5, "constant"): 75.0}
+    assert choose_p_and_schedule(_candidates(constant_only), p_tolerance=0.1) == (1e-5, "constant")
+    assert choose_p_and_schedule([], p_tolerance=0.1) is None
+
+
+def _dryer(tmp_path: Path, fraction: float, *, perturbed: bool = False) -> dict:
+    file = DRYER
+    if perturbed:  # every number times (1 + 1e-6 N(0, 1)): far below the record's own noise
+        table = np.loadtxt(DRYER, ndmin=2)
+        table = table * (1.0 + 1e-6 * np.random.default_rng(2).standard_normal(table.shape))
+        file = tmp_path / "dryer_perturbed.dat"
+        np.savetxt(file, table, fmt="%.17g")
+    done = subprocess.run([*VEHID, "identify", str(file), "--inputs", "1", "--outputs", "2", "--dt", "0.08",
+                           "--validation", repr(fraction), "--json", "--quiet"],
+                          capture_output=True, text=True, check=False)
+    assert done.returncode == 0, done.stderr[-500:]
+    return json.loads(done.stdout)
+
+
+# The default's hold-out fit on the public hair-dryer record. Before the schedule rule a constant Q was run
+# wherever it tied: 85.3 % at a held-out fraction of 0.3 and 90.7 % at 0.3333 with the same p and schedule
+# (its parameters follow the record's last part, and where that part ends moved them). A fixed model scores
+# within 0.6 point on the held-out parts of every fraction 0.3-0.4, so a larger move is the method's. With
+# the shrinking Q: 86.4 and 85.8 %, 85.1-86.4 over fractions 0.3-0.4. 2 points is the acceptance's bound.
+@pytest.mark.slow
+def test_dryer_holdout_fit_does_not_move_with_the_holdout_fraction_or_a_perturbation(tmp_path):
+    runs = [_dryer(tmp_path, 0.3), _dryer(tmp_path, 0.3333), _dryer(tmp_path, 0.3, perturbed=True)]
+    for summary in runs:
+        _check_margins(summary)
+    fits = [summary["validation_fit_percent"][0] for summary in runs]
+    assert max(fits) - min(fits) <= FLIP_BOUND, fits

@@ -13,6 +13,7 @@ import pytest
 
 from vehid.identification.archive import open_archive
 from vehid.identification.iekf_archive import read_iekf_run
+from vehid.identification.decisions import SCHEDULE_MARGIN
 from vehid.scenarios.identify_workflow import P_GRID, P_TOLERANCE, Q_SCHEDULES
 from vehid.scenarios.linear_example import make_data
 
@@ -50,14 +51,16 @@ def test_identify_json_summary(short_record, tmp_path):
         assert min(abs(f - truth) for f in found) / abs(truth) < 0.02
     assert summary["fit_percent"][0] > 99.9
     assert json.loads((tmp_path / "model.json").read_text())["structure"]["n"] == 5
-    # no --p: each p of the grid cross-validated on the halves with each Q schedule; the largest p within the
-    # tolerance of the best taken, with a constant Q where that is within the tolerance too
+    # no --p: each p of the grid cross-validated on the halves with each Q schedule; the shrinking Q unless the
+    # constant one's best beats its best by more than the schedule margin, then the largest p of that schedule
+    # within the tolerance of the schedule's best
     tried = summary["p_tried"]
     assert [(row["p"], row["q_schedule"]) for row in tried] == [(p, q) for p in P_GRID for q in Q_SCHEDULES]
     fits = {(row["p"], row["q_schedule"]): row["cv_fit_percent"] for row in tried}
-    near = [key for key, fit in fits.items() if fit >= max(fits.values()) - P_TOLERANCE]
-    assert summary["p"] == max(p for p, _ in near)
-    assert summary["q_schedule"] == ("constant" if (summary["p"], "constant") in near else "shrinking")
+    best = {q: max(fit for (_, schedule), fit in fits.items() if schedule == q) for q in Q_SCHEDULES}
+    schedule = "constant" if best["constant"] > best["shrinking"] + SCHEDULE_MARGIN else "shrinking"
+    assert summary["q_schedule"] == schedule
+    assert summary["p"] == max(p for (p, q), fit in fits.items() if q == schedule and fit >= best[q] - P_TOLERANCE)
     assert summary["tuning_seconds"] >= sum(row["seconds"] for row in tried) > 0
 
 

@@ -120,7 +120,10 @@ DEFAULT_FITS = {
     "ballbeam": [89.18],
     "dryer": [85.31],
     "robot_arm": [96.87],
-    "exchanger": [63.36],
+    # 63.36 until the schedule margin: a constant Q, whose parameters follow the estimation part's last
+    # stretch, gave 49.5-65.4 % over held-out fractions 0.3-0.4; the shrinking Q run now gives 59.79 at 0.3
+    # (57.6-59.8 over the fractions; the best peer 58.2 %, SIPPY CVA), docs/iekf_tuning.md "Schedule margin"
+    "exchanger": [59.79],
     "cd_player_arm": [73.43, 78.96],
     "cascaded_tanks": [71.76],
 }
