@@ -49,6 +49,7 @@ __all__ = [
     "calibration_record",
     "calibrate_vehicle",
     "speed_schedule",
+    "vehicle_toml",
     "vehicle_with",
 ]
 
@@ -343,3 +344,23 @@ def calibrate_vehicle(params: VehicleParameters, data: IOData | Sequence[IOData]
         vehicle=vehicle_with(prior_vehicle, parameters, values), parameter_names=parameters, units=units,
         values=values, std=std, correlation=correlation, held=held, result=result, warnings=warnings,
     )
+
+
+def vehicle_toml(params: VehicleParameters, comment: str = "") -> str:
+    """The vehicle as a TOML vehicle file (every field of every section; :func:`~vehid.vehicle.load_vehicle` reads it).
+
+    Numbers are written with ``repr``, which reads back to the same float.
+    """
+    lines = [f"# {line}" for line in comment.splitlines()]
+    lines.append(f"name = {_toml_string(params.name)}")
+    for section in ("chassis", "suspension", "tyre", "drive", "steering", "aerodynamics"):
+        holder = getattr(params, section)
+        lines.append("")
+        lines.append(f"[{section}]")
+        for item in dataclasses.fields(holder):
+            lines.append(f"{item.name} = {float(getattr(holder, item.name))!r}")
+    return "\n".join(lines) + "\n"
+
+
+def _toml_string(text: str) -> str:
+    return '"' + str(text).replace("\\", "\\\\").replace('"', '\\"') + '"'
