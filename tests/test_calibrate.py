@@ -97,3 +97,40 @@ def test_bad_parameter_names_are_input_errors():
         calibration_model(nominal, ("drive.front_drive_share",), ("yaw_rate",))
     with pytest.raises(InputError, match="unknown quantity"):
         calibration_model(nominal, ("tyre.PKY1",), ("yaw",))
+
+
+def _small_log(path):
+    """A 2 s log in the workbench's text format (only read, never calibrated, by the fast tests)."""
+    t = 0.01 * np.arange(200)
+    table = np.column_stack([t, 0.01 * np.sin(t), np.full_like(t, 20.0), 0.1 * np.sin(t), np.sin(t)])
+    np.savetxt(path, table, delimiter=",", header="t,delta,vx,yawRate,ayCG", comments="")
+    return path
+
+
+def test_cli_never_replaces_an_existing_vehicle_file(tmp_path, capsys):
+    from vehid.scenarios.cli import main
+
+    log = _small_log(tmp_path / "log.csv")
+    out = tmp_path / "car.toml"
+    out.write_text("kept\n")
+    status = main(["calibrate", str(log), "--inputs", "delta", "--speed", "vx", "--outputs", "yawRate,ayCG",
+                   "--quantities", "yaw_rate,lateral_acceleration", "--out", str(out)])
+    assert status == 2
+    assert out.read_text() == "kept\n"
+    assert "car.toml" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--prior", "tyre.PKY1"], "NAME=VALUE"),
+    (["--validation", "1.5"], "held-out fraction"),
+    (["--parameters", "aerodynamics.drag_area"], "structure"),
+])
+def test_cli_bad_input_exits_2_with_one_line(tmp_path, capsys, extra, message):
+    from vehid.scenarios.cli import main
+
+    log = _small_log(tmp_path / "log.csv")
+    status = main(["calibrate", str(log), "--inputs", "delta", "--speed", "vx", "--outputs", "yawRate,ayCG",
+                   "--quantities", "yaw_rate,lateral_acceleration", *extra])
+    assert status == 2
+    error = capsys.readouterr().err.strip()
+    assert message in error and len(error.splitlines()) == 1
