@@ -26,7 +26,7 @@ from vehid.scenarios.benchmarking import record_figures
 from vehid.vehicle.calibration import calibrate_vehicle, calibration_record, vehicle_with
 from vehid.vehicle.manoeuvres import speed_cycle
 from vehid.vehicle.parameters import baseline
-from vehid.vehicle.simulation import simulate
+from vehid.vehicle.replay import replay
 
 QUANTITIES = ("yaw_rate", "lateral_acceleration", "roll_angle")
 PARAMETERS = ("tyre.PKY1", "tyre.front_cornering_scale", "chassis.yaw_inertia", "chassis.roll_inertia",
@@ -41,11 +41,12 @@ def _value(params, name: str) -> float:
 
 
 def make_log(truth, minutes: float):
-    """Consecutive 40 s speed cycles of different steer seeds, each simulated from straight running."""
+    """Consecutive 40 s speed cycles of different steer seeds, each replayed from straight running."""
     records = []
     rng = np.random.default_rng(0)
     for seed in range(max(1, int(round(minutes * 60 / 40)))):
-        record = simulate(truth, speed_cycle(duration=40.0, dt=DT, amplitude=np.deg2rad(1.0), seed=seed))
+        cycle = speed_cycle(duration=40.0, dt=DT, amplitude=np.deg2rad(1.0), seed=seed)
+        record = replay(truth, cycle.steer, cycle.speed, DT)  # as a log: no hold delay in the record
         clean = np.column_stack([record.y[:, record.output_names.index(q)] for q in QUANTITIES])
         noisy = clean + 0.05 * np.sqrt(np.mean(clean**2, axis=0)) * rng.standard_normal(clean.shape)
         records.append(calibration_record(record.u[:, 0], record.y[:, record.output_names.index("speed")],
