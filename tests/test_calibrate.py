@@ -72,23 +72,26 @@ def test_twin_experiment_recovers_five_perturbed_parameters():
 @pytest.mark.slow(reason="two 23-state filter runs (with and without the undetermined parameter)")
 def test_parameter_the_log_does_not_excite_is_held_at_its_prior():
     nominal = baseline()
-    # pitch inertia: at a steady speed (the cycle's pulses give the only pitch motion) yaw rate and
-    # lateral acceleration hardly depend on it, and a prior 30 % off must not be "found"
+    # pitch inertia: at a constant speed nothing pitches the body, so yaw rate and lateral acceleration
+    # do not depend on it, and a prior 30 % off must not be "found"
     names = ("tyre.PKY1", "chassis.pitch_inertia")
     prior = 1.3 * _value(nominal, "chassis.pitch_inertia")
     quantities = QUANTITIES[:2]
     manoeuvre = speed_cycle(duration=8.0, dt=DT, amplitude=np.deg2rad(1.0), seed=5)
-    record = replay(nominal, manoeuvre.steer, manoeuvre.speed, DT)
-    y = np.column_stack([record.y[:, record.output_names.index(q)] for q in quantities])
-    data = calibration_record(record.u[:, 0], record.y[:, record.output_names.index("speed")], y, DT, quantities)
+    speed = np.full(manoeuvre.steer.size, 20.0)
+    record = replay(nominal, manoeuvre.steer, speed, DT)
+    clean = np.column_stack([record.y[:, record.output_names.index(q)] for q in quantities])
+    rng = np.random.default_rng(4)
+    y = clean + NOISE * np.sqrt(np.mean(clean**2, axis=0)) * rng.standard_normal(clean.shape)
+    data = calibration_record(record.u[:, 0], speed, y, DT, quantities)
     calibration = calibrate_vehicle(nominal, data, quantities, parameters=names,
                                     priors={"chassis.pitch_inertia": prior})
     assert "chassis.pitch_inertia" in calibration.held
     assert any("chassis.pitch_inertia" in text for text in calibration.warnings)
     assert calibration.values[1] == prior and np.isnan(calibration.std[1])
     assert calibration.vehicle.chassis.pitch_inertia == prior
-    # the determined one is still found (noise-free record: within 1 % of the truth)
-    assert calibration.values[0] == pytest.approx(_value(nominal, "tyre.PKY1"), rel=0.01)
+    # the determined one is still found, within its own 3 std (99.7 %)
+    assert abs(calibration.values[0] - _value(nominal, "tyre.PKY1")) <= 3 * calibration.std[0]
 
 
 def test_bad_parameter_names_are_input_errors():

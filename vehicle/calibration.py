@@ -17,7 +17,8 @@ Choices, each stated where it is made:
   the grey-box filter starts every pass from zero states: zero deviation is the car running straight
   at the log's first speed, not a car at rest. ``S`` is linear in the speed, so ``d(dx)/dt =
   f(dx + S V_ref) - S dV_ref/dt`` exactly.
-* Identifiability: after the fit, a parameter whose standard deviation exceeds its own size, or whose
+* Identifiability: after the fit, a parameter whose standard deviation exceeds its own size or
+  :data:`PRIOR_SHARE_LIMIT` of its prior standard deviation (the log taught little), or whose
   correlation with another exceeds :data:`CORRELATION_LIMIT` in magnitude (of a correlated pair the
   one less certain relative to its size), is not determined by the log. It is held at its prior and
   the others are estimated again without it, until every remaining one is determined.
@@ -43,6 +44,7 @@ from .parameters import VehicleParameters, describe
 __all__ = [
     "CORRELATION_LIMIT",
     "DEFAULT_PARAMETERS",
+    "PRIOR_SHARE_LIMIT",
     "ROLL_PARAMETERS",
     "Calibration",
     "calibration_model",
@@ -62,6 +64,10 @@ ROLL_PARAMETERS = ("chassis.roll_inertia", "suspension.front_anti_roll_bar")
 
 #: |correlation| above which two parameters are not told apart by the log (module docstring).
 CORRELATION_LIMIT = 0.95
+#: A parameter whose std the log did not bring below this share of its prior std is not determined:
+#: with the default prior (std 1 on the logarithm) an unexcited parameter's std is its own size, and a
+#: threshold at exactly that size would decide on the rounding of the covariance pass.
+PRIOR_SHARE_LIMIT = 0.5
 
 # Fields that steer a decision in the model's construction (a branch, not arithmetic): a symbol there
 # has no single model to stand for.
@@ -256,12 +262,13 @@ class Calibration:
 
 
 def _undetermined(names: Sequence[str], values: np.ndarray, std: np.ndarray, correlation: np.ndarray,
-                  limit: float) -> tuple[str, str] | None:
+                  limit: float, prior_std: float) -> tuple[str, str] | None:
     """The first parameter the fit did not determine and why (module docstring), or None."""
     relative = np.abs(std) / np.abs(values)
     worst = int(np.argmax(np.where(np.isfinite(relative), relative, np.inf)))
-    if not math.isfinite(relative[worst]) or relative[worst] > 1.0:
-        return names[worst], f"std {std[worst]:.3g} exceeds its value {values[worst]:.3g}"
+    if not math.isfinite(relative[worst]) or relative[worst] > min(1.0, PRIOR_SHARE_LIMIT * prior_std):
+        return names[worst], (f"std {std[worst]:.3g} against its value {values[worst]:.3g}: "
+                              "the log hardly narrowed its prior")
     n = len(names)
     pairs = [(abs(correlation[i, j]), i, j) for i in range(n) for j in range(i + 1, n)
              if math.isfinite(correlation[i, j])]
@@ -325,7 +332,8 @@ def calibrate_vehicle(params: VehicleParameters, data: IOData | Sequence[IOData]
         model = calibration_model(prior_vehicle, free, quantities)
         start = np.array([prior_values[parameters.index(name)] for name in free])
         result = identify_greybox(data, model, start, options=options)
-        reason = _undetermined(free, result.parameters, result.std, result.correlation, correlation_limit)
+        reason = _undetermined(free, result.parameters, result.std, result.correlation, correlation_limit,
+                               options.prior_std)
         if reason is None:
             break
         held[reason[0]] = reason[1]
