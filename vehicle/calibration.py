@@ -38,8 +38,8 @@ from vehid.identification.data import IOData
 from vehid.identification.errors import InputError
 from vehid.identification.greybox import GreyBoxModel, GreyBoxOptions, GreyBoxResult, identify_greybox
 
-from .model import OUTPUT_NAMES, OUTPUT_UNITS, STATE_NAMES, CORNERS, vehicle_expressions
-from .parameters import VehicleParameters, describe
+from .model import CORNERS, OUTPUT_NAMES, OUTPUT_UNITS, STATE_NAMES, vehicle_expressions
+from .parameters import VehicleParameters
 
 __all__ = [
     "CORRELATION_LIMIT",
@@ -82,8 +82,7 @@ _RATE_SMOOTHING = 0.05
 def _field(params: VehicleParameters, name: str) -> tuple[Any, str, str]:
     """The section object, field name and unit of ``section.field``; InputError naming the problem."""
     section, _, field_name = name.partition(".")
-    table = {"aerodynamics": "aerodynamics"}.get(section, section)
-    holder = getattr(params, table, None)
+    holder = getattr(params, section, None)
     if holder is None or not dataclasses.is_dataclass(holder) or not field_name:
         raise InputError(f"unknown vehicle parameter {name!r}: give section.field as in a vehicle file "
                          "(for instance tyre.PKY1, chassis.yaw_inertia)")
@@ -346,8 +345,8 @@ def calibrate_vehicle(params: VehicleParameters, data: IOData | Sequence[IOData]
         values[index] = result.parameters
         std[index] = result.std
         correlation[np.ix_(index, index)] = result.correlation
-    warnings = tuple(f"{name} not identifiable from this log ({why}): held at its prior {prior_values[parameters.index(name)]:.6g}"
-                     for name, why in held.items())
+    warnings = tuple(f"{name} not identifiable from this log ({why}): held at its prior "
+                     f"{prior_values[parameters.index(name)]:.6g}" for name, why in held.items())
     return Calibration(
         vehicle=vehicle_with(prior_vehicle, parameters, values), parameter_names=parameters, units=units,
         values=values, std=std, correlation=correlation, held=held, result=result, warnings=warnings,

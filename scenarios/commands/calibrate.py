@@ -7,8 +7,8 @@ as in ``vehid simulate --replay``; the first part of the log calibrates the vehi
 parameters (--parameters section.field,..., default the tyres' cornering stiffness PKY1, the front
 axle's share of it and the yaw inertia, with the roll inertia and front anti-roll bar when the roll
 angle is measured), the last --validation fraction is held out and predicted. Parameters the log
-does not determine (std above their size or half their prior std, or |correlation| > 0.95 with another) are held at their
-prior with a warning (exit 3 under --strict). --out writes the calibrated vehicle file (TOML), never
+does not determine (std above their size or half their prior std, or |correlation| > 0.95 with
+another) are held at their prior with a warning (exit 3 under --strict). --out writes the calibrated vehicle file (TOML), never
 over an existing file without --force.
 """
 
