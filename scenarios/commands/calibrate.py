@@ -8,8 +8,8 @@ parameters (--parameters section.field,..., default the tyres' cornering stiffne
 axle's share of it and the yaw inertia, with the roll inertia and front anti-roll bar when the roll
 angle is measured), the last --validation fraction is held out and predicted. Parameters the log
 does not determine (std above their size or half their prior std, or |correlation| > 0.95 with
-another) are held at their prior with a warning (exit 3 under --strict). --out writes the calibrated vehicle file (TOML), never
-over an existing file without --force.
+another) are held at their prior with a warning (exit 3 under --strict). --out writes the
+calibrated vehicle file (TOML), never over an existing file without --force.
 """
 
 from __future__ import annotations
