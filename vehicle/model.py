@@ -345,6 +345,39 @@ def build_vehicle_model(params: VehicleParameters) -> VehicleModel:
         Named symbols, ``dynamics(x, u, p)`` and ``outputs(x, u, p)``, where
         ``u`` is the road-wheel steer (rad) and ``p`` the reference speed (m/s).
     """
+    x, steer, reference_speed, reference_acceleration, xdot, y = vehicle_expressions(params)
+    tracking_dynamics = ca.Function(
+        "vehicle_tracking_dynamics", [x, steer, ca.vertcat(reference_speed, reference_acceleration)], [xdot],
+        ["x", "u", "p"], ["xdot"],
+    )
+    # At a constant reference the rate is zero: substituting it folds the feed-forward and
+    # the rear brake torque away, leaving the plain PI hold the paper's studies ran with.
+    xdot = ca.substitute(xdot, reference_acceleration, ca.SX(0))
+    dynamics = ca.Function(
+        "vehicle_dynamics", [x, steer, reference_speed], [xdot], ["x", "u", "p"], ["xdot"]
+    )
+    outputs = ca.Function("vehicle_outputs", [x, steer, reference_speed], [y], ["x", "u", "p"], ["y"])
+    return VehicleModel(
+        params=params, x=x, u=steer, p=reference_speed, xdot=xdot, y=y, dynamics=dynamics, outputs=outputs,
+        reference_acceleration=reference_acceleration, tracking_dynamics=tracking_dynamics,
+    )
+
+
+def vehicle_expressions(params: VehicleParameters) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
+    """The model's symbols and expressions, before any CasADi function is made of them.
+
+    A numeric field of ``params`` may hold a CasADi symbol instead of a number (one not used in a
+    decision: steering compliance, drive share, aerodynamics): it then stays a free symbol of the
+    expressions, which is how a calibration makes chosen vehicle parameters unknowns.
+
+    Returns
+    -------
+    x, steer, reference_speed, reference_acceleration : casadi.SX
+        Symbols: states (23,), road-wheel steer, reference speed and its rate.
+    xdot, y : casadi.SX
+        State derivative with the speed-profile feed-forward (:attr:`VehicleModel.tracking_dynamics`)
+        and outputs (:data:`OUTPUT_NAMES`).
+    """
     chassis, suspension, tyre, drive = params.chassis, params.suspension, params.tyre, params.drive
     x = ca.SX.sym("x", len(STATE_NAMES))
     steer = ca.SX.sym("steer")
@@ -480,11 +513,12 @@ def build_vehicle_model(params: VehicleParameters) -> VehicleModel:
     gravity_body = ca.mtimes(to_road.T, ca.vertcat(0, 0, -g))
     acceleration = force_body / m + gravity_body  # inertial acceleration of the CG in body axes
     velocity_rate = acceleration - ca.cross(rates, velocity)
-    inertia = ca.SX(np.array([
-        [chassis.roll_inertia, 0, -chassis.roll_yaw_product],
-        [0, chassis.pitch_inertia, 0],
-        [-chassis.roll_yaw_product, 0, chassis.yaw_inertia],
-    ]))
+    # built entry by entry so that an inertia may be a symbol (vehicle_expressions)
+    inertia = ca.vertcat(
+        ca.horzcat(chassis.roll_inertia, 0, -chassis.roll_yaw_product),
+        ca.horzcat(0, chassis.pitch_inertia, 0),
+        ca.horzcat(-chassis.roll_yaw_product, 0, chassis.yaw_inertia),
+    )
     rate_rate = ca.solve(inertia, moment_body - ca.cross(rates, ca.mtimes(inertia, rates)))
     p_, q_, r_ = s["p"], s["q"], s["r"]
     sin_phi, cos_phi = ca.sin(phi), ca.cos(phi)
@@ -515,18 +549,4 @@ def build_vehicle_model(params: VehicleParameters) -> VehicleModel:
         *load,
         force_body[1] / m,  # specific force along body y: what a body-fixed accelerometer reads
     )
-    tracking_dynamics = ca.Function(
-        "vehicle_tracking_dynamics", [x, steer, ca.vertcat(reference_speed, reference_acceleration)], [xdot],
-        ["x", "u", "p"], ["xdot"],
-    )
-    # At a constant reference the rate is zero: substituting it folds the feed-forward and
-    # the rear brake torque away, leaving the plain PI hold the paper's studies ran with.
-    xdot = ca.substitute(xdot, reference_acceleration, ca.SX(0))
-    dynamics = ca.Function(
-        "vehicle_dynamics", [x, steer, reference_speed], [xdot], ["x", "u", "p"], ["xdot"]
-    )
-    outputs = ca.Function("vehicle_outputs", [x, steer, reference_speed], [y], ["x", "u", "p"], ["y"])
-    return VehicleModel(
-        params=params, x=x, u=steer, p=reference_speed, xdot=xdot, y=y, dynamics=dynamics, outputs=outputs,
-        reference_acceleration=reference_acceleration, tracking_dynamics=tracking_dynamics,
-    )
+    return x, steer, reference_speed, reference_acceleration, xdot, y

@@ -1,0 +1,373 @@
+"""Calibration of the 23-state vehicle model to a measured log with the grey-box IEKF.
+
+Chosen numeric fields of a vehicle (``section.field`` as in its TOML file, for instance ``tyre.PKY1``)
+become symbols of the full model (:func:`vehid.vehicle.model.vehicle_expressions`), which is then a
+:class:`~vehid.identification.greybox.GreyBoxModel`; :func:`calibrate_vehicle` estimates them from a log
+of the steer, the forward speed and measured quantities (yaw rate, lateral acceleration, ...).
+
+Choices, each stated where it is made:
+
+* The measured speed drives the model as the replay does (:mod:`vehid.vehicle.replay`): it is the
+  reference of the speed hold, with its rate as feed-forward; both are scheduling signals of the
+  grey-box model. The filter therefore never has to estimate the longitudinal motion from the data
+  (which the chosen parameters barely touch), and the speed state stays within the hold's small error
+  of the log: the lateral parameters are estimated at the speeds actually driven.
+* The filter's states are the deviation from straight running at the reference speed
+  (``x = dx + S V_ref``, ``S`` the straight-running direction: forward speed and wheel spins), because
+  the grey-box filter starts every pass from zero states: zero deviation is the car running straight
+  at the log's first speed, not a car at rest. ``S`` is linear in the speed, so ``d(dx)/dt =
+  f(dx + S V_ref) - S dV_ref/dt`` exactly.
+* Identifiability: after the fit, a parameter whose standard deviation exceeds its own size or
+  :data:`PRIOR_SHARE_LIMIT` of its prior standard deviation (the log taught little), or whose
+  correlation with another exceeds :data:`CORRELATION_LIMIT` in magnitude (of a correlated pair the
+  one less certain relative to its size), is not determined by the log. It is held at its prior and
+  the others are estimated again without it, until every remaining one is determined.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Any, Mapping, Sequence
+
+import casadi as ca
+import numpy as np
+
+from vehid.identification.data import IOData
+from vehid.identification.errors import InputError
+from vehid.identification.greybox import GreyBoxModel, GreyBoxOptions, GreyBoxResult, identify_greybox
+
+from .model import CORNERS, OUTPUT_NAMES, OUTPUT_UNITS, STATE_NAMES, vehicle_expressions
+from .parameters import VehicleParameters
+
+__all__ = [
+    "CORRELATION_LIMIT",
+    "DEFAULT_PARAMETERS",
+    "PRIOR_SHARE_LIMIT",
+    "ROLL_PARAMETERS",
+    "Calibration",
+    "calibration_model",
+    "calibration_record",
+    "calibrate_vehicle",
+    "speed_schedule",
+    "vehicle_toml",
+    "vehicle_with",
+]
+
+#: Parameters a log of steer, speed, yaw rate and lateral acceleration usually determines: the tyres'
+#: cornering stiffness (both axles), the front axle's share of it (the understeer balance) and the
+#: yaw inertia (the yaw response's lag).
+DEFAULT_PARAMETERS = ("tyre.PKY1", "tyre.front_cornering_scale", "chassis.yaw_inertia")
+#: Added to the defaults when the roll angle is measured: what sets the roll response.
+ROLL_PARAMETERS = ("chassis.roll_inertia", "suspension.front_anti_roll_bar")
+
+#: |correlation| above which two parameters are not told apart by the log (module docstring).
+CORRELATION_LIMIT = 0.95
+#: A parameter whose std the log did not bring below this share of its prior std is not determined:
+#: with the default prior (std 1 on the logarithm) an unexcited parameter's std is its own size, and a
+#: threshold at exactly that size would decide on the rounding of the covariance pass.
+PRIOR_SHARE_LIMIT = 0.5
+
+# Fields that steer a decision in the model's construction (a branch, not arithmetic): a symbol there
+# has no single model to stand for.
+_DECISION_FIELDS = ("steering.compliance", "drive.front_drive_share", "aerodynamics.drag_area",
+                    "aerodynamics.front_downforce_area", "aerodynamics.rear_downforce_area")
+
+# Half-width (s) of the moving average under the measured speed's rate: a 0.1 s window passes the
+# speed changes a driver makes (below 2 Hz) and removes most of a speed sensor's white noise.
+_RATE_SMOOTHING = 0.05
+
+
+def _field(params: VehicleParameters, name: str) -> tuple[Any, str, str]:
+    """The section object, field name and unit of ``section.field``; InputError naming the problem."""
+    section, _, field_name = name.partition(".")
+    holder = getattr(params, section, None)
+    if holder is None or not dataclasses.is_dataclass(holder) or not field_name:
+        raise InputError(f"unknown vehicle parameter {name!r}: give section.field as in a vehicle file "
+                         "(for instance tyre.PKY1, chassis.yaw_inertia)")
+    fields = {item.name: item for item in dataclasses.fields(holder)}
+    if field_name not in fields:
+        raise InputError(f"unknown vehicle parameter {name!r}: [{section}] has no field {field_name!r}")
+    if name in _DECISION_FIELDS:
+        raise InputError(f"vehicle parameter {name!r} selects the model's structure and cannot be calibrated")
+    return holder, field_name, str(fields[field_name].metadata.get("unit", "-"))
+
+
+def vehicle_with(params: VehicleParameters, names: Sequence[str], values: Sequence[Any]) -> VehicleParameters:
+    """``params`` with the named fields set to ``values`` (numbers: validated as a vehicle file is)."""
+    changes: dict[str, dict[str, Any]] = {}
+    for name, value in zip(names, values):
+        _field(params, name)
+        section, _, field_name = name.partition(".")
+        changes.setdefault(section, {})[field_name] = float(value)
+    sections = {section: dataclasses.replace(getattr(params, section), **fields) for section, fields in changes.items()}
+    return dataclasses.replace(params, **sections)
+
+
+def _symbolic_vehicle(params: VehicleParameters, names: Sequence[str], theta: ca.SX) -> VehicleParameters:
+    """A copy of ``params`` whose named fields hold the symbols ``theta`` (not validated: symbols have no sign)."""
+    by_section: dict[str, dict[str, Any]] = {}
+    for i, name in enumerate(names):
+        section, _, field_name = name.partition(".")
+        by_section.setdefault(section, {})[field_name] = theta[i]
+    copy = dataclasses.replace(params)
+    for section, fields in by_section.items():
+        holder = dataclasses.replace(getattr(params, section))
+        for field_name, symbol in fields.items():
+            object.__setattr__(holder, field_name, symbol)
+        object.__setattr__(copy, section, holder)
+    return copy
+
+
+def _straight_direction(params: VehicleParameters) -> np.ndarray:
+    """States of straight running per unit speed (forward speed and wheel spins): linear in the speed."""
+    direction = np.zeros(len(STATE_NAMES))
+    direction[STATE_NAMES.index("u")] = 1.0
+    for corner in CORNERS:
+        direction[STATE_NAMES.index(f"omega_{corner}")] = 1.0 / float(params.tyre.rolling_radius)
+    return direction
+
+
+def calibration_model(params: VehicleParameters, parameters: Sequence[str], quantities: Sequence[str]) -> GreyBoxModel:
+    """The 23-state model of ``params`` with ``parameters`` symbolic, measuring ``quantities``.
+
+    Parameters
+    ----------
+    params : VehicleParameters
+        The vehicle; its values of the chosen fields are the starts.
+    parameters : sequence of str
+        ``section.field`` names (module docstring).
+    quantities : sequence of str
+        Model outputs (:data:`vehid.vehicle.model.OUTPUT_NAMES`) the log measures, in its column order.
+
+    Returns
+    -------
+    GreyBoxModel
+        Input ``steer`` (road-wheel, rad); scheduling signals ``reference_speed`` (m/s) and
+        ``reference_acceleration`` (m/s^2); states: the deviation from straight running.
+    """
+    parameters, quantities = tuple(parameters), tuple(quantities)
+    if not parameters:
+        raise InputError("choose at least one vehicle parameter to calibrate")
+    if len(set(parameters)) != len(parameters):
+        raise InputError("a vehicle parameter is named twice")
+    if not quantities or len(set(quantities)) != len(quantities):
+        raise InputError("name each measured quantity once")
+    unknown = [q for q in quantities if q not in OUTPUT_NAMES]
+    if unknown:
+        raise InputError(f"unknown quantity {unknown[0]!r}; the model offers {', '.join(OUTPUT_NAMES)}")
+    units, positive, starts = [], [], []
+    for name in parameters:
+        holder, field_name, unit = _field(params, name)
+        value = float(getattr(holder, field_name))
+        if value == 0.0:
+            raise InputError(f"vehicle parameter {name!r} is zero: give it a non-zero prior (its size sets its scale)")
+        units.append(unit)
+        positive.append(value > 0)
+        starts.append(value)
+    theta = ca.SX.sym("theta", len(parameters))
+    try:
+        x, steer, reference_speed, reference_acceleration, xdot, y = vehicle_expressions(
+            _symbolic_vehicle(params, parameters, theta))
+    except (RuntimeError, NotImplementedError, TypeError) as exc:  # a symbol met a branch
+        raise InputError(f"one of {', '.join(parameters)} cannot be a calibration parameter: {exc}") from None
+    deviation = ca.SX.sym("deviation", len(STATE_NAMES))
+    straight = ca.DM(_straight_direction(params))
+    full = deviation + straight * reference_speed
+    rows = [OUTPUT_NAMES.index(q) for q in quantities]
+    rate = ca.substitute(xdot, x, full) - straight * reference_acceleration
+    measured = ca.substitute(y[rows], x, full)
+    schedule = ca.vertcat(reference_speed, reference_acceleration)
+    dynamics = ca.Function("calibration_dynamics", [deviation, steer, theta, schedule], [rate])
+    output = ca.Function("calibration_output", [deviation, steer, theta, schedule], [measured])
+    return GreyBoxModel(
+        dynamics=dynamics, output=output, parameter_names=parameters, parameter_units=tuple(units),
+        positive=tuple(positive), state_names=tuple(f"d_{name}" for name in STATE_NAMES), input_names=("steer",),
+        schedule_names=("reference_speed", "reference_acceleration"), output_names=quantities,
+        description=f"23-state vehicle {params.name!r}: {', '.join(parameters)} calibrated",
+    )
+
+
+def speed_schedule(speed: Any, dt: float) -> np.ndarray:
+    """The scheduling signals of a measured speed: itself and its smoothed rate, (N, 2).
+
+    The rate is the difference quotient of the speed averaged over ``2 * 0.05 s`` (see
+    ``_RATE_SMOOTHING``), so that a speed sensor's white noise does not reach the feed-forward.
+    """
+    speed = np.asarray(speed, dtype=float).ravel()
+    if speed.size < 3 or not np.all(np.isfinite(speed)):
+        raise InputError("the speed channel needs at least three finite samples")
+    half = max(1, int(round(_RATE_SMOOTHING / dt)))
+    kernel = np.ones(2 * half + 1) / (2 * half + 1)
+    padded = np.concatenate([2 * speed[0] - speed[half:0:-1], speed, 2 * speed[-1] - speed[-2:-half - 2:-1]])
+    smooth = np.convolve(padded, kernel, mode="valid")
+    return np.column_stack([speed, np.gradient(smooth, dt)])
+
+
+def calibration_record(steer: Any, speed: Any, outputs: Any, dt: float, quantities: Sequence[str],
+                       t0: float = 0.0) -> IOData:
+    """A log as the calibration model takes it: road-wheel steer, the speed schedule, the measured quantities."""
+    steer = np.asarray(steer, dtype=float).ravel()
+    outputs = np.asarray(outputs, dtype=float)
+    outputs = outputs.reshape(-1, 1) if outputs.ndim == 1 else outputs
+    if not (math.isfinite(dt) and dt > 0):
+        raise InputError(f"the sample interval must be a positive number of seconds; got {dt!r}")
+    if outputs.shape != (steer.size, len(quantities)) or np.size(speed) != steer.size:
+        raise InputError(f"steer ({steer.size}), speed ({np.size(speed)}) and outputs {outputs.shape} "
+                         f"do not match {len(quantities)} quantities")
+    units = dict(zip(OUTPUT_NAMES, OUTPUT_UNITS))
+    return IOData(
+        t=t0 + dt * np.arange(steer.size), u=np.column_stack([steer, speed_schedule(speed, dt)]), y=outputs,
+        input_names=("steer", "reference_speed", "reference_acceleration"), input_units=("rad", "m/s", "m/s^2"),
+        output_names=tuple(quantities), output_units=tuple(units[q] for q in quantities),
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class Calibration:
+    """A calibrated vehicle.
+
+    Attributes
+    ----------
+    vehicle : VehicleParameters
+        The prior vehicle with the determined parameters at their estimates.
+    parameter_names, units : tuple of str
+        Every parameter asked for, in the order asked.
+    values, std : ndarray
+        Estimate and standard deviation; a parameter held at its prior has its prior and NaN std.
+    correlation : ndarray
+        Correlation of the determined parameters' last fit (NaN rows for the held ones).
+    held : dict
+        Name -> reason, for the parameters the log did not determine (held at the prior).
+    result : GreyBoxResult
+        The last grey-box fit (of the determined parameters).
+    """
+
+    vehicle: VehicleParameters
+    parameter_names: tuple[str, ...]
+    units: tuple[str, ...]
+    values: np.ndarray
+    std: np.ndarray
+    correlation: np.ndarray
+    held: dict[str, str]
+    result: GreyBoxResult | None
+    warnings: tuple[str, ...] = field(default_factory=tuple)
+
+    def parameters_dict(self) -> dict[str, dict[str, Any]]:
+        """``name -> {value, std, unit}`` (std None where held at the prior)."""
+        return {name: {"value": float(v), "std": None if not math.isfinite(s) else float(s), "unit": unit}
+                for name, v, s, unit in zip(self.parameter_names, self.values, self.std, self.units)}
+
+
+def _undetermined(names: Sequence[str], values: np.ndarray, std: np.ndarray, correlation: np.ndarray,
+                  limit: float, prior_std: float) -> tuple[str, str] | None:
+    """The first parameter the fit did not determine and why (module docstring), or None."""
+    relative = np.abs(std) / np.abs(values)
+    worst = int(np.argmax(np.where(np.isfinite(relative), relative, np.inf)))
+    if not math.isfinite(relative[worst]) or relative[worst] > min(1.0, PRIOR_SHARE_LIMIT * prior_std):
+        return names[worst], (f"std {std[worst]:.3g} against its value {values[worst]:.3g}: "
+                              "the log hardly narrowed its prior")
+    n = len(names)
+    pairs = [(abs(correlation[i, j]), i, j) for i in range(n) for j in range(i + 1, n)
+             if math.isfinite(correlation[i, j])]
+    if pairs:
+        rho, i, j = max(pairs)
+        if rho > limit:
+            drop = i if relative[i] >= relative[j] else j
+            return names[drop], f"correlation {correlation[i, j]:+.3f} with {names[j if drop == i else i]}"
+    return None
+
+
+def calibrate_vehicle(params: VehicleParameters, data: IOData | Sequence[IOData], quantities: Sequence[str], *,
+                      parameters: Sequence[str] | None = None, priors: Mapping[str, float] | None = None,
+                      correlation_limit: float = CORRELATION_LIMIT,
+                      options: GreyBoxOptions | None = None) -> Calibration:
+    """Calibrate chosen parameters of ``params`` to logs (:func:`calibration_record`).
+
+    Parameters
+    ----------
+    params : VehicleParameters
+        The prior vehicle.
+    data : IOData or sequence of IOData
+        Logs from :func:`calibration_record` measuring ``quantities``.
+    quantities : sequence of str
+    parameters : sequence of str, optional
+        ``section.field`` names; default :data:`DEFAULT_PARAMETERS`, plus :data:`ROLL_PARAMETERS`
+        where the roll angle is measured.
+    priors : mapping, optional
+        ``name -> value``: prior values replacing the vehicle's (the starts and the values held).
+    correlation_limit : float
+        |correlation| above which a pair is not told apart.
+    options : GreyBoxOptions, optional
+
+    Returns
+    -------
+    Calibration
+    """
+    quantities = tuple(quantities)
+    if parameters is None:
+        parameters = DEFAULT_PARAMETERS + (ROLL_PARAMETERS if "roll_angle" in quantities else ())
+    parameters = tuple(parameters)
+    if not 0 < correlation_limit < 1:
+        raise InputError(f"the correlation limit must be in (0, 1); got {correlation_limit!r}")
+    priors = dict(priors or {})
+    extra = set(priors) - set(parameters)
+    if extra:
+        raise InputError(f"a prior is given for {sorted(extra)[0]!r}, which is not calibrated")
+    for name in parameters:
+        _field(params, name)
+    try:
+        prior_vehicle = vehicle_with(params, list(priors), list(priors.values())) if priors else params
+    except (ValueError, TypeError) as exc:
+        raise InputError(f"a prior makes an invalid vehicle: {exc}") from None
+    units = tuple(_field(prior_vehicle, name)[2] for name in parameters)
+    prior_values = np.array([float(getattr(*_field(prior_vehicle, name)[:2])) for name in parameters])
+    options = options or GreyBoxOptions()
+    free = list(parameters)
+    held: dict[str, str] = {}
+    result = None
+    while free:
+        model = calibration_model(prior_vehicle, free, quantities)
+        start = np.array([prior_values[parameters.index(name)] for name in free])
+        result = identify_greybox(data, model, start, options=options)
+        reason = _undetermined(free, result.parameters, result.std, result.correlation, correlation_limit,
+                               options.prior_std)
+        if reason is None:
+            break
+        held[reason[0]] = reason[1]
+        free.remove(reason[0])
+        result = None
+    values, std = prior_values.copy(), np.full(len(parameters), np.nan)
+    correlation = np.full((len(parameters), len(parameters)), np.nan)
+    if result is not None:
+        index = [parameters.index(name) for name in free]
+        values[index] = result.parameters
+        std[index] = result.std
+        correlation[np.ix_(index, index)] = result.correlation
+    warnings = tuple(f"{name} not identifiable from this log ({why}): held at its prior "
+                     f"{prior_values[parameters.index(name)]:.6g}" for name, why in held.items())
+    return Calibration(
+        vehicle=vehicle_with(prior_vehicle, parameters, values), parameter_names=parameters, units=units,
+        values=values, std=std, correlation=correlation, held=held, result=result, warnings=warnings,
+    )
+
+
+def vehicle_toml(params: VehicleParameters, comment: str = "") -> str:
+    """The vehicle as a TOML vehicle file (every field of every section; :func:`~vehid.vehicle.load_vehicle` reads it).
+
+    Numbers are written with ``repr``, which reads back to the same float.
+    """
+    lines = [f"# {line}" for line in comment.splitlines()]
+    lines.append(f"name = {_toml_string(params.name)}")
+    for section in ("chassis", "suspension", "tyre", "drive", "steering", "aerodynamics"):
+        holder = getattr(params, section)
+        lines.append("")
+        lines.append(f"[{section}]")
+        for item in dataclasses.fields(holder):
+            lines.append(f"{item.name} = {float(getattr(holder, item.name))!r}")
+    return "\n".join(lines) + "\n"
+
+
+def _toml_string(text: str) -> str:
+    return '"' + str(text).replace("\\", "\\\\").replace('"', '\\"') + '"'
