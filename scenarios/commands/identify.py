@@ -180,7 +180,8 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
         open_archive(args.resume, kinds=["identification"]).close()
     target = args.resume or args.out
     with archive_lock(target) if target else nullcontext():  # one writer per archive for the whole run
-        return _identify(args)
+        summary, text, _ = identify_run(args)
+    return summary, text
 
 
 DECISIONS = "decisions_json"  # root attribute: the p tuning and the stability decision taken before the passes
@@ -212,7 +213,9 @@ def _archive_plan(archive, plan) -> None:
     write_record_series(archive, plan.validation[:plan.held_out_count], VALIDATION_PREFIX)
 
 
-def _identify(args: argparse.Namespace) -> tuple[dict, str]:
+def identify_run(args, plan=None) -> tuple[dict, str, object]:
+    """The whole run: summary, text and the model returned; ``plan`` given, its records are identified instead of
+    the DATA files' (the library's :func:`~vehid.scenarios.identify_workflow.identify`)."""
     previous, unstable = None, None
     if args.resume:
         plan, structure, options, previous, (tuning, unstable) = _resume(args)
@@ -222,9 +225,10 @@ def _identify(args: argparse.Namespace) -> tuple[dict, str]:
         tuning = dataclasses.replace(tuning, q_schedule=workflow.q_schedule_of(options))
         archive_path = Path(args.resume)
     else:
-        if not args.data:
-            raise InputError("give a DATA file (or --resume ARCHIVE)")
-        plan = workflow.load_plan(args, args.data)
+        if plan is None:
+            if not args.data:
+                raise InputError("give a DATA file (or --resume ARCHIVE)")
+            plan = workflow.load_plan(args, args.data)
         if args.method != "iekf":
             return _run_comparator(args, plan)
         options = workflow.iekf_options(args, DEFAULT_PASSES)
@@ -284,7 +288,7 @@ def _matrices(model) -> dict:
     return {"A": model.A, "B": model.B, "C": model.C, "D": model.D}
 
 
-def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None) -> tuple[dict, str]:
+def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None) -> tuple[dict, str, object]:
     """Scores, warnings, the nonlinear model, archive and model file: the common end of every identify run."""
     data = plan.records[0]
     start_returned = result is not None and model is not result.model
@@ -375,7 +379,7 @@ def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None)
     except StrictWarningsError as exc:  # the summary is printed all the same, then the exit status says "warnings"
         exc.text = text
         raise
-    return summary, text
+    return summary, text, model
 
 
 SCORING_RULE = "scoring_rule"  # key of the archived summary only: how every model of the run is scored
@@ -394,7 +398,7 @@ def _archive_verdict(archive, summary: dict, args, *, returned: str) -> None:
     archive.attrs[VERDICT] = json.dumps(to_jsonable(verdict), allow_nan=False)
 
 
-def _run_order_search(args, plan, options) -> tuple[dict, str]:
+def _run_order_search(args, plan, options) -> tuple[dict, str, object]:
     """Each order of a range identified on the estimation data; one chosen on validation data."""
     rows, kept = workflow.search_orders(
         plan, lambda order: workflow.run_iekf_order(args, plan, options, order), args)
@@ -417,7 +421,7 @@ def _run_order_search(args, plan, options) -> tuple[dict, str]:
     return _finish(args, plan, summary, model, result=result, archive_path=archive_path)
 
 
-def _run_comparator(args: argparse.Namespace, plan) -> tuple[dict, str]:
+def _run_comparator(args: argparse.Namespace, plan) -> tuple[dict, str, object]:
     from vehid.identification.comparators import identify_with
 
     outcomes = {}
