@@ -67,3 +67,20 @@ def test_options_are_checked_where_they_are_defined():
 def test_identify_refuses_what_is_not_a_record():
     with pytest.raises(InputError, match="IOData"):
         identify(np.zeros((10, 2)))
+
+
+def test_validation_records_in_memory_score_as_validation_files(capsys, tmp_path):
+    """A validation record given to identify() is scored as the command scores the same samples given as a file."""
+    table = np.loadtxt(DRYER)
+    first, second = tmp_path / "first.dat", tmp_path / "second.dat"
+    np.savetxt(first, table[:600])
+    np.savetxt(second, table[600:])
+    settings = ReadSettings(inputs=("1",), outputs=("2",), dt=0.08)
+    assert main(["identify", str(first), "--inputs", "1", "--outputs", "2", "--dt", "0.08", "--order", "2",
+                 "--p", "1e-4", "--passes", "8", "--validation-file", str(second), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    result = identify(read_record(first, settings), order=2, validation=[read_record(second, settings)],
+                      options=IdentifyOptions(p=1e-4, passes=8))
+    _close(result.model.A, summary["A"])
+    _close(result.validation_fit_percent, summary["validation_fit_percent"])
+    assert len(result.summary["validation_records"]) == len(summary["validation_records"]) == 1
