@@ -17,7 +17,6 @@ few dozen realisations the count is binomial, so 90-99 % is accepted.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import time
 from dataclasses import dataclass
@@ -93,26 +92,16 @@ def _realisation(model: ModalModel, seconds: float, p: float | None = None) -> R
 def command_line_iekf(data: IOData) -> tuple[ModalModel, float]:
     """The IEKF model of ``data`` as `vehid identify --order 4 --pattern default` gives it, and the p it chose.
 
-    The command's own steps: its argument defaults, each record's mean
-    removed (so its start state is unknown and settled), p by two-fold
-    cross-validation (:func:`~vehid.scenarios.identify_workflow.tune_p`),
-    and the start model where that beat every p, all as one order of the
-    command's order search runs them
-    (:func:`~vehid.scenarios.identify_workflow.run_iekf_order`). The pattern
-    is the true structure's, as for the other methods.
+    The command's own pipeline (:func:`~vehid.scenarios.identify_library.identify`):
+    each record's mean removed (so its start state is unknown and settled), p
+    by two-fold cross-validation, and the start model where that beat every
+    p. The pattern is the true structure's, as for the other methods.
     """
-    from vehid.identification.preparation import prepare
-    from vehid.scenarios import identify_workflow as workflow
-    from vehid.scenarios.commands import identify as command
+    from vehid.identification.pipeline import IdentifyOptions
+    from vehid.scenarios.identify_library import identify
 
-    parser = argparse.ArgumentParser()
-    command.register(parser)
-    args = parser.parse_args(["--order", "4", "--pattern", "default"])
-    records, preparation = prepare((data,), detrend=args.detrend)
-    plan = workflow.make_plan(args, records, lambda path: data, preparation=preparation)
-    model, extra = workflow.run_iekf_order(args, plan, workflow.iekf_options(args, command.DEFAULT_PASSES),
-                                           plan.orders[0])
-    return model, extra["p"]
+    result = identify(data, order=4, options=IdentifyOptions(pattern="default"))
+    return result.model, float(result.summary["p"])
 
 
 def identify_realisation(data: IOData, *, iekf_settings: dict[str, Any] | None = None,

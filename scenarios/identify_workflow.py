@@ -33,7 +33,6 @@
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import sys
 import time
@@ -45,12 +44,12 @@ import numpy as np
 from vehid.identification.data import IOData
 from vehid.identification.decisions import SCHEDULE_MARGIN, ScheduleCandidate, choose_p_and_schedule
 from vehid.identification.errors import DivergenceError, InputError, StrictWarningsError, WorkbenchError
-from vehid.identification.iekf import (INVARIANT_P, INVARIANT_P_DECAY, START_CHOICES, TIMESCALES, IEKFOptions,
+from vehid.identification.iekf import (INVARIANT_P, INVARIANT_P_DECAY, START_CHOICES, IEKFOptions,
                                       identify_iekf, invariant_noise_settings, normalized_data_start, signal_scales,
                                       start_structure)
 from vehid.identification.modal import ModalModel, ModalStructure
 from vehid.identification.uncertainty import simulation_error_covariance
-from vehid.identification.validation import (INITIAL_STATES, UNSTABLE_HORIZON, Scores, default_horizon, score,
+from vehid.identification.validation import (UNSTABLE_HORIZON, Scores, default_horizon, score,
                                             split_holdout)
 
 __all__ = [
@@ -68,7 +67,6 @@ __all__ = [
     "AUTO_MAX_ORDER",
     "ORDER_TOLERANCE",
     "Plan",
-    "register_options",
     "parse_orders",
     "make_plan",
     "iekf_options",
@@ -101,6 +99,8 @@ __all__ = [
     "WHOLE_RECORD_MARGIN",
 ]
 
+# the settings of one run: the command's parsed arguments, or the same names set by the library's options
+Settings = Any
 AUTO_MAX_ORDER = 8
 ORDER_TOLERANCE = 0.5  # points of mean validation fit
 AUTO_HOLDOUT = 0.3  # fraction held out to choose an order when no validation data are given
@@ -136,34 +136,6 @@ FIT_FLOOR = 0.0
 NONLINEAR_P = 1e-7  # the spline model's p without validation data
 # with validation data: no one p suits every sample interval (docs/measurements.md, cascaded tanks)
 NONLINEAR_P_GRID = (1e-7, 1e-8, 1e-9)
-
-
-def register_options(parser: argparse.ArgumentParser) -> None:
-    """The validation, order, model-class and warning options of `vehid identify`."""
-    parser.add_argument("--validation", type=float, metavar="FRACTION",
-                        help="hold out the last FRACTION of the record for validation (e.g. 0.3)")
-    parser.add_argument("--validation-file", action="append", default=[], metavar="FILE",
-                        help="validate on this record too (repeatable; same columns)")
-    parser.add_argument("--validation-inputs", metavar="NAMES",
-                        help="the input channels' names in the validation files, where they differ")
-    parser.add_argument("--validation-outputs", metavar="NAMES",
-                        help="the output channels' names in the validation files, where they differ")
-    parser.add_argument("--initial-state", default="estimate", choices=INITIAL_STATES,
-                        help="simulate linear models from a least-squares initial state (default) or from rest")
-    parser.add_argument("--horizon", type=int, metavar="K",
-                        help="score by K-step-ahead prediction instead of simulation (automatic for unstable models)")
-    parser.add_argument("--allow-unstable", action="store_true",
-                        help="keep unstable modes (open-loop unstable plants) instead of stopping")
-    parser.add_argument("--timescale", default="auto", choices=TIMESCALES,
-                        help="filter time unit: auto (samples; p per dominant time constant, default) or seconds (absolute, the paper's)")
-    parser.add_argument("--nonlinear", action="store_true",
-                        help="after the linear model, identify the spline-nonlinear model started from it")
-    parser.add_argument("--nodes", type=int, default=5, help="nodes per spline with --nonlinear (default 5)")
-    parser.add_argument("--nonlinear-p", type=float, action="append", metavar="P",
-                        help="tuning parameter(s) of the spline model; several are tried and one chosen on "
-                             "validation data (default 1e-7, or 1e-7, 1e-8, 1e-9 with validation data)")
-    parser.add_argument("--nonlinear-passes", type=int, default=30, help="largest number of nonlinear passes (default 30)")
-    parser.add_argument("--strict", action="store_true", help="exit with status 3 when the run ends with warnings")
 
 
 def parse_orders(text: Any) -> tuple[list[int], bool]:
@@ -242,7 +214,7 @@ class Plan:
         return None
 
 
-def holdout_fraction(args: argparse.Namespace) -> tuple[float | None, str | None]:
+def holdout_fraction(args: Settings) -> tuple[float | None, str | None]:
     """The fraction of each record held out, and a note when it is held out only to choose the order."""
     orders, _ = parse_orders(args.order)
     if args.validation is not None:
@@ -254,7 +226,7 @@ def holdout_fraction(args: argparse.Namespace) -> tuple[float | None, str | None
     return None, None
 
 
-def load_plan(args: argparse.Namespace, paths: list[str]) -> Plan:
+def load_plan(args: Settings, paths: list[str]) -> Plan:
     """Read the data files, hold out the tail of each record where asked, and prepare both alike.
 
     The split comes before the preparation, so the offsets kept with the model
@@ -292,7 +264,7 @@ def load_plan(args: argparse.Namespace, paths: list[str]) -> Plan:
     return plan
 
 
-def validation_channels(args: argparse.Namespace, preparation: Any) -> tuple[tuple[str, ...], tuple[str, ...]] | None:
+def validation_channels(args: Settings, preparation: Any) -> tuple[tuple[str, ...], tuple[str, ...]] | None:
     """The validation files' channel names (model order), where the options name them."""
     if args.validation_inputs is None and args.validation_outputs is None:
         return None
@@ -313,7 +285,7 @@ def _same_samples(a: IOData, b: IOData) -> bool:
                for x, z in ((a.u, b.u), (a.y, b.y)))
 
 
-def make_plan(args: argparse.Namespace, records: tuple[IOData, ...], load: Callable[[str], IOData],
+def make_plan(args: Settings, records: tuple[IOData, ...], load: Callable[[str], IOData],
               held_out: tuple[IOData, ...] = (), fraction: float | None = None, note: str | None = None,
               preparation: Any = None) -> Plan:
     """The plan of one command: estimation records, their held-out parts and the validation files (``load`` reads one)."""
@@ -419,7 +391,7 @@ def given_p(options: IEKFOptions) -> PTuning:
     return PTuning(options.p, (), 0.0, q_schedule=q_schedule_of(options))
 
 
-def tunes_p(args: argparse.Namespace) -> bool:
+def tunes_p(args: Settings) -> bool:
     """Whether the IEKF's p is chosen by cross-validation: no --p given, on the unit-free time scale."""
     return args.p is None and args.timescale == "auto"
 
@@ -429,7 +401,7 @@ def _halves(records: tuple[IOData, ...]) -> tuple[tuple[IOData, ...], tuple[IODa
     return tuple(part[0] for part in parts), tuple(part[1] for part in parts)
 
 
-def tune_p(args: argparse.Namespace, plan: Plan, options: IEKFOptions, structure: ModalStructure) -> PTuning:
+def tune_p(args: Settings, plan: Plan, options: IEKFOptions, structure: ModalStructure) -> PTuning:
     """The IEKF's p and Q schedule by two-fold cross-validation on the estimation records (module docstring).
 
     Each record is cut in halves; a model identified on the first halves is scored on the second and
@@ -506,7 +478,7 @@ def _start_fits(fit_on: IOData, score_on: IOData, structure: ModalStructure, opt
             float(np.mean(score(free, test, horizon=UNSTABLE_HORIZON).fit)), not free.is_stable())
 
 
-def assume_unstable(args: argparse.Namespace, plan: Plan, options: IEKFOptions, order: int
+def assume_unstable(args: Settings, plan: Plan, options: IEKFOptions, order: int
                     ) -> tuple[IEKFOptions, dict[str, Any] | None]:
     """Options allowing unstable modes where the data say the plant is open-loop unstable, and the evidence.
 
@@ -565,7 +537,7 @@ def unstable_warning(entry: dict[str, Any]) -> str:
 START_KEPT = "the data start scores better than the filter's model on the estimation data; the start model is returned"
 
 
-def returned_model(result: Any, plan: Plan, args: argparse.Namespace, tuning: PTuning,
+def returned_model(result: Any, plan: Plan, args: Settings, tuning: PTuning,
                    unstable: dict[str, Any] | None) -> tuple[ModalModel, dict[str, Any]]:
     """The model an IEKF run returns (the filter's, or its start where that scores better) and the summary keys.
 
@@ -599,7 +571,7 @@ def returned_model(result: Any, plan: Plan, args: argparse.Namespace, tuning: PT
     return model, keys
 
 
-def start_beats_filter(result: Any, plan: Plan, args: argparse.Namespace) -> dict[str, Any] | None:
+def start_beats_filter(result: Any, plan: Plan, args: Settings) -> dict[str, Any] | None:
     """The start's and the filter's fits on the estimation records, scored alike; None where the start is unknown.
 
     The cross-validation that chooses p runs on half records; on the whole
@@ -692,7 +664,7 @@ def decision_notes(summary: dict[str, Any]) -> list[str]:
     return notes
 
 
-def iekf_options(args: argparse.Namespace, default_passes: int) -> IEKFOptions:
+def iekf_options(args: Settings, default_passes: int) -> IEKFOptions:
     """IEKF settings of the command line: the unit-invariant ones unless asked otherwise."""
     p = args.p if args.p is not None else (INVARIANT_P if args.timescale == "auto" else 1.0)
     # the unit-free time scale meets noise as IEKFOptions.invariant does; the paper's settings keep Q and R = I
@@ -731,7 +703,7 @@ class Evaluation(_RankedScores):
     horizon: int | None
 
 
-def evaluate(model: Any, plan: Plan, args: argparse.Namespace) -> Evaluation:
+def evaluate(model: Any, plan: Plan, args: Settings) -> Evaluation:
     """Score ``model`` on the plan's records (k-step-ahead where asked or where simulation diverges)."""
     horizon = args.horizon if args.horizon is not None else default_horizon(model)
     estimation = _mean_scores(model, plan.records, initial_state=args.initial_state, horizon=horizon)
@@ -823,7 +795,7 @@ def scores_summary(evaluation: Evaluation, fit_percent: Any) -> dict[str, Any]:
     }
 
 
-def search_orders(plan: Plan, fit_one: Callable[[int], tuple[Any, dict[str, Any]]], args: argparse.Namespace
+def search_orders(plan: Plan, fit_one: Callable[[int], tuple[Any, dict[str, Any]]], args: Settings
                   ) -> tuple[list[dict[str, Any]], dict[int, tuple[Any, dict[str, Any], Evaluation]]]:
     """Identify each order of the plan (``fit_one(order) -> (model, extra)``), score it, stop early for auto."""
     rows: list[dict[str, Any]] = []
@@ -864,7 +836,7 @@ def search_orders(plan: Plan, fit_one: Callable[[int], tuple[Any, dict[str, Any]
     return rows, kept
 
 
-def emit(summary: dict[str, Any], warnings: list[str], args: argparse.Namespace) -> None:
+def emit(summary: dict[str, Any], warnings: list[str], args: Settings) -> None:
     """Print the warnings (one line each) and raise under --strict."""
     summary["warnings"] = list(warnings)
     if args.strict and warnings:
@@ -953,7 +925,7 @@ def nonlinear_warnings(outcome: NonlinearOutcome, linear: Evaluation) -> list[st
             "--nonlinear-p or fewer --nodes"]
 
 
-def identify_nonlinear(linear: ModalModel, plan: Plan, args: argparse.Namespace) -> NonlinearOutcome:
+def identify_nonlinear(linear: ModalModel, plan: Plan, args: Settings) -> NonlinearOutcome:
     """The spline-nonlinear model started from ``linear``, its p chosen on validation data from a small grid."""
     from vehid.identification.spline_iekf import SplineIEKFOptions, identify_spline_iekf
 
@@ -1022,7 +994,7 @@ def start_of(result: Any, records: tuple[IOData, ...]) -> tuple[float | None, bo
     return float(np.mean(fit)), moved
 
 
-def structure_for(args: argparse.Namespace, order: int, plan: Plan, options: IEKFOptions) -> ModalStructure:
+def structure_for(args: Settings, order: int, plan: Plan, options: IEKFOptions) -> ModalStructure:
     """The model structure of an IEKF run: ``--pattern`` where given, else the data start's modes
     (:func:`vehid.identification.iekf.start_structure`) or, for other starts, the default pattern."""
     first = plan.records[0]
@@ -1046,7 +1018,7 @@ def last_good_on_divergence(run: Callable[[], Any]) -> tuple[Any, str | None]:
         return exc.last_good, str(exc)
 
 
-def run_iekf_order(args: argparse.Namespace, plan: Plan, options: IEKFOptions, order: int
+def run_iekf_order(args: Settings, plan: Plan, options: IEKFOptions, order: int
                    ) -> tuple[ModalModel, dict[str, Any]]:
     """One IEKF run of an order search (no checkpoints, p tuned per order): its model and what the summary needs."""
     options, unstable = assume_unstable(args, plan, options, order)

@@ -66,14 +66,16 @@ from vehid.identification.archive import (open_archive, read_records, run_group,
 from vehid.identification.archive_safety import RUN_ATTRIBUTE, archive_lock, check_output_target
 from vehid.identification.errors import InputError, StrictWarningsError
 from vehid.identification.filter_models import DISCRETIZATIONS
-from vehid.identification.iekf import identify_iekf
+from vehid.identification.iekf import TIMESCALES, identify_iekf
 from vehid.identification.iekf_archive import Checkpointer, read_iekf_run, write_pass_history
 from vehid.identification.iekf_pass import COVARIANCE_FORMS
 from vehid.identification.jsonable import to_jsonable
 from vehid.identification.modal import C_PATTERNS, ModalModel
 from vehid.identification.multirecord import pooled_simulation_fit
+from vehid.identification.pipeline import DEFAULT_NODES, DEFAULT_NONLINEAR_PASSES, DEFAULT_PASSES
 from vehid.identification.preparation import prepare_validation, read_record
 from vehid.identification.storage import write_value
+from vehid.identification.validation import INITIAL_STATES
 from vehid.scenarios import identify_workflow as workflow
 from vehid.scenarios import scheduled_identify
 from vehid.scenarios import single_track_identify as single_track
@@ -122,15 +124,44 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--structure", default="modal", choices=single_track.STRUCTURES,
                         help="model structure: modal (default) or single-track (a car's physical parameters)")
     register_data_options(parser)
-    workflow.register_options(parser)
+    register_pipeline_options(parser)
     scheduled_identify.register_options(parser)
     single_track.register_options(parser)
     parser.set_defaults(handler=run)
 
 
+def register_pipeline_options(parser: argparse.ArgumentParser) -> None:
+    """The validation, order, model-class and warning options of `vehid identify`."""
+    parser.add_argument("--validation", type=float, metavar="FRACTION",
+                        help="hold out the last FRACTION of the record for validation (e.g. 0.3)")
+    parser.add_argument("--validation-file", action="append", default=[], metavar="FILE",
+                        help="validate on this record too (repeatable; same columns)")
+    parser.add_argument("--validation-inputs", metavar="NAMES",
+                        help="the input channels' names in the validation files, where they differ")
+    parser.add_argument("--validation-outputs", metavar="NAMES",
+                        help="the output channels' names in the validation files, where they differ")
+    parser.add_argument("--initial-state", default="estimate", choices=INITIAL_STATES,
+                        help="simulate linear models from a least-squares initial state (default) or from rest")
+    parser.add_argument("--horizon", type=int, metavar="K",
+                        help="score by K-step-ahead prediction instead of simulation (automatic for unstable models)")
+    parser.add_argument("--allow-unstable", action="store_true",
+                        help="keep unstable modes (open-loop unstable plants) instead of stopping")
+    parser.add_argument("--timescale", default="auto", choices=TIMESCALES,
+                        help="filter time unit: auto (samples; p per dominant time constant, default) or seconds (absolute, the paper's)")
+    parser.add_argument("--nonlinear", action="store_true",
+                        help="after the linear model, identify the spline-nonlinear model started from it")
+    parser.add_argument("--nodes", type=int, default=DEFAULT_NODES,
+                        help=f"nodes per spline with --nonlinear (default {DEFAULT_NODES})")
+    parser.add_argument("--nonlinear-p", type=float, action="append", metavar="P",
+                        help="tuning parameter(s) of the spline model; several are tried and one chosen on "
+                             "validation data (default 1e-7, or 1e-7, 1e-8, 1e-9 with validation data)")
+    parser.add_argument("--nonlinear-passes", type=int, default=DEFAULT_NONLINEAR_PASSES,
+                        help=f"largest number of nonlinear passes (default {DEFAULT_NONLINEAR_PASSES})")
+    parser.add_argument("--strict", action="store_true", help="exit with status 3 when the run ends with warnings")
+
+
 RUN_NAME = "iekf"
 ARCHIVE_KIND = "identification"
-DEFAULT_PASSES = 50
 VALIDATION_PREFIX = "validation"
 
 
@@ -180,7 +211,8 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
         open_archive(args.resume, kinds=["identification"]).close()
     target = args.resume or args.out
     with archive_lock(target) if target else nullcontext():  # one writer per archive for the whole run
-        return _identify(args)
+        summary, text, _ = identify_run(args)
+    return summary, text
 
 
 DECISIONS = "decisions_json"  # root attribute: the p tuning and the stability decision taken before the passes
@@ -212,7 +244,9 @@ def _archive_plan(archive, plan) -> None:
     write_record_series(archive, plan.validation[:plan.held_out_count], VALIDATION_PREFIX)
 
 
-def _identify(args: argparse.Namespace) -> tuple[dict, str]:
+def identify_run(args, plan=None) -> tuple[dict, str, object]:
+    """The whole run: summary, text and the model returned; ``plan`` given, its records are identified instead of
+    the DATA files' (the library's :func:`~vehid.scenarios.identify_workflow.identify`)."""
     previous, unstable = None, None
     if args.resume:
         plan, structure, options, previous, (tuning, unstable) = _resume(args)
@@ -222,9 +256,10 @@ def _identify(args: argparse.Namespace) -> tuple[dict, str]:
         tuning = dataclasses.replace(tuning, q_schedule=workflow.q_schedule_of(options))
         archive_path = Path(args.resume)
     else:
-        if not args.data:
-            raise InputError("give a DATA file (or --resume ARCHIVE)")
-        plan = workflow.load_plan(args, args.data)
+        if plan is None:
+            if not args.data:
+                raise InputError("give a DATA file (or --resume ARCHIVE)")
+            plan = workflow.load_plan(args, args.data)
         if args.method != "iekf":
             return _run_comparator(args, plan)
         options = workflow.iekf_options(args, DEFAULT_PASSES)
@@ -284,7 +319,7 @@ def _matrices(model) -> dict:
     return {"A": model.A, "B": model.B, "C": model.C, "D": model.D}
 
 
-def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None) -> tuple[dict, str]:
+def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None) -> tuple[dict, str, object]:
     """Scores, warnings, the nonlinear model, archive and model file: the common end of every identify run."""
     data = plan.records[0]
     start_returned = result is not None and model is not result.model
@@ -375,7 +410,7 @@ def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None)
     except StrictWarningsError as exc:  # the summary is printed all the same, then the exit status says "warnings"
         exc.text = text
         raise
-    return summary, text
+    return summary, text, model
 
 
 SCORING_RULE = "scoring_rule"  # key of the archived summary only: how every model of the run is scored
@@ -394,7 +429,7 @@ def _archive_verdict(archive, summary: dict, args, *, returned: str) -> None:
     archive.attrs[VERDICT] = json.dumps(to_jsonable(verdict), allow_nan=False)
 
 
-def _run_order_search(args, plan, options) -> tuple[dict, str]:
+def _run_order_search(args, plan, options) -> tuple[dict, str, object]:
     """Each order of a range identified on the estimation data; one chosen on validation data."""
     rows, kept = workflow.search_orders(
         plan, lambda order: workflow.run_iekf_order(args, plan, options, order), args)
@@ -417,7 +452,7 @@ def _run_order_search(args, plan, options) -> tuple[dict, str]:
     return _finish(args, plan, summary, model, result=result, archive_path=archive_path)
 
 
-def _run_comparator(args: argparse.Namespace, plan) -> tuple[dict, str]:
+def _run_comparator(args: argparse.Namespace, plan) -> tuple[dict, str, object]:
     from vehid.identification.comparators import identify_with
 
     outcomes = {}

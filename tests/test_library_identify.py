@@ -1,0 +1,86 @@
+"""`identify()` from Python gives what `vehid identify` gives on the same file, and checks its options once."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from vehid.identification.errors import InputError
+from vehid.identification.pipeline import DEFAULT_PASSES, Identification, IdentifyOptions
+from vehid.identification.preparation import ReadSettings, read_record
+from vehid.scenarios.cli import main
+from vehid.scenarios.identify_library import identify
+
+DRYER = Path(__file__).parent / "data" / "dryer" / "dryer.dat"
+# both run the same arithmetic on the same samples in one process; 1e-9 leaves room only for
+# the JSON round trip of the command's summary (shortest-repr floats, exact) and nothing else
+AGREEMENT = 1e-9
+
+
+def _command(capsys, *arguments):
+    assert main(["identify", str(DRYER), "--inputs", "1", "--outputs", "2", "--dt", "0.08", "--json",
+                 *arguments]) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+def _dryer():
+    return read_record(DRYER, ReadSettings(inputs=("1",), outputs=("2",), dt=0.08))
+
+
+def _close(library, command):
+    library = np.asarray(library, dtype=float)
+    command = np.asarray(command, dtype=float)
+    assert library.shape == command.shape
+    assert np.allclose(library, command, rtol=AGREEMENT, atol=AGREEMENT * max(1.0, float(np.max(np.abs(command)))))
+
+
+def test_library_reproduces_the_command_model_and_scores(capsys):
+    """A given p and a held-out tail: the model, its eigenvalues and every score agree to 1e-9."""
+    summary = _command(capsys, "--order", "2", "--p", "1e-4", "--passes", "8", "--validation", "0.3")
+    result = identify(_dryer(), order=2, validation=0.3, options=IdentifyOptions(p=1e-4, passes=8))
+    assert isinstance(result, Identification)
+    for name in "ABCD":
+        _close(getattr(result.model, name), summary[name])
+    eigenvalues = np.sort_complex(np.linalg.eigvals(result.model.A))
+    reported = np.sort_complex(np.array([complex(re, im) for re, im in summary["eigenvalues"]]))
+    _close(eigenvalues.real, reported.real)
+    _close(eigenvalues.imag, reported.imag)
+    _close(result.fit_percent, summary["fit_percent"])
+    _close(result.estimation_fit_percent, summary["estimation_fit_percent"])
+    _close(result.validation_fit_percent, summary["validation_fit_percent"])
+    assert result.warnings == tuple(summary["warnings"])
+    assert [row.order for row in result.orders] == [row["order"] for row in summary["orders_tried"]]
+    assert {decision.name for decision in result.decisions} == set(summary.get("decision_margins", {}))
+
+
+def test_options_are_checked_where_they_are_defined():
+    """Each number is refused by name; the pass budget's default is the command's."""
+    assert IdentifyOptions().passes == DEFAULT_PASSES
+    for bad, name in ((dict(p=0.0), "p"), (dict(p=float("nan")), "p"), (dict(passes=0), "passes"),
+                      (dict(passes=2.5), "passes"), (dict(horizon=0), "horizon"), (dict(nodes=1), "nodes"),
+                      (dict(nonlinear_p=()), "nonlinear_p"), (dict(nonlinear_passes=0), "nonlinear_passes")):
+        with pytest.raises(InputError, match=name):
+            IdentifyOptions(**bad)
+
+
+def test_identify_refuses_what_is_not_a_record():
+    with pytest.raises(InputError, match="IOData"):
+        identify(np.zeros((10, 2)))
+
+
+def test_validation_records_in_memory_score_as_validation_files(capsys, tmp_path):
+    """A validation record given to identify() is scored as the command scores the same samples given as a file."""
+    table = np.loadtxt(DRYER)
+    first, second = tmp_path / "first.dat", tmp_path / "second.dat"
+    np.savetxt(first, table[:600])
+    np.savetxt(second, table[600:])
+    settings = ReadSettings(inputs=("1",), outputs=("2",), dt=0.08)
+    assert main(["identify", str(first), "--inputs", "1", "--outputs", "2", "--dt", "0.08", "--order", "2",
+                 "--p", "1e-4", "--passes", "8", "--validation-file", str(second), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    result = identify(read_record(first, settings), order=2, validation=[read_record(second, settings)],
+                      options=IdentifyOptions(p=1e-4, passes=8))
+    _close(result.model.A, summary["A"])
+    _close(result.validation_fit_percent, summary["validation_fit_percent"])
+    assert len(result.summary["validation_records"]) == len(summary["validation_records"]) == 1
