@@ -25,10 +25,10 @@ import time
 import numpy as np
 
 from vehid.identification.compiled import compile_driver
-from vehid.identification.filter_models import LinearModalFilterModel
-from vehid.identification.iekf_kernel import structured_pass_source
-from vehid.identification.iekf_pass import _DRIVER, _CompiledPass, build_filter_step, pack_covariance
-from vehid.identification.modal import ModalStructure
+from vehid.identification.filtering.filter_models import LinearModalFilterModel
+from vehid.identification.filtering.iekf_kernel import structured_pass_source
+from vehid.identification.filtering.iekf_pass import _DRIVER, _CompiledPass, build_filter_step, pack_covariance
+from vehid.identification.models.modal import ModalStructure
 from vehid.scenarios.benchmarking import record_figures
 
 LEVELS = ("-O0", "-O1", "-O2", "-O3 -march=native")

@@ -26,10 +26,10 @@ import time
 import numpy as np
 
 from vehid.identification import IEKFOptions, ModalStructure, identify_iekf
-from vehid.identification.filter_models import LinearModalFilterModel
-from vehid.identification.iekf_pass import compiled_pass, pack_covariance
-from vehid.identification.spline_iekf import residual_covariance, covering_ranges
-from vehid.identification.spline_modal import SplineModalFilterModel, SplineModalModel
+from vehid.identification.filtering.filter_models import LinearModalFilterModel
+from vehid.identification.filtering.iekf_pass import compiled_pass, pack_covariance
+from vehid.identification.filtering.spline_iekf import residual_covariance, covering_ranges
+from vehid.identification.models.spline_modal import SplineModalFilterModel, SplineModalModel
 from vehid.scenarios.benchmarking import median_seconds, record_figures
 from vehid.vehicle import baseline, make_manoeuvre, simulate
 

@@ -30,9 +30,9 @@ import time
 import numpy as np
 
 from vehid.identification.errors import DivergenceError
-from vehid.identification.iekf import IEKFOptions, identify_iekf
-from vehid.identification.modal import ModalStructure
-from vehid.identification.validation import score
+from vehid.identification.filtering.iekf import IEKFOptions, identify_iekf
+from vehid.identification.models.modal import ModalStructure
+from vehid.identification.assessment.validation import score
 from vehid.scenarios.benchmarking import record_figures
 from vehid.scenarios.handling_study import HandlingConfig, make_records, with_sensor_noise
 from vehid.scenarios.identify_workflow import P_GRID

@@ -297,8 +297,8 @@ def fixed_model_fits(entry: records.RecordSet, model: dict | None, fractions: li
     if entry.validation_path_columns is not None or not model or model.get("method") != "iekf" or not model.get("A"):
         return None
     from vehid.identification.data import IOData
-    from vehid.identification.discrete import ContinuousModel
-    from vehid.identification.validation import default_horizon, score
+    from vehid.identification.models.discrete import ContinuousModel
+    from vehid.identification.assessment.validation import default_horizon, score
 
     fixed = ContinuousModel(*(np.asarray(model[key], dtype=float) for key in "ABCD"))
     input_offset = np.asarray(model["preparation"]["input_offset"], dtype=float)

@@ -30,13 +30,13 @@ import sys
 import time
 from pathlib import Path
 
-from vehid.identification.archive import open_archive, read_records
-from vehid.identification.comparators import identify_with
+from vehid.identification.dataio.archive import open_archive, read_records
+from vehid.identification.classical.comparators import identify_with
 from vehid.identification.errors import DivergenceError
-from vehid.identification.iekf import IEKFOptions, identify_iekf
-from vehid.identification.iekf_archive import read_iekf_run
-from vehid.identification.modal import ModalStructure
-from vehid.identification.storage import read_group
+from vehid.identification.filtering.iekf import IEKFOptions, identify_iekf
+from vehid.identification.filtering.iekf_archive import read_iekf_run
+from vehid.identification.models.modal import ModalStructure
+from vehid.identification.dataio.storage import read_group
 from vehid.scenarios.handling_study import HandlingConfig, make_records, with_sensor_noise
 from vehid.scenarios.linear_example import make_data, true_model
 from vehid.scenarios.model_checks import model_residual_tests

@@ -9,46 +9,117 @@ pay for SciPy's signal processing, CasADi and HDF5 before they use them.
 from __future__ import annotations
 
 import importlib
+import importlib.abc
+import importlib.util
+import sys
 from typing import Any
 
 # submodule -> the public names it defines
 _EXPORTS: dict[str, tuple[str, ...]] = {
-    "archive": ("SCHEMA_VERSION", "Archive", "RunName", "RunRecord", "append_history", "open_archive",
+    "dataio.archive": ("SCHEMA_VERSION", "Archive", "RunName", "RunRecord", "append_history", "open_archive",
         "read_archive", "read_history", "read_records", "read_run", "run_group", "update_archive", "write_archive",
         "write_record", "write_run"),
     "data": ("IOData", "as_records", "check_channels", "read_hdf5"),
-    "readers": ("RawRecord", "read_mat", "read_mdf", "read_raw", "read_table"),
-    "timebase": ("JITTER_TOLERANCE", "uniform_record"),
-    "preparation": ("DETRENDS", "Preparation", "ReadSettings", "RecordOffsets", "estimate_preparation",
+    "dataio.readers": ("RawRecord", "read_mat", "read_mdf", "read_raw", "read_table"),
+    "dataio.timebase": ("JITTER_TOLERANCE", "uniform_record"),
+    "dataio.preparation": ("DETRENDS", "Preparation", "ReadSettings", "RecordOffsets", "estimate_preparation",
         "load_records", "prepare", "prepare_validation", "read_raw_records", "read_record"),
     "errors": ("ArchiveError", "DivergenceError", "ExcitationError", "InputError", "WorkbenchError"),
-    "iekf": ("START_VALUES", "FilterState", "IEKFOptions", "IEKFResult", "PassRecord", "identify_iekf"),
-    "metrics": ("FitMetrics", "fit_metrics", "nrmse_fit", "percentage_explanation", "r_squared"),
-    "modal": ("C_PATTERNS", "ModalModel", "ModalStructure"),
-    "protocol": ("IdentifiedModel", "Mode"),
-    "discrete": ("ContinuousModel", "DiscreteModel"),
-    "spline_iekf": ("SplineIEKFOptions", "SplineIEKFResult", "identify_spline_iekf"),
-    "greybox": ("GreyBoxModel", "GreyBoxOptions", "GreyBoxResult", "identify_greybox", "simulate_greybox"),
-    "spline_modal": ("SplineModalModel", "SplineModalStructure"),
-    "order": ("OrderAssessment", "assess_orders"),
-    "spline": ("SplineBasis", "covering_basis", "resample"),
-    "storage": ("read_group", "read_value", "write_group", "write_value"),
-    "comparators": ("COMPARATORS", "ComparatorResult", "identify_with", "register_comparator"),
-    "ekf": ("EkfResult", "NonlinearModel", "ekf_joint"),
-    "gls": ("GlsResult", "estimate_gls"),
-    "kalman": ("KalmanResult", "SmootherResult", "kalman_filter", "kalman_predict", "kalman_update", "rts_smoother"),
-    "least_squares": ("ArxModel", "ArxResult", "LeastSquaresResult", "arx_regressors", "estimate_arx", "least_squares"),
-    "pencil": ("PencilEstimate", "PencilModel", "estimate_pencil"),
-    "recursive": ("RecursiveResult", "estimate_arx_recursive", "recursive_least_squares", "rls_step"),
-    "factorised": ("sqrt_step", "ud_step"),
-    "statespace": ("balanced_truncation", "continuous_to_discrete", "discrete_to_continuous", "hold_state_shift",
+    "filtering.iekf": ("START_VALUES", "FilterState", "IEKFOptions", "IEKFResult", "PassRecord", "identify_iekf"),
+    "assessment.metrics": ("FitMetrics", "fit_metrics", "nrmse_fit", "percentage_explanation", "r_squared"),
+    "models.modal": ("C_PATTERNS", "ModalModel", "ModalStructure"),
+    "models.protocol": ("IdentifiedModel", "Mode"),
+    "models.discrete": ("ContinuousModel", "DiscreteModel"),
+    "filtering.spline_iekf": ("SplineIEKFOptions", "SplineIEKFResult", "identify_spline_iekf"),
+    "filtering.greybox": ("GreyBoxModel", "GreyBoxOptions", "GreyBoxResult", "identify_greybox", "simulate_greybox"),
+    "models.spline_modal": ("SplineModalModel", "SplineModalStructure"),
+    "assessment.order": ("OrderAssessment", "assess_orders"),
+    "models.spline": ("SplineBasis", "covering_basis", "resample"),
+    "dataio.storage": ("read_group", "read_value", "write_group", "write_value"),
+    "classical.comparators": ("COMPARATORS", "ComparatorResult", "identify_with", "register_comparator"),
+    "classical.ekf": ("EkfResult", "NonlinearModel", "ekf_joint"),
+    "classical.gls": ("GlsResult", "estimate_gls"),
+    "classical.kalman": ("KalmanResult", "SmootherResult", "kalman_filter", "kalman_predict", "kalman_update", "rts_smoother"),
+    "classical.least_squares": ("ArxModel", "ArxResult", "LeastSquaresResult", "arx_regressors", "estimate_arx", "least_squares"),
+    "classical.pencil": ("PencilEstimate", "PencilModel", "estimate_pencil"),
+    "classical.recursive": ("RecursiveResult", "estimate_arx_recursive", "recursive_least_squares", "rls_step"),
+    "classical.factorised": ("sqrt_step", "ud_step"),
+    "models.statespace": ("balanced_truncation", "continuous_to_discrete", "discrete_to_continuous", "hold_state_shift",
         "modal_structure_for", "to_modal"),
-    "subspace": ("SubspaceResult", "estimate_subspace", "largest_subspace_order"),
-    "residuals": ("ResidualTests", "residual_tests"),
-    "uncertainty": ("FrequencyResponseBand", "ModelUncertainty", "ModeEstimate", "model_uncertainty"),
-    "scheduled": ("ModeMatch", "ScheduledModalModel", "schedule_models"),
-    "scheduled_iekf": ("ScheduledIEKFOptions", "ScheduledIEKFResult", "identify_scheduled"),
+    "classical.subspace": ("SubspaceResult", "estimate_subspace", "largest_subspace_order"),
+    "assessment.residuals": ("ResidualTests", "residual_tests"),
+    "assessment.uncertainty": ("FrequencyResponseBand", "ModelUncertainty", "ModeEstimate", "model_uncertainty"),
+    "models.scheduled": ("ModeMatch", "ScheduledModalModel", "schedule_models"),
+    "filtering.scheduled_iekf": ("ScheduledIEKFOptions", "ScheduledIEKFResult", "identify_scheduled"),
 }
+# The modules' former flat names (before the sub-packages by role), so that code importing
+# ``vehid.identification.modal`` keeps working: each resolves to the very module object of its new
+# place, so classes, isinstance checks and pickles agree whichever name imported them.
+_FORMER_MODULES: dict[str, str] = {
+    "protocol": "models.protocol",
+    "statespace": "models.statespace",
+    "discrete": "models.discrete",
+    "modal": "models.modal",
+    "spline": "models.spline",
+    "spline_modal": "models.spline_modal",
+    "scheduled": "models.scheduled",
+    "iekf": "filtering.iekf",
+    "iekf_pass": "filtering.iekf_pass",
+    "iekf_kernel": "filtering.iekf_kernel",
+    "filter_models": "filtering.filter_models",
+    "rinse": "filtering.rinse",
+    "start": "filtering.start",
+    "spline_iekf": "filtering.spline_iekf",
+    "scheduled_iekf": "filtering.scheduled_iekf",
+    "greybox": "filtering.greybox",
+    "iekf_archive": "filtering.iekf_archive",
+    "least_squares": "classical.least_squares",
+    "recursive": "classical.recursive",
+    "gls": "classical.gls",
+    "kalman": "classical.kalman",
+    "ekf": "classical.ekf",
+    "pencil": "classical.pencil",
+    "factorised": "classical.factorised",
+    "subspace": "classical.subspace",
+    "comparators": "classical.comparators",
+    "metrics": "assessment.metrics",
+    "multirecord": "assessment.multirecord",
+    "validation": "assessment.validation",
+    "residuals": "assessment.residuals",
+    "uncertainty": "assessment.uncertainty",
+    "order": "assessment.order",
+    "readers": "dataio.readers",
+    "timebase": "dataio.timebase",
+    "preparation": "dataio.preparation",
+    "archive": "dataio.archive",
+    "archive_safety": "dataio.archive_safety",
+    "storage": "dataio.storage",
+}
+
+
+class _FormerModuleFinder(importlib.abc.MetaPathFinder, importlib.abc.Loader):
+    """Resolves a former module name to its module's new place."""
+
+    def find_spec(self, fullname: str, path: Any = None, target: Any = None) -> Any:
+        package, _, name = fullname.rpartition(".")
+        if package != __name__ or name not in _FORMER_MODULES:
+            return None
+        return importlib.util.spec_from_loader(fullname, self)
+
+    def create_module(self, spec: Any) -> Any:
+        module = importlib.import_module(f"{__name__}.{_FORMER_MODULES[spec.name.rpartition('.')[2]]}")
+        spec.loader_state = module.__spec__
+        return module
+
+    def exec_module(self, module: Any) -> None:
+        # The module ran at its new place; the import system has just given it the former name's spec,
+        # which would misplace its own relative imports: it gets its own spec back.
+        module.__spec__ = module.__spec__.loader_state
+
+
+if not any(isinstance(finder, _FormerModuleFinder) for finder in sys.meta_path):
+    sys.meta_path.append(_FormerModuleFinder())
+
 _MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
 
 

@@ -24,12 +24,12 @@ from typing import Any
 
 import numpy as np
 
-from vehid.identification.comparators import identify_with
+from vehid.identification.classical.comparators import identify_with
 from vehid.identification.data import IOData
-from vehid.identification.discrete import DiscreteModel
+from vehid.identification.models.discrete import DiscreteModel
 from vehid.identification.errors import ConversionError, ExcitationError, InputError
-from vehid.identification.iekf import IEKFOptions, identify_iekf
-from vehid.identification.modal import ModalModel, ModalStructure
+from vehid.identification.filtering.iekf import IEKFOptions, identify_iekf
+from vehid.identification.models.modal import ModalModel, ModalStructure
 
 __all__ = ["DT", "IEKF_SETTINGS", "COMMAND_LINE_SETTINGS", "N4SID_BLOCK_ROWS", "true_model", "make_record", "Realisation",
            "command_line_iekf", "identify_realisation", "coverage"]

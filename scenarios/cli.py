@@ -278,7 +278,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"vehid: interrupted by {name}", file=sys.stderr)
         return _failed(args, exc, status, message=f"interrupted by {name}")
     except OSError as exc:  # a file read or written: its name and the cause, never "internal error"
-        from vehid.identification.archive_safety import os_error_text  # h5py: imported when needed
+        from vehid.identification.dataio.archive_safety import os_error_text  # h5py: imported when needed
         text = os_error_text(exc)
         print(f"vehid: error: {one_line(text)}", file=sys.stderr)
         return _failed(args, exc, 2 if exc.errno in PATH_ERRNOS else 1, message=text)

@@ -17,13 +17,13 @@ from typing import Any, Mapping, Sequence
 
 import h5py
 
-from vehid.identification.archive import write_record
+from vehid.identification.dataio.archive import write_record
 from vehid.identification.data import IOData
 from vehid.identification.errors import InputError
-from vehid.identification.multirecord import score_records
-from vehid.identification.preparation import DETRENDS, Preparation, ReadSettings, read_raw_records
-from vehid.identification.storage import read_value, write_value
-from vehid.identification.timebase import JITTER_TOLERANCE
+from vehid.identification.assessment.multirecord import score_records
+from vehid.identification.dataio.preparation import DETRENDS, Preparation, ReadSettings, read_raw_records
+from vehid.identification.dataio.storage import read_value, write_value
+from vehid.identification.dataio.timebase import JITTER_TOLERANCE
 
 __all__ = ["channel_names", "register_data_options", "settings_from_args", "read_from_args", "preparation_options",
            "records_summary", "data_warnings", "record_names",
@@ -81,9 +81,9 @@ def settings_from_args(args: argparse.Namespace) -> ReadSettings:
 def read_from_args(args: argparse.Namespace, paths: Sequence[str]) -> tuple[tuple[IOData, ...], ReadSettings]:
     """The raw records of the data files named on the command line, and the settings they were read with.
 
-    For a hold-out split: split a raw record first, then :func:`~identification.preparation.prepare` the
+    For a hold-out split: split a raw record first, then :func:`~identification.dataio.preparation.prepare` the
     estimation part (``detrend=args.detrend, scale=args.scale, settings=settings``)
-    and :func:`~identification.preparation.prepare_validation` the rest.
+    and :func:`~identification.dataio.preparation.prepare_validation` the rest.
     """
     if not paths:
         raise InputError("give a DATA file (or --resume ARCHIVE)")
@@ -93,7 +93,7 @@ def read_from_args(args: argparse.Namespace, paths: Sequence[str]) -> tuple[tupl
 
 
 def preparation_options(args: argparse.Namespace) -> dict[str, Any]:
-    """The keywords of :func:`~identification.preparation.prepare` the options give (offsets and conversions)."""
+    """The keywords of :func:`~identification.dataio.preparation.prepare` the options give (offsets and conversions)."""
     return {"detrend": args.detrend, "scale": args.scale, "steering_ratio": getattr(args, "steering_ratio", None)}
 
 
@@ -179,7 +179,7 @@ MODEL_FILE_SUFFIXES = (".json", ".mat")
 
 def _model_file_identity(path: Path):
     """A model file the workbench wrote (JSON or MATLAB with the matrices A, B, C, D), or None for any other file."""
-    from vehid.identification.archive_safety import OutputIdentity
+    from vehid.identification.dataio.archive_safety import OutputIdentity
 
     matrices = {"A", "B", "C", "D"}
     try:
@@ -201,7 +201,7 @@ def check_model_target(target: str, *, inputs=(), force: bool = False) -> Path:
     An existing file is replaced only if it is a model file of the
     workbench, or with ``force``.
     """
-    from vehid.identification.archive_safety import check_output_target
+    from vehid.identification.dataio.archive_safety import check_output_target
 
     path = Path(target)
     if path.suffix.lower() not in MODEL_FILE_SUFFIXES:

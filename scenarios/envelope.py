@@ -11,7 +11,7 @@ it) and scores both on both records. Results go to one archive, one group
 per job, written as jobs finish, so that ``--resume`` skips the jobs done.
 
 Speeds between grid speeds (by default the midpoints) are identified too:
-there the speed-scheduled model (:mod:`vehid.identification.scheduled`) is
+there the speed-scheduled model (:mod:`vehid.identification.models.scheduled`) is
 validated beside the model identified directly.
 
 Dask reschedules the jobs of a lost worker and a job that raised is retried
@@ -34,14 +34,14 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from vehid.identification.archive import open_archive, read_run, update_archive, write_archive, write_run
-from vehid.identification.archive_safety import archive_lock
+from vehid.identification.dataio.archive import open_archive, read_run, update_archive, write_archive, write_run
+from vehid.identification.dataio.archive_safety import archive_lock
 from vehid.identification.errors import DivergenceError, InputError, SimulationError
-from vehid.identification.iekf import IEKFOptions
-from vehid.identification.spline_iekf import SplineIEKFOptions
-from vehid.identification.modal import ModalModel
-from vehid.identification.scheduled import ScheduledModalModel, schedule_models
-from vehid.identification.storage import read_value, write_value
+from vehid.identification.filtering.iekf import IEKFOptions
+from vehid.identification.filtering.spline_iekf import SplineIEKFOptions
+from vehid.identification.models.modal import ModalModel
+from vehid.identification.models.scheduled import ScheduledModalModel, schedule_models
+from vehid.identification.dataio.storage import read_value, write_value
 from vehid.vehicle import DEFAULT_DT, linearize, make_manoeuvre, named_vehicle, simulate
 from vehid.vehicle.parameters import VehicleParameters
 

@@ -21,10 +21,10 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from vehid.identification.archive import Archive, RunName, read_archive
+from vehid.identification.dataio.archive import Archive, RunName, read_archive
 from vehid.identification.errors import InputError
-from vehid.identification.residuals import residual_tests
-from vehid.identification.uncertainty import normal_quantile
+from vehid.identification.assessment.residuals import residual_tests
+from vehid.identification.assessment.uncertainty import normal_quantile
 
 from . import plots
 from .figure_style import add_legend
@@ -222,7 +222,7 @@ def _shade(axes: Any, xs: Any, values: Any, spreads: Any, color: Any = "tab:blue
 def write_handling_report(archive: Archive | str | Path, out_dir: str | Path) -> list[Path]:
     """Write the report beside the archive: PNGs, ``report.pdf``, ``table.md`` and the CasADi export.
 
-    ``archive`` is the study's archive as :func:`~identification.archive.read_archive` returns it, or its path.
+    ``archive`` is the study's archive as :func:`~identification.dataio.archive.read_archive` returns it, or its path.
     """
     archive = _study(archive)
     out_dir = Path(out_dir)

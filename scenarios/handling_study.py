@@ -12,7 +12,7 @@ vehicle's own linearisation.
 
 No trim is removed: the records start at the straight-running trim, where all
 three outputs are zero, which is the models' rest state too. The order is
-chosen by :func:`vehid.identification.order.assess_orders` on the linear runs.
+chosen by :func:`vehid.identification.assessment.order.assess_orders` on the linear runs.
 
 What to expect (paper, Table 5): R rises with the order and the nonlinear
 model beats the linear one. The measured results are in docs/measurements.md, the
@@ -33,19 +33,19 @@ from typing import Any, Callable, Iterator, Mapping, NamedTuple
 
 import numpy as np
 
-from vehid.identification.archive import RunName, append_history, run_group, write_archive, write_record, write_run
-from vehid.identification.archive_safety import RUN_ATTRIBUTE
+from vehid.identification.dataio.archive import RunName, append_history, run_group, write_archive, write_record, write_run
+from vehid.identification.dataio.archive_safety import RUN_ATTRIBUTE
 from vehid.identification.data import IOData
 from vehid.identification.errors import DivergenceError, InputError
-from vehid.identification.iekf import IEKFOptions, IEKFResult, identify_iekf
-from vehid.identification.iekf_archive import write_iekf_run
+from vehid.identification.filtering.iekf import IEKFOptions, IEKFResult, identify_iekf
+from vehid.identification.filtering.iekf_archive import write_iekf_run
 from vehid.identification.jsonable import to_jsonable
-from vehid.identification.spline_iekf import SplineIEKFOptions, identify_spline_iekf
-from vehid.identification.metrics import percentage_explanation
-from vehid.identification.modal import ModalStructure
-from vehid.identification.protocol import Mode as ModelMode
-from vehid.identification.order import OrderAssessment, OrderRow, assess_orders
-from vehid.identification.storage import write_value
+from vehid.identification.filtering.spline_iekf import SplineIEKFOptions, identify_spline_iekf
+from vehid.identification.assessment.metrics import percentage_explanation
+from vehid.identification.models.modal import ModalStructure
+from vehid.identification.models.protocol import Mode as ModelMode
+from vehid.identification.assessment.order import OrderAssessment, OrderRow, assess_orders
+from vehid.identification.dataio.storage import write_value
 from vehid.vehicle import DEFAULT_DT, DEFAULT_SPEED, linearize, make_manoeuvre, named_vehicle, simulate
 from vehid.vehicle.linearize import VehicleMode
 

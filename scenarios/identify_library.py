@@ -17,8 +17,8 @@ from typing import Sequence
 from vehid.identification.data import IOData
 from vehid.identification.errors import InputError
 from vehid.identification.pipeline import Identification, IdentifyOptions
-from vehid.identification.preparation import prepare, prepare_validation
-from vehid.identification.validation import split_holdout
+from vehid.identification.dataio.preparation import prepare, prepare_validation
+from vehid.identification.assessment.validation import split_holdout
 
 __all__ = ["identify"]
 

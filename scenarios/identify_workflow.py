@@ -2,7 +2,7 @@
 
 * Validation: ``--validation FRACTION`` holds out the last part of the
   record, ``--validation-file FILE`` adds records; both are scored
-  (:mod:`vehid.identification.validation`) by simulation, or by k-step-ahead
+  (:mod:`vehid.identification.assessment.validation`) by simulation, or by k-step-ahead
   prediction for an unstable model.
 * Order: one, a range ``2-8`` or ``auto`` (stopping after two orders in a row
   without gain); the smallest order within :data:`ORDER_TOLERANCE` points of
@@ -44,12 +44,12 @@ import numpy as np
 from vehid.identification.data import IOData
 from vehid.identification.decisions import SCHEDULE_MARGIN, ScheduleCandidate, choose_p_and_schedule
 from vehid.identification.errors import DivergenceError, InputError, StrictWarningsError, WorkbenchError
-from vehid.identification.iekf import (INVARIANT_P, INVARIANT_P_DECAY, START_CHOICES, IEKFOptions,
+from vehid.identification.filtering.iekf import (INVARIANT_P, INVARIANT_P_DECAY, START_CHOICES, IEKFOptions,
                                       identify_iekf, invariant_noise_settings, normalized_data_start, signal_scales,
                                       start_structure)
-from vehid.identification.modal import ModalModel, ModalStructure
-from vehid.identification.uncertainty import simulation_error_covariance
-from vehid.identification.validation import (UNSTABLE_HORIZON, Scores, default_horizon, score,
+from vehid.identification.models.modal import ModalModel, ModalStructure
+from vehid.identification.assessment.uncertainty import simulation_error_covariance
+from vehid.identification.assessment.validation import (UNSTABLE_HORIZON, Scores, default_horizon, score,
                                             split_holdout)
 
 __all__ = [
@@ -158,12 +158,12 @@ def parse_orders(text: Any) -> tuple[list[int], bool]:
 def supported_orders(orders: list[int], auto: bool, records: tuple[IOData, ...], text: Any) -> list[int]:
     """The orders the estimation records can support: ``--order auto`` is cut to them, any other beyond them refused.
 
-    The bound is the data start's (:func:`~identification.subspace.largest_subspace_order`:
+    The bound is the data start's (:func:`~identification.classical.subspace.largest_subspace_order`:
     a Hankel matrix of 2n block rows with as many columns as rows, N >= 4 n (1 + n_u + n_y) - 1
     samples for one record) and the filter's (fewer parameters than samples): docs/measured_data.md, "Orders".
     """
-    from vehid.identification.modal import ModalStructure
-    from vehid.identification.subspace import largest_subspace_order
+    from vehid.identification.models.modal import ModalStructure
+    from vehid.identification.classical.subspace import largest_subspace_order
 
     first = records[0]
     lengths = [record.n_samples for record in records]
@@ -199,7 +199,7 @@ class Plan:
     notes: tuple[str, ...] = ()
     preparation: Any = None
     held_out_count: int = 0  # the first validation records are held-out parts of the estimation records
-    schedule: Any = None  # with --schedule: the channel's samples per record (scenarios.scheduled_identify)
+    schedule: Any = None  # with --schedule: the channel's samples per record (scenarios.schedule_channel)
 
     @property
     def estimation(self) -> IOData | tuple[IOData, ...]:
@@ -232,15 +232,15 @@ def load_plan(args: Settings, paths: list[str]) -> Plan:
     The split comes before the preparation, so the offsets kept with the model
     are the estimation part's own (the held-out part plays no role in them).
     """
-    from vehid.identification.preparation import prepare, prepare_validation
+    from vehid.identification.dataio.preparation import prepare, prepare_validation
     from vehid.scenarios.data_options import preparation_options, read_from_args
 
     fraction, note = holdout_fraction(args)
     scale, schedules = args.scale, None
     if getattr(args, "schedule", None):  # the schedule channel is read beside the inputs, kept apart and never offset
-        from vehid.scenarios import scheduled_identify
+        from vehid.scenarios import schedule_channel
 
-        raw, settings, schedules, scale = scheduled_identify.read_with_schedule(args, paths)
+        raw, settings, schedules, scale = schedule_channel.read_with_schedule(args, paths)
     else:
         raw, settings = read_from_args(args, paths)
     held_raw: tuple[IOData, ...] = ()
@@ -254,11 +254,11 @@ def load_plan(args: Settings, paths: list[str]) -> Plan:
     load = lambda path: prepare_validation(path, preparation, own_offsets=True, channels=channels)  # noqa: E731
     if schedules is not None:
         found: list[np.ndarray] = []
-        load = scheduled_identify.schedule_loader(args, preparation, channels, found)
+        load = schedule_channel.schedule_loader(args, preparation, channels, found)
     plan = make_plan(args, records, load, held_out=held, fraction=fraction, note=note, preparation=preparation)
     if schedules is not None:
         cut = [record.n_samples for record in records]
-        plan = dataclasses.replace(plan, schedule=scheduled_identify.ScheduleData(
+        plan = dataclasses.replace(plan, schedule=schedule_channel.ScheduleData(
             args.schedule.strip(), tuple(s[:n] for s, n in zip(schedules, cut)),
             tuple(s[n:] for s, n in zip(schedules, cut))[:len(held)] + tuple(found)))
     return plan
@@ -379,7 +379,7 @@ def returned_start(result: Any, records: Sequence[IOData]) -> ModalModel:
     """The start model as it is returned in the filter's place: with the covariance a subspace model gets.
 
     That is the asymptotic covariance of its simulation errors on ``records``
-    (:func:`~vehid.identification.uncertainty.simulation_error_covariance`), as
+    (:func:`~vehid.identification.assessment.uncertainty.simulation_error_covariance`), as
     ``--method n4sid`` gives; None where its simulation diverges (a growing mode).
     """
     start = start_model(result)
@@ -579,7 +579,7 @@ def start_beats_filter(result: Any, plan: Plan, args: Settings) -> dict[str, Any
     from a good start (pull a growing mode into the left half-plane, or follow
     noise). Both models are scored on the estimation records as validation
     scores a model, with one horizon for both: k-step prediction
-    (:data:`~vehid.identification.validation.UNSTABLE_HORIZON`, or
+    (:data:`~vehid.identification.assessment.validation.UNSTABLE_HORIZON`, or
     ``--horizon``) where either is unstable, else simulation; a k-step fit of
     one against a simulation fit of the other would favour the unstable one.
     """
@@ -598,7 +598,7 @@ def start_beats_filter(result: Any, plan: Plan, args: Settings) -> dict[str, Any
             "horizon": horizon}
 
 
-def _margin(choice: Any, score: Any, runner_up: Any, runner_up_score: Any, measure: str, rule: str) -> dict[str, Any]:
+def margin_entry(choice: Any, score: Any, runner_up: Any, runner_up_score: Any, measure: str, rule: str) -> dict[str, Any]:
     def number(value: Any) -> float | None:
         return float(value) if value is not None and np.isfinite(value) else None
 
@@ -622,7 +622,7 @@ def decision_margins(tuning: PTuning, unstable: dict[str, Any] | None, compariso
         margins["p"] = p_margin
     if unstable is not None:
         free, stable = unstable["unstable_start_cv_fit_percent"], unstable["stable_start_cv_fit_percent"]
-        margins["open_loop_unstable"] = _margin(
+        margins["open_loop_unstable"] = margin_entry(
             *(("unstable", free, "stable", stable) if unstable["assumed"] else ("stable", stable, "unstable", free)),
             measure=f"two-fold {unstable['horizon']}-step fit % of the data starts, each fold floored at {FIT_FLOOR:g}",
             rule=f"unstable where its fit beats the stable start's by more than {UNSTABLE_MARGIN} points")
@@ -630,7 +630,7 @@ def decision_margins(tuning: PTuning, unstable: dict[str, Any] | None, compariso
         fits = {"start": comparison["start_estimation_fit_percent"], "filter": comparison["filter_estimation_fit_percent"]}
         other = "filter" if returned == "start" else "start"
         how = f"{comparison['horizon']}-step prediction" if comparison.get("horizon") else "simulation"
-        margins["model_returned"] = _margin(
+        margins["model_returned"] = margin_entry(
             returned, fits[returned], other, fits[other], measure=f"estimation NRMSE fit % ({how})",
             rule=f"the start where it beats the filter by more than {comparison.get('margin', WHOLE_RECORD_MARGIN)} "
                  f"points here (the filter's run {'diverged' if comparison.get('margin') == P_TOLERANCE else 'finished'}),"
@@ -643,7 +643,7 @@ def order_margin(rows: list[dict[str, Any]], chosen: int) -> dict[str, Any]:
     eligible = {row["order"]: row["ranking_fit"] for row in rows if row.get("eligible")}
     others = [(order, fit) for order, fit in eligible.items() if order != chosen]
     runner_up = max(others, key=lambda item: item[1]) if others else (None, None)
-    return _margin(chosen, eligible.get(chosen), runner_up[0], runner_up[1], measure="mean validation NRMSE fit %",
+    return margin_entry(chosen, eligible.get(chosen), runner_up[0], runner_up[1], measure="mean validation NRMSE fit %",
                    rule=f"the smallest order within {ORDER_TOLERANCE} points of the best")
 
 
@@ -927,7 +927,7 @@ def nonlinear_warnings(outcome: NonlinearOutcome, linear: Evaluation) -> list[st
 
 def identify_nonlinear(linear: ModalModel, plan: Plan, args: Settings) -> NonlinearOutcome:
     """The spline-nonlinear model started from ``linear``, its p chosen on validation data from a small grid."""
-    from vehid.identification.spline_iekf import SplineIEKFOptions, identify_spline_iekf
+    from vehid.identification.filtering.spline_iekf import SplineIEKFOptions, identify_spline_iekf
 
     if not isinstance(linear, ModalModel):
         raise InputError("--nonlinear starts from a continuous-time modal model; this linear model is discrete-time "
@@ -986,7 +986,7 @@ def start_of(result: Any, records: tuple[IOData, ...]) -> tuple[float | None, bo
     model = ModalModel.from_parameters(result.structure, theta)
     start_modes, final_modes = model.mode_eigenvalues(), result.model.mode_eigenvalues()
     moved = bool(np.max(np.abs(final_modes - start_modes) / np.maximum(np.abs(start_modes), 1e-300)) > MOVED)
-    from vehid.identification.multirecord import pooled_simulation_fit
+    from vehid.identification.assessment.multirecord import pooled_simulation_fit
 
     fit = pooled_simulation_fit(model, records)
     if not np.all(np.isfinite(fit)):  # the start overflows: no fit to compare with
@@ -996,7 +996,7 @@ def start_of(result: Any, records: tuple[IOData, ...]) -> tuple[float | None, bo
 
 def structure_for(args: Settings, order: int, plan: Plan, options: IEKFOptions) -> ModalStructure:
     """The model structure of an IEKF run: ``--pattern`` where given, else the data start's modes
-    (:func:`vehid.identification.iekf.start_structure`) or, for other starts, the default pattern."""
+    (:func:`vehid.identification.filtering.iekf.start_structure`) or, for other starts, the default pattern."""
     first = plan.records[0]
     structure = ModalStructure.from_pattern(args.pattern or "default", order, first.n_u, first.n_y)
     if args.pattern is not None:

@@ -11,9 +11,9 @@ from typing import Any
 
 import numpy as np
 
-from vehid.identification.filter_models import LinearModalFilterModel
-from vehid.identification.iekf_pass import compiled_pass, numpy_reference_pass, pack_covariance
-from vehid.identification.modal import ModalStructure
+from vehid.identification.filtering.filter_models import LinearModalFilterModel
+from vehid.identification.filtering.iekf_pass import compiled_pass, numpy_reference_pass, pack_covariance
+from vehid.identification.models.modal import ModalStructure
 
 from .benchmarking import median_seconds
 from .linear_example import make_data

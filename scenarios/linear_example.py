@@ -33,16 +33,16 @@ from typing import Any, Callable
 
 import numpy as np
 
-from vehid.identification.archive import write_archive, write_record
-from vehid.identification.archive_safety import RUN_ATTRIBUTE
+from vehid.identification.dataio.archive import write_archive, write_record
+from vehid.identification.dataio.archive_safety import RUN_ATTRIBUTE
 from vehid.identification.data import IOData
 from vehid.identification.errors import InputError
-from vehid.identification.iekf import IEKFOptions, IEKFResult, identify_iekf
-from vehid.identification.iekf_archive import write_iekf_run
+from vehid.identification.filtering.iekf import IEKFOptions, IEKFResult, identify_iekf
+from vehid.identification.filtering.iekf_archive import write_iekf_run
 from vehid.identification.jsonable import to_jsonable
-from vehid.identification.metrics import percentage_explanation
-from vehid.identification.modal import ModalModel, ModalStructure
-from vehid.identification.order import OrderAssessment, assess_orders
+from vehid.identification.assessment.metrics import percentage_explanation
+from vehid.identification.models.modal import ModalModel, ModalStructure
+from vehid.identification.assessment.order import OrderAssessment, assess_orders
 
 from .paths import results_path
 
@@ -244,7 +244,7 @@ def run_case(
     discretization : {"euler", "exact", "exact-zoh"}
         ``euler`` reproduces the paper; ``exact`` identifies the continuous system.
     covariance, start :
-        See :class:`vehid.identification.iekf.IEKFOptions`.
+        See :class:`vehid.identification.filtering.iekf.IEKFOptions`.
     on_pass : callable, optional
         ``on_pass(run_label, record, result)`` after every pass.
     """

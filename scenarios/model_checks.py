@@ -9,7 +9,7 @@ Public JSON keys (a contract once released):
     estimator gave no covariance).
 ``residual_whiteness_p``, ``input_correlation_max``
     Per output, of the continuous model's simulation residuals on the
-    record (:mod:`vehid.identification.residuals`); ``residual_tests`` holds the
+    record (:mod:`vehid.identification.assessment.residuals`); ``residual_tests`` holds the
     full test results per output (also ``ljung_box``,
     ``input_correlation_p``, ``white``, ``independent``) with the 99 % bound.
 ``innovation_nis``, ``innovation_nis_band``
@@ -27,8 +27,8 @@ from typing import Any, Sequence
 import numpy as np
 
 from vehid.identification.data import IOData
-from vehid.identification.modal import ModalModel
-from vehid.identification.residuals import ResidualTests, nis_band, residual_tests
+from vehid.identification.models.modal import ModalModel
+from vehid.identification.assessment.residuals import ResidualTests, nis_band, residual_tests
 
 __all__ = ["model_residual_tests", "uncertainty_summary", "uncertainty_lines"]
 

@@ -19,9 +19,9 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
 from vehid.identification.errors import InputError
-from vehid.identification.metrics import percentage_explanation
-from vehid.identification.residuals import autocorrelation as residual_autocorrelation
-from vehid.identification.uncertainty import frequency_response as response_band
+from vehid.identification.assessment.metrics import percentage_explanation
+from vehid.identification.assessment.residuals import autocorrelation as residual_autocorrelation
+from vehid.identification.assessment.uncertainty import frequency_response as response_band
 
 # The shared style and the pole map live in their own modules; they stay part of this module's API.
 from .figure_style import (  # noqa: F401
@@ -441,7 +441,7 @@ def _as_model(model: Any) -> Any:
     """``model`` itself where it offers a frequency response; an ``(A, B, C, D)`` tuple as a continuous model."""
     if hasattr(model, "frequency_response") and hasattr(model, "to_statespace"):
         return model
-    from vehid.identification.discrete import ContinuousModel
+    from vehid.identification.models.discrete import ContinuousModel
 
     matrices = tuple(model) if isinstance(model, (tuple, list)) else ()
     if len(matrices) != 4:
@@ -501,7 +501,7 @@ def plot_bode(
     """Magnitude and phase from one input to every output, for several models.
 
     Models that carry a parameter covariance get their 95 % band shaded
-    (delta method, :func:`vehid.identification.uncertainty.frequency_response`)
+    (delta method, :func:`vehid.identification.assessment.uncertainty.frequency_response`)
     unless ``confidence`` is False.
 
     Parameters
@@ -597,7 +597,7 @@ def _gain_label(output_unit: str, input_unit: str) -> str:
 def autocorrelation(residuals: Any, max_lag: int) -> np.ndarray:
     """Normalised autocorrelation of each residual column at lags 0..max_lag, shape (max_lag + 1, n_y).
 
-    See :func:`vehid.identification.residuals.autocorrelation`.
+    See :func:`vehid.identification.assessment.residuals.autocorrelation`.
     """
     return residual_autocorrelation(_matrix("residuals", residuals), max_lag)
 
@@ -710,7 +710,7 @@ def plot_innovation_consistency(nis: Any, band: tuple[float, float], *, title: s
     nis : array_like, shape (n_pass,)
         Mean ``e' R^-1 e`` of each pass.
     band : (float, float)
-        :func:`vehid.identification.residuals.nis_band` for the record.
+        :func:`vehid.identification.assessment.residuals.nis_band` for the record.
 
     Returns
     -------

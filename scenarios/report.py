@@ -14,8 +14,8 @@ from matplotlib.backends.backend_pdf import PdfPages
 from matplotlib.figure import Figure
 
 from vehid.identification.errors import InputError, WorkbenchError
-from vehid.identification.residuals import DEFAULT_LAGS, nis_band, residual_tests
-from vehid.identification.validation import default_horizon, predict, score
+from vehid.identification.assessment.residuals import DEFAULT_LAGS, nis_band, residual_tests
+from vehid.identification.assessment.validation import default_horizon, predict, score
 
 from . import plots
 
@@ -249,7 +249,7 @@ def _scoring_rule(archive: Any) -> ScoringRule:
 def _model_prediction(model: Any, record: Any, rule: ScoringRule = ScoringRule()) -> Prediction | None:
     """The model on the record restricted to its inputs and outputs: outputs, NRMSE fit and R, by ``rule``.
 
-    The same functions score it as the identify command (:func:`~vehid.identification.validation.score`),
+    The same functions score it as the identify command (:func:`~vehid.identification.assessment.validation.score`),
     with the same initial state, so that a drawn curve is the one whose fit the command stated.
     """
     if not hasattr(model, "simulate_outputs"):
@@ -305,7 +305,7 @@ def archive_figures(archive: Any, *, window: tuple[float, float] | None = None, 
     Parameters
     ----------
     archive : identification.archive.Archive
-        As :func:`vehid.identification.archive.read_archive` returns it.
+        As :func:`vehid.identification.dataio.archive.read_archive` returns it.
     window : (float, float), optional
         Time range (s) of the time-fit figures.
     max_lag : int

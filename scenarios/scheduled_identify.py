@@ -3,8 +3,8 @@
 The scheduling channel (a car's speed) is read beside the inputs, scaled by ``--scale`` where one names
 it and never offset (the model's coefficients are functions of its measured value). The unscheduled
 model of the default pipeline starts the scheduled IEKF
-(:mod:`vehid.identification.scheduled_iekf`) at every knot; the family returned is a
-:class:`~vehid.identification.scheduled.ScheduledModalModel`, scored like every model on the
+(:mod:`vehid.identification.filtering.scheduled_iekf`) at every knot; the family returned is a
+:class:`~vehid.identification.models.scheduled.ScheduledModalModel`, scored like every model on the
 estimation and held-out data, simulated from rest along their measured schedules.
 
 The family is returned only where it validates better than the unscheduled model by
@@ -34,31 +34,23 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from vehid.identification.data import IOData
 from vehid.identification.errors import InputError
-from vehid.identification.modal import ModalModel
+from vehid.identification.models.modal import ModalModel
+
+from .schedule_channel import ScheduleData, parse_schedule_grid, scheduled_records
 
 # said where --nonlinear and --schedule are given together (JSON ``notes``)
 NONLINEAR_NOTE = ("--nonlinear with --schedule: the scheduled family may gain a static output map (speed-scheduled "
                   "linear dynamics, then a piecewise-linear map of each output; scheduled.output_map), kept where it "
                   "validates better; the spline-nonlinear model ('nonlinear') of the unscheduled model is beside it")
 
-__all__ = ["NONLINEAR_NOTE", "ScheduleData", "register_options", "read_with_schedule", "schedule_loader", "scheduled_records",
+__all__ = ["NONLINEAR_NOTE", "register_options",
            "identify_scheduled_model", "ScheduledOutcome", "text_lines"]
-
-
-@dataclass(frozen=True, eq=False)
-class ScheduleData:
-    """The schedule channel of a plan's records: its name and its samples per estimation and validation record."""
-
-    channel: str
-    estimation: tuple[np.ndarray, ...]
-    validation: tuple[np.ndarray, ...]
 
 
 def register_options(parser: argparse.ArgumentParser) -> None:
     """``--schedule`` and the scheduled model's settings."""
-    from vehid.identification.scheduled_iekf import DEFAULT_KNOTS, DEFAULT_P, MAX_KNOTS, MIN_KNOTS
+    from vehid.identification.filtering.scheduled_iekf import DEFAULT_KNOTS, DEFAULT_P, MAX_KNOTS, MIN_KNOTS
 
     parser.add_argument("--schedule", metavar="CHANNEL",
                         help="scheduling channel (a speed such as vx), read beside the inputs and never offset: "
@@ -78,84 +70,6 @@ def register_options(parser: argparse.ArgumentParser) -> None:
 
 #: p of the scheduled filter tried on validation data, largest first (the default alone without them)
 P_GRID = (1e-2, 1e-3)
-
-
-def _grid(text: str | None) -> tuple[float, ...] | None:
-    if text is None:
-        return None
-    try:
-        values = tuple(float(part) for part in text.split(",") if part.strip())
-    except ValueError:
-        raise InputError(f"--schedule-grid takes comma-separated numbers; got {text!r}") from None
-    return values
-
-
-def check_options(args: argparse.Namespace) -> None:
-    """Refuse combinations the scheduled model does not support, before any work."""
-    if args.resume:
-        raise InputError("--schedule runs are not checkpointed: give no --resume")
-    if len(args.data) > 1:
-        raise InputError("--schedule identifies the scheduled model from one record; give one data file")
-    if not args.inputs:
-        raise InputError("--schedule needs --inputs naming the inputs (the schedule is read beside them)")
-    from vehid.identification.scheduled_iekf import ScheduledIEKFOptions
-
-    for p in args.schedule_p or [None]:
-        ScheduledIEKFOptions(knots=args.schedule_knots, grid=_grid(args.schedule_grid),
-                             **({} if p is None else {"p": p}))
-
-
-def _without_schedule(args: argparse.Namespace) -> dict[str, float]:
-    from vehid.identification.preparation import parse_scale
-
-    return {name: factor for name, factor in parse_scale(args.scale).items() if name != args.schedule}
-
-
-def read_with_schedule(args: argparse.Namespace, paths: Sequence[str]) -> tuple[tuple[IOData, ...], Any, list[np.ndarray], dict]:
-    """Raw records without the schedule, their reading settings, each record's schedule (scaled) and
-    the ``--scale`` factors of the other channels."""
-    from vehid.identification.preparation import parse_scale, read_raw_records
-    from vehid.scenarios.data_options import settings_from_args
-
-    check_options(args)
-    settings = settings_from_args(args)
-    channel = args.schedule.strip()
-    if channel in settings.inputs or channel in settings.outputs:
-        raise InputError(f"--schedule {channel} is also named among --inputs or --outputs: the schedule is a "
-                         "channel of its own")
-    raw, full_settings = read_raw_records(list(paths), dataclasses.replace(settings, inputs=settings.inputs + (channel,)))
-    factor = parse_scale(args.scale).get(channel, 1.0)
-    schedules = [record.u[:, -1] * factor for record in raw]
-    inputs = full_settings.inputs[:-1]
-    return (tuple(record.select_inputs(inputs) for record in raw), dataclasses.replace(full_settings, inputs=inputs),
-            schedules, _without_schedule(args))
-
-
-def schedule_loader(args: argparse.Namespace, preparation: Any, channels: Any, found: list[np.ndarray]):
-    """A validation-file loader that also reads the file's schedule (appended to ``found``, in order)."""
-    from vehid.identification.preparation import parse_scale, prepare_validation, read_record
-
-    channel = args.schedule.strip()
-    factor = parse_scale(args.scale).get(channel, 1.0)
-
-    def load(path: str) -> IOData:
-        inputs, outputs = channels if channels is not None else (preparation.settings.inputs, preparation.settings.outputs)
-        settings = dataclasses.replace(preparation.settings, inputs=tuple(inputs) + (channel,),
-                                       outputs=tuple(outputs), segment=None)
-        raw = read_record(path, settings)
-        found.append(raw.u[:, -1] * factor)
-        raw = raw.select_inputs(tuple(inputs)).replace(input_names=preparation.input_names,
-                                                       output_names=preparation.output_names)
-        return prepare_validation(raw, preparation, own_offsets=True)
-
-    return load
-
-
-def scheduled_records(records: Sequence[IOData], schedules: Sequence[np.ndarray], channel: str) -> tuple[IOData, ...]:
-    """The records with their schedule as a last input column, as a scheduled model simulates them."""
-    return tuple(record.replace(u=np.column_stack([record.u, schedule]), input_names=record.input_names + (channel,),
-                                input_units=record.input_units + ("-",))
-                 for record, schedule in zip(records, schedules))
 
 
 @dataclass
@@ -202,7 +116,7 @@ def identify_scheduled_model(start: Any, plan: Any, args: argparse.Namespace, un
     ``unscheduled`` is the start's :class:`~vehid.scenarios.identify_workflow.Evaluation`.
     """
     from vehid.identification.errors import DivergenceError
-    from vehid.identification.scheduled_iekf import DEFAULT_P, ScheduledIEKFOptions, identify_scheduled
+    from vehid.identification.filtering.scheduled_iekf import DEFAULT_P, ScheduledIEKFOptions, identify_scheduled
     from vehid.scenarios import identify_workflow as workflow
     from vehid.scenarios.data_options import records_summary
 
@@ -217,7 +131,7 @@ def identify_scheduled_model(start: Any, plan: Any, args: argparse.Namespace, un
     grid = args.schedule_p or (list(P_GRID) if plan.validation else [DEFAULT_P])
     tried, candidates = [], []
     for p in grid:
-        options = ScheduledIEKFOptions(knots=args.schedule_knots, grid=_grid(args.schedule_grid), p=p,
+        options = ScheduledIEKFOptions(knots=args.schedule_knots, grid=parse_schedule_grid(args.schedule_grid), p=p,
                                        discretization=args.discretization, stable=not args.allow_unstable)
         stops: list[tuple[float, int, Any]] = []  # (held-out ranking fit, steps, family) of each refinement step
 
@@ -288,7 +202,7 @@ def identify_scheduled_model(start: Any, plan: Any, args: argparse.Namespace, un
     margin = schedule_margin(evaluation, from_rest)
     returned = stable and margin["score"] is not None and (
         margin["runner_up_score"] is None or margin["score"] > margin["runner_up_score"] + margin["margin"])
-    margin = workflow._margin(*(("scheduled", margin["score"], "unscheduled", margin["runner_up_score"]) if returned
+    margin = workflow.margin_entry(*(("scheduled", margin["score"], "unscheduled", margin["runner_up_score"]) if returned
                                 else ("unscheduled", margin["runner_up_score"], "scheduled", margin["score"])),
                               measure=margin["measure"], rule=margin["rule"])
     entry.update(model_returned="scheduled" if returned else "unscheduled",
@@ -312,7 +226,7 @@ def _stopped_early(result: Any, stops: list[tuple[float, Any, Any]], plan: Any, 
     validated better than ten and twenty-five worse still, so held-out data say when to stop, as
     they choose p. Without validation data every step stands.
     """
-    from vehid.identification.scheduled_iekf import HOLD_OF, scheduled_simulation_covariance
+    from vehid.identification.filtering.scheduled_iekf import HOLD_OF, scheduled_simulation_covariance
 
     finite = [stop for stop in stops if np.isfinite(stop[0])]
     if not finite or "refine_steps" not in result.meta:
@@ -324,7 +238,7 @@ def _stopped_early(result: Any, stops: list[tuple[float, Any, Any]], plan: Any, 
     method = HOLD_OF[result.options.discretization]
     covariance = scheduled_simulation_covariance(family, plan.records[0], schedule.estimation[0], method)
     family = family.with_parameters(family.parameters, covariance)
-    from vehid.identification.metrics import percentage_explanation
+    from vehid.identification.assessment.metrics import percentage_explanation
 
     data = plan.records[0]
     with np.errstate(all="ignore"):
@@ -349,16 +263,16 @@ def with_output_map(family: Any, evaluation: Any, plan: Any, scheduled_plan: Any
     """The family with a static output map (``--nonlinear``) where one validates better, and the map's entry.
 
     A Wiener model: the speed-scheduled linear dynamics, then per output a piecewise-linear map of the
-    linear output (:class:`~vehid.identification.scheduled.OutputMap`) fitted by least squares to the
+    linear output (:class:`~vehid.identification.models.scheduled.OutputMap`) fitted by least squares to the
     estimation record, the nodes at the linear output's quantiles. It bends the outputs where the
     linear part overshoots them (a lateral acceleration at the grip limit) whatever the speed. Each
     node count of :data:`OUTPUT_MAP_NODES` is scored like every model; the best is kept only where it
     beats the linear family by :data:`VALIDATION_MARGIN` (on the estimation fit by the whole-record
     margin without validation data).
     """
-    from vehid.identification.metrics import percentage_explanation
-    from vehid.identification.scheduled import OutputMap
-    from vehid.identification.scheduled_iekf import HOLD_OF
+    from vehid.identification.assessment.metrics import percentage_explanation
+    from vehid.identification.models.scheduled import OutputMap
+    from vehid.identification.filtering.scheduled_iekf import HOLD_OF
     from vehid.scenarios import identify_workflow as workflow
 
     data, schedule = plan.records[0], plan.schedule.estimation[0]
@@ -388,7 +302,7 @@ def with_output_map(family: Any, evaluation: Any, plan: Any, scheduled_plan: Any
 
 def unscheduled_fit(plan: Any, start: Any) -> Any:
     """R per output of the unscheduled model from rest on the estimation records (as ``fit_percent``)."""
-    from vehid.identification.multirecord import pooled_simulation_fit
+    from vehid.identification.assessment.multirecord import pooled_simulation_fit
 
     return pooled_simulation_fit(start, plan.records)
 

@@ -2,12 +2,12 @@
 
 The physical single-track model (:mod:`vehid.vehicle.single_track`) with the log's speed as a measured
 time-varying parameter (``--schedule``), identified by the grey-box IEKF
-(:mod:`vehid.identification.greybox`). Signals are taken as recorded, times ``--scale``: a physical
+(:mod:`vehid.identification.filtering.greybox`). Signals are taken as recorded, times ``--scale``: a physical
 model has no operating point to remove, and a track log's mean yaw rate (a circuit driven one way round)
 is response, not offset; ``--detrend`` other than the default is refused. Mass and axle distances come
 from ``--mass``, ``--lf``, ``--lr`` or a vehicle file (``--vehicle``; the options override it).
 ``--p`` is the grey-box filter's (the random-walk variance of a scaled parameter over the first
-pass, :class:`~identification.greybox.GreyBoxOptions`), ``--passes`` its largest number of passes.
+pass, :class:`~identification.filtering.greybox.GreyBoxOptions`), ``--passes`` its largest number of passes.
 
 JSON (public contract): ``structure``, ``physical_parameters`` (``cornering_stiffness_front``,
 ``cornering_stiffness_rear``, ``yaw_inertia`` and, with ``--saturation``, ``axle_friction``, each
@@ -30,7 +30,7 @@ import numpy as np
 
 from vehid.identification.data import IOData
 from vehid.identification.errors import InputError
-from vehid.identification.metrics import nrmse_fit
+from vehid.identification.assessment.metrics import nrmse_fit
 
 __all__ = ["register_options", "run", "MIN_LOG_SPEED", "CORRELATION_WARNING", "LINEAR_LIMIT_G", "MAX_SUBSTEPS"]
 
@@ -86,7 +86,7 @@ def _config(args: argparse.Namespace, n_outputs: int):
     if missing:
         raise InputError(f"the single-track structure needs the car's mass and axle distances: give "
                          f"{', '.join(missing)} (or --vehicle FILE)")
-    from vehid.identification.preparation import parse_steering_ratio
+    from vehid.identification.dataio.preparation import parse_steering_ratio
 
     # --steering-ratio is the data options' (a steering-wheel angle on the one input); the model divides by it
     steer = (args.inputs or "").split(",")[0].strip()
@@ -115,8 +115,8 @@ def _refuse_other_options(args: argparse.Namespace) -> None:
 def _read(args: argparse.Namespace) -> tuple[IOData, IOData | None]:
     """The raw record (steer, speed -> outputs), times --scale, and its held-out tail where asked."""
     from vehid.identification.data import check_channels
-    from vehid.identification.preparation import parse_scale
-    from vehid.identification.validation import split_holdout
+    from vehid.identification.dataio.preparation import parse_scale
+    from vehid.identification.assessment.validation import split_holdout
     from vehid.scenarios.data_options import read_from_args
 
     if len(args.data) != 1:
@@ -157,7 +157,7 @@ def _read(args: argparse.Namespace) -> tuple[IOData, IOData | None]:
 
 def run(args: argparse.Namespace) -> tuple[dict, str]:
     """Identify the single-track model and summarise it (module docstring)."""
-    from vehid.identification.greybox import GreyBoxOptions, identify_greybox, simulate_greybox
+    from vehid.identification.filtering.greybox import GreyBoxOptions, identify_greybox, simulate_greybox
     from vehid.scenarios import identify_workflow as workflow
     from vehid.vehicle.single_track import GRAVITY, single_track_handling, single_track_model, single_track_start
 

@@ -28,12 +28,12 @@ import numpy as np
 import scipy.linalg
 from scipy.signal import lfilter
 
-from vehid.identification.ekf import NonlinearModel, ekf_joint
-from vehid.identification.gls import estimate_gls
-from vehid.identification.kalman import kalman_filter
-from vehid.identification.least_squares import arx_regressors, estimate_arx, least_squares
-from vehid.identification.pencil import PencilModel, estimate_pencil
-from vehid.identification.recursive import recursive_least_squares
+from vehid.identification.classical.ekf import NonlinearModel, ekf_joint
+from vehid.identification.classical.gls import estimate_gls
+from vehid.identification.classical.kalman import kalman_filter
+from vehid.identification.classical.least_squares import arx_regressors, estimate_arx, least_squares
+from vehid.identification.classical.pencil import PencilModel, estimate_pencil
+from vehid.identification.classical.recursive import recursive_least_squares
 
 __all__ = [
     "kalman_example",
@@ -211,8 +211,8 @@ def ud_example(*, lam: float = 0.98) -> dict[str, Any]:
     prints F = U' phi, G = D F, beta = lambda + F'G, the gain, U(1), D(1), theta(1), and the plain
     form's P(1) for comparison.
     """
-    from vehid.identification.factorised import ud_covariance, ud_step
-    from vehid.identification.recursive import rls_step
+    from vehid.identification.classical.factorised import ud_covariance, ud_step
+    from vehid.identification.classical.recursive import rls_step
 
     U = np.array([[1.0, 0.5], [0.0, 1.0]])
     d = np.array([4.0, 2.0])

@@ -27,7 +27,7 @@ from vehid.identification import (
     write_value,
 )
 from vehid.identification import archive as archive_module
-from vehid.identification.modal import ModalModel, ModalStructure
+from vehid.identification.models.modal import ModalModel, ModalStructure
 from vehid.vehicle import baseline
 from vehid.vehicle.linearize import Linearization, VehicleMode
 

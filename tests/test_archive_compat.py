@@ -21,15 +21,15 @@ import scipy.signal
 
 from vehid.identification import storage
 from vehid.identification import archive as archive_module
-from vehid.identification.archive import read_archive
-from vehid.identification.archive_safety import write_checksums
+from vehid.identification.dataio.archive import read_archive
+from vehid.identification.dataio.archive_safety import write_checksums
 from vehid.identification import ArxModel, DiscreteModel, IOData, estimate_subspace
-from vehid.identification.discrete import ContinuousModel
-from vehid.identification.pencil import PencilModel
-from vehid.identification.scheduled import schedule_models
-from vehid.identification.statespace import continuous_to_discrete
-from vehid.identification.spline_iekf import SplineIEKFOptions
-from vehid.identification.storage import read_value, write_value
+from vehid.identification.models.discrete import ContinuousModel
+from vehid.identification.classical.pencil import PencilModel
+from vehid.identification.models.scheduled import schedule_models
+from vehid.identification.models.statespace import continuous_to_discrete
+from vehid.identification.filtering.spline_iekf import SplineIEKFOptions
+from vehid.identification.dataio.storage import read_value, write_value
 from vehid.scenarios.cli import main
 from vehid.vehicle.linearize import linearize
 from vehid.vehicle.parameters import AeroParameters, baseline, saloon

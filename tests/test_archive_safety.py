@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from vehid.identification import IOData, read_archive, write_archive, write_record, write_run
-from vehid.identification.archive import open_archive, update_archive
-from vehid.identification.archive_safety import (
+from vehid.identification.dataio.archive import open_archive, update_archive
+from vehid.identification.dataio.archive_safety import (
     REPORT_MARKER,
     ArchiveLockedError,
     OutputTargetError,
@@ -27,7 +27,7 @@ from vehid.identification.archive_safety import (
     writing_report_folder,
 )
 from vehid.identification.errors import ArchiveError
-from vehid.identification.modal import ModalModel, ModalStructure
+from vehid.identification.models.modal import ModalModel, ModalStructure
 from vehid.scenarios.cli import main
 
 CORRUPT_VALUE = 1.6e40  # the value the issue found overwritten on disk, unnoticed
@@ -104,7 +104,7 @@ def test_archives_without_checksums_still_read(tmp_path):
 # ------------------------------------------------------------------ locking
 _HOLDER = """
 import sys, time
-from vehid.identification.archive_safety import archive_lock
+from vehid.identification.dataio.archive_safety import archive_lock
 with archive_lock(sys.argv[1]):
     print("locked", flush=True)
     time.sleep(60)
@@ -223,7 +223,7 @@ def test_a_failed_report_leaves_the_old_folder(tmp_path):
 _KILLED_WRITER = """
 import sys, time
 from pathlib import Path
-from vehid.identification.archive_safety import replacing_directory
+from vehid.identification.dataio.archive_safety import replacing_directory
 with replacing_directory(sys.argv[1]) as partial:
     (partial / "table.md").write_text("new")
     print("half", flush=True)

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from vehid.identification.errors import InputError
-from vehid.identification.greybox import GreyBoxOptions
-from vehid.identification.metrics import percentage_explanation
+from vehid.identification.filtering.greybox import GreyBoxOptions
+from vehid.identification.assessment.metrics import percentage_explanation
 from vehid.vehicle.calibration import (
     DEFAULT_PARAMETERS,
     calibrate_vehicle,

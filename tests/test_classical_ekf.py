@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from vehid.identification import InputError
-from vehid.identification.ekf import NonlinearModel, ekf_joint
-from vehid.identification.kalman import kalman_filter
+from vehid.identification.classical.ekf import NonlinearModel, ekf_joint
+from vehid.identification.classical.kalman import kalman_filter
 from vehid.scenarios.textbook import ekf_bicycle_example
 
 

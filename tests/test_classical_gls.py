@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from vehid.identification import InputError
-from vehid.identification.gls import estimate_gls
-from vehid.identification.least_squares import estimate_arx
+from vehid.identification.classical.gls import estimate_gls
+from vehid.identification.classical.least_squares import estimate_arx
 from vehid.scenarios.textbook import GLS_TRUE, coloured_noise_record
 
 TRUE = np.array(GLS_TRUE)  # y(k) = 0.8 y(k-1) + 0.5 u(k-1) + xi(k): theta = [a1, b1]

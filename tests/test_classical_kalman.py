@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from vehid.identification import InputError
-from vehid.identification.kalman import kalman_filter, rts_smoother
+from vehid.identification.classical.kalman import kalman_filter, rts_smoother
 from vehid.scenarios.textbook import kalman_example
 
 # The appendix's example (A.92): x(k+1) = phi x(k) + w(k), y(k) = x(k) + v(k), phi = 1, P0 = 100,

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from vehid.identification import ExcitationError, InputError
-from vehid.identification.factorised import ud_covariance, ud_factor
-from vehid.identification.least_squares import arx_regressors, estimate_arx, least_squares
-from vehid.identification.recursive import estimate_arx_recursive, recursive_least_squares
+from vehid.identification.classical.factorised import ud_covariance, ud_factor
+from vehid.identification.classical.least_squares import arx_regressors, estimate_arx, least_squares
+from vehid.identification.classical.recursive import estimate_arx_recursive, recursive_least_squares
 
 # Algebraic identities are checked to 1e-10: the regressions here have
 # condition numbers below 1e3, so rounding stays near 1e-13.

@@ -5,8 +5,8 @@ import pytest
 from scipy.signal import lfilter
 
 from vehid.identification import InputError
-from vehid.identification.least_squares import ArxModel, estimate_arx
-from vehid.identification.pencil import PencilModel, estimate_pencil
+from vehid.identification.classical.least_squares import ArxModel, estimate_arx
+from vehid.identification.classical.pencil import PencilModel, estimate_pencil
 
 ALGEBRA = 1e-10  # conversions are a few small factorisations of well-conditioned matrices
 

@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 
 from vehid.identification import ExcitationError, InputError
-from vehid.identification.modal import ModalStructure
-from vehid.identification.statespace import (balanced_truncation, continuous_to_discrete, discrete_to_continuous,
+from vehid.identification.models.modal import ModalStructure
+from vehid.identification.models.statespace import (balanced_truncation, continuous_to_discrete, discrete_to_continuous,
                                              modal_structure_for, to_modal)
-from vehid.identification.subspace import estimate_subspace
+from vehid.identification.classical.subspace import estimate_subspace
 from vehid.scenarios.linear_example import identification_input, true_model
 
 ALGEBRA = 1e-9  # matrix exponentials and eigen-decompositions of 5-state models

@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from vehid.identification.modal import ModalStructure
-from vehid.identification.start import data_start
+from vehid.identification.models.modal import ModalStructure
+from vehid.identification.filtering.start import data_start
 
 
 def _unstable_record():

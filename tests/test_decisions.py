@@ -20,7 +20,7 @@ import pytest
 
 from vehid.identification.data import IOData
 from vehid.identification.decisions import SCHEDULE_MARGIN, ScheduleCandidate, choose_p_and_schedule
-from vehid.identification.modal import ModalModel, ModalStructure
+from vehid.identification.models.modal import ModalModel, ModalStructure
 from vehid.scenarios import identify_workflow as workflow
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -104,7 +104,7 @@ def test_a_decision_within_its_margin_keeps_the_filter():
 
 def test_the_data_start_note_names_no_library_call():
     """A subspace model whose modes do not fit the structure is described in the model's terms."""
-    from vehid.identification.start import _subspace_start
+    from vehid.identification.filtering.start import _subspace_start
 
     # two well separated real poles asked to fit one complex pair: the conversion to the structure fails
     structure = ModalStructure.default(2, 1, 1)

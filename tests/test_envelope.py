@@ -17,7 +17,7 @@ import signal
 import numpy as np
 import pytest
 
-from vehid.identification.archive import read_archive
+from vehid.identification.dataio.archive import read_archive
 from vehid.identification.errors import InputError
 from vehid.scenarios.cli import main
 from vehid.scenarios.envelope import EnvelopeConfig, grip_limit, run_campaign

@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 from matplotlib.figure import Figure
 
-from vehid.identification.archive import read_archive
-from vehid.identification.metrics import percentage_explanation
+from vehid.identification.dataio.archive import read_archive
+from vehid.identification.assessment.metrics import percentage_explanation
 from vehid.scenarios import plots
 from vehid.scenarios.cli import main
 from vehid.scenarios.handling_report import handling_figures

@@ -13,7 +13,7 @@ import scipy.linalg
 
 from vehid.identification.data import IOData
 from vehid.identification.errors import DivergenceError, InputError
-from vehid.identification.greybox import GreyBoxModel, GreyBoxOptions, identify_greybox, simulate_greybox
+from vehid.identification.filtering.greybox import GreyBoxModel, GreyBoxOptions, identify_greybox, simulate_greybox
 
 
 def _scheduled_first_order() -> GreyBoxModel:

@@ -10,15 +10,15 @@ module notes of :mod:`vehid.scenarios.handling_study`.
 import json
 import subprocess
 import sys
-from vehid.identification.spline_modal import SplineModalModel
+from vehid.identification.models.spline_modal import SplineModalModel
 from dataclasses import dataclass
 
 import numpy as np
 import pytest
 
-from vehid.identification.archive import read_archive
+from vehid.identification.dataio.archive import read_archive
 from vehid.identification.errors import DivergenceError, InputError
-from vehid.identification.spline_iekf import SplineIEKFOptions
+from vehid.identification.filtering.spline_iekf import SplineIEKFOptions
 from vehid.scenarios import handling_study
 from vehid.scenarios.cli import main
 from vehid.scenarios.commands.study_handling import text_of
@@ -348,7 +348,7 @@ def test_resume_of_a_truncated_study_redoes_only_what_is_missing(study, tmp_path
     """
     import shutil
 
-    from vehid.identification.archive import update_archive
+    from vehid.identification.dataio.archive import update_archive
 
     summary, out, _ = study
     partial = tmp_path / "partial.h5"

@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from vehid.identification.data import IOData
-from vehid.identification.iekf import IEKFOptions, identify_iekf
-from vehid.identification.modal import ModalModel, ModalStructure
-from vehid.identification.validation import score
+from vehid.identification.filtering.iekf import IEKFOptions, identify_iekf
+from vehid.identification.models.modal import ModalModel, ModalStructure
+from vehid.identification.assessment.validation import score
 
 DT = 0.05  # s
 # A pair at -0.5 +/- 2j rad/s and a real pole at -0.3 rad/s, one input, one output.
@@ -184,8 +184,8 @@ def test_cli_order_range_chooses_on_validation_data(tmp_path):
 
 def test_a_negative_real_discrete_pole_gives_a_labelled_discrete_model():
     """y(k) = -0.6 y(k-1) + u(k-1): no continuous-time equivalent; ARX returns the discrete model, not an error."""
-    from vehid.identification.comparators import identify_with
-    from vehid.identification.discrete import DiscreteModel
+    from vehid.identification.classical.comparators import identify_with
+    from vehid.identification.models.discrete import DiscreteModel
 
     u = np.random.default_rng(11).standard_normal((400, 1))
     y = np.zeros((400, 1))
@@ -318,7 +318,7 @@ def test_the_start_is_returned_only_where_it_beats_every_p_in_cross_validation()
 
 def test_a_returned_start_is_what_the_summary_and_the_archive_describe(tmp_path, capsys, monkeypatch):
     """Where cross-validation prefers the start, the command returns it, says so once, and archives it."""
-    from vehid.identification.archive import read_archive
+    from vehid.identification.dataio.archive import read_archive
     from vehid.scenarios import identify_workflow
     from vehid.scenarios.cli import main
 

@@ -11,8 +11,8 @@ import h5py
 import numpy as np
 import pytest
 
-from vehid.identification.archive import open_archive
-from vehid.identification.iekf_archive import read_iekf_run
+from vehid.identification.dataio.archive import open_archive
+from vehid.identification.filtering.iekf_archive import read_iekf_run
 from vehid.identification.decisions import SCHEDULE_MARGIN
 from vehid.scenarios.identify_workflow import P_GRID, P_TOLERANCE, Q_SCHEDULES
 from vehid.scenarios.linear_example import make_data
@@ -167,7 +167,7 @@ def test_help(command):
 def test_the_archived_decisions_keep_the_Q_schedule(schedule, tmp_path):
     """A resumed run reports the schedule its tuning chose; an archive written before schedules were kept
     reads as the constant Q every run had then."""
-    from vehid.identification.archive import update_archive, write_archive
+    from vehid.identification.dataio.archive import update_archive, write_archive
     from vehid.scenarios.commands.identify import DECISIONS, _archive_decisions, _read_decisions
     from vehid.scenarios.identify_workflow import PTuning
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from vehid.identification import DivergenceError, IEKFOptions, IOData, ModalStructure, identify_iekf
-from vehid.identification.iekf import (BACK_OFF_FACTOR, NOISE_WEIGHT_FLOOR, data_measurement_noise,
+from vehid.identification.filtering.iekf import (BACK_OFF_FACTOR, NOISE_WEIGHT_FLOOR, data_measurement_noise,
                                        output_noise_variance, start_structure)
 from vehid.scenarios import identify_workflow as workflow
 from vehid.scenarios.linear_example import make_data

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from vehid.identification.filter_models import LinearModalFilterModel
-from vehid.identification.iekf_pass import compiled_pass, numpy_reference_pass, pack_covariance, unpack_covariance
-from vehid.identification.modal import ModalStructure
+from vehid.identification.filtering.filter_models import LinearModalFilterModel
+from vehid.identification.filtering.iekf_pass import compiled_pass, numpy_reference_pass, pack_covariance, unpack_covariance
+from vehid.identification.models.modal import ModalStructure
 from vehid.scenarios.linear_example import make_data, true_model
 
 DT = 0.002
@@ -139,7 +139,7 @@ def test_covariance_packing_round_trip():
 def test_a_failed_generated_step_is_an_error_naming_the_sample():
     """The C driver returns 1 + the sample at which the generated step failed; that must never pass as a finished pass."""
     from vehid.identification.errors import DivergenceError
-    from vehid.identification.iekf_pass import _CompiledPass, build_filter_step
+    from vehid.identification.filtering.iekf_pass import _CompiledPass, build_filter_step
 
     structure = ModalStructure.default(2, 1, 1)
     step = build_filter_step(LinearModalFilterModel(structure), 0.01, "exact", "joseph")
@@ -170,7 +170,7 @@ def test_code_generation_leaves_the_working_directory_alone(monkeypatch):
 def test_structured_loops_equal_the_generated_step(covariance, spline):
     # The low-rank prediction and looped Joseph update are the generated step's algebra in another
     # order: 1,000 steps agree to 1e-10 relative (rounding, as against the NumPy reference above).
-    from vehid.identification.spline_modal import SplineModalFilterModel, SplineModalStructure
+    from vehid.identification.models.spline_modal import SplineModalFilterModel, SplineModalStructure
 
     data, _ = make_data(3, outputs=(0, 1, 2), duration=2.2)
     u, y = data.u[:1000, :1], data.y[:1000]

@@ -8,7 +8,7 @@ import pytest
 
 from vehid.identification.errors import InputError
 from vehid.identification.pipeline import DEFAULT_PASSES, Identification, IdentifyOptions
-from vehid.identification.preparation import ReadSettings, read_record
+from vehid.identification.dataio.preparation import ReadSettings, read_record
 from vehid.scenarios.cli import main
 from vehid.scenarios.identify_library import identify
 

@@ -20,7 +20,7 @@ import pytest
 import scipy.io
 
 from vehid.identification import InputError, load_records, prepare, read_record
-from vehid.identification.storage import read_value, write_value
+from vehid.identification.dataio.storage import read_value, write_value
 
 ROOT = Path(__file__).resolve().parent.parent
 RACE_LOG = ROOT / "tests" / "data" / "race_car_250lm" / "20140222_01_01_03_250lm.csv"
@@ -75,8 +75,8 @@ def test_epoch_stamps_with_jitter_load_and_count_from_the_first_sample(tmp_path)
 
 def test_file_time_near_zero_is_kept_as_it_was():
     """Time within a million steps of zero stays the file's own (segments and plots speak file time)."""
-    from vehid.identification.readers import RawRecord
-    from vehid.identification.timebase import uniform_record
+    from vehid.identification.dataio.readers import RawRecord
+    from vehid.identification.dataio.timebase import uniform_record
 
     t = 390.0 + np.arange(100) * 0.01
     raw = RawRecord("log.csv", ("u", "y"), (np.sin(t), np.cos(t)), (t, t), ("-", "-"), "t")

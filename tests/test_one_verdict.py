@@ -16,12 +16,12 @@ import numpy as np
 import pytest
 
 from vehid.identification import read_archive, write_archive, write_record, write_run
-from vehid.identification.archive import open_archive
+from vehid.identification.dataio.archive import open_archive
 from vehid.identification.data import IOData
-from vehid.identification.iekf import IEKFOptions, identify_iekf
-from vehid.identification.iekf_archive import read_iekf_run, write_iekf_run
-from vehid.identification.metrics import nrmse_fit
-from vehid.identification.modal import ModalModel, ModalStructure
+from vehid.identification.filtering.iekf import IEKFOptions, identify_iekf
+from vehid.identification.filtering.iekf_archive import read_iekf_run, write_iekf_run
+from vehid.identification.assessment.metrics import nrmse_fit
+from vehid.identification.models.modal import ModalModel, ModalStructure
 from vehid.scenarios.cli import main
 from vehid.scenarios.report import archive_figures, archive_table
 

@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 
 from vehid.identification import write_archive
-from vehid.identification.archive import read_archive
-from vehid.identification.archive_safety import (REPORT_MARKER, OutputTargetError, check_report_folder,
+from vehid.identification.dataio.archive import read_archive
+from vehid.identification.dataio.archive_safety import (REPORT_MARKER, OutputTargetError, check_report_folder,
                                                 output_identity, writing_report_folder)
 from vehid.scenarios.cli import build_parser, main
 from vehid.scenarios.linear_example import make_data

@@ -61,7 +61,7 @@ def test_generic_top_level_names_are_not_installed(tmp_path):
     for name in SUBPACKAGES:
         done = subprocess.run([sys.executable, "-c", f"import {name}"], cwd=tmp_path, capture_output=True, text=True)
         assert done.returncode != 0 and "ModuleNotFoundError" in done.stderr, name
-    _run([sys.executable, "-c", "import vehid.identification.iekf, vehid.vehicle.model, vehid.scenarios.cli"],
+    _run([sys.executable, "-c", "import vehid.identification.filtering.iekf, vehid.vehicle.model, vehid.scenarios.cli"],
          cwd=tmp_path)
 
 
@@ -91,7 +91,7 @@ def test_regular_install_from_a_fresh_clone_runs_the_command_line(wheel, tmp_pat
     _run([sys.executable, "-m", "pip", "install", "--no-deps", "--quiet", "--target", str(target), str(wheel)],
          cwd=tmp_path)
     env = {**os.environ, "PYTHONPATH": str(target)}
-    done = _run([sys.executable, "-c", "import vehid.identification.modal as m; print(m.__file__)"], cwd=tmp_path,
+    done = _run([sys.executable, "-c", "import vehid.identification.models.modal as m; print(m.__file__)"], cwd=tmp_path,
                 env=env)
     assert Path(done.stdout.strip()).is_relative_to(target)
     assert "linearize" in _run([sys.executable, "-m", "vehid.scenarios.cli", "--help"], cwd=tmp_path, env=env).stdout

@@ -13,8 +13,8 @@ from matplotlib.figure import Figure
 from scipy import signal
 
 from vehid.identification.errors import InputError
-from vehid.identification.metrics import percentage_explanation
-from vehid.identification.modal import ModalModel, ModalStructure
+from vehid.identification.assessment.metrics import percentage_explanation
+from vehid.identification.models.modal import ModalModel, ModalStructure
 from vehid.scenarios import plots
 from vehid.scenarios.report import format_eigenvalues, markdown_table, write_report
 
@@ -176,8 +176,8 @@ def test_frequency_response_matches_scipy():
 
 def test_a_discrete_model_is_plotted_with_its_own_response():
     """At z = exp(j 2 pi f dt): periodic in 1/dt, and near the continuous system's well below it."""
-    from vehid.identification.discrete import DiscreteModel
-    from vehid.identification.statespace import continuous_to_discrete
+    from vehid.identification.models.discrete import DiscreteModel
+    from vehid.identification.models.statespace import continuous_to_discrete
 
     model, dt = _model(n_y=1), 0.05
     discrete = DiscreteModel(*continuous_to_discrete(model.A, model.B, model.C, model.D, dt), dt)

@@ -9,9 +9,9 @@ import pytest
 
 from vehid.identification import (IEKFOptions, InputError, ModalStructure, identify_iekf, identify_with, prepare,
                                   prepare_validation)
-from vehid.identification.archive import open_archive
-from vehid.identification.iekf_archive import read_iekf_run
-from vehid.identification.multirecord import score_records
+from vehid.identification.dataio.archive import open_archive
+from vehid.identification.filtering.iekf_archive import read_iekf_run
+from vehid.identification.assessment.multirecord import score_records
 from vehid.scenarios.data_options import archived_preparation
 from vehid.scenarios.linear_example import make_data
 

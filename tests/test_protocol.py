@@ -41,10 +41,10 @@ from scipy.signal import dfreqresp, freqresp
 from vehid.identification import (ArxModel, DiscreteModel, IdentifiedModel, IOData, ModalModel, ModalStructure, Mode,
                                   SplineModalModel, estimate_subspace, identify_with, percentage_explanation,
                                   read_archive, read_value, write_value)
-from vehid.identification.discrete import ContinuousModel
+from vehid.identification.models.discrete import ContinuousModel
 from vehid.identification.errors import InputError
-from vehid.identification.pencil import PencilModel
-from vehid.identification.statespace import continuous_to_discrete, hold_state_shift
+from vehid.identification.classical.pencil import PencilModel
+from vehid.identification.models.statespace import continuous_to_discrete, hold_state_shift
 
 DT = 0.01
 # The hand-written systems: (pairs sigma, omega), real poles.

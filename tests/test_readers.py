@@ -6,7 +6,7 @@ import pytest
 import scipy.io
 
 from vehid.identification import InputError, read_record
-from vehid.identification.timebase import JITTER_TOLERANCE
+from vehid.identification.dataio.timebase import JITTER_TOLERANCE
 
 
 def _write(path, text):

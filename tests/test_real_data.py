@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 
 from vehid.identification import IOData
-from vehid.identification.metrics import nrmse_fit
+from vehid.identification.assessment.metrics import nrmse_fit
 
 ROOT = Path(__file__).resolve().parent.parent
 

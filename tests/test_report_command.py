@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from vehid.identification import IOData, append_history, read_archive, run_group, write_archive, write_record, write_run
-from vehid.identification.metrics import fit_metrics
-from vehid.identification.modal import ModalModel, ModalStructure
+from vehid.identification.assessment.metrics import fit_metrics
+from vehid.identification.models.modal import ModalModel, ModalStructure
 from vehid.scenarios.cli import main
 from vehid.scenarios.report import archive_figures, archive_table
 

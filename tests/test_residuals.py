@@ -10,14 +10,14 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter
 
-from vehid.identification.archive import open_archive, read_archive, update_archive
-from vehid.identification.comparators import identify_with
+from vehid.identification.dataio.archive import open_archive, read_archive, update_archive
+from vehid.identification.classical.comparators import identify_with
 from vehid.identification.errors import InputError
-from vehid.identification.iekf import IEKFOptions, identify_iekf
-from vehid.identification.iekf_archive import append_iekf_pass, read_iekf_run
-from vehid.identification.modal import ModalStructure
-from vehid.identification.residuals import nis_band, residual_tests
-from vehid.identification.storage import read_value
+from vehid.identification.filtering.iekf import IEKFOptions, identify_iekf
+from vehid.identification.filtering.iekf_archive import append_iekf_pass, read_iekf_run
+from vehid.identification.models.modal import ModalStructure
+from vehid.identification.assessment.residuals import nis_band, residual_tests
+from vehid.identification.dataio.storage import read_value
 from vehid.scenarios import calibration
 from vehid.scenarios.handling_study import HandlingConfig, make_records, with_sensor_noise
 from vehid.scenarios.linear_example import make_data, true_model

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from vehid.identification import DivergenceError, IOData
-from vehid.identification.iekf_pass import pack_covariance
-from vehid.identification.rinse import Assessment, RinseHooks, rinse
+from vehid.identification.filtering.iekf_pass import pack_covariance
+from vehid.identification.filtering.rinse import Assessment, RinseHooks, rinse
 
 DT = 0.01
 

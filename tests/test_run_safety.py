@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from vehid.identification import IEKFOptions, ModalStructure, identify_iekf
-from vehid.identification.archive import open_archive, read_archive
+from vehid.identification.dataio.archive import open_archive, read_archive
 from vehid.identification.errors import ConversionError
-from vehid.identification.iekf_archive import Checkpointer, read_iekf_run
+from vehid.identification.filtering.iekf_archive import Checkpointer, read_iekf_run
 from vehid.scenarios.cli import main
 from vehid.scenarios.commands import identify as identify_command
 from vehid.scenarios.linear_example import make_data
@@ -190,7 +190,7 @@ def test_a_negative_real_discrete_pole_comes_back_as_a_labelled_discrete_model(t
 
 def test_a_model_conversion_failure_on_good_input_exits_1(tmp_path, capsys, monkeypatch):
     """An estimate with no modal form is a failed computation (1), not bad input (it used to be 2)."""
-    import vehid.identification.comparators as comparators
+    import vehid.identification.classical.comparators as comparators
     def no_modal_form(*args, **kwargs):
         raise ConversionError("the arx model has no continuous modal form: a defective eigenvalue")
 

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from vehid.identification.errors import InputError
-from vehid.identification.modal import ModalModel, ModalStructure
-from vehid.identification.scheduled import ScheduledModalModel, canonical_modal_model, schedule_models
+from vehid.identification.models.modal import ModalModel, ModalStructure
+from vehid.identification.models.scheduled import ScheduledModalModel, canonical_modal_model, schedule_models
 
 STRUCTURE = ModalStructure.default(5, 1, 3)  # two pairs (outputs 1, 2) and a real pole (output 3)
 

@@ -21,13 +21,13 @@ import scipy.signal
 
 from vehid.identification.data import IOData
 from vehid.identification.errors import InputError
-from vehid.identification.iekf import IEKFOptions, identify_iekf
-from vehid.identification.metrics import nrmse_fit
-from vehid.identification.modal import ModalStructure
-from vehid.identification.scheduled import OutputMap, ScheduledModalModel
-from vehid.identification.scheduled_iekf import ScheduledIEKFOptions, default_grid, identify_scheduled
-from vehid.identification.storage import read_value, write_value
-from vehid.identification.validation import score, split_holdout
+from vehid.identification.filtering.iekf import IEKFOptions, identify_iekf
+from vehid.identification.assessment.metrics import nrmse_fit
+from vehid.identification.models.modal import ModalStructure
+from vehid.identification.models.scheduled import OutputMap, ScheduledModalModel
+from vehid.identification.filtering.scheduled_iekf import ScheduledIEKFOptions, default_grid, identify_scheduled
+from vehid.identification.dataio.storage import read_value, write_value
+from vehid.identification.assessment.validation import score, split_holdout
 
 MASS, YAW_INERTIA, LF, LR = 1500.0, 2500.0, 1.2, 1.5  # kg, kg m^2, m, m
 CF, CR = 80_000.0, 100_000.0  # N/rad per axle: an understeering car

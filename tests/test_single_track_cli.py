@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from vehid.identification.data import IOData
-from vehid.identification.greybox import simulate_greybox
+from vehid.identification.filtering.greybox import simulate_greybox
 from vehid.scenarios.cli import main
 from vehid.vehicle.manoeuvres import band_limited_noise
 from vehid.vehicle.single_track import SingleTrackConfig, single_track_model

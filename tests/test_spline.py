@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from scipy.interpolate import CubicSpline
 
-import vehid.identification.spline as spline_module
+import vehid.identification.models.spline as spline_module
 from vehid.identification import InputError, SplineBasis, covering_basis, resample
 
 # Uniform sets exercise the symbolic fast path (one width), uneven ones the

@@ -12,10 +12,10 @@ import pytest
 
 from vehid.identification import IEKFOptions, IOData, ModalModel, ModalStructure, identify_iekf
 from vehid.identification.errors import InputError
-from vehid.identification.filter_models import LinearModalFilterModel
-from vehid.identification.iekf_pass import compiled_pass, pack_covariance
-from vehid.identification.spline_iekf import SplineIEKFOptions, identify_spline_iekf
-from vehid.identification.spline_modal import SplineModalFilterModel, SplineModalModel, SplineModalStructure
+from vehid.identification.filtering.filter_models import LinearModalFilterModel
+from vehid.identification.filtering.iekf_pass import compiled_pass, pack_covariance
+from vehid.identification.filtering.spline_iekf import SplineIEKFOptions, identify_spline_iekf
+from vehid.identification.models.spline_modal import SplineModalFilterModel, SplineModalModel, SplineModalStructure
 from vehid.scenarios.linear_example import make_data, true_model
 
 DT = 0.002

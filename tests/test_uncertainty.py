@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vehid.identification.comparators import identify_with
+from vehid.identification.classical.comparators import identify_with
 from vehid.identification.errors import InputError
-from vehid.identification.least_squares import least_squares
-from vehid.identification.modal import ModalModel, ModalStructure
-from vehid.identification.uncertainty import (
+from vehid.identification.classical.least_squares import least_squares
+from vehid.identification.models.modal import ModalModel, ModalStructure
+from vehid.identification.assessment.uncertainty import (
     frequency_response,
     gauss_newton_covariance,
     model_uncertainty,
@@ -141,7 +141,7 @@ def _arx_record(seed: int):
     from scipy.signal import lfilter
 
     from vehid.identification.data import IOData
-    from vehid.identification.statespace import continuous_to_discrete
+    from vehid.identification.models.statespace import continuous_to_discrete
 
     clean_data, clean = calibration.make_record(seed, 0.0, duration=20.0)
     truth = calibration.true_model()
@@ -310,7 +310,7 @@ def test_intervals_are_calibrated_on_the_known_system_lean():
 @pytest.mark.slow  # 1500 sampled models' modes at 7 amplitudes, in Python: 76-80 s on a quiet machine
 def test_spline_bands_match_monte_carlo_sampling():
     """Spline coefficient and first-mode frequency/damping std against 1500 samples of the ordinates (relative error of a sampled std 1.8 %: 6 % is 3.3 of it)."""
-    from vehid.identification.spline_modal import SplineModalModel
+    from vehid.identification.models.spline_modal import SplineModalModel
 
     linear = _model_with_covariance().with_parameter_covariance(None)
     spline = SplineModalModel.from_linear(linear, 5, np.ones(2), np.ones(2), 0.01)

@@ -12,9 +12,9 @@ from scipy.linalg import expm
 from scipy.optimize import brentq
 
 from vehid.identification.errors import InputError
-from vehid.identification.protocol import StateSpaceModel
-from vehid.identification.scheduled import schedule_models
-from vehid.identification.statespace import to_modal
+from vehid.identification.models.protocol import StateSpaceModel
+from vehid.identification.models.scheduled import schedule_models
+from vehid.identification.models.statespace import to_modal
 from vehid.scenarios.cli import main
 from vehid.vehicle import baseline, build_vehicle_model, understeer
 from vehid.vehicle.handling import METRIC_UNITS, HandlingMetrics, handling_metrics, source_handling
@@ -392,7 +392,7 @@ def test_handling_page_draws_bands_where_there_is_a_spread():
 def test_report_gains_a_handling_page_for_a_speed_scheduled_model():
     """An archive whose run holds a speed-scheduled model with a yaw-rate output gets the page, at the
     grid speeds, with the wheelbase its metadata gives; other archives do not."""
-    from vehid.identification.archive import RunRecord
+    from vehid.identification.dataio.archive import RunRecord
     from vehid.scenarios.report import archive_figures, archive_handling
 
     archive = type("ArchiveLike", (), {})()

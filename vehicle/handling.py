@@ -28,7 +28,7 @@ each requested speed. Where the model carries a parameter covariance and can
 be rebuilt from its parameters (``parameters``, ``parameter_covariance`` and
 either ``with_parameters(theta)`` or the modal models' ``from_parameters``),
 each metric's standard deviation follows by the delta method, the Jacobian by
-central differences (:func:`vehid.identification.uncertainty.propagate_by_differences`).
+central differences (:func:`vehid.identification.assessment.uncertainty.propagate_by_differences`).
 
 :func:`source_handling` does the same for the source model: its exact
 linearisation at each speed (heading, which is ignorable, removed), and its
@@ -51,7 +51,7 @@ from scipy.linalg import expm
 from scipy.optimize import brentq
 
 from vehid.identification.errors import ConversionError, InputError
-from vehid.identification.uncertainty import propagate_by_differences
+from vehid.identification.assessment.uncertainty import propagate_by_differences
 
 from .parameters import GRAVITY, VehicleParameters, named_vehicle
 
@@ -404,7 +404,7 @@ def handling_metrics(
     Parameters
     ----------
     model : IdentifiedModel or scheduled model
-        A linear model meeting :class:`vehid.identification.protocol.IdentifiedModel`
+        A linear model meeting :class:`vehid.identification.models.protocol.IdentifiedModel`
         (``to_statespace``), valid at one speed; or a scheduled family offering
         ``model_at(V)``, evaluated at each speed.
     speeds : float or sequence of float

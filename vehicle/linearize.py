@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from vehid.identification.storage import register_codec
+from vehid.identification.dataio.storage import register_codec
 
 from .model import DEFAULT_SPEED, VehicleModel, build_vehicle_model, check_speed
 from .parameters import VehicleParameters, named_vehicle

@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from vehid.identification.errors import InputError
-from vehid.identification.storage import register_codec
+from vehid.identification.dataio.storage import register_codec
 
 __all__ = [
     "ChassisParameters",

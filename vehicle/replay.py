@@ -36,7 +36,7 @@ import numpy as np
 
 from vehid.identification.data import IOData
 from vehid.identification.errors import InputError, SimulationError
-from vehid.identification.metrics import nrmse_fit
+from vehid.identification.assessment.metrics import nrmse_fit
 
 from .linearize import linearization_function
 from .model import build_vehicle_model, speed_limit

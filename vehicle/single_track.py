@@ -37,7 +37,7 @@ import casadi as ca
 import numpy as np
 
 from vehid.identification.errors import InputError
-from vehid.identification.greybox import GreyBoxModel
+from vehid.identification.filtering.greybox import GreyBoxModel
 
 __all__ = [
     "GRAVITY",
@@ -164,7 +164,7 @@ def _axle_forces(config: SingleTrackConfig, alpha_f: Any, alpha_r: Any, theta: A
 
 
 def single_track_model(config: SingleTrackConfig) -> GreyBoxModel:
-    """The single-track model of ``config`` as a :class:`~identification.greybox.GreyBoxModel`.
+    """The single-track model of ``config`` as a :class:`~identification.filtering.greybox.GreyBoxModel`.
 
     Input: the steer channel (road-wheel angle times the steering ratio, rad); scheduling signal:
     the speed ``v_x`` (m/s); parameters ``C_f``, ``C_r`` (N/rad), ``I_z`` (kg m^2) and, with

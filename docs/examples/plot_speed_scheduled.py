@@ -34,7 +34,7 @@ from vehid.identification import (
     prepare_validation,
     read_record,
 )
-from vehid.identification.scheduled_iekf import ScheduledIEKFOptions, identify_scheduled
+from vehid.identification.filtering.scheduled_iekf import ScheduledIEKFOptions, identify_scheduled
 
 # Shortened under VEHID_DOCS_QUICK=1 (the documentation test): fewer passes.
 quick = os.environ.get("VEHID_DOCS_QUICK") == "1"

@@ -89,10 +89,10 @@ def _write_text(path: Path, text: str) -> None:
 def run(args: argparse.Namespace) -> tuple[dict, str]:
     import numpy as np
 
-    from vehid.identification.archive_safety import check_output_target
-    from vehid.identification.greybox import GreyBoxOptions
-    from vehid.identification.metrics import percentage_explanation
-    from vehid.identification.preparation import ReadSettings, read_record
+    from vehid.identification.dataio.archive_safety import check_output_target
+    from vehid.identification.filtering.greybox import GreyBoxOptions
+    from vehid.identification.assessment.metrics import percentage_explanation
+    from vehid.identification.dataio.preparation import ReadSettings, read_record
     from vehid.vehicle import named_vehicle
     from vehid.vehicle.calibration import calibrate_vehicle, calibration_record, vehicle_toml
     from vehid.vehicle.handling import source_handling

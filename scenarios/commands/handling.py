@@ -100,8 +100,8 @@ def parse_scales(text: str | None) -> dict[str, float]:
 
 
 def _model_from_json(path: Path) -> Any:
-    from vehid.identification.modal import ModalModel
-    from vehid.identification.scheduled import ScheduledModalModel
+    from vehid.identification.models.modal import ModalModel
+    from vehid.identification.models.scheduled import ScheduledModalModel
 
     try:
         content = json.loads(path.read_text())
@@ -138,7 +138,7 @@ def _named_by_preparation(model: Any, preparation: Any) -> Any:
 
 
 def _model_from_archive(path: Path, run_name: str | None) -> tuple[Any, dict[str, Any]]:
-    from vehid.identification.archive import read_archive
+    from vehid.identification.dataio.archive import read_archive
     from vehid.scenarios.report import archive_verdict
 
     archive = read_archive(path)

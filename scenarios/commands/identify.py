@@ -61,23 +61,23 @@ from pathlib import Path
 
 import numpy as np
 
-from vehid.identification.archive import (open_archive, read_records, run_group, update_archive, write_archive,
+from vehid.identification.dataio.archive import (open_archive, read_records, run_group, update_archive, write_archive,
                                           write_run)
-from vehid.identification.archive_safety import RUN_ATTRIBUTE, archive_lock, check_output_target
+from vehid.identification.dataio.archive_safety import RUN_ATTRIBUTE, archive_lock, check_output_target
 from vehid.identification.errors import InputError, StrictWarningsError
-from vehid.identification.filter_models import DISCRETIZATIONS
-from vehid.identification.iekf import TIMESCALES, identify_iekf
-from vehid.identification.iekf_archive import Checkpointer, read_iekf_run, write_pass_history
-from vehid.identification.iekf_pass import COVARIANCE_FORMS
+from vehid.identification.filtering.filter_models import DISCRETIZATIONS
+from vehid.identification.filtering.iekf import TIMESCALES, identify_iekf
+from vehid.identification.filtering.iekf_archive import Checkpointer, read_iekf_run, write_pass_history
+from vehid.identification.filtering.iekf_pass import COVARIANCE_FORMS
 from vehid.identification.jsonable import to_jsonable
-from vehid.identification.modal import C_PATTERNS, ModalModel
-from vehid.identification.multirecord import pooled_simulation_fit
+from vehid.identification.models.modal import C_PATTERNS, ModalModel
+from vehid.identification.assessment.multirecord import pooled_simulation_fit
 from vehid.identification.pipeline import DEFAULT_NODES, DEFAULT_NONLINEAR_PASSES, DEFAULT_PASSES
-from vehid.identification.preparation import prepare_validation, read_record
-from vehid.identification.storage import write_value
-from vehid.identification.validation import INITIAL_STATES
+from vehid.identification.dataio.preparation import prepare_validation, read_record
+from vehid.identification.dataio.storage import write_value
+from vehid.identification.assessment.validation import INITIAL_STATES
 from vehid.scenarios import identify_workflow as workflow
-from vehid.scenarios import scheduled_identify
+from vehid.scenarios import schedule_channel, scheduled_identify
 from vehid.scenarios import single_track_identify as single_track
 from vehid.scenarios.data_options import (RECORD_PREFIX, archive_records, archived_preparation, record_series,
                                           check_model_target, records_summary, register_data_options, save_model,
@@ -198,7 +198,7 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     if args.resume and args.out:
         raise InputError("--resume continues in its own archive: give no --out")
     if args.schedule:
-        scheduled_identify.check_options(args)
+        schedule_channel.check_options(args)
     inputs = [*args.data, *args.validation_file, args.resume]
     # the run's identity, kept with the archive: a rerun of the same run may replace it, another may not
     args = argparse.Namespace(**vars(args), output_run=run_digest(args))
@@ -442,7 +442,7 @@ def _run_order_search(args, plan, options) -> tuple[dict, str, object]:
     summary["decision_margins"] = {**summary.get("decision_margins", {}), "order": workflow.order_margin(rows, chosen)}
     archive_path = Path(args.out) if args.out else None
     if archive_path is not None:
-        from vehid.identification.iekf_archive import write_iekf_run
+        from vehid.identification.filtering.iekf_archive import write_iekf_run
 
         with write_archive(archive_path, kind=ARCHIVE_KIND, config=options, seeds=[]) as archive:
             archive.attrs[RUN_ATTRIBUTE] = args.output_run
@@ -453,7 +453,7 @@ def _run_order_search(args, plan, options) -> tuple[dict, str, object]:
 
 
 def _run_comparator(args: argparse.Namespace, plan) -> tuple[dict, str, object]:
-    from vehid.identification.comparators import identify_with
+    from vehid.identification.classical.comparators import identify_with
 
     outcomes = {}
 

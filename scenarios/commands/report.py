@@ -44,8 +44,8 @@ def register(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> tuple[dict, str]:
     # matplotlib and h5py when the command runs, not when its --help is asked for
-    from vehid.identification.archive import read_archive
-    from vehid.identification.archive_safety import check_report_folder, writing_report_folder
+    from vehid.identification.dataio.archive import read_archive
+    from vehid.identification.dataio.archive_safety import check_report_folder, writing_report_folder
     from vehid.scenarios.report import (archive_figures, archive_table, archive_verdict, markdown_table, verdict_lines,
                                         verdict_page, write_report)
 

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from vehid.identification.archive_safety import KIND_ATTRIBUTE, RUN_ATTRIBUTE, check_output_target
+from vehid.identification.dataio.archive_safety import KIND_ATTRIBUTE, RUN_ATTRIBUTE, check_output_target
 from vehid.identification.errors import InputError, SimulationError
 from vehid.scenarios.paths import HDF5_SUFFIXES, OUT_RULE, run_digest
 from vehid.vehicle import MANOEUVRES, make_manoeuvre, named_vehicle, simulate
@@ -226,7 +226,7 @@ def _compare_pairs(text: str | None) -> dict[str, str]:
 
 def run_replay(args: argparse.Namespace) -> tuple[dict, str]:
     """``--replay LOG``: the measured steer and speed through the model, on the log's samples."""
-    from vehid.identification.preparation import ReadSettings, parse_scale, read_record
+    from vehid.identification.dataio.preparation import ReadSettings, parse_scale, read_record
 
     for name in _MANOEUVRE_OPTIONS:
         if getattr(args, name) is not None:

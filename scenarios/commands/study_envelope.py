@@ -22,7 +22,7 @@ from vehid.scenarios.commands.study_handling import add_filter_options
 from vehid.scenarios.handling_study import parse_orders
 from vehid.scenarios.paths import HDF5_SUFFIXES, OUT_RULE, results_path
 from vehid.scenarios.progress import Progress
-from vehid.identification.archive_safety import (OutputTargetError, check_report_folder, output_identity,
+from vehid.identification.dataio.archive_safety import (OutputTargetError, check_report_folder, output_identity,
                                                 writing_report_folder)
 from vehid.identification.errors import InputError
 

@@ -19,12 +19,12 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from vehid.identification.archive import open_archive
-from vehid.identification.archive_safety import (archive_lock, check_output_target, check_report_folder,
+from vehid.identification.dataio.archive import open_archive
+from vehid.identification.dataio.archive_safety import (archive_lock, check_output_target, check_report_folder,
                                                 output_identity, writing_report_folder)
 from vehid.identification.errors import InputError
-from vehid.identification.iekf import IEKFOptions
-from vehid.identification.spline_iekf import SplineIEKFOptions
+from vehid.identification.filtering.iekf import IEKFOptions
+from vehid.identification.filtering.spline_iekf import SplineIEKFOptions
 from vehid.scenarios.handling_resume import StudyCheckpoint, read_progress
 from vehid.scenarios.handling_study import (OUTPUTS, PAPER, HandlingConfig, HandlingResult, archive_path, make_records,
                                             parse_orders, percent_text, planned_passes, run_study, spline_options,

@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import argparse
 
-from vehid.identification.archive_safety import archive_lock, check_output_target
-from vehid.identification.filter_models import DISCRETIZATIONS
-from vehid.identification.iekf_pass import COVARIANCE_FORMS
+from vehid.identification.dataio.archive_safety import archive_lock, check_output_target
+from vehid.identification.filtering.filter_models import DISCRETIZATIONS
+from vehid.identification.filtering.iekf_pass import COVARIANCE_FORMS
 from vehid.scenarios.linear_example import CASES, planned_passes, run_case, write_archive_for
 from vehid.scenarios.paths import HDF5_SUFFIXES, OUT_RULE, results_path, run_digest
 from vehid.scenarios.progress import Progress

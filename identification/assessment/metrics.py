@@ -1,0 +1,114 @@
+"""Fit metrics, per output and averaged over outputs.
+
+``percentage_explanation`` is the paper's R (Best & Bogdanski, eq. 17), ``100 (1 - sum (y - yhat)^2 / sum y^2)``:
+the residual against the signal's raw energy, mean included. ``nrmse_fit`` is MATLAB ``compare``'s
+``100 (1 - ||y - yhat|| / ||y - mean(y)||)``; ``r_squared`` is ``1 - sum (y - yhat)^2 / sum (y - mean(y))^2``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError
+
+__all__ = ["percentage_explanation", "nrmse_fit", "r_squared", "FitMetrics", "fit_metrics"]
+
+
+def _pair(y: np.ndarray, y_hat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    y = np.asarray(y, dtype=float)
+    y_hat = np.asarray(y_hat, dtype=float)
+    if y.ndim == 1:
+        y = y[:, None]
+    if y_hat.ndim == 1:
+        y_hat = y_hat[:, None]
+    if y.shape != y_hat.shape:
+        raise InputError(f"measured outputs have shape {y.shape} but predictions {y_hat.shape}")
+    return y, y_hat
+
+
+def percentage_explanation(y: np.ndarray, y_hat: np.ndarray) -> np.ndarray:
+    """The paper's percentage explanation R per output (eq. 17), in percent.
+
+    Parameters
+    ----------
+    y, y_hat : array_like, shape (N, n_y) or (N,)
+        Measured and modelled outputs.
+
+    Returns
+    -------
+    ndarray, shape (n_y,)
+
+    Examples
+    --------
+    >>> percentage_explanation([1.0, -1.0], [1.0, -0.9]).round(3)
+    array([99.5])
+    """
+    y, y_hat = _pair(y, y_hat)
+    energy = np.sum(y**2, axis=0)
+    if np.any(energy == 0):
+        raise InputError("an output is identically zero: R (eq. 17) is undefined")
+    return (1.0 - np.sum((y - y_hat) ** 2, axis=0) / energy) * 100.0
+
+
+def nrmse_fit(y: np.ndarray, y_hat: np.ndarray) -> np.ndarray:
+    """NRMSE fit in percent per output, as MATLAB's ``compare`` reports it."""
+    y, y_hat = _pair(y, y_hat)
+    spread = np.linalg.norm(y - y.mean(axis=0), axis=0)
+    if np.any(spread == 0):
+        raise InputError("an output is constant: the NRMSE fit is undefined")
+    return (1.0 - np.linalg.norm(y - y_hat, axis=0) / spread) * 100.0
+
+
+def r_squared(y: np.ndarray, y_hat: np.ndarray) -> np.ndarray:
+    """Coefficient of determination per output."""
+    y, y_hat = _pair(y, y_hat)
+    spread = np.sum((y - y.mean(axis=0)) ** 2, axis=0)
+    if np.any(spread == 0):
+        raise InputError("an output is constant: R^2 is undefined")
+    return 1.0 - np.sum((y - y_hat) ** 2, axis=0) / spread
+
+
+@dataclass(frozen=True)
+class FitMetrics:
+    """All three metrics per output, with their means over outputs."""
+
+    percentage_explanation: np.ndarray
+    nrmse_fit: np.ndarray
+    r_squared: np.ndarray
+
+    @property
+    def mean_percentage_explanation(self) -> float:
+        """Mean R over outputs, percent (the handling study's figure)."""
+        return float(np.mean(self.percentage_explanation))
+
+    @property
+    def mean_nrmse_fit(self) -> float:
+        """Mean NRMSE fit over outputs, percent."""
+        return float(np.mean(self.nrmse_fit))
+
+    @property
+    def mean_r_squared(self) -> float:
+        """Mean R^2 over outputs."""
+        return float(np.mean(self.r_squared))
+
+    def as_dict(self) -> dict[str, object]:
+        """JSON-ready form."""
+        return {
+            "percentage_explanation": self.percentage_explanation.tolist(),
+            "nrmse_fit": self.nrmse_fit.tolist(),
+            "r_squared": self.r_squared.tolist(),
+            "mean_percentage_explanation": self.mean_percentage_explanation,
+            "mean_nrmse_fit": self.mean_nrmse_fit,
+            "mean_r_squared": self.mean_r_squared,
+        }
+
+
+def fit_metrics(y: np.ndarray, y_hat: np.ndarray) -> FitMetrics:
+    """Compute R (eq. 17), NRMSE fit and R^2 per output."""
+    return FitMetrics(
+        percentage_explanation=percentage_explanation(y, y_hat),
+        nrmse_fit=nrmse_fit(y, y_hat),
+        r_squared=r_squared(y, y_hat),
+    )

@@ -1,0 +1,1 @@
+"""The classical estimators of the textbook appendix, and comparators: least squares, recursive least squares, GLS, the Kalman filter, joint EKF, the singular pencil, square-root and UDU' forms, subspace methods."""

@@ -1,0 +1,688 @@
+"""Grey-box identification: the constant parameters of any continuous-time CasADi model, estimated by the IEKF.
+
+The model is ``dx/dt = f(x, u, theta, s)``, ``y = h(x, u, theta, s)`` (:class:`GreyBoxModel`): ``theta``
+are unknown constants, ``s`` measured time-varying parameters (a scheduling signal) that enter like
+inputs. As in the modal IEKF (Best & Bogdanski 2017, eq. 7-14) the parameters join the states in the
+filter's state vector with zero dynamics, the Jacobians are CasADi's exact ones, the whole pass runs in
+compiled code (:mod:`vehid.identification.filtering.iekf_pass`) and the record is rinsed through the filter pass
+after pass (:mod:`vehid.identification.filtering.rinse`): each pass starts the true states at zero and carries the
+parameters and ``P`` on.
+
+Choices, each stated where it is made:
+
+* Parameters are filtered in scaled form: ``phi = log(theta / theta_0)`` where the model declares a
+  parameter positive, ``phi = theta / |theta_0|`` otherwise (``theta_0`` the start). ``phi`` is of order
+  one, so ``P0 = prior_std^2 I`` and ``Q = p I`` mean the same for every parameter: relative uncertainty.
+* ``Q`` is stated per pass: the random-walk variance a parameter may gather over one pass over all
+  records is ``p`` (``q = p / duration``), shrinking by ``p_decay`` per pass down to
+  ``P_DECAY_FLOOR`` of ``p``, as the modal IEKF's invariant settings do: the early passes move the
+  parameters from the start, the late ones average over the whole record.
+* Discretisation: a classical Runge-Kutta step (``rk4``, default) with the input and the scheduling
+  signal linear between samples (the first-order hold of the modal filter's ``exact`` form), in
+  ``substeps`` steps per sample; ``euler`` is the paper's one-step form.
+* ``R`` from the data where not given: ``"residual"`` (default) takes each output's residual variance
+  of the frozen model's simulation, of the start model for the first pass and of each pass's model
+  after it (the spline filter's rule); ``"data"`` takes each output's white-noise variance from its
+  differences (:func:`~identification.filtering.iekf.output_noise_variance`), as the modal filter's
+  ``measurement_noise="data"``. Both are floored at :data:`~identification.filtering.iekf.NOISE_FLOOR` of the
+  output's power. On a record the model fits to its noise the two agree; where the model cannot
+  follow the record (model error), the residual rule counts that error as noise, so the filter
+  does not chase it and the standard deviations include it, while the difference rule, seeing a
+  smooth record, takes a tiny ``R`` and lets the parameters run after the error.
+* Standard deviations. Carried over many passes, ``P`` counts the record once per pass and ends far
+  too small. After the rinse one more pass runs from the estimate with ``P0`` and no ``Q``: its ``P``
+  is the linearised covariance of one pass's information (with the prior), scaled by the mean
+  normalised innovation squared per output where that exceeds one (innovations larger than ``R``
+  says: model error or coloured noise). The parameters are not moved by that pass.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Sequence
+
+import casadi as ca
+import numpy as np
+
+from ..compiled import CompiledRecursion
+from ..data import IOData, as_records, check_channels
+from ..errors import DivergenceError, InputError
+from .iekf import NOISE_FLOOR, P_DECAY_FLOOR, output_noise_variance
+from .iekf_pass import compiled_pass, pack_covariance, unpack_covariance
+from ..assessment.metrics import nrmse_fit, percentage_explanation
+from .rinse import Assessment, PassHistory, PassRecord, RinseHooks, rinse
+
+__all__ = [
+    "GREYBOX_DISCRETIZATIONS",
+    "GreyBoxModel",
+    "GreyBoxOptions",
+    "GreyBoxResult",
+    "identify_greybox",
+    "simulate_greybox",
+]
+
+GREYBOX_DISCRETIZATIONS = ("rk4", "euler")
+MEASUREMENT_NOISE_RULES = ("data", "residual")
+
+# the filter step's name of each discretisation (the compiled pass checks it against the modal forms'):
+# the transition itself is this module's, whatever the label
+_FILTER_LABEL = {"rk4": "exact", "euler": "euler"}
+
+# the covariance pass's prior variance, at most this multiple of the carried one (covariance_pass): with some 30
+# passes counted the prior is still some 300 times what one pass determines, and moves the result by < 0.5 %
+PRIOR_OVER_CARRIED = 1e4
+
+# a simulation beyond this multiple of the largest measured output has blown up: the pass is refused
+_BLOW_UP = 1e6
+
+
+def _as_sx_function(function: ca.Function, name: str, n_in: int) -> ca.Function:
+    """An SX function of ``n_in`` inputs (an MX function is expanded), so that it can be called on SX symbols."""
+    if not isinstance(function, ca.Function):
+        raise InputError(f"the model's {name} must be a casadi.Function")
+    if function.n_in() != n_in:
+        raise InputError(f"the model's {name} takes {function.n_in()} inputs; (x, u, theta, s) are {n_in}")
+    return function.expand() if function.is_a("MXFunction") else function
+
+
+@dataclass(frozen=True, eq=False)
+class GreyBoxModel:
+    """A continuous-time model with named constant parameters, as the grey-box IEKF takes it.
+
+    Parameters
+    ----------
+    dynamics : casadi.Function
+        ``(x, u, theta, s) -> dx/dt``, column vectors of sizes ``n_x, n_u, n_theta, n_s``.
+    output : casadi.Function
+        ``(x, u, theta, s) -> y`` (``n_y``).
+    parameter_names, parameter_units : sequence of str
+        One per parameter.
+    positive : sequence of bool
+        Parameters that are positive by nature (estimated as logarithms, so they stay positive).
+    state_names, input_names, schedule_names, output_names : sequence of str
+    description : str
+        What the model is (for reports); its text enters the cache key.
+    parameter_scale : sequence of float
+        The typical size of each parameter (for instance a sensor offset's), which sets its scale
+        where the start is zero; empty: every start must be non-zero and sets the scale itself.
+    """
+
+    dynamics: ca.Function
+    output: ca.Function
+    parameter_names: tuple[str, ...]
+    parameter_units: tuple[str, ...]
+    positive: tuple[bool, ...]
+    state_names: tuple[str, ...]
+    input_names: tuple[str, ...]
+    schedule_names: tuple[str, ...] = ()
+    output_names: tuple[str, ...] = ()
+    description: str = ""
+    parameter_scale: tuple[float, ...] = ()
+
+    def __post_init__(self) -> None:
+        for name in ("parameter_names", "parameter_units", "positive", "state_names", "input_names",
+                     "schedule_names", "output_names", "parameter_scale"):
+            object.__setattr__(self, name, tuple(getattr(self, name)))
+        object.__setattr__(self, "dynamics", _as_sx_function(self.dynamics, "dynamics", 4))
+        object.__setattr__(self, "output", _as_sx_function(self.output, "output", 4))
+        sizes = (self.n_x, self.n_u, self.n_theta, self.n_s)
+        for function, label, n_out in ((self.dynamics, "dynamics", self.n_x), (self.output, "output", None)):
+            for i, (size, what) in enumerate(zip(sizes, ("states", "inputs", "parameters", "scheduling signals"))):
+                if function.size1_in(i) != size or function.size2_in(i) not in (1, 0 if size == 0 else 1):
+                    raise InputError(f"the model's {label} takes {function.size1_in(i)} {what}; "
+                                     f"the names give {size}")
+            if n_out is not None and function.size1_out(0) != n_out:
+                raise InputError(f"the model's dynamics return {function.size1_out(0)} values for {n_out} states")
+        if self.output_names and len(self.output_names) != self.output.size1_out(0):
+            raise InputError(f"the model's output has {self.output.size1_out(0)} values; "
+                             f"{len(self.output_names)} output names were given")
+        if not (len(self.parameter_units) == len(self.positive) == self.n_theta):
+            raise InputError("give one unit and one positivity flag per parameter")
+        if self.parameter_scale and (len(self.parameter_scale) != self.n_theta or not all(
+                math.isfinite(v) and v > 0 for v in self.parameter_scale)):
+            raise InputError("parameter_scale needs one positive size per parameter")
+
+    @property
+    def n_x(self) -> int:
+        return len(self.state_names)
+
+    @property
+    def n_u(self) -> int:
+        return len(self.input_names)
+
+    @property
+    def n_s(self) -> int:
+        return len(self.schedule_names)
+
+    @property
+    def n_theta(self) -> int:
+        return len(self.parameter_names)
+
+    @property
+    def n_y(self) -> int:
+        return int(self.output.size1_out(0))
+
+    def cache_key(self) -> str:
+        """Text naming the model exactly: its serialised functions, names and flags."""
+        digest = hashlib.sha256()
+        for part in (self.dynamics.serialize(), self.output.serialize(), repr(self.parameter_names),
+                     repr(self.positive), repr(self.state_names), repr(self.input_names),
+                     repr(self.schedule_names), self.description, repr(self.parameter_scale)):
+            digest.update(part.encode())
+            digest.update(b"\0")
+        return digest.hexdigest()
+
+    def check_parameters(self, theta: Any) -> np.ndarray:
+        """``theta`` as a float vector of the model's size; InputError where a positive parameter is not."""
+        theta = np.asarray(theta, dtype=float).ravel()
+        if theta.size != self.n_theta:
+            raise InputError(f"the model has {self.n_theta} parameters ({', '.join(self.parameter_names)}); "
+                             f"got {theta.size} values")
+        if not np.all(np.isfinite(theta)):
+            raise InputError("a parameter value is not finite")
+        bad = [name for name, value, positive in zip(self.parameter_names, theta, self.positive)
+               if positive and value <= 0]
+        if bad:
+            raise InputError(f"parameter {bad[0]!r} must be positive")
+        return theta
+
+
+def _transition(model: GreyBoxModel, x: Any, u0: Any, u1: Any, theta: Any, dt: float, discretization: str,
+                substeps: int) -> Any:
+    """The state after one sample (SX): RK4 with inputs and scheduling signals linear over the sample, or Euler."""
+    n_u = model.n_u
+
+    def f(state: Any, v: Any) -> Any:
+        return model.dynamics(state, v[:n_u], theta, v[n_u:])
+
+    if discretization == "euler":
+        return x + dt * f(x, u0)
+    h = dt / substeps
+    for i in range(substeps):
+        begin, middle, end = (u0 + (u1 - u0) * (i + a) / substeps for a in (0.0, 0.5, 1.0))
+        k1 = f(x, begin)
+        k2 = f(x + 0.5 * h * k1, middle)
+        k3 = f(x + 0.5 * h * k2, middle)
+        k4 = f(x + h * k3, end)
+        x = x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+    return x
+
+
+class _GreyBoxFilterModel:
+    """The grey-box model as the compiled IEKF pass takes it (:class:`~identification.filtering.filter_models.FilterModel`).
+
+    Filter parameters are the scaled ``phi`` (module docstring); the constants are each parameter's
+    scale ``theta_0`` and each output's reciprocal scale, so that a new record or start needs no new code.
+    """
+
+    def __init__(self, model: GreyBoxModel, discretization: str, substeps: int):
+        self.model = model
+        self.discretization = discretization
+        self.substeps = substeps
+
+    n_constants = property(lambda self: self.model.n_theta + self.model.n_y)
+    n_x = property(lambda self: self.model.n_x)
+    n_theta = property(lambda self: self.model.n_theta)
+    n_u = property(lambda self: self.model.n_u + self.model.n_s)
+    n_y = property(lambda self: self.model.n_y)
+
+    def physical(self, phi: Any, constants: Any) -> Any:
+        """``theta`` from ``phi`` (SX): ``theta_0 exp(phi)`` for positive parameters, ``theta_0 phi`` else."""
+        scale = constants[: self.model.n_theta]
+        return ca.vertcat(*[scale[i] * (ca.exp(phi[i]) if positive else phi[i])
+                            for i, positive in enumerate(self.model.positive)])
+
+    def transition(self, x, phi, u0, u1, dt, discretization, constants):
+        return _transition(self.model, x, u0, u1, self.physical(phi, constants), dt, self.discretization,
+                           self.substeps)
+
+    def output(self, x, phi, u, constants):
+        n_u = self.model.n_u
+        y = self.model.output(x, u[:n_u], self.physical(phi, constants), u[n_u:])
+        return y * constants[self.model.n_theta:]
+
+    def cache_key(self) -> str:
+        return f"greybox:{self.model.cache_key()}:{self.discretization}:{self.substeps}"
+
+    def __hash__(self) -> int:
+        return hash(self.cache_key())
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, _GreyBoxFilterModel) and other.cache_key() == self.cache_key()
+
+
+@functools.lru_cache(maxsize=16)
+def _simulator(model_key: str, model: GreyBoxModel, dt: float, discretization: str, substeps: int
+               ) -> CompiledRecursion:
+    """The compiled recursion ``(x, u_k, u_k+1, theta) -> (x_next, y_k)`` of a model (inputs then schedule)."""
+    x = ca.SX.sym("x", model.n_x)
+    u0 = ca.SX.sym("u0", model.n_u + model.n_s)
+    u1 = ca.SX.sym("u1", model.n_u + model.n_s)
+    theta = ca.SX.sym("theta", model.n_theta)
+    x_next = _transition(model, x, u0, u1, theta, dt, discretization, substeps)
+    y = model.output(x, u0[: model.n_u], theta, u0[model.n_u:])
+    step = ca.Function(f"greybox_{model_key[:12]}", [x, u0, u1, theta], [x_next, y],
+                       ["x", "u0", "u1", "theta"], ["x_next", "y"], {"cse": True})
+    return CompiledRecursion(step)
+
+
+def _driving(model: GreyBoxModel, record: IOData) -> np.ndarray:
+    """The record's inputs, inputs first and scheduling signals last, as the model takes them (N, n_u + n_s)."""
+    if record.n_u != model.n_u + model.n_s:
+        raise InputError(f"the model takes {model.n_u} input(s) and {model.n_s} scheduling signal(s) "
+                         f"({', '.join(model.input_names + model.schedule_names)}); the record has {record.n_u} inputs")
+    if record.n_y != model.n_y:
+        raise InputError(f"the model has {model.n_y} outputs; the record has {record.n_y}")
+    return record.u
+
+
+def simulate_greybox(model: GreyBoxModel, theta: Any, record: IOData, *, x0: Any = None, discretization: str = "rk4",
+                     substeps: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """Simulate the model with parameters ``theta`` over a record's inputs and scheduling signals.
+
+    Parameters
+    ----------
+    model : GreyBoxModel
+    theta : array_like (n_theta,)
+    record : IOData
+        ``u`` holds the inputs, then the scheduling signals (``n_u + n_s`` columns); ``y`` sets the size only.
+    x0 : array_like, optional
+        Initial state (default zero).
+    discretization : {"rk4", "euler"}
+    substeps : int
+
+    Returns
+    -------
+    y : ndarray (N, n_y)
+        Outputs at the sample times.
+    x : ndarray (N, n_x)
+        States at the sample times.
+    """
+    _check_discretization(discretization, substeps)
+    theta = model.check_parameters(theta)
+    u = _driving(model, record)
+    simulator = _simulator(model.cache_key(), model, float(record.dt), discretization, int(substeps))
+    x0 = np.zeros(model.n_x) if x0 is None else np.asarray(x0, dtype=float).ravel()
+    with np.errstate(all="ignore"):
+        return simulator(x0, u, theta)
+
+
+def _check_discretization(discretization: str, substeps: int) -> None:
+    if discretization not in GREYBOX_DISCRETIZATIONS:
+        raise InputError(f"unknown discretization {discretization!r}; use one of {', '.join(GREYBOX_DISCRETIZATIONS)}")
+    if isinstance(substeps, bool) or int(substeps) != substeps or substeps < 1:
+        raise InputError(f"substeps must be a whole number >= 1; got {substeps!r}")
+
+
+@dataclass(frozen=True)
+class GreyBoxOptions:
+    """Settings of a grey-box identification (module docstring).
+
+    Parameters
+    ----------
+    p : float
+        Random-walk variance of a scaled parameter over one pass (first pass). The default lets a
+        parameter drift by 1 % over the record: enough to leave a start 30 % off within a few passes
+        (``P0`` does most of that), small enough that a model which cannot follow every part of a
+        record (one lacking a mode the record's fastest part excites) is not dragged by its last
+        seconds into an unstable one, as 1e-2 was (measured: a two-state model of a sine sweep whose
+        last seconds excite modes the model lacks).
+    p_decay : float
+        Factor on ``Q`` from one pass to the next, in (0, 1]; never below ``P_DECAY_FLOOR`` of ``p``.
+    prior_std : float
+        Standard deviation of the scaled parameters at the start (``P0``): 1 allows a factor e
+        on a positive parameter.
+    passes, min_passes : int
+        Largest number of passes; no early stop before ``min_passes``.
+    parameter_tolerance : float
+        Stop when no parameter changes by more than this fraction of itself (or of its scale, where
+        that is larger) from one pass to the next.
+    discretization : {"rk4", "euler"}
+    substeps : int
+        Runge-Kutta steps per sample.
+    covariance : {"joseph", "paper"}
+        Covariance numerics of the pass (:mod:`vehid.identification.filtering.iekf_pass`).
+    measurement_noise : "data", "residual", float or sequence of float
+        ``R`` (diagonal, the outputs' units squared) or the rule taking it from the data.
+    initial_state_std : sequence of float, optional
+        Where records do not start at rest: the standard deviation of each state at a record's
+        start. The state rows of ``P`` are set to it at the start of every record (uncorrelated with
+        the parameters), so the filter estimates the start. Default: records start at rest.
+    """
+
+    p: float = 1e-4
+    p_decay: float = 0.5
+    prior_std: float = 1.0
+    passes: int = 30
+    min_passes: int = 4
+    parameter_tolerance: float = 1e-4
+    discretization: str = "rk4"
+    substeps: int = 1
+    covariance: str = "joseph"
+    measurement_noise: Any = "residual"
+    initial_state_std: tuple[float, ...] | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("p", "prior_std", "parameter_tolerance"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise InputError(f"{name} must be a positive number; got {value!r}")
+        if not (isinstance(self.p_decay, (int, float)) and 0 < self.p_decay <= 1):
+            raise InputError(f"p_decay must be in (0, 1]; got {self.p_decay!r}")
+        for name in ("passes", "min_passes"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or int(value) != value or value < 1:
+                raise InputError(f"{name} must be a whole number >= 1; got {value!r}")
+        _check_discretization(self.discretization, self.substeps)
+        if self.covariance not in ("joseph", "paper"):
+            raise InputError(f"unknown covariance form {self.covariance!r}; use joseph or paper")
+        noise = self.measurement_noise
+        if isinstance(noise, str):
+            if noise not in MEASUREMENT_NOISE_RULES:
+                raise InputError(f"measurement_noise must be {' or '.join(MEASUREMENT_NOISE_RULES)} or variances; "
+                                 f"got {noise!r}")
+        else:
+            values = np.asarray(noise, dtype=float).ravel()
+            if values.size == 0 or not np.all(np.isfinite(values)) or np.any(values <= 0):
+                raise InputError(f"measurement_noise variances must be positive numbers; got {noise!r}")
+            object.__setattr__(self, "measurement_noise", tuple(float(v) for v in values))
+        if self.initial_state_std is not None:
+            values = np.asarray(self.initial_state_std, dtype=float).ravel()
+            if not np.all(np.isfinite(values)) or np.any(values < 0):
+                raise InputError("initial_state_std must be non-negative numbers")
+            object.__setattr__(self, "initial_state_std", tuple(float(v) for v in values))
+
+
+@dataclass(frozen=True, eq=False)
+class GreyBoxResult(PassHistory):
+    """A grey-box identification: parameters with their uncertainty, fits and the passes.
+
+    Attributes
+    ----------
+    model : GreyBoxModel
+    parameters : ndarray (n_theta,)
+        The estimate, in the parameters' units.
+    covariance : ndarray (n_theta, n_theta)
+        Their covariance (module docstring, "Standard deviations"); NaN where it could not be had.
+    start : ndarray (n_theta,)
+    fit_percent : ndarray (n_y,)
+        R (eq. 17) per output of the model simulated from rest over the records (pooled).
+    nrmse_fit_percent : ndarray (n_y,)
+        NRMSE fit per output, likewise.
+    measurement_noise : ndarray (n_y,)
+        ``R``'s diagonal of the last pass, in the outputs' units squared.
+    history : tuple of PassRecord
+        One per pass (``parameters`` in their units, ``trace_p`` of the scaled filter).
+    stop_reason : str
+        ``"converged"``, ``"passes"`` or ``"diverged at pass k"`` (on a DivergenceError's ``last_good``).
+    dt, seconds : float
+    options : GreyBoxOptions
+    meta : dict
+        ``covariance_source`` and the normalised innovation squared of the covariance pass.
+    """
+
+    model: GreyBoxModel
+    parameters: np.ndarray
+    covariance: np.ndarray
+    start: np.ndarray
+    fit_percent: np.ndarray
+    nrmse_fit_percent: np.ndarray
+    measurement_noise: np.ndarray
+    history: tuple[PassRecord, ...]
+    stop_reason: str
+    dt: float
+    seconds: float
+    options: GreyBoxOptions
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def std(self) -> np.ndarray:
+        """Standard deviation of each parameter."""
+        return np.sqrt(np.clip(np.diag(self.covariance), 0.0, None))
+
+    @property
+    def correlation(self) -> np.ndarray:
+        """The parameters' correlation matrix."""
+        std = self.std
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return self.covariance / np.outer(std, std)
+
+    @property
+    def trace_p(self) -> np.ndarray:
+        """trace(P) of the scaled filter after each pass."""
+        return np.array([record.trace_p for record in self.history])
+
+    def parameter(self, name: str) -> tuple[float, float]:
+        """``(value, std)`` of a parameter by name."""
+        try:
+            index = self.model.parameter_names.index(name)
+        except ValueError:
+            raise InputError(f"no parameter {name!r}; the model has {', '.join(self.model.parameter_names)}") from None
+        return float(self.parameters[index]), float(self.std[index])
+
+    def simulate(self, record: IOData) -> np.ndarray:
+        """The identified model's outputs (N, n_y) on a record, simulated from rest."""
+        y, _ = simulate_greybox(self.model, self.parameters, record, discretization=self.options.discretization,
+                                substeps=self.options.substeps)
+        return y
+
+
+def _pooled_fits(y_parts: Sequence[np.ndarray], y_hat_parts: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    y, y_hat = np.vstack(y_parts), np.vstack(y_hat_parts)
+    return percentage_explanation(y, y_hat), nrmse_fit(y, y_hat)
+
+
+def identify_greybox(
+    data: IOData | Sequence[IOData],
+    model: GreyBoxModel,
+    start: Any,
+    *,
+    options: GreyBoxOptions | None = None,
+    on_pass: Callable[[PassRecord, GreyBoxResult], None] | None = None,
+) -> GreyBoxResult:
+    """Estimate a grey-box model's parameters with the IEKF (module docstring).
+
+    Parameters
+    ----------
+    data : IOData or sequence of IOData
+        Uniformly sampled records of one ``dt``: ``u`` (N, n_u + n_s) the model's inputs then its
+        scheduling signals, ``y`` (N, n_y) its outputs, in the model's units. Each record starts
+        from rest unless ``options.initial_state_std`` says otherwise.
+    model : GreyBoxModel
+    start : array_like (n_theta,)
+        Start values of the parameters (non-zero; positive for the positive ones).
+    options : GreyBoxOptions, optional
+    on_pass : callable, optional
+        Called after every pass with its record and the result so far.
+
+    Returns
+    -------
+    GreyBoxResult
+
+    Raises
+    ------
+    InputError
+        Records that do not fit the model, a start of zero, bad options.
+    DivergenceError
+        Non-finite values, a covariance no longer positive definite or a simulation that blows up;
+        its ``last_good`` holds the result up to the last good pass (None before the first).
+    """
+    options = options or GreyBoxOptions()
+    started = time.perf_counter()
+    records = as_records(data)
+    dt = float(records[0].dt)
+    for record in records:
+        _driving(model, record)
+        if not math.isclose(record.dt, dt, rel_tol=1e-9):
+            raise InputError(f"every record must have one sample interval; got {dt} and {record.dt} s")
+    samples = sum(record.n_samples for record in records)
+    if samples <= 2 * model.n_theta:
+        raise InputError(f"{samples} samples cannot identify {model.n_theta} parameters")
+    check_channels(tuple(IOData(t=r.t, u=r.u[:, : model.n_u], y=r.y, input_names=model.input_names,
+                                output_names=r.output_names) for r in records), detrend="none")
+    start = model.check_parameters(start)
+    typical = np.asarray(model.parameter_scale, dtype=float) if model.parameter_scale else np.zeros(model.n_theta)
+    scale = np.where(start != 0, np.abs(start), typical)
+    if np.any(scale == 0):
+        raise InputError(f"parameter {model.parameter_names[int(np.flatnonzero(scale == 0)[0])]!r} starts at zero: "
+                         "give a start of its expected size (it sets the parameter's scale)")
+    n, n_theta = model.n_x, model.n_theta
+    m = n + n_theta
+    if options.initial_state_std is not None and len(options.initial_state_std) != n:
+        raise InputError(f"initial_state_std needs {n} values (one per state); got {len(options.initial_state_std)}")
+
+    positive = np.array(model.positive, dtype=bool)
+
+    def physical(phi: np.ndarray) -> np.ndarray:
+        with np.errstate(over="ignore"):  # a runaway parameter becomes inf, which the simulation check names
+            return np.where(positive, scale * np.exp(np.where(positive, phi, 0.0)), scale * phi)
+
+    def jacobian(theta: np.ndarray) -> np.ndarray:
+        """d theta / d phi (diagonal)."""
+        return np.diag(np.where(positive, theta, scale))
+
+    phi_start = np.where(positive, 0.0, start / scale)
+    y_all = np.vstack([record.y for record in records])
+    power = np.mean(y_all**2, axis=0)
+    if np.any(power == 0):
+        raise InputError("an output is zero throughout: there is no response to identify")
+    output_scale = np.sqrt(power)
+    constants = np.concatenate([scale, 1.0 / output_scale])
+    drives = [_driving(model, record) for record in records]
+    outputs = [record.y / output_scale for record in records]
+    duration = samples * dt
+
+    filter_model = _GreyBoxFilterModel(model, options.discretization, int(options.substeps))
+    run_pass = compiled_pass(filter_model, dt, _FILTER_LABEL[options.discretization], options.covariance)
+
+    def simulate_all(theta: np.ndarray) -> list[np.ndarray]:
+        y_hat = []
+        for record in records:
+            y, _ = simulate_greybox(model, theta, record, discretization=options.discretization,
+                                    substeps=options.substeps)
+            y_hat.append(y)
+        return y_hat
+
+    def residual_variance(y_hat: list[np.ndarray]) -> np.ndarray:
+        residual = np.vstack([record.y for record in records]) - np.vstack(y_hat)
+        return np.maximum(np.mean(residual**2, axis=0), NOISE_FLOOR * power)
+
+    if isinstance(options.measurement_noise, tuple):
+        if len(options.measurement_noise) not in (1, model.n_y):
+            raise InputError(f"measurement_noise needs 1 or {model.n_y} variances")
+        noise = np.broadcast_to(np.asarray(options.measurement_noise), (model.n_y,)).copy()
+    elif options.measurement_noise == "data":
+        noise = np.maximum(output_noise_variance(records), NOISE_FLOOR * power)
+    else:
+        start_fit = simulate_all(start)
+        if not all(np.all(np.isfinite(y)) for y in start_fit):
+            raise DivergenceError("the start model's simulation is not finite: give other start values")
+        noise = residual_variance(start_fit)
+    R = np.diag(noise / output_scale**2)
+
+    q_first = np.concatenate([np.zeros(n), np.full(n_theta, options.p / duration)])
+    q = q_first.copy()
+
+    def shrink(index: int) -> float:
+        return max(options.p_decay ** (index - 1), P_DECAY_FLOOR) if options.p_decay < 1 else 1.0
+
+    def prepare_pass(index: int) -> None:
+        q[:] = q_first * shrink(index)
+
+    def start_record(state: np.ndarray) -> np.ndarray:
+        """Where records do not start at rest: the states' prior at the record's start (class docstring)."""
+        if options.initial_state_std is None:
+            return state
+        P = unpack_covariance(state[m:], m)
+        P[:n, :] = 0.0
+        P[:, :n] = 0.0
+        P[:n, :n] = np.diag(np.square(options.initial_state_std))
+        state = state.copy()
+        state[m:] = pack_covariance(P)
+        return state
+
+    def run_record(state: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+        return run_pass(start_record(state), drives[k], outputs[k], q, R, constants)
+
+    last_fit: dict[str, np.ndarray] = {}
+
+    def assess(phi: np.ndarray, P: np.ndarray) -> Assessment:
+        nonlocal R
+        theta = physical(phi)
+        if not np.all(np.isfinite(theta)):
+            raise DivergenceError("a parameter ran away to infinity (try a smaller p or a better start)")
+        y_hat = simulate_all(theta)
+        biggest = float(np.max(np.abs(y_all)))
+        if not all(np.all(np.isfinite(y)) and np.max(np.abs(y), initial=0.0) < _BLOW_UP * biggest for y in y_hat):
+            values = ", ".join(f"{name} {value:.4g}" for name, value in zip(model.parameter_names, theta))
+            raise DivergenceError(f"the identified model's simulation blows up ({values}); try a smaller p or a "
+                                  "better start")
+        fit, nrmse = _pooled_fits([record.y for record in records], y_hat)
+        last_fit.update(R=fit, nrmse=nrmse)
+        if options.measurement_noise == "residual":
+            R = np.diag(residual_variance(y_hat) / output_scale**2)
+        return Assessment(theta, fit, fit, phi, P)
+
+    def settled(previous: PassRecord, current: PassRecord) -> bool:
+        # relative to each parameter, or to its scale where it is smaller (an offset near zero)
+        change = np.abs(current.parameters - previous.parameters) / np.maximum(np.abs(current.parameters), scale)
+        return bool(np.max(change) < options.parameter_tolerance)
+
+    def covariance_pass(phi: np.ndarray, carried: np.ndarray) -> tuple[np.ndarray, float]:
+        """The scaled parameters' covariance of one pass from ``phi`` without Q, and its mean NIS per output.
+
+        The prior is ``P0``, but at most :data:`PRIOR_OVER_CARRIED` times the carried variance: far wider
+        than what one pass determines (the carried P counts the record about once per pass), so the result
+        is the data's, while the first samples cannot throw the parameters across the space (a record
+        that does not start at rest would, from the full ``P0``).
+        """
+        prior = np.minimum(options.prior_std**2, PRIOR_OVER_CARRIED * np.clip(np.diag(carried), 0.0, None))
+        P0 = np.diag(np.concatenate([np.zeros(n), prior]))
+        state = np.concatenate([np.zeros(n), phi, pack_covariance(P0)])
+        no_drift = np.zeros(m)
+        nis, count = 0.0, 0
+        with np.errstate(all="ignore"):
+            for k in range(len(records)):
+                state[:n] = 0.0
+                state, innovations = run_pass(start_record(state), drives[k], outputs[k], no_drift, R, constants)
+                if not (np.all(np.isfinite(state)) and np.all(np.isfinite(innovations))):
+                    raise DivergenceError("the covariance pass produced non-finite values")
+                nis += float(np.sum(innovations * np.linalg.solve(R, innovations.T).T))
+                count += innovations.shape[0]
+        return unpack_covariance(state[m:], m)[n:, n:], nis / max(count, 1) / model.n_y
+
+    def result(stop_reason: str, history: tuple[PassRecord, ...], phi: np.ndarray, P: np.ndarray) -> GreyBoxResult:
+        theta = physical(phi)
+        J = jacobian(theta)
+        meta: dict[str, Any] = {}
+        if stop_reason in ("converged", "passes"):
+            try:
+                covariance_phi, nis = covariance_pass(phi, P[n:, n:])
+                inflation = max(nis, 1.0)
+                covariance = J @ covariance_phi @ J.T * inflation
+                meta.update(covariance_source="one pass from P0 without Q", nis_per_output=nis,
+                            covariance_inflation=inflation)
+            except DivergenceError as exc:
+                covariance = np.full((n_theta, n_theta), np.nan)
+                meta.update(covariance_source=f"none ({exc})")
+        else:  # an unfinished run: the carried P (which counts the record once per pass) is all there is
+            covariance = J @ P[n:, n:] @ J.T
+            meta.update(covariance_source="the filter's carried P (too small: the record counted once per pass)")
+        fit = last_fit.get("R", np.full(model.n_y, np.nan))
+        nrmse = last_fit.get("nrmse", np.full(model.n_y, np.nan))
+        return GreyBoxResult(
+            model=model, parameters=theta, covariance=0.5 * (covariance + covariance.T), start=start.copy(),
+            fit_percent=fit, nrmse_fit_percent=nrmse, measurement_noise=np.diag(R) * output_scale**2,
+            history=history, stop_reason=stop_reason, dt=dt, seconds=time.perf_counter() - started,
+            options=options, meta=meta,
+        )
+
+    hooks = RinseHooks(records, run_record, lambda: R, assess, settled, result, n, label="grey-box pass",
+                       hint="try a smaller p or a better start", prepare_pass=prepare_pass)
+    P_start = np.diag(np.concatenate([np.zeros(n), np.full(n_theta, options.prior_std**2)]))
+    return rinse(hooks, phi_start, P_start, passes=options.passes, min_passes=options.min_passes,
+                 check_covariance=options.covariance != "paper", on_pass=on_pass)

@@ -1,0 +1,301 @@
+"""Start values of the IEKF taken from the data, in units that do not depend on the user's.
+
+Fixed starts in seconds and signal units (the paper's sigma = -1, omega = 1)
+fail on records whose time base or signal scale differ from the paper's. The
+starts here are computed on the normalised problem (signals divided by their
+RMS, time in samples), so relabelling time or rescaling signals gives the
+same start up to rounding.
+
+``data``
+    The best-simulating (R, eq. 17) of the ``band`` start and PO-MOESP
+    models with 2n, 10 and 25 block rows, converted to continuous time for a
+    first-order hold and to the structure's modal form. Where a subspace
+    model does not fit the structure, its eigenvalues are placed on the
+    structure's modes (:func:`place_eigenvalues`) and B and D fitted by least
+    squares (:func:`fit_input_gains`).
+``band``
+    Modes spread log-evenly over the record's band, damping 0.5; B and D by
+    least squares.
+
+A start needs the dynamics, not all of a long record: both are found on its
+first samples only (``_START_BYTES``).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import threading
+from collections import OrderedDict
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError, WorkbenchError
+from ..models.modal import ModalModel, ModalStructure
+
+__all__ = ["DataStart", "data_start", "band_eigenvalues", "place_eigenvalues", "fit_input_gains", "DATA_STARTS"]
+
+DATA_STARTS = ("data", "band")
+
+_BAND_DAMPING = 0.5
+_MAX_RATE = 3.0  # rad/sample: the fastest a discrete model can say (pi) with a margin of rounding
+# The start is found on as many first samples as keep the largest subspace start's block-Hankel matrix
+# (25 block rows) within this many bytes, at least _START_MIN_SAMPLES: a long record's whole Hankel
+# matrix would take gigabytes.
+_START_BYTES = 32e6
+_START_MIN_SAMPLES = 1000
+# data starts remembered (see data_start): a command asks for at most five distinct ones
+_REMEMBER = 8
+_REMEMBERED: OrderedDict[tuple, DataStart] = OrderedDict()
+_REMEMBERED_LOCK = threading.Lock()
+
+
+@dataclass(frozen=True, eq=False)
+class DataStart:
+    """A start model on the normalised problem (time in samples) and how it was found.
+
+    Attributes
+    ----------
+    model : ModalModel
+        Continuous-time in units of samples: eigenvalues in rad/sample,
+        inputs and outputs divided by their RMS.
+    source : str
+        ``"subspace"``, ``"subspace eigenvalues"`` or ``"band"``.
+    note : str
+        Why a fallback was taken (empty when none was).
+    """
+
+    model: ModalModel
+    source: str
+    note: str = ""
+
+
+def band_eigenvalues(structure: ModalStructure, n_samples: int) -> np.ndarray:
+    """One eigenvalue per mode of ``structure`` (rad/sample), spread log-evenly over the record's band.
+
+    From ten periods in the record to a quarter of the Nyquist frequency;
+    pairs get damping 0.5, real poles the same magnitudes, negative.
+    """
+    modes = structure.n_complex_pairs + structure.n_real
+    low = min(2 * np.pi * 10 / max(n_samples, 1), 0.05)
+    high = np.pi / 4
+    rates = np.geomspace(low, high, modes + 2)[1:-1] if modes > 1 else np.array([np.sqrt(low * high)])
+    values = []
+    for k in range(structure.n_complex_pairs):
+        w = rates[k]
+        values.append(complex(-_BAND_DAMPING * w, w * np.sqrt(1 - _BAND_DAMPING**2)))
+    for k in range(structure.n_real):
+        values.append(complex(-rates[structure.n_complex_pairs + k], 0.0))
+    return np.array(values)
+
+
+def place_eigenvalues(values: np.ndarray, structure: ModalStructure, *, stable: bool = True) -> np.ndarray:
+    """Map a model's eigenvalues onto the structure's modes: one per mode, pairs first.
+
+    Complex eigenvalues (one of each conjugate pair) fill the structure's
+    pairs, slowest first; left-over pairs are made from two real poles
+    (their mean as sigma, half their distance, at least a tenth of the mean,
+    as omega); real eigenvalues, then left-over complex ones (by their
+    magnitude), fill the real poles. With ``stable`` every real part is made
+    negative (reflected).
+    """
+    values = np.asarray(values, dtype=complex)
+    upper = [v for v in values if v.imag > 1e-9 * abs(v)]
+    real = sorted((v.real for v in values if abs(v.imag) <= 1e-9 * abs(v)), key=abs)
+    upper.sort(key=abs)
+    pairs: list[complex] = []
+    while len(pairs) < structure.n_complex_pairs and upper:
+        pairs.append(upper.pop(0))
+    while len(pairs) < structure.n_complex_pairs and len(real) >= 2:
+        a, b = real.pop(0), real.pop(0)
+        sigma = 0.5 * (a + b)
+        pairs.append(complex(sigma, max(0.5 * abs(a - b), 0.1 * abs(sigma))))
+    while len(pairs) < structure.n_complex_pairs:  # not enough eigenvalues at all: repeat the slowest, spread
+        base = pairs[-1] if pairs else complex(-0.01, 0.01)
+        pairs.append(complex(base.real, abs(base.imag) * 1.5 + 1e-3))
+    poles = list(real)
+    for v in upper:
+        poles.append(-abs(v) if v.real <= 0 else abs(v))
+    poles = poles[: structure.n_real]
+    while len(poles) < structure.n_real:
+        poles.append(-(abs(poles[-1]) * 1.5 if poles else 0.01))
+    placed = np.array(pairs + [complex(p, 0.0) for p in poles])
+    if stable:
+        bad = placed.real >= 0
+        placed[bad] = -np.maximum(np.abs(placed[bad].real), 1e-4 * np.abs(placed[bad])) + 1j * placed[bad].imag
+    return placed
+
+
+def _modal_matrix(structure: ModalStructure, modes: np.ndarray) -> np.ndarray:
+    theta = np.zeros(structure.n_parameters)
+    for k in range(structure.n_complex_pairs):
+        theta[2 * k], theta[2 * k + 1] = modes[k].real, abs(modes[k].imag)
+    for k in range(structure.n_real):
+        theta[2 * structure.n_complex_pairs + k] = modes[structure.n_complex_pairs + k].real
+    return theta
+
+
+def fit_input_gains(structure: ModalStructure, modes: np.ndarray, u: np.ndarray, y: np.ndarray) -> ModalModel:
+    """The model with these modes (rad/sample) whose B and D fit ``y`` best, the free C entries zero.
+
+    ``y`` is linear in B and D once the modes and C are fixed: one
+    simulation per B entry gives its regressor (time in samples, inputs
+    linear between samples).
+    """
+    theta = _modal_matrix(structure, modes)
+    slices = structure.slices()
+    n, n_u, n_y = structure.n, structure.n_u, structure.n_y
+    columns = []
+    for k in range(n * n_u):
+        trial = theta.copy()
+        trial[slices["B"].start + k] = 1.0
+        with np.errstate(over="ignore", invalid="ignore"):
+            columns.append(ModalModel.from_parameters(structure, trial).simulate_outputs(u, 1.0).ravel())
+    for i in range(n_y):
+        for j in range(n_u):
+            column = np.zeros_like(y)
+            column[:, i] = u[:, j]
+            columns.append(column.ravel())
+    regressors = np.column_stack(columns)
+    if not np.all(np.isfinite(regressors)):
+        return ModalModel.from_parameters(structure, theta)
+    solution = np.linalg.lstsq(regressors, y.ravel(), rcond=None)[0]
+    theta[slices["B"]] = solution[: n * n_u]
+    theta[slices["D"]] = solution[n * n_u:]
+    return ModalModel.from_parameters(structure, theta)
+
+
+def _simulation_fit(model: ModalModel, u: np.ndarray, y: np.ndarray, *, estimate_state: bool = False) -> float:
+    """Mean R (eq. 17) of the model simulated (time in samples); -inf where it overflows.
+
+    From rest, or with ``estimate_state`` from the least-squares initial state: an unstable model
+    (allowed for an open-loop unstable plant) simulated from rest grows without bound even when
+    its dynamics are right, and would lose to any stable candidate.
+    """
+    from ..data import IOData
+    from ..assessment.metrics import percentage_explanation
+    from ..assessment.validation import estimate_initial_state
+
+    with np.errstate(all="ignore"):
+        x0 = None
+        if estimate_state:
+            x0 = estimate_initial_state(model, IOData(t=np.arange(u.shape[0], dtype=float), u=u, y=y))
+        simulated = model.simulate_outputs(u, 1.0, x0=x0)
+        if not np.all(np.isfinite(simulated)):
+            return -np.inf
+        return float(np.mean(percentage_explanation(y, simulated)))
+
+
+def _subspace_start(u: np.ndarray, y: np.ndarray, structure: ModalStructure, stable: bool,
+                    block_rows: int | None = None, free_modes: bool = False) -> DataStart:
+    from ..models.statespace import discrete_to_continuous, to_modal
+    from ..classical.subspace import estimate_subspace
+
+    fit = estimate_subspace((u, y), order=structure.n, block_rows=block_rows)
+    discrete = np.linalg.eigvals(fit.A)
+    magnitude = np.maximum(np.abs(discrete), 1e-12)
+    negative = (np.abs(discrete.imag) <= 1e-9 * magnitude) & (discrete.real < 0)
+    # A negative real discrete pole (a sign flip every sample, mostly noise) has no continuous
+    # counterpart; its decay rate alone is kept, as a real pole.
+    continuous = np.where(negative, np.log(magnitude).astype(complex), np.log(discrete.astype(complex)))
+    if free_modes:
+        pairs = int(np.sum(continuous.imag > 1e-9 * np.abs(continuous)))
+        structure = ModalStructure.with_modes(pairs, structure.n - 2 * pairs, structure.n_u, structure.n_y)
+    note = ""
+    try:
+        A, B, C, D = discrete_to_continuous(fit.A, fit.B, fit.C, fit.D, 1.0, hold="foh")
+        model = to_modal(A, B, C, D, structure, meta={"start": "subspace"})
+        if stable and not model.is_stable():
+            note = "the subspace model is unstable"
+        elif not np.all(np.abs(model.mode_eigenvalues()) < _MAX_RATE * 10):
+            note = "the subspace model has modes beyond the sample rate"
+        else:
+            return DataStart(model, "subspace")
+    except InputError:
+        # the conversion's own message advises a library call; the start's note speaks of the model
+        pairs = int(np.sum(np.abs(continuous.imag) > 1e-9 * np.abs(continuous))) // 2
+        counts = (f" ({pairs} complex pairs and {structure.n - 2 * pairs} real poles where the structure has "
+                  f"{structure.n_complex_pairs} and {structure.n_real})"
+                  if (pairs, structure.n - 2 * pairs) != (structure.n_complex_pairs, structure.n_real) else "")
+        note = f"the subspace model does not fit the structure's modes{counts}"
+    modes = place_eigenvalues(continuous, structure, stable=stable)
+    model = fit_input_gains(structure, modes, u, y)
+    return DataStart(model, "subspace eigenvalues", note)
+
+
+def data_start(u: np.ndarray, y: np.ndarray, structure: ModalStructure, *, method: str = "data",
+               stable: bool = True, free_modes: bool = False) -> DataStart:
+    """A start model for ``structure`` from normalised inputs ``u`` (N, n_u) and outputs ``y`` (N, n_y).
+
+    Parameters
+    ----------
+    u, y : ndarray
+        Inputs and outputs, each divided by its RMS; time is counted in samples.
+    structure : ModalStructure
+    method : {"data", "band"}
+        See the module docstring.
+    stable : bool
+        Reflect unstable start modes into the left half-plane.
+    free_modes : bool
+        Let each subspace candidate keep its own numbers of complex pairs and
+        real poles (same order, modes tied to outputs as
+        :meth:`ModalStructure.with_modes`); the returned model's structure is
+        the best candidate's.
+
+    Returns
+    -------
+    DataStart
+
+    Notes
+    -----
+    The answers to the last eight distinct problems (the windowed record's
+    digest, the structure and the options) are kept and returned again,
+    the same immutable object: one `vehid identify` asks for each
+    cross-validation fold's start once per candidate p.
+    """
+    if method not in DATA_STARTS:
+        raise InputError(f"unknown data start {method!r}; use one of {', '.join(DATA_STARTS)}")
+    largest_rows = max(2 * structure.n, structure.n + 1, 25)
+    window = max(int(_START_BYTES / (8 * 2 * largest_rows * (u.shape[1] + y.shape[1]))), _START_MIN_SAMPLES)
+    u, y = np.asarray(u[:window], dtype=float), np.asarray(y[:window], dtype=float)
+    # a pure function of its arguments, asked for the same record several times by one command (each p
+    # of a cross-validation starts from its fold's start): the last few answers are kept, keyed by a
+    # digest of the data, and the immutable result is shared
+    digest = hashlib.blake2b(digest_size=16)
+    for array in (u, y):
+        digest.update(repr(array.shape).encode())
+        digest.update(np.ascontiguousarray(array).tobytes())
+    key = (digest.hexdigest(), structure, method, bool(stable), bool(free_modes))
+    with _REMEMBERED_LOCK:
+        if key in _REMEMBERED:
+            _REMEMBERED.move_to_end(key)
+            return _REMEMBERED[key]
+    found = _found_start(u, y, structure, method, stable, free_modes)
+    with _REMEMBERED_LOCK:
+        _REMEMBERED[key] = found
+        while len(_REMEMBERED) > _REMEMBER:
+            _REMEMBERED.popitem(last=False)
+    return found
+
+
+def _found_start(u: np.ndarray, y: np.ndarray, structure: ModalStructure, method: str, stable: bool,
+                 free_modes: bool) -> DataStart:
+    """:func:`data_start` on the window of the record it uses."""
+    modes = band_eigenvalues(structure, u.shape[0])
+    model = fit_input_gains(structure, modes, u, y)
+    band = DataStart(model, "band")
+    if method == "band":
+        return band
+    # Subspace models with a few block-row counts (more rows average noise better, fewer suit short
+    # records) and the band start: the one that simulates the record best.
+    candidates, notes = [band], []
+    default_rows = max(2 * structure.n, structure.n + 1)
+    for rows in sorted({default_rows, max(default_rows, 10), max(default_rows, 25)}):
+        try:
+            candidates.append(_subspace_start(u, y, structure, stable, block_rows=rows, free_modes=free_modes))
+        except (WorkbenchError, np.linalg.LinAlgError) as exc:
+            notes.append(f"subspace with {rows} block rows failed ({exc})")
+    fits = [_simulation_fit(candidate.model, u, y, estimate_state=not stable) for candidate in candidates]
+    best = candidates[int(np.argmax(fits))]
+    note = "; ".join(filter(None, [best.note, *notes]))
+    return DataStart(best.model, best.source, note)

@@ -1,0 +1,109 @@
+"""The scheduling channel of `vehid identify --schedule CHANNEL`: read beside the inputs, kept apart.
+
+The channel (a car's speed) is read with the record's inputs, scaled by ``--scale`` where one names it
+and never offset: a scheduled model's coefficients are functions of its measured value. The command's
+plan (:mod:`vehid.scenarios.identify_workflow`) reads it here; the scheduled identification
+(:mod:`vehid.scenarios.scheduled_identify`) uses what the plan holds.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any, Sequence
+
+import numpy as np
+
+from vehid.identification.data import IOData
+from vehid.identification.errors import InputError
+
+__all__ = ["ScheduleData", "parse_schedule_grid", "check_options", "read_with_schedule", "schedule_loader",
+           "scheduled_records"]
+
+
+@dataclass(frozen=True, eq=False)
+class ScheduleData:
+    """The schedule channel of a plan's records: its name and its samples per estimation and validation record."""
+
+    channel: str
+    estimation: tuple[np.ndarray, ...]
+    validation: tuple[np.ndarray, ...]
+
+
+
+def parse_schedule_grid(text: str | None) -> tuple[float, ...] | None:
+    if text is None:
+        return None
+    try:
+        values = tuple(float(part) for part in text.split(",") if part.strip())
+    except ValueError:
+        raise InputError(f"--schedule-grid takes comma-separated numbers; got {text!r}") from None
+    return values
+
+
+def check_options(args: Any) -> None:
+    """Refuse combinations the scheduled model does not support, before any work."""
+    if args.resume:
+        raise InputError("--schedule runs are not checkpointed: give no --resume")
+    if len(args.data) > 1:
+        raise InputError("--schedule identifies the scheduled model from one record; give one data file")
+    if not args.inputs:
+        raise InputError("--schedule needs --inputs naming the inputs (the schedule is read beside them)")
+    from vehid.identification.filtering.scheduled_iekf import ScheduledIEKFOptions
+
+    for p in args.schedule_p or [None]:
+        ScheduledIEKFOptions(knots=args.schedule_knots, grid=parse_schedule_grid(args.schedule_grid),
+                             **({} if p is None else {"p": p}))
+
+
+def _without_schedule(args: Any) -> dict[str, float]:
+    from vehid.identification.dataio.preparation import parse_scale
+
+    return {name: factor for name, factor in parse_scale(args.scale).items() if name != args.schedule}
+
+
+def read_with_schedule(args: Any, paths: Sequence[str]) -> tuple[tuple[IOData, ...], Any, list[np.ndarray], dict]:
+    """Raw records without the schedule, their reading settings, each record's schedule (scaled) and
+    the ``--scale`` factors of the other channels."""
+    from vehid.identification.dataio.preparation import parse_scale, read_raw_records
+    from vehid.scenarios.data_options import settings_from_args
+
+    check_options(args)
+    settings = settings_from_args(args)
+    channel = args.schedule.strip()
+    if channel in settings.inputs or channel in settings.outputs:
+        raise InputError(f"--schedule {channel} is also named among --inputs or --outputs: the schedule is a "
+                         "channel of its own")
+    raw, full_settings = read_raw_records(list(paths), dataclasses.replace(settings, inputs=settings.inputs + (channel,)))
+    factor = parse_scale(args.scale).get(channel, 1.0)
+    schedules = [record.u[:, -1] * factor for record in raw]
+    inputs = full_settings.inputs[:-1]
+    return (tuple(record.select_inputs(inputs) for record in raw), dataclasses.replace(full_settings, inputs=inputs),
+            schedules, _without_schedule(args))
+
+
+def schedule_loader(args: Any, preparation: Any, channels: Any, found: list[np.ndarray]):
+    """A validation-file loader that also reads the file's schedule (appended to ``found``, in order)."""
+    from vehid.identification.dataio.preparation import parse_scale, prepare_validation, read_record
+
+    channel = args.schedule.strip()
+    factor = parse_scale(args.scale).get(channel, 1.0)
+
+    def load(path: str) -> IOData:
+        inputs, outputs = channels if channels is not None else (preparation.settings.inputs, preparation.settings.outputs)
+        settings = dataclasses.replace(preparation.settings, inputs=tuple(inputs) + (channel,),
+                                       outputs=tuple(outputs), segment=None)
+        raw = read_record(path, settings)
+        found.append(raw.u[:, -1] * factor)
+        raw = raw.select_inputs(tuple(inputs)).replace(input_names=preparation.input_names,
+                                                       output_names=preparation.output_names)
+        return prepare_validation(raw, preparation, own_offsets=True)
+
+    return load
+
+
+def scheduled_records(records: Sequence[IOData], schedules: Sequence[np.ndarray], channel: str) -> tuple[IOData, ...]:
+    """The records with their schedule as a last input column, as a scheduled model simulates them."""
+    return tuple(record.replace(u=np.column_stack([record.u, schedule]), input_names=record.input_names + (channel,),
+                                input_units=record.input_units + ("-",))
+                 for record, schedule in zip(records, schedules))
