@@ -599,6 +599,7 @@ def start_beats_filter(result: Any, plan: Plan, args: Settings) -> dict[str, Any
 
 
 def margin_entry(choice: Any, score: Any, runner_up: Any, runner_up_score: Any, measure: str, rule: str) -> dict[str, Any]:
+    """One ``decision_margins`` entry: the choice and its score, the runner-up and its, the measure and the rule."""
     def number(value: Any) -> float | None:
         return float(value) if value is not None and np.isfinite(value) else None
 

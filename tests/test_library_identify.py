@@ -84,3 +84,28 @@ def test_validation_records_in_memory_score_as_validation_files(capsys, tmp_path
     _close(result.model.A, summary["A"])
     _close(result.validation_fit_percent, summary["validation_fit_percent"])
     assert len(result.summary["validation_records"]) == len(summary["validation_records"]) == 1
+
+
+def _readme_python_example() -> str:
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
+    blocks = readme.split("```python\n")[1:]
+    assert len(blocks) == 1, "the README shows one Python example"
+    return blocks[0].split("```")[0]
+
+
+def test_the_readme_python_example_reproduces_the_command(capsys, monkeypatch):
+    """The README's example verbatim (default options: p by cross-validation) against the command it names."""
+    code = _readme_python_example()
+    command_line = next(line for line in code.splitlines() if line.startswith("# as: vehid identify "))
+    arguments = command_line.removeprefix("# as: vehid ").split()
+    monkeypatch.chdir(Path(__file__).resolve().parents[1])  # the example names the record from the clone's root
+    namespace: dict = {}
+    exec(compile(code, "README.md", "exec"), namespace)
+    printed = capsys.readouterr()
+    assert main([*arguments, "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    result = namespace["result"]
+    for name in "ABCD":
+        _close(getattr(result.model, name), summary[name])
+    _close(result.validation_fit_percent, summary["validation_fit_percent"])
+    assert result.warnings == tuple(summary["warnings"]) and printed.out.strip()
