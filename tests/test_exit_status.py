@@ -22,8 +22,12 @@ from vehid.scenarios.cli import main
 COMMANDS = {  # every subcommand; test_every_command_is_covered fails when one is added without a row below
     ("identify",), ("report",), ("simulate",), ("linearize",), ("study", "handling"),
     ("study", "linear-example"), ("study", "textbook"), ("bench", "iekf"), ("study", "envelope"),
-    ("handling",),
+    ("handling",), ("calibrate",),
 }
+
+
+_CALIBRATE_CHANNELS = ("--inputs", "delta", "--speed", "vx", "--outputs", "yawRate,ayCG", "--quantities",
+                       "yaw_rate,lateral_acceleration")
 
 
 def _check(capsys, argv, status, *words):
@@ -65,7 +69,7 @@ def _corrupt_archive(tmp_path):
     "simulate-missing-vehicle", "linearize-missing-vehicle", "handling-resume-missing", "handling-bad-orders",
     "linear-example-bad-passes", "textbook-unwritable", "bench-unwritable", "identify-save-model-directory",
     "report-out-is-a-file", "envelope-bad-speeds", "envelope-out-is-a-directory",
-    "vehicle-handling-missing", "vehicle-handling-corrupt", "vehicle-handling-bad-speeds",
+    "vehicle-handling-missing", "vehicle-handling-corrupt", "vehicle-handling-bad-speeds", "calibrate-missing-log",
 ])
 def test_bad_input_exits_2(case, tmp_path, capsys, monkeypatch):
     monkeypatch.setenv("VEHID_RESULTS_DIR", str(tmp_path / "results"))
@@ -108,6 +112,8 @@ def test_bad_input_exits_2(case, tmp_path, capsys, monkeypatch):
         _check(capsys, ["handling", missing, "--speeds", "20"], 2, "absent.h5")
     elif case == "vehicle-handling-corrupt":
         _check(capsys, ["handling", str(_corrupt_archive(tmp_path)), "--speeds", "20"], 2, "corrupt.h5")
+    elif case == "calibrate-missing-log":
+        _check(capsys, ["calibrate", missing, *_CALIBRATE_CHANNELS], 2, "absent.h5")
     elif case == "vehicle-handling-bad-speeds":
         _check(capsys, ["handling", "--source", "--speeds", "20,fast"], 2, "fast")
     elif case == "linear-example-bad-passes":
@@ -172,6 +178,12 @@ def test_a_failed_computation_exits_1(command, tmp_path, capsys, monkeypatch):
     elif command == ("study", "envelope"):
         monkeypatch.setattr("vehid.scenarios.commands.study_envelope.run_campaign", diverge)
         argv += ["--speeds", "15", "--orders", "2", "--linear-only"]
+    elif command == ("calibrate",):
+        monkeypatch.setattr("vehid.vehicle.calibration.calibrate_vehicle", diverge)
+        log = tmp_path / "log.csv"
+        log.write_text("t,delta,vx,yawRate,ayCG\n" + "".join(
+            f"{k * 0.01},{0.01 * (-1) ** k},20,{0.1 * (-1) ** k},{(-1) ** k}\n" for k in range(200)))
+        argv += [str(log), *_CALIBRATE_CHANNELS]
     elif command == ("handling",):
         monkeypatch.setattr("vehid.vehicle.handling.source_handling", diverge)
         argv += ["--source", "--speeds", "20"]

@@ -119,6 +119,9 @@ def test_every_command_with_an_output_option_is_in_the_matrix():
     walk(parser, [])
     covered = {(argv[0] if argv[0] != "study" else f"study {argv[1]}", option)
                for argv, option in WRITERS.values()} | {("report", "--out")}
+    # calibrate writes a vehicle file (TOML), not an archive: tests/test_calibrate.py checks that it never replaces
+    # an existing file without --force and refuses before any computation
+    covered |= {("calibrate", "--out")}
     assert named == covered
 
 

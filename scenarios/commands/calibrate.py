@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from vehid.identification.errors import InputError, StrictWarningsError
+from vehid.scenarios.paths import OUT_RULE
 
 NAME = "calibrate"
 GROUP = None
@@ -45,7 +46,7 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--prior-std", type=float, default=1.0,
                         help="relative prior standard deviation of every parameter (default 1: a factor e)")
     parser.add_argument("--time-column", default=None, help="the log's time column (default t when present)")
-    parser.add_argument("--out", default=None, help="write the calibrated vehicle to this .toml file")
+    parser.add_argument("--out", default=None, help=f"write the calibrated vehicle to this .toml file ({OUT_RULE})")
     parser.add_argument("--force", action="store_true", help="let --out replace an existing file")
     parser.add_argument("--strict", action="store_true", help="exit with status 3 when the result has warnings")
     parser.set_defaults(handler=run)
