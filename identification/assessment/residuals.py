@@ -19,10 +19,8 @@ from dataclasses import dataclass
 from typing import Any, Sequence
 
 import numpy as np
-import scipy.linalg
 # scipy.stats's chi2.sf, chi2.ppf and norm.ppf are these special functions; importing scipy.stats costs most
 # of a second of every command's start-up
-from scipy.special import chdtrc, gammaincinv, ndtri
 
 from ..errors import InputError
 
@@ -214,6 +212,7 @@ def residual_tests(
     >>> bool(tests.adequate)
     True
     """
+    from scipy.special import chdtrc, ndtri  # imported where used: scipy's start costs half a second
     if not 0 < level < 1:
         raise InputError(f"level must lie between 0 and 1; got {level!r}")
     e = _columns("residuals", residuals)
@@ -262,6 +261,8 @@ def _cross_correlation_p(u: np.ndarray, r_ue: np.ndarray, samples: int) -> np.nd
     largest): a smooth input sampled fast makes neighbouring lags nearly
     equal, and the degrees of freedom are the directions kept.
     """
+    from scipy.special import chdtrc  # imported where used: scipy's start costs half a second
+    import scipy.linalg  # half a second to import: paid where used, not at every command's start
     width = r_ue.shape[0]
     p_values = np.ones((u.shape[1], r_ue.shape[2]))
     for j in range(u.shape[1]):
@@ -287,4 +288,5 @@ def nis_band(samples: int, n_y: int, *, level: float = 0.99) -> tuple[float, flo
 
 def _chi2_quantile(probability: float, dof: int) -> float:
     """The chi-square distribution's ``probability`` quantile (``scipy.stats.chi2.ppf``)."""
+    from scipy.special import gammaincinv  # imported where used: scipy's start costs half a second
     return 2.0 * float(gammaincinv(dof / 2.0, probability))

@@ -24,8 +24,6 @@ from typing import Any, Callable
 
 import casadi as ca
 import numpy as np
-import scipy.linalg
-from scipy.special import ndtri  # scipy.stats.norm.ppf, without scipy.stats's import time
 
 from ..errors import InputError
 
@@ -66,6 +64,7 @@ def normal_quantile(level: float) -> float:
     """``z`` of a two-sided interval ``+/- z sigma`` holding ``level`` of a normal distribution."""
     if not 0 < level < 1:
         raise InputError(f"a confidence level lies between 0 and 1; got {level!r}")
+    from scipy.special import ndtri  # scipy.stats.norm.ppf, without scipy.stats's import time
     return float(ndtri(0.5 + level / 2))
 
 
@@ -320,6 +319,7 @@ def sample_parameters(model: Any, count: int, rng: np.random.Generator) -> np.nd
     """``count`` parameter vectors drawn from N(parameters, parameter_covariance), shape (count, n_theta)."""
     if model.parameter_covariance is None:
         raise InputError("the model carries no parameter covariance to sample")
+    import scipy.linalg  # half a second to import: paid where it is used, not by every command's start
     values, vectors = scipy.linalg.eigh(model.parameter_covariance)
     root = vectors * np.sqrt(np.maximum(values, 0.0))
     return model.parameters + rng.standard_normal((count, values.size)) @ root.T
@@ -438,6 +438,7 @@ def upper_envelope(first: np.ndarray, second: np.ndarray) -> np.ndarray:
     ``first`` must be positive definite; where it is not, the sum stands in.
     """
     try:
+        import scipy.linalg  # half a second to import: paid where it is used, not by every command's start
         values, vectors = scipy.linalg.eigh(second, first)
     except (np.linalg.LinAlgError, ValueError):
         return first + second
@@ -496,6 +497,7 @@ def gauss_newton_covariance(jacobian: np.ndarray, residuals: np.ndarray, *, over
     stacked = weighted.reshape(samples * n_y, n_theta)
     # only R is needed: LAPACK's Householder QR leaves it in the top rows, without forming Q or
     # copying out the full (N n_y, n_theta) triangle as scipy.linalg.qr(mode="r") does
+    import scipy.linalg  # half a second to import: paid where it is used, not by every command's start
     factored = scipy.linalg.lapack.dgeqrf(stacked, overwrite_a=int(in_place))[0]
     upper = np.triu(factored[: min(stacked.shape)])
     inverse = scipy.linalg.pinv(upper)

@@ -14,7 +14,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import scipy.linalg
 
 from ..data import IOData
 from ..errors import InputError
@@ -143,6 +142,8 @@ def default_horizon(model: Any) -> int | None:
 
 def _k_step(model: Any, data: IOData, horizon: int) -> np.ndarray:
     """Outputs predicted ``horizon`` samples ahead of a steady-state Kalman filter's state; the first ``horizon`` from rest."""
+    import scipy.linalg  # half a second to import: paid by a prediction, not at every command's start
+
     A, B, C, D, model_dt = model.to_statespace()
     continuous = model_dt is None
     Ad, Bd, Cd, Dd = continuous_to_discrete(A, B, C, D, data.dt, hold="foh") if continuous else (A, B, C, D)

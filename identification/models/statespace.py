@@ -14,7 +14,6 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-import scipy.linalg
 
 from .._checks import finite_matrix
 from ..errors import InputError
@@ -47,6 +46,7 @@ def _system(A: Any, B: Any, C: Any, D: Any) -> tuple[np.ndarray, np.ndarray, np.
 
 def _phi_matrices(A: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``exp(AT), phi1(AT), phi2(AT)`` from one exponential of a 3n block matrix."""
+    import scipy.linalg  # half a second to import: paid where used, not at every command's start
     n = A.shape[0]
     block = np.zeros((3 * n, 3 * n))
     block[:n, :n] = A * dt
@@ -296,6 +296,7 @@ def balanced_truncation(Ad: Any, Bd: Any, Cd: Any, Dd: Any, order: int
         The model is unstable (a Gramian does not exist), has fewer than
         ``order`` controllable and observable states, or ``order`` is out of range.
     """
+    import scipy.linalg  # half a second to import: paid where used, not at every command's start
     Ad, Bd, Cd, Dd = _system(Ad, Bd, Cd, Dd)
     n = Ad.shape[0]
     if not 1 <= order <= n:
