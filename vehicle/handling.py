@@ -33,6 +33,13 @@ central differences (:func:`vehid.identification.assessment.uncertainty.propagat
 :func:`source_handling` does the same for the source model: its exact
 linearisation at each speed (heading, which is ignorable, removed), and its
 nonlinear simulation under an ISO 7401 step, a 1 Hz sine dwell and a sine sweep.
+:func:`source_steady_state` gives the source model's steady-state gains and
+understeer gradient over a stated range of lateral acceleration (ISO 4138,
+constant speed with steer steps), the reference for a linear model fitted on
+data that reach that range: the linearisation holds at zero lateral
+acceleration only, and the tyres' and load transfer's nonlinearity raises the
+baseline car's understeer gradient from 0.69 deg/g there to 0.82 deg/g over
++/-4 m/s^2.
 
 Units: steer in rad at the road wheel, yaw rate rad/s, lateral acceleration
 m/s^2, sideslip rad, unless ``scales`` says how a model's channels convert
@@ -62,7 +69,9 @@ __all__ = [
     "linear_handling",
     "source_handling",
     "SourceHandling",
+    "SteadyStateHandling",
     "ISO_7401_LATERAL_ACCELERATION",
+    "source_steady_state",
 ]
 
 #: Each metric with its unit, in the order they are reported.
@@ -671,3 +680,122 @@ def source_handling(
         tuple(_metrics_from_vector(v, "linearisation", vector, None) for v, vector in zip(speeds, linear)),
         simulated, float(step_lateral_acceleration),
     )
+
+
+@dataclass(frozen=True)
+class SteadyStateHandling:
+    """The source model's steady states at one speed over a range of lateral acceleration (ISO 4138).
+
+    Attributes
+    ----------
+    speed : float
+        m/s.
+    lateral_acceleration : float
+        The range's limit (m/s^2): the steady states span +/- this.
+    steer, yaw_rate, lateral_acceleration_values : tuple of float
+        Each steady state: road-wheel steer (rad), yaw rate (rad/s), lateral acceleration (m/s^2).
+    yaw_rate_gain, lateral_acceleration_gain : float
+        Least-squares slopes through the origin of yaw rate and lateral
+        acceleration against steer over the range (1/s, m/s^2 per rad).
+    understeer_gradient_deg_per_g : float
+        Least-squares slope through the origin of ``delta - L r / V`` against
+        ``a_y`` over the range (Gillespie 1992, eq. 6-14), in deg/g.
+    characteristic_speed_m_s, critical_speed_m_s : float
+        ``sqrt(L / K)`` of an understeering car, ``sqrt(-L / K)`` of an oversteering one; NaN otherwise.
+    """
+
+    speed: float
+    lateral_acceleration: float
+    steer: tuple[float, ...]
+    yaw_rate: tuple[float, ...]
+    lateral_acceleration_values: tuple[float, ...]
+    yaw_rate_gain: float
+    lateral_acceleration_gain: float
+    understeer_gradient_deg_per_g: float
+    characteristic_speed_m_s: float
+    critical_speed_m_s: float
+
+    def as_dict(self) -> dict[str, Any]:
+        def number(value: float) -> float | None:
+            return float(value) if math.isfinite(value) else None
+
+        return {"speed": self.speed, "lateral_acceleration": self.lateral_acceleration,
+                "yaw_rate_gain": self.yaw_rate_gain, "lateral_acceleration_gain": self.lateral_acceleration_gain,
+                "understeer_gradient_deg_per_g": self.understeer_gradient_deg_per_g,
+                "characteristic_speed_m_s": number(self.characteristic_speed_m_s),
+                "critical_speed_m_s": number(self.critical_speed_m_s)}
+
+
+_STEADY_STATES_PER_SIDE = 4  # steer steps on each side of straight running: a least-squares line through 8 points
+
+
+def source_steady_state(
+    params: VehicleParameters | str = "baseline",
+    speeds: float | Sequence[float] = (10.0, 20.0, 30.0),
+    *,
+    lateral_acceleration: float,
+) -> tuple[SteadyStateHandling, ...]:
+    """Steady-state handling of the 23-state source model over +/- a stated lateral acceleration.
+
+    Constant speed with steer steps, in the manner of ISO 4138: at each
+    speed, steer angles in equal steps of ``lateral_acceleration / 4`` on
+    each side of straight running (sized by the linearisation's gain), each
+    held to the model's exact steady state (its trim, by Newton's method,
+    rather than a simulation that approaches it); the gains and the
+    understeer gradient are the least-squares lines through the origin over
+    these states. That is what a linear model fitted on data spanning the
+    range sees of the car's steady state. As the range shrinks they tend to
+    the linearisation's values (:func:`source_handling`), the closed form at
+    zero lateral acceleration.
+
+    Parameters
+    ----------
+    params : VehicleParameters or str
+        The vehicle, a name or a parameter file.
+    speeds : float or sequence of float
+        Speeds (m/s) within the model's valid range.
+    lateral_acceleration : float
+        The range's limit (m/s^2), positive and within the car's grip.
+
+    Returns
+    -------
+    tuple of SteadyStateHandling
+        One per speed.
+
+    Raises
+    ------
+    InputError
+        On a non-positive or non-finite lateral acceleration or a speed outside the valid range.
+    DivergenceError
+        When a steady state cannot be found (the range reaches beyond the grip limit).
+    """
+    from .model import build_vehicle_model, check_speed
+
+    params = named_vehicle(params)
+    speeds = [check_speed(v) for v in np.atleast_1d(np.asarray(speeds, dtype=float))]
+    if not (math.isfinite(lateral_acceleration) and lateral_acceleration > 0):
+        raise InputError(f"the lateral acceleration must be positive and finite (m/s^2); got {lateral_acceleration}")
+    model = build_vehicle_model(params)
+    wheelbase = params.chassis.cg_to_front_axle + params.chassis.cg_to_rear_axle
+    gain_index = list(METRIC_UNITS).index("lateral_acceleration_gain")
+    yaw_row, lateral_row = model.output_index("yaw_rate"), model.output_index("lateral_acceleration")
+    fractions = np.arange(1, _STEADY_STATES_PER_SIDE + 1) / _STEADY_STATES_PER_SIDE
+    results = []
+    for speed in speeds:
+        linear_gain = _source_linearisation(params, speed)[gain_index]
+        steers = np.concatenate([-fractions[::-1], fractions]) * lateral_acceleration / linear_gain
+        yaw, lateral = np.empty(steers.size), np.empty(steers.size)
+        for k, steer in enumerate(steers):
+            outputs = np.asarray(model.outputs(model.trim(speed, float(steer)), float(steer), speed)).ravel()
+            yaw[k], lateral[k] = outputs[yaw_row], outputs[lateral_row]
+        # a line through the origin: straight running is a steady state of a symmetric car
+        kinematic_excess = steers - wheelbase * yaw / speed
+        gradient = float(lateral @ kinematic_excess / (lateral @ lateral))
+        per_steer = float(steers @ steers)
+        characteristic = math.sqrt(wheelbase / gradient) if gradient > 0 else math.nan
+        critical = math.sqrt(-wheelbase / gradient) if gradient < 0 else math.nan
+        results.append(SteadyStateHandling(
+            speed, float(lateral_acceleration), tuple(map(float, steers)), tuple(map(float, yaw)),
+            tuple(map(float, lateral)), float(steers @ yaw / per_steer), float(steers @ lateral / per_steer),
+            gradient * _RAD_PER_MPS2_TO_DEG_PER_G, characteristic, critical))
+    return tuple(results)
