@@ -1,0 +1,112 @@
+"""Acceptance on the 23-state source model driven along a speed ramp, against the car's own truth.
+
+* The handling function's steady state over a range of lateral acceleration (ISO 4138, constant speed,
+  steer steps) against its closed forms: the linearisation's values as the range shrinks, and the
+  kinematics of a steady turn, ``a_y = V r``.
+* The single-track understeer gradient and characteristic speed identified from a quasi-steady drive
+  (slow steer along a slow ramp) against the car's own steady state over the lateral acceleration the
+  drive reaches, at the ramp's ends and middle.
+* The speed-scheduled model's modes against models identified at fixed speeds and the linearisation.
+
+The records and identifications are those of ``benchmarks/source_acceptance.py`` (loaded here), which
+measures the same figures over steer seeds 0-2; the tolerances below sit above that spread.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from vehid.identification.errors import InputError
+from vehid.vehicle import baseline
+from vehid.vehicle.handling import source_handling, source_steady_state
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _load_benchmark_module(name: str):
+    spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+acceptance = _load_benchmark_module("source_acceptance")
+SPEEDS = (10.0, 30.0)
+
+
+@pytest.fixture(scope="module")
+def linearisation():
+    return {m.speed: m for m in source_handling(baseline(), SPEEDS, simulate=False).linearisation}
+
+
+# --- the steady state against its closed forms ---------------------------------------------------
+
+def test_steady_state_tends_to_the_linearisation(linearisation):
+    """Over +/-0.05 m/s^2 the steady states are the linearisation's (itself the bicycle closed form,
+    tests/test_vehicle_handling.py): gains, understeer gradient and characteristic speed within 1e-4
+    relative. Measured 2e-5: the nonlinearity grows as the square of the range (1 % at 1 m/s^2), so
+    (0.05)^2 of it is 2.5e-5."""
+    for steady in source_steady_state(baseline(), SPEEDS, lateral_acceleration=0.05):
+        linear = linearisation[steady.speed]
+        for name in ("yaw_rate_gain", "lateral_acceleration_gain", "understeer_gradient_deg_per_g",
+                     "characteristic_speed_m_s"):
+            assert getattr(steady, name) == pytest.approx(getattr(linear, name), rel=1e-4), name
+        assert math.isnan(steady.critical_speed_m_s)
+
+
+def test_steady_states_are_steady_turns_and_reach_the_stated_range():
+    """Each steady state is a steady turn: ``a_y = V r`` within 2e-3 (measured 6e-4 at 4 m/s^2: the
+    road-plane acceleration is the body's tilted by the roll angle, cos(2 deg) = 1 - 6e-4). The steps
+    are sized by the linear gain, so the largest reaches the stated range to within the nonlinearity
+    (measured 0.8-7 % short at 4 m/s^2, the tyres saturating) and never beyond it. The understeer
+    gradient grows with the range, the front axle saturating first (a property of the baseline car:
+    0.70, 0.71, 0.79-0.82 deg/g over 1, 2, 4 m/s^2)."""
+    by_range = {level: source_steady_state(baseline(), SPEEDS, lateral_acceleration=level)
+                for level in (1.0, 2.0, 4.0)}
+    for level, states in by_range.items():
+        for steady in states:
+            lateral, yaw = np.array(steady.lateral_acceleration_values), np.array(steady.yaw_rate)
+            np.testing.assert_allclose(lateral, steady.speed * yaw, rtol=2e-3)
+            assert level * 0.85 < np.max(np.abs(lateral)) <= level * (1 + 1e-9)
+            np.testing.assert_allclose(lateral[::-1], -lateral, rtol=1e-9)  # a symmetric car
+    for index in range(len(SPEEDS)):
+        gradients = [by_range[level][index].understeer_gradient_deg_per_g for level in (1.0, 2.0, 4.0)]
+        assert gradients == sorted(gradients) and gradients[-1] > 1.1 * gradients[0]
+
+
+@pytest.mark.parametrize("level", [0.0, -1.0, math.nan, math.inf])
+def test_steady_state_refuses_a_range_that_is_not_one(level):
+    with pytest.raises(InputError, match="lateral acceleration must be positive"):
+        source_steady_state(baseline(), 20.0, lateral_acceleration=level)
+
+
+# --- single-track handling from a quasi-steady drive -------------------------------------------
+
+@pytest.fixture(scope="module")
+def single_track():
+    return acceptance.single_track_case(0)
+
+
+def test_single_track_handling_is_the_cars_steady_state(single_track):
+    """The understeer gradient and characteristic speed of the single-track model identified on the
+    quasi-steady ramp (240 s, 10-35 m/s, steer 0-0.5 Hz) agree with the car's steady state over the
+    lateral acceleration the record reaches, at 10, 22.5 and 35 m/s, within the acceptance's 5 %.
+    Measured over seeds 0-2: K -0.8 to +0.5 %, v_char -0.4 to +0.3 %. The reported std (3e-4 deg/g)
+    covers noise, not the structural difference, so it is not the tolerance.
+
+    A faster ramp is not a quasi-steady drive: accelerating, the car moves load to its rear axle and
+    drives through its tyres, and the single-track model takes that into its stiffnesses: K +7.4 % on
+    the 60 s ramp (0.54 m/s^2), +3.9 % on 120 s (benchmarks/source_acceptance.py)."""
+    assert single_track["peak_lateral_acceleration"] < 2.0  # the linear range the reference is taken over
+    for speed, (gradient, characteristic) in single_track["reference"].items():
+        assert single_track["understeer_gradient_deg_per_g"] == pytest.approx(gradient, rel=0.05), speed
+        assert single_track["characteristic_speed_m_s"] == pytest.approx(characteristic, rel=0.05), speed
+    # the yaw inertia of a car without a roll-yaw product of inertia is its own: 10 % (measured 1.0-1.3 %)
+    assert single_track["yaw_inertia"] == pytest.approx(baseline().chassis.yaw_inertia, rel=0.10)
