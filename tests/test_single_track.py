@@ -291,3 +291,34 @@ def test_understeer_gradient_of_the_source_car():
     # the single-track yaw inertia of a car without roll-yaw product of inertia: its own, within 10 %
     # (measured 0.9 %)
     assert result.parameter("yaw_inertia")[0] == pytest.approx(car.chassis.yaw_inertia, rel=0.10)
+
+
+@pytest.mark.parametrize("changes", [{}, {"steering_ratio": 15.0, "relaxation_length": 0.5},
+                                     {"saturation": True, "offsets": True}],
+                         ids=["plain", "ratio-and-lag", "saturating-with-offsets"])
+def test_the_identified_model_is_linear_at_each_speed_with_the_closed_form_steady_state(changes):
+    """An identified single-track model, linearised at straight running, has the closed-form steady state
+    whatever its options: per road-wheel angle (the steering ratio divided out), the relaxation lag
+    leaving the steady state alone, the saturating axle's slope at zero slip its stiffness, offsets not
+    entering. Yaw-rate gain within 1e-4 and K within 1e-3 (measured 4e-5 and 4e-4 at 10 m/s: the
+    model's speed is sqrt(v^2 + 0.1^2)). The JSON form round-trips."""
+    from vehid.vehicle.handling import handling_metrics
+    from vehid.vehicle.single_track import IdentifiedSingleTrack
+
+    config = SingleTrackConfig(MASS, LF, LR, **changes)
+    extra = ([1.0] if config.saturation else []) + [0.01, 0.02, 0.1] * config.offsets
+    theta = np.concatenate([TRUTH, extra])
+    covariance = np.diag(np.concatenate([TRUTH * 0.03, np.full(len(extra), 0.01)])) ** 2
+    model = IdentifiedSingleTrack(config, theta, covariance, (10.0, 30.0))
+    closed = single_track_handling(config, theta, covariance, speeds=(10.0, 20.0, 30.0))
+    metrics = handling_metrics(model, model.grid, wheelbase=model.wheelbase)
+    assert [m.speed for m in metrics] == [10.0, 20.0, 30.0]
+    for m, (_, gain) in zip(metrics, closed.yaw_rate_gains):
+        assert m.yaw_rate_gain == pytest.approx(gain.value, rel=1e-4)
+        assert m.understeer_gradient_deg_per_g == pytest.approx(closed.understeer_gradient.value, rel=1e-3)
+        assert m.std["understeer_gradient_deg_per_g"] == pytest.approx(closed.understeer_gradient.std, rel=0.02)
+    again = IdentifiedSingleTrack.from_dict(model.to_dict())
+    assert again.config == config and np.array_equal(again.parameters, theta)
+    np.testing.assert_array_equal(again.parameter_covariance, covariance)
+    with pytest.raises(InputError, match="single-track"):
+        IdentifiedSingleTrack.from_dict({"kind": "modal"})

@@ -29,9 +29,10 @@ derivatives.
 
 from __future__ import annotations
 
+import functools
 import math
-from dataclasses import dataclass
-from typing import Any, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any, Mapping, Sequence
 
 import casadi as ca
 import numpy as np
@@ -51,6 +52,8 @@ __all__ = [
     "single_track_start",
     "single_track_handling",
     "config_from_vehicle",
+    "IdentifiedSingleTrack",
+    "SingleTrackAtSpeed",
 ]
 
 GRAVITY = 9.81  # m/s^2, as the vehicle parameters use it
@@ -312,3 +315,142 @@ def single_track_handling(config: SingleTrackConfig, parameters: Any, covariance
                                            "1/s"))
                   for v in speeds)
     return SingleTrackHandling(HandlingValue(k_value, k_std, "deg/g"), limit, kind, gains)
+
+
+# ---------------------------------------------------------------------------------------------
+# The identified model as a value: saved, loaded, and linear at each speed for the handling metrics
+# ---------------------------------------------------------------------------------------------
+
+@functools.lru_cache(maxsize=16)
+def _linearisation(config: SingleTrackConfig) -> ca.Function:
+    """``(theta, speed) -> (A, B, C, D)`` at straight running, B and D per road-wheel angle."""
+    model = single_track_model(config)
+    x, u = ca.SX.sym("x", model.n_x), ca.SX.sym("u", 1)
+    theta, speed = ca.SX.sym("theta", model.n_theta), ca.SX.sym("speed", 1)
+    rates, outputs = model.dynamics(x, u, theta, speed), model.output(x, u, theta, speed)
+    # straight running: no states excited and the steer channel at its offset (zero slip angles), where
+    # the saturating axle's slope is its cornering stiffness
+    rest = theta[config.n_physical] if config.offsets else 0.0
+    at_rest = [ca.substitute(ca.substitute(jacobian, x, ca.DM.zeros(model.n_x)), u, rest)
+               for jacobian in (ca.jacobian(rates, x), ca.jacobian(rates, u), ca.jacobian(outputs, x),
+                                ca.jacobian(outputs, u))]
+    ratio = config.steering_ratio  # the channel is the road-wheel angle times the ratio
+    return ca.Function("single_track_linearisation", [theta, speed],
+                       [at_rest[0], at_rest[1] * ratio, at_rest[2], at_rest[3] * ratio],
+                       ["theta", "speed"], ["A", "B", "C", "D"])
+
+
+@dataclass(frozen=True, eq=False)
+class SingleTrackAtSpeed:
+    """An identified single-track model linearised at one speed: continuous time, input the road-wheel angle.
+
+    It meets what :func:`vehid.vehicle.handling.handling_metrics` asks of a linear model
+    (``to_statespace``, names, ``parameters`` with ``parameter_covariance`` and ``with_parameters``),
+    so the handling metrics carry the parameters' uncertainty by the delta method.
+    """
+
+    config: SingleTrackConfig
+    parameters: np.ndarray
+    parameter_covariance: np.ndarray | None
+    speed: float
+
+    @property
+    def input_names(self) -> tuple[str, ...]:
+        return ("steer",)
+
+    @property
+    def output_names(self) -> tuple[str, ...]:
+        return self.config.quantities
+
+    def to_statespace(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
+        """``(A, B, C, D, None)`` at straight running: states as :func:`single_track_model` names them."""
+        A, B, C, D = (np.asarray(m, dtype=float) for m in _linearisation(self.config)(self.parameters, self.speed))
+        return A, B, C, D, None
+
+    def with_parameters(self, theta: Any) -> "SingleTrackAtSpeed":
+        return replace(self, parameters=np.asarray(theta, dtype=float).ravel())
+
+
+@dataclass(frozen=True, eq=False)
+class IdentifiedSingleTrack:
+    """A single-track model identified from a log: its configuration, parameters and their covariance.
+
+    Speed is a parameter of the model, so it is a family over speed like the scheduled modal models:
+    :meth:`model_at` gives the linear model at a speed, :attr:`grid` the speeds the log spans (the handling
+    command's default). Saved as JSON (``kind: single-track``) by ``vehid identify --structure single-track
+    --save-model``.
+
+    Parameters
+    ----------
+    config : SingleTrackConfig
+    parameters : array_like (n_theta,)
+        In the order of ``config.parameter_names``.
+    parameter_covariance : array_like (n_theta, n_theta), optional
+    speed_range : (float, float)
+        Least and greatest speed of the log (m/s).
+    meta : mapping
+        What else to keep (fits, the log's name).
+    """
+
+    config: SingleTrackConfig
+    parameters: np.ndarray
+    parameter_covariance: np.ndarray | None
+    speed_range: tuple[float, float]
+    meta: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        n = len(self.config.parameter_names)
+        parameters = np.asarray(self.parameters, dtype=float).ravel()
+        if parameters.size != n:
+            raise InputError(f"the single-track model has {n} parameters; got {parameters.size}")
+        object.__setattr__(self, "parameters", parameters)
+        if self.parameter_covariance is not None:
+            covariance = np.asarray(self.parameter_covariance, dtype=float)
+            if covariance.shape != (n, n):
+                raise InputError(f"the parameter covariance must be {n} x {n}; got {covariance.shape}")
+            object.__setattr__(self, "parameter_covariance", covariance)
+        low, high = (float(v) for v in self.speed_range)
+        if not (math.isfinite(low) and math.isfinite(high) and 0 < low <= high):
+            raise InputError(f"the speed range must be positive and ordered (m/s); got {self.speed_range}")
+        object.__setattr__(self, "speed_range", (low, high))
+
+    @property
+    def wheelbase(self) -> float:
+        return self.config.wheelbase
+
+    @property
+    def grid(self) -> np.ndarray:
+        """Three speeds spanning the log (m/s), rounded to whole metres per second where that keeps them inside."""
+        low, high = self.speed_range
+        rounded = np.unique(np.round(np.linspace(low, high, 3)))
+        return rounded if rounded[0] >= low and rounded[-1] <= high else np.unique(np.linspace(low, high, 3))
+
+    def model_at(self, speed: float) -> SingleTrackAtSpeed:
+        return SingleTrackAtSpeed(self.config, self.parameters, self.parameter_covariance, float(speed))
+
+    def to_dict(self) -> dict[str, Any]:
+        config = self.config
+        return {
+            "kind": "single-track",
+            "config": {"mass": config.mass, "cg_to_front_axle": config.cg_to_front_axle,
+                       "cg_to_rear_axle": config.cg_to_rear_axle, "quantities": list(config.quantities),
+                       "steering_ratio": config.steering_ratio, "relaxation_length": config.relaxation_length,
+                       "saturation": config.saturation, "offsets": config.offsets},
+            "parameter_names": list(config.parameter_names),
+            "parameters": self.parameters.tolist(),
+            "parameter_covariance": None if self.parameter_covariance is None else self.parameter_covariance.tolist(),
+            "speed_range_m_s": list(self.speed_range),
+            "meta": dict(self.meta),
+        }
+
+    @classmethod
+    def from_dict(cls, content: Mapping[str, Any]) -> "IdentifiedSingleTrack":
+        if content.get("kind") != "single-track":
+            raise InputError("not a single-track model (kind single-track)")
+        config = SingleTrackConfig(**{**content["config"], "quantities": tuple(content["config"]["quantities"])})
+        if list(content.get("parameter_names", config.parameter_names)) != list(config.parameter_names):
+            raise InputError(f"the parameters are named {content['parameter_names']}; the configuration's are "
+                             f"{list(config.parameter_names)}")
+        covariance = content.get("parameter_covariance")
+        return cls(config, content["parameters"], None if covariance is None else np.asarray(covariance, dtype=float),
+                   tuple(content["speed_range_m_s"]), dict(content.get("meta", {})))
