@@ -17,7 +17,8 @@ JSON (public contract): ``structure``, ``physical_parameters`` (``cornering_stif
 ``critical_speed_m_s``, each ``{value, std, unit}``, and ``yaw_rate_gain`` at speeds spanning the
 log), ``fit_percent`` (R, eq. 17), ``estimation_fit_percent``,
 ``validation_fit_percent`` (NRMSE), ``speed_range_m_s``, ``passes_run``, ``stop_reason``,
-``trace_p``, ``notes``, ``warnings``, ``seconds``.
+``trace_p``, ``notes``, ``warnings``, ``seconds``; with ``--save-model`` (.json) ``model_file``, the
+identified model (:class:`~vehid.vehicle.single_track.IdentifiedSingleTrack`) that ``vehid handling`` reads.
 """
 
 from __future__ import annotations
@@ -99,7 +100,7 @@ def _config(args: argparse.Namespace, n_outputs: int):
 def _refuse_other_options(args: argparse.Namespace) -> None:
     """Options of the modal structure that mean nothing here: named, not silently ignored."""
     given = [name for name, value, default in (
-        ("--out", args.out, None), ("--resume", args.resume, None), ("--save-model", args.save_model, None),
+        ("--out", args.out, None), ("--resume", args.resume, None),
         ("--nonlinear", args.nonlinear, False), ("--method", args.method, "iekf"),
         ("--detrend", args.detrend, "mean"), ("--horizon", args.horizon, None), ("--pattern", args.pattern, None),
         ("--validation-file", args.validation_file, []), ("--bootstrap", args.bootstrap, None),
@@ -168,6 +169,14 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     from vehid.scenarios.data_options import channel_names
 
     config = _config(args, len(channel_names(args.outputs)))  # before the file is read: a bad option costs nothing
+    if args.save_model:
+        from pathlib import Path
+
+        from vehid.scenarios.data_options import check_model_target
+
+        if Path(args.save_model).suffix.lower() != ".json":
+            raise InputError(f"a single-track model is saved as .json; got {args.save_model!r}")
+        check_model_target(args.save_model, inputs=[*args.data, *args.validation_file], force=args.force)
     estimation, validation = _read(args)
     model = single_track_model(config)
     substeps = _substeps(config, *[record for record in (estimation, validation) if record is not None])
@@ -254,6 +263,15 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     }
     if divergence:
         summary["divergence"] = divergence
+    if args.save_model:
+        from vehid.scenarios.data_options import save_model
+        from vehid.vehicle.single_track import IdentifiedSingleTrack
+
+        identified = IdentifiedSingleTrack(
+            config, result.parameters, result.covariance, (float(np.min(speeds)), float(np.max(speeds))),
+            {"data": [str(d) for d in args.data], "schedule": args.schedule.strip(),
+             "validation_fit_percent": None if validation_fit is None else [float(f) for f in validation_fit]})
+        summary["model_file"] = str(save_model(identified, args.save_model, None))
     text = _text(summary, estimation.output_names, validation is not None)
     workflow.emit(summary, warnings, args)
     return summary, text

@@ -198,3 +198,32 @@ def test_friction_below_the_logged_cornering_is_named(friction, peak_estimation,
     assert len(warnings) == len(expected)
     for warning, text in zip(warnings, expected):
         assert text in warning and f"{friction:.2f}" in warning
+
+
+def test_saved_model_gives_its_handling_and_page(log, tmp_path, capsys):
+    """`--save-model` keeps the identified single-track model; `vehid handling` reads it as a model over
+    speed (the log's speeds by default, its own wheelbase) and its metrics, from the model linearised at
+    each speed, are the closed forms the identification reports: the understeer gradient within 1e-3
+    (measured 4e-4 at 10 m/s: the model's speed is sqrt(v^2 + 0.1^2), a shift of 5e-5 that the difference
+    ``1 - L r / (v delta)`` magnifies) and its std, central differences against exact derivatives, within 2 %."""
+    model_file, figure = tmp_path / "car.json", tmp_path / "handling.png"
+    assert main(["identify", str(log), "--structure", "single-track", "--inputs", "delta", "--schedule", "vx",
+                 "--outputs", "yawRate,ayCG", "--scale", f"yawRate={DEG!r}", *GEOMETRY, "--json", "--quiet",
+                 "--save-model", str(model_file)]) == 0
+    identified = json.loads(capsys.readouterr().out)
+    assert identified["model_file"] == str(model_file)
+    assert main(["handling", str(model_file), "--figure", str(figure), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["scheduled"] is True and summary["wheelbase"] == pytest.approx(2.7)
+    low, high = identified["speed_range_m_s"]
+    speeds = [row["speed"] for row in summary["metrics"]]
+    assert len(speeds) == 3 and low <= speeds[0] < speeds[1] < speeds[2] <= high
+    reported = identified["handling"]["understeer_gradient_deg_per_g"]
+    for row in summary["metrics"]:
+        assert row["understeer_gradient_deg_per_g"]["value"] == pytest.approx(reported["value"], rel=1e-3)
+        assert row["understeer_gradient_deg_per_g"]["std"] == pytest.approx(reported["std"], rel=0.02)
+    assert summary["warnings"] == [] and figure.stat().st_size > 0
+    # the model file is JSON only
+    assert main(["identify", str(log), "--structure", "single-track", "--inputs", "delta", "--schedule", "vx",
+                 "--outputs", "yawRate,ayCG", *GEOMETRY, "--save-model", str(tmp_path / "car.mat")]) == 2
+    assert "saved as .json" in capsys.readouterr().err

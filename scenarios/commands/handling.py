@@ -110,6 +110,10 @@ def _model_from_json(path: Path) -> Any:
     if not isinstance(content, dict):
         raise InputError(f"{path} is not a model file of the workbench")
     try:
+        if content.get("kind") == "single-track":
+            from vehid.vehicle.single_track import IdentifiedSingleTrack
+
+            return IdentifiedSingleTrack.from_dict(content)  # physical units throughout: no preparation to undo
         if "grid" in content and "variable" in content:
             model = ScheduledModalModel.from_dict(content)
         elif "structure" in content and "A" in content:
@@ -299,6 +303,8 @@ def _run_model(args: argparse.Namespace) -> tuple[dict, str, list[str]]:
 
         source_params = named_vehicle(args.beside_source)  # a bad vehicle file is bad input before any work
     model, origin = load_model(args.model, args.run)
+    if args.wheelbase is None and getattr(model, "wheelbase", None) is not None:
+        args.wheelbase = float(model.wheelbase)  # a physical model knows its own
     speeds = parse_speeds(args.speeds) if args.speeds is not None else _default_speeds(model, origin)
     metrics = handling_metrics(model, speeds, yaw_rate=args.yaw_rate, lateral_acceleration=args.lateral_acceleration,
                                sideslip=args.sideslip, steer=args.steer, wheelbase=args.wheelbase, scales=scales)
