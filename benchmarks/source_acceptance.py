@@ -51,12 +51,13 @@ from vehid.vehicle.handling import source_steady_state
 from vehid.vehicle.linearize import linearize
 from vehid.vehicle.manoeuvres import Manoeuvre, band_limited_noise, speed_ramp
 from vehid.vehicle.simulation import DEFAULT_DT
-from vehid.vehicle.single_track import config_from_vehicle, single_track_handling, single_track_model, single_track_start
+from vehid.vehicle.single_track import (config_from_vehicle, single_track_handling, single_track_model,
+                                        single_track_start)
 
 DECIMATION = 5  # the 500 Hz simulation read at 100 Hz: 20 samples per period of the fastest mode identified (5 Hz)
 MODE_SPEEDS = (10.0, 20.0, 30.0)  # m/s
 GRID = (10.0, 15.0, 20.0, 25.0, 30.0, 35.0)  # m/s: the scheduled family's knots over the ramp
-SCHEDULE_SECONDS = 60.0  # the ramp of the default speed-ramp manoeuvre (0.52 m/s^2)
+SCHEDULE_SECONDS = 60.0  # the ramp of the default speed-ramp manoeuvre (0.54 m/s^2)
 FIXED_SECONDS = 20.0  # each record held at one speed
 STEER_RMS_DEG = 0.5  # at 20 m/s, as the speed-ramp manoeuvre's default: within the linear range
 QUASI_STEADY_SECONDS = 240.0  # a ramp of 0.13 m/s^2 (module notes)
@@ -71,7 +72,7 @@ def _outputs(record: IOData) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.nda
     """Time, steer, (yaw rate, lateral acceleration) and speed of a simulated record, at 100 Hz."""
     names = record.output_names
     every = slice(None, None, DECIMATION)
-    y = np.column_stack([record.y[every, names.index("yaw_rate")], record.y[every, names.index("lateral_acceleration")]])
+    y = np.column_stack([record.y[every, names.index(name)] for name in ("yaw_rate", "lateral_acceleration")])
     return record.t[every], record.u[every, 0], y, record.y[every, names.index("speed")]
 
 
@@ -176,7 +177,9 @@ def single_track_case(seed: int, seconds: float = QUASI_STEADY_SECONDS,
     handling = single_track_handling(config, result.parameters, result.covariance)
     reach = float(np.max(np.abs(data.y[:, 1])))
     reference = source_steady_state(car, reference_speeds, lateral_acceleration=reach)
-    return {"seed": seed, "ramp_seconds": seconds, "acceleration_m_s2": 25.0 / (0.8 * seconds - min(2.0, 0.1 * seconds)),
+    # the speed-ramp manoeuvre's rate: 25 m/s over 0.8 of the record less one edge (at most 2 s)
+    acceleration = 25.0 / (0.8 * seconds - min(2.0, 0.1 * seconds))
+    return {"seed": seed, "ramp_seconds": seconds, "acceleration_m_s2": acceleration,
             "peak_lateral_acceleration": reach,
             "understeer_gradient_deg_per_g": handling.understeer_gradient.value,
             "understeer_gradient_std": handling.understeer_gradient.std,
@@ -211,13 +214,15 @@ def main() -> int:
         figures["single_track"].append(case)
         reference = "; ".join(f"{k:.4f}, {c:.2f}" for k, c in case["reference"].values())
         print(f"  seed {seed}: {case['understeer_gradient_deg_per_g']:.4f} +/- {case['understeer_gradient_std']:.4f}, "
-              f"{case['characteristic_speed_m_s']:.2f} | {reference} (|a_y| <= {case['peak_lateral_acceleration']:.2f})")
+              f"{case['characteristic_speed_m_s']:.2f} | {reference} "
+              f"(|a_y| <= {case['peak_lateral_acceleration']:.2f})")
     print("ramp rate: K identified against the ramp's acceleration (seed 0)")
     for seconds in (60.0, 120.0, 240.0):
         case = single_track_case(0, seconds, reference_speeds=(22.5,))
         figures["ramp_rate"].append(case)
         (k_ref, _), = case["reference"].values()
-        print(f"  {seconds:.0f} s ({case['acceleration_m_s2']:.2f} m/s^2): K {case['understeer_gradient_deg_per_g']:.4f} "
+        gradient = case["understeer_gradient_deg_per_g"]
+        print(f"  {seconds:.0f} s ({case['acceleration_m_s2']:.2f} m/s^2): K {gradient:.4f} "
               f"against {k_ref:.4f} ({100 * (case['understeer_gradient_deg_per_g'] / k_ref - 1):+.1f} %)")
     record_figures("source_acceptance", figures)
     return 0

@@ -38,8 +38,8 @@ understeer gradient over a stated range of lateral acceleration (ISO 4138,
 constant speed with steer steps), the reference for a linear model fitted on
 data that reach that range: the linearisation holds at zero lateral
 acceleration only, and the tyres' and load transfer's nonlinearity raises the
-baseline car's understeer gradient from 0.69 deg/g there to 0.82 deg/g over
-+/-4 m/s^2.
+baseline car's understeer gradient from 0.69 deg/g there to 0.79-0.82 deg/g
+over +/-4 m/s^2 (10-30 m/s).
 
 Units: steer in rad at the road wheel, yaw rate rad/s, lateral acceleration
 m/s^2, sideslip rad, unless ``scales`` says how a model's channels convert
