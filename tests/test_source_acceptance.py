@@ -15,6 +15,7 @@ measures the same figures over steer seeds 0-2; the tolerances below sit above t
 from __future__ import annotations
 
 import importlib.util
+import json
 import math
 import sys
 from pathlib import Path
@@ -85,6 +86,26 @@ def test_steady_states_are_steady_turns_and_reach_the_stated_range():
 def test_steady_state_refuses_a_range_that_is_not_one(level):
     with pytest.raises(InputError, match="lateral acceleration must be positive"):
         source_steady_state(baseline(), 20.0, lateral_acceleration=level)
+
+
+def test_handling_command_gives_the_steady_state_and_names_saturation(capsys):
+    """`vehid handling --source --steady-range A` reports the function's steady states; a range beyond
+    the car's steady cornering (9 m/s^2: the baseline reaches 6.3 at 30 m/s) is named as a warning
+    (exit 3 under --strict), a range that is not one is bad input (exit 2)."""
+    from vehid.scenarios.cli import main
+
+    assert main(["handling", "--source", "--speeds", "30", "--no-simulation", "--steady-range", "1.5", "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    (entry,) = summary["steady_state"]
+    (direct,) = source_steady_state(baseline(), 30.0, lateral_acceleration=1.5)
+    assert entry["understeer_gradient_deg_per_g"] == pytest.approx(direct.understeer_gradient_deg_per_g, rel=1e-12)
+    assert entry["reached_lateral_acceleration"] == pytest.approx(direct.reached_lateral_acceleration, rel=1e-12)
+    assert summary["warnings"] == []
+    argv = ["handling", "--source", "--speeds", "30", "--no-simulation", "--steady-range", "9"]
+    assert main([*argv, "--strict"]) == 3
+    assert "the tyres saturate" in capsys.readouterr().err
+    assert main(["handling", "--source", "--steady-range", "0"]) == 2
+    assert "--steady-range must be a positive" in capsys.readouterr().err
 
 
 # --- single-track handling from a quasi-steady drive -------------------------------------------

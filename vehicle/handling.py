@@ -715,11 +715,17 @@ class SteadyStateHandling:
     characteristic_speed_m_s: float
     critical_speed_m_s: float
 
+    @property
+    def reached_lateral_acceleration(self) -> float:
+        """The largest steady lateral acceleration (m/s^2) of the steps: short of the range where the tyres saturate."""
+        return float(np.max(np.abs(self.lateral_acceleration_values)))
+
     def as_dict(self) -> dict[str, Any]:
         def number(value: float) -> float | None:
             return float(value) if math.isfinite(value) else None
 
         return {"speed": self.speed, "lateral_acceleration": self.lateral_acceleration,
+                "reached_lateral_acceleration": self.reached_lateral_acceleration,
                 "yaw_rate_gain": self.yaw_rate_gain, "lateral_acceleration_gain": self.lateral_acceleration_gain,
                 "understeer_gradient_deg_per_g": self.understeer_gradient_deg_per_g,
                 "characteristic_speed_m_s": number(self.characteristic_speed_m_s),

@@ -30,6 +30,9 @@ GROUP = None
 HELP = "handling metrics (ISO 4138 / ISO 7401) of an identified model or of the source model at each speed"
 
 _ROLES = ("steer", "yaw_rate", "lateral_acceleration", "sideslip")
+#: Below this fraction of the asked range the steady states are named as saturating (the baseline car's
+#: steps fall 1-7 % short at 4 m/s^2 and 30 % short at 9).
+_REACHED = 0.8
 
 
 def register(parser: argparse.ArgumentParser) -> None:
@@ -56,6 +59,9 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--step-lateral-acceleration", type=float, default=None,
                         help="with --source: steady lateral acceleration of the simulated step in m/s^2 "
                              "(default 4, as ISO 7401)")
+    parser.add_argument("--steady-range", type=float, default=None, metavar="A",
+                        help="with --source: also the steady state over +/- A m/s^2 of lateral acceleration "
+                             "(ISO 4138 steer steps): the reference for a model fitted on data reaching A")
     parser.add_argument("--beside-source", default=None, metavar="VEHICLE",
                         help="with MODEL: also the source model's linearisation at the same speeds "
                              "(baseline, understeer, or a .toml/.json vehicle file)")
@@ -257,7 +263,7 @@ def _write_figure(path: Path | None, curves: dict[str, Any], title: str) -> str 
 
 def _run_source(args: argparse.Namespace) -> tuple[dict, str, list[str]]:
     from vehid.vehicle import named_vehicle
-    from vehid.vehicle.handling import ISO_7401_LATERAL_ACCELERATION, source_handling
+    from vehid.vehicle.handling import ISO_7401_LATERAL_ACCELERATION, source_handling, source_steady_state
 
     if args.model is not None:
         raise InputError("--source reports the source model: give no MODEL")
@@ -269,8 +275,17 @@ def _run_source(args: argparse.Namespace) -> tuple[dict, str, list[str]]:
     level = ISO_7401_LATERAL_ACCELERATION if args.step_lateral_acceleration is None else args.step_lateral_acceleration
     params = named_vehicle(args.vehicle)
     figure = _check_figure_target(args)
+    if args.steady_range is not None and not (math.isfinite(args.steady_range) and args.steady_range > 0):
+        raise InputError(f"--steady-range must be a positive lateral acceleration (m/s^2); got {args.steady_range}")
     result = source_handling(params, speeds, simulate=not args.no_simulation, step_lateral_acceleration=level)
     summary = {"source": True, **result.as_dict(), "warnings": []}
+    steady = ()
+    if args.steady_range is not None:
+        steady = source_steady_state(params, speeds, lateral_acceleration=args.steady_range)
+        summary["steady_state"] = [entry.as_dict() for entry in steady]
+        short = [entry for entry in steady if entry.reached_lateral_acceleration < _REACHED * args.steady_range]
+        summary["warnings"] += [f"at {entry.speed:g} m/s the steady states reach {entry.reached_lateral_acceleration:.3g} "
+                                f"of the {args.steady_range:g} m/s^2 asked: the tyres saturate" for entry in short]
     curves = {"linearisation": result.linearisation,
               **({f"simulation (step to {level:g} m/s^2)": result.simulation} if result.simulation else {})}
     written = _write_figure(figure, curves, f"Handling of the source model {result.vehicle}")
@@ -281,9 +296,14 @@ def _run_source(args: argparse.Namespace) -> tuple[dict, str, list[str]]:
     if result.simulation:
         lines += metrics_table(f"simulation (step to {level:g} m/s^2; 1 Hz sine dwell and sweep of that steer):",
                                result.simulation)
+    if steady:
+        lines.append(f"steady state over +/- {args.steady_range:g} m/s^2 (ISO 4138 steer steps):")
+        lines += [f"  {entry.speed:g} m/s: understeer gradient {entry.understeer_gradient_deg_per_g:.4g} deg/g, "
+                  f"characteristic speed {_format(entry.characteristic_speed_m_s)} m/s, "
+                  f"yaw-rate gain {entry.yaw_rate_gain:.4g} 1/s" for entry in steady]
     if written:
         lines.append(f"wrote {written}")
-    return summary, "\n".join(lines), []
+    return summary, "\n".join(lines), summary["warnings"]
 
 
 def _run_model(args: argparse.Namespace) -> tuple[dict, str, list[str]]:
@@ -292,7 +312,8 @@ def _run_model(args: argparse.Namespace) -> tuple[dict, str, list[str]]:
     if args.model is None:
         raise InputError("give a MODEL file or archive, or --source for the source model")
     for option, given in (("--vehicle", args.vehicle != "baseline"), ("--no-simulation", args.no_simulation),
-                          ("--step-lateral-acceleration", args.step_lateral_acceleration is not None)):
+                          ("--step-lateral-acceleration", args.step_lateral_acceleration is not None),
+                          ("--steady-range", args.steady_range is not None)):
         if given:
             raise InputError(f"{option} applies to --source only")
     scales = parse_scales(args.scale)
