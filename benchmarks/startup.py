@@ -30,7 +30,7 @@ import time
 from pathlib import Path
 
 from vehid.scenarios.benchmarking import record_figures
-from vehid.scenarios.cli import GROUPS, _command_headers
+from vehid.scenarios.commands.parser import GROUPS, command_headers
 
 HELP_TARGET_SECONDS = 0.3
 COMMAND_TARGET_SECONDS = 0.5
@@ -47,7 +47,7 @@ def _vehid() -> list[str]:
 def _commands() -> dict[str, list[str]]:
     vehid = _vehid()
     commands = {"vehid --help": [*vehid, "--help"]}
-    for header in _command_headers():
+    for header in command_headers():
         words = [header["NAME"]] if header["GROUP"] is None else [header["GROUP"], header["NAME"]]
         commands[" ".join(["vehid", *words, "--help"])] = [*vehid, *words, "--help"]
     for group in GROUPS:

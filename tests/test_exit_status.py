@@ -46,9 +46,9 @@ def _check(capsys, argv, status, *words):
 
 
 def test_every_command_is_covered():
-    from vehid.scenarios.cli import _command_modules
+    from vehid.scenarios.commands.parser import command_modules
 
-    found = {(m.NAME,) if m.GROUP is None else (m.GROUP, m.NAME) for m in _command_modules()}
+    found = {(m.NAME,) if m.GROUP is None else (m.GROUP, m.NAME) for m in command_modules()}
     assert found == COMMANDS
 
 

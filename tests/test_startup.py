@@ -34,10 +34,10 @@ def test_a_commands_help_imports_none_of_what_it_computes_with(words):
 
 
 def test_the_command_list_read_from_source_is_the_one_the_modules_define():
-    from vehid.scenarios.cli import _command_headers, _command_modules
+    from vehid.scenarios.commands.parser import command_headers, command_modules
 
-    from_source = {(h["GROUP"], h["NAME"], h["HELP"], h["module"]) for h in _command_headers()}
-    imported = {(m.GROUP, m.NAME, m.HELP, m.__name__) for m in _command_modules()}
+    from_source = {(h["GROUP"], h["NAME"], h["HELP"], h["module"]) for h in command_headers()}
+    imported = {(m.GROUP, m.NAME, m.HELP, m.__name__) for m in command_modules()}
     assert from_source == imported
 
 
