@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import argparse
 
-from vehid.identification.choices import DETRENDS, JITTER_TOLERANCE
+from vehid.identification.choices import DETRENDS, JITTER_TOLERANCE, SPLINE_NODES, SPLINE_P, SPLINE_PASSES
 
-__all__ = ["common_options", "register_data_options"]
+__all__ = ["common_options", "register_data_options", "add_filter_options"]
 
 
 def common_options() -> argparse.ArgumentParser:
@@ -51,3 +51,18 @@ def register_data_options(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--steering-ratio", action="append", metavar="[NAME=]RATIO", default=None,
                        help="divide a steering-wheel angle by the steering ratio, giving the road-wheel angle "
                             "(a bare RATIO: the only input); repeatable or a comma list")
+
+
+def add_filter_options(parser: argparse.ArgumentParser, *, passes: int, p: float) -> None:
+    """The filters' options the vehicle studies share: ``--passes`` and ``--p`` of the linear IEKF (defaults
+    ``passes`` and ``p``), ``--nodes``, ``--nonlinear-passes`` and ``--nonlinear-p`` of the spline IEKF."""
+    parser.add_argument("--passes", type=int, default=passes,
+                        help=f"passes of each linear identification (default {passes})")
+    parser.add_argument("--p", type=float, default=p,
+                        help=f"tuning parameter p of the linear identifications (default {p:g})")
+    parser.add_argument("--nodes", type=int, default=SPLINE_NODES,
+                        help=f"spline nodes per coefficient of the nonlinear models (default {SPLINE_NODES})")
+    parser.add_argument("--nonlinear-passes", type=int, default=None,
+                        help=f"passes of each nonlinear identification (default {SPLINE_PASSES})")
+    parser.add_argument("--nonlinear-p", type=float, default=None,
+                        help=f"tuning parameter p of the nonlinear identifications (default {SPLINE_P:g})")
