@@ -17,6 +17,8 @@ speeds outside ``MIN_SPEED``-``MAX_SPEED`` (m/s) are input errors.
 from __future__ import annotations
 
 import importlib
+import sys
+import types
 from typing import Any
 
 # submodule -> the public names it defines. Each name is imported from its module when first asked
@@ -47,6 +49,23 @@ def __getattr__(name: str) -> Any:
 
 def __dir__() -> list[str]:
     return sorted(set(globals()) | set(_MODULE_OF))
+
+
+class _LazyPackage(types.ModuleType):
+    """The package module, whose exported names win over its submodules' names.
+
+    Importing a submodule makes it an attribute of its package; the function
+    ``linearize`` would then be hidden by the module ``linearize`` that
+    defines it, whichever was imported first.
+    """
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if name in _MODULE_OF and isinstance(value, types.ModuleType):
+            return  # the submodule stays in sys.modules; the package's name keeps meaning the exported value
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _LazyPackage
 
 
 __all__ = [
