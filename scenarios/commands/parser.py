@@ -182,7 +182,6 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     imported and gets its arguments; the others are listed with their help
     line alone, which is all argparse shows of a command not chosen.
     """
-    common = common_options()
     parser = WorkbenchParser(
         prog="vehid",
         description="Vehicle-dynamics identification workbench: simulate a full-vehicle model, "
@@ -197,9 +196,13 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
         sub.required = True
         group_parsers[group] = sub
     chosen = None if argv is None else chosen_command(argv)
+    common = common_options()
     for header in command_headers():
         words = (header["NAME"],) if header["GROUP"] is None else (header["GROUP"], header["NAME"])
         target = top if header["GROUP"] is None else group_parsers[header["GROUP"]]
+        if chosen is not None and chosen != words:
+            target.add_parser(header["NAME"], help=header["HELP"])  # listed by its help line, never parsed with
+            continue
         command = target.add_parser(
             header["NAME"],
             help=header["HELP"],
@@ -207,6 +210,5 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
             parents=[common],
             formatter_class=argparse.RawDescriptionHelpFormatter,
         )
-        if chosen is None or chosen == words:
-            importlib.import_module(header["module"]).register(command)
+        importlib.import_module(header["module"]).register(command)
     return parser
