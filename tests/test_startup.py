@@ -52,8 +52,20 @@ def test_a_commands_help_imports_none_of_what_it_computes_with():
 def test_the_modules_a_command_reads_its_options_with_are_light():
     """The data options, output paths and shared option groups that any command may import at start."""
     modules = ("vehid.scenarios.data_options", "vehid.scenarios.paths", "vehid.scenarios.commands.arguments",
-               "vehid.scenarios.study_settings", "vehid.identification.choices", "vehid.vehicle.choices")
+               "vehid.scenarios.study_settings", "vehid.identification.choices", "vehid.vehicle.choices", "vehid.vehicle")
     assert _imported_after("\n".join(f"import {module}" for module in modules)) == []
+
+
+def test_the_vehicle_packages_names_keep_their_meaning_whatever_is_imported_first():
+    """The package imports its modules on demand; the module ``linearize`` imported before the function
+    ``linearize`` is asked for must not take its name."""
+    probe = ("import inspect\nimport vehid.vehicle.linearize\nimport vehid.vehicle.replay\n"
+             "from vehid.vehicle import linearize, simulate, DEFAULT_SPEED, MANOEUVRES\n"
+             "from vehid.vehicle.choices import MANOEUVRE_NAMES\n"
+             "print(inspect.isfunction(linearize), inspect.isfunction(simulate), DEFAULT_SPEED,"
+             " tuple(MANOEUVRES) == MANOEUVRE_NAMES)")
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
+    assert done.stdout.split() == ["True", "True", "20.0", "True"]
 
 
 def test_modules_of_the_command_package_without_register_are_no_commands(tmp_path):
