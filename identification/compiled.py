@@ -128,19 +128,31 @@ def generate_c(function: ca.Function, *more: ca.Function) -> str:
         return Path(scratch, source_name).read_text()
 
 
-def _cpu_identity() -> str:
-    """The machine type and CPU model and flags, as far as the system tells."""
+# The lines of the first processor's entry in /proc/cpuinfo that tell one CPU design from another:
+# x86 its model name and instruction-set flags; Arm its implementer, architecture, variant, part and
+# features; RISC-V its ISA string and micro-architecture.
+_CPU_FIELDS = ("model name", "flags", "CPU implementer", "CPU architecture", "CPU variant", "CPU part", "Features",
+               "isa", "uarch")
+
+
+def _cpu_identity(cpuinfo: str = "/proc/cpuinfo") -> str:
+    """The machine type and CPU design and features, as far as the system tells."""
     identity = platform.machine()
     try:
-        with open("/proc/cpuinfo") as handle:
+        with open(cpuinfo) as handle:
             for line in handle:
-                if line.startswith(("model name", "flags")):
+                if line.split(":", 1)[0].strip() in _CPU_FIELDS:
                     identity += line
-                if line.strip() == "":
-                    break
+                if line.strip() == "" and identity != platform.machine():
+                    break  # the first processor's entry is enough: a machine's CPUs share one design
     except OSError:
         identity += platform.processor()
     return identity
+
+
+def _native_code(optimisation: str) -> bool:
+    """Whether the flags build for this very CPU (``-march=native``, ``-mcpu=native``, ``-mtune=native``)."""
+    return any(flag.endswith("=native") for flag in optimisation.split())
 
 
 @functools.lru_cache(maxsize=None)
@@ -196,7 +208,7 @@ def build_shared_library(
         raise RuntimeError("no C compiler found (set CC or install gcc)")
     digest = hashlib.sha256()
     parts = [source, compiler, _compiler_identity(compiler), optimisation, ca.__version__, platform.machine()]
-    if "-march=native" in optimisation:
+    if _native_code(optimisation):
         parts.append(_cpu_identity())  # native code must not be loaded on another CPU sharing the cache
     for part in parts:
         digest.update(part.encode())

@@ -1,7 +1,8 @@
 """The command line's data options: reading, time base and preparation of one or several records.
 
-Commands that read measured data register them (:func:`register_data_options`),
-read with :func:`read_from_args`, prepare with :func:`preparation_options`,
+Commands that read measured data register the options
+(:func:`vehid.scenarios.commands.arguments.register_data_options`), read with
+:func:`read_from_args`, prepare with :func:`preparation_options`,
 report with :func:`records_summary` (public JSON keys ``records``,
 ``sample_jitter``, ``preparation``, ``conversions``, ``time_offset``) and
 :func:`data_warnings`, and keep the prepared records and their preparation in
@@ -10,22 +11,19 @@ an archive (:func:`archive_records`).
 
 from __future__ import annotations
 
-import argparse
 import json
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
-import h5py
-
-from vehid.identification.dataio.archive import write_record
-from vehid.identification.data import IOData
 from vehid.identification.errors import InputError
-from vehid.identification.assessment.multirecord import score_records
-from vehid.identification.dataio.preparation import DETRENDS, Preparation, ReadSettings, read_raw_records
-from vehid.identification.dataio.storage import read_value, write_value
-from vehid.identification.dataio.timebase import JITTER_TOLERANCE
 
-__all__ = ["channel_names", "register_data_options", "settings_from_args", "read_from_args", "preparation_options",
+if TYPE_CHECKING:  # the command line imports this module before it knows whether it will read any data
+    import h5py
+
+    from vehid.identification.data import IOData
+    from vehid.identification.dataio.preparation import Preparation, ReadSettings
+
+__all__ = ["channel_names", "settings_from_args", "read_from_args", "preparation_options",
            "records_summary", "data_warnings", "record_names",
            "archive_records", "archived_preparation", "save_model", "RECORD_PREFIX",
            "record_series", "record_series_name", "write_record_series"]
@@ -44,33 +42,10 @@ def channel_names(text: str | None) -> tuple[str, ...]:
     return names
 
 
-def register_data_options(parser: argparse.ArgumentParser) -> None:
-    """Add the reading, time-base and preparation options (their names are the Python API's)."""
-    group = parser.add_argument_group("data files")
-    group.add_argument("--time-column", metavar="NAME",
-                       help="time column or variable (default: t when present; 'none' disables it)")
-    group.add_argument("--dt", type=float, help="sample interval in s, for files without a time column")
-    group.add_argument("--time-scale", type=float, metavar="FACTOR",
-                       help="seconds per unit of the time column, 0.001 for ms (default: from the column's unit, "
-                            "t(ms) or a units row, else 1)")
-    group.add_argument("--resample", type=float, metavar="HZ",
-                       help="interpolate every channel linearly onto a uniform grid at HZ (low-passed first when the rate falls)")
-    group.add_argument("--decimate", type=int, metavar="K", help="keep every K-th sample after an anti-aliasing FIR filter")
-    group.add_argument("--segment", metavar="T0:T1", help="use only T0 <= t <= T1 (s, file time)")
-    group.add_argument("--jitter-tolerance", type=float, default=JITTER_TOLERANCE, metavar="FRACTION",
-                       help=f"largest stray of a sample time from a uniform grid, in steps (default {JITTER_TOLERANCE:g})")
-    group.add_argument("--detrend", default="mean", choices=DETRENDS,
-                       help="offsets removed per record and stored with the model (default: the means)")
-    group.add_argument("--scale", action="append", metavar="NAME=FACTOR", default=None,
-                       help="multiply a channel by FACTOR before identification: a unit (yawRate=0.0174533 for "
-                            "deg/s), a sign (ay=-1 for an axis pointing right); repeatable or a comma list")
-    group.add_argument("--steering-ratio", action="append", metavar="[NAME=]RATIO", default=None,
-                       help="divide a steering-wheel angle by the steering ratio, giving the road-wheel angle "
-                            "(a bare RATIO: the only input); repeatable or a comma list")
+def settings_from_args(args: Any) -> ReadSettings:
+    """The :class:`ReadSettings` the options describe (``args``: the parsed command line)."""
+    from vehid.identification.dataio.preparation import ReadSettings
 
-
-def settings_from_args(args: argparse.Namespace) -> ReadSettings:
-    """The :class:`ReadSettings` the options describe."""
     return ReadSettings(
         inputs=channel_names(args.inputs), outputs=channel_names(args.outputs), time_column=args.time_column, dt=args.dt,
         resample=args.resample, decimate=args.decimate, segment=args.segment,
@@ -78,7 +53,7 @@ def settings_from_args(args: argparse.Namespace) -> ReadSettings:
     )
 
 
-def read_from_args(args: argparse.Namespace, paths: Sequence[str]) -> tuple[tuple[IOData, ...], ReadSettings]:
+def read_from_args(args: Any, paths: Sequence[str]) -> tuple[tuple[IOData, ...], ReadSettings]:
     """The raw records of the data files named on the command line, and the settings they were read with.
 
     For a hold-out split: split a raw record first, then :func:`~identification.dataio.preparation.prepare` the
@@ -89,10 +64,12 @@ def read_from_args(args: argparse.Namespace, paths: Sequence[str]) -> tuple[tupl
         raise InputError("give a DATA file (or --resume ARCHIVE)")
     if len(set(paths)) != len(paths):
         raise InputError("a data file is named twice")
+    from vehid.identification.dataio.preparation import read_raw_records
+
     return read_raw_records(list(paths), settings_from_args(args))
 
 
-def preparation_options(args: argparse.Namespace) -> dict[str, Any]:
+def preparation_options(args: Any) -> dict[str, Any]:
     """The keywords of :func:`~identification.dataio.preparation.prepare` the options give (offsets and conversions)."""
     return {"detrend": args.detrend, "scale": args.scale, "steering_ratio": getattr(args, "steering_ratio", None)}
 
@@ -105,6 +82,8 @@ def record_names(records: Sequence[IOData]) -> list[str]:
 
 def records_summary(model: Any, records: Sequence[IOData], preparation: Preparation | None) -> dict[str, Any]:
     """The JSON keys about the data: ``records``, ``sample_jitter``, ``preparation``."""
+    from vehid.identification.assessment.multirecord import score_records
+
     scored = score_records(model, records, names=record_names(records))
     jitters = [r.meta.get("time_base", {}).get("sample_jitter") for r in records]
     summary: dict[str, Any] = {
@@ -145,6 +124,8 @@ def record_series_name(prefix: str, index: int) -> str:
 
 def write_record_series(archive: h5py.File, records: Sequence[IOData], prefix: str) -> None:
     """Store records as a series under ``prefix`` (:func:`record_series_name`), in order."""
+    from vehid.identification.dataio.archive import write_record
+
     for index, record in enumerate(records):
         write_record(archive, record_series_name(prefix, index), record)
 
@@ -159,6 +140,8 @@ def record_series(stored: Mapping[str, IOData], prefix: str) -> tuple[IOData, ..
 
 def archive_records(archive: h5py.File, records: Sequence[IOData], preparation: Preparation | None) -> None:
     """Store the prepared records (``data/identification``, ``data/identification_2``, ...) and the preparation."""
+    from vehid.identification.dataio.storage import write_value
+
     write_record_series(archive, records, RECORD_PREFIX)
     if preparation is not None:
         write_value(archive, PREPARATION_MEMBER, preparation)
@@ -166,6 +149,9 @@ def archive_records(archive: h5py.File, records: Sequence[IOData], preparation: 
 
 def archived_preparation(archive: h5py.File) -> Preparation | None:
     """The preparation stored with an identification run (None in archives written before it was kept)."""
+    from vehid.identification.dataio.preparation import Preparation
+    from vehid.identification.dataio.storage import read_value
+
     if PREPARATION_MEMBER not in archive:
         return None
     value = read_value(archive, PREPARATION_MEMBER)
@@ -233,3 +219,12 @@ def save_model(model: Any, target: str, preparation: Preparation | None) -> Path
             savemat(path, contents)
         return path
     raise InputError(f"--save-model takes a .json or .mat file; got {target!r}")
+
+
+def __getattr__(name: str) -> Any:
+    # The option group lives in the command layer now; importing it from here still works.
+    if name == "register_data_options":
+        from vehid.scenarios.commands.arguments import register_data_options
+
+        return register_data_options
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -49,6 +49,8 @@ from .handling_study import (COMPARED_MODES, OUTPUTS, check_orders, explained_pe
                              positive_number, spline_options, study_linear_options, whole_number)
 from .paths import results_path
 from .shutdown import run_in_workers
+from .study_settings import (ENVELOPE_AMPLITUDE_FRACTION, ENVELOPE_ARCHIVE_KIND, ENVELOPE_DURATION, ENVELOPE_EXECUTORS,
+                             ENVELOPE_P, ENVELOPE_PASSES)
 
 __all__ = [
     "EXECUTORS",
@@ -65,8 +67,8 @@ __all__ = [
     "run_campaign",
 ]
 
-EXECUTORS = ("process", "dask")
-ARCHIVE_KIND = "envelope-campaign"
+EXECUTORS = ENVELOPE_EXECUTORS
+ARCHIVE_KIND = ENVELOPE_ARCHIVE_KIND
 _DEG = math.pi / 180
 _RAMP_DURATION = 20.0  # [s] slow enough to be quasi-steady (1 deg/s at 20 m/s)
 _RAMP_DT = 0.005  # [s] the ramp only needs the handling curve, not the identification's 500 Hz
@@ -124,15 +126,15 @@ class EnvelopeConfig:
 
     vehicles: tuple[str, ...] = ("baseline",)
     speeds: tuple[float, ...] = (10.0, 15.0, 20.0, 25.0, 30.0)
-    amplitude_fraction: float = 0.1
+    amplitude_fraction: float = ENVELOPE_AMPLITUDE_FRACTION
     orders: tuple[int, ...] = (2, 3, 4)
     seeds: tuple[int, ...] = (0,)
     nonlinear: bool = True
     off_grid: tuple[float, ...] | None = None
-    duration: float = 30.0
+    duration: float = ENVELOPE_DURATION
     dt: float = DEFAULT_DT
-    p: float = 1e-3
-    passes: int = 30
+    p: float = ENVELOPE_P
+    passes: int = ENVELOPE_PASSES
     nodes: int = 5
     nonlinear_passes: int | None = None
     nonlinear_p: float | None = None

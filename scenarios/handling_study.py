@@ -46,10 +46,12 @@ from vehid.identification.models.modal import ModalStructure
 from vehid.identification.models.protocol import Mode as ModelMode
 from vehid.identification.assessment.order import OrderAssessment, OrderRow, assess_orders
 from vehid.identification.dataio.storage import write_value
-from vehid.vehicle import DEFAULT_DT, DEFAULT_SPEED, linearize, make_manoeuvre, named_vehicle, simulate
+from vehid.vehicle import DEFAULT_DT, linearize, make_manoeuvre, named_vehicle, simulate
 from vehid.vehicle.linearize import VehicleMode
 
 from .paths import results_path
+from .study_settings import (HANDLING_AMPLITUDE_SCALE, HANDLING_DURATION, HANDLING_ORDERS, HANDLING_SEED,
+                             HANDLING_SPEED, HANDLING_VEHICLE, STUDY_LINEAR_P, STUDY_LINEAR_PASSES)
 from .shutdown import run_in_workers
 
 
@@ -169,7 +171,7 @@ def whole_number(value: Any, name: str, minimum: int, maximum: int | None = None
     return int(value)
 
 
-def study_linear_options(p: float = 1e-5, passes: int = 100) -> IEKFOptions:
+def study_linear_options(p: float = STUDY_LINEAR_P, passes: int = STUDY_LINEAR_PASSES) -> IEKFOptions:
     """The study's linear IEKF options: normalised data, exact (first-order-hold) discretisation."""
     return IEKFOptions(p=p, passes=passes, normalize=True, discretization="exact")
 
@@ -210,12 +212,12 @@ class HandlingConfig:
         Processes running orders at once; default ``min(len(orders), cpu_count)``.
     """
 
-    orders: tuple[int, ...] = (2, 3, 4, 5, 6)
-    seed: int = 0
-    duration: float = 30.0  # [s]
-    amplitude_scale: float = 1.0  # [-]
-    vehicle: str = "baseline"
-    speed: float = DEFAULT_SPEED  # [m/s]
+    orders: tuple[int, ...] = HANDLING_ORDERS
+    seed: int = HANDLING_SEED
+    duration: float = HANDLING_DURATION  # [s]
+    amplitude_scale: float = HANDLING_AMPLITUDE_SCALE  # [-]
+    vehicle: str = HANDLING_VEHICLE
+    speed: float = HANDLING_SPEED  # [m/s]
     dt: float = DEFAULT_DT  # [s]
     linear_options: IEKFOptions = study_linear_options()
     spline_options: SplineIEKFOptions | None = SplineIEKFOptions()

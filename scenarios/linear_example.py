@@ -45,6 +45,7 @@ from vehid.identification.models.modal import ModalModel, ModalStructure
 from vehid.identification.assessment.order import OrderAssessment, assess_orders
 
 from .paths import results_path
+from .study_settings import LINEAR_EXAMPLE_CASES
 
 __all__ = [
     "CASES",
@@ -61,7 +62,7 @@ __all__ = [
 ]
 
 DT = 0.002  # [s] 500 Hz (eq. 16)
-CASES = ("single-output", "three-output", "three-output-constrained", "noise", "orders")
+CASES = LINEAR_EXAMPLE_CASES
 NOISE_RATIOS = (0.1, 0.3, 0.5, 0.7)
 ORDERS = (3, 4, 5, 6, 7)
 

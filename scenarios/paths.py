@@ -8,7 +8,6 @@ given, goes to the results folder (``$VEHID_RESULTS_DIR``, else ``results/``).
 
 from __future__ import annotations
 
-import argparse
 import hashlib
 import json
 import os
@@ -71,8 +70,10 @@ def _identity(value: Any) -> Any:
     return value
 
 
-def run_digest(args: argparse.Namespace) -> str:
+def run_digest(args: Any) -> str:
     """The digest that says which run a command line asks for: the command, its settings and its input files' content.
+
+    ``args`` is the parsed command line (its ``handler`` and option attributes).
 
     Two command lines with the same digest compute the same thing, so the
     second may replace the first's output; where, how verbosely and by how

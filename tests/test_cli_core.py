@@ -27,10 +27,10 @@ def test_parser_builds():
 
 
 def _subcommands():
-    from vehid.scenarios.cli import GROUPS, _command_modules
+    from vehid.scenarios.commands.parser import GROUPS, command_modules
 
     commands = []
-    for module in _command_modules():
+    for module in command_modules():
         commands.append([module.NAME] if module.GROUP is None else [module.GROUP, module.NAME])
     assert {"study", "bench"} == set(GROUPS)
     return commands

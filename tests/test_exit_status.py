@@ -46,9 +46,9 @@ def _check(capsys, argv, status, *words):
 
 
 def test_every_command_is_covered():
-    from vehid.scenarios.cli import _command_modules
+    from vehid.scenarios.commands.parser import command_modules
 
-    found = {(m.NAME,) if m.GROUP is None else (m.GROUP, m.NAME) for m in _command_modules()}
+    found = {(m.NAME,) if m.GROUP is None else (m.GROUP, m.NAME) for m in command_modules()}
     assert found == COMMANDS
 
 
@@ -163,20 +163,20 @@ def test_a_failed_computation_exits_1(command, tmp_path, capsys, monkeypatch):
             pass
         argv += [str(archive)]
     elif command == ("simulate",):
-        monkeypatch.setattr("vehid.scenarios.commands.simulate.simulate", diverge)
+        monkeypatch.setattr("vehid.vehicle.simulate", diverge)
         argv += ["--duration", "1"]
     elif command == ("linearize",):
         monkeypatch.setattr(importlib.import_module("vehid.vehicle.linearize"), "linearize", diverge)
     elif command == ("study", "handling"):
-        monkeypatch.setattr("vehid.scenarios.commands.study_handling.run_study", diverge)
-        monkeypatch.setattr("vehid.scenarios.commands.study_handling.make_records", lambda config: {})
+        monkeypatch.setattr("vehid.scenarios.handling_study.run_study", diverge)
+        monkeypatch.setattr("vehid.scenarios.handling_study.make_records", lambda config: {})
         argv += ["--orders", "2", "--out", str(tmp_path / "h.h5")]
     elif command == ("study", "linear-example"):
-        monkeypatch.setattr("vehid.scenarios.commands.study_linear_example.run_case", diverge)
+        monkeypatch.setattr("vehid.scenarios.linear_example.run_case", diverge)
     elif command == ("study", "textbook"):
         monkeypatch.setattr("vehid.scenarios.textbook.run_all", diverge)
     elif command == ("study", "envelope"):
-        monkeypatch.setattr("vehid.scenarios.commands.study_envelope.run_campaign", diverge)
+        monkeypatch.setattr("vehid.scenarios.envelope.run_campaign", diverge)
         argv += ["--speeds", "15", "--orders", "2", "--linear-only"]
     elif command == ("calibrate",):
         monkeypatch.setattr("vehid.vehicle.calibration.calibrate_vehicle", diverge)
@@ -200,7 +200,7 @@ def test_a_full_disk_names_the_file_and_exits_1(tmp_path, capsys, monkeypatch):
     def full(*args, **kwargs):
         raise OSError(errno.ENOSPC, "No space left on device", target)
 
-    monkeypatch.setattr("vehid.scenarios.commands.study_linear_example.run_case", full)
+    monkeypatch.setattr("vehid.scenarios.linear_example.run_case", full)
     _check(capsys, ["study", "linear-example"], 1, target, "No space left on device")
 
 

@@ -40,16 +40,19 @@ ARX = ["--inputs", "u1,u2", "--outputs", "y1", "--order", "2", "--method", "arx"
 
 def _no_work(monkeypatch) -> None:
     """Make every command's computation fail loudly: a refusal must come before any of it."""
-    from vehid.scenarios.commands import identify, simulate, study_envelope, study_handling, study_linear_example
+    import vehid.vehicle
+    from vehid.scenarios import envelope, handling_study, linear_example
+    from vehid.scenarios.commands import identify
 
     def refuse(*args, **kwargs):
         raise AssertionError("the work started before the output was checked")
 
+    # the commands import what they compute with when they run: the refusal is set where they find it
     monkeypatch.setattr(identify.workflow, "load_plan", refuse)
-    monkeypatch.setattr(simulate, "simulate", refuse)
-    monkeypatch.setattr(study_handling, "make_records", refuse)
-    monkeypatch.setattr(study_linear_example, "run_case", refuse)
-    monkeypatch.setattr(study_envelope, "run_campaign", refuse)
+    monkeypatch.setattr(vehid.vehicle, "simulate", refuse)
+    monkeypatch.setattr(handling_study, "make_records", refuse)
+    monkeypatch.setattr(linear_example, "run_case", refuse)
+    monkeypatch.setattr(envelope, "run_campaign", refuse)
 
 
 # ---------------------------------------------------------------- what a user may have

@@ -25,6 +25,7 @@ import numpy as np
 
 from vehid.identification.errors import InputError
 
+from .choices import MANOEUVRE_NAMES
 from .simulation import DEFAULT_DT, check_record_memory, check_speed_profile, check_steer
 
 __all__ = [
@@ -376,15 +377,8 @@ def speed_cycle(
     )
 
 
-MANOEUVRES: dict[str, Callable[..., Manoeuvre]] = {
-    "identification": identification,
-    "validation": validation,
-    "step": step,
-    "sweep": sweep,
-    "ramp": ramp,
-    "speed-ramp": speed_ramp,
-    "speed-cycle": speed_cycle,
-}
+# the names are listed once, in .choices, for the command line; each factory is the function of its name
+MANOEUVRES: dict[str, Callable[..., Manoeuvre]] = {name: globals()[name.replace("-", "_")] for name in MANOEUVRE_NAMES}
 
 
 def make_manoeuvre(name: str, **options: Any) -> Manoeuvre:

@@ -78,6 +78,7 @@ import numpy as np
 
 from vehid.identification.errors import DivergenceError, InputError
 
+from .choices import DEFAULT_SPEED
 from .parameters import GRAVITY, VehicleParameters, has_aerodynamics, static_axle_loads
 from .tyre import aligning_moment, combined_forces
 from .validity import MAX_SPEED, MAX_SPEED_AERO, check_speed_range
@@ -100,7 +101,6 @@ __all__ = [
 ]
 
 CORNERS = ("fl", "fr", "rl", "rr")
-DEFAULT_SPEED = 20.0  # [m/s] the handling study's trim speed (Best & Bogdanski, section 6)
 MAX_STEER = np.deg2rad(30.0)  # [rad] road-wheel steer beyond this is rejected as bad input
 
 STATE_NAMES = (

@@ -38,6 +38,7 @@ from vehid.identification.data import IOData
 from vehid.identification.errors import InputError, SimulationError
 from vehid.identification.assessment.metrics import nrmse_fit
 
+from .choices import STEER_KINDS
 from .linearize import linearization_function
 from .model import build_vehicle_model, speed_limit
 from .parameters import VehicleParameters, has_aerodynamics, named_vehicle
@@ -46,7 +47,6 @@ from .validity import MIN_SPEED, largest_stable_step
 
 __all__ = ["STEER_KINDS", "ReplayFit", "replay", "replay_substeps", "channel_fits"]
 
-STEER_KINDS = ("road", "wheel")
 _STEP_MARGIN = 0.8  # substeps no longer than 80 % of the largest stable RK4 step: modes shift along a drive
 _MAX_SUBSTEPS = 50  # beyond this the log's rate is too coarse to interpolate the steer within a sample
 

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from ..data import IOData
+from ..choices import INITIAL_STATES
 from ..errors import InputError
 from .metrics import nrmse_fit, percentage_explanation
 from ..models.statespace import continuous_to_discrete, hold_state_shift
@@ -31,7 +32,6 @@ __all__ = [
     "UNSTABLE_HORIZON",
 ]
 
-INITIAL_STATES = ("zero", "estimate")
 
 # Steady-state Kalman filter of the k-step predictor, in outputs divided by their RMS:
 # process noise this fraction of the input-driven state variance per sample, unit measurement noise.

@@ -18,6 +18,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from ..data import IOData, as_records, check_channels, read_hdf5
+from ..choices import DETRENDS
 from ..errors import InputError
 from .readers import RawRecord, expand_channels, read_raw
 from .timebase import JITTER_TOLERANCE, parse_segment, uniform_record
@@ -38,8 +39,6 @@ __all__ = [
     "parse_steering_ratio",
 ]
 
-#: How offsets are estimated: each record's mean, a line through each record, or none.
-DETRENDS = ("mean", "linear", "none")
 
 _HDF5_SUFFIXES = (".h5", ".hdf5", ".hdf")
 

@@ -16,13 +16,12 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..data import IOData
+from ..choices import JITTER_TOLERANCE
 from ..errors import InputError
 from .readers import RawRecord
 
 __all__ = ["JITTER_TOLERANCE", "GAP_FACTOR", "ANTI_ALIAS_CUTOFF", "uniform_record", "parse_segment"]
 
-#: Largest stray of a sample time from the uniform grid accepted without resampling, as a fraction of a step.
-JITTER_TOLERANCE = 0.05
 #: A step longer than this many median steps is a gap in the record.
 GAP_FACTOR = 2.0
 #: Cut-off of the anti-aliasing low-pass before resampling to a lower rate, as a fraction of the new Nyquist frequency.

@@ -19,12 +19,12 @@ from typing import Any, Protocol
 
 import casadi as ca
 
+from ..choices import DISCRETIZATIONS
 from ..errors import InputError
 from ..models.modal import ModalStructure
 
 __all__ = ["DISCRETIZATIONS", "FilterModel", "LinearModalFilterModel", "mode_transition", "modal_transition"]
 
-DISCRETIZATIONS = ("euler", "exact", "exact-zoh")
 
 _TAYLOR_RADIUS = 1e-3  # |z| below which phi1, phi2 use their series (error < |z|^4/120 ~ 1e-14)
 

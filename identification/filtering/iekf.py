@@ -38,6 +38,7 @@ from typing import Any, Callable
 import numpy as np
 
 from ..data import IOData, as_records
+from ..choices import TIMESCALES
 from ..errors import DivergenceError, InputError
 from .filter_models import LinearModalFilterModel
 from .iekf_pass import compiled_pass, pack_covariance, unpack_covariance
@@ -75,9 +76,6 @@ START_VALUES = {
 #: Every start: the fixed ones of :data:`START_VALUES` and those taken from the data.
 START_CHOICES = (*DATA_STARTS, *START_VALUES)
 
-#: ``seconds``: the filter runs in the record's time unit and p is absolute (the paper);
-#: ``auto``: time in samples inside the filter, p per dominant time constant (module docstring).
-TIMESCALES = ("seconds", "auto")
 
 #: The relative tuning parameter of :meth:`IEKFOptions.invariant`: Q = p I per dominant time
 #: constant of the start model, on parameters of order 1 (chosen by measurement: docs/iekf_tuning.md).

@@ -26,6 +26,7 @@ import casadi as ca
 import numpy as np
 
 from ..compiled import NoCompilerWarning, compile_driver, find_c_compiler
+from ..choices import COVARIANCE_FORMS
 from ..errors import DivergenceError
 from .filter_models import FilterModel, check_discretization
 from .iekf_kernel import structured_pass_source
@@ -41,7 +42,6 @@ __all__ = [
     "unpack_covariance",
 ]
 
-COVARIANCE_FORMS = ("joseph", "paper")
 KERNELS = ("auto", "structured", "generated")
 
 # Flags and threshold chosen by measurement (docs/iekf_tuning.md, benchmarks/iekf_compile_levels.py); the

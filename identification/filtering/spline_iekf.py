@@ -19,6 +19,7 @@ from typing import Any, Callable
 import numpy as np
 
 from ..data import IOData
+from ..choices import SPLINE_NODES, SPLINE_P, SPLINE_PASSES
 from ..errors import DivergenceError, InputError
 from .iekf_pass import compiled_pass
 from ..assessment.metrics import percentage_explanation
@@ -65,9 +66,9 @@ class SplineIEKFOptions:
         Never stop earlier than this.
     """
 
-    nodes: int = 5
-    p: float = 1e-7
-    passes: int = 60
+    nodes: int = SPLINE_NODES
+    p: float = SPLINE_P
+    passes: int = SPLINE_PASSES
     discretization: str = "exact"
     covariance: str = "joseph"
     redistribute: bool = True

@@ -33,6 +33,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from ..choices import C_PATTERNS
 from ..errors import InputError
 from .protocol import Mode, StateSpaceModel, eigenvalues_stable
 
@@ -43,12 +44,6 @@ __all__ = [
     "phi_functions",
 ]
 
-#: The C patterns of the paper, by name (Best & Bogdanski 2017): ``all-ones``
-#: ties every state to output 1 (Table 1, and Table 2's "first row fixed");
-#: ``eq18`` is the three-output, n = 5 pattern of eq. 18; ``eq19`` the
-#: order-study patterns of eq. 19 (n = 3..7, three outputs); ``default`` the
-#: workbench's generalisation (pairs first, outputs assigned in turn).
-C_PATTERNS = ("default", "all-ones", "eq18", "eq19")
 
 # Which output each mode (pairs first, then real poles) is tied to in eq. 19,
 # for three outputs; n = 5 is eq. 18. The paper ties n = 7's real pole to the

@@ -21,13 +21,11 @@ import argparse
 import math
 from pathlib import Path
 
-import numpy as np
-
-from vehid.identification.dataio.archive_safety import KIND_ATTRIBUTE, RUN_ATTRIBUTE, check_output_target
 from vehid.identification.errors import InputError, SimulationError
 from vehid.scenarios.paths import HDF5_SUFFIXES, OUT_RULE, run_digest
-from vehid.vehicle import MANOEUVRES, make_manoeuvre, named_vehicle, simulate
-from vehid.vehicle.replay import STEER_KINDS, channel_fits, replay
+from vehid.vehicle.choices import MANOEUVRE_NAMES, STEER_KINDS
+
+# NumPy, CasADi, h5py and the vehicle model are imported by the functions that use them: --help needs none.
 
 NAME = "simulate"
 GROUP = None
@@ -37,7 +35,7 @@ _STEADY_WINDOW = 0.5  # [s] the end of a step record averaged as its steady stat
 
 
 def register(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--manoeuvre", default=None, choices=sorted(MANOEUVRES),
+    parser.add_argument("--manoeuvre", default=None, choices=sorted(MANOEUVRE_NAMES),
                         help="steer input (default: identification)")
     parser.add_argument("--amplitude-deg", type=float, default=None,
                         help="road-wheel steer amplitude in degrees (default: the manoeuvre's own)")
@@ -80,6 +78,8 @@ def register(parser: argparse.ArgumentParser) -> None:
 
 def step_gains(data, amplitude: float, window: float = _STEADY_WINDOW) -> dict[str, float]:
     """Steady-state gains of a step record: mean of the last ``window`` seconds over the step size."""
+    import numpy as np
+
     if amplitude == 0:
         raise InputError("a step of zero amplitude has no gain")
     tail = slice(-max(int(round(window / data.dt)), 1), None)
@@ -104,6 +104,8 @@ def _write_record(data, args: argparse.Namespace, run: str) -> Path:
     import casadi
     import h5py
 
+    from vehid.identification.dataio.archive_safety import KIND_ATTRIBUTE, RUN_ATTRIBUTE
+
     path = Path(args.out)
     temporary = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.partial")
     try:
@@ -127,6 +129,11 @@ _REPLAY_OPTIONS = ("steer_channel", "speed_channel", "compare", "time_column", "
 
 
 def run(args: argparse.Namespace) -> tuple[dict, str]:
+    import numpy as np
+
+    from vehid.identification.dataio.archive_safety import check_output_target
+    from vehid.vehicle import make_manoeuvre, named_vehicle, simulate
+
     if args.replay is not None:
         return run_replay(args)
     given = [name for name in _REPLAY_OPTIONS if getattr(args, name) is not None] + (
@@ -226,7 +233,12 @@ def _compare_pairs(text: str | None) -> dict[str, str]:
 
 def run_replay(args: argparse.Namespace) -> tuple[dict, str]:
     """``--replay LOG``: the measured steer and speed through the model, on the log's samples."""
+    import numpy as np
+
+    from vehid.identification.dataio.archive_safety import check_output_target
     from vehid.identification.dataio.preparation import ReadSettings, parse_scale, read_record
+    from vehid.vehicle import named_vehicle
+    from vehid.vehicle.replay import channel_fits, replay
 
     for name in _MANOEUVRE_OPTIONS:
         if getattr(args, name) is not None:

@@ -17,20 +17,18 @@ import argparse
 import errno
 import os
 
-from vehid.scenarios.envelope import ARCHIVE_KIND, EXECUTORS, EnvelopeConfig, parse_speeds, run_campaign
-from vehid.scenarios.commands.study_handling import add_filter_options
-from vehid.scenarios.handling_study import parse_orders
+from vehid.scenarios.commands.arguments import add_filter_options
 from vehid.scenarios.paths import HDF5_SUFFIXES, OUT_RULE, results_path
 from vehid.scenarios.progress import Progress
-from vehid.identification.dataio.archive_safety import (OutputTargetError, check_report_folder, output_identity,
-                                                writing_report_folder)
+from vehid.scenarios.study_settings import (ENVELOPE_AMPLITUDE_FRACTION, ENVELOPE_ARCHIVE_KIND, ENVELOPE_DURATION,
+                                            ENVELOPE_EXECUTORS, ENVELOPE_P, ENVELOPE_PASSES)
 from vehid.identification.errors import InputError
+
+# The campaign, its filters and HDF5 are imported by the functions that run it: --help needs none of them.
 
 NAME = "envelope"
 GROUP = "study"
 HELP = "models across vehicles and speeds, and a speed-scheduled model, on a process pool or Dask"
-
-_DEFAULTS = EnvelopeConfig()
 
 
 def _seeds(text: str) -> tuple[int, ...]:
@@ -45,16 +43,16 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--speeds", default="10,15,20,25,30", help="grid speeds in m/s (default 10,15,20,25,30)")
     parser.add_argument("--off-grid", default=None,
                         help="speeds where the scheduled model is validated (default: midpoints of the grid; 'none')")
-    parser.add_argument("--amplitude-fraction", type=float, default=_DEFAULTS.amplitude_fraction,
+    parser.add_argument("--amplitude-fraction", type=float, default=ENVELOPE_AMPLITUDE_FRACTION,
                         help="steer amplitude as a fraction of each speed's grip limit "
-                             f"(default {_DEFAULTS.amplitude_fraction:g}: the linear range)")
+                             f"(default {ENVELOPE_AMPLITUDE_FRACTION:g}: the linear range)")
     parser.add_argument("--orders", default="2-4", help="model orders, e.g. 2-4 (default 2-4)")
     parser.add_argument("--seeds", default="0", help="seeds of the steer inputs, comma-separated (default 0)")
     parser.add_argument("--linear-only", action="store_true", help="skip the spline-nonlinear models")
-    parser.add_argument("--duration", type=float, default=_DEFAULTS.duration,
-                        help=f"length of each record in s (default {_DEFAULTS.duration:g})")
-    add_filter_options(parser, _DEFAULTS.linear_options)
-    parser.add_argument("--executor", choices=EXECUTORS, default="process",
+    parser.add_argument("--duration", type=float, default=ENVELOPE_DURATION,
+                        help=f"length of each record in s (default {ENVELOPE_DURATION:g})")
+    add_filter_options(parser, passes=ENVELOPE_PASSES, p=ENVELOPE_P)
+    parser.add_argument("--executor", choices=ENVELOPE_EXECUTORS, default="process",
                         help="local process pool (default) or Dask distributed")
     parser.add_argument("--workers", type=int, default=None,
                         help="processes of the pool or of the local Dask cluster (default: the cores)")
@@ -70,6 +68,8 @@ def register(parser: argparse.ArgumentParser) -> None:
 
 def _check_archive_target(path, resume: bool) -> None:
     """A campaign archive is only ever continued, never replaced: say so before any job is planned."""
+    from vehid.identification.dataio.archive_safety import OutputTargetError, output_identity
+
     if path.is_dir():
         raise OutputTargetError(f"cannot write the archive {path}: {os.strerror(errno.EISDIR)}")
     if path.suffix.lower() not in HDF5_SUFFIXES:
@@ -81,12 +81,16 @@ def _check_archive_target(path, resume: bool) -> None:
         raise OutputTargetError(f"{path} exists; refusing to overwrite it (give --resume to continue the campaign "
                                 "it holds, or choose another file)")
     identity = output_identity(path)
-    if identity is None or identity.kind != ARCHIVE_KIND:
+    if identity is None or identity.kind != ENVELOPE_ARCHIVE_KIND:
         raise OutputTargetError(f"{path} is not a campaign archive of the workbench; nothing to resume there "
                                 "(choose another file)")
 
 
 def run(args: argparse.Namespace) -> tuple[dict, str]:
+    from vehid.identification.dataio.archive_safety import check_report_folder, writing_report_folder
+    from vehid.scenarios.envelope import EnvelopeConfig, parse_speeds, run_campaign
+    from vehid.scenarios.handling_study import parse_orders
+
     _check_archive_target(results_path(args.out, "envelope.h5"), args.resume)
     if not args.no_report:  # before the campaign: a folder of the user's is refused now, not after hours
         check_report_folder(results_path(args.out, "envelope.h5").with_suffix(""), force=args.force)

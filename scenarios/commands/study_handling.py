@@ -17,56 +17,41 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from vehid.identification.dataio.archive import open_archive
-from vehid.identification.dataio.archive_safety import (archive_lock, check_output_target, check_report_folder,
-                                                output_identity, writing_report_folder)
 from vehid.identification.errors import InputError
-from vehid.identification.filtering.iekf import IEKFOptions
-from vehid.identification.filtering.spline_iekf import SplineIEKFOptions
-from vehid.scenarios.handling_resume import StudyCheckpoint, read_progress
-from vehid.scenarios.handling_study import (OUTPUTS, PAPER, HandlingConfig, HandlingResult, archive_path, make_records,
-                                            parse_orders, percent_text, planned_passes, run_study, spline_options,
-                                            study_linear_options, summary_of, write_study_archive)
+from vehid.scenarios.commands.arguments import add_filter_options
 from vehid.scenarios.paths import HDF5_SUFFIXES, OUT_RULE, run_digest
 from vehid.scenarios.progress import Progress
+from vehid.scenarios.study_settings import (HANDLING_AMPLITUDE_SCALE, HANDLING_DURATION, HANDLING_SEED, HANDLING_SPEED,
+                                            HANDLING_VEHICLE, STUDY_LINEAR_P, STUDY_LINEAR_PASSES)
+
+if TYPE_CHECKING:
+    from vehid.scenarios.handling_study import HandlingResult
+
+# The study, its filters and HDF5 are imported by the functions that run it: --help needs none of them.
 
 NAME = "handling"
 GROUP = "study"
 HELP = "the paper's handling study: Table 5, linear and nonlinear models of orders 2-6"
-
-_DEFAULTS = HandlingConfig()
-
-
-def add_filter_options(parser: argparse.ArgumentParser, linear: IEKFOptions) -> None:
-    """The filters' options the studies share: ``--passes`` and ``--p`` of the linear IEKF (defaults
-    from ``linear``), ``--nodes``, ``--nonlinear-passes`` and ``--nonlinear-p`` of the spline IEKF."""
-    parser.add_argument("--passes", type=int, default=linear.passes,
-                        help=f"passes of each linear identification (default {linear.passes})")
-    parser.add_argument("--p", type=float, default=linear.p,
-                        help=f"tuning parameter p of the linear identifications (default {linear.p:g})")
-    parser.add_argument("--nodes", type=int, default=SplineIEKFOptions.nodes,
-                        help=f"spline nodes per coefficient of the nonlinear models (default {SplineIEKFOptions.nodes})")
-    parser.add_argument("--nonlinear-passes", type=int, default=None,
-                        help=f"passes of each nonlinear identification (default {SplineIEKFOptions.passes})")
-    parser.add_argument("--nonlinear-p", type=float, default=None,
-                        help=f"tuning parameter p of the nonlinear identifications (default {SplineIEKFOptions.p:g})")
 
 
 def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--orders", default="2-6", help="model orders, e.g. 2-6, 4 or 2,4-6 (default 2-6)")
     parser.add_argument("--workers", type=int, default=None,
                         help="processes running orders at once (default: as many as orders, at most the cores)")
-    parser.add_argument("--seed", type=int, default=_DEFAULTS.seed, help="seed of both steer inputs (default 0)")
-    add_filter_options(parser, _DEFAULTS.linear_options)
+    parser.add_argument("--seed", type=int, default=HANDLING_SEED,
+                        help=f"seed of both steer inputs (default {HANDLING_SEED})")
+    add_filter_options(parser, passes=STUDY_LINEAR_PASSES, p=STUDY_LINEAR_P)
     parser.add_argument("--linear-only", action="store_true", help="skip the nonlinear identifications")
-    parser.add_argument("--duration", type=float, default=_DEFAULTS.duration,
-                        help=f"length of each record in s (default {_DEFAULTS.duration:g})")
-    parser.add_argument("--amplitude-scale", type=float, default=_DEFAULTS.amplitude_scale,
-                        help="steer amplitude as a fraction of the inputs' defaults (default 1; 0.1 stays linear)")
-    parser.add_argument("--vehicle", default=_DEFAULTS.vehicle, help="baseline, understeer, or a vehicle file")
-    parser.add_argument("--speed", type=float, default=_DEFAULTS.speed, help="trim speed in m/s (default 20)")
+    parser.add_argument("--duration", type=float, default=HANDLING_DURATION,
+                        help=f"length of each record in s (default {HANDLING_DURATION:g})")
+    parser.add_argument("--amplitude-scale", type=float, default=HANDLING_AMPLITUDE_SCALE,
+                        help=f"steer amplitude as a fraction of the inputs' defaults (default {HANDLING_AMPLITUDE_SCALE:g}; "
+                             "0.1 stays linear)")
+    parser.add_argument("--vehicle", default=HANDLING_VEHICLE, help="baseline, understeer, or a vehicle file")
+    parser.add_argument("--speed", type=float, default=HANDLING_SPEED,
+                        help=f"trim speed in m/s (default {HANDLING_SPEED:g})")
     parser.add_argument("--out", default=None,
                         help=f"archive file ({OUT_RULE}; default handling_study.h5 under the results folder)")
     parser.add_argument("--no-report", action="store_true",
@@ -88,6 +73,13 @@ _SETTING_DEFAULTS: dict = {}
 
 
 def run(args: argparse.Namespace) -> tuple[dict, str]:
+    from vehid.identification.dataio.archive import open_archive
+    from vehid.identification.dataio.archive_safety import (archive_lock, check_output_target, check_report_folder,
+                                                            output_identity)
+    from vehid.scenarios.handling_resume import StudyCheckpoint, read_progress
+    from vehid.scenarios.handling_study import (HandlingConfig, archive_path, make_records, parse_orders,
+                                                spline_options, study_linear_options)
+
     if args.resume:
         given = [name for name in _SETTINGS if getattr(args, name) != _SETTING_DEFAULTS.get(name)]
         if args.out or given:
@@ -121,6 +113,9 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
 
 
 def _study(args, config, path, records, finished, checkpoint, run) -> tuple[dict, str]:
+    from vehid.identification.dataio.archive_safety import writing_report_folder
+    from vehid.scenarios.handling_study import planned_passes, run_study, summary_of, write_study_archive
+
     state = {order: "-" for order in config.orders}
     shown: list[Progress] = []  # drawn from the first pass on, after the set-up has logged its warnings
 
@@ -153,6 +148,7 @@ def _study(args, config, path, records, finished, checkpoint, run) -> tuple[dict
 
 def text_of(result: HandlingResult) -> str:
     """The study's text summary: Table 5, the order chosen, the modes beside the vehicle's."""
+    from vehid.scenarios.handling_study import percent_text
     from vehid.scenarios.report import format_eigenvalues
 
     config, linear = result.config, result.config.linear_options

@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import argparse
 
-from vehid.identification.dataio.archive_safety import archive_lock, check_output_target
-from vehid.identification.filtering.filter_models import DISCRETIZATIONS
-from vehid.identification.filtering.iekf_pass import COVARIANCE_FORMS
-from vehid.scenarios.linear_example import CASES, planned_passes, run_case, write_archive_for
+from vehid.identification.choices import COVARIANCE_FORMS, DISCRETIZATIONS
 from vehid.scenarios.paths import HDF5_SUFFIXES, OUT_RULE, results_path, run_digest
 from vehid.scenarios.progress import Progress
+from vehid.scenarios.study_settings import LINEAR_EXAMPLE_CASES
+
+# The study, its filter and HDF5 are imported by run: --help needs none of them.
 
 NAME = "linear-example"
 GROUP = "study"
@@ -23,7 +23,7 @@ HELP = "the paper's linear example: Tables 1-4 and the order study"
 
 
 def register(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--case", default="single-output", choices=CASES, help="which table (default single-output)")
+    parser.add_argument("--case", default="single-output", choices=LINEAR_EXAMPLE_CASES, help="which table (default single-output)")
     parser.add_argument("--passes", type=int, default=None, help="passes per identification (default: the case's own)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the eq. 16 data (default 0)")
     parser.add_argument("--discretization", default="euler", choices=DISCRETIZATIONS,
@@ -38,6 +38,9 @@ def register(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> tuple[dict, str]:
+    from vehid.identification.dataio.archive_safety import archive_lock, check_output_target
+    from vehid.scenarios.linear_example import planned_passes, run_case, write_archive_for
+
     target = results_path(args.out, f"linear_example_{args.case}.h5").absolute()
     run = run_digest(args)
     check_output_target(target, force=args.force, kind="linear-example", run=run, suffixes=HDF5_SUFFIXES)  # before any work
