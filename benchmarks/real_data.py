@@ -45,7 +45,10 @@ for those subprocesses alone). The record's range is the spread of the
 default's mean hold-out fit over all these runs; beside each fraction, the
 best peer's fit at that fraction, and the fit of one fixed model (the
 default's at the usual fraction) on that fraction's held-out part, whose
-range is what the scored samples alone move (``fixed_model_range``).
+range is what the scored samples alone move (``fixed_model_range``). Each
+run keeps the choices it made by itself (its ``decision_margins``), and
+``switched_decisions`` names every decision whose choice differs between
+the runs: a range without one comes from the data each run estimates on.
 
 The table goes to ``results/benchmarks.json`` under ``real_data``.
 """
@@ -152,6 +155,7 @@ def run_workbench(entry: records.RecordSet, scratch: Path, default_only: bool = 
             row["linear_validation_fit_percent"] = row["validation_fit_percent"]
             row["validation_fit_percent"] = _nonlinear_validation_fit(summary)
         if label == DEFAULT_ROW and status in (0, 3):
+            row["decisions"] = decisions_of(summary)
             # the default's model, to score on every other fraction's held-out part (not written out)
             row[FIXED_MODEL] = {key: summary.get(key) for key in ("method", "A", "B", "C", "D", "preparation")}
         rows[label] = row
@@ -315,7 +319,8 @@ def run_perturbations(entry: records.RecordSet, scratch: Path, default_row: dict
     """The default ``identify`` run under each perturbation: held-out fraction, 1e-6 noise, BLAS kernel."""
     runs = [{"perturbation": "none", "fraction": _fraction(entry, records.HOLDOUT),
              "validation_fit_percent": default_row.get("validation_fit_percent"), "order": default_row.get("order"),
-             "exit_status": default_row["exit_status"], "seconds": default_row["seconds"]}]
+             "decisions": default_row.get("decisions"), "exit_status": default_row["exit_status"],
+             "seconds": default_row["seconds"]}]
     plans: list[tuple[str, float, list[str], dict | None]] = []
     if entry.validation_path_columns is None:
         plans += [(f"fraction {f:g}", f, data_args(entry, scratch, f), None)
@@ -332,11 +337,36 @@ def run_perturbations(entry: records.RecordSet, scratch: Path, default_row: dict
                "seconds": seconds, "order": summary.get("order")}
         if status in (0, 3):
             run["validation_fit_percent"] = summary.get("validation_fit_percent")
+            run["decisions"] = decisions_of(summary)
         else:
             run["error"] = summary.get("error", "")
         runs.append(run)
         print(f"   default, {label:<40} {_show(_mean_fit(run)):>9}  ({seconds:.1f} s, exit {status})", flush=True)
     return runs
+
+
+def decisions_of(summary: dict) -> dict:
+    """The choices one ``identify`` run made by itself (its ``decision_margins``), each with the Q schedule where
+    the p decision names one: what to compare between perturbed runs to see whether a decision switched."""
+    choices = {}
+    for name, entry in (summary.get("decision_margins") or {}).items():
+        choice = entry.get("choice")
+        choices[name] = f"{choice}, {entry['q_schedule']} Q" if entry.get("q_schedule") else choice
+    return choices
+
+
+def switched_decisions(runs: list[dict]) -> dict[str, list]:
+    """Each decision whose choice differs between the runs that report it, with the distinct choices in run order.
+
+    A range with no switched decision comes from the data each run estimates on and scores on (the held-out
+    part moves with the fraction); a switched one names the rule to look at.
+    """
+    seen: dict[str, list] = {}
+    for run in runs:
+        for name, choice in (run.get("decisions") or {}).items():
+            if choice not in seen.setdefault(name, []):
+                seen[name].append(choice)
+    return {name: choices for name, choices in seen.items() if len(choices) > 1}
 
 
 def _fraction(entry: records.RecordSet, fraction: float) -> str:
@@ -366,6 +396,7 @@ def perturbation_summary(runs: list[dict], peers_by_fraction: dict, fixed_fits: 
         "default_range": max(finite) - min(finite) if finite else None,
         "runs_without_fit": len(fits) - len(finite),
         "within_2_points_range": bool(finite) and len(finite) == len(fits) and max(finite) - min(finite) <= CLOSE,
+        "switched_decisions": switched_decisions(runs),
     }
     by_fraction = {}
     for run, fit in zip(runs, fits):
@@ -474,6 +505,10 @@ def print_perturbations(sets: dict) -> None:
         if spread.get("fixed_model_range") is not None:
             print(f"{'':<16} the default's model at {records.HOLDOUT:g}, held fixed, on each fraction's held-out part: "
                   f"range {_show(spread['fixed_model_range'])}")
+        switched = spread.get("switched_decisions") or {}
+        print(f"{'':<16} decisions switched between runs: "
+              + ("; ".join(f"{name} ({' / '.join(map(str, choices))})" for name, choices in switched.items())
+                 or "none"))
         for fraction, entry in spread["by_fraction"].items():
             if "default_fit" not in entry:
                 continue

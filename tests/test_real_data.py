@@ -87,6 +87,21 @@ def test_peers_and_identify_hold_out_the_same_samples(entry):
     assert (estimation.n_samples, validation.n_samples) == (len(u_est), len(u_val))
 
 
+def test_the_perturbation_summary_names_a_switched_decision_and_only_that():
+    """A decision whose choice differs between two perturbed runs is named with both choices; an agreeing one not."""
+    def run(fraction, fit, returned, schedule):
+        margins = {"model_returned": {"choice": returned}, "p": {"choice": "p 1e-05", "q_schedule": schedule}}
+        return {"perturbation": f"fraction {fraction}", "fraction": fraction, "validation_fit_percent": [fit],
+                "decisions": benchmark.decisions_of({"decision_margins": margins})}
+
+    summary = benchmark.perturbation_summary([run("0.3", 89.2, "start", "shrinking"),
+                                              run("0.4", 84.7, "start", "constant")], {})
+    assert summary["switched_decisions"] == {"p": ["p 1e-05, shrinking Q", "p 1e-05, constant Q"]}
+    assert summary["default_range"] == pytest.approx(4.5, abs=1e-12)  # algebra on the two fits
+    same = benchmark.perturbation_summary([run("0.3", 89.2, "start", "shrinking")] * 2, {})
+    assert same["switched_decisions"] == {}
+
+
 # A guard against a hung process only, not a speed target (those live in benchmarks/): a spline run on the
 # heat exchanger took more than 300 s on a 2-core machine at load average 27 with an empty compile cache.
 HANG_SECONDS = 1800
