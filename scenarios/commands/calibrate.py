@@ -8,7 +8,8 @@ parameters (--parameters section.field,..., default the tyres' cornering stiffne
 axle's share of it and the yaw inertia, with the roll inertia and front anti-roll bar when the roll
 angle is measured), the last --validation fraction is held out and predicted. Parameters the log
 does not determine (std above their size or half their prior std, or |correlation| > 0.95 with
-another) are held at their prior with a warning (exit 3 under --strict). --out writes the
+another) are held at their prior with a warning (exit 3 under --strict); --prior NAME=VALUE[:STD]
+sets a parameter's prior and, with STD (in its unit), how well it is known. --out writes the
 calibrated vehicle file (TOML), never over an existing file without --force.
 """
 
@@ -41,8 +42,9 @@ def register(parser: argparse.ArgumentParser) -> None:
                         help="fraction of the log at its end held out for validation (default 0.4)")
     parser.add_argument("--parameters", default=None, metavar="NAME,...",
                         help="vehicle fields to calibrate, section.field as in a vehicle file")
-    parser.add_argument("--prior", action="append", default=None, metavar="NAME=VALUE",
-                        help="prior value of a calibrated parameter (repeatable); default the vehicle's")
+    parser.add_argument("--prior", action="append", default=None, metavar="NAME=VALUE[:STD]",
+                        help="prior value of a calibrated parameter and optionally its std in the "
+                             "parameter's unit (repeatable); default the vehicle's value and --prior-std")
     parser.add_argument("--prior-std", type=float, default=1.0,
                         help="relative prior standard deviation of every parameter (default 1: a factor e)")
     parser.add_argument("--time-column", default=None, help="the log's time column (default t when present)")
@@ -59,18 +61,24 @@ def _names(text: str, option: str) -> tuple[str, ...]:
     return names
 
 
-def _priors(items: list[str] | None) -> dict[str, float]:
+def _priors(items: list[str] | None) -> tuple[dict[str, float], dict[str, float]]:
+    """``--prior`` items as ``(name -> value, name -> std)``."""
     priors: dict[str, float] = {}
+    stds: dict[str, float] = {}
     for item in items or ():
-        name, equals, value = item.partition("=")
+        name, equals, text = item.partition("=")
+        value, colon, std_text = text.partition(":")
         try:
             number = float(value)
+            std = float(std_text) if colon else 1.0
         except ValueError:
-            number = math.nan
-        if not equals or not name.strip() or not math.isfinite(number):
-            raise InputError(f"--prior takes NAME=VALUE with a finite number; got {item!r}")
+            number = std = math.nan
+        if not equals or not name.strip() or not math.isfinite(number) or not (math.isfinite(std) and std > 0):
+            raise InputError(f"--prior takes NAME=VALUE[:STD] with a finite value and a positive std; got {item!r}")
         priors[name.strip()] = number
-    return priors
+        if colon:
+            stds[name.strip()] = std
+    return priors, stds
 
 
 def _write_text(path: Path, text: str) -> None:
@@ -114,7 +122,7 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     if not (math.isfinite(args.prior_std) and args.prior_std > 0):
         raise InputError(f"--prior-std must be a positive number; got {args.prior_std}")
     parameters = _names(args.parameters, "--parameters") if args.parameters else None
-    priors = _priors(args.prior)
+    priors, prior_std = _priors(args.prior)
     params = named_vehicle(args.vehicle)
     if args.out:
         check_output_target(args.out, inputs=[args.vehicle, args.log], force=args.force, what="vehicle file",
@@ -127,7 +135,8 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     record = calibration_record(data.u[:, 0], speed, data.y[:, 1:], data.dt, quantities, t0=float(data.t[0]))
     estimation = _part(record, 0, n_estimation)
     calibration = calibrate_vehicle(params, estimation, quantities, parameters=parameters, priors=priors,
-                                    options=GreyBoxOptions(prior_std=args.prior_std))
+                                    prior_std=prior_std,
+                                    options=GreyBoxOptions(prior_std=args.prior_std, coloured_residuals=True))
     if calibration.result is None:
         raise InputError("the log determines none of the chosen parameters: " + "; ".join(calibration.warnings))
     validation_fit: dict[str, float] = {}
