@@ -97,3 +97,13 @@ def test_undetermined_uses_each_parameter_prior():
     correlation = np.array([[1.0, 0.99], [0.99, 1.0]])
     std = np.array([0.01, 0.2])
     assert _undetermined(names, values, std, correlation, 0.95, np.array([1.0, 1.0]))[0] == "b"
+
+
+def test_prior_option_takes_a_value_and_an_optional_std():
+    from vehid.scenarios.commands.calibrate import _priors
+
+    values, stds = _priors(["tyre.PKY1=-15", "chassis.yaw_inertia=2500:250"])
+    assert values == {"tyre.PKY1": -15.0, "chassis.yaw_inertia": 2500.0}
+    assert stds == {"chassis.yaw_inertia": 250.0}
+    with pytest.raises(InputError, match="NAME=VALUE"):
+        _priors(["tyre.PKY1=-15:x"])
