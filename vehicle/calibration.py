@@ -21,7 +21,11 @@ Choices, each stated where it is made:
   :data:`PRIOR_SHARE_LIMIT` of its prior standard deviation (the log taught little), or whose
   correlation with another exceeds :data:`CORRELATION_LIMIT` in magnitude (of a correlated pair the
   one less certain relative to its size), is not determined by the log. It is held at its prior and
-  the others are estimated again without it, until every remaining one is determined.
+  the others are estimated again without it, until every remaining one is determined. Each
+  parameter may have its own prior std (``prior_std``); the limit is then half of that one.
+* Standard deviations widen by the residuals' correlation time (the grey-box filter's
+  ``coloured_residuals``): a model's error on a measured log is coloured, and the filter's own
+  covariance, which counts every sample as independent, would be too small by that factor.
 """
 
 from __future__ import annotations
