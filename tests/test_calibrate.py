@@ -135,6 +135,7 @@ def test_cli_never_replaces_an_existing_vehicle_file(tmp_path, capsys):
     (["--prior", "chassis.mass=1500:100"], "not calibrated"),
     (["--validation", "1.5"], "held-out fraction"),
     (["--parameters", "aerodynamics.drag_area"], "structure"),
+    (["--figure", "fits.txt"], "--figure takes a .png"),
 ])
 def test_cli_bad_input_exits_2_with_one_line(tmp_path, capsys, extra, message):
     from vehid.scenarios.cli import main

@@ -6,11 +6,14 @@ lateral_acceleration, roll_angle, sideslip, ...) stand for. The speed drives the
 as in ``vehid simulate --replay``; the first part of the log calibrates the vehicle's chosen
 parameters (--parameters section.field,..., default the tyres' cornering stiffness PKY1, the front
 axle's share of it and the yaw inertia, with the roll inertia and front anti-roll bar when the roll
-angle is measured), the last --validation fraction is held out and predicted. Parameters the log
+angle is measured), the last --validation fraction is held out and predicted (the car simulated over the whole log from
+its start, its outputs scored on the held-out part). Parameters the log
 does not determine (std above their size or half their prior std, or |correlation| > 0.95 with
 another) are held at their prior with a warning (exit 3 under --strict); --prior NAME=VALUE[:STD]
 sets a parameter's prior and, with STD (in its unit), how well it is known. --out writes the
-calibrated vehicle file (TOML), never over an existing file without --force.
+calibrated vehicle file (TOML), never over an existing file without --force; --figure draws the
+measured channels over the whole log against the prior and the calibrated car, each simulated from
+straight running at the log's first speed (.png, .pdf or .svg; the same file rule).
 """
 
 from __future__ import annotations
@@ -49,7 +52,9 @@ def register(parser: argparse.ArgumentParser) -> None:
                         help="relative prior standard deviation of every parameter (default 1: a factor e)")
     parser.add_argument("--time-column", default=None, help="the log's time column (default t when present)")
     parser.add_argument("--out", default=None, help=f"write the calibrated vehicle to this .toml file ({OUT_RULE})")
-    parser.add_argument("--force", action="store_true", help="let --out replace an existing file")
+    parser.add_argument("--figure", default=None, metavar="FILE",
+                        help="draw measured against simulated channels, prior and calibrated car (.png, .pdf, .svg)")
+    parser.add_argument("--force", action="store_true", help="let --out or --figure replace an existing file")
     parser.add_argument("--strict", action="store_true", help="exit with status 3 when the result has warnings")
     parser.set_defaults(handler=run)
 
@@ -79,6 +84,23 @@ def _priors(items: list[str] | None) -> tuple[dict[str, float], dict[str, float]
         if colon:
             stds[name.strip()] = std
     return priors, stds
+
+
+_FIGURE_SUFFIXES = (".png", ".pdf", ".svg")
+
+
+def _figure_target(figure: str | None, force: bool) -> Path | None:
+    """The --figure path, checked before any work: a figure suffix, an existing folder, no file unless --force."""
+    if figure is None:
+        return None
+    path = Path(figure)
+    if path.suffix.lower() not in _FIGURE_SUFFIXES:
+        raise InputError(f"--figure takes a {', '.join(_FIGURE_SUFFIXES)} file; got {figure!r}")
+    if not path.parent.is_dir():
+        raise InputError(f"--figure: no folder {str(path.parent)!r}")
+    if path.is_dir() or (path.exists() and not force):
+        raise InputError(f"--figure {figure!r} exists: choose another name or give --force")
+    return path
 
 
 def _write_text(path: Path, text: str) -> None:
@@ -124,6 +146,7 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     parameters = _names(args.parameters, "--parameters") if args.parameters else None
     priors, prior_std = _priors(args.prior)
     params = named_vehicle(args.vehicle)
+    figure = _figure_target(args.figure, args.force)
     if args.out:
         check_output_target(args.out, inputs=[args.vehicle, args.log], force=args.force, what="vehicle file",
                             identify=lambda path: None, suffixes=(".toml",))
@@ -141,9 +164,10 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
         raise InputError("the log determines none of the chosen parameters: " + "; ".join(calibration.warnings))
     validation_fit: dict[str, float] = {}
     if args.validation > 0:
-        held_out = _part(record, n_estimation, record.n_samples)
-        predicted = calibration.result.simulate(held_out)
-        fits = percentage_explanation(held_out.y, predicted)
+        # the calibrated car drives the whole log from its start, so the held-out part begins in the
+        # state the car reached (from its inputs alone) rather than from straight running mid-drive
+        predicted = calibration.result.simulate(record)[n_estimation:]
+        fits = percentage_explanation(record.y[n_estimation:], predicted)
         validation_fit = {channel: float(value) for channel, value in zip(outputs, fits)}
     lo, hi = float(np.min(speed)), float(np.max(speed))
     speeds = sorted({round(v, 1) for v in np.linspace(max(lo, 5.0), max(hi, 5.0), 3)})
@@ -164,6 +188,7 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
         "validation_fit_percent": validation_fit,
         "handling": handling,
         "vehicle_file": None,
+        "figure": None,
         "warnings": list(calibration.warnings),
     }
     lines = [f"calibration of {params.name} to {log.name}: {n_estimation} of {data.n_samples} samples at "
@@ -183,6 +208,22 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
         _write_text(Path(args.out), vehicle_toml(calibration.vehicle, comment))
         summary["vehicle_file"] = str(args.out)
         lines.append(f"wrote {args.out}")
+    if figure is not None:
+        from vehid.identification.filtering.greybox import simulate_greybox
+        from vehid.scenarios.plots import plot_time_fits
+
+        result = calibration.result
+        prior, _ = simulate_greybox(result.model, result.start, record, discretization=result.options.discretization,
+                                    substeps=result.options.substeps)
+        page = plot_time_fits(record.t, record.y, {"prior car": prior, "calibrated car": result.simulate(record)},
+                              outputs, record.output_units,
+                              title=f"{params.name} calibrated to {log.name}: the first "
+                                    f"{n_estimation / data.n_samples:.0%} calibrates, the rest is held out")
+        for axis in page.axes:  # where the held-out part begins
+            axis.axvline(record.t[n_estimation - 1], color="0.5", linestyle="--", linewidth=1.0)
+        page.savefig(figure)
+        summary["figure"] = str(figure)
+        lines.append(f"wrote {figure}")
     text = "\n".join(lines)
     warnings = list(calibration.warnings)
     if warnings and not args.json and not args.strict:
