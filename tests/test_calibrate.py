@@ -7,27 +7,29 @@ not seen; a parameter the record does not excite must be reported and held at it
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 from vehid.identification.errors import InputError
-from vehid.identification.filtering.greybox import GreyBoxOptions
+from vehid.identification.filtering.greybox import simulate_greybox
 from vehid.identification.assessment.metrics import percentage_explanation
 from vehid.vehicle.calibration import (
     DEFAULT_PARAMETERS,
     calibrate_vehicle,
     calibration_model,
-    calibration_record,
+    simulated_log,
     vehicle_with,
 )
 from vehid.vehicle.manoeuvres import speed_cycle
 from vehid.vehicle.parameters import baseline
-from vehid.vehicle.replay import replay
 
 DT = 0.01  # 100 Hz, a logger's rate
 QUANTITIES = ("yaw_rate", "lateral_acceleration", "roll_angle")
 FIVE = DEFAULT_PARAMETERS + ("chassis.roll_inertia", "suspension.front_anti_roll_bar")
-FACTORS = (1.2, 0.85, 1.25, 0.8, 1.15)  # 15-25 % off the nominal car, both directions
+SIX = FIVE + ("chassis.pitch_inertia",)
+FACTORS = (1.2, 0.85, 1.25, 0.8, 1.15, 1.3)  # 15-30 % off the nominal car, both directions
 NOISE = 0.05  # sensor noise: 5 % of each channel's RMS, white
 
 
@@ -36,66 +38,64 @@ def _value(params, name):
     return float(getattr(getattr(params, section), field_name))
 
 
-def _log(params, seed, noise_seed, duration=20.0, amplitude_deg=1.0):
-    """A varying-speed drive (20 -> 30 -> 12 -> 20 m/s) under random steer, measured with noise."""
-    manoeuvre = speed_cycle(duration=duration, dt=DT, amplitude=np.deg2rad(amplitude_deg), seed=seed)
-    # replayed as a log is: finer steps with the steer between samples, so that the record has no
-    # hold delay the calibration (inputs linear between samples) would take for dynamics
-    record = replay(params, manoeuvre.steer, manoeuvre.speed, DT)
-    clean = np.column_stack([record.y[:, record.output_names.index(q)] for q in QUANTITIES])
+def _measured(params, steer, speed, noise_seed):
+    """The car's log (:func:`simulated_log`) with white sensor noise; also the noise-free outputs."""
+    record, clean = simulated_log(params, steer, speed, DT, QUANTITIES)
     rng = np.random.default_rng(noise_seed)
-    measured = clean + NOISE * np.sqrt(np.mean(clean**2, axis=0)) * rng.standard_normal(clean.shape)
-    speed = record.y[:, record.output_names.index("speed")]
-    return calibration_record(record.u[:, 0], speed, measured, DT, QUANTITIES), clean
+    noisy = clean + NOISE * np.sqrt(np.mean(clean**2, axis=0)) * rng.standard_normal(clean.shape)
+    return dataclasses.replace(record, y=noisy), clean
 
 
-@pytest.mark.xfail(run=False, reason="open: tyre.PKY1 came out -18.92 +/- 0.054 against the true -18.38 "
-                                      "(10 std); the bias is not explained yet")
-@pytest.mark.slow(reason="a 23-state filter compiled and rinsed over 2000 samples: minutes on one core")
-def test_twin_experiment_recovers_five_perturbed_parameters():
+@pytest.fixture(scope="module")
+def twin():
+    """The nominal car, the perturbed truth, and a varying-speed drive of the truth with its calibration."""
     nominal = baseline()
-    truth = vehicle_with(nominal, FIVE, [_value(nominal, n) * f for n, f in zip(FIVE, FACTORS)])
-    estimation, _ = _log(truth, seed=3, noise_seed=1)
-    calibration = calibrate_vehicle(nominal, estimation, QUANTITIES, parameters=FIVE,
-                                    options=GreyBoxOptions(substeps=2))
+    truth = vehicle_with(nominal, SIX, [_value(nominal, n) * f for n, f in zip(SIX, FACTORS)])
+    # 20 -> 30 -> 12 -> 20 m/s in 16 s: the accelerations pitch the body, so all six are excited
+    drive = speed_cycle(duration=16.0, dt=DT, amplitude=np.deg2rad(1.0), seed=3)
+    estimation, _ = _measured(truth, drive.steer, drive.speed, noise_seed=1)
+    return nominal, truth, calibrate_vehicle(nominal, estimation, QUANTITIES, parameters=SIX)
+
+
+@pytest.mark.slow(reason="a 23-state filter with six parameters compiled and rinsed: about 40 s of CPU cold")
+def test_twin_experiment_recovers_perturbed_parameters(twin):
+    nominal, truth, calibration = twin
     assert not calibration.held, calibration.warnings
-    for name, value, std in zip(FIVE, calibration.values, calibration.std):
+    for name, value, std in zip(SIX, calibration.values, calibration.std):
         true = _value(truth, name)
-        # the filter's own uncertainty is the yardstick: a consistent estimate is within 2 std (95 %)
+        # the filter's own uncertainty is the yardstick: a consistent estimate is within 2 std (95 %);
+        # the start was 15-30 % (at least 20 std) away, so a filter that did not move fails here;
+        # measured on this drive: at most 1.55 std (yaw inertia), a margin no rounding across machines closes
         assert abs(value - true) <= 2 * std, f"{name}: {value:.6g} +/- {std:.3g}, true {true:.6g}"
-    # a record of another seed and noise: the calibrated car predicts it to the noise
-    validation, clean = _log(truth, seed=8, noise_seed=2)
+    # a drive of another seed and noise: the calibrated car predicts it
+    drive = speed_cycle(duration=10.0, dt=DT, amplitude=np.deg2rad(1.0), seed=8)
+    validation, clean = _measured(truth, drive.steer, drive.speed, noise_seed=2)
     predicted = calibration.result.simulate(validation)
-    # against the noise-free truth a correct model explains > 99 % (the noise alone would cap a
-    # fit to the noisy channels near 100 - 5^2 = 99.75 %)
+    # against the noise-free truth a correct model explains > 99 % (the nominal car explains less:
+    # asserted below, so that the floor is not one any model would pass)
     assert np.all(percentage_explanation(clean, predicted) > 99.0)
+    start, _ = simulate_greybox(calibration.result.model, calibration.result.start, validation)
+    assert np.any(percentage_explanation(clean, start) < 99.0)
 
 
-@pytest.mark.xfail(run=False, reason="open: the pitch inertia ran from 2990 to 2.3e5 kg m^2 and was reported "
-                                      "determined; an unexcited parameter's random walk is not yet contained")
 @pytest.mark.slow(reason="two 23-state filter runs (with and without the undetermined parameter)")
-def test_parameter_the_log_does_not_excite_is_held_at_its_prior():
-    nominal = baseline()
-    # pitch inertia: at a constant speed nothing pitches the body, so yaw rate and lateral acceleration
-    # do not depend on it, and a prior 30 % off must not be "found"
-    names = ("tyre.PKY1", "chassis.pitch_inertia")
-    prior = 1.3 * _value(nominal, "chassis.pitch_inertia")
-    quantities = QUANTITIES[:2]
-    manoeuvre = speed_cycle(duration=8.0, dt=DT, amplitude=np.deg2rad(1.0), seed=5)
-    speed = np.full(manoeuvre.steer.size, 20.0)
-    record = replay(nominal, manoeuvre.steer, speed, DT)
-    clean = np.column_stack([record.y[:, record.output_names.index(q)] for q in quantities])
-    rng = np.random.default_rng(4)
-    y = clean + NOISE * np.sqrt(np.mean(clean**2, axis=0)) * rng.standard_normal(clean.shape)
-    data = calibration_record(record.u[:, 0], speed, y, DT, quantities)
-    calibration = calibrate_vehicle(nominal, data, quantities, parameters=names,
-                                    priors={"chassis.pitch_inertia": prior})
-    assert "chassis.pitch_inertia" in calibration.held
+def test_parameter_the_log_hardly_informs_is_held_at_its_prior(twin):
+    nominal, truth, _ = twin
+    # at constant speed nothing but the cornering pitches the body: the pitch inertia, 30 % off in the
+    # truth and known to 20 % beforehand, is narrowed only a little (measured on 20 s of this drive
+    # under a wide prior: std 33 % of its value, 1.6 times this prior's), so it must be held and said so
+    drive = speed_cycle(duration=16.0, dt=DT, amplitude=np.deg2rad(1.0), seed=5)
+    data, _ = _measured(truth, drive.steer, np.full(drive.steer.size, 20.0), noise_seed=4)
+    prior = _value(nominal, "chassis.pitch_inertia")
+    calibration = calibrate_vehicle(nominal, data, QUANTITIES, parameters=SIX,
+                                    prior_std={"chassis.pitch_inertia": 0.2 * prior})
+    assert list(calibration.held) == ["chassis.pitch_inertia"], calibration.warnings
     assert any("chassis.pitch_inertia" in text for text in calibration.warnings)
-    assert calibration.values[1] == prior and np.isnan(calibration.std[1])
+    assert calibration.values[-1] == prior and np.isnan(calibration.std[-1])
     assert calibration.vehicle.chassis.pitch_inertia == prior
-    # the determined one is still found, within its own 3 std (99.7 %)
-    assert abs(calibration.values[0] - _value(nominal, "tyre.PKY1")) <= 3 * calibration.std[0]
+    # the determined ones are still found, within their own 3 std (99.7 %)
+    for name, value, std in zip(FIVE, calibration.values, calibration.std):
+        assert abs(value - _value(truth, name)) <= 3 * std, name
 
 
 def test_bad_parameter_names_are_input_errors():
@@ -131,8 +131,11 @@ def test_cli_never_replaces_an_existing_vehicle_file(tmp_path, capsys):
 
 @pytest.mark.parametrize("extra, message", [
     (["--prior", "tyre.PKY1"], "NAME=VALUE"),
+    (["--prior", "tyre.PKY1=-15:0"], "positive std"),
+    (["--prior", "chassis.mass=1500:100"], "not calibrated"),
     (["--validation", "1.5"], "held-out fraction"),
     (["--parameters", "aerodynamics.drag_area"], "structure"),
+    (["--figure", "fits.txt"], "--figure takes a .png"),
 ])
 def test_cli_bad_input_exits_2_with_one_line(tmp_path, capsys, extra, message):
     from vehid.scenarios.cli import main

@@ -33,7 +33,11 @@ Choices, each stated where it is made:
   too small. After the rinse one more pass runs from the estimate with ``P0`` and no ``Q``: its ``P``
   is the linearised covariance of one pass's information (with the prior), scaled by the mean
   normalised innovation squared per output where that exceeds one (innovations larger than ``R``
-  says: model error or coloured noise). The parameters are not moved by that pass.
+  says: model error or coloured noise). The parameters are not moved by that pass. With
+  ``coloured_residuals`` the covariance is scaled also by the innovations' largest integrated
+  autocorrelation time (:func:`integrated_correlation_time`): the filter's information counts every
+  sample as independent, which coloured residuals are not (the time is kept in the result's ``meta``
+  either way).
 """
 
 from __future__ import annotations
@@ -62,6 +66,7 @@ __all__ = [
     "GreyBoxOptions",
     "GreyBoxResult",
     "identify_greybox",
+    "integrated_correlation_time",
     "simulate_greybox",
 ]
 
@@ -336,6 +341,9 @@ class GreyBoxOptions:
     prior_std : float
         Standard deviation of the scaled parameters at the start (``P0``): 1 allows a factor e
         on a positive parameter.
+    parameter_prior_std : sequence of float, optional
+        One such standard deviation per parameter, in place of ``prior_std`` (a prior known better for
+        some parameters than for others).
     passes, min_passes : int
         Largest number of passes; no early stop before ``min_passes``.
     parameter_tolerance : float
@@ -352,6 +360,11 @@ class GreyBoxOptions:
         Where records do not start at rest: the standard deviation of each state at a record's
         start. The state rows of ``P`` are set to it at the start of every record (uncorrelated with
         the parameters), so the filter estimates the start. Default: records start at rest.
+    coloured_residuals : bool
+        Scale the covariance also by the innovations' integrated autocorrelation time (module
+        docstring, "Standard deviations"): where the residuals are coloured (model error, a sensor's
+        filter) the samples are fewer independent ones than they count, and the std widens by the
+        root of the ratio. Off by default: a white residual leaves it near one anyway.
     """
 
     p: float = 1e-4
@@ -365,6 +378,8 @@ class GreyBoxOptions:
     covariance: str = "joseph"
     measurement_noise: Any = "residual"
     initial_state_std: tuple[float, ...] | None = None
+    parameter_prior_std: tuple[float, ...] | None = None
+    coloured_residuals: bool = False
 
     def __post_init__(self) -> None:
         for name in ("p", "prior_std", "parameter_tolerance"):
@@ -395,6 +410,11 @@ class GreyBoxOptions:
             if not np.all(np.isfinite(values)) or np.any(values < 0):
                 raise InputError("initial_state_std must be non-negative numbers")
             object.__setattr__(self, "initial_state_std", tuple(float(v) for v in values))
+        if self.parameter_prior_std is not None:
+            values = np.asarray(self.parameter_prior_std, dtype=float).ravel()
+            if values.size == 0 or not np.all(np.isfinite(values)) or np.any(values <= 0):
+                raise InputError("parameter_prior_std must be positive numbers, one per parameter")
+            object.__setattr__(self, "parameter_prior_std", tuple(float(v) for v in values))
 
 
 @dataclass(frozen=True, eq=False)
@@ -471,6 +491,33 @@ class GreyBoxResult(PassHistory):
         return y
 
 
+def integrated_correlation_time(residuals: np.ndarray) -> np.ndarray:
+    """Each column's integrated autocorrelation time ``1 + 2 sum rho_k`` (in samples), at least one.
+
+    ``N`` samples of a series with that time carry the information of about ``N / tau`` independent
+    ones. The sum runs over the lags up to the first whose autocorrelation is no longer positive (the
+    initial positive sequence: beyond it the estimates are noise around zero) and at most a tenth of
+    the record, so that a slow drift does not count the whole record as one sample.
+    """
+    residuals = np.asarray(residuals, dtype=float)
+    residuals = residuals.reshape(-1, 1) if residuals.ndim == 1 else residuals
+    n = residuals.shape[0]
+    times = np.ones(residuals.shape[1])
+    if n < 20:
+        return times
+    centred = residuals - residuals.mean(axis=0)
+    size = 1 << int(np.ceil(np.log2(2 * n)))
+    spectrum = np.fft.rfft(centred, size, axis=0)
+    autocovariance = np.fft.irfft(np.abs(spectrum) ** 2, size, axis=0)[: n // 10 + 1]
+    for j in range(residuals.shape[1]):
+        if autocovariance[0, j] <= 0:
+            continue
+        rho = autocovariance[1:, j] / autocovariance[0, j]
+        stop = int(np.argmax(rho <= 0)) if np.any(rho <= 0) else rho.size
+        times[j] = max(1.0, 1.0 + 2.0 * float(np.sum(rho[:stop])))
+    return times
+
+
 def _pooled_fits(y_parts: Sequence[np.ndarray], y_hat_parts: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     y, y_hat = np.vstack(y_parts), np.vstack(y_hat_parts)
     return percentage_explanation(y, y_hat), nrmse_fit(y, y_hat)
@@ -532,6 +579,11 @@ def identify_greybox(
                          "give a start of its expected size (it sets the parameter's scale)")
     n, n_theta = model.n_x, model.n_theta
     m = n + n_theta
+    if options.parameter_prior_std is not None and len(options.parameter_prior_std) != n_theta:
+        raise InputError(f"parameter_prior_std needs {n_theta} values (one per parameter); "
+                         f"got {len(options.parameter_prior_std)}")
+    prior_variance = np.square(options.parameter_prior_std if options.parameter_prior_std is not None
+                               else np.full(n_theta, options.prior_std))
     if options.initial_state_std is not None and len(options.initial_state_std) != n:
         raise InputError(f"initial_state_std needs {n} values (one per state); got {len(options.initial_state_std)}")
 
@@ -640,11 +692,12 @@ def identify_greybox(
         is the data's, while the first samples cannot throw the parameters across the space (a record
         that does not start at rest would, from the full ``P0``).
         """
-        prior = np.minimum(options.prior_std**2, PRIOR_OVER_CARRIED * np.clip(np.diag(carried), 0.0, None))
+        prior = np.minimum(prior_variance, PRIOR_OVER_CARRIED * np.clip(np.diag(carried), 0.0, None))
         P0 = np.diag(np.concatenate([np.zeros(n), prior]))
         state = np.concatenate([np.zeros(n), phi, pack_covariance(P0)])
         no_drift = np.zeros(m)
         nis, count = 0.0, 0
+        correlation_time = np.zeros(model.n_y)
         with np.errstate(all="ignore"):
             for k in range(len(records)):
                 state[:n] = 0.0
@@ -652,8 +705,10 @@ def identify_greybox(
                 if not (np.all(np.isfinite(state)) and np.all(np.isfinite(innovations))):
                     raise DivergenceError("the covariance pass produced non-finite values")
                 nis += float(np.sum(innovations * np.linalg.solve(R, innovations.T).T))
+                correlation_time += innovations.shape[0] * integrated_correlation_time(innovations)
                 count += innovations.shape[0]
-        return unpack_covariance(state[m:], m)[n:, n:], nis / max(count, 1) / model.n_y
+        return (unpack_covariance(state[m:], m)[n:, n:], nis / max(count, 1) / model.n_y,
+                correlation_time / max(count, 1))
 
     def result(stop_reason: str, history: tuple[PassRecord, ...], phi: np.ndarray, P: np.ndarray) -> GreyBoxResult:
         theta = physical(phi)
@@ -661,8 +716,11 @@ def identify_greybox(
         meta: dict[str, Any] = {}
         if stop_reason in ("converged", "passes"):
             try:
-                covariance_phi, nis = covariance_pass(phi, P[n:, n:])
+                covariance_phi, nis, correlation_time = covariance_pass(phi, P[n:, n:])
                 inflation = max(nis, 1.0)
+                meta.update(innovation_correlation_time=correlation_time.tolist())
+                if options.coloured_residuals:
+                    inflation *= max(float(np.max(correlation_time)), 1.0)
                 covariance = J @ covariance_phi @ J.T * inflation
                 meta.update(covariance_source="one pass from P0 without Q", nis_per_output=nis,
                             covariance_inflation=inflation)
@@ -683,6 +741,6 @@ def identify_greybox(
 
     hooks = RinseHooks(records, run_record, lambda: R, assess, settled, result, n, label="grey-box pass",
                        hint="try a smaller p or a better start", prepare_pass=prepare_pass)
-    P_start = np.diag(np.concatenate([np.zeros(n), np.full(n_theta, options.prior_std**2)]))
+    P_start = np.diag(np.concatenate([np.zeros(n), prior_variance]))
     return rinse(hooks, phi_start, P_start, passes=options.passes, min_passes=options.min_passes,
                  check_covariance=options.covariance != "paper", on_pass=on_pass)

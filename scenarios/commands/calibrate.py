@@ -6,10 +6,14 @@ lateral_acceleration, roll_angle, sideslip, ...) stand for. The speed drives the
 as in ``vehid simulate --replay``; the first part of the log calibrates the vehicle's chosen
 parameters (--parameters section.field,..., default the tyres' cornering stiffness PKY1, the front
 axle's share of it and the yaw inertia, with the roll inertia and front anti-roll bar when the roll
-angle is measured), the last --validation fraction is held out and predicted. Parameters the log
+angle is measured), the last --validation fraction is held out and predicted (the car simulated over the whole log from
+its start, its outputs scored on the held-out part). Parameters the log
 does not determine (std above their size or half their prior std, or |correlation| > 0.95 with
-another) are held at their prior with a warning (exit 3 under --strict). --out writes the
-calibrated vehicle file (TOML), never over an existing file without --force.
+another) are held at their prior with a warning (exit 3 under --strict); --prior NAME=VALUE[:STD]
+sets a parameter's prior and, with STD (in its unit), how well it is known. --out writes the
+calibrated vehicle file (TOML), never over an existing file without --force; --figure draws the
+measured channels over the whole log against the prior and the calibrated car, each simulated from
+straight running at the log's first speed (.png, .pdf or .svg; the same file rule).
 """
 
 from __future__ import annotations
@@ -41,13 +45,16 @@ def register(parser: argparse.ArgumentParser) -> None:
                         help="fraction of the log at its end held out for validation (default 0.4)")
     parser.add_argument("--parameters", default=None, metavar="NAME,...",
                         help="vehicle fields to calibrate, section.field as in a vehicle file")
-    parser.add_argument("--prior", action="append", default=None, metavar="NAME=VALUE",
-                        help="prior value of a calibrated parameter (repeatable); default the vehicle's")
+    parser.add_argument("--prior", action="append", default=None, metavar="NAME=VALUE[:STD]",
+                        help="prior value of a calibrated parameter and optionally its std in the "
+                             "parameter's unit (repeatable); default the vehicle's value and --prior-std")
     parser.add_argument("--prior-std", type=float, default=1.0,
                         help="relative prior standard deviation of every parameter (default 1: a factor e)")
     parser.add_argument("--time-column", default=None, help="the log's time column (default t when present)")
     parser.add_argument("--out", default=None, help=f"write the calibrated vehicle to this .toml file ({OUT_RULE})")
-    parser.add_argument("--force", action="store_true", help="let --out replace an existing file")
+    parser.add_argument("--figure", default=None, metavar="FILE",
+                        help="draw measured against simulated channels, prior and calibrated car (.png, .pdf, .svg)")
+    parser.add_argument("--force", action="store_true", help="let --out or --figure replace an existing file")
     parser.add_argument("--strict", action="store_true", help="exit with status 3 when the result has warnings")
     parser.set_defaults(handler=run)
 
@@ -59,18 +66,41 @@ def _names(text: str, option: str) -> tuple[str, ...]:
     return names
 
 
-def _priors(items: list[str] | None) -> dict[str, float]:
+def _priors(items: list[str] | None) -> tuple[dict[str, float], dict[str, float]]:
+    """``--prior`` items as ``(name -> value, name -> std)``."""
     priors: dict[str, float] = {}
+    stds: dict[str, float] = {}
     for item in items or ():
-        name, equals, value = item.partition("=")
+        name, equals, text = item.partition("=")
+        value, colon, std_text = text.partition(":")
         try:
             number = float(value)
+            std = float(std_text) if colon else 1.0
         except ValueError:
-            number = math.nan
-        if not equals or not name.strip() or not math.isfinite(number):
-            raise InputError(f"--prior takes NAME=VALUE with a finite number; got {item!r}")
+            number = std = math.nan
+        if not equals or not name.strip() or not math.isfinite(number) or not (math.isfinite(std) and std > 0):
+            raise InputError(f"--prior takes NAME=VALUE[:STD] with a finite value and a positive std; got {item!r}")
         priors[name.strip()] = number
-    return priors
+        if colon:
+            stds[name.strip()] = std
+    return priors, stds
+
+
+_FIGURE_SUFFIXES = (".png", ".pdf", ".svg")
+
+
+def _figure_target(figure: str | None, force: bool) -> Path | None:
+    """The --figure path, checked before any work: a figure suffix, an existing folder, no file unless --force."""
+    if figure is None:
+        return None
+    path = Path(figure)
+    if path.suffix.lower() not in _FIGURE_SUFFIXES:
+        raise InputError(f"--figure takes a {', '.join(_FIGURE_SUFFIXES)} file; got {figure!r}")
+    if not path.parent.is_dir():
+        raise InputError(f"--figure: no folder {str(path.parent)!r}")
+    if path.is_dir() or (path.exists() and not force):
+        raise InputError(f"--figure {figure!r} exists: choose another name or give --force")
+    return path
 
 
 def _write_text(path: Path, text: str) -> None:
@@ -114,8 +144,9 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     if not (math.isfinite(args.prior_std) and args.prior_std > 0):
         raise InputError(f"--prior-std must be a positive number; got {args.prior_std}")
     parameters = _names(args.parameters, "--parameters") if args.parameters else None
-    priors = _priors(args.prior)
+    priors, prior_std = _priors(args.prior)
     params = named_vehicle(args.vehicle)
+    figure = _figure_target(args.figure, args.force)
     if args.out:
         check_output_target(args.out, inputs=[args.vehicle, args.log], force=args.force, what="vehicle file",
                             identify=lambda path: None, suffixes=(".toml",))
@@ -127,14 +158,16 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     record = calibration_record(data.u[:, 0], speed, data.y[:, 1:], data.dt, quantities, t0=float(data.t[0]))
     estimation = _part(record, 0, n_estimation)
     calibration = calibrate_vehicle(params, estimation, quantities, parameters=parameters, priors=priors,
-                                    options=GreyBoxOptions(prior_std=args.prior_std))
+                                    prior_std=prior_std,
+                                    options=GreyBoxOptions(prior_std=args.prior_std, coloured_residuals=True))
     if calibration.result is None:
         raise InputError("the log determines none of the chosen parameters: " + "; ".join(calibration.warnings))
     validation_fit: dict[str, float] = {}
     if args.validation > 0:
-        held_out = _part(record, n_estimation, record.n_samples)
-        predicted = calibration.result.simulate(held_out)
-        fits = percentage_explanation(held_out.y, predicted)
+        # the calibrated car drives the whole log from its start, so the held-out part begins in the
+        # state the car reached (from its inputs alone) rather than from straight running mid-drive
+        predicted = calibration.result.simulate(record)[n_estimation:]
+        fits = percentage_explanation(record.y[n_estimation:], predicted)
         validation_fit = {channel: float(value) for channel, value in zip(outputs, fits)}
     lo, hi = float(np.min(speed)), float(np.max(speed))
     speeds = sorted({round(v, 1) for v in np.linspace(max(lo, 5.0), max(hi, 5.0), 3)})
@@ -155,6 +188,7 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
         "validation_fit_percent": validation_fit,
         "handling": handling,
         "vehicle_file": None,
+        "figure": None,
         "warnings": list(calibration.warnings),
     }
     lines = [f"calibration of {params.name} to {log.name}: {n_estimation} of {data.n_samples} samples at "
@@ -174,6 +208,22 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
         _write_text(Path(args.out), vehicle_toml(calibration.vehicle, comment))
         summary["vehicle_file"] = str(args.out)
         lines.append(f"wrote {args.out}")
+    if figure is not None:
+        from vehid.identification.filtering.greybox import simulate_greybox
+        from vehid.scenarios.plots import plot_time_fits
+
+        result = calibration.result
+        prior, _ = simulate_greybox(result.model, result.start, record, discretization=result.options.discretization,
+                                    substeps=result.options.substeps)
+        page = plot_time_fits(record.t, record.y, {"prior car": prior, "calibrated car": result.simulate(record)},
+                              outputs, record.output_units,
+                              title=f"{params.name} calibrated to {log.name}: the first "
+                                    f"{n_estimation / data.n_samples:.0%} calibrates, the rest is held out")
+        for axis in page.axes:  # where the held-out part begins
+            axis.axvline(record.t[n_estimation - 1], color="0.5", linestyle="--", linewidth=1.0)
+        page.savefig(figure)
+        summary["figure"] = str(figure)
+        lines.append(f"wrote {figure}")
     text = "\n".join(lines)
     warnings = list(calibration.warnings)
     if warnings and not args.json and not args.strict:
