@@ -27,9 +27,9 @@ modes are the summary's other keys.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 from dataclasses import dataclass, field
+from types import SimpleNamespace
 from typing import Any, Sequence
 
 import numpy as np
@@ -44,28 +44,8 @@ NONLINEAR_NOTE = ("--nonlinear with --schedule: the scheduled family may gain a 
                   "linear dynamics, then a piecewise-linear map of each output; scheduled.output_map), kept where it "
                   "validates better; the spline-nonlinear model ('nonlinear') of the unscheduled model is beside it")
 
-__all__ = ["NONLINEAR_NOTE", "register_options",
+__all__ = ["NONLINEAR_NOTE",
            "identify_scheduled_model", "ScheduledOutcome", "text_lines"]
-
-
-def register_options(parser: argparse.ArgumentParser) -> None:
-    """``--schedule`` and the scheduled model's settings."""
-    from vehid.identification.filtering.scheduled_iekf import DEFAULT_KNOTS, DEFAULT_P, MAX_KNOTS, MIN_KNOTS
-
-    parser.add_argument("--schedule", metavar="CHANNEL",
-                        help="scheduling channel (a speed such as vx), read beside the inputs and never offset: "
-                             "identify a model whose coefficients vary with it (modal: piecewise linear over "
-                             "--schedule-grid; --structure single-track: the speed in m/s)")
-    parser.add_argument("--schedule-grid", metavar="VALUES",
-                        help=f"knots of the scheduled modal model, comma-separated and increasing (default: "
-                             f"--schedule-knots at evenly spaced quantiles of the channel)")
-    parser.add_argument("--schedule-knots", type=int, default=DEFAULT_KNOTS,
-                        help=f"number of knots at the channel's quantiles, {MIN_KNOTS}-{MAX_KNOTS} "
-                             f"(default {DEFAULT_KNOTS})")
-    parser.add_argument("--schedule-p", type=float, action="append", metavar="P",
-                        help=f"tuning parameter(s) of the scheduled filter, per dominant time constant; several are "
-                             f"tried and one chosen on validation data (default {DEFAULT_P:g}, or "
-                             f"{', '.join(f'{p:g}' for p in P_GRID)} with validation data)")
 
 
 #: p of the scheduled filter tried on validation data, largest first (the default alone without them)
@@ -110,7 +90,7 @@ def schedule_margin(evaluation: Any, unscheduled: Any) -> dict[str, Any]:
             "rule": f"the scheduled model where it beats the unscheduled one by more than {margin} points"}
 
 
-def identify_scheduled_model(start: Any, plan: Any, args: argparse.Namespace, unscheduled: Any) -> ScheduledOutcome:
+def identify_scheduled_model(start: Any, plan: Any, args: Any, unscheduled: Any) -> ScheduledOutcome:
     """The scheduled family started from ``start`` (the unscheduled model returned), scored on the plan's records.
 
     ``unscheduled`` is the start's :class:`~vehid.scenarios.identify_workflow.Evaluation`.
@@ -196,7 +176,7 @@ def identify_scheduled_model(start: Any, plan: Any, args: argparse.Namespace, un
     # the family is simulated from rest (its initial state is not estimated), so the unscheduled model is
     # weighed alike: a record cut mid-drive costs a start from rest several points of fit
     # (a car whose dynamics ignore the speed: 92 % from rest against 99 % from an estimated state)
-    from_rest = workflow.evaluate(start, plan, argparse.Namespace(**{**vars(args), "initial_state": "zero"}))
+    from_rest = workflow.evaluate(start, plan, SimpleNamespace(**{**vars(args), "initial_state": "zero"}))
     entry["unscheduled"].update(estimation_fit_percent_from_rest=from_rest.estimation.fit,
                                 validation_fit_percent_from_rest=from_rest.validation_fit)
     margin = schedule_margin(evaluation, from_rest)
@@ -258,7 +238,7 @@ def _or_nan(value: float | None) -> float:
 OUTPUT_MAP_NODES = (3, 5)
 
 
-def with_output_map(family: Any, evaluation: Any, plan: Any, scheduled_plan: Any, args: argparse.Namespace
+def with_output_map(family: Any, evaluation: Any, plan: Any, scheduled_plan: Any, args: Any
                     ) -> tuple[Any, Any, dict[str, Any]]:
     """The family with a static output map (``--nonlinear``) where one validates better, and the map's entry.
 

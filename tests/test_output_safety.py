@@ -45,7 +45,7 @@ def _no_work(monkeypatch) -> None:
     def refuse(*args, **kwargs):
         raise AssertionError("the work started before the output was checked")
 
-    monkeypatch.setattr(identify.workflow, "load_plan", refuse)
+    monkeypatch.setattr(identify, "load_plan", refuse)
     monkeypatch.setattr(simulate, "simulate", refuse)
     monkeypatch.setattr(study_handling, "make_records", refuse)
     monkeypatch.setattr(study_linear_example, "run_case", refuse)
