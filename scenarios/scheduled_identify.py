@@ -49,7 +49,7 @@ __all__ = ["NONLINEAR_NOTE",
 
 
 #: p of the scheduled filter tried on validation data, largest first (the default alone without them)
-P_GRID = (1e-2, 1e-3)
+from vehid.identification.choices import SCHEDULED_P_GRID as P_GRID  # noqa: E402
 
 
 @dataclass

@@ -42,8 +42,6 @@ CORRELATION_WARNING = 0.98
 LINEAR_LIMIT_G = 0.5
 #: Most Runge-Kutta steps per sample; a log needing more reaches standstill (:func:`_substeps`).
 MAX_SUBSTEPS = 20
-STRUCTURES = ("modal", "single-track")
-
 
 def _config(args: Any, n_outputs: int):
     from vehid.vehicle.single_track import SingleTrackConfig

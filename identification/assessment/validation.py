@@ -31,7 +31,7 @@ __all__ = [
     "UNSTABLE_HORIZON",
 ]
 
-INITIAL_STATES = ("zero", "estimate")
+from vehid.identification.choices import INITIAL_STATES  # noqa: E402  (the one definition, light to import)
 
 # Steady-state Kalman filter of the k-step predictor, in outputs divided by their RMS:
 # process noise this fraction of the input-driven state variance per sample, unit measurement noise.

@@ -59,7 +59,7 @@ from vehid.identification.automatic.plan import (AUTO_HOLDOUT, AUTO_MAX_ORDER, P
 from vehid.identification.automatic.options import IdentifyOptions
 
 __all__ = [
-    "START_HELP", "START_CHOICES", "Evaluation", "search_orders", "identify_nonlinear", "start_of", "run_iekf_order",
+    "START_CHOICES", "Evaluation", "search_orders", "identify_nonlinear", "start_of", "run_iekf_order",
     "last_good_on_divergence", "scores_summary", "AUTO_MAX_ORDER", "AUTO_HOLDOUT", "ORDER_TOLERANCE", "Plan",
     "parse_orders", "supported_orders", "holdout_fraction", "make_plan", "iekf_options", "choose_order", "evaluate",
     "run_warnings", "PTuning", "tune_p", "tunes_p", "given_p", "q_schedule_of", "P_GRID", "Q_SCHEDULES", "P_TOLERANCE",
@@ -70,8 +70,6 @@ __all__ = [
 ]
 
 ORDER_TOLERANCE = 0.5  # points of mean validation fit
-START_HELP = ("start values: data (a subspace model of the record, default), band (modes across the record's band), "
-              "default (sigma = -10, omega = 10 rad/s, absolute) or paper (sigma = -1, omega = 1)")
 MOVED = 1e-3  # relative change of a mode's eigenvalue below which it stayed at its start
 NOTHING_TO_GAIN = 99.0  # percent R: a model this good is no warning for staying at its start
 # a run stopped by the pass limit whose mean R moved less than SETTLED_FIT points over its last

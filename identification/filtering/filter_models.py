@@ -24,7 +24,7 @@ from ..models.modal import ModalStructure
 
 __all__ = ["DISCRETIZATIONS", "FilterModel", "LinearModalFilterModel", "mode_transition", "modal_transition"]
 
-DISCRETIZATIONS = ("euler", "exact", "exact-zoh")
+from vehid.identification.choices import DISCRETIZATIONS  # noqa: E402  (the one definition, light to import)
 
 _TAYLOR_RADIUS = 1e-3  # |z| below which phi1, phi2 use their series (error < |z|^4/120 ~ 1e-14)
 

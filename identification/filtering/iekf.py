@@ -65,19 +65,8 @@ __all__ = [
     "invariant_noise_settings",
 ]
 
-#: Named start values: (sigma, omega, omega spread between pairs). The paper's sigma = -1 finds the
-#: eigenvalues far less often than faster oscillatory modes (docs/iekf_tuning.md), hence ``default``.
-START_VALUES = {
-    "default": (-10.0, 10.0, 0.5),
-    "paper": (-1.0, 1.0, 0.0),
-}
-
-#: Every start: the fixed ones of :data:`START_VALUES` and those taken from the data.
-START_CHOICES = (*DATA_STARTS, *START_VALUES)
-
-#: ``seconds``: the filter runs in the record's time unit and p is absolute (the paper);
-#: ``auto``: time in samples inside the filter, p per dominant time constant (module docstring).
-TIMESCALES = ("seconds", "auto")
+# named start values, every start and the time scales: defined once where a command line reads them cheaply
+from vehid.identification.choices import START_CHOICES, START_VALUES, TIMESCALES  # noqa: E402
 
 #: The relative tuning parameter of :meth:`IEKFOptions.invariant`: Q = p I per dominant time
 #: constant of the start model, on parameters of order 1 (chosen by measurement: docs/iekf_tuning.md).

@@ -41,7 +41,7 @@ __all__ = [
     "unpack_covariance",
 ]
 
-COVARIANCE_FORMS = ("joseph", "paper")
+from vehid.identification.choices import COVARIANCE_FORMS  # noqa: E402  (the one definition, light to import)
 KERNELS = ("auto", "structured", "generated")
 
 # Flags and threshold chosen by measurement (docs/iekf_tuning.md, benchmarks/iekf_compile_levels.py); the

@@ -48,7 +48,7 @@ __all__ = [
 #: ``eq18`` is the three-output, n = 5 pattern of eq. 18; ``eq19`` the
 #: order-study patterns of eq. 19 (n = 3..7, three outputs); ``default`` the
 #: workbench's generalisation (pairs first, outputs assigned in turn).
-C_PATTERNS = ("default", "all-ones", "eq18", "eq19")
+from vehid.identification.choices import C_PATTERNS  # noqa: E402  (the one definition, light to import)
 
 # Which output each mode (pairs first, then real poles) is tied to in eq. 19,
 # for three outputs; n = 5 is eq. 18. The paper ties n = 7's real pole to the

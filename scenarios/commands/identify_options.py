@@ -5,20 +5,23 @@ from __future__ import annotations
 import argparse
 
 from vehid.identification.automatic.options import DEFAULT_NODES, DEFAULT_NONLINEAR_PASSES, DEFAULT_PASSES
+from vehid.identification.choices import (C_PATTERNS, COVARIANCE_FORMS, DISCRETIZATIONS, INITIAL_STATES,
+                                          SCHEDULE_DEFAULT_KNOTS, SCHEDULE_MAX_KNOTS, SCHEDULE_MIN_KNOTS,
+                                          SCHEDULED_DEFAULT_P, SCHEDULED_P_GRID, START_CHOICES, TIMESCALES)
 
-__all__ = ["register_identify_options", "register_pipeline_options", "register_schedule_options",
-           "register_single_track_options"]
+__all__ = ["STRUCTURES", "START_HELP", "register_identify_options", "register_pipeline_options",
+           "register_schedule_options", "register_single_track_options"]
+
+#: The model structures: the modal model, or a car's single-track model (scenarios.single_track_identify).
+STRUCTURES = ("modal", "single-track")
+START_HELP = ("start values: data (a subspace model of the record, default), band (modes across the record's band), "
+              "default (sigma = -10, omega = 10 rad/s, absolute) or paper (sigma = -1, omega = 1)")
 
 
 def register_identify_options(parser: argparse.ArgumentParser) -> None:
     """Every option of `vehid identify`."""
-    from vehid.identification.automatic.steps import START_CHOICES, START_HELP
-    from vehid.identification.filtering.filter_models import DISCRETIZATIONS
-    from vehid.identification.filtering.iekf_pass import COVARIANCE_FORMS
-    from vehid.identification.models.modal import C_PATTERNS
     from vehid.scenarios.data_options import register_data_options
     from vehid.scenarios.paths import OUT_RULE
-    from vehid.scenarios.single_track_identify import STRUCTURES
 
     parser.add_argument("data", nargs="*", help="data files: .h5, .csv, .dat, .txt, .mat, .mf4 (several: one model)")
     parser.add_argument("--inputs", help="comma-separated input column names")
@@ -59,9 +62,6 @@ def register_identify_options(parser: argparse.ArgumentParser) -> None:
 
 def register_pipeline_options(parser: argparse.ArgumentParser) -> None:
     """The validation, order, model-class and warning options of `vehid identify`."""
-    from vehid.identification.assessment.validation import INITIAL_STATES
-    from vehid.identification.filtering.iekf import TIMESCALES
-
     parser.add_argument("--validation", type=float, metavar="FRACTION",
                         help="hold out the last FRACTION of the record for validation (e.g. 0.3)")
     parser.add_argument("--validation-file", action="append", default=[], metavar="FILE",
@@ -92,9 +92,6 @@ def register_pipeline_options(parser: argparse.ArgumentParser) -> None:
 
 def register_schedule_options(parser: argparse.ArgumentParser) -> None:
     """``--schedule`` and the scheduled model's settings."""
-    from vehid.identification.filtering.scheduled_iekf import DEFAULT_KNOTS, DEFAULT_P, MAX_KNOTS, MIN_KNOTS
-    from vehid.scenarios.scheduled_identify import P_GRID
-
     parser.add_argument("--schedule", metavar="CHANNEL",
                         help="scheduling channel (a speed such as vx), read beside the inputs and never offset: "
                              "identify a model whose coefficients vary with it (modal: piecewise linear over "
@@ -102,13 +99,13 @@ def register_schedule_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--schedule-grid", metavar="VALUES",
                         help="knots of the scheduled modal model, comma-separated and increasing (default: "
                              "--schedule-knots at evenly spaced quantiles of the channel)")
-    parser.add_argument("--schedule-knots", type=int, default=DEFAULT_KNOTS,
-                        help=f"number of knots at the channel's quantiles, {MIN_KNOTS}-{MAX_KNOTS} "
-                             f"(default {DEFAULT_KNOTS})")
+    parser.add_argument("--schedule-knots", type=int, default=SCHEDULE_DEFAULT_KNOTS,
+                        help=f"number of knots at the channel's quantiles, {SCHEDULE_MIN_KNOTS}-{SCHEDULE_MAX_KNOTS} "
+                             f"(default {SCHEDULE_DEFAULT_KNOTS})")
     parser.add_argument("--schedule-p", type=float, action="append", metavar="P",
                         help=f"tuning parameter(s) of the scheduled filter, per dominant time constant; several are "
-                             f"tried and one chosen on validation data (default {DEFAULT_P:g}, or "
-                             f"{', '.join(f'{p:g}' for p in P_GRID)} with validation data)")
+                             f"tried and one chosen on validation data (default {SCHEDULED_DEFAULT_P:g}, or "
+                             f"{', '.join(f'{p:g}' for p in SCHEDULED_P_GRID)} with validation data)")
 
 
 def register_single_track_options(parser: argparse.ArgumentParser) -> None:
