@@ -2,20 +2,22 @@
 
 :func:`identify` runs the steps of the command (p by cross-validation, the
 open-loop-unstable treatment, start or filter, order search, hold-out
-scoring, warnings, the spline-nonlinear model) on :class:`IOData` records
-and returns a typed :class:`Identification`. It writes no file and prints
-nothing: its warnings come back in the result.
+scoring, warnings, the spline-nonlinear model, the speed-scheduled family)
+on :class:`IOData` records and returns a typed :class:`Identification`. It
+writes no file and prints nothing: its warnings come back in the result.
 
 The pipeline's parts live in :mod:`vehid.identification.automatic`:
 ``options`` (the settings, checked once), ``plan`` (records and orders),
 ``steps`` (tuning, decisions, scores, warnings), ``checks`` (model and data
-checks), ``run`` (the run on a plan, with checkpoints for a caller that keeps
-it on disk) and ``result`` (the typed result and its JSON summary).
+checks), ``scheduled`` (the speed-scheduled variant), ``run`` (the run on a
+plan, with checkpoints for a caller that keeps it on disk) and ``result``
+(the typed result and its JSON summary).
 """
 
 from __future__ import annotations
 
-from typing import Sequence
+import dataclasses
+from typing import Any, Sequence
 
 from vehid.identification.automatic.options import (DEFAULT_NODES, DEFAULT_NONLINEAR_PASSES, DEFAULT_PASSES,
                                                     MIN_PASSES, IdentifyOptions)
@@ -29,7 +31,8 @@ __all__ = ["DEFAULT_PASSES", "MIN_PASSES", "DEFAULT_NONLINEAR_PASSES", "DEFAULT_
 
 def identify(data: IOData | Sequence[IOData], *, order: int | str = 4,
              validation: float | IOData | Sequence[IOData] | None = None,
-             options: IdentifyOptions = IdentifyOptions()) -> Identification:
+             options: IdentifyOptions = IdentifyOptions(), schedule: Any = None,
+             schedule_channel: str = "schedule") -> Identification:
     """Identify a modal model from raw records as `vehid identify` does.
 
     Parameters
@@ -43,6 +46,13 @@ def identify(data: IOData | Sequence[IOData], *, order: int | str = 4,
         (prepared with the estimation records' scale factors and their own offsets).
     options : IdentifyOptions
         The pipeline's settings.
+    schedule : array_like or None
+        The schedule channel's samples (a speed, say), one per sample of the one estimation record:
+        a speed-scheduled family is started from the model identified and returned where it
+        validates better (``result.scheduled``). Validation then takes a fraction, whose
+        schedule is the tail of this one.
+    schedule_channel : str
+        The schedule channel's name (in the family's grid and the summary).
 
     Returns
     -------
@@ -57,7 +67,9 @@ def identify(data: IOData | Sequence[IOData], *, order: int | str = 4,
         With ``options.strict``, where the run ends with warnings.
     """
     from vehid.identification.assessment.validation import split_holdout
-    from vehid.identification.automatic.plan import holdout_fraction, make_plan
+    import numpy as np
+
+    from vehid.identification.automatic.plan import ScheduleData, holdout_fraction, make_plan
     from vehid.identification.automatic.run import identify_plan
     from vehid.identification.dataio.preparation import prepare, prepare_validation
 
@@ -75,6 +87,14 @@ def identify(data: IOData | Sequence[IOData], *, order: int | str = 4,
     elif validation is not None:
         fraction = float(validation)
     fraction, note = holdout_fraction(order, fraction, bool(extra))
+    schedule_samples = None
+    if schedule is not None:
+        schedule_samples = np.asarray(schedule, dtype=float)
+        if len(raw) != 1 or extra:
+            raise InputError("a schedule identifies from one record, validated on a fraction of it")
+        if schedule_samples.shape != (raw[0].n_samples,) or not np.all(np.isfinite(schedule_samples)):
+            raise InputError(f"schedule must hold one finite value per sample ({raw[0].n_samples}); "
+                             f"got shape {schedule_samples.shape}")
     held_raw: tuple[IOData, ...] = ()
     if fraction is not None:
         parts = [split_holdout(record, fraction) for record in raw]
@@ -87,6 +107,10 @@ def identify(data: IOData | Sequence[IOData], *, order: int | str = 4,
     plan = make_plan(records, order=order, validation=named,
                      load=lambda record: prepare_validation(record, preparation, own_offsets=True),
                      held_out=held, fraction=fraction, note=note, preparation=preparation)
+    if schedule_samples is not None:
+        cut = records[0].n_samples
+        plan = dataclasses.replace(plan, schedule=ScheduleData(
+            schedule_channel, (schedule_samples[:cut],), (schedule_samples[cut:],) if held else ()))
     result = identify_plan(plan, options)
     if options.strict and result.warnings:
         raise StrictWarningsError(list(result.warnings), result.render())

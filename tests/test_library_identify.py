@@ -171,3 +171,16 @@ def test_the_scenarios_identification_modules_parse_no_arguments():
         imported = {alias.name for node in ast.walk(tree) if isinstance(node, ast.Import) for alias in node.names}
         imported |= {node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom) and node.module}
         assert "argparse" not in imported, name
+
+
+def test_a_schedule_is_refused_where_it_does_not_fit_the_record():
+    """One schedule value per sample of one record: anything else is named before any work."""
+    record = _dryer()
+    with pytest.raises(InputError, match="one finite value per sample"):
+        identify(record, order=2, schedule=np.ones(record.n_samples - 1))
+    with pytest.raises(InputError, match="one finite value per sample"):
+        identify(record, order=2, schedule=np.full(record.n_samples, np.nan))
+    with pytest.raises(InputError, match="one record"):
+        identify([record, record], order=2, schedule=np.ones(record.n_samples))
+    with pytest.raises(InputError, match="schedule_p"):
+        IdentifyOptions(schedule_p=(0.0,))

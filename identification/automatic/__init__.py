@@ -11,6 +11,9 @@ Modules, in the order a run meets them:
     start or filter, order search, scores, warnings and the spline-nonlinear model.
 ``checks``
     What is reported beside the scores: modes with standard deviations, residual tests, the data's keys.
+``scheduled``
+    The speed-scheduled variant: a family started from the model identified, returned where it
+    validates better.
 ``run``
     One run on a plan, with checkpoints for a caller that keeps it on disk.
 ``result``

@@ -10,6 +10,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+from vehid.identification.choices import SCHEDULE_DEFAULT_KNOTS, SCHEDULE_MIN_KNOTS
 from vehid.identification.errors import InputError
 
 __all__ = ["DEFAULT_PASSES", "MIN_PASSES", "DEFAULT_NONLINEAR_PASSES", "DEFAULT_NODES", "IdentifyOptions"]
@@ -74,6 +75,12 @@ class IdentifyOptions:
     bootstrap : int or None
         With ``method="n4sid"``: residual-bootstrap replicates for its parameter covariance
         (None: the asymptotic covariance of its simulation errors; 0: no covariance).
+    schedule_knots : int
+        Knots of the speed-scheduled family at the schedule channel's quantiles (where a schedule is given).
+    schedule_grid : tuple of float or None
+        The family's knots themselves, increasing (None: ``schedule_knots`` at quantiles).
+    schedule_p : tuple of float or None
+        The scheduled filter's p values, one chosen on validation data (None: the default grid).
     """
 
     p: float | None = None
@@ -95,6 +102,9 @@ class IdentifyOptions:
     strict: bool = False
     method: str = "iekf"
     bootstrap: int | None = None
+    schedule_knots: int = SCHEDULE_DEFAULT_KNOTS
+    schedule_grid: tuple[float, ...] | None = None
+    schedule_p: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
         if self.p is not None:
@@ -111,6 +121,13 @@ class IdentifyOptions:
                 _positive_number("nonlinear_p", value)
         if not isinstance(self.method, str) or not self.method:
             raise InputError(f"method must name an estimator; got {self.method!r}")
+        _whole_at_least("schedule_knots", self.schedule_knots, SCHEDULE_MIN_KNOTS)
+        for name in ("schedule_grid", "schedule_p"):
+            values = getattr(self, name)
+            if values is not None and not values:
+                raise InputError(f"{name} must name at least one value (or be None for the default)")
+        for value in self.schedule_p or ():
+            _positive_number("schedule_p", value)
         if self.bootstrap is not None:
             _whole_at_least("bootstrap", self.bootstrap, 0)
             if self.method != "n4sid":

@@ -17,7 +17,7 @@ import numpy as np
 from vehid.identification.data import IOData
 from vehid.identification.errors import InputError
 
-__all__ = ["AUTO_MAX_ORDER", "AUTO_HOLDOUT", "Plan", "parse_orders", "supported_orders", "holdout_fraction",
+__all__ = ["AUTO_MAX_ORDER", "AUTO_HOLDOUT", "ScheduleData", "Plan", "parse_orders", "supported_orders", "holdout_fraction",
            "make_plan"]
 
 AUTO_MAX_ORDER = 8
@@ -69,6 +69,15 @@ def supported_orders(orders: list[int], auto: bool, records: tuple[IOData, ...],
 
 
 @dataclass(frozen=True, eq=False)
+class ScheduleData:
+    """The schedule channel of a plan's records: its name and its samples per estimation and validation record."""
+
+    channel: str
+    estimation: tuple[np.ndarray, ...]
+    validation: tuple[np.ndarray, ...]
+
+
+@dataclass(frozen=True, eq=False)
 class Plan:
     """The records and orders of one identification.
 
@@ -85,7 +94,7 @@ class Plan:
     notes: tuple[str, ...] = ()
     preparation: Any = None
     held_out_count: int = 0  # the first validation records are held-out parts of the estimation records
-    schedule: Any = None  # with --schedule: the channel's samples per record (a ScheduleData: channel name, samples per record)
+    schedule: ScheduleData | None = None  # the schedule channel's samples per record, for the scheduled variant
 
     @property
     def estimation(self) -> IOData | tuple[IOData, ...]:

@@ -146,6 +146,11 @@ class Identification:
         The spline-nonlinear model started from the linear one.
     time_domain : str or None
         A classical method's time domain ("continuous" or "discrete").
+    scheduled : ScheduledOutcome or None
+        The speed-scheduled family started from the unscheduled model (where the plan holds a schedule).
+    unscheduled : object or None
+        The unscheduled model, where the scheduled family is returned in its place; the
+        summary's matrices, eigenvalues and checks are the unscheduled model's.
     """
 
     model: Any
@@ -173,6 +178,8 @@ class Identification:
     scoring_note: str | None = None
     nonlinear: Any = field(default=None, repr=False)
     time_domain: str | None = None
+    scheduled: Any = field(default=None, repr=False)
+    unscheduled: Any = field(default=None, repr=False)
 
     @property
     def p(self) -> float | None:
@@ -190,7 +197,7 @@ class Identification:
 
     def render(self) -> dict[str, Any]:
         """A fresh summary dict (:attr:`summary`), for a caller that adds keys of its own."""
-        model = self.model
+        model = self.unscheduled if self.unscheduled is not None else self.model
         summary: dict[str, Any] = {"method": self.method, "order": self.order, "eigenvalues": model.eigenvalues()}
         result = self.estimator
         if self.is_iekf:
@@ -215,7 +222,7 @@ class Identification:
         if self.divergence:
             summary["divergence"] = self.divergence
         if self.start_returned:
-            summary.update(fit_percent=self.fit_percent, model_returned="start")
+            summary.update(fit_percent=self.fit_percent, model_returned="start")  # a returned family's scores replace it below
         evaluation = self.evaluation
         summary.update({
             "fit_percent": summary["fit_percent"],
@@ -239,5 +246,9 @@ class Identification:
             summary["start"] = {k: v for k, v in result.meta.items() if k != "start_parameters"}
         if self.nonlinear is not None:
             summary["nonlinear"] = self.nonlinear.summary
+        if self.scheduled is not None:
+            summary["scheduled"] = self.scheduled.summary
+            if self.scheduled.returned:  # the scores are the family's; the matrices stay the unscheduled model's
+                summary.update(self.scheduled.scores)
         summary["warnings"] = list(self.warnings)
         return summary

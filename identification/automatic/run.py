@@ -184,12 +184,28 @@ def _finish(plan: Plan, options: IdentifyOptions, model: Any, *, estimator: Any,
         warnings += steps.nonlinear_warnings(nonlinear, evaluation)
     warnings += data_warnings(plan.records)
     decisions = tuple(Decision.from_entry(name, entry) for name, entry in keys.get("decision_margins", {}).items())
+    data_keys = records_summary(model, plan.records, plan.preparation)  # the unscheduled model's, as its checks
+    scheduled, unscheduled = None, None
+    fits = (fit, evaluation.estimation.fit, evaluation.validation_fit)
+    if plan.schedule is not None:  # the scheduled family, started from the model above, returned where it validates better
+        from vehid.identification.automatic.scheduled import NONLINEAR_NOTE, identify_scheduled_model
+
+        scheduled = identify_scheduled_model(model, plan, options, evaluation)
+        decisions += (Decision.from_entry("schedule", scheduled.margin),)
+        warnings += scheduled.warnings
+        if nonlinear is not None:
+            notes.append(NONLINEAR_NOTE)
+        if scheduled.returned:
+            unscheduled, model = model, scheduled.model
+            fits = tuple(scheduled.scores[key] for key in ("fit_percent", "estimation_fit_percent",
+                                                           "validation_fit_percent"))
     return Identification(
-        model=model, method=options.method if not iekf else "iekf", order=int(order), fit_percent=float_tuple(fit),
-        estimation_fit_percent=float_tuple(evaluation.estimation.fit),
-        validation_fit_percent=float_tuple(evaluation.validation_fit), decisions=decisions, notes=tuple(notes),
+        model=model, method=options.method if not iekf else "iekf", order=int(order), fit_percent=float_tuple(fits[0]),
+        estimation_fit_percent=float_tuple(fits[1]),
+        validation_fit_percent=float_tuple(fits[2]), decisions=decisions, notes=tuple(notes),
         warnings=tuple(warnings), orders=orders, seconds=float(seconds), plan=plan, evaluation=evaluation,
         estimator=estimator, tuning=tuning, open_loop_unstable=keys.get("open_loop_unstable"),
         start_kept=keys.get("start_kept"), start_returned=start_returned, divergence=divergence,
-        checks=checks, residual_tests=tests, data=records_summary(model, plan.records, plan.preparation),
-        scoring_note=scoring_note, nonlinear=nonlinear, time_domain=time_domain)
+        checks=checks, residual_tests=tests, data=data_keys,
+        scoring_note=scoring_note, nonlinear=nonlinear, time_domain=time_domain, scheduled=scheduled,
+        unscheduled=unscheduled)

@@ -189,13 +189,18 @@ def _archive_plan(archive, plan) -> None:
 
 def options_from_args(args: argparse.Namespace) -> IdentifyOptions:
     """The pipeline's settings named by the command's arguments (each checked where it is defined)."""
+    from vehid.scenarios.schedule_channel import parse_schedule_grid
+
     return IdentifyOptions(
         p=args.p, passes=DEFAULT_PASSES if args.passes is None else args.passes, start=args.start,
         normalize=args.normalize, discretization=args.discretization, covariance=args.covariance,
         pattern=args.pattern, timescale=args.timescale, allow_unstable=args.allow_unstable,
         initial_state=args.initial_state, horizon=args.horizon, nonlinear=args.nonlinear, nodes=args.nodes,
         nonlinear_p=tuple(args.nonlinear_p) if args.nonlinear_p else None, nonlinear_passes=args.nonlinear_passes,
-        detrend=args.detrend, strict=args.strict, method=args.method, bootstrap=args.bootstrap)
+        detrend=args.detrend, strict=args.strict, method=args.method, bootstrap=args.bootstrap,
+        **({} if not args.schedule else {  # the schedule's settings count only where a schedule is read
+            "schedule_knots": args.schedule_knots, "schedule_grid": parse_schedule_grid(args.schedule_grid),
+            "schedule_p": tuple(args.schedule_p) if args.schedule_p else None}))
 
 
 def holdout_of(args: argparse.Namespace) -> tuple[float | None, str | None]:
@@ -341,7 +346,7 @@ def _archive_search(args, plan, options, result) -> None:
 
 
 def _finish(args, plan, result, archive_path=None) -> tuple[dict, str, object]:
-    """The scheduled variant, archive, model file and the text: the command's end of every identify run."""
+    """Archive, model file and the text: the command's end of every identify run."""
     from vehid.identification.dataio.archive import run_group, update_archive, write_run
     from vehid.identification.dataio.storage import write_value
     from vehid.identification.filtering.iekf_archive import write_pass_history
@@ -355,18 +360,8 @@ def _finish(args, plan, result, archive_path=None) -> tuple[dict, str, object]:
     model = result.model
     warnings = list(result.warnings)
     nonlinear = result.nonlinear.result.model if result.nonlinear is not None else None
-    scheduled, unscheduled = None, model
-    if args.schedule:  # the scheduled family, started from the model above, returned where it validates better
-        scheduled = scheduled_identify.identify_scheduled_model(model, plan, args, result.evaluation)
-        summary.update(scheduled=scheduled.summary)
-        summary.setdefault("decision_margins", {})["schedule"] = scheduled.margin
-        warnings += scheduled.warnings
-        if nonlinear is not None:
-            summary["notes"].append(scheduled_identify.NONLINEAR_NOTE)
-        if scheduled.returned:
-            summary.update(scheduled.scores)
-            model = scheduled.model
-    summary["warnings"] = list(warnings)
+    scheduled = result.scheduled
+    unscheduled = result.unscheduled if result.unscheduled is not None else model
     if archive_path is not None:
         summary["archive"] = str(archive_path)
         own_run = RUN_NAME if result.is_iekf else args.method
