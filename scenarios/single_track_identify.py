@@ -233,8 +233,8 @@ def run(args: Any) -> tuple[dict, str]:
     }
     if divergence:
         summary["divergence"] = divergence
+    summary["warnings"] = list(warnings)  # said on standard error (or made an error by --strict) by the command
     text = _text(summary, estimation.output_names, validation is not None)
-    workflow.emit(summary, warnings, args)
     return summary, text
 
 

@@ -59,7 +59,7 @@ def schedule_margin(evaluation: Any, unscheduled: Any) -> dict[str, Any]:
 
     On validation data the mean validation fit with :data:`VALIDATION_MARGIN`; without, the estimation
     fit, where the family fitted its own record with many more parameters, so it must win by the
-    start-or-filter rule's :data:`~vehid.scenarios.identify_steps.WHOLE_RECORD_MARGIN`.
+    start-or-filter rule's :data:`~vehid.identification.automatic.steps.WHOLE_RECORD_MARGIN`.
     """
 
     def number(value: Any) -> float | None:
@@ -76,7 +76,7 @@ def schedule_margin(evaluation: Any, unscheduled: Any) -> dict[str, Any]:
 def identify_scheduled_model(start: Any, plan: Any, options: IdentifyOptions, unscheduled: Any) -> ScheduledOutcome:
     """The scheduled family started from ``start`` (the unscheduled model returned), scored on the plan's records.
 
-    ``unscheduled`` is the start's :class:`~vehid.scenarios.identify_steps.Evaluation`.
+    ``unscheduled`` is the start's :class:`~vehid.identification.automatic.steps.Evaluation`.
     """
     from vehid.identification.filtering.scheduled_iekf import ScheduledIEKFOptions, identify_scheduled
 

@@ -131,7 +131,9 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     if args.structure == "single-track":
         from vehid.scenarios import single_track_identify
 
-        return single_track_identify.run(args)
+        summary, text = single_track_identify.run(args)
+        emit(summary, summary["warnings"], args)
+        return summary, text
     if args.resume and args.out:
         raise InputError("--resume continues in its own archive: give no --out")
     if args.schedule:
