@@ -51,6 +51,7 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
     "assessment.uncertainty": ("FrequencyResponseBand", "ModelUncertainty", "ModeEstimate", "model_uncertainty"),
     "models.scheduled": ("ModeMatch", "ScheduledModalModel", "schedule_models"),
     "filtering.scheduled_iekf": ("ScheduledIEKFOptions", "ScheduledIEKFResult", "identify_scheduled"),
+    "pipeline": ("IdentifyOptions", "Identification", "identify"),
 }
 # The modules' former flat names (before the sub-packages by role), so that code importing
 # ``vehid.identification.modal`` keeps working: each resolves to the very module object of its new
@@ -266,4 +267,7 @@ __all__ = [
     "ScheduledIEKFOptions",
     "ScheduledIEKFResult",
     "identify_scheduled",
+    "IdentifyOptions",
+    "Identification",
+    "identify",
 ]

@@ -1,20 +1,36 @@
-"""The named choices and default settings of the estimators and of data preparation, as plain constants.
+"""The named choices and default settings of the estimators, the scores and data preparation, as plain constants.
 
 The modules that compute with them import them from here; the command line
-reads them to list an option's choices and default without importing NumPy,
-SciPy or CasADi, which would delay every ``--help`` by a second.
+reads them to list an option's choices and default (and check an argument
+against them) without importing NumPy, SciPy or CasADi, which would delay
+every ``--help`` by a second.
 """
 
 from __future__ import annotations
 
-__all__ = ["DETRENDS", "JITTER_TOLERANCE", "DISCRETIZATIONS", "COVARIANCE_FORMS", "TIMESCALES", "INITIAL_STATES",
-           "C_PATTERNS", "SPLINE_NODES", "SPLINE_P", "SPLINE_PASSES"]
+__all__ = ["DETRENDS", "JITTER_TOLERANCE", "DATA_STARTS", "START_VALUES", "START_CHOICES", "DISCRETIZATIONS",
+           "COVARIANCE_FORMS", "TIMESCALES", "INITIAL_STATES", "C_PATTERNS", "SPLINE_NODES", "SPLINE_P",
+           "SPLINE_PASSES", "SCHEDULE_DEFAULT_KNOTS", "SCHEDULE_MIN_KNOTS", "SCHEDULE_MAX_KNOTS",
+           "SCHEDULED_DEFAULT_P", "SCHEDULED_P_GRID"]
 
 #: How offsets are estimated: each record's mean, a line through each record, or none.
 DETRENDS = ("mean", "linear", "none")
 
 #: Largest stray of a sample time from the uniform grid accepted without resampling, as a fraction of a step.
 JITTER_TOLERANCE = 0.05
+
+#: Starts taken from the record: a subspace model of it, or modes spread across its band.
+DATA_STARTS = ("data", "band")
+
+#: Named start values: (sigma, omega, omega spread between pairs). The paper's sigma = -1 finds the
+#: eigenvalues far less often than faster oscillatory modes (docs/iekf_tuning.md), hence ``default``.
+START_VALUES = {
+    "default": (-10.0, 10.0, 0.5),
+    "paper": (-1.0, 1.0, 0.0),
+}
+
+#: Every start: the fixed ones of :data:`START_VALUES` and those taken from the data.
+START_CHOICES = (*DATA_STARTS, *START_VALUES)
 
 #: How the filter's continuous model is discretised per sample.
 DISCRETIZATIONS = ("euler", "exact", "exact-zoh")
@@ -40,3 +56,13 @@ C_PATTERNS = ("default", "all-ones", "eq18", "eq19")
 SPLINE_NODES = 5
 SPLINE_P = 1e-7
 SPLINE_PASSES = 60
+
+#: Knots of a speed-scheduled modal model: the default count and its bounds.
+SCHEDULE_DEFAULT_KNOTS = 5
+SCHEDULE_MIN_KNOTS = 2
+SCHEDULE_MAX_KNOTS = 9
+
+#: The scheduled filter's p per dominant time constant, and the values tried on validation data
+#: (largest first; the default alone without them).
+SCHEDULED_DEFAULT_P = 1e-2
+SCHEDULED_P_GRID = (1e-2, 1e-3)

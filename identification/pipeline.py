@@ -1,208 +1,117 @@
-"""The options and the typed result of the automatic identification pipeline.
+"""`vehid identify` from Python: the automatic pipeline on records in memory.
 
-:class:`IdentifyOptions` holds every setting of the automatic pipeline (the
-defaults of `vehid identify`), each number checked once, here.
-:class:`Identification` is what one run gives: the model returned, its
-scores per data set, the decisions taken with their margins, the warnings,
-the order-search rows and the run time. :meth:`Identification.from_summary`
-reads the same run's JSON summary (the command's public keys) into it, so
-that the command and a Python caller share one result.
+:func:`identify` runs the steps of the command (p by cross-validation, the
+open-loop-unstable treatment, start or filter, order search, hold-out
+scoring, warnings, the spline-nonlinear model, the speed-scheduled family)
+on :class:`IOData` records and returns a typed :class:`Identification`. It
+writes no file and prints nothing: its warnings come back in the result.
+
+The pipeline's parts live in :mod:`vehid.identification.automatic`:
+``options`` (the settings, checked once), ``plan`` (records and orders),
+``steps`` (tuning, decisions, scores, warnings), ``checks`` (model and data
+checks), ``scheduled`` (the speed-scheduled variant), ``run`` (the run on a
+plan, with checkpoints for a caller that keeps it on disk) and ``result``
+(the typed result and its JSON summary).
 """
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, field
-from typing import Any, Mapping
+import dataclasses
+from typing import Any, Sequence
 
-import numpy as np
-
-from vehid.identification.errors import InputError
+from vehid.identification.automatic.options import (DEFAULT_NODES, DEFAULT_NONLINEAR_PASSES, DEFAULT_PASSES,
+                                                    MIN_PASSES, IdentifyOptions)
+from vehid.identification.automatic.result import Decision, Identification, OrderRow
+from vehid.identification.data import IOData
+from vehid.identification.errors import InputError, StrictWarningsError
 
 __all__ = ["DEFAULT_PASSES", "MIN_PASSES", "DEFAULT_NONLINEAR_PASSES", "DEFAULT_NODES", "IdentifyOptions",
-           "OrderRow", "Decision", "Identification"]
-
-DEFAULT_PASSES = 50  # the IEKF's largest number of passes
-MIN_PASSES = 1  # one pass is a complete (if unconverged) run of the filter
-DEFAULT_NONLINEAR_PASSES = 30
-DEFAULT_NODES = 5  # spline nodes per nonlinearity
+           "OrderRow", "Decision", "Identification", "identify"]
 
 
-def _positive_number(name: str, value: Any) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
-        raise InputError(f"{name} must be a positive finite number; got {value!r}")
-
-
-def _whole_at_least(name: str, value: Any, low: int) -> None:
-    if isinstance(value, bool) or not isinstance(value, int) or value < low:
-        raise InputError(f"{name} must be a whole number >= {low}; got {value!r}")
-
-
-@dataclass(frozen=True)
-class IdentifyOptions:
-    """Settings of the automatic pipeline; the defaults are those of `vehid identify`.
+def identify(data: IOData | Sequence[IOData], *, order: int | str = 4,
+             validation: float | IOData | Sequence[IOData] | None = None,
+             options: IdentifyOptions = IdentifyOptions(), schedule: Any = None,
+             schedule_channel: str = "schedule") -> Identification:
+    """Identify a modal model from raw records as `vehid identify` does.
 
     Parameters
     ----------
-    p : float or None
-        The IEKF's tuning parameter; None chooses it by two-fold cross-validation.
-    passes : int
-        Largest number of IEKF passes (at least :data:`MIN_PASSES`).
-    start : str
-        Start values: "data", "band", "default" or "paper".
-    normalize : bool
-        Scale inputs and outputs by their RMS while filtering.
-    discretization, covariance : str
-        The filter's discretisation and covariance numerics.
-    pattern : str or None
-        The C pattern; None lets the start model choose.
-    timescale : str
-        "auto" (time in samples, p per dominant time constant) or "seconds".
-    allow_unstable : bool
-        Keep unstable modes (an open-loop unstable plant).
-    initial_state : str
-        How linear models are simulated for scoring: "estimate" or "rest".
-    horizon : int or None
-        Score by this many steps of prediction instead of simulation.
-    nonlinear : bool
-        Identify the spline-nonlinear model started from the linear one.
-    nodes : int
-        Spline nodes per nonlinearity.
-    nonlinear_p : tuple of float or None
-        The spline model's p values; None takes the command's default.
-    nonlinear_passes : int
-        Largest number of passes of the spline model.
-    detrend : str
-        Offsets removed from each record: "mean", "linear" or "none".
-    strict : bool
-        Raise :class:`~vehid.identification.errors.StrictWarningsError` when the run ends with warnings.
+    data : IOData or sequence of IOData
+        The estimation record(s), raw (offsets are removed here, as by the command).
+    order : int or str
+        A model order, a range such as ``"2-8"`` or ``"auto"``.
+    validation : float, IOData, sequence of IOData or None
+        A fraction of each record held out at its end, or validation records
+        (prepared with the estimation records' scale factors and their own offsets).
+    options : IdentifyOptions
+        The pipeline's settings.
+    schedule : array_like or None
+        The schedule channel's samples (a speed, say), one per sample of the one estimation record:
+        a speed-scheduled family is started from the model identified and returned where it
+        validates better (``result.scheduled``). Validation then takes a fraction, whose
+        schedule is the tail of this one.
+    schedule_channel : str
+        The schedule channel's name (in the family's grid and the summary).
+
+    Returns
+    -------
+    Identification
+        The model returned, its scores, decisions with margins, warnings and order rows.
+
+    Raises
+    ------
+    InputError
+        Bad data or settings (the command's exit status 2).
+    StrictWarningsError
+        With ``options.strict``, where the run ends with warnings.
     """
+    from vehid.identification.assessment.validation import split_holdout
+    import numpy as np
 
-    p: float | None = None
-    passes: int = DEFAULT_PASSES
-    start: str = "data"
-    normalize: bool = True
-    discretization: str = "exact"
-    covariance: str = "joseph"
-    pattern: str | None = None
-    timescale: str = "auto"
-    allow_unstable: bool = False
-    initial_state: str = "estimate"
-    horizon: int | None = None
-    nonlinear: bool = False
-    nodes: int = DEFAULT_NODES
-    nonlinear_p: tuple[float, ...] | None = None
-    nonlinear_passes: int = DEFAULT_NONLINEAR_PASSES
-    detrend: str = "mean"
-    strict: bool = False
+    from vehid.identification.automatic.plan import ScheduleData, holdout_fraction, make_plan
+    from vehid.identification.automatic.run import identify_plan
+    from vehid.identification.dataio.preparation import prepare, prepare_validation
 
-    def __post_init__(self) -> None:
-        if self.p is not None:
-            _positive_number("p", self.p)
-        _whole_at_least("passes", self.passes, MIN_PASSES)
-        if self.horizon is not None:
-            _whole_at_least("horizon", self.horizon, 1)
-        _whole_at_least("nodes", self.nodes, 2)
-        _whole_at_least("nonlinear_passes", self.nonlinear_passes, MIN_PASSES)
-        if self.nonlinear_p is not None:
-            if not self.nonlinear_p:
-                raise InputError("nonlinear_p must name at least one value (or be None for the default)")
-            for value in self.nonlinear_p:
-                _positive_number("nonlinear_p", value)
-
-
-@dataclass(frozen=True)
-class OrderRow:
-    """One order of an order search: its fits (percent, per output) and run time."""
-
-    order: int
-    fit_percent: tuple[float, ...]
-    estimation_fit_percent: tuple[float, ...] | None
-    validation_fit_percent: tuple[float, ...] | None
-    seconds: float
-
-
-@dataclass(frozen=True)
-class Decision:
-    """A choice the pipeline made, with its score and the runner-up's (``measure`` says what the scores are)."""
-
-    name: str
-    choice: Any
-    score: Any
-    runner_up: Any
-    runner_up_score: Any
-    measure: str
-    rule: str
-    details: Mapping[str, Any] = field(default_factory=dict)  # what else the decision records (e.g. the Q schedule)
-
-
-_DECISION_KEYS = ("choice", "score", "runner_up", "runner_up_score", "measure", "rule")
-
-
-def _floats(values: Any) -> tuple[float, ...] | None:
-    if values is None:
-        return None
-    return tuple(float(v) for v in np.ravel(np.asarray(values, dtype=float)))
-
-
-@dataclass(frozen=True)
-class Identification:
-    """One identification run's result.
-
-    Attributes
-    ----------
-    model : object
-        The model returned (the filter's, its start's where that scores better, or a scheduled family).
-    method : str
-        The estimator.
-    order : int
-        The model order.
-    fit_percent : tuple of float
-        Fit R (eq. 17) per output of the model simulated on the estimation data.
-    estimation_fit_percent, validation_fit_percent : tuple of float or None
-        NRMSE fits per output on the estimation and validation data.
-    decisions : tuple of Decision
-        The choices made (p, Q schedule, stability, start or filter, order), each with its margin.
-    notes, warnings : tuple of str
-        Choices said once, and one line per problem found.
-    orders : tuple of OrderRow
-        The orders tried.
-    seconds : float
-        Run time of the estimator(s).
-    summary : Mapping
-        The complete summary, keyed as the command's JSON.
-    """
-
-    model: Any
-    method: str
-    order: int
-    fit_percent: tuple[float, ...]
-    estimation_fit_percent: tuple[float, ...] | None
-    validation_fit_percent: tuple[float, ...] | None
-    decisions: tuple[Decision, ...]
-    notes: tuple[str, ...]
-    warnings: tuple[str, ...]
-    orders: tuple[OrderRow, ...]
-    seconds: float
-    summary: Mapping[str, Any] = field(repr=False)
-
-    @classmethod
-    def from_summary(cls, summary: Mapping[str, Any], model: Any) -> "Identification":
-        """The result of a run from its JSON summary (the command's keys) and the model returned."""
-        decisions = tuple(Decision(name=name, choice=entry.get("choice"), score=entry.get("score"),
-                                   runner_up=entry.get("runner_up"), runner_up_score=entry.get("runner_up_score"),
-                                   measure=str(entry.get("measure", "")), rule=str(entry.get("rule", "")),
-                                   details={key: value for key, value in entry.items() if key not in _DECISION_KEYS})
-                          for name, entry in summary.get("decision_margins", {}).items())
-        rows = tuple(OrderRow(order=int(row["order"]), fit_percent=_floats(row.get("fit_percent")) or (),
-                              estimation_fit_percent=_floats(row.get("estimation_fit_percent")),
-                              validation_fit_percent=_floats(row.get("validation_fit_percent")),
-                              seconds=float(row["seconds"]))
-                     for row in summary.get("orders_tried", ()))
-        return cls(model=model, method=str(summary["method"]), order=int(summary["order"]),
-                   fit_percent=_floats(summary["fit_percent"]) or (),
-                   estimation_fit_percent=_floats(summary.get("estimation_fit_percent")),
-                   validation_fit_percent=_floats(summary.get("validation_fit_percent")),
-                   decisions=decisions, notes=tuple(summary.get("notes", ())),
-                   warnings=tuple(summary.get("warnings", ())), orders=rows, seconds=float(summary["seconds"]),
-                   summary=dict(summary))
+    raw = (data,) if isinstance(data, IOData) else tuple(data)
+    if not raw or not all(isinstance(record, IOData) for record in raw):
+        raise InputError("identify takes an IOData record or a sequence of them")
+    extra: tuple[IOData, ...] = ()
+    fraction = None
+    if isinstance(validation, IOData):
+        extra = (validation,)
+    elif validation is not None and not isinstance(validation, (int, float)):
+        extra = tuple(validation)
+        if not all(isinstance(record, IOData) for record in extra):
+            raise InputError("validation takes a fraction, an IOData record or a sequence of them")
+    elif validation is not None:
+        fraction = float(validation)
+    fraction, note = holdout_fraction(order, fraction, bool(extra))
+    schedule_samples = None
+    if schedule is not None:
+        schedule_samples = np.asarray(schedule, dtype=float)
+        if len(raw) != 1 or extra:
+            raise InputError("a schedule identifies from one record, validated on a fraction of it")
+        if schedule_samples.shape != (raw[0].n_samples,) or not np.all(np.isfinite(schedule_samples)):
+            raise InputError(f"schedule must hold one finite value per sample ({raw[0].n_samples}); "
+                             f"got shape {schedule_samples.shape}")
+    held_raw: tuple[IOData, ...] = ()
+    if fraction is not None:
+        parts = [split_holdout(record, fraction) for record in raw]
+        raw, held_raw = tuple(part[0] for part in parts), tuple(part[1] for part in parts)
+    records, preparation = prepare(raw, detrend=options.detrend)
+    held = tuple(prepare_validation(part, preparation, record=i) for i, part in enumerate(held_raw))
+    # each named by its source, as the command names validation files by their paths
+    named = tuple((str(record.meta.get("source", f"validation record {i + 1}")), record)
+                  for i, record in enumerate(extra))
+    plan = make_plan(records, order=order, validation=named,
+                     load=lambda record: prepare_validation(record, preparation, own_offsets=True),
+                     held_out=held, fraction=fraction, note=note, preparation=preparation)
+    if schedule_samples is not None:
+        cut = records[0].n_samples
+        plan = dataclasses.replace(plan, schedule=ScheduleData(
+            schedule_channel, (schedule_samples[:cut],), (schedule_samples[cut:],) if held else ()))
+    result = identify_plan(plan, options)
+    if options.strict and result.warnings:
+        raise StrictWarningsError(list(result.warnings), result.render())
+    return result

@@ -92,16 +92,15 @@ def _realisation(model: ModalModel, seconds: float, p: float | None = None) -> R
 def command_line_iekf(data: IOData) -> tuple[ModalModel, float]:
     """The IEKF model of ``data`` as `vehid identify --order 4 --pattern default` gives it, and the p it chose.
 
-    The command's own pipeline (:func:`~vehid.scenarios.identify_library.identify`):
+    The command's own pipeline (:func:`~vehid.identification.pipeline.identify`):
     each record's mean removed (so its start state is unknown and settled), p
     by two-fold cross-validation, and the start model where that beat every
     p. The pattern is the true structure's, as for the other methods.
     """
-    from vehid.identification.pipeline import IdentifyOptions
-    from vehid.scenarios.identify_library import identify
+    from vehid.identification.pipeline import IdentifyOptions, identify
 
     result = identify(data, order=4, options=IdentifyOptions(pattern="default"))
-    return result.model, float(result.summary["p"])
+    return result.model, float(result.p)
 
 
 def identify_realisation(data: IOData, *, iekf_settings: dict[str, Any] | None = None,

@@ -1,4 +1,5 @@
-"""What `vehid identify` adds to a model's summary about how sure it is: modes with standard deviations and residual tests.
+"""The text of how sure a model is (modes with standard deviations); the checks themselves are the library's
+(:mod:`vehid.identification.automatic.checks`).
 
 Public JSON keys (a contract once released):
 
@@ -26,33 +27,9 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from vehid.identification.data import IOData
-from vehid.identification.models.modal import ModalModel
-from vehid.identification.assessment.residuals import ResidualTests, nis_band, residual_tests
+from vehid.identification.automatic.checks import model_residual_tests, uncertainty_summary
 
 __all__ = ["model_residual_tests", "uncertainty_summary", "uncertainty_lines"]
-
-
-def model_residual_tests(model: Any, data: IOData) -> ResidualTests:
-    """The residual tests of ``model`` simulated exactly (first-order hold) from rest over ``data``."""
-    residuals = data.y - model.simulate_outputs(data.u, data.dt)
-    return residual_tests(data.u, residuals, input_names=data.input_names, output_names=data.output_names,
-                          output_scale=np.sqrt(np.mean(data.y**2, axis=0)))
-
-
-def uncertainty_summary(model: ModalModel, data: IOData, nis: Sequence[float] | None = None) -> tuple[dict[str, Any], ResidualTests]:
-    """The summary entries of the module docstring, and the residual tests (for an archive)."""
-    tests = model_residual_tests(model, data)
-    summary: dict[str, Any] = {
-        "modes": [mode.as_dict() for mode in model.uncertainty().modes],
-        "residual_whiteness_p": tests.residual_whiteness_p,
-        "input_correlation_max": tests.input_correlation_max,
-        "residual_tests": tests.as_dict(),
-    }
-    if nis is not None:
-        summary["innovation_nis"] = np.asarray(nis, dtype=float)
-        summary["innovation_nis_band"] = list(nis_band(data.n_samples, data.n_y))
-    return summary, tests
 
 
 def _plus_minus(value: float, std: float, digits: str) -> str:

@@ -2,33 +2,24 @@
 
 The channel (a car's speed) is read with the record's inputs, scaled by ``--scale`` where one names it
 and never offset: a scheduled model's coefficients are functions of its measured value. The command's
-plan (:mod:`vehid.scenarios.identify_workflow`) reads it here; the scheduled identification
-(:mod:`vehid.scenarios.scheduled_identify`) uses what the plan holds.
+plan (:mod:`vehid.scenarios.commands.identify`) reads it here; the scheduled identification
+(:mod:`vehid.identification.automatic.scheduled`) uses what the plan holds.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
 from typing import Any, Sequence
 
 import numpy as np
 
 from vehid.identification.data import IOData
+from vehid.identification.automatic.plan import ScheduleData
+from vehid.identification.automatic.scheduled import scheduled_records
 from vehid.identification.errors import InputError
 
 __all__ = ["ScheduleData", "parse_schedule_grid", "check_options", "read_with_schedule", "schedule_loader",
            "scheduled_records"]
-
-
-@dataclass(frozen=True, eq=False)
-class ScheduleData:
-    """The schedule channel of a plan's records: its name and its samples per estimation and validation record."""
-
-    channel: str
-    estimation: tuple[np.ndarray, ...]
-    validation: tuple[np.ndarray, ...]
-
 
 
 def parse_schedule_grid(text: str | None) -> tuple[float, ...] | None:
@@ -100,10 +91,3 @@ def schedule_loader(args: Any, preparation: Any, channels: Any, found: list[np.n
         return prepare_validation(raw, preparation, own_offsets=True)
 
     return load
-
-
-def scheduled_records(records: Sequence[IOData], schedules: Sequence[np.ndarray], channel: str) -> tuple[IOData, ...]:
-    """The records with their schedule as a last input column, as a scheduled model simulates them."""
-    return tuple(record.replace(u=np.column_stack([record.u, schedule]), input_names=record.input_names + (channel,),
-                                input_units=record.input_units + ("-",))
-                 for record, schedule in zip(records, schedules))

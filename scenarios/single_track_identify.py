@@ -23,8 +23,8 @@ identified model (:class:`~vehid.vehicle.single_track.IdentifiedSingleTrack`) th
 
 from __future__ import annotations
 
-import argparse
 import time
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -33,7 +33,7 @@ from vehid.identification.data import IOData
 from vehid.identification.errors import InputError
 from vehid.identification.assessment.metrics import nrmse_fit
 
-__all__ = ["register_options", "run", "MIN_LOG_SPEED", "CORRELATION_WARNING", "LINEAR_LIMIT_G", "MAX_SUBSTEPS"]
+__all__ = ["run", "MIN_LOG_SPEED", "CORRELATION_WARNING", "LINEAR_LIMIT_G", "MAX_SUBSTEPS"]
 
 #: Below this speed (m/s) slip angles of a rolling car are not small and the model is not meant to hold.
 MIN_LOG_SPEED = 5.0
@@ -43,29 +43,8 @@ CORRELATION_WARNING = 0.98
 LINEAR_LIMIT_G = 0.5
 #: Most Runge-Kutta steps per sample; a log needing more reaches standstill (:func:`_substeps`).
 MAX_SUBSTEPS = 20
-STRUCTURES = ("modal", "single-track")
 
-
-def register_options(parser: argparse.ArgumentParser) -> None:
-    """The single-track options of `vehid identify` (``--structure`` and ``--schedule`` are registered beside them)."""
-    group = parser.add_argument_group("single-track structure (--structure single-track)")
-    group.add_argument("--quantities", metavar="NAMES",
-                       help="what each --outputs channel measures, in order: yaw_rate (rad/s), lateral_acceleration "
-                            "(m/s^2), sideslip (rad), lateral_velocity (m/s) (default yaw_rate,lateral_acceleration)")
-    group.add_argument("--mass", type=float, metavar="KG", help="vehicle mass (kg)")
-    group.add_argument("--lf", type=float, metavar="M", help="CG to front axle (m)")
-    group.add_argument("--lr", type=float, metavar="M", help="CG to rear axle (m)")
-    group.add_argument("--vehicle", metavar="FILE",
-                       help="vehicle parameter file (.toml/.json) or name for mass and axle distances")
-    group.add_argument("--relaxation-length", type=float, metavar="M",
-                       help="tyre relaxation length: slip angles lag the kinematic ones (default: no lag)")
-    group.add_argument("--saturation", action="store_true",
-                       help="saturating axle characteristic mu F_z tanh(C alpha / (mu F_z)), mu estimated")
-    group.add_argument("--offsets", action="store_true",
-                       help="estimate constant sensor offsets of the steer and of each output as well")
-
-
-def _config(args: argparse.Namespace, n_outputs: int):
+def _config(args: Any, n_outputs: int):
     from vehid.vehicle.single_track import SingleTrackConfig
 
     quantities = tuple(q.strip() for q in (args.quantities or "yaw_rate,lateral_acceleration").split(",") if q.strip())
@@ -97,7 +76,7 @@ def _config(args: argparse.Namespace, n_outputs: int):
                              offsets=args.offsets)
 
 
-def _refuse_other_options(args: argparse.Namespace) -> None:
+def _refuse_other_options(args: Any) -> None:
     """Options of the modal structure that mean nothing here: named, not silently ignored."""
     given = [name for name, value, default in (
         ("--out", args.out, None), ("--resume", args.resume, None),
@@ -113,7 +92,7 @@ def _refuse_other_options(args: argparse.Namespace) -> None:
         raise InputError("--structure single-track takes one input, the steer angle (rad): give --inputs CHANNEL")
 
 
-def _read(args: argparse.Namespace) -> tuple[IOData, IOData | None]:
+def _read(args: Any) -> tuple[IOData, IOData | None]:
     """The raw record (steer, speed -> outputs), times --scale, and its held-out tail where asked."""
     from vehid.identification.data import check_channels
     from vehid.identification.dataio.preparation import parse_scale
@@ -126,10 +105,10 @@ def _read(args: argparse.Namespace) -> tuple[IOData, IOData | None]:
         raise InputError(f"--validation takes a fraction between 0 and 1; got {args.validation}")
     speed = args.schedule.strip()
     try:  # a text table's columns are all alike; a workbench record keeps its speed among its outputs
-        reading = argparse.Namespace(**{**vars(args), "inputs": f"{args.inputs},{speed}"})
+        reading = SimpleNamespace(**{**vars(args), "inputs": f"{args.inputs},{speed}"})
         (record,), _ = read_from_args(reading, args.data)
     except InputError:
-        reading = argparse.Namespace(**{**vars(args), "outputs": f"{args.outputs},{speed}"})
+        reading = SimpleNamespace(**{**vars(args), "outputs": f"{args.outputs},{speed}"})
         try:
             (raw,), _ = read_from_args(reading, args.data)
         except InputError:
@@ -156,7 +135,7 @@ def _read(args: argparse.Namespace) -> tuple[IOData, IOData | None]:
     return split_holdout(record, args.validation)
 
 
-def run(args: argparse.Namespace) -> tuple[dict, str]:
+def run(args: Any) -> tuple[dict, str]:
     """Identify the single-track model and summarise it (module docstring)."""
     from vehid.identification.filtering.greybox import GreyBoxOptions, identify_greybox, simulate_greybox
     from vehid.scenarios import identify_workflow as workflow
@@ -272,8 +251,8 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
             {"data": [str(d) for d in args.data], "schedule": args.schedule.strip(),
              "validation_fit_percent": None if validation_fit is None else [float(f) for f in validation_fit]})
         summary["model_file"] = str(save_model(identified, args.save_model, None))
+    summary["warnings"] = list(warnings)  # said on standard error (or made an error by --strict) by the command
     text = _text(summary, estimation.output_names, validation is not None)
-    workflow.emit(summary, warnings, args)
     return summary, text
 
 

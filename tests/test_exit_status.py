@@ -152,7 +152,7 @@ def test_a_failed_computation_exits_1(command, tmp_path, capsys, monkeypatch):
 
     argv = list(command)
     if command == ("identify",):
-        monkeypatch.setattr("vehid.scenarios.commands.identify.identify_iekf", diverge)
+        monkeypatch.setattr("vehid.identification.automatic.run.identify_iekf", diverge)
         data = tmp_path / "record.csv"
         data.write_text("t,u,y\n" + "".join(f"{k * 0.01},{(-1) ** k},{k % 3}\n" for k in range(100)))
         argv += [str(data), "--inputs", "u", "--outputs", "y", "--order", "2"]

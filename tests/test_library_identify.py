@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from vehid.identification.errors import InputError
+from vehid.identification.jsonable import to_jsonable
 from vehid.identification.pipeline import DEFAULT_PASSES, Identification, IdentifyOptions
 from vehid.identification.dataio.preparation import ReadSettings, read_record
 from vehid.scenarios.cli import main
@@ -52,6 +53,12 @@ def test_library_reproduces_the_command_model_and_scores(capsys):
     assert result.warnings == tuple(summary["warnings"])
     assert [row.order for row in result.orders] == [row["order"] for row in summary["orders_tried"]]
     assert {decision.name for decision in result.decisions} == set(summary.get("decision_margins", {}))
+    # the result renders the command's summary: every key, and the same values (up to the JSON round trip)
+    rendered = json.loads(json.dumps(to_jsonable(result.summary)))
+    assert set(rendered) == set(summary)
+    for key in ("order", "method", "passes_run", "stop_reason", "notes", "warnings", "p", "q_schedule",
+                "decision_margins", "initial_state", "horizon"):
+        assert rendered[key] == summary[key], key
 
 
 def test_options_are_checked_where_they_are_defined():
@@ -109,3 +116,71 @@ def test_the_readme_python_example_reproduces_the_command(capsys, monkeypatch):
         _close(getattr(result.model, name), summary[name])
     _close(result.validation_fit_percent, summary["validation_fit_percent"])
     assert result.warnings == tuple(summary["warnings"]) and printed.out.strip()
+
+
+def test_a_classical_method_runs_the_same_pipeline(capsys):
+    """A comparator over a range of orders: the same order chosen, model and scores as the command's."""
+    summary = _command(capsys, "--method", "n4sid", "--order", "2-3", "--validation", "0.3")
+    result = identify(_dryer(), order="2-3", validation=0.3, options=IdentifyOptions(method="n4sid"))
+    assert result.method == "n4sid" and result.order == summary["order"]
+    for name in "ABCD":
+        _close(getattr(result.model, name), summary[name])
+    _close(result.validation_fit_percent, summary["validation_fit_percent"])
+    assert [decision.name for decision in result.decisions] == ["order"]
+    assert [row.order for row in result.orders] == [row["order"] for row in summary["orders_tried"]]
+
+
+def test_the_library_is_one_function_under_every_name():
+    """The package's identify, the pipeline module's and the former scenarios name are one function."""
+    import vehid.identification as package
+    from vehid.identification import pipeline
+    from vehid.scenarios import identify_library
+
+    assert package.identify is pipeline.identify is identify_library.identify is identify
+    assert package.IdentifyOptions is IdentifyOptions and package.Identification is Identification
+
+
+HEAVY = ("numpy", "scipy", "casadi", "h5py", "matplotlib")
+
+
+def test_the_identify_options_register_without_the_numerical_stack():
+    """The command module and its options (pipeline, schedule, single-track) import none of the heavy packages."""
+    import subprocess
+    import sys
+
+    code = ("import argparse, sys\n"
+            "import vehid.scenarios.commands.identify\n"
+            "from vehid.scenarios.commands import identify_options as options\n"
+            "parser = argparse.ArgumentParser()\n"
+            "options.register_pipeline_options(parser)\n"
+            "options.register_schedule_options(parser)\n"
+            "options.register_single_track_options(parser)\n"
+            f"print(sorted({{name.split('.')[0] for name in sys.modules}} & set({HEAVY!r})))\n")
+    completed = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert completed.stdout.strip() == "[]", completed.stdout
+
+
+def test_the_scenarios_identification_modules_parse_no_arguments():
+    """argparse lives with the commands: the pipeline's scenario modules take plain settings."""
+    import ast
+
+    root = Path(__file__).resolve().parents[1] / "scenarios"
+    for name in ("identify_workflow", "identify_library", "scheduled_identify", "single_track_identify",
+                 "calibration", "model_checks"):
+        tree = ast.parse((root / f"{name}.py").read_text(encoding="utf-8"))
+        imported = {alias.name for node in ast.walk(tree) if isinstance(node, ast.Import) for alias in node.names}
+        imported |= {node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom) and node.module}
+        assert "argparse" not in imported, name
+
+
+def test_a_schedule_is_refused_where_it_does_not_fit_the_record():
+    """One schedule value per sample of one record: anything else is named before any work."""
+    record = _dryer()
+    with pytest.raises(InputError, match="one finite value per sample"):
+        identify(record, order=2, schedule=np.ones(record.n_samples - 1))
+    with pytest.raises(InputError, match="one finite value per sample"):
+        identify(record, order=2, schedule=np.full(record.n_samples, np.nan))
+    with pytest.raises(InputError, match="one record"):
+        identify([record, record], order=2, schedule=np.ones(record.n_samples))
+    with pytest.raises(InputError, match="schedule_p"):
+        IdentifyOptions(schedule_p=(0.0,))

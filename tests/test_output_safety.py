@@ -48,7 +48,7 @@ def _no_work(monkeypatch) -> None:
         raise AssertionError("the work started before the output was checked")
 
     # the commands import what they compute with when they run: the refusal is set where they find it
-    monkeypatch.setattr(identify.workflow, "load_plan", refuse)
+    monkeypatch.setattr(identify, "load_plan", refuse)
     monkeypatch.setattr(vehid.vehicle, "simulate", refuse)
     monkeypatch.setattr(handling_study, "make_records", refuse)
     monkeypatch.setattr(linear_example, "run_case", refuse)

@@ -17,7 +17,7 @@ from vehid.identification.dataio.archive import open_archive, read_archive
 from vehid.identification.errors import ConversionError
 from vehid.identification.filtering.iekf_archive import Checkpointer, read_iekf_run
 from vehid.scenarios.cli import main
-from vehid.scenarios.commands import identify as identify_command
+from vehid.identification.automatic import run as pipeline_run
 from vehid.scenarios.linear_example import make_data
 
 
@@ -108,7 +108,7 @@ def _no_work(monkeypatch):
     def refuse(*args, **kwargs):
         raise AssertionError("the identification started before the target was checked")
 
-    monkeypatch.setattr(identify_command, "identify_iekf", refuse)
+    monkeypatch.setattr(pipeline_run, "identify_iekf", refuse)
 
 
 def test_out_refuses_the_input_file(tmp_path, capsys, monkeypatch):
@@ -127,12 +127,12 @@ def test_out_refuses_a_foreign_file_unless_forced(tmp_path, capsys, monkeypatch)
     record = _record(tmp_path / "record.csv", duration=4.0)
     notes = tmp_path / "notes.h5"
     notes.write_text("my notes")
-    real = identify_command.identify_iekf
+    real = pipeline_run.identify_iekf
     _no_work(monkeypatch)
     assert main(["identify", str(record), *COMMON, "--out", str(notes)]) == 2
     assert "not a workbench archive" in capsys.readouterr().err
     assert notes.read_text() == "my notes"
-    monkeypatch.setattr(identify_command, "identify_iekf", real)
+    monkeypatch.setattr(pipeline_run, "identify_iekf", real)
     assert main(["identify", str(record), *COMMON, "--passes", "2", "--out", str(notes), "--force"]) == 0
     assert read_archive(notes).runs["iekf"].n_pass == 2
 

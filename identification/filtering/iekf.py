@@ -38,7 +38,7 @@ from typing import Any, Callable
 import numpy as np
 
 from ..data import IOData, as_records
-from ..choices import TIMESCALES
+from ..choices import START_CHOICES, START_VALUES, TIMESCALES
 from ..errors import DivergenceError, InputError
 from .filter_models import LinearModalFilterModel
 from .iekf_pass import compiled_pass, pack_covariance, unpack_covariance
@@ -65,16 +65,6 @@ __all__ = [
     "data_measurement_noise",
     "invariant_noise_settings",
 ]
-
-#: Named start values: (sigma, omega, omega spread between pairs). The paper's sigma = -1 finds the
-#: eigenvalues far less often than faster oscillatory modes (docs/iekf_tuning.md), hence ``default``.
-START_VALUES = {
-    "default": (-10.0, 10.0, 0.5),
-    "paper": (-1.0, 1.0, 0.0),
-}
-
-#: Every start: the fixed ones of :data:`START_VALUES` and those taken from the data.
-START_CHOICES = (*DATA_STARTS, *START_VALUES)
 
 
 #: The relative tuning parameter of :meth:`IEKFOptions.invariant`: Q = p I per dominant time

@@ -46,9 +46,9 @@ from ..assessment.uncertainty import gauss_newton_covariance
 __all__ = ["ScheduledFilterModel", "ScheduledIEKFOptions", "ScheduledIEKFResult", "default_grid",
            "identify_scheduled", "refine_by_simulation", "scheduled_simulation_covariance", "DEFAULT_KNOTS", "DEFAULT_P", "DEFAULT_P_DECAY", "MIN_KNOTS", "MAX_KNOTS"]
 
-DEFAULT_KNOTS = 5
-MIN_KNOTS = 2
-MAX_KNOTS = 9
+from vehid.identification.choices import SCHEDULE_DEFAULT_KNOTS as DEFAULT_KNOTS  # noqa: E402
+from vehid.identification.choices import SCHEDULE_MAX_KNOTS as MAX_KNOTS  # noqa: E402
+from vehid.identification.choices import SCHEDULE_MIN_KNOTS as MIN_KNOTS  # noqa: E402
 # the end knots sit at these quantiles of the schedule, not at its extremes: a knot at the
 # record's single fastest sample would rest on a handful of samples
 _END_QUANTILES = (0.02, 0.98)
@@ -58,7 +58,7 @@ _END_QUANTILES = (0.02, 0.98)
 # on a pair's omega; the filter must travel far from it. On a single-track model driven over 10-30 m/s,
 # the linear filter's settings left every mode near critical damping (0.99 against the true 0.68-0.96);
 # p = 1e-2 shrinking by 0.9 per pass reached them within 0.03 (tests/test_scheduled_iekf.py)
-DEFAULT_P = 1e-2
+from vehid.identification.choices import SCHEDULED_DEFAULT_P as DEFAULT_P  # noqa: E402
 DEFAULT_P_DECAY = 0.9
 _DEGENERATE_SPAN = 1e-6  # a schedule range narrower than this, relative to its magnitude, did not vary
 _DIFFERENCE_STEP = 1e-6  # relative step of the central differences of the simulation

@@ -35,7 +35,7 @@ from ..models.modal import ModalModel, ModalStructure
 
 __all__ = ["DataStart", "data_start", "band_eigenvalues", "place_eigenvalues", "fit_input_gains", "DATA_STARTS"]
 
-DATA_STARTS = ("data", "band")
+from vehid.identification.choices import DATA_STARTS  # noqa: E402  (the one definition, light to import)
 
 _BAND_DAMPING = 0.5
 _MAX_RATE = 3.0  # rad/sample: the fastest a discrete model can say (pi) with a margin of rounding

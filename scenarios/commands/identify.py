@@ -58,33 +58,10 @@ import dataclasses
 import json
 from contextlib import nullcontext
 from pathlib import Path
+from typing import Any
 
-import numpy as np
-
-from vehid.identification.dataio.archive import (open_archive, read_records, run_group, update_archive, write_archive,
-                                          write_run)
-from vehid.identification.dataio.archive_safety import RUN_ATTRIBUTE, archive_lock, check_output_target
-from vehid.identification.errors import InputError, StrictWarningsError
-from vehid.identification.filtering.filter_models import DISCRETIZATIONS
-from vehid.identification.filtering.iekf import TIMESCALES, identify_iekf
-from vehid.identification.filtering.iekf_archive import Checkpointer, read_iekf_run, write_pass_history
-from vehid.identification.filtering.iekf_pass import COVARIANCE_FORMS
-from vehid.identification.jsonable import to_jsonable
-from vehid.identification.models.modal import C_PATTERNS, ModalModel
-from vehid.identification.assessment.multirecord import pooled_simulation_fit
-from vehid.identification.pipeline import DEFAULT_NODES, DEFAULT_NONLINEAR_PASSES, DEFAULT_PASSES
-from vehid.identification.dataio.preparation import prepare_validation, read_record
-from vehid.identification.dataio.storage import write_value
-from vehid.identification.assessment.validation import INITIAL_STATES
-from vehid.scenarios import identify_workflow as workflow
-from vehid.scenarios import schedule_channel, scheduled_identify
-from vehid.scenarios import single_track_identify as single_track
-from vehid.scenarios.data_options import (RECORD_PREFIX, archive_records, archived_preparation, record_series,
-                                          check_model_target, records_summary, register_data_options, save_model,
-                                          settings_from_args, write_record_series, data_warnings)
-from vehid.scenarios.model_checks import uncertainty_lines, uncertainty_summary
-from vehid.scenarios.paths import HDF5_SUFFIXES, OUT_RULE, run_digest
-from vehid.scenarios.progress import Progress
+from vehid.identification.automatic.options import DEFAULT_PASSES, IdentifyOptions
+from vehid.identification.errors import InputError
 
 NAME = "identify"
 GROUP = None
@@ -92,72 +69,10 @@ HELP = "identify a modal state-space model from a data file (IEKF by default)"
 
 
 def register(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("data", nargs="*", help="data files: .h5, .csv, .dat, .txt, .mat, .mf4 (several: one model)")
-    parser.add_argument("--inputs", help="comma-separated input column names")
-    parser.add_argument("--outputs", help="comma-separated output column names")
-    parser.add_argument("--order", default="4", help="model order n, a range such as 2-8, or auto (default 4)")
-    parser.add_argument("--pattern", choices=C_PATTERNS,
-                        help="C pattern, complex pairs first (without it: with --start data the start model's complex "
-                             "pairs and real poles, else the default pattern; either way modes tied to outputs in turn)")
-    parser.add_argument("--method", default="iekf", choices=("iekf", "arx", "rls", "n4sid", "output-error"),
-                        help="estimator: the IEKF (default) or a classical comparator on the same data")
-    parser.add_argument("--passes", type=int, default=None,
-                        help=f"largest number of passes (default {DEFAULT_PASSES}; with --resume, the run's own)")
-    parser.add_argument("--p", type=float, default=None,
-                        help="tuning parameter p: Q = p I' (default: 1e-4, 1e-5 or 1e-6 per dominant time constant, chosen by "
-                             "two-fold cross-validation on the estimation data; 1 with --timescale seconds)")
-    parser.add_argument("--discretization", default="exact", choices=DISCRETIZATIONS, help="filter discretisation (default exact)")
-    parser.add_argument("--covariance", default="joseph", choices=COVARIANCE_FORMS, help="covariance numerics (default joseph)")
-    parser.add_argument("--start", default="data", choices=workflow.START_CHOICES, help=workflow.START_HELP)
-    parser.add_argument("--normalize", action=argparse.BooleanOptionalAction, default=True,
-                        help="scale inputs and outputs by their RMS while filtering (default on)")
-    parser.add_argument("--save-model", help=f"write the model to this .json or .mat file ({OUT_RULE})")
-    parser.add_argument("--out", help=f"HDF5 archive of the run, checkpointed after every pass ({OUT_RULE})")
-    parser.add_argument("--force", action="store_true",
-                        help="let --out and --save-model replace an existing file that is not this run's own output")
-    parser.add_argument("--resume", metavar="ARCHIVE",
-                        help="continue the run checkpointed in ARCHIVE (its data and settings; --passes counts all passes)")
-    parser.add_argument("--bootstrap", type=int, metavar="N",
-                        help="with --method n4sid: residual-bootstrap replicates for its parameter covariance, each "
-                             "one subspace fit (default: none, the asymptotic covariance of its simulation errors; "
-                             "0 for no covariance)")
-    parser.add_argument("--structure", default="modal", choices=single_track.STRUCTURES,
-                        help="model structure: modal (default) or single-track (a car's physical parameters)")
-    register_data_options(parser)
-    register_pipeline_options(parser)
-    scheduled_identify.register_options(parser)
-    single_track.register_options(parser)
+    from vehid.scenarios.commands.identify_options import register_identify_options
+
+    register_identify_options(parser)
     parser.set_defaults(handler=run)
-
-
-def register_pipeline_options(parser: argparse.ArgumentParser) -> None:
-    """The validation, order, model-class and warning options of `vehid identify`."""
-    parser.add_argument("--validation", type=float, metavar="FRACTION",
-                        help="hold out the last FRACTION of the record for validation (e.g. 0.3)")
-    parser.add_argument("--validation-file", action="append", default=[], metavar="FILE",
-                        help="validate on this record too (repeatable; same columns)")
-    parser.add_argument("--validation-inputs", metavar="NAMES",
-                        help="the input channels' names in the validation files, where they differ")
-    parser.add_argument("--validation-outputs", metavar="NAMES",
-                        help="the output channels' names in the validation files, where they differ")
-    parser.add_argument("--initial-state", default="estimate", choices=INITIAL_STATES,
-                        help="simulate linear models from a least-squares initial state (default) or from rest")
-    parser.add_argument("--horizon", type=int, metavar="K",
-                        help="score by K-step-ahead prediction instead of simulation (automatic for unstable models)")
-    parser.add_argument("--allow-unstable", action="store_true",
-                        help="keep unstable modes (open-loop unstable plants) instead of stopping")
-    parser.add_argument("--timescale", default="auto", choices=TIMESCALES,
-                        help="filter time unit: auto (samples; p per dominant time constant, default) or seconds (absolute, the paper's)")
-    parser.add_argument("--nonlinear", action="store_true",
-                        help="after the linear model, identify the spline-nonlinear model started from it")
-    parser.add_argument("--nodes", type=int, default=DEFAULT_NODES,
-                        help=f"nodes per spline with --nonlinear (default {DEFAULT_NODES})")
-    parser.add_argument("--nonlinear-p", type=float, action="append", metavar="P",
-                        help="tuning parameter(s) of the spline model; several are tried and one chosen on "
-                             "validation data (default 1e-7, or 1e-7, 1e-8, 1e-9 with validation data)")
-    parser.add_argument("--nonlinear-passes", type=int, default=DEFAULT_NONLINEAR_PASSES,
-                        help=f"largest number of nonlinear passes (default {DEFAULT_NONLINEAR_PASSES})")
-    parser.add_argument("--strict", action="store_true", help="exit with status 3 when the run ends with warnings")
 
 
 RUN_NAME = "iekf"
@@ -166,7 +81,15 @@ VALIDATION_PREFIX = "validation"
 
 
 def _resume(args: argparse.Namespace):
-    """Plan, structure, options and the finished passes of a checkpointed run."""
+    """The plan of a checkpointed run, and what the pipeline needs to go on with it."""
+    from vehid.identification.automatic import steps
+    from vehid.identification.automatic.plan import make_plan
+    from vehid.identification.automatic.run import Resumed
+    from vehid.identification.dataio.archive import open_archive, read_records, update_archive
+    from vehid.identification.dataio.preparation import prepare_validation, read_record
+    from vehid.identification.filtering.iekf_archive import read_iekf_run
+    from vehid.scenarios.data_options import RECORD_PREFIX, archived_preparation, record_series, settings_from_args
+
     if args.data:
         raise InputError("--resume takes its data from the archive: give no DATA file")
     with open_archive(args.resume, kinds=["identification"]) as archive:
@@ -185,16 +108,32 @@ def _resume(args: argparse.Namespace):
         load = lambda path: prepare_validation(path, preparation, own_offsets=True)  # noqa: E731
     else:  # an archive written before preparations were kept
         load = lambda path: read_record(path, settings_from_args(args))  # noqa: E731
-    plan = workflow.make_plan(args, records, load, held_out=held_out, preparation=preparation)
+    plan = make_plan(records, order=args.order, validation=[(path, path) for path in args.validation_file], load=load,
+                     held_out=held_out, preparation=preparation)
     if judged:  # the run goes on: a verdict on fewer passes must not outlive it (a kill would leave it stale)
         with update_archive(args.resume) as archive:
             del archive.attrs[VERDICT]
-    return plan, previous.structure, options, previous, decisions
+    tuning, unstable = decisions
+    if tuning is None:  # an archive written before the tuning was kept: the run's own p, as archived
+        tuning = steps.given_p(options)
+    # the archived options run the passes; an archive written before the schedule was kept names it by them
+    tuning = dataclasses.replace(tuning, q_schedule=steps.q_schedule_of(options))
+    return plan, Resumed(previous.structure, options, previous, tuning, unstable)
 
 
 def run(args: argparse.Namespace) -> tuple[dict, str]:
+    from vehid.identification.dataio.archive import open_archive
+    from vehid.identification.dataio.archive_safety import archive_lock, check_output_target
+    from vehid.scenarios import schedule_channel
+    from vehid.scenarios.data_options import check_model_target
+    from vehid.scenarios.paths import HDF5_SUFFIXES, run_digest
+
     if args.structure == "single-track":
-        return single_track.run(args)
+        from vehid.scenarios import single_track_identify
+
+        summary, text = single_track_identify.run(args)
+        emit(summary, summary["warnings"], args)
+        return summary, text
     if args.resume and args.out:
         raise InputError("--resume continues in its own archive: give no --out")
     if args.schedule:
@@ -220,18 +159,22 @@ DECISIONS = "decisions_json"  # root attribute: the p tuning and the stability d
 
 def _archive_decisions(archive, tuning, unstable) -> None:
     """What the run decided before its passes, so that a resumed run returns and warns as the original did."""
+    from vehid.identification.jsonable import to_jsonable
+
     archive.attrs[DECISIONS] = json.dumps(to_jsonable({"tuning": tuning, "open_loop_unstable": unstable}),
                                           allow_nan=False)
 
 
 def _read_decisions(archive) -> tuple:
     """The archived ``(tuning, unstable)`` of a run; ``(None, None)`` for an archive written before they were kept."""
+    from vehid.identification.automatic.steps import PTuning
+
     if DECISIONS not in archive.attrs:
         return None, None
     try:
         stored = json.loads(archive.attrs[DECISIONS])
         tuning = stored["tuning"]
-        return (workflow.PTuning(p=float(tuning["p"]), tried=tuple(tuning["tried"]), seconds=float(tuning["seconds"]),
+        return (PTuning(p=float(tuning["p"]), tried=tuple(tuning["tried"]), seconds=float(tuning["seconds"]),
                                  start_fit=tuning["start_fit"], q_schedule=tuning.get("q_schedule", "constant")),
                 stored["open_loop_unstable"])
     except (ValueError, KeyError, TypeError):
@@ -240,173 +183,212 @@ def _read_decisions(archive) -> tuple:
 
 def _archive_plan(archive, plan) -> None:
     """The prepared estimation records, the preparation and the held-out parts (what a resume needs)."""
+    from vehid.scenarios.data_options import archive_records, write_record_series
+
     archive_records(archive, plan.records, plan.preparation)
     write_record_series(archive, plan.validation[:plan.held_out_count], VALIDATION_PREFIX)
 
 
-def identify_run(args, plan=None) -> tuple[dict, str, object]:
-    """The whole run: summary, text and the model returned; ``plan`` given, its records are identified instead of
-    the DATA files' (the library's :func:`~vehid.scenarios.identify_workflow.identify`)."""
-    previous, unstable = None, None
+def options_from_args(args: argparse.Namespace) -> IdentifyOptions:
+    """The pipeline's settings named by the command's arguments (each checked where it is defined)."""
+    from vehid.scenarios.schedule_channel import parse_schedule_grid
+
+    return IdentifyOptions(
+        p=args.p, passes=DEFAULT_PASSES if args.passes is None else args.passes, start=args.start,
+        normalize=args.normalize, discretization=args.discretization, covariance=args.covariance,
+        pattern=args.pattern, timescale=args.timescale, allow_unstable=args.allow_unstable,
+        initial_state=args.initial_state, horizon=args.horizon, nonlinear=args.nonlinear, nodes=args.nodes,
+        nonlinear_p=tuple(args.nonlinear_p) if args.nonlinear_p else None, nonlinear_passes=args.nonlinear_passes,
+        detrend=args.detrend, strict=args.strict, method=args.method, bootstrap=args.bootstrap,
+        **({} if not args.schedule else {  # the schedule's settings count only where a schedule is read
+            "schedule_knots": args.schedule_knots, "schedule_grid": parse_schedule_grid(args.schedule_grid),
+            "schedule_p": tuple(args.schedule_p) if args.schedule_p else None}))
+
+
+def holdout_of(args: argparse.Namespace) -> tuple[float | None, str | None]:
+    """The fraction of each record held out (:func:`~vehid.identification.automatic.plan.holdout_fraction`)."""
+    from vehid.identification.automatic.plan import holdout_fraction
+
+    return holdout_fraction(args.order, args.validation, bool(args.validation_file))
+
+
+def load_plan(args: argparse.Namespace, paths: list[str]):
+    """Read the data files, hold out the tail of each record where asked, and prepare both alike.
+
+    The split comes before the preparation, so the offsets kept with the model
+    are the estimation part's own (the held-out part plays no role in them).
+    """
+    from vehid.identification.assessment.validation import split_holdout
+    from vehid.identification.automatic.plan import make_plan
+    from vehid.identification.dataio.preparation import prepare, prepare_validation
+    from vehid.scenarios import schedule_channel
+    from vehid.scenarios.data_options import preparation_options, read_from_args
+
+    fraction, note = holdout_of(args)
+    scale, schedules = args.scale, None
+    if args.schedule:  # the schedule channel is read beside the inputs, kept apart and never offset
+        raw, settings, schedules, scale = schedule_channel.read_with_schedule(args, paths)
+    else:
+        raw, settings = read_from_args(args, paths)
+    held_raw = ()
+    if fraction is not None:
+        parts = [split_holdout(record, fraction) for record in raw]
+        raw, held_raw = tuple(part[0] for part in parts), tuple(part[1] for part in parts)
+    records, preparation = prepare(raw, settings=settings, **{**preparation_options(args), "scale": scale})
+    held = tuple(prepare_validation(part, preparation, record=i) for i, part in enumerate(held_raw))
+    channels = validation_channels(args, preparation)
+    # a validation file is another experiment: its offsets are its own, as each estimation record's are
+    load = lambda path: prepare_validation(path, preparation, own_offsets=True, channels=channels)  # noqa: E731
+    found: list = []  # the schedule channel of each validation file, as the loader reads it
+    if schedules is not None:
+        load = schedule_channel.schedule_loader(args, preparation, channels, found)
+    plan = make_plan(records, order=args.order, validation=[(path, path) for path in args.validation_file],
+                     load=load, held_out=held, fraction=fraction, note=note, preparation=preparation)
+    if schedules is not None:
+        cut = [record.n_samples for record in records]
+        plan = dataclasses.replace(plan, schedule=schedule_channel.ScheduleData(
+            args.schedule.strip(), tuple(s[:n] for s, n in zip(schedules, cut)),
+            tuple(s[n:] for s, n in zip(schedules, cut))[:len(held)] + tuple(found)))
+    return plan
+
+
+def validation_channels(args: argparse.Namespace, preparation) -> tuple[tuple[str, ...], tuple[str, ...]] | None:
+    """The validation files' channel names (model order), where the options name them."""
+    if args.validation_inputs is None and args.validation_outputs is None:
+        return None
+    from vehid.scenarios.data_options import channel_names
+
+    inputs = channel_names(args.validation_inputs) if args.validation_inputs is not None else preparation.settings.inputs
+    outputs = (channel_names(args.validation_outputs) if args.validation_outputs is not None
+               else preparation.settings.outputs)
+    return tuple(inputs), tuple(outputs)
+
+
+class _Keeper:
+    """The command's checkpoints of a single IEKF run: the archive written before the passes and after each,
+    and the progress bar."""
+
+    def __init__(self, args: argparse.Namespace, plan, archive_path: Path | None):
+        self.args, self.plan, self.archive_path = args, plan, archive_path
+        self.checkpoint = None
+        self.progress = None
+
+    def decided(self, options, tuning, unstable, previous) -> None:
+        from vehid.identification.dataio.archive import write_archive
+        from vehid.identification.dataio.archive_safety import RUN_ATTRIBUTE
+        from vehid.identification.filtering.iekf_archive import Checkpointer
+        from vehid.scenarios.progress import Progress
+
+        if self.archive_path is not None and previous is None:
+            with write_archive(self.archive_path, kind=ARCHIVE_KIND, config=options, seeds=[]) as archive:
+                archive.attrs[RUN_ATTRIBUTE] = self.args.output_run
+                _archive_plan(archive, self.plan)
+                _archive_decisions(archive, tuning, unstable)
+        if self.archive_path is not None:
+            self.checkpoint = Checkpointer(self.archive_path, RUN_NAME)
+        self.progress = Progress(options.passes, "IEKF passes", enabled=None if not self.args.quiet else False)
+        self.progress.__enter__()
+        self.progress.advance(previous.passes_run if previous is not None else 0)
+
+    def passed(self, record, so_far) -> None:
+        if self.checkpoint is not None:
+            self.checkpoint(record, so_far)
+        self.progress.advance(note=f"R {record.mean_fit_filter:.4f} %")
+
+    def close(self) -> None:
+        if self.progress is not None:
+            progress, self.progress = self.progress, None
+            progress.__exit__(None, None, None)
+
+    def finished(self, result) -> None:
+        self.close()
+        if self.checkpoint is not None:
+            self.checkpoint.finish(result)  # the archive says how the run ended: converged, passes or diverged at pass k
+
+
+def identify_run(args) -> tuple[dict, str, object]:
+    """The whole run: summary, text and the model returned."""
+    from vehid.identification.automatic.run import identify_plan
+
+    options = options_from_args(args)
+    resumed = None
     if args.resume:
-        plan, structure, options, previous, (tuning, unstable) = _resume(args)
-        if tuning is None:  # an archive written before the tuning was kept: the run's own p, as archived
-            tuning = workflow.given_p(options)
-        # the archived options run the passes; an archive written before the schedule was kept names it by them
-        tuning = dataclasses.replace(tuning, q_schedule=workflow.q_schedule_of(options))
+        plan, resumed = _resume(args)
         archive_path = Path(args.resume)
     else:
-        if plan is None:
-            if not args.data:
-                raise InputError("give a DATA file (or --resume ARCHIVE)")
-            plan = workflow.load_plan(args, args.data)
-        if args.method != "iekf":
-            return _run_comparator(args, plan)
-        options = workflow.iekf_options(args, DEFAULT_PASSES)
-        if len(plan.orders) > 1:
-            return _run_order_search(args, plan, options)
-        options, unstable = workflow.assume_unstable(args, plan, options, plan.orders[0])
-        structure = workflow.structure_for(args, plan.orders[0], plan, options)
-        tuning = workflow.tune_p(args, plan, options, structure) if workflow.tunes_p(args) else workflow.given_p(options)
-        options = tuning.applied(options)
+        if not args.data:
+            raise InputError("give a DATA file (or --resume ARCHIVE)")
+        plan = load_plan(args, args.data)
         archive_path = Path(args.out) if args.out else None
-        if archive_path is not None:
-            with write_archive(archive_path, kind=ARCHIVE_KIND, config=options, seeds=[]) as archive:
-                archive.attrs[RUN_ATTRIBUTE] = args.output_run
-                _archive_plan(archive, plan)
-                _archive_decisions(archive, tuning, unstable)
-    checkpoint = Checkpointer(archive_path, RUN_NAME) if archive_path is not None else None
-    done = previous.passes_run if previous is not None else 0
-    with Progress(options.passes, "IEKF passes", enabled=None if not args.quiet else False) as progress:
-        progress.advance(done)
-
-        def on_pass(record, so_far):
-            if checkpoint is not None:
-                checkpoint(record, so_far)
-            progress.advance(note=f"R {record.mean_fit_filter:.4f} %")
-
-        result, divergence = workflow.last_good_on_divergence(
-            lambda: identify_iekf(plan.estimation, structure, options=options, resume=previous, on_pass=on_pass,
-                                  settle_start=plan.settle_start))
-    if checkpoint is not None:
-        checkpoint.finish(result)  # the archive says how the run ended: converged, passes or diverged at pass k
-    model, keys = workflow.returned_model(result, plan, args, tuning, unstable)
-    summary = {**_iekf_summary(result), **tuning.summary(), **keys}
-    if divergence:
-        summary["divergence"] = divergence
-    return _finish(args, plan, summary, model, result=result, archive_path=archive_path)
+    keeper = _Keeper(args, plan, archive_path)
+    try:
+        result = identify_plan(plan, options, resumed=resumed, checkpoints=keeper)
+    finally:
+        keeper.close()
+    if archive_path is not None and resumed is None and (options.method != "iekf" or len(plan.orders) > 1):
+        _archive_search(args, plan, options, result)
+    return _finish(args, plan, result, archive_path)
 
 
-def _iekf_summary(result) -> dict:
-    """The IEKF run's summary keys (the public contract of `vehid identify --json`)."""
-    model = result.model
-    return {
-        "method": "iekf",
-        "order": result.structure.n,
-        "eigenvalues": model.eigenvalues(),
-        "fit_percent": result.fit_percent,
-        "fit_percent_filter": result.history[-1].fit_filter,
-        "passes_run": result.passes_run,
-        "stop_reason": result.stop_reason,
-        "discretization": result.options.discretization,
-        **_matrices(model),
-        "seconds": result.seconds,
-    }
+def _archive_search(args, plan, options, result) -> None:
+    """The archive of a run whose estimator was not checkpointed: an order search's chosen run, or a classical method's."""
+    if options.method != "iekf":
+        _archive_comparator(args, plan, result.estimator)
+        return
+    from vehid.identification.automatic.steps import iekf_options
+    from vehid.identification.dataio.archive import write_archive
+    from vehid.identification.dataio.archive_safety import RUN_ATTRIBUTE
+    from vehid.identification.filtering.iekf_archive import write_iekf_run
+
+    with write_archive(Path(args.out), kind=ARCHIVE_KIND, config=iekf_options(options), seeds=[]) as archive:
+        archive.attrs[RUN_ATTRIBUTE] = args.output_run
+        _archive_plan(archive, plan)
+        _archive_decisions(archive, result.tuning, result.open_loop_unstable)
+        write_iekf_run(archive, RUN_NAME, result.estimator)
 
 
-def _matrices(model) -> dict:
-    """The summary's ``A``, ``B``, ``C`` and ``D`` of the model returned."""
-    return {"A": model.A, "B": model.B, "C": model.C, "D": model.D}
+def _finish(args, plan, result, archive_path=None) -> tuple[dict, str, object]:
+    """Archive, model file and the text: the command's end of every identify run."""
+    from vehid.identification.dataio.archive import run_group, update_archive, write_run
+    from vehid.identification.dataio.storage import write_value
+    from vehid.identification.filtering.iekf_archive import write_pass_history
+    from vehid.identification.errors import StrictWarningsError
+    from vehid.scenarios import scheduled_identify
+    from vehid.scenarios.data_options import save_model
+    from vehid.scenarios.model_checks import uncertainty_lines
 
-
-def _finish(args, plan, summary: dict, model, *, result=None, archive_path=None) -> tuple[dict, str, object]:
-    """Scores, warnings, the nonlinear model, archive and model file: the common end of every identify run."""
     data = plan.records[0]
-    start_returned = result is not None and model is not result.model
-    if start_returned:  # the summary describes the model returned
-        summary.update(eigenvalues=model.eigenvalues(), **_matrices(model),
-                       fit_percent=pooled_simulation_fit(model, plan.records), model_returned="start")
-    evaluation = workflow.evaluate(model, plan, args)
-    summary.update(workflow.scores_summary(evaluation, summary["fit_percent"]))
-    summary.update(records_summary(model, plan.records, plan.preparation))
-    tests = None
-    if isinstance(model, ModalModel):  # how sure the model is; on the (first) estimation record
-        checks, tests = uncertainty_summary(model, data, [record.nis for record in result.history] if result else None)
-        summary.update(checks)
-    summary.setdefault("orders_tried", [{"order": summary["order"], "fit_percent": summary["fit_percent"],
-                                         "estimation_fit_percent": evaluation.estimation.fit,
-                                         "validation_fit_percent": evaluation.validation_fit,
-                                         "seconds": summary["seconds"]}])
-    allow_unstable = bool(getattr(args, "allow_unstable", False)) or (
-        result is not None and result.options.allow_unstable)
-    # modes that never left their start are a problem of the run, whichever of the two models is returned
-    start_fit, start_moved = workflow.start_of(result, plan.records) if result is not None else (None, None)
-    summary["notes"] = workflow.decision_notes(summary)  # choices made for the user: said once, not warnings
-    warnings = workflow.run_warnings(
-        model=model, evaluation=evaluation, start_fit=start_fit,
-        stop_reason=None if start_returned else (f"{summary['stop_reason']}: {summary['divergence']}"
-                                                 if "divergence" in summary else summary.get("stop_reason")),
-        final_fit=float(np.mean(summary["fit_percent"])) if result is not None else None,
-        allow_unstable=allow_unstable, start_moved=start_moved, p_tuned=bool(summary.get("p_tried")),
-        fit_history=[record.mean_fit_continuous for record in result.history] if result is not None else None,
-    )
-    if result is not None and not start_returned:  # a pass that diverged and ran again with a smaller p
-        warnings += list(result.meta.get("notes", ()))
-    if evaluation.horizon is not None and args.horizon is None:
-        summary["scoring_note"] = (f"the model is unstable: scored by {evaluation.horizon}-step-ahead prediction, "
-                                   "since its simulation diverges (--horizon K to choose K)")
-    if result is not None:
-        summary["start"] = {k: v for k, v in result.meta.items() if k != "start_parameters"}
-    nonlinear = None
-    if args.nonlinear:
-        outcome = workflow.identify_nonlinear(model, plan, args)
-        nonlinear = outcome.result.model
-        summary["nonlinear"] = outcome.summary
-        scores = outcome.scores
-        warnings += workflow.run_warnings(
-            model=nonlinear, evaluation=workflow.Evaluation(
-                scores.estimation, scores.estimation.R, scores.validation, None),
-            stop_reason=outcome.result.stop_reason, start_fit=float(np.mean(outcome.result.start_fit)),
-            final_fit=float(np.mean(outcome.result.fit_percent)), allow_unstable=True, label="nonlinear")
-        warnings += workflow.nonlinear_warnings(outcome, evaluation)
-    warnings += data_warnings(plan.records)
-    scheduled, unscheduled = None, model
-    if args.schedule:  # the scheduled family, started from the model above, returned where it validates better
-        scheduled = scheduled_identify.identify_scheduled_model(model, plan, args, evaluation)
-        summary.update(scheduled=scheduled.summary)
-        summary.setdefault("decision_margins", {})["schedule"] = scheduled.margin
-        warnings += scheduled.warnings
-        if nonlinear is not None:
-            summary["notes"].append(scheduled_identify.NONLINEAR_NOTE)
-        if scheduled.returned:
-            summary.update(scheduled.scores)
-            model = scheduled.model
-    summary["warnings"] = list(warnings)
+    summary = result.render()
+    model = result.model
+    warnings = list(result.warnings)
+    nonlinear = result.nonlinear.result.model if result.nonlinear is not None else None
+    scheduled = result.scheduled
+    unscheduled = result.unscheduled if result.unscheduled is not None else model
     if archive_path is not None:
         summary["archive"] = str(archive_path)
+        own_run = RUN_NAME if result.is_iekf else args.method
         with update_archive(archive_path) as archive:  # one atomic update (each copies the archive)
             if nonlinear is not None:
                 write_run(archive, "nonlinear", model=nonlinear)
-                write_pass_history(archive, "nonlinear", outcome.result.history)
+                write_pass_history(archive, "nonlinear", result.nonlinear.result.history)
             if scheduled is not None:
                 write_run(archive, "scheduled", model=scheduled.model)
-            if start_returned:
+            if result.start_returned:
                 write_run(archive, "start", model=unscheduled)
-            if tests is not None:
-                write_value(run_group(archive, RUN_NAME if result is not None else args.method),
-                            "residual_tests", tests)
+            if result.residual_tests is not None:
+                write_value(run_group(archive, own_run), "residual_tests", result.residual_tests)
             returned_scheduled = scheduled is not None and scheduled.returned
             _archive_verdict(archive, summary, args, returned="scheduled" if returned_scheduled else (
-                "start" if start_returned else (RUN_NAME if result is not None else args.method)))
+                "start" if result.start_returned else own_run))
     if args.save_model:
         summary["model_file"] = str(save_model(model, args.save_model, plan.preparation))
-    text = workflow.text_summary(summary, data, plan)
+    text = text_summary(summary, data, plan)
     if "modes" in summary:
         text += "\n" + "\n".join(uncertainty_lines(summary, data.output_names))
     if scheduled is not None:
         text += "\n" + "\n".join(scheduled_identify.text_lines(summary["scheduled"], data.output_names))
     try:
-        workflow.emit(summary, warnings, args)
+        emit(summary, warnings, args)
     except StrictWarningsError as exc:  # the summary is printed all the same, then the exit status says "warnings"
         exc.text = text
         raise
@@ -424,77 +406,18 @@ def _archive_verdict(archive, summary: dict, args, *, returned: str) -> None:
     the rule by which every model was scored (initial state, prediction horizon
     where one was given), so that a report scores the other runs the same way.
     """
+    from vehid.identification.jsonable import to_jsonable
+
     verdict = {**summary, SCORING_RULE: {"initial_state": args.initial_state, "horizon": args.horizon,
                                          "returned_run": returned}}
     archive.attrs[VERDICT] = json.dumps(to_jsonable(verdict), allow_nan=False)
 
 
-def _run_order_search(args, plan, options) -> tuple[dict, str, object]:
-    """Each order of a range identified on the estimation data; one chosen on validation data."""
-    rows, kept = workflow.search_orders(
-        plan, lambda order: workflow.run_iekf_order(args, plan, options, order), args)
-    chosen = workflow.choose_order(rows)
-    model, extra, _ = kept[chosen]
-    result = extra["result"]
-    summary = {**_iekf_summary(result), **extra["tuning"].summary(), "orders_tried": rows,
-               "seconds": sum(row["seconds"] for row in rows),
-               **{key: extra[key] for key in ("open_loop_unstable", "start_kept", "decision_margins") if key in extra}}
-    summary["decision_margins"] = {**summary.get("decision_margins", {}), "order": workflow.order_margin(rows, chosen)}
-    archive_path = Path(args.out) if args.out else None
-    if archive_path is not None:
-        from vehid.identification.filtering.iekf_archive import write_iekf_run
-
-        with write_archive(archive_path, kind=ARCHIVE_KIND, config=options, seeds=[]) as archive:
-            archive.attrs[RUN_ATTRIBUTE] = args.output_run
-            _archive_plan(archive, plan)
-            _archive_decisions(archive, extra["tuning"], extra.get("open_loop_unstable"))
-            write_iekf_run(archive, RUN_NAME, result)
-    return _finish(args, plan, summary, model, result=result, archive_path=archive_path)
-
-
-def _run_comparator(args: argparse.Namespace, plan) -> tuple[dict, str, object]:
-    from vehid.identification.classical.comparators import identify_with
-
-    outcomes = {}
-
-    if args.bootstrap is not None and args.method != "n4sid":
-        raise InputError("--bootstrap applies to --method n4sid (the other methods' covariances cost no refits)")
-    options = {"bootstrap": args.bootstrap} if args.bootstrap is not None else {}
-
-    def fit_one(order):
-        outcome = identify_with(plan.estimation, method=args.method, order=order, **options)
-        outcomes[order] = outcome
-        return outcome.model, {"fit_percent": outcome.metrics.percentage_explanation}
-
-    rows = None
-    if len(plan.orders) == 1:
-        chosen = plan.orders[0]
-        fit_one(chosen)  # errors carry their own exit status
-    else:
-        rows, _ = workflow.search_orders(plan, fit_one, args)
-        chosen = workflow.choose_order(rows)
-    outcome = outcomes[chosen]
-    model = outcome.model
-    summary = {
-        "method": args.method,
-        "order": chosen,
-        "eigenvalues": model.eigenvalues(),
-        "fit_percent": outcome.metrics.percentage_explanation,
-        "passes_run": 0,
-        "discretization": "exact",
-        "time_domain": model.meta.get("time_domain", "continuous"),
-        **_matrices(model),
-        "seconds": outcome.seconds,
-    }
-    if rows is not None:
-        summary["orders_tried"] = rows
-        summary["decision_margins"] = {"order": workflow.order_margin(rows, chosen)}
-    archive_path = _archive_comparator(args, plan, outcome) if args.out else None
-    return _finish(args, plan, summary, model, archive_path=archive_path)
-
-
 def _archive_comparator(args: argparse.Namespace, plan, outcome) -> Path:
     """The records and the comparator's model and fit, as ``runs/<method>`` of an identification archive."""
+    from vehid.identification.dataio.archive import write_archive, write_run
+    from vehid.identification.dataio.archive_safety import RUN_ATTRIBUTE
+
     path = Path(args.out)
     config = {"method": args.method, "order": outcome.model.n_states}
     with write_archive(path, kind=ARCHIVE_KIND, config=config, seeds=[]) as archive:
@@ -504,3 +427,83 @@ def _archive_comparator(args: argparse.Namespace, plan, outcome) -> Path:
         run.attrs["stop_reason"] = "finished"
         run.attrs["seconds"] = outcome.seconds
     return path
+
+
+def emit(summary: dict[str, Any], warnings: list[str], args: argparse.Namespace) -> None:
+    """Print the warnings (one line each) and raise under --strict."""
+    import sys
+
+    from vehid.identification.errors import StrictWarningsError
+
+    summary["warnings"] = list(warnings)
+    if args.strict and warnings:
+        raise StrictWarningsError(warnings, summary)
+    for line in warnings:
+        print(f"vehid: warning: {line}", file=sys.stderr)
+
+
+def _fits(names: tuple[str, ...], values: Any) -> str:
+    """Each output's name and fit, or "-" where there is none."""
+    if values is None:
+        return "-"
+    return ", ".join(f"{name} {value:.2f}" for name, value in zip(names, values))
+
+
+def text_summary(summary: dict[str, Any], data, plan) -> str:
+    """The text face: model, convergence, estimation and validation scores side by side."""
+    import numpy as np
+
+    from vehid.identification.automatic.steps import ORDER_TOLERANCE, P_TOLERANCE, decision_notes
+    from vehid.identification.decisions import SCHEDULE_MARGIN
+
+    eigen = ", ".join(
+        f"{v.real:.4g}{v.imag:+.4g}j" if v.imag else f"{v.real:.4g}" for v in np.asarray(summary["eigenvalues"], dtype=complex)
+    )
+    stop = summary.get("stop_reason")
+    converged = "converged" if stop == "converged" else (f"NOT converged ({stop})" if stop else "direct method (no iterations)")
+    kind = summary.get("time_domain", "continuous")
+    lines = [
+        f"{summary['method']}: order {summary['order']}, {summary['passes_run']} passes, "
+        f"{summary['discretization']} discretisation, {summary['seconds']:.2f} s, {converged}",
+        f"eigenvalues ({kind}-time): {eigen}",
+        f"fit R (continuous model simulated exactly): {_fits(data.output_names, summary['fit_percent'])}"
+        + (" (from rest, where an unstable model's simulation diverges: the k-step scores below measure it)"
+           if np.any(np.asarray(summary["eigenvalues"], dtype=complex).real > 0) else ""),
+    ]
+    how = (f"{summary['horizon']}-step-ahead prediction" if summary.get("horizon")
+           else f"simulation, initial state {summary.get('initial_state', 'zero')}")
+    lines.append(f"{'NRMSE fit %':<14} {'estimation':>28} {'validation':>28}   ({how})")
+    for i, name in enumerate(data.output_names):
+        est = summary["estimation_fit_percent"][i]
+        val = summary["validation_fit_percent"][i] if summary.get("validation_fit_percent") is not None else None
+        lines.append(f"{name:<14} {est:>28.2f} {('-' if val is None else f'{val:.2f}'):>28}")
+    if plan.validation:
+        lines.append("validation on: " + "; ".join(plan.validation_names))
+    for note in summary.get("notes", decision_notes(summary)):
+        lines.append(f"note: {note}")
+    if summary.get("p_tried"):
+        tried = ", ".join(f"{row['p']:g}" + (f" {row['q_schedule']}" if "q_schedule" in row else "") + ": "
+                          + ("failed" if row["cv_fit_percent"] is None else f"{row['cv_fit_percent']:.2f}")
+                          for row in summary["p_tried"])
+        lines.append(f"p {summary['p']:g}, {summary.get('q_schedule', 'constant')} Q, by two-fold cross-validation "
+                     f"(fit %: {tried}; a shrinking Q unless a constant one is {SCHEDULE_MARGIN:g} points better, "
+                     f"the largest p within {P_TOLERANCE} points of its best), {summary['tuning_seconds']:.1f} s")
+    if summary.get("scoring_note"):
+        lines.append(f"note: {summary['scoring_note']}")
+    for note in plan.notes:
+        lines.append(f"note: {note}")
+    if summary.get("orders_tried") and len(summary["orders_tried"]) > 1:
+        tried = ", ".join(
+            f"n={row['order']}: " + (f"{row['ranking_fit']:.2f}" if "ranking_fit" in row else "failed")
+            for row in summary["orders_tried"])
+        lines.append(f"orders tried (mean validation fit %): {tried}; chosen {summary['order']} "
+                     f"(smallest within {ORDER_TOLERANCE} points of the best)")
+    if "nonlinear" in summary:
+        nl = summary["nonlinear"]
+        lines.append(f"nonlinear (spline, {nl['nodes']} nodes, p {nl['p']:g}, {nl['passes_run']} passes, "
+                     f"{'converged' if nl['stop_reason'] == 'converged' else 'NOT converged'}): "
+                     f"estimation {_fits(data.output_names, nl['estimation_fit_percent'])}; "
+                     f"validation {_fits(data.output_names, nl['validation_fit_percent'])}")
+    if "model_file" in summary:
+        lines.append(f"wrote {summary['model_file']}")
+    return "\n".join(lines)

@@ -1,0 +1,211 @@
+"""The automatic pipeline on a plan: one estimator run or an order search, then the common end.
+
+:func:`identify_plan` takes a :class:`~vehid.identification.automatic.plan.Plan`
+and :class:`~vehid.identification.automatic.options.IdentifyOptions` and
+returns the typed :class:`~vehid.identification.automatic.result.Identification`.
+A caller that keeps the run on disk passes :class:`Checkpoints` (told of the
+decisions before the IEKF's passes, of every pass and of the end) and, to go
+on with a run it kept, :class:`Resumed`; the pipeline itself writes nothing.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Mapping, Protocol
+
+import numpy as np
+
+from vehid.identification.automatic import steps
+from vehid.identification.automatic.checks import data_warnings, records_summary, uncertainty_summary
+from vehid.identification.automatic.options import IdentifyOptions
+from vehid.identification.automatic.plan import Plan
+from vehid.identification.automatic.result import Decision, Identification, OrderRow, float_tuple
+from vehid.identification.filtering.iekf import identify_iekf
+from vehid.identification.models.modal import ModalModel
+
+__all__ = ["Checkpoints", "Resumed", "identify_plan"]
+
+
+class Checkpoints(Protocol):
+    """What a caller keeping the run is told as it goes (a single-order IEKF run only)."""
+
+    def decided(self, options: Any, tuning: Any, unstable: Mapping[str, Any] | None, previous: Any) -> None:
+        """The filter's options, p tuning and stability decision, before the first pass is run."""
+
+    def passed(self, record: Any, so_far: Any) -> None:
+        """One pass finished (the filter's ``on_pass``)."""
+
+    def finished(self, result: Any) -> None:
+        """The run ended (converged, out of passes or diverged)."""
+
+
+@dataclass(frozen=True)
+class Resumed:
+    """A kept IEKF run to go on with: its structure, filter options, finished passes and decisions."""
+
+    structure: Any
+    options: Any
+    previous: Any
+    tuning: Any
+    open_loop_unstable: Mapping[str, Any] | None
+
+
+def identify_plan(plan: Plan, options: IdentifyOptions, *, resumed: Resumed | None = None,
+                  checkpoints: Checkpoints | None = None) -> Identification:
+    """Identify the plan's records as `vehid identify` does (module docstring of :mod:`~.steps`)."""
+    if resumed is not None:
+        structure, iekf, previous = resumed.structure, resumed.options, resumed.previous
+        tuning, unstable = resumed.tuning, resumed.open_loop_unstable
+    else:
+        if options.method != "iekf":
+            return _comparator(plan, options)
+        iekf = steps.iekf_options(options)
+        if len(plan.orders) > 1:
+            return _order_search(plan, options, iekf)
+        previous = None
+        iekf, unstable = steps.assume_unstable(options, plan, iekf, plan.orders[0])
+        structure = steps.structure_for(options, plan.orders[0], plan, iekf)
+        tuning = steps.tune_p(options, plan, iekf, structure) if steps.tunes_p(options) else steps.given_p(iekf)
+        iekf = tuning.applied(iekf)
+    if checkpoints is not None:
+        checkpoints.decided(iekf, tuning, unstable, previous)
+    on_pass = checkpoints.passed if checkpoints is not None else None
+    result, divergence = steps.last_good_on_divergence(
+        lambda: identify_iekf(plan.estimation, structure, options=iekf, resume=previous, on_pass=on_pass,
+                              settle_start=plan.settle_start))
+    if checkpoints is not None:
+        checkpoints.finished(result)
+    model, keys = steps.returned_model(result, plan, options, tuning, unstable)
+    return _finish(plan, options, model, estimator=result, tuning=tuning, keys=keys, divergence=divergence,
+                   seconds=result.seconds)
+
+
+def _order_search(plan: Plan, options: IdentifyOptions, iekf: Any) -> Identification:
+    """Each order of a range identified on the estimation data; one chosen on validation data."""
+    rows, kept = steps.search_orders(plan, lambda order: steps.run_iekf_order(options, plan, iekf, order), options)
+    chosen = steps.choose_order(rows)
+    model, extra, _ = kept[chosen]
+    keys = {key: extra[key] for key in ("open_loop_unstable", "start_kept", "decision_margins") if key in extra}
+    keys["decision_margins"] = {**keys.get("decision_margins", {}), "order": steps.order_margin(rows, chosen)}
+    return _finish(plan, options, model, estimator=extra["result"], tuning=extra["tuning"], keys=keys,
+                   seconds=sum(row["seconds"] for row in rows), rows=rows)
+
+
+def _comparator(plan: Plan, options: IdentifyOptions) -> Identification:
+    """A classical method on the same plan, searched over orders alike where several are given."""
+    from vehid.identification.classical.comparators import identify_with
+
+    outcomes = {}
+    extra = {"bootstrap": options.bootstrap} if options.bootstrap is not None else {}
+
+    def fit_one(order):
+        outcome = identify_with(plan.estimation, method=options.method, order=order, **extra)
+        outcomes[order] = outcome
+        return outcome.model, {"fit_percent": outcome.metrics.percentage_explanation}
+
+    rows = None
+    keys: dict[str, Any] = {}
+    if len(plan.orders) == 1:
+        chosen = plan.orders[0]
+        fit_one(chosen)  # errors carry their own exit status
+    else:
+        rows, _ = steps.search_orders(plan, fit_one, options)
+        chosen = steps.choose_order(rows)
+        keys["decision_margins"] = {"order": steps.order_margin(rows, chosen)}
+    outcome = outcomes[chosen]
+    return _finish(plan, options, outcome.model, estimator=outcome, keys=keys, seconds=outcome.seconds, rows=rows,
+                   order=chosen, fit=outcome.metrics.percentage_explanation,
+                   time_domain=outcome.model.meta.get("time_domain", "continuous"))
+
+
+def _row(row: Mapping[str, Any]) -> OrderRow:
+    """An order search's row as a typed row."""
+    return OrderRow(order=int(row["order"]), fit_percent=row.get("fit_percent"),
+                    estimation_fit_percent=row.get("estimation_fit_percent"),
+                    validation_fit_percent=row.get("validation_fit_percent"), seconds=float(row["seconds"]),
+                    ranking_fit=row.get("ranking_fit"), eligible=row.get("eligible"),
+                    stop_reason=row.get("stop_reason"), p=row.get("p"), q_schedule=row.get("q_schedule"),
+                    error=row.get("error"), searched=True)
+
+
+def _finish(plan: Plan, options: IdentifyOptions, model: Any, *, estimator: Any, keys: Mapping[str, Any],
+            seconds: float, tuning: Any = None, divergence: str | None = None, rows: Any = None,
+            order: int | None = None, fit: Any = None, time_domain: str | None = None) -> Identification:
+    """Scores, checks, notes, warnings and the nonlinear model: the common end of every run."""
+    from vehid.identification.assessment.multirecord import pooled_simulation_fit
+
+    data = plan.records[0]
+    iekf = tuning is not None
+    result = estimator if iekf else None
+    start_returned = result is not None and model is not result.model
+    if iekf:
+        order = result.structure.n
+        fit = pooled_simulation_fit(model, plan.records) if start_returned else result.fit_percent
+    evaluation = steps.evaluate(model, plan, options)
+    checks = tests = None
+    if isinstance(model, ModalModel):  # how sure the model is; on the (first) estimation record
+        checks, tests = uncertainty_summary(model, data, [record.nis for record in result.history] if result else None)
+    if rows is not None:
+        orders = tuple(_row(row) for row in rows)
+    else:
+        orders = (OrderRow(order=order, fit_percent=fit, estimation_fit_percent=evaluation.estimation.fit,
+                           validation_fit_percent=evaluation.validation_fit, seconds=seconds),)
+    allow_unstable = options.allow_unstable or (result is not None and result.options.allow_unstable)
+    # modes that never left their start are a problem of the run, whichever of the two models is returned
+    start_fit, start_moved = steps.start_of(result, plan.records) if result is not None else (None, None)
+    notes = steps.decision_notes({
+        **{key: keys[key] for key in ("open_loop_unstable", "start_kept") if key in keys},
+        **({"model_returned": "start"} if start_returned else {}),
+        **({"start_cv_fit_percent": tuning.start_fit} if iekf else {})})
+    stop_reason = None
+    if result is not None and not start_returned:
+        stop_reason = f"{result.stop_reason}: {divergence}" if divergence else result.stop_reason
+    warnings = steps.run_warnings(
+        model=model, evaluation=evaluation, start_fit=start_fit, stop_reason=stop_reason,
+        final_fit=float(np.mean(fit)) if result is not None else None,
+        allow_unstable=allow_unstable, start_moved=start_moved, p_tuned=bool(iekf and tuning.tried),
+        fit_history=[record.mean_fit_continuous for record in result.history] if result is not None else None,
+    )
+    if result is not None and not start_returned:  # a pass that diverged and ran again with a smaller p
+        warnings += list(result.meta.get("notes", ()))
+    scoring_note = None
+    if evaluation.horizon is not None and options.horizon is None:
+        scoring_note = (f"the model is unstable: scored by {evaluation.horizon}-step-ahead prediction, "
+                        "since its simulation diverges (--horizon K to choose K)")
+    nonlinear = None
+    if options.nonlinear:
+        nonlinear = steps.identify_nonlinear(model, plan, options)
+        scores = nonlinear.scores
+        warnings += steps.run_warnings(
+            model=nonlinear.result.model, evaluation=steps.Evaluation(
+                scores.estimation, scores.estimation.R, scores.validation, None),
+            stop_reason=nonlinear.result.stop_reason, start_fit=float(np.mean(nonlinear.result.start_fit)),
+            final_fit=float(np.mean(nonlinear.result.fit_percent)), allow_unstable=True, label="nonlinear")
+        warnings += steps.nonlinear_warnings(nonlinear, evaluation)
+    warnings += data_warnings(plan.records)
+    decisions = tuple(Decision.from_entry(name, entry) for name, entry in keys.get("decision_margins", {}).items())
+    data_keys = records_summary(model, plan.records, plan.preparation)  # the unscheduled model's, as its checks
+    scheduled, unscheduled = None, None
+    fits = (fit, evaluation.estimation.fit, evaluation.validation_fit)
+    if plan.schedule is not None:  # the scheduled family, started from the model above, returned where it validates better
+        from vehid.identification.automatic.scheduled import NONLINEAR_NOTE, identify_scheduled_model
+
+        scheduled = identify_scheduled_model(model, plan, options, evaluation)
+        decisions += (Decision.from_entry("schedule", scheduled.margin),)
+        warnings += scheduled.warnings
+        if nonlinear is not None:
+            notes.append(NONLINEAR_NOTE)
+        if scheduled.returned:
+            unscheduled, model = model, scheduled.model
+            fits = tuple(scheduled.scores[key] for key in ("fit_percent", "estimation_fit_percent",
+                                                           "validation_fit_percent"))
+    return Identification(
+        model=model, method=options.method if not iekf else "iekf", order=int(order), fit_percent=float_tuple(fits[0]),
+        estimation_fit_percent=float_tuple(fits[1]),
+        validation_fit_percent=float_tuple(fits[2]), decisions=decisions, notes=tuple(notes),
+        warnings=tuple(warnings), orders=orders, seconds=float(seconds), plan=plan, evaluation=evaluation,
+        estimator=estimator, tuning=tuning, open_loop_unstable=keys.get("open_loop_unstable"),
+        start_kept=keys.get("start_kept"), start_returned=start_returned, divergence=divergence,
+        checks=checks, residual_tests=tests, data=data_keys,
+        scoring_note=scoring_note, nonlinear=nonlinear, time_domain=time_domain, scheduled=scheduled,
+        unscheduled=unscheduled)
