@@ -74,49 +74,6 @@ def preparation_options(args: Any) -> dict[str, Any]:
     return {"detrend": args.detrend, "scale": args.scale, "steering_ratio": getattr(args, "steering_ratio", None)}
 
 
-def record_names(records: Sequence[IOData]) -> list[str]:
-    """Unique display names of records: their sources, numbered where one repeats."""
-    names = [str(r.meta.get("source", f"record {i + 1}")) for i, r in enumerate(records)]
-    return [f"{n} ({i + 1})" if names.count(n) > 1 else n for i, n in enumerate(names)]
-
-
-def records_summary(model: Any, records: Sequence[IOData], preparation: Preparation | None) -> dict[str, Any]:
-    """The JSON keys about the data: ``records``, ``sample_jitter``, ``preparation``."""
-    from vehid.identification.assessment.multirecord import score_records
-
-    scored = score_records(model, records, names=record_names(records))
-    jitters = [r.meta.get("time_base", {}).get("sample_jitter") for r in records]
-    summary: dict[str, Any] = {
-        "records": [fit.as_dict() for fit in scored.records],
-        "sample_jitter": max((j for j in jitters if j is not None), default=None),
-    }
-    if preparation is not None:
-        summary["preparation"] = preparation.as_dict()
-        summary["conversions"] = preparation.conversion_list()
-    offsets = [float(r.meta.get("time_base", {}).get("time_offset", 0.0)) for r in records]
-    if any(offsets):  # time counted from each record's first sample: where that was in the file's time
-        summary["time_offset"] = offsets
-    resampled = [r.meta.get("time_base", {}).get("resample") for r in records]
-    if any(resampled):
-        summary["resample"] = next(r for r in resampled if r)
-    return summary
-
-
-def data_warnings(records: Sequence[IOData]) -> list[str]:
-    """One line per record whose gaps in time were bridged by resampling, naming where they were."""
-    lines = []
-    for name, record in zip(record_names(records), records):
-        base = record.meta.get("time_base", {})
-        gaps, count = base.get("gaps") or [], int(base.get("gap_count", 0))
-        if not count:
-            continue
-        shown = ", ".join(f"{gap['length_s']:.3g} s at {gap['at_s']:.9g} s ({gap['location']})" for gap in gaps[:3])
-        more = f" and {count - 3} more" if count > 3 else ""
-        lines.append(f"{name}: {count} gap{'s' if count > 1 else ''} in time bridged by straight lines when "
-                     f"resampling ({shown}{more}): the model sees no data there; --segment T0:T1 leaves a gap out")
-    return lines
-
-
 def record_series_name(prefix: str, index: int) -> str:
     """The archive name of record ``index`` (0-based) of a series: ``prefix``, ``prefix_2``, ``prefix_3``, ..."""
     return prefix if index == 0 else f"{prefix}_{index + 1}"
@@ -219,12 +176,3 @@ def save_model(model: Any, target: str, preparation: Preparation | None) -> Path
             savemat(path, contents)
         return path
     raise InputError(f"--save-model takes a .json or .mat file; got {target!r}")
-
-
-def __getattr__(name: str) -> Any:
-    # The option group lives in the command layer now; importing it from here still works.
-    if name == "register_data_options":
-        from vehid.scenarios.commands.arguments import register_data_options
-
-        return register_data_options
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -26,7 +26,7 @@ def test_help_and_the_package_import_none_of_the_heavy_libraries():
     assert "casadi" not in _imported_after("from vehid.identification import nrmse_fit")
 
 
-LIGHT_COMMANDS = [("report",), ("linearize",), ("study", "textbook"), ("bench", "iekf"), ("simulate",), ("handling",),
+LIGHT_COMMANDS = [("identify",), ("report",), ("linearize",), ("study", "textbook"), ("bench", "iekf"), ("simulate",), ("handling",),
                   ("calibrate",), ("study", "linear-example"), ("study", "handling"), ("study", "envelope")]
 
 

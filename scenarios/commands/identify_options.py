@@ -20,7 +20,7 @@ START_HELP = ("start values: data (a subspace model of the record, default), ban
 
 def register_identify_options(parser: argparse.ArgumentParser) -> None:
     """Every option of `vehid identify`."""
-    from vehid.scenarios.data_options import register_data_options
+    from vehid.scenarios.commands.arguments import register_data_options
     from vehid.scenarios.paths import OUT_RULE
 
     parser.add_argument("data", nargs="*", help="data files: .h5, .csv, .dat, .txt, .mat, .mf4 (several: one model)")
