@@ -39,7 +39,8 @@ DISCRETIZATIONS = ("euler", "exact", "exact-zoh")
 COVARIANCE_FORMS = ("joseph", "paper")
 
 #: ``seconds``: the filter runs in the record's time unit and p is absolute (the paper);
-#: ``auto``: time in samples inside the filter, p per dominant time constant (see :mod:`~vehid.identification.filtering.iekf`).
+#: ``auto``: time in samples inside the filter, p per dominant time constant
+#: (see :mod:`~vehid.identification.filtering.iekf`).
 TIMESCALES = ("seconds", "auto")
 
 #: Initial states of a simulation scored against a record: zero, or estimated from its first samples.

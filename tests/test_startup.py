@@ -26,8 +26,9 @@ def test_help_and_the_package_import_none_of_the_heavy_libraries():
     assert "casadi" not in _imported_after("from vehid.identification import nrmse_fit")
 
 
-LIGHT_COMMANDS = [("identify",), ("report",), ("linearize",), ("study", "textbook"), ("bench", "iekf"), ("simulate",), ("handling",),
-                  ("calibrate",), ("study", "linear-example"), ("study", "handling"), ("study", "envelope")]
+LIGHT_COMMANDS = [("identify",), ("report",), ("linearize",), ("study", "textbook"), ("bench", "iekf"), ("simulate",),
+                  ("handling",), ("calibrate",), ("study", "linear-example"), ("study", "handling"),
+                  ("study", "envelope")]
 
 
 def test_a_commands_help_imports_none_of_what_it_computes_with():
