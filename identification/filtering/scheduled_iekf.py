@@ -566,6 +566,7 @@ def identify_scheduled(
         structure, grid, np.tile(knot_theta, count), variable=variable, input_names=start.input_names,
         output_names=start.output_names, meta={"estimator": "scheduled-iekf", "dt": dt})
     start_theta = np.tile(knot_theta, count)
+    record_family = family  # the given start at every knot, a candidate for the refinement whatever the start
     local_starts: list[str] = []
     if options.local_starts:
         local = _local_start_family(family, start, data, schedule, input_scale, output_scale, options.stable, method)
@@ -619,16 +620,24 @@ def identify_scheduled(
         final = family.with_parameters(theta * scale, passes=len(history), stop_reason=stop_reason)
         refined: dict[str, Any] = {}
         if stop_reason != "running" and history and options.refine_iterations:
-            # from whichever of the filter's family and its start simulates better
+            # from whichever of the filter's family, its start and (where the knots started locally) the
+            # given start at every knot simulates better: the local start is a better place for the
+            # filter to begin, not always for the simulation errors to end
             simulated = {name: percentage_explanation(data.y, simulate(candidate))
-                         for name, candidate in (("filter", final), ("start", start_family))}
+                         for name, candidate in (("filter", final), ("start", start_family),
+                                                 ("record start", record_family))
+                         if name != "record start" or candidate is not start_family}
             origin = max(simulated, key=lambda name: float(np.nan_to_num(np.mean(simulated[name]), nan=-np.inf)))
-            base = final if origin == "filter" else start_family.with_parameters(
-                start_family.parameters, passes=len(history), stop_reason=stop_reason)
+            chosen = {"filter": final, "start": start_family, "record start": record_family}[origin]
+            base = final if origin == "filter" else chosen.with_parameters(
+                chosen.parameters, passes=len(history), stop_reason=stop_reason)
             final, steps = refine_by_simulation(base, data, schedule, method=method,
                                                 iterations=options.refine_iterations, stable=options.stable,
                                                 on_step=on_refine)
-            refined = {"refined_from": origin, "refine_steps": steps,
+            # either start is "start" to a caller (how far the passes got does not matter); which one, apart
+            refined = {"refined_from": "filter" if origin == "filter" else "start",
+                       "refined_start": None if origin == "filter" else
+                       ("record" if chosen is record_family else "local"), "refine_steps": steps,
                        "fit_percent": percentage_explanation(data.y, simulate(final))}
         if stop_reason != "running" and history:
             covariance = scheduled_simulation_covariance(final, data, schedule, method)
