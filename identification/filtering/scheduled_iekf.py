@@ -53,7 +53,7 @@ from ..models.scheduled import (ScheduledModalModel, gauge_parameters, input_gau
 from ..assessment.uncertainty import gauss_newton_covariance
 
 __all__ = ["ScheduledFilterModel", "ScheduledIEKFOptions", "ScheduledIEKFResult", "default_grid",
-           "identify_scheduled", "refine_by_simulation", "scheduled_simulation_covariance", "DEFAULT_KNOTS", "DEFAULT_P", "DEFAULT_P_DECAY", "MIN_KNOTS", "MAX_KNOTS"]
+           "identify_scheduled", "knot_cells", "refine_by_simulation", "scheduled_simulation_covariance", "DEFAULT_KNOTS", "DEFAULT_P", "DEFAULT_P_DECAY", "MIN_KNOTS", "MAX_KNOTS"]
 
 DEFAULT_KNOTS = 5
 MIN_KNOTS = 2
@@ -393,6 +393,29 @@ def _knot_parameters(model: ModalModel, order: list[int] | None = None) -> np.nd
     return np.concatenate([gauge_parameters(modal, B, C, model.D), np.zeros(structure.n_y)])
 
 
+def _mode_eigenvalues(model: ModalModel) -> np.ndarray:
+    """One eigenvalue per mode of the structure, read from A's blocks: ``sigma + j|omega|``."""
+    A = model.A
+    return np.array([complex(A[s[0], s[0]], abs(A[s[0], s[1]]) if len(s) == 2 else 0.0)
+                     for s in model.structure.mode_states()])
+
+
+def _mode_order(reference: np.ndarray, candidate: np.ndarray, n_pairs: int) -> list[int]:
+    """The candidate's modes in the reference's slots (pairs among pairs, real poles among real poles),
+    least total relative eigenvalue distance."""
+    from scipy.optimize import linear_sum_assignment  # slow to import: paid only where local starts are found
+
+    order: list[int] = []
+    for low, high in ((0, n_pairs), (n_pairs, reference.size)):
+        if high <= low:
+            continue
+        cost = np.abs(reference[low:high, None] - candidate[None, low:high]) / np.maximum(
+            np.abs(reference[low:high, None]), 1e-12)
+        rows, columns = linear_sum_assignment(cost)
+        order += [low + int(c) for c in columns[np.argsort(rows)]]
+    return order
+
+
 def knot_cells(schedule: np.ndarray, grid: np.ndarray) -> list[np.ndarray]:
     """Per knot, the indices of the samples whose schedule value lies nearer that knot than any other.
 
@@ -450,8 +473,6 @@ def _local_start_family(family: ScheduledModalModel, start: ModalModel, data: IO
     nearest knot on either side that simulates its samples better. Local modes take the start's order by
     least eigenvalue distance, so that the same slot means the same mode at every knot.
     """
-    from ..models.scheduled import _match, _mode_eigenvalues
-
     structure = start.structure
     size = knot_size(structure)
     reference = _mode_eigenvalues(start)
@@ -483,7 +504,7 @@ def _local_start_family(family: ScheduledModalModel, start: ModalModel, data: IO
             nearest = ([max(below)] if below else []) + ([min(above)] if above else [])
             chosen = max(nearest, key=lambda j: _cell_fit(local[j], data, rows, method)) if rows.size else nearest[0]
             label = f"local of knot {chosen}"
-        order, _ = _match(reference, _mode_eigenvalues(local[chosen]), structure.n_complex_pairs)
+        order = _mode_order(reference, _mode_eigenvalues(local[chosen]), structure.n_complex_pairs)
         try:
             theta[k * size:(k + 1) * size] = _knot_parameters(local[chosen], order)
         except InputError:  # a local mode not driven by the first input has no gauge
