@@ -191,7 +191,8 @@ class ScheduledIEKFOptions:
         can drift unstable without the filter noticing; the simulation from rest then blows up.
     refine_iterations : int
         Levenberg-Marquardt steps on the simulation errors after the passes (:func:`refine_by_simulation`),
-        from whichever of the filter's family and its start simulates the record better; 0: none. On a
+        from whichever of the filter's family, its start and the given unscheduled start at every knot
+        simulates the record better; 0: none. On a
         race car's 48 s log the filter's family simulated worse than its unscheduled start (its
         one-step errors were small while knots drifted); ten steps from the start raised the held-out
         fit of the lateral acceleration from 64 % to 72 %.
