@@ -25,7 +25,8 @@ from vehid.identification.filtering.iekf import IEKFOptions, identify_iekf
 from vehid.identification.assessment.metrics import nrmse_fit
 from vehid.identification.models.modal import ModalStructure
 from vehid.identification.models.scheduled import OutputMap, ScheduledModalModel
-from vehid.identification.filtering.scheduled_iekf import ScheduledIEKFOptions, default_grid, identify_scheduled
+from vehid.identification.filtering.scheduled_iekf import (ScheduledIEKFOptions, default_grid, identify_scheduled,
+                                                             knot_cells)
 from vehid.identification.dataio.storage import read_value, write_value
 from vehid.identification.assessment.validation import score, split_holdout
 
@@ -233,6 +234,21 @@ def test_default_grid_sits_at_quantiles_and_refuses_a_constant_schedule():
         default_grid(np.full(500, 20.0))
     with pytest.raises(InputError, match="dwells"):
         default_grid(speed, 5)
+
+
+def test_knot_cells_split_the_record_by_nearest_knot():
+    """The samples a knot's local start is found on: every sample in exactly one cell, the cell of its
+    nearest knot (the end knots also take the samples beyond the grid, where the family holds them)."""
+    schedule = np.random.default_rng(3).uniform(0.0, 50.0, 4000)
+    grid = np.array([10.0, 15.0, 25.0, 40.0])
+    cells = knot_cells(schedule, grid)
+    joined = np.sort(np.concatenate(cells))
+    np.testing.assert_array_equal(joined, np.arange(schedule.size))
+    for k, rows in enumerate(cells):
+        distances = np.abs(schedule[rows, None] - grid[None, :])
+        assert np.all(distances[:, k] <= distances.min(axis=1)), k
+    assert np.all(schedule[cells[0]] <= 12.5) and np.any(schedule[cells[0]] < 10.0)
+    assert np.all(schedule[cells[-1]] >= 32.5) and np.any(schedule[cells[-1]] > 40.0)
 
 
 def _vehid(*args):

@@ -149,28 +149,28 @@ def test_scheduled_modes_follow_the_speed(modes):
     """The scheduled family's yaw mode, identified on the 60 s ramp (0.54 m/s^2, 10-35 m/s), against
     second-order models identified by the same filter at 10, 20 and 30 m/s and the linearisation.
 
-    Measured over seeds 0-2 (scheduled | fixed | linearisation, Hz): 10 m/s 3.16-3.61 | 2.75-2.87 |
-    3.41; 20 m/s 1.31-1.35 | 1.24-1.25 | (2.14, damping 0.98); 30 m/s 0.94-0.98 | 0.87 | 1.00.
+    Measured over seeds 0-2 (scheduled | fixed | linearisation, Hz): 10 m/s 2.71-2.94 | 2.75-2.87 |
+    3.41; 20 m/s 1.23 | 1.24-1.25 | (2.14, damping 0.98); 30 m/s 0.88-0.89 | 0.87 | 1.00.
 
-    * The linearisation's pair is a visible resonance where it is underdamped (damping 0.76 at 10 m/s,
-      0.80 at 30); at 20 m/s it is damped 0.98 and its residues cancel against a real pole at 6.6 Hz,
-      so there is no mode there to compare. Scheduled against linearisation: 12 % (measured 7.2 %).
-    * Scheduled against fixed speed at 20 and 30 m/s: 20 % (measured 5.2-12.9 %). At 10 m/s the
-      order-2 models are compromises between two visible pairs (3.4 Hz in yaw rate, 4.8 Hz in lateral
-      acceleration) and the ramp holds 10 m/s for 6 s only: they differ by up to 26 %, and what is
-      asserted there is that each scheduled mode is nearest the fixed-speed model of its own speed.
-    * Fixed speed against linearisation: 25 % in frequency (measured 13-19 %: the order-2 model's
-      compromise again) and 0.15 in damping (measured 0.02-0.11).
+    * Scheduled against fixed speed, like for like (the same structure and filter): 10 % at every
+      speed (measured -1.7 to +2.9 %, the seeds' spread of that difference 4.3 points at 10 m/s).
+    * Against the linearisation, where its pair is a visible resonance (damping 0.76 at 10 m/s, 0.80
+      at 30; at 20 m/s it is damped 0.98 and its residues cancel against a real pole at 6.6 Hz, so
+      there is no mode there to compare): the order-2 models are compromises between two visible
+      pairs (3.4 Hz in yaw rate, 4.8 Hz in lateral acceleration at 10 m/s), the fixed-speed ones as
+      the scheduled: both within 25 % in frequency (measured 11-21 % scheduled, 13-19 % fixed) and
+      0.15 in damping (measured 0.03-0.05 scheduled, 0.02-0.11 fixed).
+    * Each scheduled mode is nearest the fixed-speed model of its own speed.
     """
     scheduled, fixed, linear = modes["scheduled"], modes["fixed"], modes["linearisation"]
     for speed in (10.0, 30.0):
         assert linear[speed][1] < 0.9  # a resonance visible at the outputs
-        assert scheduled[speed][0] == pytest.approx(linear[speed][0], rel=0.12), speed
-        assert fixed[speed][0] == pytest.approx(linear[speed][0], rel=0.25), speed
-        assert fixed[speed][1] == pytest.approx(linear[speed][1], abs=0.15), speed
+        for family in (scheduled, fixed):
+            assert family[speed][0] == pytest.approx(linear[speed][0], rel=0.25), speed
+            assert family[speed][1] == pytest.approx(linear[speed][1], abs=0.15), speed
     assert linear[20.0][1] > 0.9
-    for speed in (20.0, 30.0):
-        assert scheduled[speed][0] == pytest.approx(fixed[speed][0], rel=0.20), speed
+    for speed in acceptance.MODE_SPEEDS:
+        assert scheduled[speed][0] == pytest.approx(fixed[speed][0], rel=0.10), speed
     for speed, (frequency, _) in scheduled.items():
         others = [fixed[v][0] for v in fixed if v != speed]
         assert all(_log_distance(frequency, fixed[speed][0]) < _log_distance(frequency, f) for f in others), speed
@@ -180,14 +180,15 @@ def test_scheduled_modes_follow_the_speed(modes):
         assert frequencies == sorted(frequencies, reverse=True)
 
 
-@pytest.mark.xfail(strict=True, reason="the scheduled family from the record's unscheduled start ends near "
-                                       "critical damping (0.96-1.00) where the fixed-speed models have 0.66-0.90")
 def test_scheduled_damping_agrees_with_the_fixed_speed_models(modes):
-    """The acceptance's damping: the scheduled mode within 0.1 of the fixed-speed model at each speed
-    (the fixed-speed models' spread over seeds 0-2 is 0.014). Not met by the default path: started
-    from the unscheduled model of the whole ramp (one mode of 2.1 Hz damped 0.998, a compromise over
-    the speeds), the family stays near critical damping; started instead from the model held at
-    20 m/s it reaches 2.71/0.72, 1.23/0.86 and 0.89/0.77 at 10/20/30 m/s and fits the ramp better
-    (benchmarks/source_acceptance.py, seed 0: 96.9/91.3 % against 95.1/89.3 %)."""
+    """The acceptance's damping: the scheduled mode within 0.1 of the fixed-speed model at each speed.
+
+    Measured over seeds 0-2 (scheduled - fixed): +0.060 to +0.074 at 10 m/s, -0.047 to -0.039 at 20,
+    -0.060 to -0.047 at 30; the seeds move each difference by at most 0.014, so 0.1 sits above the
+    largest by about twice that spread. The differences are systematic, not noise: the ramp holds each
+    speed for a few seconds while the car accelerates, the fixed-speed record for 20 s at constant speed.
+    Each knot starts from a linear estimate of the samples near it (identify_scheduled's local starts);
+    started from the unscheduled model of the whole ramp (one mode of 2.1 Hz damped 0.998, a compromise
+    over the speeds) the family stayed near critical damping (0.96-1.00) and fitted the ramp worse."""
     for speed in acceptance.MODE_SPEEDS:
         assert modes["scheduled"][speed][1] == pytest.approx(modes["fixed"][speed][1], abs=0.1), speed
