@@ -118,6 +118,33 @@ def test_the_readme_python_example_reproduces_the_command(capsys, monkeypatch):
     assert result.warnings == tuple(summary["warnings"]) and printed.out.strip()
 
 
+def test_the_gallery_example_reproduces_the_command(capsys, monkeypatch):
+    """The measured-record example of the documentation's gallery, run as a user runs it, against the
+    command its docstring names: the same model and held-out scores to 1e-9."""
+    import runpy
+
+    import matplotlib
+
+    matplotlib.use("Agg")  # the example ends in plt.show(), which a test must not block on
+    script = Path(__file__).resolve().parents[1] / "docs" / "examples" / "plot_measured_record.py"
+    namespace = runpy.run_path(str(script), run_name="__main__")
+    import matplotlib.pyplot as plt
+
+    plt.close("all")
+    docstring = namespace["__doc__"]
+    # the command as the docstring shows it: two lines joined at the shell's continuation backslash
+    command = " ".join(docstring.split("vehid identify ")[1].split("\n")[0:2]).replace("\\", " ").split()
+    monkeypatch.chdir(Path(__file__).resolve().parents[1])  # it names the record from the clone's root
+    capsys.readouterr()
+    assert main(["identify", *command, "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    result = namespace["result"]
+    for name in "ABCD":
+        _close(getattr(result.model, name), summary[name])
+    _close(result.validation_fit_percent, summary["validation_fit_percent"])
+    assert result.warnings == tuple(summary["warnings"])
+
+
 def test_a_classical_method_runs_the_same_pipeline(capsys):
     """A comparator over a range of orders: the same order chosen, model and scores as the command's."""
     summary = _command(capsys, "--method", "n4sid", "--order", "2-3", "--validation", "0.3")
