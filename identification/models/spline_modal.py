@@ -239,6 +239,13 @@ def _simulator(structure: SplineModalStructure, discretization: str) -> Compiled
     return CompiledRecursion(step, optimisation="-O1")
 
 
+@functools.lru_cache(maxsize=256)
+def _uniform_basis(lower: float, upper: float, count: int) -> SplineBasis:
+    """A uniform basis, shared between models: a basis is never changed once built, and a model and
+    its sampled neighbours (one node range each) linearise thousands of times."""
+    return SplineBasis.uniform(lower, upper, count)
+
+
 @dataclass(frozen=True, eq=False)
 class SplineModalModel(StateSpaceModel):
     """An identified spline-nonlinear modal model: a frozen value.
@@ -461,7 +468,7 @@ class SplineModalModel(StateSpaceModel):
             if variable not in rows:
                 lower, upper = self.ranges[variable]
                 point = at if variable < st.linear.n_complex_pairs else 0.0
-                rows[variable] = SplineBasis.uniform(lower, upper, st.nodes).evaluate(np.array([point], dtype=float))
+                rows[variable] = _uniform_basis(float(lower), float(upper), st.nodes).evaluate(np.array([point], dtype=float))
             values.append(float((rows[variable] @ gammas[index])[0]))
         theta = st.linear.denormalize(np.array(values), self.input_scale, self.output_scale)
         return ModalModel.from_parameters(st.linear, theta, input_names=self.input_names, output_names=self.output_names)
