@@ -11,7 +11,8 @@ import pytest
 from scipy.linalg import expm
 
 from vehid.identification.filtering.filter_models import LinearModalFilterModel
-from vehid.identification.filtering.iekf_pass import compiled_pass, numpy_reference_pass, pack_covariance, unpack_covariance
+from vehid.identification.filtering.iekf_pass import (QUICK_COMPILE_STEPS, compiled_pass, numpy_reference_pass, pack_covariance,
+                                                    unpack_covariance)
 from vehid.identification.models.modal import ModalStructure
 from vehid.scenarios.linear_example import make_data, true_model
 
@@ -202,3 +203,24 @@ def test_structured_loops_equal_the_generated_step(covariance, spline):
 def test_unknown_kernel_is_rejected():
     with pytest.raises(ValueError, match="kernel"):
         compiled_pass(LinearModalFilterModel(ModalStructure.default(2, 1, 1)), DT, "exact", "joseph", kernel="fast")
+
+
+def test_a_short_run_gets_the_quick_build_with_the_same_arithmetic():
+    """A run of few filter steps is built at QUICK_COMPILE_FLAGS, a long one fully optimised: two libraries,
+    both within 1e-10 of the NumPy reference over 1,000 steps (the tolerance of the full build's test above;
+    the two builds differ only in rounding, fused multiply-adds)."""
+    data, _ = make_data(1, outputs=(0,), duration=2.2)
+    structure = ModalStructure.from_pattern("all-ones", 3, 2, 1)
+    filter_model = LinearModalFilterModel(structure)
+    quick = compiled_pass(filter_model, DT, "exact", "joseph", expected_steps=1000)
+    full = compiled_pass(filter_model, DT, "exact", "joseph", expected_steps=QUICK_COMPILE_STEPS + 1)
+    assert quick._function is not full._function
+    assert compiled_pass(filter_model, DT, "exact", "joseph")._function is full._function  # unknown length: full
+    q = np.concatenate([np.zeros(3), np.ones(structure.n_parameters)])
+    state = _start_state(structure, structure.initial_parameters(sigma=-10, omega=10, omega_spread=0.5), q)
+    u, y = data.u[:1000], data.y[:1000]
+    reference_state, reference_innovations = numpy_reference_pass(quick.filter_step, state, u, y, q, np.eye(1))
+    for run in (quick, full):
+        compiled_state, compiled_innovations = run(state, u, y, q, np.eye(1))
+        assert np.max(np.abs(compiled_state - reference_state)) < 1e-10 * np.max(np.abs(reference_state))
+        assert np.max(np.abs(compiled_innovations - reference_innovations)) < 1e-10 * np.max(np.abs(y))

@@ -501,7 +501,9 @@ def identify_iekf(
     # unscaled data are passed as they are: a copy of a long record per channel is memory for nothing
     u_scaled = [record.u if np.all(input_scale == 1) else record.u / input_scale for record in records]
     y_scaled = [record.y if np.all(output_scale == 1) else record.y / output_scale for record in records]
-    run_pass = compiled_pass(LinearModalFilterModel(structure), dt / time_unit, options.discretization, options.covariance)
+    # at most every pass over every record (the settling heads and the covariance's sampled pass aside)
+    run_pass = compiled_pass(LinearModalFilterModel(structure), dt / time_unit, options.discretization, options.covariance,
+                             expected_steps=options.passes * sum(record.n_samples for record in records))
 
     def original_units(theta_filter: np.ndarray) -> np.ndarray:
         return structure.denormalize(structure.rescale_time(theta_filter, 1.0 / time_unit), input_scale, output_scale)

@@ -55,6 +55,15 @@ LARGE_STEP_COMPILE_FLAGS = "-O1"
 # A full-vehicle model's step (the 23-state car with six parameters: 160,000 instructions) makes loops whose
 # model part alone took over 3 min of CPU to compile at -O3 and 20 s at -O1; -O1 is taken beyond this size.
 HUGE_STEP_INSTRUCTIONS = 100_000
+# A short run does not repay a full optimisation. Against -O3 -march=native the generated step at -O0
+# compiles 0.2-0.7 ms of CPU faster per instruction and runs 0.6-1.5 ns slower per instruction and
+# sample (benchmarks/iekf_compile_levels.py, 900 to 13,000 instructions, two runs): both grow with the
+# step, so the break-even, 150,000 to 1,200,000 filter steps (samples x passes), hardly depends on its
+# size. The lowest figure is that of the smallest step, whose whole compile takes under half a second:
+# at 250,000 steps the quick build loses at most a tenth of a second there and wins everywhere else.
+# Only the rounding differs (no fused multiply-adds at -O0).
+QUICK_COMPILE_FLAGS = "-O0"
+QUICK_COMPILE_STEPS = 250_000
 
 
 def pack_covariance(P: np.ndarray) -> np.ndarray:
@@ -288,8 +297,9 @@ class _VirtualMachinePass:
 
 
 @functools.lru_cache(maxsize=32)
-def _compiled_library(filter_model: FilterModel, discretization: str, covariance: str, kernel: str):
-    """The loaded pass of a structure, its sample time a run-time argument: compiled once per structure."""
+def _compiled_library(filter_model: FilterModel, discretization: str, covariance: str, kernel: str, quick: bool):
+    """The loaded pass of a structure, its sample time a run-time argument: compiled once per structure
+    (and per build: ``quick`` for a run too short to repay the full optimisation of the generated step)."""
     timed_step, _ = _timed_functions(filter_model, discretization, covariance)
     tag = hashlib.sha256(filter_model.cache_key().encode()).hexdigest()[:8]
     large = timed_step.n_instructions() > LARGE_STEP_INSTRUCTIONS
@@ -300,14 +310,18 @@ def _compiled_library(filter_model: FilterModel, discretization: str, covariance
             tuple(functions), source, library_name=f"iekf_loops_{tag}", entry="vehid_iekf_pass",
             n_integers=4, n_arrays=8, optimisation=LARGE_STEP_COMPILE_FLAGS if huge else PASS_COMPILE_FLAGS,
         )
+    if quick:
+        flags = QUICK_COMPILE_FLAGS
+    else:
+        flags = LARGE_STEP_COMPILE_FLAGS if large else PASS_COMPILE_FLAGS
     return compile_driver(
         timed_step, _DRIVER, library_name=f"iekf_pass_{tag}", entry="vehid_iekf_pass",
-        n_integers=4, n_arrays=8, optimisation=LARGE_STEP_COMPILE_FLAGS if large else PASS_COMPILE_FLAGS,
+        n_integers=4, n_arrays=8, optimisation=flags,
     )
 
 
 @functools.lru_cache(maxsize=32)
-def _pass_for(filter_model: FilterModel, dt: float, discretization: str, covariance: str, kernel: str):
+def _pass_for(filter_model: FilterModel, dt: float, discretization: str, covariance: str, kernel: str, quick: bool):
     filter_step = build_filter_step(filter_model, dt, discretization, covariance)
     if find_c_compiler() is None:
         warnings.warn(
@@ -317,10 +331,11 @@ def _pass_for(filter_model: FilterModel, dt: float, discretization: str, covaria
             stacklevel=3,
         )
         return _VirtualMachinePass(filter_step)
-    return _CompiledPass(_compiled_library(filter_model, discretization, covariance, kernel), filter_step)
+    return _CompiledPass(_compiled_library(filter_model, discretization, covariance, kernel, quick), filter_step)
 
 
-def compiled_pass(filter_model: FilterModel, dt: float, discretization: str, covariance: str, kernel: str = "auto"):
+def compiled_pass(filter_model: FilterModel, dt: float, discretization: str, covariance: str, kernel: str = "auto",
+                  *, expected_steps: int | None = None):
     """The pass function for a filter model, built and compiled once (cached in memory and on disk).
 
     ``kernel`` chooses the compiled code: ``structured`` generates only the
@@ -330,6 +345,11 @@ def compiled_pass(filter_model: FilterModel, dt: float, discretization: str, cov
     loops where the generated step is large (above
     ``LARGE_STEP_INSTRUCTIONS``), which pays only for large steps (docs/iekf_tuning.md).
 
+    ``expected_steps`` is the most filter steps the caller will run (samples
+    times passes); at most ``QUICK_COMPILE_STEPS`` the generated step is built
+    at ``QUICK_COMPILE_FLAGS``, which costs less than a full optimisation repays
+    over so few steps. ``None`` (unknown) builds it fully optimised.
+
     Returns a callable ``run(state, u, y, q, r, c=None) -> (state, innovations)`` with
     ``state = [z; upper(P)]`` (see :func:`pack_covariance`), ``u`` (N, n_u),
     ``y`` (N, n_y), ``q`` (m,) the diagonal of Q, ``r`` (n_y, n_y), ``c`` the
@@ -338,7 +358,8 @@ def compiled_pass(filter_model: FilterModel, dt: float, discretization: str, cov
     """
     if kernel not in KERNELS:
         raise ValueError(f"unknown kernel {kernel!r}; use one of {', '.join(KERNELS)}")
-    return _pass_for(filter_model, float(dt), discretization, covariance, kernel)
+    quick = expected_steps is not None and expected_steps <= QUICK_COMPILE_STEPS
+    return _pass_for(filter_model, float(dt), discretization, covariance, kernel, quick)
 
 
 def numpy_reference_pass(

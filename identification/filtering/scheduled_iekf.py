@@ -608,7 +608,8 @@ def identify_scheduled(
     r = np.diag(data_measurement_noise(data) / output_scale**2)
     u_filter = np.column_stack([data.u / input_scale, schedule])
     y_filter = data.y / output_scale
-    run_pass = compiled_pass(filter_model, 1.0, options.discretization, options.covariance)
+    run_pass = compiled_pass(filter_model, 1.0, options.discretization, options.covariance,
+                             expected_steps=options.passes * data.n_samples)
 
     def simulate(candidate: ScheduledModalModel) -> np.ndarray:
         with np.errstate(all="ignore"):

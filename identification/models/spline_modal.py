@@ -239,6 +239,13 @@ def _simulator(structure: SplineModalStructure, discretization: str) -> Compiled
     return CompiledRecursion(step, optimisation="-O1")
 
 
+@functools.lru_cache(maxsize=256)
+def _uniform_basis(lower: float, upper: float, count: int) -> SplineBasis:
+    """A uniform basis, shared between models: a basis is never changed once built, and a model and
+    its sampled neighbours (one node range each) linearise thousands of times."""
+    return SplineBasis.uniform(lower, upper, count)
+
+
 @dataclass(frozen=True, eq=False)
 class SplineModalModel(StateSpaceModel):
     """An identified spline-nonlinear modal model: a frozen value.
@@ -453,9 +460,16 @@ class SplineModalModel(StateSpaceModel):
         st = self.structure
         values = []
         follows = st.coefficient_variables()
-        for index, name in enumerate(st.coefficient_names()):
-            point = at if follows[index] < st.linear.n_complex_pairs else 0.0
-            values.append(float(self.coefficient(name, [point])[0]))
+        gammas = st.gammas(self.theta)
+        # The coefficients following one variable share its basis and its row at the point: built once per
+        # variable, not per coefficient (a sampled band evaluates thousands of linearisations)
+        rows: dict[int, np.ndarray] = {}
+        for index, variable in enumerate(follows):
+            if variable not in rows:
+                lower, upper = self.ranges[variable]
+                point = at if variable < st.linear.n_complex_pairs else 0.0
+                rows[variable] = _uniform_basis(float(lower), float(upper), st.nodes).evaluate(np.array([point], dtype=float))
+            values.append(float((rows[variable] @ gammas[index])[0]))
         theta = st.linear.denormalize(np.array(values), self.input_scale, self.output_scale)
         return ModalModel.from_parameters(st.linear, theta, input_names=self.input_names, output_names=self.output_names)
 
