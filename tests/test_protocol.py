@@ -3,7 +3,8 @@
 Each class is built to stand for a known continuous system whose
 eigenvalues are written down by hand (two complex pairs and a real pole, one
 input, two outputs; an unstable twin with a pair at +0.8 +/- 6j): directly
-(modal, continuous), through its spline form, through the exact first-order-
+(modal, continuous), through its spline form, as the model a speed-scheduled family gives at one
+value of its variable (scheduled; its other knots a slower system), through the exact first-order-
 hold discretisation (discrete, ARX polynomials, singular pencil) or by an
 estimator on noise-free samples (subspace). Independent truth:
 
@@ -45,6 +46,7 @@ from vehid.identification.models.discrete import ContinuousModel
 from vehid.identification.errors import InputError
 from vehid.identification.classical.pencil import PencilModel
 from vehid.identification.models.statespace import continuous_to_discrete, hold_state_shift
+from vehid.identification.models.scheduled import ScheduledModalModel, gauge_parameters, input_gauge
 
 DT = 0.01
 # The hand-written systems: (pairs sigma, omega), real poles.
@@ -57,6 +59,15 @@ ALGEBRA = 1e-9
 SUBSPACE = 1e-8
 # An archive stores arrays bit for bit: the round trip may differ by rounding of the rebuild only.
 ROUND_TRIP = 1e-12
+
+
+def _knot_parameters(model: ModalModel) -> np.ndarray:
+    """One knot of a scheduled family holding ``model``: its modes in the input gauge, output offsets zero."""
+    structure = model.structure
+    A, B, C = input_gauge(model, list(range(len(structure.mode_states()))))
+    modal = np.array([A[s[0], s[0]] if k == 0 else abs(A[s[0], s[1]])
+                      for s in structure.mode_states() for k in range(len(s))])
+    return np.concatenate([gauge_parameters(modal, B, C, model.D), np.zeros(structure.n_y)])
 
 
 def _hand_written(system) -> np.ndarray:
@@ -111,6 +122,12 @@ def _build(kind: str, system) -> tuple[object, Truth]:
         return modal, truth(None)
     if kind == "spline-modal":  # scales away from 1, so that a slip in the normalisation shows
         return SplineModalModel.from_linear(modal, 5, np.array([2.0]), np.array([0.5, 3.0]), DT), truth(None)
+    if kind == "scheduled":  # a family on three speeds whose middle knot is the system, taken at that speed
+        pairs, real = system
+        slower = _modal((tuple((0.7 * s, 0.7 * w) for s, w in pairs), tuple(0.7 * r for r in real)))
+        grid = np.array([10.0, 20.0, 30.0])
+        theta = np.concatenate([_knot_parameters(slower), _knot_parameters(modal), _knot_parameters(slower)])
+        return ScheduledModalModel.from_parameters(modal.structure, grid, theta).model_at(20.0), truth(None)
     if kind == "continuous":  # the same system in another state basis
         T = np.random.default_rng(2).uniform(-1.0, 1.0, (5, 5)) + 3 * np.eye(5)
         Ti = np.linalg.inv(T)
@@ -131,7 +148,7 @@ def _build(kind: str, system) -> tuple[object, Truth]:
     raise ValueError(kind)
 
 
-MODEL_KINDS = ("modal", "spline-modal", "continuous", "discrete", "arx", "pencil", "subspace")
+MODEL_KINDS = ("modal", "spline-modal", "scheduled", "continuous", "discrete", "arx", "pencil", "subspace")
 
 
 @functools.cache
