@@ -64,6 +64,7 @@ def make_log(truth, minutes: float):
 RACE_LOG = Path(__file__).resolve().parents[1] / "tests" / "data" / "race_car_250lm" / "20140222_01_01_03_250lm.csv"
 RACE_PARAMETERS = ("tyre.PKY1", "tyre.front_cornering_scale", "tyre.friction_scale", "chassis.yaw_inertia")
 RACE_VALIDATION = 0.4
+RACE_HANDLING_SPEEDS = (20.0, 30.0, 40.0)  # within the log's 16-61 m/s
 
 
 def race_car():
@@ -94,6 +95,7 @@ def race(substeps: int = 0) -> dict:
     from vehid.identification.assessment.metrics import nrmse_fit
     from vehid.identification.filtering.greybox import GreyBoxOptions, simulate_greybox
     from vehid.vehicle.calibration import calibration_model, calibration_record
+    from vehid.vehicle.handling import source_handling
     from vehid.vehicle.replay import replay_substeps
 
     table = np.genfromtxt(RACE_LOG, delimiter=",", skip_header=2)
@@ -122,7 +124,18 @@ def race(substeps: int = 0) -> dict:
         fits = nrmse_fit(held.y, predicted)
         figures[f"{label}_holdout_nrmse_percent"] = dict(zip(("yaw_rate", "lateral_acceleration", "sideslip"),
                                                              map(float, fits)))
+    # the calibrated car's own handling (its linearisation, ISO 4138 quantities) where the log drove
+    handling = source_handling(calibration.vehicle, RACE_HANDLING_SPEEDS, simulate=False)
+    figures["handling"] = {
+        f"{metrics.speed:g}": {"understeer_gradient_deg_per_g": metrics.understeer_gradient_deg_per_g,
+                               "characteristic_speed_m_s": metrics.characteristic_speed_m_s,
+                               "yaw_rate_gain_per_s": metrics.yaw_rate_gain}
+        for metrics in handling.linearisation}
     print(f"race car: {n_estimation} samples calibrated in {seconds:.1f} s ({substeps} RK4 steps per sample)")
+    for speed, row in figures["handling"].items():
+        print(f"  calibrated car at {speed} m/s: understeer gradient {row['understeer_gradient_deg_per_g']:.2f} deg/g, "
+              f"characteristic speed {row['characteristic_speed_m_s']:.1f} m/s, "
+              f"yaw-rate gain {row['yaw_rate_gain_per_s']:.2f} 1/s")
     for name, row in figures["parameters"].items():
         print(f"  {name} = {row['value']:.5g} +/- {row['std'] if row['std'] is None else format(row['std'], '.3g')}")
     for label in ("prior", "calibrated"):
