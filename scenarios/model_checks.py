@@ -1,24 +1,8 @@
 """The text of how sure a model is (modes with standard deviations); the checks themselves are the library's
 (:mod:`vehid.identification.automatic.checks`).
 
-Public JSON keys (a contract once released):
-
-``modes``
-    One object per mode (pairs first, then real poles): ``eigenvalue`` and
-    ``eigenvalue_std`` as [re, im], ``frequency_hz``, ``frequency_hz_std``,
-    ``damping``, ``damping_std`` (NaN standard deviations where the
-    estimator gave no covariance).
-``residual_whiteness_p``, ``input_correlation_max``
-    Per output, of the continuous model's simulation residuals on the
-    record (:mod:`vehid.identification.assessment.residuals`); ``residual_tests`` holds the
-    full test results per output (also ``ljung_box``,
-    ``input_correlation_p``, ``white``, ``independent``) with the 99 % bound.
-``innovation_nis``, ``innovation_nis_band``
-    IEKF only: the mean normalised innovation squared ``e' R^-1 e`` of every
-    pass and the 99 % band of a consistent filter. The filter's innovation
-    covariance is ``H P H' + R``; the compiled pass returns innovations
-    only, so R stands for it, which overstates the NIS a little while P is
-    large and not at all once it has settled.
+The public JSON keys of the checks (a contract once released) are listed in
+:mod:`vehid.identification.automatic.checks`.
 """
 
 from __future__ import annotations

@@ -223,17 +223,9 @@ class Identification:
             summary["divergence"] = self.divergence
         if self.start_returned:
             summary.update(fit_percent=self.fit_percent, model_returned="start")  # a returned family's scores replace it below
-        evaluation = self.evaluation
-        summary.update({
-            "fit_percent": summary["fit_percent"],
-            "estimation_fit_percent": evaluation.estimation.fit,
-            "estimation_R": evaluation.estimation.R,
-            "validation_fit_percent": evaluation.validation_fit,
-            "validation_R": evaluation.validation_R,
-            "validation_records": [s.as_dict() for s in evaluation.validation],
-            "initial_state": evaluation.estimation.initial_state,
-            "horizon": evaluation.horizon,
-        })
+        from .steps import scores_summary  # the public score keys are defined once, beside the scoring
+
+        summary.update(scores_summary(self.evaluation, summary["fit_percent"]))
         summary.update(self.data)
         if self.checks is not None:
             summary.update(self.checks)
