@@ -229,6 +229,10 @@ class _GreyBoxFilterModel:
         self.discretization = discretization
         self.substeps = substeps
 
+    # An integrator over a physical model's ODE: its step is one large expression graph, which the C
+    # compiler optimises at -O3 for minutes (iekf_pass.HUGE_STEP_INSTRUCTIONS)
+    model_bound_step = True
+
     n_constants = property(lambda self: self.model.n_theta + self.model.n_y)
     n_x = property(lambda self: self.model.n_x)
     n_theta = property(lambda self: self.model.n_theta)

@@ -53,7 +53,10 @@ PASS_COMPILE_FLAGS = "-O3 -march=native"
 LARGE_STEP_INSTRUCTIONS = 10_000
 LARGE_STEP_COMPILE_FLAGS = "-O1"
 # A full-vehicle model's step (the 23-state car with six parameters: 160,000 instructions) makes loops whose
-# model part alone took over 3 min of CPU to compile at -O3 and 20 s at -O1; -O1 is taken beyond this size.
+# model part alone took over 3 min of CPU to compile at -O3 and 20 s at -O1, for a pass about twice as slow:
+# -O1 is taken beyond this size for a filter model whose step integrates a physical model (its attribute
+# ``model_bound_step``). The modal and spline filters' loops compile in seconds at -O3, and their passes
+# at -O1 made the handling study 60 % slower, so they keep the full optimisation whatever their size.
 HUGE_STEP_INSTRUCTIONS = 100_000
 # A short run does not repay a full optimisation. Against -O3 -march=native the generated step at -O0
 # compiles 0.2-0.7 ms of CPU faster per instruction and runs 0.6-1.5 ns slower per instruction and
@@ -305,7 +308,8 @@ def _compiled_library(filter_model: FilterModel, discretization: str, covariance
     large = timed_step.n_instructions() > LARGE_STEP_INSTRUCTIONS
     if kernel == "structured" or (kernel == "auto" and large):
         source, functions = structured_pass_source(build_filter_step(filter_model, 1.0, discretization, covariance))
-        huge = timed_step.n_instructions() > HUGE_STEP_INSTRUCTIONS
+        huge = (getattr(filter_model, "model_bound_step", False)
+                and timed_step.n_instructions() > HUGE_STEP_INSTRUCTIONS)
         return compile_driver(
             tuple(functions), source, library_name=f"iekf_loops_{tag}", entry="vehid_iekf_pass",
             n_integers=4, n_arrays=8, optimisation=LARGE_STEP_COMPILE_FLAGS if huge else PASS_COMPILE_FLAGS,
