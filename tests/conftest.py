@@ -9,6 +9,13 @@ out first, those with most of them before the others, and the many short files f
 
 from __future__ import annotations
 
+import contextlib
+import io
+import logging
+import os
+import warnings
+from dataclasses import dataclass
+
 import pytest
 
 
@@ -34,3 +41,52 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     # (xdist checks) and each file's tests stay together and in their own order.
     items.sort(key=lambda item: (-slow_tests.get(file_of[id(item)], 0), first_position[file_of[id(item)]],
                                  position[id(item)]))
+
+
+@dataclass(frozen=True)
+class CommandRun:
+    """What one ``vehid`` command gave: its exit status and the text it wrote to stdout and stderr."""
+
+    returncode: int
+    stdout: str
+    stderr: str
+
+
+def run_vehid(*argv: str, cwd: str | os.PathLike | None = None) -> CommandRun:
+    """Run ``vehid argv...`` in this process, as the console script would, and return what it gave.
+
+    A separate process pays the interpreter's start, the workbench's imports and the building of every
+    symbolic function again (about 2 s of a short identification run); in this process a second command
+    finds them built. What the command does is the same: ``main`` is the console script's entry point,
+    Python warnings are shown on stderr as the command shows them (not turned into errors by the suite's
+    filter, which a separate process would not see either), and the logging set-up, the warnings' display
+    and the working folder the command changes are put back afterwards. A test of what only a process can
+    show (a signal, the environment, C-level output) still starts one.
+    """
+    from vehid.scenarios.cli import main
+
+    root = logging.getLogger()
+    saved_handlers, saved_level, saved_show = root.handlers[:], root.level, warnings.showwarning
+    out, err = io.StringIO(), io.StringIO()
+    try:
+        with contextlib.ExitStack() as stack:
+            if cwd is not None:
+                stack.enter_context(contextlib.chdir(cwd))
+            stack.enter_context(warnings.catch_warnings())
+            warnings.simplefilter("default")
+            stack.enter_context(contextlib.redirect_stdout(out))
+            stack.enter_context(contextlib.redirect_stderr(err))
+            try:
+                status = main([str(argument) for argument in argv])
+            except SystemExit as exc:  # argparse's usage errors end the process with their status
+                status = exc.code if isinstance(exc.code, int) else 1
+    finally:
+        root.handlers[:], warnings.showwarning = saved_handlers, saved_show
+        root.setLevel(saved_level)
+    return CommandRun(status, out.getvalue(), err.getvalue())
+
+
+@pytest.fixture(scope="session")
+def vehid_command():
+    """:func:`run_vehid`, for tests and module fixtures that run commands."""
+    return run_vehid

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import run_vehid
 
 from vehid.identification import IOData
 from vehid.identification.assessment.metrics import nrmse_fit
@@ -109,9 +110,7 @@ HANG_SECONDS = 1800
 
 def _identify(entry, scratch: Path, *options: str) -> tuple[int, dict]:
     """``vehid identify`` on the raw file with the benchmark's arguments; exit status and JSON summary."""
-    command = [sys.executable, "-m", "vehid.scenarios.cli", "identify", *benchmark.data_args(entry, scratch), *options,
-               "--json", "--quiet"]
-    done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=HANG_SECONDS)
+    done = run_vehid("identify", *benchmark.data_args(entry, scratch), *options, "--json", "--quiet", cwd=ROOT)
     assert done.returncode in (0, 3), done.stderr[-500:]
     return done.returncode, json.loads(done.stdout.strip().splitlines()[-1])
 
