@@ -71,6 +71,7 @@ def identify(data: IOData | Sequence[IOData], *, order: int | str = 4,
 
     from vehid.identification.automatic.plan import ScheduleData, holdout_fraction, make_plan
     from vehid.identification.automatic.run import identify_plan
+    from vehid.identification.blas import one_blas_thread
     from vehid.identification.dataio.preparation import prepare, prepare_validation
 
     raw = (data,) if isinstance(data, IOData) else tuple(data)
@@ -111,7 +112,8 @@ def identify(data: IOData | Sequence[IOData], *, order: int | str = 4,
         cut = records[0].n_samples
         plan = dataclasses.replace(plan, schedule=ScheduleData(
             schedule_channel, (schedule_samples[:cut],), (schedule_samples[cut:],) if held else ()))
-    result = identify_plan(plan, options)
+    with one_blas_thread():
+        result = identify_plan(plan, options)
     if options.strict and result.warnings:
         raise StrictWarningsError(list(result.warnings), result.render())
     return result

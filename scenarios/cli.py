@@ -76,11 +76,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise
     _configure_logging(args)
     # What only a running command needs (worker processes, signal handling) is imported once it runs.
+    from vehid.identification.blas import one_blas_thread
     from vehid.scenarios.shutdown import PATH_ERRNOS, signal_name, stopping_on_signals
 
     handler: Callable[[Any], tuple[dict, str]] = args.handler
     try:
-        with stopping_on_signals():  # until the result is printed: a signal before then ends with 128 + its number
+        # until the result is printed: a signal before then ends with 128 + its number
+        with stopping_on_signals(), one_blas_thread():
             summary, text = handler(args)
             _print_result(args, summary, text)
     except StrictWarningsError as exc:

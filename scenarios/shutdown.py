@@ -23,6 +23,7 @@ from contextlib import contextmanager
 from multiprocessing import get_context
 from typing import Any, Callable, Iterator, Sequence
 
+from vehid.identification.blas import one_blas_thread
 from vehid.identification.errors import WorkbenchError
 
 from ._parent_watch import ENVIRONMENT, die_with_parent
@@ -150,17 +151,18 @@ def _worker_main(function: Callable[..., Any], jobs: Any, results: Any, parent_p
     def report(message: Any) -> None:
         results.put(("message", None, message))
 
-    while True:
-        item = jobs.get()
-        if item is None:
-            return
-        index, job = item
-        try:
-            value = function(job, report)
-        except BaseException as exc:  # handed to the parent, which stops the others
-            results.put(("error", index, _portable(exc)))
-            return
-        results.put(("done", index, value))
+    with one_blas_thread():  # as in the parent command (vehid.identification.blas)
+        while True:
+            item = jobs.get()
+            if item is None:
+                return
+            index, job = item
+            try:
+                value = function(job, report)
+            except BaseException as exc:  # handed to the parent, which stops the others
+                results.put(("error", index, _portable(exc)))
+                return
+            results.put(("done", index, value))
 
 
 def _stop(processes: Sequence[Any]) -> None:
