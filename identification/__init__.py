@@ -14,6 +14,8 @@ import importlib.util
 import sys
 from typing import Any
 
+from .lazy_exports import export_lazily
+
 # submodule -> the public names it defines
 _EXPORTS: dict[str, tuple[str, ...]] = {
     "dataio.archive": ("SCHEMA_VERSION", "Archive", "RunName", "RunRecord", "append_history", "open_archive",
@@ -121,20 +123,7 @@ class _FormerModuleFinder(importlib.abc.MetaPathFinder, importlib.abc.Loader):
 if not any(isinstance(finder, _FormerModuleFinder) for finder in sys.meta_path):
     sys.meta_path.append(_FormerModuleFinder())
 
-_MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
-
-
-def __getattr__(name: str) -> Any:
-    module = _MODULE_OF.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{module}", __name__), name)
-    globals()[name] = value  # later look-ups skip this function
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_MODULE_OF))
+export_lazily(__name__, _EXPORTS)
 
 
 __all__ = [

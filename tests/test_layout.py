@@ -138,3 +138,20 @@ def test_former_module_names_are_the_same_modules():
             importlib.import_module(f"vehid.identification.{current}"), former
     assert importlib.import_module("vehid.identification.modal").ModalModel is ModalModel
     assert importlib.import_module("vehid.identification.modal").__spec__.name == "vehid.identification.models.modal"
+
+
+@pytest.mark.parametrize("package_name", ["vehid.identification", "vehid.vehicle"])
+def test_exported_names_stay_the_exported_values_once_every_submodule_is_imported(package_name):
+    # importing a submodule sets it as an attribute of its package: an exported function of the same
+    # name (identification's ``least_squares`` and its former module name, vehicle's ``linearize``)
+    # would be replaced by the module, and ``from package import name`` would give a module
+    import importlib
+    import pkgutil
+
+    package = importlib.import_module(package_name)
+    for info in pkgutil.iter_modules(package.__path__):
+        importlib.import_module(f"{package_name}.{info.name}")
+    for former in getattr(package, "_FORMER_MODULES", {}):
+        importlib.import_module(f"{package_name}.{former}")
+    for name, module in package._MODULE_OF.items():
+        assert getattr(package, name) is getattr(importlib.import_module(f"{package_name}.{module}"), name), name

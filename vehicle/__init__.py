@@ -16,14 +16,10 @@ speeds outside ``MIN_SPEED``-``MAX_SPEED`` (m/s) are input errors.
 
 from __future__ import annotations
 
-import importlib
-import sys
-import types
-from typing import Any
+from vehid.identification.lazy_exports import export_lazily
 
-# submodule -> the public names it defines. Each name is imported from its module when first asked
-# for, so that a light module of the package (its named choices, its parameters) does not pull in
-# CasADi and the symbolic model with it.
+# submodule -> the public names it defines, each imported when first asked for: a light module of the
+# package (its named choices, its parameters) does not pull in CasADi and the symbolic model with it.
 _EXPORTS: dict[str, tuple[str, ...]] = {
     "linearize": ("Linearization", "VehicleMode", "linearize"),
     "manoeuvres": ("MANOEUVRES", "Manoeuvre", "make_manoeuvre"),
@@ -35,37 +31,7 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
     "simulation": ("DEFAULT_DT", "rk4_simulator", "simulate"),
     "validity": ("ENVELOPE", "MAX_SPEED", "MAX_SPEED_AERO", "MIN_SPEED"),
 }
-_MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
-
-
-def __getattr__(name: str) -> Any:
-    module = _MODULE_OF.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{module}", __name__), name)
-    globals()[name] = value  # later look-ups skip this function
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_MODULE_OF))
-
-
-class _LazyPackage(types.ModuleType):
-    """The package module, whose exported names win over its submodules' names.
-
-    Importing a submodule makes it an attribute of its package; the function
-    ``linearize`` would then be hidden by the module ``linearize`` that
-    defines it, whichever was imported first.
-    """
-
-    def __setattr__(self, name: str, value: Any) -> None:
-        if name in _MODULE_OF and isinstance(value, types.ModuleType):
-            return  # the submodule stays in sys.modules; the package's name keeps meaning the exported value
-        super().__setattr__(name, value)
-
-
-sys.modules[__name__].__class__ = _LazyPackage
+export_lazily(__name__, _EXPORTS)
 
 
 __all__ = [
