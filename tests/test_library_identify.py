@@ -5,6 +5,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import run_vehid
 
 from vehid.identification.errors import InputError
 from vehid.identification.jsonable import to_jsonable
@@ -100,7 +101,24 @@ def _readme_python_example() -> str:
     return blocks[0].split("```")[0]
 
 
-def test_the_readme_python_example_reproduces_the_command(capsys, monkeypatch):
+@pytest.fixture(scope="module")
+def documented_command():
+    """``vehid ARGUMENTS --json`` run from the clone's root (where the examples name their records), as a
+    function; a command line two examples both name is run once and its summary given to each."""
+    summaries: dict[tuple[str, ...], dict] = {}
+
+    def summary_of(arguments: list[str]) -> dict:
+        key = tuple(arguments)
+        if key not in summaries:
+            completed = run_vehid(*arguments, "--json", cwd=Path(__file__).resolve().parents[1])
+            assert completed.returncode == 0, completed.stderr
+            summaries[key] = json.loads(completed.stdout)
+        return summaries[key]
+
+    return summary_of
+
+
+def test_the_readme_python_example_reproduces_the_command(capsys, monkeypatch, documented_command):
     """The README's example verbatim (default options: p by cross-validation) against the command it names."""
     code = _readme_python_example()
     command_line = next(line for line in code.splitlines() if line.startswith("# as: vehid identify "))
@@ -109,8 +127,7 @@ def test_the_readme_python_example_reproduces_the_command(capsys, monkeypatch):
     namespace: dict = {}
     exec(compile(code, "README.md", "exec"), namespace)
     printed = capsys.readouterr()
-    assert main([*arguments, "--json"]) == 0
-    summary = json.loads(capsys.readouterr().out)
+    summary = documented_command(arguments)
     result = namespace["result"]
     for name in "ABCD":
         _close(getattr(result.model, name), summary[name])
@@ -118,7 +135,7 @@ def test_the_readme_python_example_reproduces_the_command(capsys, monkeypatch):
     assert result.warnings == tuple(summary["warnings"]) and printed.out.strip()
 
 
-def test_the_gallery_example_reproduces_the_command(capsys, monkeypatch):
+def test_the_gallery_example_reproduces_the_command(documented_command):
     """The measured-record example of the documentation's gallery, run as a user runs it, against the
     command its docstring names: the same model and held-out scores to 1e-9."""
     import runpy
@@ -134,10 +151,7 @@ def test_the_gallery_example_reproduces_the_command(capsys, monkeypatch):
     docstring = namespace["__doc__"]
     # the command as the docstring shows it: two lines joined at the shell's continuation backslash
     command = " ".join(docstring.split("vehid identify ")[1].split("\n")[0:2]).replace("\\", " ").split()
-    monkeypatch.chdir(Path(__file__).resolve().parents[1])  # it names the record from the clone's root
-    capsys.readouterr()
-    assert main(["identify", *command, "--json"]) == 0
-    summary = json.loads(capsys.readouterr().out)
+    summary = documented_command(["identify", *command])  # it names the record from the clone's root
     result = namespace["result"]
     for name in "ABCD":
         _close(getattr(result.model, name), summary[name])

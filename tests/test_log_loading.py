@@ -10,14 +10,13 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import subprocess
-import sys
 from pathlib import Path
 
 import h5py
 import numpy as np
 import pytest
 import scipy.io
+from conftest import run_vehid
 
 from vehid.identification import InputError, load_records, prepare, read_record
 from vehid.identification.dataio.storage import read_value, write_value
@@ -273,8 +272,7 @@ def test_a_bare_steering_ratio_needs_a_single_input(tmp_path):
 
 # ------------------------------------------------------------------ the command line
 def _vehid(*arguments, cwd):
-    return subprocess.run([sys.executable, "-m", "vehid.scenarios.cli", "identify", *arguments], cwd=cwd,
-                          capture_output=True, text=True, timeout=600)
+    return run_vehid("identify", *arguments, cwd=cwd)
 
 
 def test_command_line_reads_an_epoch_log_with_a_gap_and_reports_conversions(tmp_path):

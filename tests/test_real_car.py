@@ -7,25 +7,22 @@ move them; the assertions are physical properties, not figures measured on one m
 """
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import run_vehid
 
 LOG = Path(__file__).parent / "data" / "race_car_250lm" / "20140222_01_01_03_250lm.csv"
 MASS, LF, LR = 1100.0, 1.2, 1.2
-VEHID = [sys.executable, "-m", "vehid.scenarios.cli"]
 
 
 def _single_track(*outputs_and_quantities: str, extra: tuple[str, ...] = ()) -> dict:
     outputs, quantities = outputs_and_quantities
-    completed = subprocess.run(
-        [*VEHID, "identify", str(LOG), "--structure", "single-track", "--inputs", "delta", "--schedule", "vx",
-         "--outputs", outputs, "--quantities", quantities, "--mass", str(MASS), "--lf", str(LF), "--lr", str(LR),
-         "--validation", "0.4", "--json", *extra],
-        capture_output=True, text=True, check=False)
+    completed = run_vehid(
+        "identify", LOG, "--structure", "single-track", "--inputs", "delta", "--schedule", "vx",
+        "--outputs", outputs, "--quantities", quantities, "--mass", MASS, "--lf", LF, "--lr", LR,
+        "--validation", "0.4", "--json", *extra)
     assert completed.returncode == 0, completed.stderr
     return json.loads(completed.stdout)
 
@@ -86,9 +83,8 @@ def test_saturating_axles_that_cannot_reach_the_logged_cornering_say_so():
 
 
 def _modal(*options: str) -> dict:
-    completed = subprocess.run(
-        [*VEHID, "identify", str(LOG), "--inputs", "delta", "--outputs", "yawRate,ayCG", "--validation", "0.4",
-         "--json", *options], capture_output=True, text=True, check=False)
+    completed = run_vehid("identify", LOG, "--inputs", "delta", "--outputs", "yawRate,ayCG", "--validation", "0.4",
+                          "--json", *options)
     assert completed.returncode == 0, completed.stderr
     return json.loads(completed.stdout)
 

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 import scipy.linalg
 import scipy.signal
+from conftest import run_vehid
 
 from vehid.identification.data import IOData
 from vehid.identification.errors import InputError
@@ -252,11 +253,7 @@ def test_knot_cells_split_the_record_by_nearest_knot():
 
 
 def _vehid(*args):
-    import subprocess
-    import sys
-
-    return subprocess.run([sys.executable, "-m", "vehid.scenarios.cli", *args], capture_output=True, text=True,
-                          check=False)
+    return run_vehid(*args)
 
 
 def _write_log(path, seed):

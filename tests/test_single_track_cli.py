@@ -1,11 +1,10 @@
 """`vehid identify --structure single-track`: JSON contract, units, hold-out validation, warnings and bad input."""
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
+from conftest import run_vehid
 
 from vehid.identification.data import IOData
 from vehid.identification.filtering.greybox import simulate_greybox
@@ -13,14 +12,13 @@ from vehid.scenarios.cli import main
 from vehid.vehicle.manoeuvres import band_limited_noise
 from vehid.vehicle.single_track import SingleTrackConfig, single_track_model
 
-VEHID = [sys.executable, "-m", "vehid.scenarios.cli"]
 TRUTH = {"cornering_stiffness_front": 80_000.0, "cornering_stiffness_rear": 100_000.0, "yaw_inertia": 2500.0}
 GEOMETRY = ["--mass", "1500", "--lf", "1.2", "--lr", "1.5"]
 DEG = np.pi / 180.0
 
 
 def _vehid(*args):
-    return subprocess.run([*VEHID, *args], capture_output=True, text=True, check=False)
+    return run_vehid(*args)
 
 
 @pytest.fixture(scope="module")

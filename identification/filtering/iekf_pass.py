@@ -101,8 +101,6 @@ class FilterStep:
     library serves every record of a structure whatever its sample time.
     """
 
-    step: ca.Function
-    model: ca.Function
     n_z: int
     n_x: int
     n_u: int
@@ -113,6 +111,18 @@ class FilterStep:
     covariance: str
     timed_step: ca.Function
     timed_model: ca.Function
+
+    # Built when first asked for: the compiled pass is generated from the timed functions alone, and
+    # substituting the sample time into a physical model's large expression graph costs seconds per
+    # structure (about two thirds of a 23-state car's symbolic build) that only the virtual machine's
+    # pass and the NumPy reference use.
+    @functools.cached_property
+    def step(self) -> ca.Function:
+        return _at_sample_time(self.timed_step, self.dt)
+
+    @functools.cached_property
+    def model(self) -> ca.Function:
+        return _at_sample_time(self.timed_model, self.dt)
 
     @property
     def n_state(self) -> int:
@@ -197,7 +207,7 @@ def build_filter_step(filter_model: FilterModel, dt: float, discretization: str,
     timed_step, timed_model = _timed_functions(filter_model, discretization, covariance)
     m = filter_model.n_x + filter_model.n_theta
     return FilterStep(
-        _at_sample_time(timed_step, float(dt)), _at_sample_time(timed_model, float(dt)), m, filter_model.n_x,
+        m, filter_model.n_x,
         filter_model.n_u, filter_model.n_y, filter_model.n_constants, float(dt), discretization, covariance,
         timed_step, timed_model,
     )
