@@ -125,13 +125,14 @@ def _identify(entry, scratch: Path, *options: str) -> tuple[int, dict]:
 # unstable, predicts each half of the record from the other far better than a stable one (two-fold
 # 10-step fit 69.9 against 5.9 %), so the default run allows unstable modes, says so, and returns that
 # start because the filter pulls its growing mode into the left half-plane (estimation fit 84.5 against
-# 37.0 %); it is scored by 10-step prediction, as every unstable model is. Measured 89.18 (under the
-# perturbation: 89.18 with both seeds), against 32.01 before, when stable modes were asked and the
-# run ended worse than its start; the best peer's is 87.0 (SIPPY N4SID). The test checks that the
-# run's note says why the model is unstable. On the CD player arm cross-validation prefers the data
+# 37.0 %); it is scored by 10-step prediction, as every unstable model is. Measured 76.66 (under the
+# perturbation: 76.66 with both seeds), against 32.01 when stable modes were asked and the run ended
+# worse than its start. (Until the predictor's process noise followed the record's input, that score
+# depended on the input's units and read 89.18 with the published ones; the peers' stable models score
+# 88.0-90.9 by simulation.) The test checks that the run's note says why the model is unstable. On the CD player arm cross-validation prefers the data
 # start, which is returned.
 DEFAULT_FITS = {
-    "ballbeam": [89.18],
+    "ballbeam": [76.66],
     "dryer": [85.31],
     "robot_arm": [96.87],
     # 63.36 until the schedule margin: a constant Q, whose parameters follow the estimation part's last
@@ -152,7 +153,7 @@ MARGIN = 2.0
 # be fixed in the method rather than by lowering this floor. Its cause, measured: the cross-validated fit of
 # p 1e-4 is 38.6 % with the Haswell kernel and 71.5 % with Sandybridge (p 1e-5: 67.2 and 69.1 %), so the
 # filter run at that p, not a near tie, decides. With the Sandybridge kernel every other record gives its
-# figure above to 0.01 point (ball-and-beam 89.18, dryer 85.31, robot arm 96.87, exchanger 63.36, CD player
+# figure above to 0.01 point (ball-and-beam 89.18 as then scored, dryer 85.31, robot arm 96.87, exchanger 63.36, CD player
 # arm 73.43 and 78.96), and so do the comparators below (N4SID 96.80, ARX 69.58).
 
 

@@ -151,8 +151,12 @@ def _k_step(model: Any, data: IOData, horizon: int) -> np.ndarray:
     Cn, Dn = Cd / scale[:, None], Dd / scale[:, None]
     yn = data.y / scale
     n = Ad.shape[0]
+    # the state variance the record's own input drives: each input column at its RMS, so that the predictor,
+    # and with it the score, does not depend on the units the input is given in
+    input_rms = np.sqrt(np.mean(data.u**2, axis=0)) if data.u.size else np.zeros(Bd.shape[1])
+    Bu = Bd * input_rms[None, :]
     driven = scipy.linalg.solve_discrete_lyapunov(Ad * min(1.0, 0.99 / max(np.abs(np.linalg.eigvals(Ad)).max(), 1e-12)),
-                                                  Bd @ Bd.T) if n else np.zeros((0, 0))
+                                                  Bu @ Bu.T) if n else np.zeros((0, 0))
     Q = _PREDICTOR_PROCESS_NOISE * (driven + 1e-9 * np.trace(driven) * np.eye(n) / max(n, 1))
     R = np.eye(Cn.shape[0])
     try:
