@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pytest
+from conftest import run_vehid
 
 from vehid.identification.dataio.archive import read_archive
 from vehid.identification.errors import DivergenceError, InputError
@@ -44,13 +45,14 @@ TABLE_KEYS = {"order", "linear_eigenvalues", "linear_identification_R", "nonline
 
 @pytest.fixture(scope="module")
 def study(tmp_path_factory):
-    """The command run as a user runs it, two workers (a spawned process pool), JSON on stdout."""
+    """The command as a user runs it, two workers (a spawned process pool), JSON on stdout.
+
+    Run through the console script's entry point in this process: the workers are spawned processes
+    either way, and the vehicle's functions the command builds to simulate the records serve the
+    tests below that simulate them again.
+    """
     out = tmp_path_factory.mktemp("handling") / "handling_study.h5"
-    completed = subprocess.run(
-        [sys.executable, "-m", "vehid.scenarios.cli", "study", "handling", *FAST, "--workers", "2", "--json",
-         "--out", str(out)],
-        capture_output=True, text=True, check=False,
-    )
+    completed = run_vehid("study", "handling", *FAST, "--workers", "2", "--json", "--out", str(out))
     assert completed.returncode == 0, completed.stderr
     return json.loads(completed.stdout), out, completed.stderr
 

@@ -24,7 +24,7 @@ from vehid.vehicle import baseline, linearize, make_manoeuvre, simulate
 
 # Shortened under VEHID_DOCS_QUICK=1 (the documentation test); the study uses 30 s and 100 passes.
 quick = os.environ.get("VEHID_DOCS_QUICK") == "1"
-duration, passes = (8.0, 10) if quick else (30.0, 100)
+duration, passes = (5.0, 4) if quick else (30.0, 100)
 outputs = ["lateral_acceleration", "yaw_rate", "roll_angle"]
 
 # %%

@@ -24,7 +24,7 @@ from vehid.scenarios.linear_example import make_data, true_model
 
 # Shortened under VEHID_DOCS_QUICK=1 (the documentation test); the paper uses 100 s.
 quick = os.environ.get("VEHID_DOCS_QUICK") == "1"
-duration, passes = (20.0, 8) if quick else (100.0, 30)
+duration, passes = (10.0, 4) if quick else (100.0, 30)
 
 # %%
 # The record: eq. 16 inputs, the first output of eq. 15, 500 Hz.

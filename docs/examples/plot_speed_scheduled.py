@@ -38,7 +38,7 @@ from vehid.identification.filtering.scheduled_iekf import ScheduledIEKFOptions, 
 
 # Shortened under VEHID_DOCS_QUICK=1 (the documentation test): fewer passes.
 quick = os.environ.get("VEHID_DOCS_QUICK") == "1"
-passes, scheduled_passes, refine = (20, 10, 10) if quick else (40, 40, 10)
+passes, scheduled_passes, refine = (8, 4, 2) if quick else (40, 40, 10)
 
 # The log ships with the repository's tests; this path holds in a clone.
 path = Path(vehid.__file__).resolve().parent / "tests" / "data" / "race_car_250lm" / "20140222_01_01_03_250lm.csv"
