@@ -10,13 +10,12 @@ public ball-and-beam record a slightly different hold-out fraction or a
 """
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from conftest import run_vehid
 
 from vehid.identification.data import IOData
 from vehid.identification.decisions import SCHEDULE_MARGIN, ScheduleCandidate, choose_p_and_schedule
@@ -26,7 +25,6 @@ from vehid.scenarios import identify_workflow as workflow
 ROOT = Path(__file__).resolve().parent.parent
 BALLBEAM = ROOT / "tests" / "data" / "ballbeam" / "ballbeam.dat"
 DRYER = ROOT / "tests" / "data" / "dryer" / "dryer.dat"
-VEHID = [sys.executable, "-m", "vehid.scenarios.cli"]
 
 
 def _record(model: ModalModel, samples: int = 600, seed: int = 0) -> IOData:
@@ -156,8 +154,8 @@ def test_a_healthy_run_warns_of_nothing_and_reports_its_margins(tmp_path):
     y = record.y + 0.02 * np.sqrt(np.mean(record.y**2)) * np.random.default_rng(6).standard_normal(record.y.shape)
     path = tmp_path / "healthy.csv"
     np.savetxt(path, np.column_stack([record.t, record.u, y]), delimiter=",", header="t,u,y", comments="")
-    done = subprocess.run([*VEHID, "identify", str(path), "--inputs", "u", "--outputs", "y", "--order", "2-4",
-                           "--validation", "0.3", "--json", "--quiet"], capture_output=True, text=True, check=False)
+    done = run_vehid("identify", path, "--inputs", "u", "--outputs", "y", "--order", "2-4", "--validation", "0.3",
+                     "--json", "--quiet")
     assert done.returncode == 0, done.stderr[-500:]
     summary = json.loads(done.stdout)
     assert summary["warnings"] == [], summary["warnings"]
@@ -172,9 +170,8 @@ def _ballbeam(tmp_path: Path, fraction: float, *, perturbed: bool = False) -> di
         table = table * (1.0 + 1e-6 * np.random.default_rng(1).standard_normal(table.shape))
         file = tmp_path / "ballbeam_perturbed.dat"
         np.savetxt(file, table, fmt="%.17g")
-    done = subprocess.run([*VEHID, "identify", str(file), "--inputs", "1", "--outputs", "2", "--dt", "0.1",
-                           "--order", "2", "--validation", repr(fraction), "--json", "--quiet"],
-                          capture_output=True, text=True, check=False)
+    done = run_vehid("identify", file, "--inputs", "1", "--outputs", "2", "--dt", "0.1", "--order", "2",
+                     "--validation", repr(fraction), "--json", "--quiet")
     assert done.returncode == 0, done.stderr[-500:]
     return json.loads(done.stdout)
 
@@ -237,9 +234,8 @@ def _dryer(tmp_path: Path, fraction: float, *, perturbed: bool = False) -> dict:
         table = table * (1.0 + 1e-6 * np.random.default_rng(2).standard_normal(table.shape))
         file = tmp_path / "dryer_perturbed.dat"
         np.savetxt(file, table, fmt="%.17g")
-    done = subprocess.run([*VEHID, "identify", str(file), "--inputs", "1", "--outputs", "2", "--dt", "0.08",
-                           "--validation", repr(fraction), "--json", "--quiet"],
-                          capture_output=True, text=True, check=False)
+    done = run_vehid("identify", file, "--inputs", "1", "--outputs", "2", "--dt", "0.08",
+                     "--validation", repr(fraction), "--json", "--quiet")
     assert done.returncode == 0, done.stderr[-500:]
     return json.loads(done.stdout)
 

@@ -8,11 +8,10 @@ relative, fits within 0.1 point.
 """
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
+from conftest import run_vehid
 
 from vehid.identification.data import IOData
 from vehid.identification.filtering.iekf import IEKFOptions, identify_iekf
@@ -108,17 +107,14 @@ def test_an_unstable_plant_is_kept_and_scored_by_prediction():
     assert score(result.model, record, horizon=10).fit[0] > 99
 
 
-VEHID = [sys.executable, "-m", "vehid.scenarios.cli"]
-
-
 def _write_csv(path, data, *, y_factor=1.0):
     np.savetxt(path, np.column_stack([data.t, data.u, data.y * y_factor]), delimiter=",", header="t,u1,y1", comments="")
     return path
 
 
 def _cli_identify(record, *extra):
-    completed = subprocess.run([*VEHID, "identify", str(record), "--inputs", "u1", "--outputs", "y1", "--order", "3",
-                                "--validation", "0.3", "--json", *extra], capture_output=True, text=True, check=False)
+    completed = run_vehid("identify", record, "--inputs", "u1", "--outputs", "y1", "--order", "3",
+                          "--validation", "0.3", "--json", *extra)
     assert completed.returncode == 0, completed.stderr
     return json.loads(completed.stdout)
 
@@ -150,21 +146,20 @@ def test_cli_defaults_on_outputs_scaled_by_1e_minus_6(tmp_path):
 @pytest.mark.slow
 def test_cli_warns_and_strict_exits_3_on_a_run_that_did_not_converge(tmp_path):
     record = _write_csv(tmp_path / "r.csv", _record(30.0, seed=8))
-    common = [*VEHID, "identify", str(record), "--inputs", "u1", "--outputs", "y1", "--order", "3",
+    common = ["identify", record, "--inputs", "u1", "--outputs", "y1", "--order", "3",
               "--start", "paper", "--timescale", "seconds", "--no-normalize", "--passes", "2"]
-    loose = subprocess.run([*common], capture_output=True, text=True, check=False)
+    loose = run_vehid(*common)
     assert loose.returncode == 0 and "NOT converged" in loose.stdout
     warning_lines = [line for line in loose.stderr.splitlines() if line.startswith("vehid: warning:")]
     assert warning_lines and any("did not converge" in line for line in warning_lines)
-    strict = subprocess.run([*common, "--strict", "--json"], capture_output=True, text=True, check=False)
+    strict = run_vehid(*common, "--strict", "--json")
     assert strict.returncode == 3
     summary = json.loads(strict.stdout)
     assert summary["exit_status"] == 3 and any("did not converge" in w for w in summary["warnings"])
     # the issue's case: outputs x1e-6 with the absolute settings leave the modes at their start values
     small = _write_csv(tmp_path / "small.csv", _record(30.0, seed=8), y_factor=1e-6)
-    stuck = subprocess.run([*VEHID, "identify", str(small), "--inputs", "u1", "--outputs", "y1", "--order", "3",
-                            "--start", "default", "--timescale", "seconds", "--no-normalize", "--p", "1", "--json"],
-                           capture_output=True, text=True, check=False)
+    stuck = run_vehid("identify", small, "--inputs", "u1", "--outputs", "y1", "--order", "3",
+                      "--start", "default", "--timescale", "seconds", "--no-normalize", "--p", "1", "--json")
     assert stuck.returncode == 0
     assert any("no better than its start" in w for w in json.loads(stuck.stdout)["warnings"])
 
@@ -172,8 +167,7 @@ def test_cli_warns_and_strict_exits_3_on_a_run_that_did_not_converge(tmp_path):
 @pytest.mark.slow
 def test_cli_order_range_chooses_on_validation_data(tmp_path):
     record = _write_csv(tmp_path / "r.csv", _record(100.0, seed=9, noise=0.02))
-    completed = subprocess.run([*VEHID, "identify", str(record), "--inputs", "u1", "--outputs", "y1", "--order", "1-4",
-                                "--json"], capture_output=True, text=True, check=False)
+    completed = run_vehid("identify", record, "--inputs", "u1", "--outputs", "y1", "--order", "1-4", "--json")
     assert completed.returncode == 0, completed.stderr
     summary = json.loads(completed.stdout)
     assert [row["order"] for row in summary["orders_tried"]] == [1, 2, 3, 4]
@@ -208,9 +202,9 @@ def test_cli_nonlinear_scores_and_archives_both_models(tmp_path):
     np.savetxt(record, np.column_stack([data.t, data.u, data.y - 0.2 * data.y**3]), delimiter=",",
                header="t,u1,y1", comments="")
     archive = tmp_path / "run.h5"
-    completed = subprocess.run([*VEHID, "identify", str(record), "--inputs", "u1", "--outputs", "y1", "--order", "3",
-                                "--validation", "0.3", "--nonlinear", "--nonlinear-p", "1e-7", "--nonlinear-passes", "5",
-                                "--out", str(archive), "--json"], capture_output=True, text=True, check=False)
+    completed = run_vehid("identify", record, "--inputs", "u1", "--outputs", "y1", "--order", "3",
+                          "--validation", "0.3", "--nonlinear", "--nonlinear-p", "1e-7", "--nonlinear-passes", "5",
+                          "--out", archive, "--json")
     assert completed.returncode == 0, completed.stderr
     summary = json.loads(completed.stdout)
     nonlinear = summary["nonlinear"]
@@ -220,8 +214,7 @@ def test_cli_nonlinear_scores_and_archives_both_models(tmp_path):
         assert {"iekf", "nonlinear"} <= set(handle["runs"])
     # the report draws both (a spline model keeps its sizes on its linear structure; it used to be an internal error)
     figures = tmp_path / "figures"
-    report = subprocess.run([*VEHID, "report", str(archive), "--out", str(figures), "--dpi", "30", "--quiet"],
-                            capture_output=True, text=True, check=False)
+    report = run_vehid("report", archive, "--out", figures, "--dpi", "30", "--quiet")
     assert report.returncode == 0, report.stderr
     assert (figures / "residuals_identification_nonlinear.png").exists()
 
@@ -250,17 +243,16 @@ def test_cli_validation_file_is_scored_and_a_mismatched_one_refused(tmp_path):
     other = _write_csv(tmp_path / "other.csv", _record(30.0, seed=16))
     # Both records start at rest with no offsets, so the model explains them exactly only with the offsets
     # left in; removing each record's means adds a constant no linear model from rest has (about 1 point).
-    completed = subprocess.run([*VEHID, "identify", str(record), "--inputs", "u1", "--outputs", "y1", "--order", "3",
-                                "--validation-file", str(other), "--detrend", "none", "--json"],
-                               capture_output=True, text=True, check=False)
+    completed = run_vehid("identify", record, "--inputs", "u1", "--outputs", "y1", "--order", "3",
+                          "--validation-file", other, "--detrend", "none", "--json")
     assert completed.returncode == 0, completed.stderr
     summary = json.loads(completed.stdout)
     assert len(summary["validation_records"]) == 1 and summary["validation_fit_percent"][0] > 99.9
     assert summary["validation_R"][0] > 99.9 and summary["estimation_fit_percent"][0] > 99.9
     bad = tmp_path / "bad.csv"
     np.savetxt(bad, np.ones((50, 3)), delimiter=",", header="t,u1,y2", comments="")
-    refused = subprocess.run([*VEHID, "identify", str(record), "--inputs", "u1", "--outputs", "y1", "--order", "3",
-                              "--validation-file", str(bad)], capture_output=True, text=True, check=False)
+    refused = run_vehid("identify", record, "--inputs", "u1", "--outputs", "y1", "--order", "3",
+                        "--validation-file", bad)
     assert refused.returncode == 2 and "y1" in refused.stderr
 
 

@@ -1,7 +1,6 @@
 """The identify, study linear-example and bench iekf commands: JSON contracts, bad input, checkpoint and resume."""
 
 import json
-import os
 import signal
 import subprocess
 import sys
@@ -10,6 +9,7 @@ import time
 import h5py
 import numpy as np
 import pytest
+from conftest import run_vehid
 
 from vehid.identification.dataio.archive import open_archive
 from vehid.identification.filtering.iekf_archive import read_iekf_run
@@ -21,8 +21,9 @@ VEHID = [sys.executable, "-m", "vehid.scenarios.cli"]
 IDENTIFY_KEYS = {"eigenvalues", "fit_percent", "passes_run", "discretization", "A", "B", "C", "D", "seconds"}
 
 
-def _vehid(*args, cwd=None, env=None):
-    return subprocess.run([*VEHID, *args], capture_output=True, text=True, cwd=cwd, env=env, check=False)
+def _vehid(*args):
+    """The command in this process: only its status, output and files are under test."""
+    return run_vehid(*args)
 
 
 def _write_csv(path, u, y, *, t=None, header="t,u1,u2,y1"):
@@ -146,9 +147,9 @@ def test_a_killed_run_resumes_to_the_same_parameters(tmp_path):
     assert [r.index for r in final_resumed.history] == list(range(1, final_whole.passes_run + 1))
 
 
-def test_study_linear_example_json(tmp_path):
-    env = {**os.environ, "VEHID_RESULTS_DIR": str(tmp_path)}
-    completed = _vehid("study", "linear-example", "--case", "single-output", "--passes", "3", "--json", env=env)
+def test_study_linear_example_json(tmp_path, monkeypatch):
+    monkeypatch.setenv("VEHID_RESULTS_DIR", str(tmp_path))
+    completed = _vehid("study", "linear-example", "--case", "single-output", "--passes", "3", "--json")
     assert completed.returncode == 0, completed.stderr
     summary = json.loads(completed.stdout)
     assert IDENTIFY_KEYS | {"fit_percent_by_pass"} <= set(summary)
