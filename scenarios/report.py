@@ -75,6 +75,10 @@ def write_report(
     for name, figure in figures.items():
         path = out_dir / f"{name}.png"
         figure.savefig(path, dpi=dpi, format="png")
+        # The layout just solved places the PDF's page too: positions are fractions of the figure, and text
+        # extents in inches hardly depend on the resolution (the PDF's axes land within 0.5 % of the figure
+        # of a layout solved anew, at the default 120 dpi). Solving it again was half of the drawing time.
+        figure.set_layout_engine("none")
         paths.append(path)
     pdf_path = out_dir / pdf_name
     with PdfPages(pdf_path, metadata={"Title": title, "Creator": "vehid"}) as pdf:
