@@ -20,7 +20,8 @@ ends, so a notebook's own work keeps its threads.
 from __future__ import annotations
 
 import os
-from contextlib import contextmanager
+import sys
+from contextlib import ExitStack, contextmanager
 from typing import Iterator
 
 __all__ = ["THREAD_VARIABLES", "blas_threads_chosen", "one_blas_thread"]
@@ -28,6 +29,9 @@ __all__ = ["THREAD_VARIABLES", "blas_threads_chosen", "one_blas_thread"]
 # The variables by which a user sets the BLAS (and OpenMP) thread count of OpenBLAS, MKL, BLIS and Accelerate.
 THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS",
                     "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")
+
+# What the block sets: each BLAS's own variable (OpenMP's, read by other libraries too, is left alone).
+_LIBRARY_VARIABLES = ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS")
 
 
 def blas_threads_chosen() -> bool:
@@ -39,15 +43,27 @@ def blas_threads_chosen() -> bool:
 def one_blas_thread() -> Iterator[None]:
     """Compute with one BLAS thread inside the block, unless the environment chose a thread count.
 
-    NumPy's and SciPy's BLAS libraries are loaded first, so that both are limited (a
-    library loaded inside the block would keep its threads).
+    A BLAS library loaded inside the block (a command's first NumPy import, SciPy's
+    own BLAS) reads its thread variable (``OPENBLAS_NUM_THREADS``, ``MKL_NUM_THREADS``,
+    ``BLIS_NUM_THREADS``), set to 1 for the block and the processes started in it,
+    and unset afterwards (none was set, or the block would not limit anything). Libraries already loaded
+    (NumPy imported by a notebook) are limited at run time through threadpoolctl,
+    and given their threads back when the block ends. A command therefore pays no
+    import for the limit before its work begins.
     """
     if blas_threads_chosen():
         yield
         return
-    import numpy  # noqa: F401  (loads NumPy's BLAS)
-    import scipy.linalg  # noqa: F401  (loads SciPy's BLAS, a separate library)
-    from threadpoolctl import threadpool_limits
+    with ExitStack() as loaded_libraries:
+        if "numpy" in sys.modules:
+            import scipy.linalg  # noqa: F401  (its own BLAS, loaded before the variables are set: it keeps its threads after)
+            from threadpoolctl import threadpool_limits
 
-    with threadpool_limits(limits=1, user_api="blas"):
-        yield
+            loaded_libraries.enter_context(threadpool_limits(limits=1, user_api="blas"))
+        for name in _LIBRARY_VARIABLES:
+            os.environ[name] = "1"
+        try:
+            yield
+        finally:
+            for name in _LIBRARY_VARIABLES:
+                os.environ.pop(name, None)

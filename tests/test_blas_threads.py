@@ -1,0 +1,56 @@
+"""The workbench computes with one BLAS thread and leaves the process's BLAS as it found it."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+from vehid.identification.blas import blas_threads_chosen, one_blas_thread
+
+threadpoolctl = pytest.importorskip("threadpoolctl")
+
+
+def _blas_threads() -> list[int]:
+    return [entry["num_threads"] for entry in threadpoolctl.threadpool_info() if entry["user_api"] == "blas"]
+
+
+def test_a_fresh_process_loads_its_blas_on_one_thread_inside_the_block_and_sets_nothing_after():
+    # a command's process: NumPy and SciPy are first imported inside the block, their libraries read the
+    # variable then; afterwards the environment is as before (processes the command starts later are not limited)
+    code = (
+        "import json, os\n"
+        "from vehid.identification.blas import one_blas_thread\n"
+        "before = {k: os.environ.get(k) for k in ('OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS', 'BLIS_NUM_THREADS')}\n"
+        "with one_blas_thread():\n"
+        "    import numpy, scipy.linalg, threadpoolctl\n"
+        "    inside = [e['num_threads'] for e in threadpoolctl.threadpool_info() if e['user_api'] == 'blas']\n"
+        "    child = os.environ.get('OPENBLAS_NUM_THREADS')\n"
+        "after = {k: os.environ.get(k) for k in before}\n"
+        "print(json.dumps({'inside': inside, 'child': child, 'same': before == after}))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
+    assert done.returncode == 0, done.stderr
+    seen = json.loads(done.stdout)
+    if blas_threads_chosen():  # the machine's environment chose a count: kept, and nothing to check here
+        return
+    assert seen["inside"] and set(seen["inside"]) == {1}
+    assert seen["child"] == "1"  # worker processes started in the block inherit the limit
+    assert seen["same"]
+
+
+def test_libraries_already_loaded_are_limited_inside_and_given_their_threads_back():
+    import numpy  # noqa: F401  (a notebook's process: NumPy's BLAS is loaded before the block)
+    import scipy.linalg  # noqa: F401
+
+    before = _blas_threads()
+    with one_blas_thread():
+        inside = _blas_threads()
+    assert _blas_threads() == before
+    if not blas_threads_chosen():
+        assert inside and set(inside) == {1}
+    else:
+        assert inside == before
