@@ -297,7 +297,9 @@ def test_intervals_are_calibrated_on_the_known_system_lean():
     scores: dict[str, list] = {"iekf": [], "output-error": []}
     for seed in range(100, 120):
         data, _ = calibration.make_record(seed, 0.3, duration=30.0)
-        for method, realisation in calibration.identify_realisation(data, iekf_settings=LEAN_IEKF_SETTINGS).items():
+        # N4SID's intervals are not scored here (the bootstrap tests above cover them): it is not fitted
+        for method, realisation in calibration.identify_realisation(data, iekf_settings=LEAN_IEKF_SETTINGS,
+                                                                    subspace=False).items():
             for name in ("frequency_hz", "damping"):
                 if method in scores:
                     scores[method].extend((getattr(realisation, name) - truth[name]) / getattr(realisation, f"{name}_std"))
@@ -342,25 +344,33 @@ def test_identify_bootstrap_option_sets_n4sid_replicates_and_stdout_stays_one_js
     import subprocess
     import sys
 
+    from conftest import run_vehid
+
     from vehid.scenarios.linear_example import make_data
 
     data, _ = make_data(1, outputs=(0,), duration=20.0)
     record = tmp_path / "one.csv"
     np.savetxt(record, np.column_stack([data.t, data.u[:, :1], data.y[:, :1]]), delimiter=",", header="t,u1,y1",
                comments="")
-    command = [sys.executable, "-m", "vehid.scenarios.cli", "identify", str(record), "--inputs", "u1", "--outputs", "y1",
-               "--order", "4", "--json", "--quiet"]
+    arguments = ["identify", str(record), "--inputs", "u1", "--outputs", "y1", "--order", "4", "--json", "--quiet"]
 
     def summary(*extra):
-        done = subprocess.run([*command, *extra], capture_output=True, text=True, check=False)
+        done = run_vehid(*arguments, *extra)
         return done.returncode, json.loads(done.stdout)  # the whole of stdout: one JSON object
+
+    def summary_of_a_process(*extra):
+        # LAPACK's messages about an overflowing replicate would be written by C to the process's stdout,
+        # which only a separate process shows
+        done = subprocess.run([sys.executable, "-m", "vehid.scenarios.cli", *arguments, *extra], capture_output=True,
+                              text=True, check=False)
+        return done.returncode, json.loads(done.stdout)
 
     status, default = summary("--method", "n4sid")
     assert status == 0 and all(np.isfinite(mode["frequency_hz_std"]) and mode["frequency_hz_std"] > 0
                                for mode in default["modes"])
     status, none = summary("--method", "n4sid", "--bootstrap", "0")
     assert status == 0 and all(mode["frequency_hz_std"] is None for mode in none["modes"])
-    status, some = summary("--method", "n4sid", "--bootstrap", "4")
+    status, some = summary_of_a_process("--method", "n4sid", "--bootstrap", "4")
     assert status == 0 and all(np.isfinite(mode["frequency_hz_std"]) and mode["frequency_hz_std"] > 0
                                for mode in some["modes"])
     status, refused = summary("--method", "arx", "--bootstrap", "3")
