@@ -174,16 +174,16 @@ def test_structured_loops_equal_the_generated_step(covariance, spline):
     from vehid.identification.models.spline_modal import SplineModalFilterModel, SplineModalStructure
 
     data, _ = make_data(3, outputs=(0, 1, 2), duration=2.2)
-    u, y = data.u[:1000], data.y[:1000]
-    if spline:  # a spline model of one input and one output: the Jacobian patterns depend on the state
-        u, y = u[:, :1], y[:, :1]
+    u, y = data.u[:1000, :1], data.y[:1000]
+    if spline:  # a spline model of one output: the Jacobian patterns depend on the state
+        y = y[:, :1]
         linear = ModalStructure.default(2, 1, 1)
         structure = SplineModalStructure(linear, 3)
         filter_model = SplineModalFilterModel(structure)
         theta = structure.from_linear(linear.initial_parameters(sigma=-10, omega=10)) * np.linspace(0.8, 1.2, 3 * linear.n_parameters)
         constants = structure.constants(structure.default_ranges() * 3.0)
-    else:  # eq. 18's structure of the reference test above: its generated step is built once for both
-        linear = ModalStructure.from_pattern("eq18", 5, 2, 3)
+    else:
+        linear = ModalStructure.from_pattern("eq18", 5, 1, 3)
         filter_model = LinearModalFilterModel(linear)
         theta = linear.initial_parameters(sigma=-10, omega=10, omega_spread=0.5)
         constants = None
