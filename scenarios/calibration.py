@@ -104,11 +104,12 @@ def command_line_iekf(data: IOData) -> tuple[ModalModel, float]:
 
 
 def identify_realisation(data: IOData, *, iekf_settings: dict[str, Any] | None = None,
-                         iekf_only: bool = False) -> dict[str, Realisation]:
+                         iekf_only: bool = False, subspace: bool = True) -> dict[str, Realisation]:
     """Identify ``data`` with the true structure by the IEKF, output error and N4SID; each model's modes.
 
     Without ``iekf_settings`` the IEKF runs as the command line runs it
-    (:func:`command_line_iekf`); ``iekf_only`` leaves the other two out. Output error
+    (:func:`command_line_iekf`); ``iekf_only`` leaves the other two out, ``subspace=False``
+    leaves N4SID out (for comparisons that read only the other two). Output error
     starts from the IEKF's model: its default ARX start is biased by output
     noise (at 30 % noise it lands on the wrong modes) and it is a local
     method; what is measured here is its intervals, not its basin of
@@ -129,12 +130,14 @@ def identify_realisation(data: IOData, *, iekf_settings: dict[str, Any] | None =
                                  start=iekf.with_parameter_covariance(None)).model
     stop = time.perf_counter()
     result = {"iekf": _realisation(iekf, middle - started, p), "output-error": _realisation(output_error, stop - middle)}
+    if not subspace:
+        return result
     try:
-        subspace = identify_with(data, method="n4sid", order=structure.n, block_rows=N4SID_BLOCK_ROWS).model
+        subspace_model = identify_with(data, method="n4sid", order=structure.n, block_rows=N4SID_BLOCK_ROWS).model
     except (ConversionError, ExcitationError, InputError):
         return result
-    if not isinstance(subspace, DiscreteModel) and subspace.structure == structure:
-        result["n4sid"] = _realisation(subspace, time.perf_counter() - stop)
+    if not isinstance(subspace_model, DiscreteModel) and subspace_model.structure == structure:
+        result["n4sid"] = _realisation(subspace_model, time.perf_counter() - stop)
     return result
 
 

@@ -232,6 +232,7 @@ def run_case(
     covariance: str = "joseph",
     start: str = "default",
     on_pass: Callable[[str, Any, Any], None] | None = None,
+    parameter_covariance: bool = True,
 ) -> CaseResult:
     """Run one case of the linear example.
 
@@ -248,6 +249,9 @@ def run_case(
         See :class:`vehid.identification.filtering.iekf.IEKFOptions`.
     on_pass : callable, optional
         ``on_pass(run_label, record, result)`` after every pass.
+    parameter_covariance : bool
+        Leave each model its parameter covariance (one more pass and the fit's sensitivity per run);
+        False where only the estimates and the fits are read.
     """
     if case not in CASES:
         raise InputError(f"unknown case {case!r}; use one of {', '.join(CASES)}")
@@ -268,13 +272,14 @@ def run_case(
         return lambda record, result: on_pass(label, record, result)
 
     if case == "noise":
-        return _noise_case(settings, options, callback, started)
+        return _noise_case(settings, options, callback, started, parameter_covariance)
     if case == "orders":
-        return _orders_case(settings, options, callback, started)
+        return _orders_case(settings, options, callback, started, parameter_covariance)
 
     data, _ = make_data(seed, outputs=settings["outputs"])
     structure = ModalStructure.from_pattern(settings["pattern"], 5, 2, len(settings["outputs"]))
-    result = identify_iekf(data, structure, options=options, on_pass=callback(case))
+    result = identify_iekf(data, structure, options=options, on_pass=callback(case),
+                           parameter_covariance=parameter_covariance)
     truth = true_model().eigenvalues()
     reference = euler_equivalent(truth) if discretization == "euler" else truth
     paper = PAPER[case]
@@ -298,14 +303,15 @@ def run_case(
                       time.perf_counter() - started)
 
 
-def _noise_case(settings, options, callback, started) -> CaseResult:
+def _noise_case(settings, options, callback, started, parameter_covariance) -> CaseResult:
     structure = ModalStructure.from_pattern(settings["pattern"], 5, 2, 1)
     truth = true_model()
     runs, rows = {}, []
     for ratio in NOISE_RATIOS:
         data, clean = make_data(settings["seed"], outputs=(0,), noise_ratio=ratio)
         label = f"noise-{int(round(ratio * 100))}"
-        runs[label] = identify_iekf(data, structure, options=options, on_pass=callback(label))
+        runs[label] = identify_iekf(data, structure, options=options, on_pass=callback(label),
+                                    parameter_covariance=parameter_covariance)
         predicted = runs[label].model.simulate_outputs(data.u, data.dt, method=options.simulation_method)
         true_on_noisy = percentage_explanation(data.y, truth.simulate_outputs(data.u, data.dt)[:, :1])[0]
         rows.append({
@@ -327,12 +333,13 @@ def _noise_case(settings, options, callback, started) -> CaseResult:
     return CaseResult("noise", settings, runs, {}, tuple(rows), summary, "\n".join(lines), time.perf_counter() - started)
 
 
-def _orders_case(settings, options, callback, started) -> CaseResult:
+def _orders_case(settings, options, callback, started, parameter_covariance) -> CaseResult:
     data, _ = make_data(settings["seed"], outputs=(0, 1, 2))
     runs = {}
     for order in ORDERS:
         structure = ModalStructure.from_pattern("eq19", order, 2, 3)
-        runs[f"n{order}"] = identify_iekf(data, structure, options=options, on_pass=callback(f"n{order}"))
+        runs[f"n{order}"] = identify_iekf(data, structure, options=options, on_pass=callback(f"n{order}"),
+                                          parameter_covariance=parameter_covariance)
     assessment = assess_orders({int(label[1:]): result for label, result in runs.items()})
     rows = tuple(row.as_dict() for row in assessment.rows)
     summary = {"case": "orders", "table": list(rows), "chosen_order": assessment.chosen_order,

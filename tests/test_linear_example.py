@@ -8,9 +8,16 @@ printed tables, and the true model's own fit to noisy data.
 import numpy as np
 import pytest
 
-from vehid.scenarios.linear_example import PAPER, euler_equivalent, make_data, run_case, true_model
+from vehid.scenarios import linear_example
+from vehid.scenarios.linear_example import PAPER, euler_equivalent, make_data, true_model
 
 TRUE_EIGENVALUES = np.array([-15 + 10j, -15 - 10j, -8 + 40j, -8 - 40j, -4 + 0j])
+
+
+def run_case(case, **settings):
+    """A case of the linear example without the models' parameter covariances, which no test here reads
+    (they cost one more pass and the fit's sensitivity per run, a tenth of the order study)."""
+    return linear_example.run_case(case, parameter_covariance=False, **settings)
 
 
 def _matched_relative_error(found, reference):
@@ -92,11 +99,16 @@ def test_table2_three_outputs_with_first_row_fixed_fit_nearly_perfectly():
 def test_table3_eq18_pattern_finds_all_five_eigenvalues_on_most_seeds():
     # The paper finds all five with the eq. 18 pattern; the outcome depends on the data realisation,
     # so five seeds are run and at least four must find every eigenvalue within 2 % (exact mode).
-    found = 0
+    # The verdict is decided once four seeds found them or two missed: the seeds left cannot change it.
+    found = missed = 0
     for seed in range(5):
+        if found >= 4 or missed >= 2:
+            break
         result = run_case("three-output-constrained", discretization="exact", seed=seed, passes=25)
         if _matched_relative_error(result.runs["three-output-constrained"].model.eigenvalues(), TRUE_EIGENVALUES) < 0.02:
             found += 1
+        else:
+            missed += 1
     assert found >= 4
 
 

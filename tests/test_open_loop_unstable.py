@@ -7,12 +7,11 @@ real pole at -0.3 instead) is the stable control: there nothing may be assumed.
 """
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 import scipy.linalg
+from conftest import run_vehid
 
 DT = 0.1  # s
 POLES = np.array([0.3, -0.5, -1 + 3j, -1 - 3j])  # rad/s; the first is the one whose sign the control flips
@@ -41,9 +40,7 @@ def _identify(tmp_path, real_pole: float, noise: float) -> dict:
     u, y = _record(real_pole, noise)
     path = tmp_path / "record.csv"
     np.savetxt(path, np.column_stack([np.arange(len(u)) * DT, u, y]), delimiter=",", header="t,u,y", comments="")
-    done = subprocess.run([sys.executable, "-m", "vehid.scenarios.cli", "identify", str(path), "--inputs", "u",
-                           "--outputs", "y", "--validation", "0.3", "--json", "--quiet"],
-                          capture_output=True, text=True, check=False)
+    done = run_vehid("identify", path, "--inputs", "u", "--outputs", "y", "--validation", "0.3", "--json", "--quiet")
     assert done.returncode == 0, done.stderr[-500:]
     return json.loads(done.stdout.strip().splitlines()[-1])
 
@@ -93,8 +90,7 @@ def test_the_text_summary_says_what_an_unstable_model_s_simulation_scores_mean(t
     u, y = _record(POLES[0].real, 0.01)
     path = tmp_path / "record.csv"
     np.savetxt(path, np.column_stack([np.arange(len(u)) * DT, u, y]), delimiter=",", header="t,u,y", comments="")
-    done = subprocess.run([sys.executable, "-m", "vehid.scenarios.cli", "identify", str(path), "--inputs", "u",
-                           "--outputs", "y", "--validation", "0.3"], capture_output=True, text=True, check=False)
+    done = run_vehid("identify", path, "--inputs", "u", "--outputs", "y", "--validation", "0.3")
     assert done.returncode == 0, done.stderr[-500:]
     lines = done.stdout.splitlines()
     r_line = next(line for line in lines if line.startswith("fit R"))

@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
+from conftest import run_vehid
 from scipy.signal import lfilter
 
 from vehid.identification.dataio.archive import open_archive, read_archive, update_archive
@@ -106,8 +105,7 @@ def _csv(tmp_path, seed=3):
 
 
 def _identify(*arguments):
-    return subprocess.run([sys.executable, "-m", "vehid.scenarios.cli", "identify", *arguments, "--quiet"],
-                          capture_output=True, text=True, check=False)
+    return run_vehid("identify", *arguments, "--quiet")
 
 
 def test_identify_json_carries_modes_with_std_and_residual_keys(tmp_path):
