@@ -56,6 +56,8 @@ def identify_plan(plan: Plan, options: IdentifyOptions, *, resumed: Resumed | No
     if resumed is not None:
         structure, iekf, previous = resumed.structure, resumed.options, resumed.previous
         tuning, unstable = resumed.tuning, resumed.open_loop_unstable
+        # the build the interrupted run used
+        planned = steps.planned_filter_steps(plan, iekf, tuned=tuning is not None and bool(tuning.tried))
     else:
         if options.method != "iekf":
             return _comparator(plan, options)
@@ -66,13 +68,14 @@ def identify_plan(plan: Plan, options: IdentifyOptions, *, resumed: Resumed | No
         iekf, unstable = steps.assume_unstable(options, plan, iekf, plan.orders[0])
         structure = steps.structure_for(options, plan.orders[0], plan, iekf)
         tuning = steps.tune_p(options, plan, iekf, structure) if steps.tunes_p(options) else steps.given_p(iekf)
+        planned = steps.planned_filter_steps(plan, iekf, tuned=bool(tuning.tried))
         iekf = tuning.applied(iekf)
     if checkpoints is not None:
         checkpoints.decided(iekf, tuning, unstable, previous)
     on_pass = checkpoints.passed if checkpoints is not None else None
     result, divergence = steps.last_good_on_divergence(
         lambda: identify_iekf(plan.estimation, structure, options=iekf, resume=previous, on_pass=on_pass,
-                              settle_start=plan.settle_start))
+                              settle_start=plan.settle_start, planned_steps=planned))
     if checkpoints is not None:
         checkpoints.finished(result)
     model, keys = steps.returned_model(result, plan, options, tuning, unstable)

@@ -184,6 +184,21 @@ def tunes_p(settings: IdentifyOptions) -> bool:
     return settings.p is None and settings.timescale == "auto"
 
 
+def planned_filter_steps(plan: Plan, options: IEKFOptions, tuned: bool) -> int:
+    """The most filter steps one order's runs take in all: where p is ``tuned``, the cross-validation's
+    candidates (two folds of half the estimation records each, every schedule), and the final run, each
+    at most ``options.passes`` passes. A resumed run is tuned where the run it resumes tried candidates.
+
+    Every run of the order is given this figure (``identify_iekf``'s ``planned_steps``): runs of a few
+    thousand samples each would otherwise build the compiled pass for a short run (no optimisation),
+    while together they make millions of steps; and all of them use the one build, so the run returned
+    has the rounding of the cross-validated ones.
+    """
+    samples = sum(record.n_samples for record in plan.records)
+    candidates = len(P_GRID) * len(Q_SCHEDULES) if tuned else 0
+    return (candidates + 1) * options.passes * samples
+
+
 def _halves(records: tuple[IOData, ...]) -> tuple[tuple[IOData, ...], tuple[IOData, ...]]:
     parts = [split_holdout(record, 0.5) for record in records]
     return tuple(part[0] for part in parts), tuple(part[1] for part in parts)
@@ -214,6 +229,7 @@ def tune_p(settings: IdentifyOptions, plan: Plan, options: IEKFOptions, structur
         horizon = settings.horizon if settings.horizon is not None else default_horizon(model)
         return float(np.mean(_mean_scores(model, records, initial_state=settings.initial_state, horizon=horizon).fit))
 
+    planned = planned_filter_steps(plan, options, tuned=True)
     rows = []
     start_fits: dict[int, float] = {}  # per fold: the data start does not depend on p
     for p, schedule in ((p, schedule) for p in P_GRID for schedule in schedules):
@@ -225,7 +241,8 @@ def tune_p(settings: IdentifyOptions, plan: Plan, options: IEKFOptions, structur
             data = fit_on[0] if len(fit_on) == 1 else fit_on
             try:
                 result, _ = last_good_on_divergence(
-                    lambda: identify_iekf(data, structure, options=trial, settle_start=settle, parameter_covariance=False))
+                    lambda: identify_iekf(data, structure, options=trial, settle_start=settle, parameter_covariance=False,
+                                          planned_steps=planned))
             except WorkbenchError as exc:
                 errors.append(str(exc))
                 continue
@@ -743,9 +760,11 @@ def run_iekf_order(settings: IdentifyOptions, plan: Plan, options: IEKFOptions, 
     options, unstable = assume_unstable(settings, plan, options, order)
     structure = structure_for(settings, order, plan, options)
     tuning = tune_p(settings, plan, options, structure) if tunes_p(settings) else given_p(options)
+    planned = planned_filter_steps(plan, options, tuned=bool(tuning.tried))
     options = tuning.applied(options)
     result, divergence = last_good_on_divergence(
-        lambda: identify_iekf(plan.estimation, structure, options=options, settle_start=plan.settle_start))
+        lambda: identify_iekf(plan.estimation, structure, options=options, settle_start=plan.settle_start,
+                              planned_steps=planned))
     stop_reason = f"{result.stop_reason}: {divergence}" if divergence else result.stop_reason
     model, keys = returned_model(result, plan, settings, tuning, unstable)
     return model, {"fit_percent": result.fit_percent, "stop_reason": stop_reason, "result": result, "tuning": tuning,

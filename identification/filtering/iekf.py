@@ -359,6 +359,7 @@ def identify_iekf(
     on_pass: Callable[[PassRecord, "IEKFResult"], None] | None = None,
     settle_start: bool | None = None,
     parameter_covariance: bool = True,
+    planned_steps: int | None = None,
 ) -> IEKFResult:
     """Identify a linear modal model with the IEKF.
 
@@ -392,6 +393,13 @@ def identify_iekf(
         (:func:`~identification.assessment.uncertainty.iekf_parameter_covariance`, which
         costs one more pass and the fit's sensitivity); False for fits whose
         covariance nobody reads (cross-validation folds).
+    planned_steps : int, optional
+        The filter steps (samples times passes) the caller will run on this
+        structure in all, this run's included: a cross-validation's runs
+        together. It chooses the compiled pass's build
+        (:func:`~identification.filtering.iekf_pass.compiled_pass`), so that
+        runs which together repay a full optimisation share it, and share its
+        rounding; by default this run's own steps.
 
     Returns
     -------
@@ -503,7 +511,8 @@ def identify_iekf(
     y_scaled = [record.y if np.all(output_scale == 1) else record.y / output_scale for record in records]
     # at most every pass over every record (the settling heads and the covariance's sampled pass aside)
     run_pass = compiled_pass(LinearModalFilterModel(structure), dt / time_unit, options.discretization, options.covariance,
-                             expected_steps=options.passes * sum(record.n_samples for record in records))
+                             expected_steps=max(options.passes * sum(record.n_samples for record in records),
+                                                planned_steps or 0))
 
     def original_units(theta_filter: np.ndarray) -> np.ndarray:
         return structure.denormalize(structure.rescale_time(theta_filter, 1.0 / time_unit), input_scale, output_scale)
