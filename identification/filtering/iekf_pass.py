@@ -69,21 +69,29 @@ QUICK_COMPILE_FLAGS = "-O0"
 QUICK_COMPILE_STEPS = 250_000
 
 
-def pack_covariance(P: np.ndarray) -> np.ndarray:
-    """Upper-triangle nonzeros of a symmetric matrix, column-major (casadi.Sparsity.upper order)."""
-    m = P.shape[0]
+@functools.lru_cache(maxsize=64)
+def _upper_triangle(m: int) -> tuple[np.ndarray, np.ndarray]:
+    """Row and column indices of an m x m upper triangle, column-major (asked for at every pass: kept)."""
     rows, cols = np.triu_indices(m)
     order = np.lexsort((rows, cols))
-    return np.asarray(P)[rows[order], cols[order]].copy()
+    rows, cols = rows[order], cols[order]
+    rows.setflags(write=False)
+    cols.setflags(write=False)
+    return rows, cols
+
+
+def pack_covariance(P: np.ndarray) -> np.ndarray:
+    """Upper-triangle nonzeros of a symmetric matrix, column-major (casadi.Sparsity.upper order)."""
+    rows, cols = _upper_triangle(P.shape[0])
+    return np.asarray(P)[rows, cols].copy()
 
 
 def unpack_covariance(values: np.ndarray, m: int) -> np.ndarray:
     """Inverse of :func:`pack_covariance`: the full symmetric matrix."""
-    rows, cols = np.triu_indices(m)
-    order = np.lexsort((rows, cols))
+    rows, cols = _upper_triangle(m)
     P = np.zeros((m, m))
-    P[rows[order], cols[order]] = values
-    P[cols[order], rows[order]] = values
+    P[rows, cols] = values
+    P[cols, rows] = values
     return P
 
 

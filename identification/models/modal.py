@@ -270,13 +270,17 @@ class ModalStructure:
         for pole in range(self.n_real):
             state = 2 * self.n_complex_pairs + pole
             modal.append(A[state, state])
-        theta = np.concatenate([modal, B.ravel(), [C[i, j] for i, j in self.free_c], D.ravel()])
+        theta = self._theta_of(modal, B, C, D)
         rebuilt = self.matrices(theta)
         if not _equal_within(rebuilt[0], A, 1e-12 * max(1.0, np.abs(A).max())):
             raise InputError("A is not in the modal block form of this structure")
         if not _equal_within(rebuilt[2], C, 1e-12 * max(1.0, np.abs(C).max())):
             raise InputError("C's fixed entries are not 1 for this structure")
         return theta
+
+    def _theta_of(self, modal: Any, B: np.ndarray, C: np.ndarray, D: np.ndarray) -> np.ndarray:
+        """theta from the modal entries and B, C, D of this structure, unchecked."""
+        return np.concatenate([modal, B.ravel(), [C[i, j] for i, j in self.free_c], D.ravel()])
 
     def initial_parameters(self, *, sigma: float = -1.0, omega: float = 1.0, omega_spread: float = 0.0) -> np.ndarray:
         """The filter's start: every sigma given, omegas ``omega * (1 + omega_spread * i)``, B, free C, D zero.
@@ -299,12 +303,14 @@ class ModalStructure:
         scale of the output each state is tied to, ``A`` is unchanged, the fixed
         C entries stay 1, ``B -> S B Su^-1``, ``C -> Sy C S^-1``, ``D -> Sy D Su^-1``.
         """
-        A, B, C, D = self.matrices(theta)
+        _, B, C, D = self.matrices(theta)
         state_scale = np.array([output_scale[self.output_of_state(j)] for j in range(self.n)])
         B = state_scale[:, None] * B / input_scale[None, :]
         C = output_scale[:, None] * C / state_scale[None, :]
         D = output_scale[:, None] * D / input_scale[None, :]
-        return self.pack(A, B, C, D)
+        # A is unchanged and C's fixed entries stay 1 (each state is scaled by its own output's scale): the
+        # matrices are this structure's by construction, and pack's check would only repeat that
+        return self._theta_of(np.asarray(theta, dtype=float).ravel()[self.slices()["modal"]], B, C, D)
 
     def normalize_parameters(self, theta: np.ndarray, input_scale: np.ndarray, output_scale: np.ndarray) -> np.ndarray:
         """Inverse of :meth:`denormalize`."""
