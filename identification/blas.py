@@ -9,7 +9,9 @@ spent 9.3 s of CPU for 7.1 s of wall time with two BLAS threads and 6.8 s
 for 7.0 s with one (``benchmarks/blas_threads.py`` measures it), and
 parallel work (two test workers, a study's worker processes) lost the spun
 time to each other. So the workbench's commands, its worker processes and
-:func:`vehid.identification.identify` compute with one BLAS thread.
+:func:`vehid.identification.identify` compute with one BLAS thread, and so do the
+estimators' entry points (``identify_iekf`` and its spline, scheduled and grey-box
+forms, ``identify_with``) where a script calls them directly.
 
 A user who has chosen a thread count in the environment (``OPENBLAS_NUM_THREADS``,
 ``OMP_NUM_THREADS``, ``MKL_NUM_THREADS`` and the like) keeps it: the limit
@@ -19,12 +21,13 @@ ends, so a notebook's own work keeps its threads.
 
 from __future__ import annotations
 
+import functools
 import os
 import sys
 from contextlib import ExitStack, contextmanager
-from typing import Iterator
+from typing import Any, Callable, Iterator
 
-__all__ = ["THREAD_VARIABLES", "blas_threads_chosen", "one_blas_thread"]
+__all__ = ["THREAD_VARIABLES", "blas_threads_chosen", "one_blas_thread", "on_one_blas_thread"]
 
 # The variables by which a user sets the BLAS (and OpenMP) thread count of OpenBLAS, MKL, BLIS and Accelerate.
 THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS",
@@ -67,3 +70,15 @@ def one_blas_thread() -> Iterator[None]:
         finally:
             for name in _LIBRARY_VARIABLES:
                 os.environ.pop(name, None)
+
+
+def on_one_blas_thread(function: Callable[..., Any]) -> Callable[..., Any]:
+    """``function``, computing inside :func:`one_blas_thread`: the estimators' entry points, so that a
+    script or notebook calling them directly computes as the commands do."""
+
+    @functools.wraps(function)
+    def on_one_thread(*args: Any, **kwargs: Any) -> Any:
+        with one_blas_thread():
+            return function(*args, **kwargs)
+
+    return on_one_thread

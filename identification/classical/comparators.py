@@ -46,6 +46,7 @@ import scipy.optimize
 from scipy.special import comb
 
 from .._checks import non_negative_int, positive_int
+from ..blas import on_one_blas_thread
 from ..data import IOData, as_records
 from ..models.discrete import DiscreteModel, has_no_continuous_equivalent
 from ..errors import ConversionError, ExcitationError, InputError, WorkbenchError
@@ -409,6 +410,7 @@ def register_comparator(name: str, function: Comparator, *, replace: bool = Fals
     COMPARATORS[name] = function
 
 
+@on_one_blas_thread
 def identify_with(data: IOData, *, method: str, order: int, **options: Any) -> ComparatorResult:
     """Identify a modal model of ``order`` states from ``data`` by ``method`` and score it.
 

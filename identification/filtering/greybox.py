@@ -53,6 +53,7 @@ import casadi as ca
 import numpy as np
 
 from ..compiled import CompiledRecursion
+from ..blas import on_one_blas_thread
 from ..data import IOData, as_records, check_channels
 from ..errors import DivergenceError, InputError
 from .iekf import NOISE_FLOOR, P_DECAY_FLOOR, output_noise_variance
@@ -527,6 +528,7 @@ def _pooled_fits(y_parts: Sequence[np.ndarray], y_hat_parts: Sequence[np.ndarray
     return percentage_explanation(y, y_hat), nrmse_fit(y, y_hat)
 
 
+@on_one_blas_thread
 def identify_greybox(
     data: IOData | Sequence[IOData],
     model: GreyBoxModel,

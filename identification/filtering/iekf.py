@@ -37,6 +37,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from ..blas import on_one_blas_thread
 from ..data import IOData, as_records
 from ..choices import START_CHOICES, START_VALUES, TIMESCALES
 from ..errors import DivergenceError, InputError
@@ -349,6 +350,7 @@ def _settle_states(state, u, y, structure: ModalStructure, run_pass, q, r, dt: f
     return settled, u[head:], y[head:]
 
 
+@on_one_blas_thread
 def identify_iekf(
     data: IOData,
     structure: ModalStructure,

@@ -40,6 +40,7 @@ from typing import Any, Callable
 import casadi as ca
 import numpy as np
 
+from ..blas import on_one_blas_thread
 from ..data import IOData
 from ..errors import DivergenceError, InputError, WorkbenchError
 from .filter_models import FilterModel, check_discretization
@@ -523,6 +524,7 @@ def _local_start_family(family: ScheduledModalModel, start: ModalModel, data: IO
     return (candidate, labels) if mean_fit(candidate) > mean_fit(family) else None
 
 
+@on_one_blas_thread
 def identify_scheduled(
     data: IOData,
     schedule: Any,

@@ -18,6 +18,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from ..blas import on_one_blas_thread
 from ..data import IOData
 from ..choices import SPLINE_NODES, SPLINE_P, SPLINE_PASSES
 from ..errors import DivergenceError, InputError
@@ -126,6 +127,7 @@ def residual_covariance(y: np.ndarray, y_hat: np.ndarray) -> np.ndarray:
     return R + np.diag(floor)
 
 
+@on_one_blas_thread
 def identify_spline_iekf(
     data: IOData,
     linear: ModalModel,
