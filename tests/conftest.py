@@ -5,6 +5,11 @@ so that a file's module-scoped fixtures, a simulated study, an identified model,
 are computed once). A worker that draws a file of several minutes near the end keeps the whole
 run waiting while the others sit idle; the files that hold a test marked ``slow`` therefore go
 out first, those with most of them before the others, and the many short files fill the gaps. A serial run keeps the usual order.
+
+Each test process computes as the workbench's commands do: on one BLAS thread, unless the
+environment chose a thread count (:mod:`vehid.identification.blas`). The tests' own NumPy work
+(reference solutions, simulations, classical estimators called directly) otherwise left OpenBLAS's
+second thread spinning, and the two workers of a 2-core run lost that time to each other.
 """
 
 from __future__ import annotations
@@ -22,6 +27,30 @@ import pytest
 def _in_parallel(config: pytest.Config) -> bool:
     """Whether this process is one of several workers (the controller of a parallel run collects nothing)."""
     return hasattr(config, "workerinput") and config.workerinput.get("workercount", 1) > 1
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    from vehid.identification.blas import blas_threads_chosen
+
+    if blas_threads_chosen():  # a run that sets a count (a measurement across thread counts) keeps it
+        return
+    # Only the libraries loaded in this process are limited, at run time: no environment variable is
+    # set, so processes the tests start (a command's subprocess, a study's workers) see the environment
+    # unchanged and limit themselves as the workbench does.
+    import numpy  # noqa: F401
+    import scipy.linalg  # noqa: F401  (SciPy's own OpenBLAS, loaded now so that it is limited too)
+    from threadpoolctl import threadpool_limits
+
+    config.stash[_BLAS_LIMIT] = threadpool_limits(limits=1, user_api="blas")
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    limit = config.stash.get(_BLAS_LIMIT, None)
+    if limit is not None:
+        limit.restore_original_limits()
+
+
+_BLAS_LIMIT = pytest.StashKey()
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:

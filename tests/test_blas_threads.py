@@ -9,13 +9,9 @@ import sys
 
 import pytest
 
-from vehid.identification.blas import blas_threads_chosen, one_blas_thread
+from vehid.identification.blas import blas_threads_chosen
 
-threadpoolctl = pytest.importorskip("threadpoolctl")
-
-
-def _blas_threads() -> list[int]:
-    return [entry["num_threads"] for entry in threadpoolctl.threadpool_info() if entry["user_api"] == "blas"]
+pytest.importorskip("threadpoolctl")
 
 
 def test_a_fresh_process_loads_its_blas_on_one_thread_inside_the_block_and_sets_nothing_after():
@@ -43,14 +39,24 @@ def test_a_fresh_process_loads_its_blas_on_one_thread_inside_the_block_and_sets_
 
 
 def test_libraries_already_loaded_are_limited_inside_and_given_their_threads_back():
-    import numpy  # noqa: F401  (a notebook's process: NumPy's BLAS is loaded before the block)
-    import scipy.linalg  # noqa: F401
-
-    before = _blas_threads()
-    with one_blas_thread():
-        inside = _blas_threads()
-    assert _blas_threads() == before
+    # a notebook's process: NumPy's and SciPy's BLAS are loaded before the block (in a process of its own,
+    # since the suite's processes compute on one thread already)
+    code = (
+        "import json\n"
+        "import numpy, scipy.linalg, threadpoolctl\n"
+        "from vehid.identification.blas import one_blas_thread\n"
+        "def counts():\n"
+        "    return [e['num_threads'] for e in threadpoolctl.threadpool_info() if e['user_api'] == 'blas']\n"
+        "before = counts()\n"
+        "with one_blas_thread():\n"
+        "    inside = counts()\n"
+        "print(json.dumps({'before': before, 'inside': inside, 'after': counts()}))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
+    assert done.returncode == 0, done.stderr
+    seen = json.loads(done.stdout)
+    assert seen["after"] == seen["before"]
     if not blas_threads_chosen():
-        assert inside and set(inside) == {1}
+        assert seen["inside"] and set(seen["inside"]) == {1}
     else:
-        assert inside == before
+        assert seen["inside"] == seen["before"]
