@@ -65,11 +65,9 @@ def identify_plan(plan: Plan, options: IdentifyOptions, *, resumed: Resumed | No
         if len(plan.orders) > 1:
             return _order_search(plan, options, iekf)
         previous = None
-        iekf, unstable = steps.assume_unstable(options, plan, iekf, plan.orders[0])
-        structure = steps.structure_for(options, plan.orders[0], plan, iekf)
-        tuning = steps.tune_p(options, plan, iekf, structure) if steps.tunes_p(options) else steps.given_p(iekf)
-        planned = steps.planned_filter_steps(plan, iekf, tuned=bool(tuning.tried))
-        iekf = tuning.applied(iekf)
+        decided = steps.decide_run(options, plan, iekf, plan.orders[0])
+        iekf, structure, tuning = decided.options, decided.structure, decided.tuning
+        unstable, planned = decided.unstable, decided.planned_steps
     if checkpoints is not None:
         checkpoints.decided(iekf, tuning, unstable, previous)
     on_pass = checkpoints.passed if checkpoints is not None else None

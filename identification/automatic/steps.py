@@ -66,7 +66,7 @@ __all__ = [
     "NONLINEAR_P", "START_RETURNED", "start_model", "returned_start", "returned_model", "NONLINEAR_P_GRID",
     "NonlinearOutcome", "NonlinearScores", "nonlinear_warnings", "UNSTABLE_MARGIN", "assume_unstable",
     "unstable_warning", "start_beats_filter", "START_KEPT", "decision_margins", "margin_entry", "order_margin",
-    "decision_notes", "structure_for", "FIT_FLOOR", "WHOLE_RECORD_MARGIN",
+    "decision_notes", "structure_for", "FIT_FLOOR", "WHOLE_RECORD_MARGIN", "RunDecisions", "decide_run",
 ]
 
 ORDER_TOLERANCE = 0.5  # points of mean validation fit
@@ -754,18 +754,37 @@ def last_good_on_divergence(run: Callable[[], Any]) -> tuple[Any, str | None]:
         return exc.last_good, str(exc)
 
 
-def run_iekf_order(settings: IdentifyOptions, plan: Plan, options: IEKFOptions, order: int
-                   ) -> tuple[ModalModel, dict[str, Any]]:
-    """One IEKF run of an order search (no checkpoints, p tuned per order): its model and what the summary needs."""
+@dataclass(frozen=True)
+class RunDecisions:
+    """What is decided before an IEKF run of one order: the filter's options (p and Q schedule applied),
+    its structure, the p tuning, the open-loop-unstable entry and the filter steps planned for the order."""
+
+    options: IEKFOptions
+    structure: ModalStructure
+    tuning: PTuning
+    unstable: dict[str, Any] | None
+    planned_steps: int
+
+
+def decide_run(settings: IdentifyOptions, plan: Plan, options: IEKFOptions, order: int) -> RunDecisions:
+    """The decisions before an IEKF run of ``order``, in their order: the open-loop-unstable treatment
+    (:func:`assume_unstable`), the structure (:func:`structure_for`), p and Q schedule (:func:`tune_p`,
+    or the p given) and the compiled build's planned steps (:func:`planned_filter_steps`)."""
     options, unstable = assume_unstable(settings, plan, options, order)
     structure = structure_for(settings, order, plan, options)
     tuning = tune_p(settings, plan, options, structure) if tunes_p(settings) else given_p(options)
     planned = planned_filter_steps(plan, options, tuned=bool(tuning.tried))
-    options = tuning.applied(options)
+    return RunDecisions(tuning.applied(options), structure, tuning, unstable, planned)
+
+
+def run_iekf_order(settings: IdentifyOptions, plan: Plan, options: IEKFOptions, order: int
+                   ) -> tuple[ModalModel, dict[str, Any]]:
+    """One IEKF run of an order search (no checkpoints, p tuned per order): its model and what the summary needs."""
+    decided = decide_run(settings, plan, options, order)
     result, divergence = last_good_on_divergence(
-        lambda: identify_iekf(plan.estimation, structure, options=options, settle_start=plan.settle_start,
-                              planned_steps=planned))
+        lambda: identify_iekf(plan.estimation, decided.structure, options=decided.options,
+                              settle_start=plan.settle_start, planned_steps=decided.planned_steps))
     stop_reason = f"{result.stop_reason}: {divergence}" if divergence else result.stop_reason
-    model, keys = returned_model(result, plan, settings, tuning, unstable)
-    return model, {"fit_percent": result.fit_percent, "stop_reason": stop_reason, "result": result, "tuning": tuning,
-                   "p": tuning.p, **keys}
+    model, keys = returned_model(result, plan, settings, decided.tuning, decided.unstable)
+    return model, {"fit_percent": result.fit_percent, "stop_reason": stop_reason, "result": result,
+                   "tuning": decided.tuning, "p": decided.tuning.p, **keys}
