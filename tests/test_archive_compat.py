@@ -30,9 +30,9 @@ from vehid.identification.models.scheduled import schedule_models
 from vehid.identification.models.statespace import continuous_to_discrete
 from vehid.identification.filtering.spline_iekf import SplineIEKFOptions
 from vehid.identification.dataio.storage import read_value, write_value
-from vehid.scenarios.cli import main
 from vehid.vehicle.linearize import linearize
 from vehid.vehicle.parameters import AeroParameters, baseline, saloon
+from conftest import run_vehid
 
 ARCHIVES = Path(__file__).parent / "data" / "archives"
 
@@ -57,12 +57,11 @@ def _stems(files):
 
 
 @pytest.mark.parametrize("name", sorted(EXPECTED_FILES))
-def test_an_archive_written_before_schemas_reports(name, tmp_path, capsys):
+def test_an_archive_written_before_schemas_reports(name, tmp_path):
     out = tmp_path / "report"
-    status = main(["report", str(ARCHIVES / name), "--out", str(out), "--dpi", "30", "--json"])
-    captured = capsys.readouterr()
-    assert status == 0, captured.err
-    summary = json.loads(captured.out)
+    done = run_vehid("report", ARCHIVES / name, "--out", out, "--dpi", "30", "--json")
+    assert done.returncode == 0, done.stderr
+    summary = json.loads(done.stdout)
     assert _stems(summary["files"]) == EXPECTED_FILES[name]
     assert all(Path(f).stat().st_size > 0 for f in summary["files"])
 
@@ -163,7 +162,7 @@ def test_the_stored_nonlinear_history_is_the_series_the_summary_once_carried():
     ("vehid_schema", "popen", "schema 'popen', which this workbench does not know"),
     ("dataclass", "subprocess:Popen", "names class 'subprocess:Popen'.*refusing"),
 ], ids=["unknown-schema", "foreign-class-path"])
-def test_report_refuses_a_value_it_cannot_rebuild_with_exit_2(attribute, value, message, tmp_path, capsys):
+def test_report_refuses_a_value_it_cannot_rebuild_with_exit_2(attribute, value, message, tmp_path):
     path = tmp_path / "tampered.h5"
     shutil.copyfile(ARCHIVES / "identify_n4sid.h5", path)
     with h5py.File(path, "r+") as handle:  # a consistent archive (checksums rewritten) that names a stranger
@@ -172,16 +171,17 @@ def test_report_refuses_a_value_it_cannot_rebuild_with_exit_2(attribute, value, 
             model.attrs.pop(key, None)
         model.attrs[attribute] = value
         write_checksums(handle)
-    assert main(["report", str(path), "--out", str(tmp_path / "report")]) == 2
-    assert re.search(message, capsys.readouterr().err)
+    done = run_vehid("report", path, "--out", tmp_path / "report")
+    assert done.returncode == 2
+    assert re.search(message, done.stderr)
     assert not (tmp_path / "report").exists()
 
 
-def test_an_old_identification_run_resumes_and_its_archive_is_marked_with_the_new_layout(tmp_path, capsys):
+def test_an_old_identification_run_resumes_and_its_archive_is_marked_with_the_new_layout(tmp_path):
     path = tmp_path / "run.h5"
     shutil.copyfile(ARCHIVES / "identify_iekf.h5", path)
-    status = main(["identify", "--resume", str(path), "--passes", "4", "--json", "--quiet"])
-    assert status == 0, capsys.readouterr().err
+    done = run_vehid("identify", "--resume", path, "--passes", "4", "--json", "--quiet")
+    assert done.returncode == 0, done.stderr
     archive = read_archive(path)
     assert archive.runs["iekf"].n_pass == 4 and archive.schema_version == archive_module.SCHEMA_VERSION
     with h5py.File(path, "r") as handle:

@@ -22,8 +22,8 @@ from vehid.identification.filtering.iekf import IEKFOptions, identify_iekf
 from vehid.identification.filtering.iekf_archive import read_iekf_run, write_iekf_run
 from vehid.identification.assessment.metrics import nrmse_fit
 from vehid.identification.models.modal import ModalModel, ModalStructure
-from vehid.scenarios.cli import main
 from vehid.scenarios.report import archive_figures, archive_table
+from conftest import run_vehid
 
 ROOT = Path(__file__).resolve().parents[1]
 ROBOT_ARM = ROOT / "tests" / "data" / "robot_arm" / "robot_arm.dat"
@@ -57,37 +57,36 @@ STUCK = ("--order", "3", "--start", "default", "--timescale", "seconds", "--no-n
 TUNED = ("--order", "3", "--passes", "3", "--validation", "0.3")
 
 
-def _vehid(capsys, *argv: str) -> tuple[int, str, str]:
-    status = main(list(argv))
-    captured = capsys.readouterr()
-    return status, captured.out, captured.err
+def _vehid(*argv: str) -> tuple[int, str, str]:
+    done = run_vehid(*argv)
+    return done.returncode, done.stdout, done.stderr
 
 
-def _identify(capsys, record: Path, *options: str) -> tuple[int, str, str]:
-    return _vehid(capsys, "identify", str(record), "--inputs", "u1", "--outputs", "y1", "--quiet", *options)
+def _identify(record: Path, *options: str) -> tuple[int, str, str]:
+    return _vehid("identify", str(record), "--inputs", "u1", "--outputs", "y1", "--quiet", *options)
 
 
-def test_strict_prints_the_whole_summary_then_exits_3(tmp_path, capsys):
+def test_strict_prints_the_whole_summary_then_exits_3(tmp_path):
     record = _csv(tmp_path / "small.csv", _record(30.0), y_factor=1e-6)
-    loose_status, loose, loose_err = _identify(capsys, record, *STUCK)
+    loose_status, loose, loose_err = _identify(record, *STUCK)
     assert loose_status == 0 and "vehid: warning:" in loose_err  # the case has warnings
-    status, text, err = _identify(capsys, record, *STUCK, "--strict")
+    status, text, err = _identify(record, *STUCK, "--strict")
     assert status == 3 and "warnings under --strict" in err
     # the same summary as without --strict (the first line holds the run time, which differs)
     assert text.splitlines()[1:] == loose.splitlines()[1:] and "NRMSE fit %" in text
-    status, out, _ = _identify(capsys, record, *STUCK, "--strict", "--json")
+    status, out, _ = _identify(record, *STUCK, "--strict", "--json")
     summary = json.loads(out)
     assert status == 3 and summary["exit_status"] == 3 and summary["warnings"]
     assert {"eigenvalues", "A", "validation_fit_percent", "estimation_fit_percent"} <= set(summary)
 
 
 @pytest.mark.parametrize("options", [STUCK, TUNED], ids=["stuck-at-start", "p-tuned"])
-def test_a_resumed_or_reread_run_gives_the_original_verdict(tmp_path, capsys, options):
+def test_a_resumed_or_reread_run_gives_the_original_verdict(tmp_path, options):
     record = _csv(tmp_path / "r.csv", _record(30.0), y_factor=1e-6 if options is STUCK else 1.0)
     archive = tmp_path / "run.h5"
-    status, out, _ = _identify(capsys, record, *options, "--out", str(archive), "--json")
+    status, out, _ = _identify(record, *options, "--out", str(archive), "--json")
     original = json.loads(out)
-    resumed_status, out, _ = _vehid(capsys, "identify", "--resume", str(archive), "--json", "--quiet", "--strict")
+    resumed_status, out, _ = _vehid("identify", "--resume", str(archive), "--json", "--quiet", "--strict")
     resumed = json.loads(out)
     for key in ("warnings", "p", "p_tried", "start", "model_returned", "passes_run", "stop_reason",
                 "validation_fit_percent", "estimation_fit_percent"):
@@ -97,7 +96,7 @@ def test_a_resumed_or_reread_run_gives_the_original_verdict(tmp_path, capsys, op
         return
     assert any("start" in line for line in original["warnings"]), original["warnings"]  # needs the archived start
     # re-read: the report states the command's scores and every one of its warnings
-    status, out, _ = _vehid(capsys, "report", str(archive), "--out", str(tmp_path / "report"), "--dpi", "30",
+    status, out, _ = _vehid("report", str(archive), "--out", str(tmp_path / "report"), "--dpi", "30",
                             "--json")
     report = json.loads(out)
     verdict = report["verdict"]
@@ -127,10 +126,10 @@ ARM_FLOORS = [pytest.param("n4sid", 96.80 - 2.0, id="n4sid"),
 
 
 @pytest.mark.parametrize("method, floor", ARM_FLOORS)
-def test_the_report_scores_the_robot_arm_as_the_command_does(tmp_path, capsys, method, floor):
+def test_the_report_scores_the_robot_arm_as_the_command_does(tmp_path, method, floor):
     """The lightly damped arm starts mid-motion: from rest its model runs out of phase (23 % in the old report)."""
     archive = tmp_path / "arm.h5"
-    status, out, _ = _vehid(capsys, "identify", str(ROBOT_ARM), "--inputs", "1", "--outputs", "2", "--dt", "1",
+    status, out, _ = _vehid("identify", str(ROBOT_ARM), "--inputs", "1", "--outputs", "2", "--dt", "1",
                             "--validation", "0.3", "--method", method, "--out", str(archive), "--json", "--quiet")
     command = json.loads(out)
     assert status == 0
@@ -170,10 +169,10 @@ def test_a_run_without_a_stored_history_shows_the_passes_the_command_counted(tmp
 
 
 @pytest.mark.slow  # the spline filter's first compilation takes up to ~30 s on a fresh cache
-def test_the_spline_run_is_archived_with_its_passes_and_scored_as_the_command_did(tmp_path, capsys):
+def test_the_spline_run_is_archived_with_its_passes_and_scored_as_the_command_did(tmp_path):
     record = _csv(tmp_path / "r.csv", _record(30.0))
     archive = tmp_path / "run.h5"
-    status, out, _ = _identify(capsys, record, "--order", "3", "--p", "1e-4", "--passes", "3", "--validation", "0.3",
+    status, out, _ = _identify(record, "--order", "3", "--p", "1e-4", "--passes", "3", "--validation", "0.3",
                                "--nonlinear", "--nonlinear-p", "1e-8", "--nonlinear-passes", "3", "--out",
                                str(archive), "--json")
     command = json.loads(out)["nonlinear"]

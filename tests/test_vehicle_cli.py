@@ -8,18 +8,18 @@ import pytest
 
 from vehid.identification.data import read_hdf5
 from vehid.scenarios.cli import main
+from conftest import run_vehid
 
 
-def _run_json(capsys, argv):
-    status = main([*argv, "--json"])
-    captured = capsys.readouterr()
-    assert status == 0, captured.err
-    return json.loads(captured.out)
+def _run_json(argv):
+    done = run_vehid(*argv, "--json")
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout)
 
 
-def test_simulate_step_summary_keys(capsys, tmp_path, monkeypatch):
+def test_simulate_step_summary_keys(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # a relative --out is taken from the working directory
-    summary = _run_json(capsys, ["simulate", "--manoeuvre", "step", "--amplitude-deg", "0.3",
+    summary = _run_json(["simulate", "--manoeuvre", "step", "--amplitude-deg", "0.3",
                                  "--duration", "6", "--out", "step.h5"])
     for key in ("peak_lateral_acceleration", "min_speed", "max_speed", "seconds",
                 "yaw_rate_gain", "lateral_acceleration_gain", "roll_gain"):
@@ -35,14 +35,14 @@ def test_simulate_step_summary_keys(capsys, tmp_path, monkeypatch):
     assert record.output_names[:3] == ("lateral_acceleration", "yaw_rate", "roll_angle")
 
 
-def test_simulate_identification_summary(capsys):
-    summary = _run_json(capsys, ["simulate", "--manoeuvre", "identification", "--duration", "4"])
+def test_simulate_identification_summary():
+    summary = _run_json(["simulate", "--manoeuvre", "identification", "--duration", "4"])
     assert "yaw_rate_gain" not in summary
     assert 19.5 < summary["min_speed"] <= summary["max_speed"] < 20.5
 
 
-def test_linearize_modes(capsys):
-    summary = _run_json(capsys, ["linearize", "--vehicle", "understeer", "--speed", "25"])
+def test_linearize_modes():
+    summary = _run_json(["linearize", "--vehicle", "understeer", "--speed", "25"])
     labels = [mode["label"] for mode in summary["modes"]]
     for label in ("roll", "yaw-sideslip", "heave", "pitch", "wheel"):
         assert label in labels
@@ -71,11 +71,11 @@ def _bad_vehicle(tmp_path, text):
         (["simulate", "--vehicle", "VEHICLE:base = \"baseline\"\n[tyre]\nwheel_inertia = -1.0\n"], "wheel_inertia"),
     ],
 )
-def test_bad_input_exits_2_with_one_line(capsys, tmp_path, argv, message):
+def test_bad_input_exits_2_with_one_line(tmp_path, argv, message):
     argv = [_bad_vehicle(tmp_path, a[8:]) if a.startswith("VEHICLE:") else a for a in argv]
-    status = main(argv)
-    err = capsys.readouterr().err
-    assert status == 2
+    done = run_vehid(*argv)
+    err = done.stderr
+    assert done.returncode == 2
     assert len(err.strip().splitlines()) == 1 and message in err and "Traceback" not in err
 
 

@@ -16,15 +16,14 @@ import pytest
 
 from vehid.identification.data import read_hdf5
 from vehid.identification.errors import InputError, WorkbenchError
-from vehid.scenarios.cli import main
 from vehid.vehicle import baseline, build_vehicle_model, simulate
 from vehid.vehicle.manoeuvres import identification, step
+from conftest import run_vehid
 
 
-def _cli(capsys, argv):
-    status = main([*argv, "--json"])
-    captured = capsys.readouterr()
-    return status, json.loads(captured.out), captured.err
+def _cli(argv):
+    done = run_vehid(*argv, "--json")
+    return done.returncode, json.loads(done.stdout), done.stderr
 
 
 def _vehicle_file(tmp_path, text):
@@ -35,9 +34,9 @@ def _vehicle_file(tmp_path, text):
 
 # --- up front: bad vehicles and speeds are input errors (exit 2), before any work -------------------
 
-def test_a_vehicle_that_tips_before_it_slides_is_rejected(capsys, tmp_path):
+def test_a_vehicle_that_tips_before_it_slides_is_rejected(tmp_path):
     """3 m CG height on a 1.52 m track: t / (2 h) = 0.25 g, far below the tyres' friction (0.89)."""
-    status, body, err = _cli(capsys, ["simulate", "--vehicle", _vehicle_file(tmp_path, "[chassis]\ncg_height = 3.0\n")])
+    status, body, err = _cli(["simulate", "--vehicle", _vehicle_file(tmp_path, "[chassis]\ncg_height = 3.0\n")])
     assert status == 2 and body["exit_status"] == 2
     assert "tip over" in body["error"] and "0.253" in body["error"]
     assert len(err.strip().splitlines()) == 1
@@ -54,9 +53,9 @@ def test_a_vehicle_unstable_in_roll_is_rejected():
 
 @pytest.mark.parametrize("speed, words", [("0.1", "below the model's valid range"),
                                           ("80", "above the model's valid range")])
-def test_speeds_outside_the_valid_range_are_rejected(capsys, speed, words):
+def test_speeds_outside_the_valid_range_are_rejected(speed, words):
     """0.1 m/s (slid at 90 deg sideslip) and 80 m/s (spun) exit 2 and name the range 3-50 m/s."""
-    status, body, _ = _cli(capsys, ["simulate", "--speed", speed])
+    status, body, _ = _cli(["simulate", "--speed", speed])
     assert status == 2 and words in body["error"] and "3-50 m/s" in body["error"]
 
 
@@ -87,10 +86,10 @@ def test_rk4_stability_bound_is_the_textbook_one():
 
 # --- memory is checked before the run -------------------------------------------------------------
 
-def test_a_record_too_large_for_memory_is_refused_before_any_work(capsys):
+def test_a_record_too_large_for_memory_is_refused_before_any_work():
     """1e6 s at 500 Hz is 5e8 samples, some 400 GiB of arrays: refused at once with the estimate."""
     started = time.perf_counter()
-    status, body, _ = _cli(capsys, ["simulate", "--duration", "1e6"])
+    status, body, _ = _cli(["simulate", "--duration", "1e6"])
     assert time.perf_counter() - started < 5.0  # nothing was built or integrated
     assert status == 2 and "GiB" in body["error"] and "available" in body["error"]
 
@@ -109,7 +108,7 @@ def test_memory_estimate_against_the_available_memory(monkeypatch):
 
 # --- during the run: the physical envelope --------------------------------------------------------
 
-def test_wheelspin_beyond_the_grip_limit_stops_the_run_with_the_partial_record(capsys, tmp_path, monkeypatch):
+def test_wheelspin_beyond_the_grip_limit_stops_the_run_with_the_partial_record(tmp_path, monkeypatch):
     """The identification input at 40 m/s asks for more than the tyres can give: the PI hold spins a
     front wheel up (slip ratio past 0.5 at 6.6 s). A failed computation, exit 1, one line, the
     quantity, its value and the time named; the record up to that sample is kept."""
@@ -125,7 +124,7 @@ def test_wheelspin_beyond_the_grip_limit_stops_the_run_with_the_partial_record(c
     kappa = np.abs(partial.x[:, [partial.state_names.index(f"kappa_{c}") for c in ("fl", "fr", "rl", "rr")]])
     assert np.max(kappa[:-1]) <= 0.5 < np.max(kappa[-1])  # it ends at the first sample outside
     monkeypatch.chdir(tmp_path)  # a relative --out is taken from the working directory
-    status, body, err = _cli(capsys, ["simulate", "--speed", "40", "--out", "spin.h5"])
+    status, body, err = _cli(["simulate", "--speed", "40", "--out", "spin.h5"])
     assert status == 1 and body["exit_status"] == 1 and "longitudinal tyre slip" in body["error"]
     assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
     assert "3302 samples" in body["error"] and read_hdf5(tmp_path / "spin.h5").n_samples == 3302
