@@ -29,6 +29,10 @@ def _in_parallel(config: pytest.Config) -> bool:
     return hasattr(config, "workerinput") and config.workerinput.get("workercount", 1) > 1
 
 
+# the BLAS thread limit of this test process, lifted when the run ends
+_BLAS_LIMIT = pytest.StashKey()
+
+
 def pytest_configure(config: pytest.Config) -> None:
     from vehid.identification.blas import blas_threads_chosen
 
@@ -48,9 +52,6 @@ def pytest_unconfigure(config: pytest.Config) -> None:
     limit = config.stash.get(_BLAS_LIMIT, None)
     if limit is not None:
         limit.restore_original_limits()
-
-
-_BLAS_LIMIT = pytest.StashKey()
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:

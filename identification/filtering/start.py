@@ -165,7 +165,7 @@ def damped_beyond_band(values: np.ndarray, limit: float) -> tuple[np.ndarray, in
     (:func:`input_band_edge`). The input hardly drives a mode beyond it, so the record cannot tell
     its frequency or gain: a subspace model of a noisy record puts a resonance of the noise there,
     which the filter then cannot leave (the handling study's noisy records: damping 0.006 at three
-    times the steer's band edge, diverging at n = 6 and losing up to 54 points of hold-out fit at
+    times the steer's band edge, diverging at n = 6 and losing up to 88 points of hold-out fit at
     n = 7, ``benchmarks/noisy_handling.py``). At the limit, damped, its gain is fitted by least
     squares with the others' and the filter moves it where the data call for it. A mode damped at
     least as much as the band start's (:data:`_BAND_DAMPING`) is kept, wherever it lies.
