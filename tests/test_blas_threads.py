@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 
@@ -12,6 +11,13 @@ import pytest
 from vehid.identification.blas import blas_threads_chosen
 
 pytest.importorskip("threadpoolctl")
+
+
+def _seen_by_a_new_process(code: str) -> dict:
+    """What ``code``, run in a new interpreter, printed as JSON (the suite's own processes are limited already)."""
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout)
 
 
 def test_a_fresh_process_loads_its_blas_on_one_thread_inside_the_block_and_sets_nothing_after():
@@ -28,9 +34,7 @@ def test_a_fresh_process_loads_its_blas_on_one_thread_inside_the_block_and_sets_
         "after = {k: os.environ.get(k) for k in before}\n"
         "print(json.dumps({'inside': inside, 'child': child, 'same': before == after}))\n"
     )
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
-    assert done.returncode == 0, done.stderr
-    seen = json.loads(done.stdout)
+    seen = _seen_by_a_new_process(code)
     if blas_threads_chosen():  # the machine's environment chose a count: kept, and nothing to check here
         return
     assert seen["inside"] and set(seen["inside"]) == {1}
@@ -52,9 +56,7 @@ def test_libraries_already_loaded_are_limited_inside_and_given_their_threads_bac
         "    inside = counts()\n"
         "print(json.dumps({'before': before, 'inside': inside, 'after': counts()}))\n"
     )
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
-    assert done.returncode == 0, done.stderr
-    seen = json.loads(done.stdout)
+    seen = _seen_by_a_new_process(code)
     assert seen["after"] == seen["before"]
     if not blas_threads_chosen():
         assert seen["inside"] and set(seen["inside"]) == {1}
