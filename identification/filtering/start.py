@@ -172,8 +172,7 @@ def damped_beyond_band(values: np.ndarray, limit: float) -> tuple[np.ndarray, in
     """
     values = np.asarray(values, dtype=complex).copy()
     magnitude = np.abs(values)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        damping = np.where(magnitude > 0, -values.real / np.maximum(magnitude, np.finfo(float).tiny), 1.0)
+    damping = -values.real / np.maximum(magnitude, np.finfo(float).tiny)  # 0 at the origin, which no limit moves
     beyond = (magnitude > limit) & (damping < _BAND_DAMPING)
     radius = np.minimum(magnitude, limit)
     oscillating = np.abs(values.imag) > 1e-9 * magnitude
@@ -183,6 +182,12 @@ def damped_beyond_band(values: np.ndarray, limit: float) -> tuple[np.ndarray, in
     values[beyond] = replaced[beyond]
     changed = int(np.sum(beyond & (values.imag >= 0)))
     return values, changed
+
+
+def _band_limit(u: np.ndarray) -> float:
+    """The rate (rad/sample) beyond which the data start moves a lightly damped mode: :data:`_BAND_MARGIN`
+    times the input's band edge."""
+    return _BAND_MARGIN * input_band_edge(u)
 
 
 def _modal_matrix(structure: ModalStructure, modes: np.ndarray) -> np.ndarray:
@@ -246,7 +251,10 @@ def _simulation_fit(model: ModalModel, u: np.ndarray, y: np.ndarray, *, estimate
 
 
 def _subspace_start(u: np.ndarray, y: np.ndarray, structure: ModalStructure, stable: bool,
-                    block_rows: int | None = None, free_modes: bool = False) -> DataStart:
+                    block_rows: int | None = None, free_modes: bool = False,
+                    band_limit: float | None = None) -> DataStart:
+    """One subspace candidate of the data start; ``band_limit`` is :func:`_band_limit` of ``u`` (computed
+    where not given: the candidates of one record share it)."""
     from ..models.statespace import discrete_to_continuous, to_modal
     from ..classical.subspace import estimate_subspace
 
@@ -260,7 +268,7 @@ def _subspace_start(u: np.ndarray, y: np.ndarray, structure: ModalStructure, sta
     if free_modes:
         pairs = int(np.sum(continuous.imag > 1e-9 * np.abs(continuous)))
         structure = ModalStructure.with_modes(pairs, structure.n - 2 * pairs, structure.n_u, structure.n_y)
-    limit = _BAND_MARGIN * input_band_edge(u)
+    limit = _band_limit(u) if band_limit is None else band_limit
     continuous, damped = damped_beyond_band(continuous, limit)
     if damped:
         note = (f"{damped} lightly damped subspace mode{'s' if damped > 1 else ''} beyond the input's band "
@@ -356,9 +364,11 @@ def _found_start(u: np.ndarray, y: np.ndarray, structure: ModalStructure, method
     # records) and the band start: the one that simulates the record best.
     candidates, notes = [band], []
     default_rows = max(2 * structure.n, structure.n + 1)
+    limit = _band_limit(u)
     for rows in sorted({default_rows, max(default_rows, 10), max(default_rows, 25)}):
         try:
-            candidates.append(_subspace_start(u, y, structure, stable, block_rows=rows, free_modes=free_modes))
+            candidates.append(_subspace_start(u, y, structure, stable, block_rows=rows, free_modes=free_modes,
+                                              band_limit=limit))
         except (WorkbenchError, np.linalg.LinAlgError) as exc:
             notes.append(f"subspace with {rows} block rows failed ({exc})")
     fits = [_simulation_fit(candidate.model, u, y, estimate_state=not stable) for candidate in candidates]
