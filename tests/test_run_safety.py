@@ -22,7 +22,7 @@ from vehid.scenarios.linear_example import make_data
 
 
 class _Killed(KeyboardInterrupt):
-    """Stands for a kill right after a checkpoint was written (the archive is what a kill leaves)."""
+    """Stands for an interruption after a pass (Ctrl-C, a stopping signal): the archive is what it leaves."""
 
 
 def _record(path, duration=20.0):
@@ -77,6 +77,64 @@ def test_resume_without_passes_runs_to_the_runs_own_budget(tmp_path, capsys, mon
     assert _summary(capsys)["passes_run"] == 11
     assert main(["identify", "--resume", str(archive), "--quiet", "--json"]) == 0
     assert _summary(capsys)["passes_run"] == 11
+
+
+def test_fast_passes_are_checkpointed_together_and_none_is_lost(tmp_path, monkeypatch):
+    """Passes are gathered until the time computed since the last checkpoint reaches COMPUTE_PER_CHECKPOINT
+    times what that checkpoint took to write; the first is written at once, and a flush (an interrupted
+    run) or the finish writes the rest. On a clock that this test moves: a pass takes 1 s, a write 2 s."""
+    from vehid.identification.dataio.archive import write_archive
+    from vehid.identification.filtering import iekf_archive
+
+    clock = {"now": 0.0}
+
+    class _Clock:
+        @staticmethod
+        def perf_counter():
+            return clock["now"]
+
+    real_update = iekf_archive.update_archive
+
+    def slow_update(path):
+        clock["now"] += 2.0
+        return real_update(path)
+
+    monkeypatch.setattr(iekf_archive, "time", _Clock)
+    monkeypatch.setattr(iekf_archive, "update_archive", slow_update)
+    data, _ = make_data(5, outputs=(0,), duration=4.0)
+    structure = ModalStructure.default(5, data.n_u, data.n_y)
+    options = IEKFOptions(p=0.5, passes=12, parameter_tolerance=0.0, trace_tolerance=0.0)
+    archive = tmp_path / "run.h5"
+    with write_archive(archive, kind="identification", config=options, seeds=[]):
+        pass
+    checkpoint = iekf_archive.Checkpointer(archive, "iekf")
+
+    def stored_passes():
+        with open_archive(archive) as handle:
+            return read_iekf_run(handle, "iekf").passes_run if "runs" in handle else 0
+
+    stored = []
+
+    def on_pass(record, so_far):
+        clock["now"] += 1.0
+        checkpoint(record, so_far)
+        stored.append(stored_passes())
+        if record.index == 11:
+            raise _Killed()
+
+    with pytest.raises(_Killed):
+        identify_iekf(data, structure, options=options, on_pass=on_pass)
+    # pass 1 at once (no write timed yet); then 8 s of passes (4 x the 2 s write) before the next: pass 9
+    assert iekf_archive.COMPUTE_PER_CHECKPOINT == 4.0
+    assert stored == [1] * 8 + [9] * 3
+    checkpoint.flush()  # what the command does on its way out of an interrupted run
+    assert stored_passes() == 11
+    whole = identify_iekf(data, structure, options=options)
+    with open_archive(archive) as handle:
+        kept = read_iekf_run(handle, "iekf")
+    assert [record.index for record in kept.history] == list(range(1, 12))
+    assert all(np.array_equal(a.parameters, b.parameters) for a, b in zip(kept.history, whole.history))
+    assert np.array_equal(kept.model.parameters, whole.history[10].parameters)  # the model of pass 11
 
 
 def test_a_run_killed_after_it_converged_resumes_converged():

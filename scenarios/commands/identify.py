@@ -295,15 +295,23 @@ class _Keeper:
             self.checkpoint(record, so_far)
         self.progress.advance(note=f"R {record.mean_fit_filter:.4f} %")
 
-    def close(self) -> None:
+    def _stop_progress(self) -> None:
         if self.progress is not None:
             progress, self.progress = self.progress, None
             progress.__exit__(None, None, None)
 
-    def finished(self, result) -> None:
-        self.close()
+    def close(self) -> None:
+        """On the way out, however the run ends: an interrupted run's archive keeps every finished pass."""
+        self._stop_progress()
         if self.checkpoint is not None:
-            self.checkpoint.finish(result)  # the archive says how the run ended: converged, passes or diverged at pass k
+            checkpoint, self.checkpoint = self.checkpoint, None
+            checkpoint.flush()
+
+    def finished(self, result) -> None:
+        self._stop_progress()
+        if self.checkpoint is not None:
+            checkpoint, self.checkpoint = self.checkpoint, None
+            checkpoint.finish(result)  # the archive says how the run ended: converged, passes or diverged at pass k
 
 
 def identify_run(args) -> tuple[dict, str, object]:
