@@ -33,13 +33,19 @@ def _write_csv(path, u, y, *, t=None, header="t,u1,u2,y1"):
 
 
 @pytest.fixture(scope="module")
-def short_record(tmp_path_factory):
+def record_at_100_hz(tmp_path_factory):
+    """The 100 s record of eq. 16 at every fifth sample (100 Hz, a fifth of the filter's work).
+
+    Its inputs are linear between 50 Hz points, so the exact (first-order-hold) discretisation loses
+    nothing by the coarser sampling: the fit is 99.9994 % at 100 Hz as at 500 Hz.
+    """
     data, _ = make_data(4, outputs=(0,), duration=100.0)
-    return _write_csv(tmp_path_factory.mktemp("data") / "record.csv", data.u, data.y)
+    u, y = data.u[::5], data.y[::5]
+    return _write_csv(tmp_path_factory.mktemp("data") / "record_100hz.csv", u, y, t=np.arange(len(u)) * 0.01)
 
 
-def test_identify_json_summary(short_record, tmp_path):
-    completed = _vehid("identify", str(short_record), "--inputs", "u1,u2", "--outputs", "y1", "--order", "5",
+def test_identify_json_summary(record_at_100_hz, tmp_path):
+    completed = _vehid("identify", str(record_at_100_hz), "--inputs", "u1,u2", "--outputs", "y1", "--order", "5",
                        "--passes", "40", "--json", "--save-model", str(tmp_path / "model.json"))
     assert completed.returncode == 0, completed.stderr
     summary = json.loads(completed.stdout)
@@ -47,6 +53,7 @@ def test_identify_json_summary(short_record, tmp_path):
     assert summary["discretization"] == "exact" and summary["passes_run"] <= 40
     assert len(summary["eigenvalues"]) == 5 and all(len(v) == 2 for v in summary["eigenvalues"])
     # eq. 15 from the 100 s record of eq. 16 (shorter records leave the weak modes slow to settle): within 2 %
+    # (measured 0.55 % for the pair at -15 +- 10j and 0.7 % for the real pole; 0.05 % and 0.5 % at 500 Hz)
     found = [complex(*v) for v in summary["eigenvalues"]]
     for truth in (-15 + 10j, -15 - 10j, -8 + 40j, -8 - 40j, -4):
         assert min(abs(f - truth) for f in found) / abs(truth) < 0.02
@@ -99,8 +106,8 @@ def test_identify_bad_input_is_one_clear_line(case, message, tmp_path):
     assert "Traceback" not in completed.stderr
 
 
-def test_unknown_option_is_a_usage_error(short_record):
-    completed = _vehid("identify", str(short_record), "--frobnicate")
+def test_unknown_option_is_a_usage_error(record_at_100_hz):
+    completed = _vehid("identify", str(record_at_100_hz), "--frobnicate")
     assert completed.returncode == 2 and "Traceback" not in completed.stderr
 
 
