@@ -4,7 +4,8 @@
         [--rule holdout|estimation-split] [--tolerance 0.5] [--inner-holdout 0.3] SET [SET ...]
 
 prints, after each split, one JSON line holding the results so far (the last line: all of them): ``{"settings": ..., "versions": ..., "sets": {set: {split: {method: {"order": n,
-"validation_fit_percent": [...], "fit_by_order": {n: mean fit}, "seconds": s} or {"error": text}}}}}``, where
+"validation_fit_percent": [...], "fit_by_order": {n: mean fit}, "models_by_order": {n: {"A": ..., "B": ..., "C": ...,
+"D": ...}} (linear peers), "seconds": s} or {"error": text}}}}}``, where
 ``split`` is the held-out fraction as text (``"0.3"``) or ``"published"`` for a record published with its own
 validation record. The peers (SIPPY, nfoursid, python-control, sysidentpy) are never imported by the
 workbench; this script needs only them, NumPy, SciPy and ``_real_records.py`` beside it.
@@ -14,7 +15,10 @@ remove offsets themselves); the validation record is centred as ``vehid
 identify`` centres it (``_real_records.validation_offsets``: the estimation
 means for a held-out tail, its own means for a separate validation record).
 Every model is simulated on the validation input from its least-squares
-initial state (``_real_records``).
+initial state (``_real_records``: MATLAB ``compare``'s rule). The linear
+peers' discrete models are printed too, so that the benchmark can score them
+as ``vehid identify`` scores its own (k-step prediction where a model is
+unstable), which this environment cannot: it has no workbench.
 
 Every peer gets the order search ``vehid identify --order 2-8`` gets: it is
 identified at each order (state dimension; the ARX lag count for
@@ -110,41 +114,49 @@ def _sysidentpy(degree: int):
 NARX_PEERS = {"sysidentpy-arx": _sysidentpy(1), "sysidentpy-narx2": _sysidentpy(2)}
 
 
-def _fits(method: str, estimation, validation, order: int) -> list[float | None]:
+def _fits(method: str, estimation, validation, order: int) -> tuple[list[float | None], dict | None]:
     """Hold-out fit per output of ``method`` at ``order``: identified on ``estimation``, scored on ``validation``.
 
     Both parts are raw; the estimation means are removed before identifying,
     and ``validation`` arrives with its offsets as a pair ``((u, y), (u0, y0))``.
+    Also returns a linear peer's discrete model (``A``, ``B``, ``C``, ``D`` as
+    lists), for the benchmark to score as ``identify`` scores; None for NARX.
     """
     (u_est, y_est), ((u_val, y_val), (u_val_offset, y_val_offset)) = estimation, validation
     u_c, y_c = u_est - u_est.mean(axis=0), y_est - y_est.mean(axis=0)
     with warnings.catch_warnings(), contextlib.redirect_stdout(io.StringIO()):
         warnings.simplefilter("ignore")
         if method in NARX_PEERS:
-            return NARX_PEERS[method](u_c, y_c, u_val - u_val_offset, y_val - y_val_offset, order)
+            return NARX_PEERS[method](u_c, y_c, u_val - u_val_offset, y_val - y_val_offset, order), None
         A, B, C, D = LINEAR_PEERS[method](u_c, y_c, order)
-        return records.score_discrete(A, B, C, D, u_val, y_val, u_val_offset, y_val_offset)
+        model = {key: np.atleast_2d(np.asarray(matrix, dtype=float)).tolist() for key, matrix in zip("ABCD", (A, B, C, D))}
+        return records.score_discrete(A, B, C, D, u_val, y_val, u_val_offset, y_val_offset), model
 
 
 def _mean(fits: list[float | None] | None) -> float | None:
     return None if not fits or any(f is None for f in fits) else float(np.mean(fits))
 
 
-def _fits_by_order(method: str, estimation, validation, orders) -> tuple[dict[int, list | None], dict[int, str]]:
-    """Hold-out fit per output at each order; a peer failing at an order is recorded, not raised."""
-    fits, errors = {}, {}
+def _fits_by_order(method: str, estimation, validation, orders
+                   ) -> tuple[dict[int, list | None], dict[int, str], dict[int, dict]]:
+    """Hold-out fit per output at each order, and each linear model; a peer failing at an order is recorded, not raised."""
+    fits, errors, models = {}, {}, {}
     for order in orders:
         try:
-            fits[order] = _fits(method, estimation, validation, order)
+            fits[order], model = _fits(method, estimation, validation, order)
         except Exception as exc:  # a peer failing at one order is a result, not a crash of the benchmark
-            fits[order], errors[order] = None, f"{type(exc).__name__}: {exc}"[:200]
-    return fits, errors
+            fits[order], errors[order], model = None, f"{type(exc).__name__}: {exc}"[:200], None
+        if model is not None:
+            models[order] = model
+    return fits, errors, models
 
 
 def search(method: str, estimation, validation, options) -> dict:
     """One peer's order search and the hold-out fit of the order it chooses."""
-    held, errors = _fits_by_order(method, estimation, validation, options.orders)
+    held, errors, models = _fits_by_order(method, estimation, validation, options.orders)
     row: dict = {"fit_by_order": {order: _mean(fits) for order, fits in held.items()}}
+    if models:
+        row["models_by_order"] = models
     if options.rule == "holdout":
         ranking = row["fit_by_order"]
     else:
@@ -153,7 +165,7 @@ def search(method: str, estimation, validation, options) -> dict:
         cut = records.split_index(len(u_est), options.inner_holdout)
         inner_estimation, inner_validation = (u_est[:cut], y_est[:cut]), (u_est[cut:], y_est[cut:])
         inner_offsets = (inner_estimation[0].mean(axis=0), inner_estimation[1].mean(axis=0))
-        inner, _ = _fits_by_order(method, inner_estimation, (inner_validation, inner_offsets), options.orders)
+        inner, _, _ = _fits_by_order(method, inner_estimation, (inner_validation, inner_offsets), options.orders)
         ranking = {order: _mean(fits) for order, fits in inner.items()}
         row["selection_fit_by_order"] = ranking
     order = records.choose_order(ranking, options.tolerance)

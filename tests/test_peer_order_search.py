@@ -147,3 +147,44 @@ def test_perturbed_copy_differs_by_the_perturbation_alone(name, tmp_path):
     (u_est, y_est), (u_val, y_val) = records.load(entry, file=copy)
     (u0, y0), (u1, y1) = records.load(entry)
     assert [a.shape for a in (u_est, y_est, u_val, y_val)] == [a.shape for a in (u0, y0, u1, y1)]
+
+
+def test_peers_are_scored_as_identify_scores_and_their_order_chosen_on_those_scores():
+    """A stable peer model keeps compare's figure (the same least-squares initial state); an unstable one is
+    predicted 10 samples ahead, as identify scores its own unstable models; the order is chosen again on these."""
+    from vehid.identification.assessment.validation import UNSTABLE_HORIZON, score
+    from vehid.identification.classical.subspace import estimate_subspace
+    from vehid.identification.models.discrete import DiscreteModel
+
+    real_data = _load_benchmark_module("real_data")
+    entry = records.record_set("dryer")
+    estimation, validation = records.load(entry, 0.3)
+    u_offset, y_offset = records.validation_offsets(entry, estimation, validation)
+    (u, y) = estimation
+    fit = estimate_subspace((u - u.mean(axis=0), y - y.mean(axis=0)), order=2)
+    stable = (fit.A, fit.B, fit.C, fit.D)
+    growing = (fit.A * 1.02 / np.max(np.abs(np.linalg.eigvals(fit.A))), fit.B, fit.C, fit.D)  # 2 % a sample
+    models = {order: {key: np.atleast_2d(m).tolist() for key, m in zip("ABCD", model)}
+              for order, model in ((2, stable), (3, _padded(growing, 3)))}
+    compare = {order: records.score_discrete(*(np.asarray(models[order][k]) for k in "ABCD"),
+                                             validation[0], validation[1], u_offset, y_offset)
+               for order in models}
+    row = {"order": 3, "validation_fit_percent": compare[3], "models_by_order": models,
+           "fit_by_order": {order: fits[0] for order, fits in compare.items()}}
+    narx = {"order": 2, "validation_fit_percent": [50.0]}
+    peers = {"sets": {"dryer": {"0.3": {"stand-in": row, "narx": narx}}}}
+    real_data.score_as_identify(peers, "holdout")
+
+    held_out = IOData(t=np.arange(len(validation[0])) * entry.dt, u=validation[0] - u_offset,
+                      y=validation[1] - y_offset)
+    unstable = DiscreteModel(*(np.asarray(models[3][k]) for k in "ABCD"), entry.dt)
+    assert not unstable.is_stable()
+    predicted = float(score(unstable, held_out, horizon=UNSTABLE_HORIZON).fit[0])
+    assert row["fit_by_order"][2] == pytest.approx(compare[2][0], abs=1e-9)  # stable: compare's own rule
+    assert row["fit_by_order"][3] == pytest.approx(predicted, abs=1e-9)
+    assert abs(predicted - compare[3][0]) > 1.0  # the two rules differ on the growing model
+    assert row["order"] == records.choose_order(row["fit_by_order"], ORDER_TOLERANCE)
+    assert row["validation_fit_percent"][0] == pytest.approx(row["fit_by_order"][row["order"]], abs=1e-12)
+    assert row["compare_order"] == 3 and row["compare_fit_percent"] == compare[3]
+    assert row["scored_as"] == "identify" and "models_by_order" not in row
+    assert narx == {"order": 2, "validation_fit_percent": [50.0], "scored_as": "compare"}  # no model: as it came
