@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from vehid.identification.models.modal import ModalStructure
-from vehid.identification.filtering.start import damped_beyond_band, data_start, input_band_edge
+from vehid.identification.filtering.start import data_start, input_band_edge, lightly_damped_beyond
 
 
 def _unstable_record():
@@ -48,23 +48,51 @@ def test_the_input_band_edge_of_sines_is_their_highest_frequency_and_of_white_no
     assert input_band_edge(np.ones((100, 1))) == np.pi  # no variance: the input bounds nothing
 
 
-def test_lightly_damped_modes_beyond_the_limit_move_to_it_with_the_band_damping():
+def test_lightly_damped_modes_beyond_the_limit_are_counted_a_pair_once():
     values = np.array([-0.01 + 1j, -0.01 - 1j, -0.02 + 0.1j, -0.02 - 0.1j, 0.5, -0.9 + 0.5j, -0.9 - 0.5j])
-    moved, count = damped_beyond_band(values, 0.3)
-    assert count == 2  # the resonance beyond the limit and the growing real pole; a pair counts once
-    np.testing.assert_allclose(moved[:2], 0.3 * (-0.5 + np.array([1j, -1j]) * np.sqrt(0.75)), rtol=1e-12)
-    assert moved[4] == -0.3
-    np.testing.assert_array_equal(moved[[2, 3, 5, 6]], values[[2, 3, 5, 6]])  # in the band, or well damped
+    # the resonance beyond the limit and the growing real pole; not the one in the band, nor the damped one
+    # (damping 0.9 / |-0.9 + 0.5j| = 0.87 against the band start's 0.5)
+    assert lightly_damped_beyond(values, 0.3) == 2
+    assert lightly_damped_beyond(values, 1.1) == 0  # every fast one within the limit
+    assert lightly_damped_beyond(np.array([-0.6 + 0.8j, -0.6 - 0.8j]), 0.3) == 0  # damping 0.6: well damped
+    assert lightly_damped_beyond(np.array([-0.4 + 0.9165j, -0.4 - 0.9165j]), 0.3) == 1  # damping 0.4
 
 
-@pytest.mark.parametrize("excitation_seed, noise_seed, order, p", [(2, 12, 6, 1e-5), (0, 11, 7, 1e-4)])
+def test_a_subspace_candidate_with_a_resonance_beyond_the_band_is_no_start():
+    """A record whose input holds all its power below 0.05 rad/sample, and whose output adds a lightly damped
+    resonance at 1 rad/sample that the input cannot have driven (an output disturbance): a second-order
+    subspace model fits that resonance, and the start must not be it (the band start is taken, with a note)."""
+    rng = np.random.default_rng(5)
+    samples = 4000
+    t = np.arange(samples)
+    u = np.sin(0.01 * t) + 0.5 * np.sin(0.03 * t)
+    y = np.zeros(samples)
+    for k in range(1, samples):  # a first-order lag of the input, pole 0.98
+        y[k] = 0.98 * y[k - 1] + 0.02 * u[k - 1]
+    disturbance = np.zeros(samples)
+    drive = rng.standard_normal(samples)
+    radius, angle = np.exp(-0.005), 1.0  # damping 0.005 at 1 rad/sample: 20 times the input's edge
+    for k in range(2, samples):
+        disturbance[k] = 2 * radius * np.cos(angle) * disturbance[k - 1] - radius**2 * disturbance[k - 2] + drive[k]
+    y = y / np.std(y) + 2.0 * disturbance / np.std(disturbance)
+    structure = ModalStructure.with_modes(1, 0, 1, 1)
+    found = data_start(u[:, None] / np.std(u), y[:, None] / np.std(y), structure)
+    assert "beyond the input's band" in found.note and "left out" in found.note, found.note
+    assert found.source == "band"
+
+
+@pytest.mark.parametrize("excitation_seed, noise_seed, order, p",
+                         [(2, 12, 6, 1e-5), (0, 11, 7, 1e-4), (1, 11, 5, 1e-5)])
 def test_sensor_noise_on_the_handling_records_costs_little_at_high_orders(excitation_seed, noise_seed, order, p):
     """The handling study's record with its sensor noise, at orders above what the dynamics need.
 
     Before the start's band limit, the subspace start put a resonance of the noise (damping 0.006, three
     times the steer's band) into the model: the first case diverged (last good pass 11.3 points below the
-    noise-free run), the second lost 54 points. The issue's target is at most 3 points lost against the
-    same record without noise, scored on the noise-free validation record; measured 0.0 and 1.7 points.
+    noise-free run), the second lost 54 points. With that mode moved into the band the third lost 3.9
+    points: the subspace model had merged the two pairs in the band into one. The issue's target is at
+    most 3 points lost against the same record without noise, scored on the noise-free validation record;
+    measured with such candidates left out: -0.4, 1.7 and 2.0 points (over the 30 runs at n = 5 of
+    ``benchmarks/noisy_handling.py``: at most 2.6).
     """
     from vehid.identification.assessment.validation import score
     from vehid.identification.filtering.iekf import IEKFOptions, identify_iekf

@@ -12,10 +12,10 @@ same start up to rounding.
     first-order hold and to the structure's modal form. Where a subspace
     model does not fit the structure, its eigenvalues are placed on the
     structure's modes (:func:`place_eigenvalues`) and B and D fitted by least
-    squares (:func:`fit_input_gains`). So are they where a subspace model has
-    a lightly damped mode beyond the band the input drives
-    (:func:`input_band_edge`, with a margin): that mode is moved to the
-    margin's limit, damped (:func:`damped_beyond_band`).
+    squares (:func:`fit_input_gains`). A subspace model with a lightly
+    damped mode beyond the band the input drives (:func:`input_band_edge`,
+    with a margin; :func:`lightly_damped_beyond`) fits the record's noise at
+    that order and is no candidate.
 ``band``
     Modes spread log-evenly over the record's band, damping 0.5; B and D by
     least squares.
@@ -37,7 +37,7 @@ from ..errors import InputError, WorkbenchError
 from ..models.modal import ModalModel, ModalStructure
 
 __all__ = ["DataStart", "data_start", "band_eigenvalues", "place_eigenvalues", "fit_input_gains", "input_band_edge",
-           "damped_beyond_band", "DATA_STARTS"]
+           "lightly_damped_beyond", "DATA_STARTS"]
 
 from vehid.identification.choices import DATA_STARTS  # noqa: E402  (the one definition, light to import)
 
@@ -45,10 +45,9 @@ _BAND_DAMPING = 0.5
 # the share of an input's variance above its band's edge (input_band_edge): the handling study's steer holds
 # all but 1e-4 of it below 0.31 rad/sample; the public records' edges lie at 0.37 (cascaded tanks) to 3.14
 _OUT_OF_BAND_POWER = 1e-4
-# a start mode is moved only beyond this many times the edge: the edge is an estimate, and a lightly damped
-# mode just above it may still be told from the little input there (the CD player arm's at 1.15 times its
-# edge: moved, the arm's hold-out fit at orders 6 and 8 fell by 0.3 and 0.7 points); the handling records'
-# spurious modes lie at 3.2-3.8 times theirs
+# a subspace candidate is left out only for a mode beyond this many times the edge: the edge is an estimate,
+# and a lightly damped mode just above it may still be told from the little input there (the CD player arm's
+# at 1.15 times its edge); the handling records' spurious modes lie at 3.2-3.8 times theirs
 _BAND_MARGIN = 2.0
 _MAX_RATE = 3.0  # rad/sample: the fastest a discrete model can say (pi) with a margin of rounding
 # The start is found on as many first samples as keep the largest subspace start's block-Hankel matrix
@@ -157,36 +156,32 @@ def input_band_edge(u: np.ndarray) -> float:
     return min(edge, float(np.pi))
 
 
-def damped_beyond_band(values: np.ndarray, limit: float) -> tuple[np.ndarray, int]:
-    """Eigenvalues (rad/sample) with each lightly damped mode faster than ``limit`` moved to it with the
-    band start's damping, and how many modes (a conjugate pair counts once) were moved.
+def lightly_damped_beyond(values: np.ndarray, limit: float) -> int:
+    """How many lightly damped modes (a conjugate pair counts once) of ``values`` (rad/sample) lie beyond
+    ``limit``: damped less than the band start (:data:`_BAND_DAMPING`) and faster than ``limit``.
 
     The data start's limit is :data:`_BAND_MARGIN` times the input's band edge
-    (:func:`input_band_edge`). The input hardly drives a mode beyond it, so the record cannot tell
-    its frequency or gain: a subspace model of a noisy record puts a resonance of the noise there,
-    which the filter then cannot leave (the handling study's noisy records: damping 0.006 at three
-    times the steer's band edge, diverging at n = 6 and losing up to 88 points of hold-out fit at
-    n = 7, ``benchmarks/noisy_handling.py``). At the limit, damped, its gain is fitted by least
-    squares with the others' and the filter moves it where the data call for it. A mode damped at
-    least as much as the band start's (:data:`_BAND_DAMPING`) is kept, wherever it lies.
+    (:func:`input_band_edge`). The input hardly drives a mode beyond it, so the record cannot tell its
+    frequency or gain, and a subspace model with such a mode has fitted a resonance of the noise: on the
+    handling study's noisy records damping 0.006 at three times the steer's band edge, where the true
+    modes within the band were merged into fewer. A filter started there could not leave it: it diverged
+    (n = 6), rang on the validation record (n = 7, up to 88 points of hold-out fit lost) or, with the
+    mode moved into the band, kept the merged modes (n = 5, ``benchmarks/noisy_handling.py``).
     """
-    values = np.asarray(values, dtype=complex).copy()
+    values = np.asarray(values, dtype=complex)
     magnitude = np.abs(values)
-    damping = -values.real / np.maximum(magnitude, np.finfo(float).tiny)  # 0 at the origin, which no limit moves
+    damping = -values.real / np.maximum(magnitude, np.finfo(float).tiny)  # 0 at the origin, which no limit counts
     beyond = (magnitude > limit) & (damping < _BAND_DAMPING)
-    radius = np.minimum(magnitude, limit)
-    oscillating = np.abs(values.imag) > 1e-9 * magnitude
-    replaced = np.where(oscillating,
-                        radius * (-_BAND_DAMPING + 1j * np.sign(values.imag) * np.sqrt(1 - _BAND_DAMPING**2)),
-                        -radius + 0j)
-    values[beyond] = replaced[beyond]
-    changed = int(np.sum(beyond & (values.imag >= 0)))
-    return values, changed
+    return int(np.sum(beyond & (values.imag >= 0)))
+
+
+class _NoiseModes(WorkbenchError):
+    """A subspace candidate with lightly damped modes beyond the input's band (:func:`lightly_damped_beyond`)."""
 
 
 def _band_limit(u: np.ndarray) -> float:
-    """The rate (rad/sample) beyond which the data start moves a lightly damped mode: :data:`_BAND_MARGIN`
-    times the input's band edge."""
+    """The rate (rad/sample) beyond which a lightly damped mode leaves a subspace candidate out of the data
+    start: :data:`_BAND_MARGIN` times the input's band edge."""
     return _BAND_MARGIN * input_band_edge(u)
 
 
@@ -254,7 +249,8 @@ def _subspace_start(u: np.ndarray, y: np.ndarray, structure: ModalStructure, sta
                     block_rows: int | None = None, free_modes: bool = False,
                     band_limit: float | None = None) -> DataStart:
     """One subspace candidate of the data start; ``band_limit`` is :func:`_band_limit` of ``u`` (computed
-    where not given: the candidates of one record share it)."""
+    where not given: the candidates of one record share it). Raises :class:`_NoiseModes` for a model with
+    lightly damped modes beyond it."""
     from ..models.statespace import discrete_to_continuous, to_modal
     from ..classical.subspace import estimate_subspace
 
@@ -269,12 +265,10 @@ def _subspace_start(u: np.ndarray, y: np.ndarray, structure: ModalStructure, sta
         pairs = int(np.sum(continuous.imag > 1e-9 * np.abs(continuous)))
         structure = ModalStructure.with_modes(pairs, structure.n - 2 * pairs, structure.n_u, structure.n_y)
     limit = _band_limit(u) if band_limit is None else band_limit
-    continuous, damped = damped_beyond_band(continuous, limit)
-    if damped:
-        note = (f"{damped} lightly damped subspace mode{'s' if damped > 1 else ''} beyond the input's band "
-                f"moved to {limit:.3g} rad/sample with damping {_BAND_DAMPING}")
-        modes = place_eigenvalues(continuous, structure, stable=stable)
-        return DataStart(fit_input_gains(structure, modes, u, y), "subspace eigenvalues", note)
+    noise = lightly_damped_beyond(continuous, limit)
+    if noise:
+        raise _NoiseModes(f"{noise} lightly damped mode{'s' if noise > 1 else ''} beyond the input's band "
+                          f"({limit:.3g} rad/sample): a fit of the noise")
     note = ""
     try:
         A, B, C, D = discrete_to_continuous(fit.A, fit.B, fit.C, fit.D, 1.0, hold="foh")
@@ -369,6 +363,8 @@ def _found_start(u: np.ndarray, y: np.ndarray, structure: ModalStructure, method
         try:
             candidates.append(_subspace_start(u, y, structure, stable, block_rows=rows, free_modes=free_modes,
                                               band_limit=limit))
+        except _NoiseModes as exc:
+            notes.append(f"subspace with {rows} block rows left out ({exc})")
         except (WorkbenchError, np.linalg.LinAlgError) as exc:
             notes.append(f"subspace with {rows} block rows failed ({exc})")
     fits = [_simulation_fit(candidate.model, u, y, estimate_state=not stable) for candidate in candidates]
