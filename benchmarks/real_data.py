@@ -228,9 +228,9 @@ def score_as_identify(peers: dict, rule: str) -> None:
     The peers' runner scores by MATLAB ``compare``'s rule: simulation from the
     least-squares initial state, whatever the model. ``identify`` simulates a
     stable model the same way but predicts an unstable one 10 samples ahead
-    (``default_horizon``): on the open-loop unstable ball and beam the same
-    model scores 3-8 points lower by that rule. Scoring both alike is the like
-    for like comparison. Each such row keeps the runner's own order and fit as
+    (``default_horizon``), which on the open-loop unstable ball and beam
+    scores the same model several points lower (docs/measurements.md).
+    Scoring both alike is the like for like comparison. Each such row keeps the runner's own order and fit as
     ``compare_order`` and ``compare_fit_percent``; ``scored_as`` says which
     rule ``validation_fit_percent`` follows. Rows without models (a NARX
     peer, an earlier runner's output) keep ``compare``'s rule. With the
@@ -239,6 +239,7 @@ def score_as_identify(peers: dict, rule: str) -> None:
     """
     from vehid.identification.assessment.validation import default_horizon, score
     from vehid.identification.data import IOData
+    from vehid.identification.errors import WorkbenchError
     from vehid.identification.models.discrete import DiscreteModel
     from vehid.scenarios.identify_workflow import ORDER_TOLERANCE
 
@@ -257,8 +258,11 @@ def score_as_identify(peers: dict, rule: str) -> None:
                     continue
                 fits = {}
                 for order, matrices in models.items():
-                    model = DiscreteModel(*(np.asarray(matrices[key], dtype=float) for key in "ABCD"), entry.dt)
-                    per_output = score(model, held_out, horizon=default_horizon(model)).fit
+                    try:
+                        model = DiscreteModel(*(np.asarray(matrices[key], dtype=float) for key in "ABCD"), entry.dt)
+                        per_output = score(model, held_out, horizon=default_horizon(model)).fit
+                    except (WorkbenchError, np.linalg.LinAlgError):  # a peer's non-finite model: no fit
+                        per_output = np.full(held_out.n_y, np.nan)
                     fits[int(order)] = [float(f) if np.isfinite(f) else None for f in per_output]
                 means = {order: (float(np.mean(f)) if None not in f else None) for order, f in fits.items()}
                 chosen = records.choose_order(means, ORDER_TOLERANCE) if rule == "holdout" else row.get("order")

@@ -166,10 +166,12 @@ def test_peers_are_scored_as_identify_scores_and_their_order_chosen_on_those_sco
     growing = (fit.A * 1.02 / np.max(np.abs(np.linalg.eigvals(fit.A))), fit.B, fit.C, fit.D)  # 2 % a sample
     models = {order: {key: np.atleast_2d(m).tolist() for key, m in zip("ABCD", model)}
               for order, model in ((2, stable), (3, _padded(growing, 3)))}
+    failed = {key: np.full(shape, np.nan).tolist()  # a peer that returned no finite model at order 4
+              for key, shape in zip("ABCD", ((4, 4), (4, 1), (1, 4), (1, 1)))}
     compare = {order: records.score_discrete(*(np.asarray(models[order][k]) for k in "ABCD"),
                                              validation[0], validation[1], u_offset, y_offset)
                for order in models}
-    row = {"order": 3, "validation_fit_percent": compare[3], "models_by_order": models,
+    row = {"order": 3, "validation_fit_percent": compare[3], "models_by_order": {**models, 4: failed},
            "fit_by_order": {order: fits[0] for order, fits in compare.items()}}
     narx = {"order": 2, "validation_fit_percent": [50.0]}
     peers = {"sets": {"dryer": {"0.3": {"stand-in": row, "narx": narx}}}}
@@ -182,6 +184,7 @@ def test_peers_are_scored_as_identify_scores_and_their_order_chosen_on_those_sco
     predicted = float(score(unstable, held_out, horizon=UNSTABLE_HORIZON).fit[0])
     assert row["fit_by_order"][2] == pytest.approx(compare[2][0], abs=1e-9)  # stable: compare's own rule
     assert row["fit_by_order"][3] == pytest.approx(predicted, abs=1e-9)
+    assert row["fit_by_order"][4] is None  # no fit, and no failure of the whole benchmark
     assert abs(predicted - compare[3][0]) > 1.0  # the two rules differ on the growing model
     assert row["order"] == records.choose_order(row["fit_by_order"], ORDER_TOLERANCE)
     assert row["validation_fit_percent"][0] == pytest.approx(row["fit_by_order"][row["order"]], abs=1e-12)
