@@ -71,7 +71,7 @@ def test_a_subspace_candidate_with_a_resonance_beyond_the_band_is_no_start():
         y[k] = 0.98 * y[k - 1] + 0.02 * u[k - 1]
     disturbance = np.zeros(samples)
     drive = rng.standard_normal(samples)
-    radius, angle = np.exp(-0.005), 1.0  # damping 0.005 at 1 rad/sample: 20 times the input's edge
+    radius, angle = np.exp(-0.005), 1.0  # damping 0.005 at 1 rad/sample: 32 times the input's edge (0.031)
     for k in range(2, samples):
         disturbance[k] = 2 * radius * np.cos(angle) * disturbance[k - 1] - radius**2 * disturbance[k - 2] + drive[k]
     y = y / np.std(y) + 2.0 * disturbance / np.std(disturbance)
