@@ -193,16 +193,16 @@ class Checkpointer:
         if not self._gathered:
             return
         started = time.perf_counter()
-        with update_archive(self.path) as archive:
-            for record in self._gathered[:-1]:
-                _append_history_row(archive, self.name, record)
-            append_iekf_pass(archive, self.name, self._gathered[-1], self._latest)
-        self._gathered.clear()
+        self._write(self._latest)
         self._since = time.perf_counter()
         self._write_seconds = self._since - started
 
     def finish(self, result: IEKFResult) -> None:
         """Record how the run ended: its final stop reason (no longer ``running``), model, state and time."""
+        self._write(result)
+
+    def _write(self, result: IEKFResult) -> None:
+        """One checkpoint: the gathered passes' rows, then ``result``'s model, resume state and account."""
         with update_archive(self.path) as archive:
             for record in self._gathered:
                 _append_history_row(archive, self.name, record)
