@@ -34,13 +34,11 @@ import argparse
 import json
 import os
 import statistics
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
-from vehid.scenarios.benchmarking import record_figures
+from vehid.scenarios.benchmarking import record_figures, timed_command
 
 ROOT = Path(__file__).resolve().parent.parent
 RECORD = ROOT / "tests" / "data" / "dryer" / "dryer.dat"
@@ -67,16 +65,8 @@ CASES = {  # name: (checkpoint rule, whether to keep an archive)
 
 def _timed(arguments: list[str]) -> tuple[float, float, dict]:
     """Wall and CPU seconds (user + system, the child's own) of one command, and its JSON summary."""
-    started = time.perf_counter()
-    process = subprocess.Popen(arguments, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    _, status, usage = os.wait4(process.pid, 0)
-    wall = time.perf_counter() - started
-    out, err = process.stdout.read(), process.stderr.read()
-    process.stdout.close()
-    process.stderr.close()
-    if os.waitstatus_to_exitcode(status) != 0:
-        raise RuntimeError(f"{' '.join(arguments[-6:])} failed: {err.strip()[-300:]}")
-    return wall, usage.ru_utime + usage.ru_stime, json.loads(out)
+    run = timed_command(arguments)
+    return run.wall, run.cpu, json.loads(run.stdout)
 
 
 def main(argv: list[str] | None = None) -> dict:

@@ -35,13 +35,11 @@ import argparse
 import os
 import shutil
 import statistics
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
-from vehid.scenarios.benchmarking import record_figures
+from vehid.scenarios.benchmarking import record_figures, timed_command
 from vehid.scenarios.commands.parser import GROUPS, build_parser, command_headers
 
 HELP_TARGET_SECONDS = 0.3
@@ -116,15 +114,8 @@ def _commands() -> dict[str, list[str]]:
 
 def _timed(command: list[str], environment: dict[str, str]) -> tuple[float, float]:
     """Wall and CPU seconds of one run of ``command`` (its output discarded; a failure is an error)."""
-    start = time.perf_counter()
-    process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=environment)
-    _, status, usage = os.wait4(process.pid, 0)
-    wall = time.perf_counter() - start
-    process.returncode = os.waitstatus_to_exitcode(status)
-    if process.returncode != 0:
-        raise RuntimeError(f"{' '.join(command[-4:])} failed: {process.stderr.read().decode()[-300:]}")
-    process.stderr.close()
-    return wall, usage.ru_utime + usage.ru_stime
+    run = timed_command(command, environment=environment)
+    return run.wall, run.cpu
 
 
 def main(repeats: int, as_configured: bool = False) -> dict:
