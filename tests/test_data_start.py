@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from vehid.identification.models.modal import ModalStructure
-from vehid.identification.filtering.start import data_start, input_band_edge, lightly_damped_beyond
+from vehid.identification.filtering.start import (data_start, input_band_edge, lightly_damped_beyond,
+                                                   reals_made_into_pairs)
 
 
 def _unstable_record():
@@ -58,6 +59,18 @@ def test_lightly_damped_modes_beyond_the_limit_are_counted_a_pair_once():
     assert lightly_damped_beyond(np.array([-0.4 + 0.9165j, -0.4 - 0.9165j]), 0.3) == 1  # damping 0.4
 
 
+def test_the_real_poles_made_into_pairs_are_the_slowest_two_per_missing_pair():
+    values = np.array([-0.5, -0.01 + 0.02j, -0.01 - 0.02j, -0.03, 0.02, -0.9])
+    # one complex pair; a structure of two pairs makes its second from the two slowest real poles
+    assert sorted(reals_made_into_pairs(values, ModalStructure.with_modes(2, 2, 1, 1))) == [-0.03, 0.02]
+    # three pairs: two made, from the four real poles in order of magnitude
+    assert list(reals_made_into_pairs(values, ModalStructure.with_modes(3, 0, 1, 1))) == [0.02, -0.03, -0.5, -0.9]
+    assert reals_made_into_pairs(values, ModalStructure.with_modes(1, 4, 1, 1)).size == 0  # its pair is there
+    # one real pole left cannot make a pair: place_eigenvalues repeats a pair instead
+    assert reals_made_into_pairs(np.array([-0.1 + 0.1j, -0.1 - 0.1j, -0.2]),
+                                 ModalStructure.with_modes(2, 0, 1, 1)).size == 0
+
+
 def test_a_subspace_candidate_with_a_resonance_beyond_the_band_is_no_start():
     """A record whose input holds all its power below 0.05 rad/sample, and whose output adds a lightly damped
     resonance at 1 rad/sample that the input cannot have driven (an output disturbance): a second-order
@@ -82,17 +95,20 @@ def test_a_subspace_candidate_with_a_resonance_beyond_the_band_is_no_start():
 
 
 @pytest.mark.parametrize("excitation_seed, noise_seed, order, p",
-                         [(2, 12, 6, 1e-5), (0, 11, 7, 1e-4), (1, 11, 5, 1e-5)])
-def test_sensor_noise_on_the_handling_records_costs_little_at_high_orders(excitation_seed, noise_seed, order, p):
-    """The handling study's record with its sensor noise, at orders above what the dynamics need.
+                         [(2, 12, 6, 1e-5), (0, 11, 7, 1e-4), (1, 11, 5, 1e-5), (4, 12, 4, 1e-4)])
+def test_sensor_noise_on_the_handling_records_costs_little(excitation_seed, noise_seed, order, p):
+    """The handling study's record with its sensor noise.
 
     Before the start's band limit, the subspace start put a resonance of the noise (damping 0.006, three
     times the steer's band) into the model: the first case diverged (last good pass 11.3 points below the
     noise-free run), the second lost 54 points. With that mode moved into the band the third lost 3.9
-    points: the subspace model had merged the two pairs in the band into one. The issue's target is at
-    most 3 points lost against the same record without noise, scored on the noise-free validation record;
-    measured with such candidates left out: -0.4, 1.7 and 2.0 points (over the 30 runs at n = 5 of
-    ``benchmarks/noisy_handling.py``: at most 2.6).
+    points: the subspace model had merged the two pairs in the band into one. At n = 4 every subspace
+    candidate of the fourth case has one pair and two real poles, one of them the noise's beyond the
+    band; the pair the structure needs, made of the two, diverged at the first pass and its restarts down
+    to p 1e-6 did not recover. The issue's target is at most 3 points lost against the same record without
+    noise, scored on the noise-free validation record; measured with such candidates left out: -0.4, 1.7,
+    2.0 and 0.5 points (over the 30 runs each at n = 4 and n = 5 of ``benchmarks/noisy_handling.py``: at
+    most 0.9 and 2.6).
     """
     from vehid.identification.assessment.validation import score
     from vehid.identification.filtering.iekf import IEKFOptions, identify_iekf

@@ -15,7 +15,9 @@ same start up to rounding.
     squares (:func:`fit_input_gains`). A subspace model with a lightly
     damped mode beyond the band the input drives (:func:`input_band_edge`,
     with a margin; :func:`lightly_damped_beyond`) fits the record's noise at
-    that order and is no candidate.
+    that order and is no candidate; nor is one that fits the structure only
+    through a pair made of a real pole beyond that band
+    (:func:`reals_made_into_pairs`).
 ``band``
     Modes spread log-evenly over the record's band, damping 0.5; B and D by
     least squares.
@@ -37,7 +39,7 @@ from ..errors import InputError, WorkbenchError
 from ..models.modal import ModalModel, ModalStructure
 
 __all__ = ["DataStart", "data_start", "band_eigenvalues", "place_eigenvalues", "fit_input_gains", "input_band_edge",
-           "lightly_damped_beyond", "DATA_STARTS"]
+           "lightly_damped_beyond", "reals_made_into_pairs", "DATA_STARTS"]
 
 from vehid.identification.choices import DATA_STARTS  # noqa: E402  (the one definition, light to import)
 
@@ -179,10 +181,14 @@ class _NoiseModes(WorkbenchError):
     """A subspace candidate with lightly damped modes beyond the input's band (:func:`lightly_damped_beyond`)."""
 
 
-def _band_limit(u: np.ndarray) -> float:
-    """The rate (rad/sample) beyond which a lightly damped mode leaves a subspace candidate out of the data
-    start: :data:`_BAND_MARGIN` times the input's band edge."""
-    return _BAND_MARGIN * input_band_edge(u)
+def reals_made_into_pairs(values: np.ndarray, structure: ModalStructure) -> np.ndarray:
+    """The real eigenvalues of ``values`` that :func:`place_eigenvalues` makes into ``structure``'s
+    left-over complex pairs (two per pair, slowest first; empty where the complex ones fill its pairs)."""
+    values = np.asarray(values, dtype=complex)
+    complex_pairs = int(np.sum(values.imag > 1e-9 * np.abs(values)))
+    real = sorted((v.real for v in values if abs(v.imag) <= 1e-9 * abs(v)), key=abs)
+    made = min(max(structure.n_complex_pairs - complex_pairs, 0), len(real) // 2)
+    return np.array(real[: 2 * made])
 
 
 def _modal_matrix(structure: ModalStructure, modes: np.ndarray) -> np.ndarray:
@@ -247,10 +253,18 @@ def _simulation_fit(model: ModalModel, u: np.ndarray, y: np.ndarray, *, estimate
 
 def _subspace_start(u: np.ndarray, y: np.ndarray, structure: ModalStructure, stable: bool,
                     block_rows: int | None = None, free_modes: bool = False,
-                    band_limit: float | None = None) -> DataStart:
-    """One subspace candidate of the data start; ``band_limit`` is :func:`_band_limit` of ``u`` (computed
-    where not given: the candidates of one record share it). Raises :class:`_NoiseModes` for a model with
-    lightly damped modes beyond it."""
+                    band_edge: float | None = None) -> DataStart:
+    """One subspace candidate of the data start; ``band_edge`` is :func:`input_band_edge` of ``u``
+    (computed where not given: the candidates of one record share it).
+
+    Raises :class:`_NoiseModes` for a model with lightly damped modes beyond :data:`_BAND_MARGIN` times
+    the edge, and for one whose eigenvalues fit the structure only through a pair made of a real pole
+    beyond the edge (:func:`reals_made_into_pairs`): the pair's frequency would be set by a pole the input
+    does not drive. On the handling study's noisy records at n = 4 that pole is the noise's (a sign flip
+    every sample, or a real pole at twice the edge); the pair placed between it and a true slow pole
+    started the filter 20-40 times too fast, and it lost up to 6.7 points of hold-out fit where the band
+    start lost under one (``benchmarks/noisy_handling.py``).
+    """
     from ..models.statespace import discrete_to_continuous, to_modal
     from ..classical.subspace import estimate_subspace
 
@@ -264,7 +278,8 @@ def _subspace_start(u: np.ndarray, y: np.ndarray, structure: ModalStructure, sta
     if free_modes:
         pairs = int(np.sum(continuous.imag > 1e-9 * np.abs(continuous)))
         structure = ModalStructure.with_modes(pairs, structure.n - 2 * pairs, structure.n_u, structure.n_y)
-    limit = _band_limit(u) if band_limit is None else band_limit
+    edge = input_band_edge(u) if band_edge is None else band_edge
+    limit = _BAND_MARGIN * edge
     noise = lightly_damped_beyond(continuous, limit)
     if noise:
         raise _NoiseModes(f"{noise} lightly damped mode{'s' if noise > 1 else ''} beyond the input's band "
@@ -286,6 +301,11 @@ def _subspace_start(u: np.ndarray, y: np.ndarray, structure: ModalStructure, sta
                   f"{structure.n_complex_pairs} and {structure.n_real})"
                   if (pairs, structure.n - 2 * pairs) != (structure.n_complex_pairs, structure.n_real) else "")
         note = f"the subspace model does not fit the structure's modes{counts}"
+    merged = reals_made_into_pairs(continuous, structure)
+    undriven = merged[np.abs(merged) > edge]
+    if undriven.size:
+        raise _NoiseModes(f"a pair of the structure would be made of a real pole at {abs(undriven[0]):.3g} "
+                          f"rad/sample, beyond the input's band ({edge:.3g} rad/sample)")
     modes = place_eigenvalues(continuous, structure, stable=stable)
     model = fit_input_gains(structure, modes, u, y)
     return DataStart(model, "subspace eigenvalues", note)
@@ -358,11 +378,11 @@ def _found_start(u: np.ndarray, y: np.ndarray, structure: ModalStructure, method
     # records) and the band start: the one that simulates the record best.
     candidates, notes = [band], []
     default_rows = max(2 * structure.n, structure.n + 1)
-    limit = _band_limit(u)
+    edge = input_band_edge(u)
     for rows in sorted({default_rows, max(default_rows, 10), max(default_rows, 25)}):
         try:
             candidates.append(_subspace_start(u, y, structure, stable, block_rows=rows, free_modes=free_modes,
-                                              band_limit=limit))
+                                              band_edge=edge))
         except _NoiseModes as exc:
             notes.append(f"subspace with {rows} block rows left out ({exc})")
         except (WorkbenchError, np.linalg.LinAlgError) as exc:
