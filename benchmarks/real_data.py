@@ -438,6 +438,31 @@ def _best_peer(peer_rows: dict) -> tuple[str | None, float | None, int | None]:
     return max(scored, key=lambda item: item[1]) if scored else (None, None, None)
 
 
+def peers_against_the_goal(peers_by_fraction: dict) -> dict[str, dict]:
+    """Each peer held to the default's goals over the fractions it was run at: its fit's range, and its
+    worst gap to the best peer (itself included) at the same fraction.
+
+    A goal no peer meets on a record measures what that record's held-out parts can tell apart, not the
+    workbench. A peer without a finite fit at some fraction gets None for both.
+    """
+    fractions = list(peers_by_fraction)
+    if len(fractions) < 2:
+        return {}
+    best = {fraction: _best_peer(rows)[1] for fraction, rows in peers_by_fraction.items()}
+    names = sorted({name for rows in peers_by_fraction.values() for name in rows})
+    verdicts = {}
+    for name in names:
+        fits = [_mean_fit(peers_by_fraction[fraction].get(name, {})) for fraction in fractions]
+        if any(fit is None or not np.isfinite(fit) for fit in fits):
+            verdicts[name] = {"range": None, "worst_minus_best_peer": None, "meets_both": False}
+            continue
+        spread = max(fits) - min(fits)
+        worst = min(fit - best[fraction] for fit, fraction in zip(fits, fractions))
+        verdicts[name] = {"range": spread, "worst_minus_best_peer": worst,
+                          "meets_both": bool(spread <= CLOSE and worst >= -CLOSE)}
+    return verdicts
+
+
 def perturbation_summary(runs: list[dict], peers_by_fraction: dict, fixed_fits: dict[str, float] | None = None
                          ) -> dict:
     """The default's range over the perturbed runs, and the best peer against the default at each fraction.
@@ -477,6 +502,7 @@ def perturbation_summary(runs: list[dict], peers_by_fraction: dict, fixed_fits: 
     # a fraction without a default fit or without any peer's counts as not within
     summary["default_within_2_points_of_best_peer_at_every_fraction"] = (
         None if not peers_by_fraction else all(g is not None and g >= -CLOSE for g in gaps))
+    summary["peers_against_the_goal"] = peers_against_the_goal(peers_by_fraction)
     return summary
 
 
@@ -567,6 +593,12 @@ def print_perturbations(sets: dict) -> None:
         print(f"{'':<16} decisions switched between runs: "
               + ("; ".join(f"{name} ({' / '.join(map(str, choices))})" for name, choices in switched.items())
                  or "none"))
+        verdicts = spread.get("peers_against_the_goal") or {}
+        held = [f"{peer} {_show(v['range'])} / {v['worst_minus_best_peer']:+.1f}"
+                for peer, v in verdicts.items() if v["range"] is not None]
+        if held:
+            print(f"{'':<16} each peer held to the same goals (range / worst minus best peer): " + ", ".join(held)
+                  + f"; {sum(v['meets_both'] for v in verdicts.values())} of {len(verdicts)} meet both")
         for fraction, entry in spread["by_fraction"].items():
             if "default_fit" not in entry:
                 continue

@@ -102,6 +102,24 @@ def test_the_perturbation_summary_names_a_switched_decision_and_only_that():
     assert same["switched_decisions"] == {}
 
 
+def test_each_peer_is_held_to_the_defaults_goals_at_the_same_fractions():
+    """Range and worst gap to the best peer per peer, by hand. The best peers are C (85) at 0.3 and B (87)
+    at 0.4: A 80/86 has range 6 and gaps -5/-1, B 79/87 range 8 and gaps -6/0; C has no fit at 0.4 and no
+    verdict."""
+    def row(fit):
+        return {"validation_fit_percent": [fit]}
+
+    peers = {"0.3": {"A": row(80.0), "B": row(79.0), "C": row(85.0)}, "0.4": {"A": row(86.0), "B": row(87.0)}}
+    verdicts = benchmark.peers_against_the_goal(peers)
+    assert verdicts["A"]["range"] == pytest.approx(6.0) and verdicts["A"]["worst_minus_best_peer"] == pytest.approx(-5.0)
+    assert verdicts["B"]["range"] == pytest.approx(8.0) and verdicts["B"]["worst_minus_best_peer"] == pytest.approx(-6.0)
+    assert verdicts["C"] == {"range": None, "worst_minus_best_peer": None, "meets_both": False}
+    assert not any(v["meets_both"] for v in verdicts.values())
+    close = {"0.3": {"A": row(80.0), "B": row(81.5)}, "0.4": {"A": row(81.0), "B": row(80.0)}}
+    assert benchmark.peers_against_the_goal(close)["A"]["meets_both"]  # range 1, worst gap -1.5
+    assert benchmark.peers_against_the_goal({"published": {"A": row(80.0)}}) == {}  # one split: nothing to hold
+
+
 def _identify(entry, scratch: Path, *options: str) -> tuple[int, dict]:
     """``vehid identify`` on the raw file with the benchmark's arguments; exit status and JSON summary."""
     done = run_vehid("identify", *benchmark.data_args(entry, scratch), *options, "--json", "--quiet", cwd=ROOT)
