@@ -47,6 +47,8 @@ def test_the_input_band_edge_of_sines_is_their_highest_frequency_and_of_white_no
     white = np.random.default_rng(0).standard_normal((4000, 1))
     assert input_band_edge(white) > 3.0  # all but 1e-4 of white noise's power lies below pi (1 - 1e-4) on average
     assert input_band_edge(np.ones((100, 1))) == np.pi  # no variance: the input bounds nothing
+    # an input held constant beside one that varies: the edge is the varying one's, not pi
+    assert input_band_edge(np.column_stack([np.sin(0.1 * t), np.ones(t.size)])) == input_band_edge(sines[:, 1:])
 
 
 def test_lightly_damped_modes_beyond_the_limit_are_counted_a_pair_once():
