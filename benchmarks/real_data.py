@@ -438,6 +438,17 @@ def _best_peer(peer_rows: dict) -> tuple[str | None, float | None, int | None]:
     return max(scored, key=lambda item: item[1]) if scored else (None, None, None)
 
 
+def best_peer_at_order(peer_rows: dict, order: int | None) -> tuple[str | None, float | None]:
+    """The peer whose model of ``order`` states scores best (``fit_by_order``, as ``identify`` scores), and
+    its fit: the like-for-like figure for a default that does not search its order."""
+    if order is None:
+        return None, None
+    scored = [(name, (row.get("fit_by_order") or {}).get(order, (row.get("fit_by_order") or {}).get(str(order))))
+              for name, row in peer_rows.items()]
+    scored = [(name, fit) for name, fit in scored if fit is not None and np.isfinite(fit)]
+    return max(scored, key=lambda item: item[1]) if scored else (None, None)
+
+
 def peers_against_the_goal(peers_by_fraction: dict) -> dict[str, dict]:
     """Each peer held to the default's goals over the fractions it was run at: its fit's range, and its
     worst gap to the best peer (itself included) at the same fraction.
@@ -487,9 +498,12 @@ def perturbation_summary(runs: list[dict], peers_by_fraction: dict, fixed_fits: 
             continue
         peer, peer_fit, peer_order = _best_peer(peers_by_fraction.get(run["fraction"], {}))
         gap = None if fit is None or peer_fit is None or not np.isfinite(fit) else fit - peer_fit
+        same, same_fit = best_peer_at_order(peers_by_fraction.get(run["fraction"], {}), run.get("order"))
         by_fraction[run["fraction"]] = {"default_fit": fit, "default_order": run.get("order"), "best_peer": peer,
                                         "best_peer_fit": peer_fit, "best_peer_order": peer_order,
-                                        "default_minus_best_peer": gap}
+                                        "default_minus_best_peer": gap,
+                                        "best_peer_at_default_order": same,
+                                        "best_peer_at_default_order_fit": same_fit}
     if fixed_fits:
         for fraction, fit in fixed_fits.items():
             by_fraction.setdefault(fraction, {})["fixed_model_fit"] = fit
@@ -607,8 +621,11 @@ def print_perturbations(sets: dict) -> None:
                     if entry["best_peer"] else "")
             fixed = (f", fixed model {_show(entry['fixed_model_fit'])}" if entry.get("fixed_model_fit") is not None
                      else "")
+            same = (f"; at n={entry['default_order']} best peer {entry['best_peer_at_default_order']} "
+                    f"{_show(entry['best_peer_at_default_order_fit'])}"
+                    if entry.get("best_peer_at_default_order") else "")
             print(f"   {fraction:>9}: default {_show(entry['default_fit'])} n={entry['default_order']}{peer}"
-                  + ("" if gap is None else f", {gap:+.1f}") + fixed)
+                  + ("" if gap is None else f", {gap:+.1f}") + fixed + same)
 
 
 def _numbers(kind):

@@ -120,6 +120,15 @@ def test_each_peer_is_held_to_the_defaults_goals_at_the_same_fractions():
     assert benchmark.peers_against_the_goal({"published": {"A": row(80.0)}}) == {}  # one split: nothing to hold
 
 
+def test_the_best_peer_at_the_defaults_order_is_read_from_each_peers_fits_by_order():
+    peers = {"A": {"fit_by_order": {"2": 90.0, "4": 80.0}}, "B": {"fit_by_order": {"4": 82.0, "6": None}},
+             "C": {"validation_fit_percent": [95.0]}}  # C: no models kept (a NARX peer), so no fit at an order
+    assert benchmark.best_peer_at_order(peers, 4) == ("B", 82.0)
+    assert benchmark.best_peer_at_order(peers, 2) == ("A", 90.0)
+    assert benchmark.best_peer_at_order(peers, 6) == (None, None)  # B's order-6 model had no finite fit
+    assert benchmark.best_peer_at_order(peers, None) == (None, None)
+
+
 def _identify(entry, scratch: Path, *options: str) -> tuple[int, dict]:
     """``vehid identify`` on the raw file with the benchmark's arguments; exit status and JSON summary."""
     done = run_vehid("identify", *benchmark.data_args(entry, scratch), *options, "--json", "--quiet", cwd=ROOT)
