@@ -176,6 +176,10 @@ def _nonlinear_validation_fit(summary: dict) -> list | None:
 def peers_python() -> Path:
     """The peers' interpreter, creating their virtual environment on first use."""
     python = PEERS_VENV / "bin" / "python"
+    if not python.exists() and (PEERS_VENV.exists() or PEERS_VENV.is_symlink()):
+        # raised as the runner's own failure, so that the workbench's figures measured before are still written
+        raise RuntimeError(f"{PEERS_VENV.relative_to(ROOT)} exists but holds no interpreter "
+                           f"(a broken link or an interrupted creation): remove it to have it created again")
     if not python.exists():
         print(f"creating {PEERS_VENV.relative_to(ROOT)} with {', '.join(PEER_PACKAGES)}", flush=True)
         venv.create(PEERS_VENV, with_pip=True)
