@@ -26,6 +26,14 @@ found in three linear-algebra steps, without iterations:
    state-sequence methods fit them to one-step ones (Van Overschee & De Moor
    1996, ch. 4), and the problem stays linear.
 
+:func:`estimate_subspace_states` is N4SID's state-sequence form (Van
+Overschee & De Moor 1996, sec. 4.3): the oblique projection of the future
+outputs along the future inputs onto the past data, its SVD, the state
+sequence it implies, and ``[A B; C D]`` by least squares on the one-step
+equations between consecutive states. Nothing is simulated, so a growing
+mode weighs no sample more than another: the data start takes it for an
+open-loop unstable plant, whose model is validated by prediction.
+
 All three steps run on signals divided column by column by their RMS, and
 the model is scaled back (``B / s_u``, ``s_y C``, ``s_y D / s_u``): a
 channel in microvolts next to one in kilonewtons would otherwise dominate
@@ -46,7 +54,7 @@ from .._checks import io_arrays, positive_int
 from ..errors import ExcitationError, InputError
 from ..models.protocol import StateSpaceModel, sample_interval
 
-__all__ = ["SubspaceResult", "estimate_subspace", "largest_subspace_order"]
+__all__ = ["SubspaceResult", "estimate_subspace", "estimate_subspace_states", "largest_subspace_order"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -278,6 +286,107 @@ def estimate_subspace(data_or_arrays: Any, *, order: int, block_rows: int | None
     residuals = (target - regressors @ solution).reshape(-1, n_y) * output_scale
     return SubspaceResult(A, B / input_scale, output_scale[:, None] * C,
                           output_scale[:, None] * D / input_scale, x0, singular, residuals, s, dt)
+
+
+def estimate_subspace_states(data_or_arrays: Any, *, order: int, block_rows: int | None = None) -> SubspaceResult:
+    """Identify a discrete state-space model of ``order`` states by N4SID's state sequence.
+
+    Parameters
+    ----------
+    data_or_arrays : IOData, (u, y), or a list of them
+        Time-major inputs (N, n_u) and outputs (N, n_y); a list holds several
+        experiments, whose Hankel columns are joined and whose state
+        sequences are regressed together (no pair of states spans two).
+    order : int
+        Number of states n.
+    block_rows : int, optional
+        Block rows s of the past and of the future, > order / n_y; default
+        ``max(2 order, order + 1)``.
+
+    Returns
+    -------
+    SubspaceResult
+        ``singular_values`` are the oblique projection's; ``x0`` fits the
+        first experiment's first ``max(2 s, 10 n)`` samples by least squares
+        (zero where A is not diagonalisable); ``residuals`` are the output
+        equation's one-step residuals, from sample s of each experiment on.
+
+    Raises
+    ------
+    InputError
+        Bad orders, too short a record, non-finite data.
+    ExcitationError
+        The data do not reveal ``order`` states, or the states and inputs do
+        not determine the model.
+
+    Notes
+    -----
+    With ``W_p`` the past inputs and outputs, the future outputs are
+    regressed on the future inputs and ``W_p``; the part explained by
+    ``W_p`` is the oblique projection ``O``. Its first ``order`` singular
+    triplets give ``O ~ Gamma X``, ``Gamma = U_n S_n^(1/2)`` and the states
+    ``X = Gamma^+ O``; ``[x(k+1); y(k)] = [A B; C D] [x(k); u(k)]`` is then
+    solved by least squares (Van Overschee & De Moor 1996, sec. 4.3.1).
+    """
+    experiments = [io_arrays(item) for item in data_or_arrays] if isinstance(data_or_arrays, list) \
+        else [io_arrays(data_or_arrays)]
+    input_scale = _column_rms([e[0] for e in experiments])
+    output_scale = _column_rms([e[1] for e in experiments])
+    experiments = [(u_e / input_scale, y_e / output_scale, dt_e) for u_e, y_e, dt_e in experiments]
+    n = positive_int(order, "order")
+    s = _default_block_rows(n) if block_rows is None else positive_int(block_rows, "block_rows")
+    n_u, n_y = experiments[0][0].shape[1], experiments[0][1].shape[1]
+    if s * n_y < n:
+        raise InputError(f"block_rows={s} with {n_y} outputs cannot reveal {n} states (need s * n_y >= order)")
+    if not _hankel_fits([e[0].shape[0] for e in experiments], s, n_u, n_y):
+        samples = sum(e[0].shape[0] for e in experiments)
+        raise InputError(f"{samples} samples are too few for {s} block rows: fewer columns than rows in the data matrix")
+    counts = [e[0].shape[0] - 2 * s + 1 for e in experiments]
+    su, sy = s * n_u, s * n_y
+    future_inputs, past, future_outputs = [], [], []
+    for (u_e, y_e, _), columns in zip(experiments, counts):
+        u_h, y_h = _hankel(u_e, 2 * s, columns), _hankel(y_e, 2 * s, columns)
+        future_inputs.append(u_h[su:])
+        past.append(np.vstack([u_h[:su], y_h[:sy]]))
+        future_outputs.append(y_h[sy:])
+    U_f, W_p, Y_f = (np.hstack(blocks) for blocks in (future_inputs, past, future_outputs))
+    coefficients = np.linalg.lstsq(np.vstack([U_f, W_p]).T, Y_f.T, rcond=None)[0].T
+    projection = coefficients[:, su:] @ W_p
+    left, singular, _ = np.linalg.svd(projection, full_matrices=False)
+    if singular.size < n or singular[n - 1] <= 1e-12 * singular[0]:
+        raise ExcitationError(
+            f"the data reveal fewer than {n} states (singular values of the oblique projection: "
+            f"{np.array2string(singular[: n + 1], precision=3)}): lower the order or excite more")
+    gamma = left[:, :n] * np.sqrt(singular[:n])
+    states = np.linalg.pinv(gamma) @ projection  # x(k) for k = s .. s + columns - 1 of each experiment
+    regressors, targets, offset = [], [], 0
+    for (u_e, y_e, _), columns in zip(experiments, counts):
+        x_e = states[:, offset: offset + columns]
+        offset += columns
+        u_k, y_k = u_e[s: s + columns].T, y_e[s: s + columns].T
+        regressors.append(np.vstack([x_e[:, :-1], u_k[:, :-1]]))
+        targets.append(np.vstack([x_e[:, 1:], y_k[:, :-1]]))
+    regressor, target = np.hstack(regressors), np.hstack(targets)
+    solution, _, rank, _ = np.linalg.lstsq(regressor.T, target.T, rcond=None)
+    if rank < regressor.shape[0]:
+        raise ExcitationError("the states and inputs do not determine the model (rank-deficient regression)")
+    system = solution.T
+    A, B, C, D = system[:n, :n], system[:n, n:], system[n:, :n], system[n:, n:]
+    residuals = np.vstack([(y_e[s: s + columns] - states[:, first: first + columns].T @ C.T
+                            - u_e[s: s + columns] @ D.T)
+                           for (u_e, y_e, _), columns, first in zip(experiments, counts,
+                                                                    np.cumsum([0, *counts[:-1]]))])
+    u_0, y_0, _ = experiments[0]
+    head = min(u_0.shape[0], max(2 * s, 10 * n))
+    x0 = np.zeros(n)
+    try:
+        free, forced = _responses(A, C, u_0[:head])
+        simulated = np.einsum("kyij,ij->ky", forced, B) + u_0[:head] @ D.T
+        x0 = np.linalg.lstsq(free.reshape(head * n_y, n), (y_0[:head] - simulated).reshape(-1), rcond=None)[0]
+    except InputError:  # not diagonalisable, or overflowing: the state sequence is the estimate, x0 a courtesy
+        pass
+    return SubspaceResult(A, B / input_scale, output_scale[:, None] * C, output_scale[:, None] * D / input_scale,
+                          x0, singular, residuals * output_scale, s, experiments[0][2])
 
 
 def _segment_length(A: np.ndarray, block_rows: int, order: int) -> int | None:
