@@ -24,13 +24,13 @@ def _unstable_record():
     return u[:, None] / np.sqrt(np.mean(u**2)), y[:, None] / np.sqrt(np.mean(y**2))
 
 
-def test_an_unstable_start_is_scored_from_its_estimated_initial_state():
+def test_an_unstable_start_is_ranked_by_prediction():
     """Where unstable modes are allowed, the subspace model (the true unstable pole) wins the start.
 
     Noise-free data of order 1: the subspace model is the plant up to rounding and the hold's conversion, so its
     continuous pole is log(1.01) per sample to 1e-6. Simulated from rest it misses the record's start x(0) = 1,
-    whose error grows by 1 % a sample, and a stable band start would be taken; from the least-squares initial
-    state it is exact.
+    whose error grows by 1 % a sample, and a stable band start would be taken; predicted 10 samples ahead, as
+    its validation scores it, it is exact.
     """
     u, y = _unstable_record()
     structure = ModalStructure.default(1, 1, 1)
