@@ -148,7 +148,7 @@ def _identify(entry, scratch: Path, *options: str) -> tuple[int, dict]:
 # start, found by N4SID's state sequence, because the filter's model predicts the estimation part worse
 # (10-step fit 69.9 against 42.3 %); it is scored by 10-step prediction, as every unstable model is.
 # Measured 84.44 (the same under both perturbation seeds and the Sandybridge, Nehalem and Core2 kernels;
-# 82.2-84.4 over held-out fractions 0.3-0.4). It read 76.66 while the unstable start was PO-MOESP's, whose
+# 83.1-85.1 over held-out fractions 0.3-0.4). It read 76.66 while the unstable start was PO-MOESP's, whose
 # B and D were fitted to simulated outputs that the growing mode swamps. (Until the predictor's process
 # noise followed the record's input, that score depended on the input's units and read 89.18 with the
 # published ones; the peers' models score 88.0-90.9 by simulation.) The test checks that the run's note says
