@@ -186,7 +186,9 @@ def lightly_damped_beyond(values: np.ndarray, limit: float) -> int:
 
 
 class _NoiseModes(WorkbenchError):
-    """A subspace candidate with lightly damped modes beyond the input's band (:func:`lightly_damped_beyond`)."""
+    """A subspace candidate fitted to noise beyond the input's band: lightly damped modes there
+    (:func:`lightly_damped_beyond`), or a real pole there that the structure would make into a pair
+    (:func:`reals_made_into_pairs`)."""
 
 
 def reals_made_into_pairs(values: np.ndarray, structure: ModalStructure) -> np.ndarray:
