@@ -1,4 +1,4 @@
-"""Subspace identification: PO-MOESP (Verhaegen 1994; Verhaegen & Verdult 2007, sec. 9.6).
+"""Subspace identification: PO-MOESP (Verhaegen 1994; Verhaegen & Verdult 2007, sec. 9.6), and N4SID's state sequence.
 
 A discrete model ``x(k+1) = A x + B u``, ``y = C x + D u`` of given order is
 found in three linear-algebra steps, without iterations:
@@ -31,14 +31,14 @@ Overschee & De Moor 1996, sec. 4.3): the oblique projection of the future
 outputs along the future inputs onto the past data, its SVD, the state
 sequence it implies, and ``[A B; C D]`` by least squares on the one-step
 equations between consecutive states. Nothing is simulated, so a growing
-mode weighs no sample more than another: the data start takes it for an
-open-loop unstable plant, whose model is validated by prediction.
+mode weighs no sample more than another: it suits a model that will be
+validated by prediction, as an open-loop unstable plant's is.
 
-All three steps run on signals divided column by column by their RMS, and
-the model is scaled back (``B / s_u``, ``s_y C``, ``s_y D / s_u``): a
-channel in microvolts next to one in kilonewtons would otherwise dominate
-the SVD and the regressions, so the model would depend on the units. The
-eigenvalues do not change under the scaling.
+Both run on signals divided column by column by their RMS, and the model
+is scaled back (``B / s_u``, ``s_y C``, ``s_y D / s_u``): a channel in
+microvolts next to one in kilonewtons would otherwise dominate the SVD and
+the regressions, so the model would depend on the units. The eigenvalues
+do not change under the scaling.
 """
 
 from __future__ import annotations
