@@ -53,6 +53,11 @@ range is what the scored samples alone move (``fixed_model_range``). Each
 run keeps the choices it made by itself (its ``decision_margins``), and
 ``switched_decisions`` names every decision whose choice differs between
 the runs: a range without one comes from the data each run estimates on.
+Each peer is held to the same two goals over the fractions
+(``peers_against_the_goal``: its range and its worst gap to the best peer),
+and beside the best peer at each fraction stands the best at the default's
+own order (``best_peer_at_default_order``), the default not searching its
+order.
 
 The table goes to ``results/benchmarks.json`` under ``real_data``.
 """
