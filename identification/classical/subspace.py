@@ -176,6 +176,26 @@ def _responses(A: np.ndarray, C: np.ndarray, u: np.ndarray) -> tuple[np.ndarray,
     return free, forced
 
 
+def _scaled_experiments(data_or_arrays: Any, order: int, block_rows: int | None
+                        ) -> tuple[list[tuple[np.ndarray, np.ndarray, Any]], np.ndarray, np.ndarray, int, int]:
+    """The experiments of either estimator divided by their RMS (module docstring), the scales, the order
+    and the block rows, with the problem's size checked: ``(experiments, input_scale, output_scale, n, s)``."""
+    experiments = [io_arrays(item) for item in data_or_arrays] if isinstance(data_or_arrays, list) \
+        else [io_arrays(data_or_arrays)]
+    input_scale = _column_rms([e[0] for e in experiments])
+    output_scale = _column_rms([e[1] for e in experiments])
+    experiments = [(u_e / input_scale, y_e / output_scale, dt_e) for u_e, y_e, dt_e in experiments]
+    n = positive_int(order, "order")
+    s = _default_block_rows(n) if block_rows is None else positive_int(block_rows, "block_rows")
+    n_u, n_y = experiments[0][0].shape[1], experiments[0][1].shape[1]
+    if s * n_y < n:
+        raise InputError(f"block_rows={s} with {n_y} outputs cannot reveal {n} states (need s * n_y >= order)")
+    if not _hankel_fits([e[0].shape[0] for e in experiments], s, n_u, n_y):
+        samples = sum(e[0].shape[0] for e in experiments)
+        raise InputError(f"{samples} samples are too few for {s} block rows: fewer columns than rows in the data matrix")
+    return experiments, input_scale, output_scale, n, s
+
+
 def estimate_subspace(data_or_arrays: Any, *, order: int, block_rows: int | None = None,
                       estimate_x0: bool = True) -> SubspaceResult:
     """Identify a discrete state-space model of ``order`` states by PO-MOESP.
@@ -207,21 +227,10 @@ def estimate_subspace(data_or_arrays: Any, *, order: int, block_rows: int | None
         The data do not reveal ``order`` states (rank-deficient ``L_32``)
         or do not determine B and D.
     """
-    experiments = [io_arrays(item) for item in data_or_arrays] if isinstance(data_or_arrays, list) \
-        else [io_arrays(data_or_arrays)]
-    input_scale = _column_rms([e[0] for e in experiments])
-    output_scale = _column_rms([e[1] for e in experiments])
-    experiments = [(u_e / input_scale, y_e / output_scale, dt_e) for u_e, y_e, dt_e in experiments]
+    experiments, input_scale, output_scale, n, s = _scaled_experiments(data_or_arrays, order, block_rows)
     u, y, dt = experiments[0]
-    n = positive_int(order, "order")
-    s = _default_block_rows(n) if block_rows is None else positive_int(block_rows, "block_rows")
     n_u, n_y = u.shape[1], y.shape[1]
-    if s * n_y < n:
-        raise InputError(f"block_rows={s} with {n_y} outputs cannot reveal {n} states (need s * n_y >= order)")
     counts = [e[0].shape[0] - 2 * s + 1 for e in experiments]
-    if not _hankel_fits([e[0].shape[0] for e in experiments], s, n_u, n_y):
-        samples = sum(e[0].shape[0] for e in experiments)
-        raise InputError(f"{samples} samples are too few for {s} block rows: fewer columns than rows in the data matrix")
     su, sy = s * n_u, s * n_y
     blocks = []
     for (u_e, y_e, _), columns in zip(experiments, counts):
@@ -328,19 +337,8 @@ def estimate_subspace_states(data_or_arrays: Any, *, order: int, block_rows: int
     ``X = Gamma^+ O``; ``[x(k+1); y(k)] = [A B; C D] [x(k); u(k)]`` is then
     solved by least squares (Van Overschee & De Moor 1996, sec. 4.3.1).
     """
-    experiments = [io_arrays(item) for item in data_or_arrays] if isinstance(data_or_arrays, list) \
-        else [io_arrays(data_or_arrays)]
-    input_scale = _column_rms([e[0] for e in experiments])
-    output_scale = _column_rms([e[1] for e in experiments])
-    experiments = [(u_e / input_scale, y_e / output_scale, dt_e) for u_e, y_e, dt_e in experiments]
-    n = positive_int(order, "order")
-    s = _default_block_rows(n) if block_rows is None else positive_int(block_rows, "block_rows")
+    experiments, input_scale, output_scale, n, s = _scaled_experiments(data_or_arrays, order, block_rows)
     n_u, n_y = experiments[0][0].shape[1], experiments[0][1].shape[1]
-    if s * n_y < n:
-        raise InputError(f"block_rows={s} with {n_y} outputs cannot reveal {n} states (need s * n_y >= order)")
-    if not _hankel_fits([e[0].shape[0] for e in experiments], s, n_u, n_y):
-        samples = sum(e[0].shape[0] for e in experiments)
-        raise InputError(f"{samples} samples are too few for {s} block rows: fewer columns than rows in the data matrix")
     counts = [e[0].shape[0] - 2 * s + 1 for e in experiments]
     su, sy = s * n_u, s * n_y
     future_inputs, past, future_outputs = [], [], []

@@ -104,6 +104,15 @@ def band_eigenvalues(structure: ModalStructure, n_samples: int) -> np.ndarray:
     return np.array(values)
 
 
+def _complex_and_real(values: np.ndarray) -> tuple[list[complex], list[float]]:
+    """One eigenvalue of each conjugate pair (the upper one) and the real ones, each slowest first: what
+    :func:`place_eigenvalues` fills a structure from, and :func:`reals_made_into_pairs` reads."""
+    values = np.asarray(values, dtype=complex)
+    upper = sorted((v for v in values if v.imag > 1e-9 * abs(v)), key=abs)
+    real = sorted((v.real for v in values if abs(v.imag) <= 1e-9 * abs(v)), key=abs)
+    return upper, real
+
+
 def place_eigenvalues(values: np.ndarray, structure: ModalStructure, *, stable: bool = True) -> np.ndarray:
     """Map a model's eigenvalues onto the structure's modes: one per mode, pairs first.
 
@@ -114,10 +123,7 @@ def place_eigenvalues(values: np.ndarray, structure: ModalStructure, *, stable: 
     magnitude), fill the real poles. With ``stable`` every real part is made
     negative (reflected).
     """
-    values = np.asarray(values, dtype=complex)
-    upper = [v for v in values if v.imag > 1e-9 * abs(v)]
-    real = sorted((v.real for v in values if abs(v.imag) <= 1e-9 * abs(v)), key=abs)
-    upper.sort(key=abs)
+    upper, real = _complex_and_real(values)
     pairs: list[complex] = []
     while len(pairs) < structure.n_complex_pairs and upper:
         pairs.append(upper.pop(0))
@@ -194,10 +200,8 @@ class _NoiseModes(WorkbenchError):
 def reals_made_into_pairs(values: np.ndarray, structure: ModalStructure) -> np.ndarray:
     """The real eigenvalues of ``values`` that :func:`place_eigenvalues` makes into ``structure``'s
     left-over complex pairs (two per pair, slowest first; empty where the complex ones fill its pairs)."""
-    values = np.asarray(values, dtype=complex)
-    complex_pairs = int(np.sum(values.imag > 1e-9 * np.abs(values)))
-    real = sorted((v.real for v in values if abs(v.imag) <= 1e-9 * abs(v)), key=abs)
-    made = min(max(structure.n_complex_pairs - complex_pairs, 0), len(real) // 2)
+    upper, real = _complex_and_real(values)
+    made = min(max(structure.n_complex_pairs - len(upper), 0), len(real) // 2)
     return np.array(real[: 2 * made])
 
 
