@@ -452,9 +452,12 @@ def best_peer_at_order(peer_rows: dict, order: int | None) -> tuple[str | None, 
     its fit: the like-for-like figure for a default that does not search its order."""
     if order is None:
         return None, None
-    scored = [(name, (row.get("fit_by_order") or {}).get(order, (row.get("fit_by_order") or {}).get(str(order))))
-              for name, row in peer_rows.items()]
-    scored = [(name, fit) for name, fit in scored if fit is not None and np.isfinite(fit)]
+    scored = []
+    for name, row in peer_rows.items():
+        fits = row.get("fit_by_order") or {}
+        fit = fits.get(order, fits.get(str(order)))  # int keys as scored here, text keys once read from JSON
+        if fit is not None and np.isfinite(fit):
+            scored.append((name, fit))
     return max(scored, key=lambda item: item[1]) if scored else (None, None)
 
 
