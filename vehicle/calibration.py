@@ -77,7 +77,7 @@ PRIOR_SHARE_LIMIT = 0.5
 
 # Fields that steer a decision in the model's construction (a branch, not arithmetic): a symbol there
 # has no single model to stand for.
-_DECISION_FIELDS = ("steering.compliance", "drive.front_drive_share", "aerodynamics.drag_area",
+_DECISION_FIELDS = ("steering.compliance", "drive.front_drive_share", "drive.slip_limit", "aerodynamics.drag_area",
                     "aerodynamics.front_downforce_area", "aerodynamics.rear_downforce_area")
 
 # Half-width (s) of the moving average under the measured speed's rate: a 0.1 s window passes the
@@ -195,15 +195,22 @@ def calibration_model(params: VehicleParameters, parameters: Sequence[str], quan
     )
 
 
-def speed_schedule(speed: Any, dt: float) -> np.ndarray:
+def speed_schedule(speed: Any, dt: float, acceleration: Any = None) -> np.ndarray:
     """The scheduling signals of a measured speed: itself and its smoothed rate, (N, 2).
 
     The rate is the difference quotient of the speed averaged over ``2 * 0.05 s`` (see
-    ``_RATE_SMOOTHING``), so that a speed sensor's white noise does not reach the feed-forward.
+    ``_RATE_SMOOTHING``), so that a speed sensor's white noise does not reach the feed-forward;
+    or, where the log measures it, the longitudinal acceleration ``acceleration`` (m/s^2, one per
+    sample), which needs no differentiating and holds what the speed hold must supply.
     """
     speed = np.asarray(speed, dtype=float).ravel()
     if speed.size < 3 or not np.all(np.isfinite(speed)):
         raise InputError("the speed channel needs at least three finite samples")
+    if acceleration is not None:
+        acceleration = np.asarray(acceleration, dtype=float).ravel()
+        if acceleration.shape != speed.shape or not np.all(np.isfinite(acceleration)):
+            raise InputError(f"the acceleration channel needs one finite value per speed sample ({speed.size})")
+        return np.column_stack([speed, acceleration])
     half = max(1, int(round(_RATE_SMOOTHING / dt)))
     kernel = np.ones(2 * half + 1) / (2 * half + 1)
     padded = np.concatenate([2 * speed[0] - speed[half:0:-1], speed, 2 * speed[-1] - speed[-2:-half - 2:-1]])
@@ -212,8 +219,12 @@ def speed_schedule(speed: Any, dt: float) -> np.ndarray:
 
 
 def calibration_record(steer: Any, speed: Any, outputs: Any, dt: float, quantities: Sequence[str],
-                       t0: float = 0.0) -> IOData:
-    """A log as the calibration model takes it: road-wheel steer, the speed schedule, the measured quantities."""
+                       t0: float = 0.0, acceleration: Any = None) -> IOData:
+    """A log as the calibration model takes it: road-wheel steer, the speed schedule, the measured quantities.
+
+    ``acceleration``, where the log measures it, is fed forward in place of the speed's rate
+    (:func:`speed_schedule`).
+    """
     steer = np.asarray(steer, dtype=float).ravel()
     outputs = np.asarray(outputs, dtype=float)
     outputs = outputs.reshape(-1, 1) if outputs.ndim == 1 else outputs
@@ -224,7 +235,8 @@ def calibration_record(steer: Any, speed: Any, outputs: Any, dt: float, quantiti
                          f"do not match {len(quantities)} quantities")
     units = dict(zip(OUTPUT_NAMES, OUTPUT_UNITS))
     return IOData(
-        t=t0 + dt * np.arange(steer.size), u=np.column_stack([steer, speed_schedule(speed, dt)]), y=outputs,
+        t=t0 + dt * np.arange(steer.size), u=np.column_stack([steer, speed_schedule(speed, dt, acceleration)]),
+        y=outputs,
         input_names=("steer", "reference_speed", "reference_acceleration"), input_units=("rad", "m/s", "m/s^2"),
         output_names=tuple(quantities), output_units=tuple(units[q] for q in quantities),
     )
@@ -342,7 +354,8 @@ def _undetermined(names: Sequence[str], values: np.ndarray, std: np.ndarray, cor
 def calibrate_vehicle(params: VehicleParameters, data: IOData | Sequence[IOData], quantities: Sequence[str], *,
                       parameters: Sequence[str] | None = None, priors: Mapping[str, float] | None = None,
                       prior_std: Mapping[str, float] | None = None, correlation_limit: float = CORRELATION_LIMIT,
-                      options: GreyBoxOptions | None = None) -> Calibration:
+                      options: GreyBoxOptions | None = None, fixed: Sequence[str] = (),
+                      starts: Mapping[str, float] | None = None) -> Calibration:
     """Calibrate chosen parameters of ``params`` to logs (:func:`calibration_record`).
 
     Parameters
@@ -365,10 +378,22 @@ def calibrate_vehicle(params: VehicleParameters, data: IOData | Sequence[IOData]
     options : GreyBoxOptions, optional
         Default: :class:`GreyBoxOptions` with ``coloured_residuals`` (a measured log's residuals are
         rarely white; the std then widens by their correlation time).
+    fixed : sequence of str
+        Parameters kept at their start in this calibration, not estimated (a stage of a staged
+        calibration); they are neither reported as undetermined nor given a std.
+    starts : mapping, optional
+        ``name -> value``: where the filter starts, in place of the prior value (an earlier stage's
+        estimate). The prior std still applies around it.
 
     Returns
     -------
     Calibration
+
+    Notes
+    -----
+    The model is built and compiled once, with every parameter a symbol: a parameter held (fixed,
+    or found undetermined) is kept at its value by the filter's ``held`` mask, so dropping one
+    costs a run of the filter but no compilation.
     """
     quantities = tuple(quantities)
     if parameters is None:
@@ -378,7 +403,8 @@ def calibrate_vehicle(params: VehicleParameters, data: IOData | Sequence[IOData]
         raise InputError(f"the correlation limit must be in (0, 1); got {correlation_limit!r}")
     priors = dict(priors or {})
     prior_std = dict(prior_std or {})
-    extra = (set(priors) | set(prior_std)) - set(parameters)
+    starts = dict(starts or {})
+    extra = (set(priors) | set(prior_std) | set(starts) | set(fixed)) - set(parameters)
     if extra:
         raise InputError(f"a prior is given for {sorted(extra)[0]!r}, which is not calibrated")
     for name, value in prior_std.items():
@@ -388,38 +414,47 @@ def calibrate_vehicle(params: VehicleParameters, data: IOData | Sequence[IOData]
         _field(params, name)
     try:
         prior_vehicle = vehicle_with(params, list(priors), list(priors.values())) if priors else params
+        start_vehicle = vehicle_with(prior_vehicle, list(starts), list(starts.values())) if starts else prior_vehicle
     except (ValueError, TypeError) as exc:
         raise InputError(f"a prior makes an invalid vehicle: {exc}") from None
     units = tuple(_field(prior_vehicle, name)[2] for name in parameters)
     prior_values = np.array([float(getattr(*_field(prior_vehicle, name)[:2])) for name in parameters])
+    start_values = np.array([float(getattr(*_field(start_vehicle, name)[:2])) for name in parameters])
     options = options or GreyBoxOptions(coloured_residuals=True)
     relative_prior = np.array([prior_std[name] / abs(value) if name in prior_std else options.prior_std
                                for name, value in zip(parameters, prior_values)])
-    free = list(parameters)
+    model = calibration_model(start_vehicle, parameters, quantities)
+    free = [name for name in parameters if name not in fixed]
+    if not free:
+        raise InputError("every calibration parameter is fixed: leave at least one to estimate")
     held: dict[str, str] = {}
     result = None
+    start = start_values.copy()
     while free:
-        model = calibration_model(prior_vehicle, free, quantities)
-        start = np.array([prior_values[parameters.index(name)] for name in free])
-        free_prior = np.array([relative_prior[parameters.index(name)] for name in free])
-        result = identify_greybox(data, model, start,
-                                  options=dataclasses.replace(options, parameter_prior_std=tuple(free_prior)))
-        reason = _undetermined(free, result.parameters, result.std, result.correlation, correlation_limit,
-                               free_prior)
+        mask = tuple(name not in free for name in parameters)
+        result = identify_greybox(data, model, start, options=dataclasses.replace(
+            options, parameter_prior_std=tuple(relative_prior), held=mask))
+        index = [parameters.index(name) for name in free]
+        reason = _undetermined(free, result.parameters[index], result.std[index],
+                               result.correlation[np.ix_(index, index)], correlation_limit, relative_prior[index])
         if reason is None:
             break
         held[reason[0]] = reason[1]
         free.remove(reason[0])
+        # the others start again where they started: a parameter running away may have dragged them
         result = None
-    values, std = prior_values.copy(), np.full(len(parameters), np.nan)
+    values, std = start_values.copy(), np.full(len(parameters), np.nan)
     correlation = np.full((len(parameters), len(parameters)), np.nan)
     if result is not None:
         index = [parameters.index(name) for name in free]
-        values[index] = result.parameters
-        std[index] = result.std
-        correlation[np.ix_(index, index)] = result.correlation
-    warnings = tuple(f"{name} not identifiable from this log ({why}): held at its prior "
-                     f"{prior_values[parameters.index(name)]:.6g}" for name, why in held.items())
+        values[index] = result.parameters[index]
+        std[index] = result.std[index]
+        correlation[np.ix_(index, index)] = result.correlation[np.ix_(index, index)]
+    # a held parameter keeps its start, the value the others were estimated with: the prior, or an
+    # earlier stage's estimate
+    warnings = tuple(f"{name} not identifiable from this log ({why}): held at its "
+                     f"{'prior' if name not in starts else 'start'} {start_values[parameters.index(name)]:.6g}"
+                     for name, why in held.items())
     return Calibration(
         vehicle=vehicle_with(prior_vehicle, parameters, values), parameter_names=parameters, units=units,
         values=values, std=std, correlation=correlation, held=held, result=result, warnings=warnings,
