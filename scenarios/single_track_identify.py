@@ -119,7 +119,8 @@ def _read(args: Any) -> tuple[IOData, IOData | None]:
                              input_units=(*raw.input_units, raw.output_units[-1]),
                              output_units=raw.output_units[:-1])
     scale = parse_scale(args.scale)
-    unknown = [name for name in scale if name not in record.input_names + record.output_names]
+    chosen = record.input_names + record.output_names + tuple(filter(None, [getattr(args, "measured_sideslip", None)]))
+    unknown = [name for name in scale if name not in chosen]
     if unknown:
         raise InputError(f"--scale names {unknown[0]!r}, which is not a chosen channel")
     record = record.replace(u=record.u * [scale.get(n, 1.0) for n in record.input_names],
@@ -251,6 +252,12 @@ def run(args: Any) -> tuple[dict, str]:
             {"data": [str(d) for d in args.data], "schedule": args.schedule.strip(),
              "validation_fit_percent": None if validation_fit is None else [float(f) for f in validation_fit]})
         summary["model_file"] = str(save_model(identified, args.save_model, None))
+    from vehid.scenarios import plausibility_checks as plausibility
+    from vehid.vehicle.single_track import IdentifiedSingleTrack
+
+    plausibility.record_findings(summary, warnings, plausibility.single_track_findings(
+        IdentifiedSingleTrack(config, result.parameters, None, (float(np.min(speeds)), float(np.max(speeds)))),
+        estimation, plausibility.single_track_sideslip(args, config, result.parameters, estimation, options.substeps)))
     summary["warnings"] = list(warnings)  # said on standard error (or made an error by --strict) by the command
     text = _text(summary, estimation.output_names, validation is not None)
     return summary, text
