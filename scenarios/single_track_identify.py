@@ -17,8 +17,11 @@ JSON (public contract): ``structure``, ``physical_parameters`` (``cornering_stif
 ``critical_speed_m_s``, each ``{value, std, unit}``, and ``yaw_rate_gain`` at speeds spanning the
 log), ``fit_percent`` (R, eq. 17), ``estimation_fit_percent``,
 ``validation_fit_percent`` (NRMSE), ``speed_range_m_s``, ``passes_run``, ``stop_reason``,
-``trace_p``, ``notes``, ``warnings``, ``seconds``; with ``--save-model`` (.json) ``model_file``, the
-identified model (:class:`~vehid.vehicle.single_track.IdentifiedSingleTrack`) that ``vehid handling`` reads.
+``trace_p``, ``notes``, ``warnings``, ``seconds``, ``plausibility`` (each failed check of the car's physics,
+``{quantity, value, range, speed, cause}``, also a warning: :mod:`vehid.scenarios.plausibility_checks`;
+``--measured-sideslip CHANNEL`` adds the predicted sideslip against a measured one); with ``--save-model``
+(.json) ``model_file``, the identified model (:class:`~vehid.vehicle.single_track.IdentifiedSingleTrack`)
+that ``vehid handling`` reads.
 """
 
 from __future__ import annotations

@@ -34,7 +34,9 @@ chosen on validation data; --nonlinear adds the spline-nonlinear model. It
 also says how sure the model is (scenarios.model_checks): each mode with
 standard deviations (text: value +/- 2 sigma; JSON: the list `modes`), the
 residual tests per output (`residual_whiteness_p`, `input_correlation_max`)
-and, for the IEKF, the innovation NIS per pass with its band.
+and, for the IEKF, the innovation NIS per pass with its band. A model of a
+car (an output named, or by --quantities, yaw_rate) is checked for physical
+plausibility: each failure joins `plausibility` and the warnings.
 
 With --out ARCHIVE the record and every finished pass are written to an HDF5
 archive as the run goes (atomically, so a killed run leaves the archive of
