@@ -283,3 +283,38 @@ def test_a_knot_on_a_straight_is_marked_extrapolated(tmp_path, capsys):
     assert [row["extrapolated"] for row in summary["metrics"]] == [False, False, True]
     assert any("38 m/s" in warning and "extrapolated" in warning for warning in summary["warnings"])
     assert summary["plausibility"] == []
+
+
+# --- which models `vehid identify` takes for a car's ----------------------------------------------------------
+
+def test_a_modal_model_is_a_cars_by_its_quantities():
+    """Outputs named by --quantities (or named as the quantity) make a modal model a car's, checked at the speed
+    its record states; without a yaw rate it is not checked at all (None: no JSON plausibility)."""
+    from types import SimpleNamespace
+
+    model = _car_at(30.0)
+    steady = float(-(model.C @ np.linalg.solve(model.A, model.B))[0, 0])
+    D = model.D.copy()
+    D[0, 0] = 20.0 * steady  # the yaw rate answers at once
+    model = dataclasses.replace(model, D=D, output_names=("yawRate", "ayCG"))
+    n = 2000
+    record = IOData(t=0.01 * np.arange(n), u=np.sin(np.arange(n) / 10.0)[:, None], y=np.zeros((n, 2)),
+                    output_names=("yawRate", "ayCG"), meta={"speed": 30.0})
+    plan = SimpleNamespace(records=(record,), schedule=None)
+    args = SimpleNamespace(quantities="yaw_rate,lateral_acceleration", lf=LF, lr=LR, vehicle=None)
+    found = {f.quantity: f for f in plausibility_checks.identify_findings(args, plan, model)}
+    assert found["yaw_rate_response_time_s"].speed == 30.0
+    # the feed-through makes the steady yaw-rate gain 21 times the car's, whose a_y = V r held exactly
+    assert found["steady_turn_kinematic_ratio"].value == pytest.approx(1 / 21, rel=1e-4)
+    assert plausibility_checks.identify_findings(SimpleNamespace(quantities=None, lf=None, lr=None, vehicle=None),
+                                                 plan, model) is None
+
+
+@pytest.mark.parametrize("extra, message", [
+    (("--quantities", "yaw_rate"), "--quantities names 1 quantities for 2"),
+    (("--quantities", "yaw_rate,roll"), "unknown quantity 'roll'"),
+    (("--measured-sideslip", "beta_true"), "--structure single-track"),
+])
+def test_modal_quantities_are_checked_before_any_work(extra, message):
+    completed = run_vehid("identify", LOG, "--inputs", "delta", "--outputs", "yawRate,ayCG", *extra)
+    assert completed.returncode == 2 and message in completed.stderr

@@ -129,7 +129,6 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     from vehid.scenarios import schedule_channel
     from vehid.scenarios.data_options import check_model_target
     from vehid.scenarios.paths import HDF5_SUFFIXES, run_digest
-
     from vehid.scenarios.plausibility_checks import check_quantities
 
     check_quantities(args)
@@ -369,7 +368,6 @@ def _finish(args, plan, result, archive_path=None) -> tuple[dict, str, object]:
     from vehid.scenarios import scheduled_identify
     from vehid.scenarios.data_options import save_model
     from vehid.scenarios.model_checks import uncertainty_lines
-
     from vehid.scenarios.plausibility_checks import identify_findings, record_findings
 
     data = plan.records[0]
