@@ -72,7 +72,7 @@ def extrapolated_speeds(model: Any, speeds: Iterable[float]) -> tuple[float, ...
     """The speeds where the model rests on too few data: nearest a knot marked extrapolated
     (``meta["knot_coverage"]`` of a scheduled family), or outside the log's speed range (``speed_range``)."""
     speeds = [float(v) for v in speeds]
-    coverage = (getattr(model, "meta", None) or {}).get("knot_coverage") if hasattr(model, "meta") else None
+    coverage = (getattr(model, "meta", None) or {}).get("knot_coverage")
     sparse: list[float] = []
     if coverage:
         knots = np.array([float(knot["value"]) for knot in coverage])

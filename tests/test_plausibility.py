@@ -25,7 +25,7 @@ from vehid.identification.models.statespace import to_modal
 from vehid.scenarios import plausibility_checks
 from vehid.scenarios.scheduled_identify import text_lines
 from vehid.vehicle.plausibility import RANGES, sideslip_findings, single_track_findings, steer_band_hz
-from vehid.vehicle.single_track import GRAVITY, SingleTrackConfig, single_track_model
+from vehid.vehicle.single_track import SingleTrackConfig, single_track_model
 
 LOG = Path(__file__).parent / "data" / "race_car_250lm" / "20140222_01_01_03_250lm.csv"
 MASS, LF, LR = 982.0, 1.33, 1.07

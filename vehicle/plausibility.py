@@ -7,23 +7,22 @@ each range in this one place with its source) and returns a :class:`Finding` for
 quantity, its value, the range, the speed (m/s) where it fails, and the likely cause. The command
 line gives them as the JSON list ``plausibility`` and as warnings.
 
-The checks (axes, units and symbols of ``docs/conventions.md``):
+The checks (axes, units and symbols of ``docs/conventions.md``; each bound in :data:`RANGES`):
 
 * **steady turn** (:func:`handling_findings`): in a steady turn ``a_y = V r``, so a model with both
   outputs has a lateral-acceleration gain of ``V`` times its yaw-rate gain at every speed
-  (``steady_turn_kinematic_ratio``, 1 within 15 %);
-* **steady-state handling**: understeer gradient (at most 6 deg/g) and, for an oversteering model, a
+  (``steady_turn_kinematic_ratio``, 1 within a tolerance);
+* **steady-state handling**: an understeer gradient no car exceeds and, for an oversteering model, a
   critical speed above the fastest speed the car was driven at (else it would have spun);
-* **step steer, ISO 7401**: yaw-rate and lateral-acceleration response times above 0.01 s (a quicker
-  response is a direct feed-through) and below 1 and 1.5 s, the yaw rate's peak after its response
-  time and within 1.5 s, its overshoot at most 50 %;
-* **modes** (:func:`mode_findings`): every mode damped 0.1 or more; the cause says whether the mode lies
-  in the band the steer excites (:func:`steer_band_hz`) or above it (noise or vibration fitted);
+* **step steer, ISO 7401**: yaw-rate and lateral-acceleration response times above zero (a response
+  quicker than the tyres' own lag is a direct feed-through) and below what any car takes, the yaw
+  rate's peak after its response time, its overshoot;
+* **modes** (:func:`mode_findings`): every mode damped; the cause says whether the mode lies in the
+  band the steer excites (:func:`steer_band_hz`) or above it (noise or vibration fitted);
 * **single-track parameters** (:func:`single_track_findings`): each axle's normalised cornering
-  stiffness ``C / F_z`` (``F_z`` its static load) within 2-40 /rad, and the dynamic index
-  ``I_z / (m l_f l_r)`` within 0.5-1.5;
+  stiffness ``C / F_z`` (``F_z`` its static load) and the dynamic index ``I_z / (m l_f l_r)``;
 * **measured sideslip** (:func:`sideslip_findings`): the model's predicted sideslip correlates with the
-  measured one by 0.5 or more.
+  measured one.
 
 Each range's bounds and why they are where they are: :data:`RANGES`. The causes are what the
 workbench's own cases showed: a steering-wheel angle read as the road-wheel angle (``--scale`` of
