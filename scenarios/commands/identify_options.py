@@ -100,8 +100,9 @@ def register_schedule_options(parser: argparse.ArgumentParser) -> None:
                         help="knots of the scheduled modal model, comma-separated and increasing (default: "
                              "--schedule-knots at evenly spaced quantiles of the channel)")
     parser.add_argument("--schedule-knots", type=int, default=SCHEDULE_DEFAULT_KNOTS,
-                        help=f"number of knots at the channel's quantiles, {SCHEDULE_MIN_KNOTS}-{SCHEDULE_MAX_KNOTS} "
-                             f"(default {SCHEDULE_DEFAULT_KNOTS})")
+                        help=f"the most knots at the channel's quantiles, {SCHEDULE_MIN_KNOTS}-{SCHEDULE_MAX_KNOTS} "
+                             f"(default {SCHEDULE_DEFAULT_KNOTS}; knots crowded within a quarter of the even spacing "
+                             "merge)")
     parser.add_argument("--schedule-p", type=float, action="append", metavar="P",
                         help=f"tuning parameter(s) of the scheduled filter, per dominant time constant; several are "
                              f"tried and one chosen on validation data (default {SCHEDULED_DEFAULT_P:g}, or "
