@@ -17,8 +17,11 @@ JSON (public contract): ``structure``, ``physical_parameters`` (``cornering_stif
 ``critical_speed_m_s``, each ``{value, std, unit}``, and ``yaw_rate_gain`` at speeds spanning the
 log), ``fit_percent`` (R, eq. 17), ``estimation_fit_percent``,
 ``validation_fit_percent`` (NRMSE), ``speed_range_m_s``, ``passes_run``, ``stop_reason``,
-``trace_p``, ``notes``, ``warnings``, ``seconds``; with ``--save-model`` (.json) ``model_file``, the
-identified model (:class:`~vehid.vehicle.single_track.IdentifiedSingleTrack`) that ``vehid handling`` reads.
+``trace_p``, ``notes``, ``warnings``, ``seconds``, ``plausibility`` (each failed check of the car's physics,
+``{quantity, value, range, speed, cause}``, also a warning: :mod:`vehid.scenarios.plausibility_checks`;
+``--measured-sideslip CHANNEL`` adds the predicted sideslip against a measured one); with ``--save-model``
+(.json) ``model_file``, the identified model (:class:`~vehid.vehicle.single_track.IdentifiedSingleTrack`)
+that ``vehid handling`` reads.
 """
 
 from __future__ import annotations
@@ -119,7 +122,8 @@ def _read(args: Any) -> tuple[IOData, IOData | None]:
                              input_units=(*raw.input_units, raw.output_units[-1]),
                              output_units=raw.output_units[:-1])
     scale = parse_scale(args.scale)
-    unknown = [name for name in scale if name not in record.input_names + record.output_names]
+    chosen = record.input_names + record.output_names + tuple(filter(None, [getattr(args, "measured_sideslip", None)]))
+    unknown = [name for name in scale if name not in chosen]
     if unknown:
         raise InputError(f"--scale names {unknown[0]!r}, which is not a chosen channel")
     record = record.replace(u=record.u * [scale.get(n, 1.0) for n in record.input_names],
@@ -251,6 +255,12 @@ def run(args: Any) -> tuple[dict, str]:
             {"data": [str(d) for d in args.data], "schedule": args.schedule.strip(),
              "validation_fit_percent": None if validation_fit is None else [float(f) for f in validation_fit]})
         summary["model_file"] = str(save_model(identified, args.save_model, None))
+    from vehid.scenarios import plausibility_checks as plausibility
+    from vehid.vehicle.single_track import IdentifiedSingleTrack
+
+    plausibility.record_findings(summary, warnings, plausibility.single_track_findings(
+        IdentifiedSingleTrack(config, result.parameters, None, (float(np.min(speeds)), float(np.max(speeds)))),
+        estimation, plausibility.single_track_sideslip(args, config, result.parameters, estimation, options.substeps)))
     summary["warnings"] = list(warnings)  # said on standard error (or made an error by --strict) by the command
     text = _text(summary, estimation.output_names, validation is not None)
     return summary, text

@@ -131,9 +131,13 @@ def identify_scheduled_model(start: Any, plan: Any, options: IdentifyOptions, un
     scores = {**steps.scores_summary(evaluation, fit_percent),
               **records_summary(family, scheduled_plan.records, plan.preparation)}
     scores.pop("preparation", None)  # the unscheduled preparation stands: the schedule is never offset
+    coverage = list(family.meta.get("knot_coverage") or [])
+    sparse = {float(knot["value"]) for knot in coverage if knot["extrapolated"]}
     entry = {
         "channel": schedule.channel, "grid": family.grid,
-        "modes_at": [{"value": at["value"], "modes": at["modes"]} for at in family.modes_at(family.grid)],
+        "modes_at": [{"value": at["value"], "modes": at["modes"], "extrapolated": float(at["value"]) in sparse}
+                     for at in family.modes_at(family.grid)],
+        "knot_coverage": coverage,
         "knots": int(family.grid.size), "p": chosen["p"], "p_tried": tried, "passes_run": result.passes_run,
         "stop_reason": result.stop_reason if divergence is None else f"{result.stop_reason}: {divergence}",
         "start_fit_percent": result.start_fit, "seconds": result.seconds,
@@ -168,7 +172,12 @@ def identify_scheduled_model(start: Any, plan: Any, options: IdentifyOptions, un
                               measure=margin["measure"], rule=margin["rule"])
     entry.update(model_returned="scheduled" if returned else "unscheduled",
                  estimation_fit_percent=evaluation.estimation.fit, validation_fit_percent=evaluation.validation_fit)
-    if not returned:
+    if returned:
+        warnings += [f"scheduled: the knot at {schedule.channel} = {knot['value']:.4g} rests on {knot['seconds']:.3g} s "
+                     f"of the record with the first input at {knot['excitation']:.2f} of its RMS: too little to say "
+                     "its modes, which are extrapolated from its neighbours' data" for knot in coverage
+                     if knot["extrapolated"]]
+    else:
         scheduled_fit, other_fit = margin["runner_up_score"], margin["score"]
         warnings.append(
             "scheduled: the scheduled model " + ("is unstable at some grid value where stability was asked" if not

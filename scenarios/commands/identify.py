@@ -34,7 +34,9 @@ chosen on validation data; --nonlinear adds the spline-nonlinear model. It
 also says how sure the model is (scenarios.model_checks): each mode with
 standard deviations (text: value +/- 2 sigma; JSON: the list `modes`), the
 residual tests per output (`residual_whiteness_p`, `input_correlation_max`)
-and, for the IEKF, the innovation NIS per pass with its band.
+and, for the IEKF, the innovation NIS per pass with its band. A model of a
+car (an output named, or by --quantities, yaw_rate) is checked for physical
+plausibility: each failure joins `plausibility` and the warnings.
 
 With --out ARCHIVE the record and every finished pass are written to an HDF5
 archive as the run goes (atomically, so a killed run leaves the archive of
@@ -127,7 +129,9 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     from vehid.scenarios import schedule_channel
     from vehid.scenarios.data_options import check_model_target
     from vehid.scenarios.paths import HDF5_SUFFIXES, run_digest
+    from vehid.scenarios.plausibility_checks import check_quantities
 
+    check_quantities(args)
     if args.structure == "single-track":
         from vehid.scenarios import single_track_identify
 
@@ -364,11 +368,16 @@ def _finish(args, plan, result, archive_path=None) -> tuple[dict, str, object]:
     from vehid.scenarios import scheduled_identify
     from vehid.scenarios.data_options import save_model
     from vehid.scenarios.model_checks import uncertainty_lines
+    from vehid.scenarios.plausibility_checks import identify_findings, record_findings
 
     data = plan.records[0]
     summary = result.render()
     model = result.model
     warnings = list(result.warnings)
+    findings = identify_findings(args, plan, model)
+    if findings is not None:  # a car's model: named checks of its physics (JSON plausibility), as warnings
+        record_findings(summary, warnings, findings)
+        summary["warnings"] = list(warnings)
     nonlinear = result.nonlinear.result.model if result.nonlinear is not None else None
     scheduled = result.scheduled
     unscheduled = result.unscheduled if result.unscheduled is not None else model

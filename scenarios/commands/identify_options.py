@@ -100,8 +100,9 @@ def register_schedule_options(parser: argparse.ArgumentParser) -> None:
                         help="knots of the scheduled modal model, comma-separated and increasing (default: "
                              "--schedule-knots at evenly spaced quantiles of the channel)")
     parser.add_argument("--schedule-knots", type=int, default=SCHEDULE_DEFAULT_KNOTS,
-                        help=f"number of knots at the channel's quantiles, {SCHEDULE_MIN_KNOTS}-{SCHEDULE_MAX_KNOTS} "
-                             f"(default {SCHEDULE_DEFAULT_KNOTS})")
+                        help=f"the most knots at the channel's quantiles, {SCHEDULE_MIN_KNOTS}-{SCHEDULE_MAX_KNOTS} "
+                             f"(default {SCHEDULE_DEFAULT_KNOTS}; knots crowded within a quarter of the even spacing "
+                             "merge)")
     parser.add_argument("--schedule-p", type=float, action="append", metavar="P",
                         help=f"tuning parameter(s) of the scheduled filter, per dominant time constant; several are "
                              f"tried and one chosen on validation data (default {SCHEDULED_DEFAULT_P:g}, or "
@@ -113,7 +114,8 @@ def register_single_track_options(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group("single-track structure (--structure single-track)")
     group.add_argument("--quantities", metavar="NAMES",
                        help="what each --outputs channel measures, in order: yaw_rate (rad/s), lateral_acceleration "
-                            "(m/s^2), sideslip (rad), lateral_velocity (m/s) (default yaw_rate,lateral_acceleration)")
+                            "(m/s^2), sideslip (rad), lateral_velocity (m/s) (default yaw_rate,lateral_acceleration); "
+                            "a modal model's outputs so named (or other) are checked as a car's (JSON plausibility)")
     group.add_argument("--mass", type=float, metavar="KG", help="vehicle mass (kg)")
     group.add_argument("--lf", type=float, metavar="M", help="CG to front axle (m)")
     group.add_argument("--lr", type=float, metavar="M", help="CG to rear axle (m)")
@@ -125,3 +127,6 @@ def register_single_track_options(parser: argparse.ArgumentParser) -> None:
                        help="saturating axle characteristic mu F_z tanh(C alpha / (mu F_z)), mu estimated")
     group.add_argument("--offsets", action="store_true",
                        help="estimate constant sensor offsets of the steer and of each output as well")
+    group.add_argument("--measured-sideslip", metavar="CHANNEL",
+                       help="a channel that measured the sideslip (rad, ISO 8855), not fitted: the model's predicted "
+                            "sideslip is checked against it (JSON plausibility)")
