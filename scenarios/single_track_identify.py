@@ -92,6 +92,14 @@ def _refuse_other_options(args: Any) -> None:
         raise InputError("--structure single-track takes one input, the steer angle (rad): give --inputs CHANNEL")
 
 
+def _is_workbench_record(path: str) -> bool:
+    from pathlib import Path
+
+    from vehid.scenarios.paths import HDF5_SUFFIXES
+
+    return Path(path).suffix.lower() in HDF5_SUFFIXES
+
+
 def _read(args: Any) -> tuple[IOData, IOData | None]:
     """The raw record (steer, speed -> outputs), times --scale, and its held-out tail where asked."""
     from vehid.identification.data import check_channels
@@ -104,10 +112,13 @@ def _read(args: Any) -> tuple[IOData, IOData | None]:
     if args.validation is not None and not 0 < args.validation < 1:
         raise InputError(f"--validation takes a fraction between 0 and 1; got {args.validation}")
     speed = args.schedule.strip()
-    try:  # a text table's columns are all alike; a workbench record keeps its speed among its outputs
+    # a text table's columns are all alike; a workbench record keeps its speed among its inputs or its outputs
+    try:
         reading = SimpleNamespace(**{**vars(args), "inputs": f"{args.inputs},{speed}"})
         (record,), _ = read_from_args(reading, args.data)
     except InputError:
+        if not _is_workbench_record(args.data[0]):
+            raise  # the file's own problem (a column, a segment), not where the speed is kept
         reading = SimpleNamespace(**{**vars(args), "outputs": f"{args.outputs},{speed}"})
         try:
             (raw,), _ = read_from_args(reading, args.data)

@@ -31,6 +31,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from vehid.identification.data import IOData
+from vehid.identification.dataio.timewindow import time_text
 from vehid.identification.models.modal import ModalModel
 from vehid.identification.assessment.multirecord import score_records
 from vehid.identification.assessment.residuals import ResidualTests, nis_band, residual_tests
@@ -94,7 +95,9 @@ def data_warnings(records: Sequence[IOData]) -> list[str]:
         gaps, count = base.get("gaps") or [], int(base.get("gap_count", 0))
         if not count:
             continue
-        shown = ", ".join(f"{gap['length_s']:.3g} s at {gap['at_s']:.9g} s ({gap['location']})" for gap in gaps[:3])
+        offset = float(base.get("time_offset", 0.0))  # at_s is file time; the message speaks the axes' time
+        shown = ", ".join(f"{gap['length_s']:.3g} s at {time_text(gap['at_s'] - offset, offset)} ({gap['location']})"
+                          for gap in gaps[:3])
         more = f" and {count - 3} more" if count > 3 else ""
         lines.append(f"{name}: {count} gap{'s' if count > 1 else ''} in time bridged by straight lines when "
                      f"resampling ({shown}{more}): the model sees no data there; --segment T0:T1 leaves a gap out")
