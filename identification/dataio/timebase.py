@@ -20,7 +20,7 @@ from ..data import IOData
 from ..choices import JITTER_TOLERANCE
 from ..errors import InputError
 from .readers import RawRecord
-from .timewindow import TimeWindow, parse_time_window, span_text, time_text
+from .timewindow import TimeWindow, edge_slack, parse_time_window, span_text, time_text
 
 __all__ = ["JITTER_TOLERANCE", "GAP_FACTOR", "ANTI_ALIAS_CUTOFF", "uniform_record", "parse_segment"]
 
@@ -204,7 +204,8 @@ def uniform_record(
     if segment is not None:
         low, high = segment.in_file_time(first_sample)
         for c, t in enumerate(times):
-            keep = np.flatnonzero((t >= low) & (t <= high))
+            slack = edge_slack(float(t[-1]), float(t[1] - t[0]) if t.size > 1 else 0.0)
+            keep = np.flatnonzero((t >= low - slack) & (t <= high + slack))
             if keep.size < 2:
                 span = span_text(float(t[0]), float(t[-1])) if file_time else span_text(
                     float(t[0]) - first_sample, float(t[-1]) - first_sample, first_sample)
@@ -228,7 +229,7 @@ def uniform_record(
     steps = [median for median, _, _ in checked]
     strays = [_stray(t) for t in (times[:1] if shared else times)]
     jitter = max(float(np.max(stray)) for stray in strays)
-    report: dict[str, Any] = {"sample_jitter": jitter, "resample": None, "decimate": None,
+    report: dict[str, Any] = {"sample_jitter": jitter, "resample": None, "decimate": None, "log_start": first_sample,
                               "segment": None if segment is None else list(segment.in_file_time(first_sample))}
     if repeated:
         report["repeated_stamps"] = repeated

@@ -18,7 +18,8 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["TimeWindow", "parse_time_window", "parse_time_windows", "window_mask", "time_text", "span_text"]
+__all__ = ["TimeWindow", "parse_time_window", "parse_time_windows", "edge_slack", "window_mask", "time_text",
+           "span_text"]
 
 _GRAMMAR = "T0:T1 in the file's time (s), or +T0:+T1 in seconds from the log's first sample"
 
@@ -125,18 +126,30 @@ def parse_time_windows(values: str | Sequence[str | TimeWindow] | None, what: st
     return tuple(windows)
 
 
-def window_mask(t: np.ndarray, window: TimeWindow, time_offset: float = 0.0) -> np.ndarray:
+def edge_slack(file_time: float, step: float) -> float:
+    """How far outside a window a sample may lie and still be in it: a millionth of a step, and a few
+    rounding units of the file's time (epoch seconds resolve only 2.4e-7 s), so that a window that names a
+    sample's stamp keeps it."""
+    return 1e-6 * abs(step) + 4.0 * float(np.spacing(abs(file_time)))
+
+
+def window_mask(t: np.ndarray, window: TimeWindow, time_offset: float = 0.0, log_start: float | None = None
+                ) -> np.ndarray:
     """Which samples of a record lie in the window.
 
-    ``t`` is the record's time and ``time_offset`` the file time of ``t = 0`` (the record's
-    ``meta["time_base"]["time_offset"]``); the log's first sample is ``t[0]``.
+    ``t`` is the record's time, ``time_offset`` the file time of ``t = 0`` (the record's
+    ``meta["time_base"]["time_offset"]``) and ``log_start`` the file time of the log's first sample,
+    from which ``+T0:+T1`` counts (``meta["time_base"]["log_start"]``; default the record's first sample).
+    The ends are compared in the record's time, with :func:`edge_slack`.
     """
     t = np.asarray(t, dtype=float)
-    if window.from_start:
-        low, high = window.start + t[0], window.stop + t[0]
+    if window.from_start:  # the log's first sample in the record's time: small, whatever the file's time
+        first = float(t[0]) if log_start is None else log_start - time_offset
+        low, high = window.start + first, window.stop + first
     else:
         low, high = window.start - time_offset, window.stop - time_offset
-    return (t >= low) & (t <= high)
+    slack = edge_slack(time_offset + float(t[-1]), float(t[1] - t[0]) if t.size > 1 else 0.0)
+    return (t >= low - slack) & (t <= high + slack)
 
 
 def _number(value: float) -> str:
