@@ -378,4 +378,5 @@ def _text(summary: dict[str, Any], outputs: tuple[str, ...], validated: bool) ->
     for name, est, val in zip(outputs, summary["estimation_fit_percent"],
                               summary["validation_fit_percent"] if validated else [None] * len(outputs)):
         lines.append(f"  NRMSE fit % {name:<15} estimation {est:7.2f}   validation {'-' if val is None else f'{val:.2f}'}")
+    lines += [f"note: {note}" for note in summary["notes"]]
     return "\n".join(lines)

@@ -15,7 +15,7 @@
   car's vibration: on the 550 s race-car drive, of the samples departing by more than a tenth of their
   channel's span, the accelerometers' depart by at most 9.2 scaled MADs and no other channel's but the
   steer's by any, while its four one-sample steer glitches depart by 142 to 1,199
-  (docs/measured_data.md, "Outliers").
+  (docs/measured_data.md, "Spikes and drop-outs").
 * **Repair** (:func:`despike`): each outlier replaced by the straight line between the nearest samples
   of its channel that are not outliers.
 * **Runs** (:func:`clean_record`): the samples to use (outside ``--exclude`` windows, and where a
@@ -235,8 +235,8 @@ class CleanedRecord:
     extra_estimation, extra_validation : dict of str to tuple of ndarray
         The extra channels (a scheduling channel), cut alike.
     report : dict
-        What was found and done (docs/measured_data.md, "Outliers" and "Left out"; the JSON keys of
-        :func:`cleaning_summary`).
+        What was found and done (docs/measured_data.md, "Spikes and drop-outs" and "A moving car's
+        samples"; the JSON keys of :func:`cleaning_summary`).
     """
 
     estimation: tuple[IOData, ...]
