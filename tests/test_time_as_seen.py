@@ -118,12 +118,12 @@ def test_single_track_takes_a_relative_segment_of_an_epoch_log(epoch_log):
     """Before: "no channel 'vx'", the segment's own error hidden by the search for the speed channel."""
     done = run_vehid("identify", str(epoch_log), "--structure", "single-track", "--inputs", "delta",
                      "--schedule", "vx", "--outputs", "yawRate,ayCG", "--mass", "982", "--lf", "1.33",
-                     "--lr", "1.07", "--segment", "+20:+60", "--json")
+                     "--lr", "1.07", "--segment", "+20:+130", "--json")
     assert done.returncode == 0, done.stderr[-800:]
     summary = json.loads(done.stdout)
-    # 20-60 s of the committed log (410-450 s): its speed range, read from the committed file
+    # 20 s to the end of the committed log (410-470 s): its speed range, read from the committed file
     table = np.loadtxt(RACE_LOG, delimiter=",", skiprows=2)
-    inside = (table[:, 0] >= 410.0 - 1e-9) & (table[:, 0] <= 450.0 + 1e-9)
+    inside = table[:, 0] >= 410.0 - 1e-9
     assert summary["speed_range_m_s"] == [pytest.approx(table[inside, 2].min()), pytest.approx(table[inside, 2].max())]
     wrong = run_vehid("identify", str(epoch_log), "--structure", "single-track", "--inputs", "delta",
                       "--schedule", "vx", "--outputs", "yawRate,ayCG", "--mass", "982", "--lf", "1.33",
