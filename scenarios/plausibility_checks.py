@@ -192,11 +192,12 @@ def identify_findings(args: Any, plan: Any, model: Any) -> tuple[Any, ...] | Non
                           speed_known=known)
 
 
-def single_track_findings(identified: Any, estimation: Any, sideslip: tuple[np.ndarray, np.ndarray] | None = None
-                          ) -> tuple[Any, ...]:
+def single_track_findings(identified: Any, estimation: Sequence[Any],
+                          sideslip: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[Any, ...]:
     """Findings on an identified single-track model: its parameters, its handling and modes at the log's
     speeds (its linearisation with yaw rate and lateral acceleration, whatever the log measured), and
-    ``sideslip`` (measured, predicted) where the log has it."""
+    ``sideslip`` (measured, predicted) where the log has it. ``estimation`` holds the runs it was
+    identified from; their steer sets the band the modes are weighed against."""
     import dataclasses
 
     from vehid.vehicle import plausibility
@@ -208,9 +209,10 @@ def single_track_findings(identified: Any, estimation: Any, sideslip: tuple[np.n
     car = IdentifiedSingleTrack(dataclasses.replace(config, quantities=("yaw_rate", "lateral_acceleration"),
                                                     offsets=False),
                                 identified.parameters[:config.n_physical], None, identified.speed_range)
+    longest = max(estimation, key=lambda run: run.n_samples)
     findings += model_findings(car, [float(v) for v in identified.grid], roles={"yaw_rate": 0, "lateral_acceleration": 1},
                                wheelbase=config.wheelbase,
-                               band_hz=plausibility.steer_band_hz(estimation.u[:, 0], estimation.dt),
+                               band_hz=plausibility.steer_band_hz(longest.u[:, 0], longest.dt),
                                top_speed=identified.speed_range[1],
                                lateral_feedthrough=_single_track_without_lag(car))
     if sideslip is not None:
@@ -218,47 +220,29 @@ def single_track_findings(identified: Any, estimation: Any, sideslip: tuple[np.n
     return tuple(findings)
 
 
-def single_track_sideslip(args: Any, config: Any, parameters: np.ndarray, estimation: Any, substeps: int
+def single_track_sideslip(config: Any, parameters: np.ndarray, estimation: Sequence[Any],
+                          measured: Sequence[np.ndarray] | None, substeps: int
                           ) -> tuple[np.ndarray, np.ndarray] | None:
-    """(measured, predicted) sideslip on the estimation record, where the log measured it: an output of
-    quantity ``sideslip``, or the channel ``--measured-sideslip`` names (read as the outputs are, times
-    its ``--scale``, the estimation part of the same samples); None otherwise."""
+    """(measured, predicted) sideslip over the estimation runs, joined, where the log measured it: an
+    output of quantity ``sideslip``, or ``measured``, the ``--measured-sideslip`` channel on each run
+    (read as the outputs are, times its ``--scale``, cleaned with them); None otherwise."""
     import dataclasses
 
     from vehid.identification.filtering.greybox import simulate_greybox
     from vehid.vehicle.single_track import single_track_model
 
     if "sideslip" in config.quantities:
-        measured = estimation.y[:, config.quantities.index("sideslip")]
-    elif getattr(args, "measured_sideslip", None):
-        measured = _estimation_channel(args, args.measured_sideslip.strip(), estimation.n_samples)
-    else:
+        measured = [run.y[:, config.quantities.index("sideslip")] for run in estimation]
+    elif measured is None:
         return None
     theta = list(parameters[:config.n_physical]) + ([float(parameters[config.n_physical]), 0.0] if config.offsets else [])
-    record = estimation.replace(y=measured[:, None], output_names=("sideslip",), output_units=("rad",))
-    predicted, _ = simulate_greybox(single_track_model(dataclasses.replace(config, quantities=("sideslip",))),
-                                    theta, record, substeps=substeps)
-    return measured, np.asarray(predicted, dtype=float)[:, 0]
+    model = single_track_model(dataclasses.replace(config, quantities=("sideslip",)))
+    predicted = []
+    for run, values in zip(estimation, measured):
+        record = run.replace(y=np.asarray(values, dtype=float)[:, None], output_names=("sideslip",),
+                             output_units=("rad",))
+        simulated, _ = simulate_greybox(model, theta, record, substeps=substeps)
+        predicted.append(np.asarray(simulated, dtype=float)[:, 0])
+    return np.concatenate([np.asarray(v, dtype=float) for v in measured]), np.concatenate(predicted)
 
 
-def _estimation_channel(args: Any, channel: str, samples: int) -> np.ndarray:
-    """A further channel of the data file, read with the command's reading options, scaled, cut as the estimation part."""
-    from types import SimpleNamespace
-
-    from vehid.identification.assessment.validation import split_holdout
-    from vehid.identification.dataio.preparation import parse_scale
-    from vehid.identification.errors import InputError
-    from vehid.scenarios.data_options import read_from_args
-
-    reading = SimpleNamespace(**{**vars(args), "outputs": channel, "inputs": args.inputs.split(",")[0].strip()})
-    try:
-        (raw,), _ = read_from_args(reading, args.data)
-    except InputError as exc:
-        raise InputError(f"--measured-sideslip {channel}: {exc}") from None
-    raw = raw.replace(y=raw.y * parse_scale(args.scale).get(channel, 1.0))
-    if args.validation is not None:
-        raw, _ = split_holdout(raw, args.validation)
-    if raw.n_samples != samples:
-        raise InputError(f"--measured-sideslip {channel} has {raw.n_samples} samples where the estimation part has "
-                         f"{samples}")
-    return raw.y[:, 0]

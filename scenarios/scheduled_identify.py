@@ -1,7 +1,9 @@
 """`vehid identify --schedule CHANNEL`: a speed-scheduled modal model from one varying-schedule record.
 
 The scheduling channel (a car's speed) is read beside the inputs, scaled by ``--scale`` where one names
-it and never offset (the model's coefficients are functions of its measured value). The unscheduled
+it and never offset (the model's coefficients are functions of its measured value); the samples below
+``--min-speed`` are left out and each run of the rest is a record of its own, simulated from rest
+(:mod:`vehid.scenarios.log_cleaning`). The unscheduled
 model of the default pipeline starts the scheduled IEKF
 (:mod:`vehid.identification.filtering.scheduled_iekf`) at every knot; the family returned is a
 :class:`~vehid.identification.models.scheduled.ScheduledModalModel`, scored like every model on the

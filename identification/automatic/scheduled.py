@@ -102,7 +102,7 @@ def identify_scheduled_model(start: Any, plan: Any, options: IdentifyOptions, un
 
         try:
             result, divergence = steps.last_good_on_divergence(
-                lambda: identify_scheduled(plan.records[0], schedule.estimation[0], start, variable=schedule.channel,
+                lambda: identify_scheduled(plan.records, schedule.estimation, start, variable=schedule.channel,
                                            options=filter_options, on_refine=on_refine))
         except DivergenceError as exc:
             tried.append({"p": p, "error": str(exc)})
@@ -196,7 +196,7 @@ def _stopped_early(result: Any, stops: list[tuple[float, Any, Any]], plan: Any, 
     validated better than ten and twenty-five worse still, so held-out data say when to stop, as
     they choose p. Without validation data every step stands.
     """
-    from vehid.identification.filtering.scheduled_iekf import HOLD_OF, scheduled_simulation_covariance
+    from vehid.identification.filtering.scheduled_iekf import HOLD_OF, Runs, scheduled_simulation_covariance
 
     finite = [stop for stop in stops if np.isfinite(stop[0])]
     if not finite or "refine_steps" not in result.meta:
@@ -206,14 +206,13 @@ def _stopped_early(result: Any, stops: list[tuple[float, Any, Any]], plan: Any, 
     if refine_steps == result.meta["refine_steps"]:
         return result
     method = HOLD_OF[result.options.discretization]
-    covariance = scheduled_simulation_covariance(family, plan.records[0], schedule.estimation[0], method)
+    runs = Runs.of(plan.records, schedule.estimation)
+    covariance = scheduled_simulation_covariance(family, runs, None, method)
     family = family.with_parameters(family.parameters, covariance)
     from vehid.identification.assessment.metrics import percentage_explanation
 
-    data = plan.records[0]
     with np.errstate(all="ignore"):
-        fit_percent = percentage_explanation(data.y, family.simulate_outputs(
-            data.u, data.dt, schedule=schedule.estimation[0], method=method))
+        fit_percent = percentage_explanation(runs.y, runs.simulate(family, method))
     return dataclasses.replace(result, model=family, meta={**result.meta, "refine_steps": refine_steps, "fit_percent": fit_percent,
                                                             "refine_steps_run": result.meta["refine_steps"]})
 
@@ -242,16 +241,16 @@ def with_output_map(family: Any, evaluation: Any, plan: Any, scheduled_plan: Any
     """
     from vehid.identification.assessment.metrics import percentage_explanation
     from vehid.identification.models.scheduled import OutputMap
-    from vehid.identification.filtering.scheduled_iekf import HOLD_OF
+    from vehid.identification.filtering.scheduled_iekf import HOLD_OF, Runs
 
-    data, schedule = plan.records[0], plan.schedule.estimation[0]
+    runs = Runs.of(plan.records, plan.schedule.estimation)
     method = HOLD_OF[options.discretization]
     with np.errstate(all="ignore"):
-        linear_outputs = family.simulate_outputs(data.u, data.dt, schedule=schedule, method=method)
+        linear_outputs = runs.simulate(family, method)
     rows, best = [], None
     if np.all(np.isfinite(linear_outputs)):
         for count in OUTPUT_MAP_NODES:
-            mapped = dataclasses.replace(family, output_map=OutputMap.fit(linear_outputs, data.y, count))
+            mapped = dataclasses.replace(family, output_map=OutputMap.fit(linear_outputs, runs.y, count))
             scored = steps.evaluate(mapped, scheduled_plan, options)
             rows.append({"nodes": count, "estimation_fit_percent": scored.estimation.fit,
                          "validation_fit_percent": scored.validation_fit, "ranking_fit": scored.ranking_fit()})
@@ -264,7 +263,7 @@ def with_output_map(family: Any, evaluation: Any, plan: Any, scheduled_plan: Any
         return family, evaluation, entry
     mapped, scored, row = best
     with np.errstate(all="ignore"):
-        fit = percentage_explanation(data.y, mapped.simulate_outputs(data.u, data.dt, schedule=schedule, method=method))
+        fit = percentage_explanation(runs.y, runs.simulate(mapped, method))
     entry.update(nodes=row["nodes"], fit_percent=fit, map=mapped.output_map.to_dict())
     return mapped, scored, entry
 

@@ -22,6 +22,7 @@ from ..choices import DETRENDS
 from ..errors import InputError
 from .readers import RawRecord, expand_channels, read_raw
 from .timebase import JITTER_TOLERANCE, parse_segment, uniform_record
+from .timewindow import TimeWindow
 
 __all__ = [
     "DETRENDS",
@@ -65,12 +66,16 @@ class ReadSettings:
     decimate : int or None
         Keep every K-th sample after an anti-aliasing filter.
     segment : (float, float) or None
-        Only ``T0 <= t <= T1`` (file time, s).
+        Only ``T0 <= t <= T1`` (s): file time, or from the log's first sample where
+        ``segment_from_start``. Given as text, ``"T0:T1"`` or ``"+T0:+T1"``
+        (:func:`~vehid.identification.dataio.timewindow.parse_time_window`), it sets both fields.
     jitter_tolerance : float
         Largest stray of a sample time from the uniform grid, as a fraction of a step.
     time_scale : float or None
         Seconds per unit of the time column (0.001 for milliseconds); None:
         from the unit the file gives the column (:data:`TIME_UNITS`), else 1.
+    segment_from_start : bool
+        The segment counts from the log's first sample (``+T0:+T1``).
     """
 
     inputs: tuple[str, ...] = ()
@@ -82,11 +87,22 @@ class ReadSettings:
     segment: tuple[float, float] | None = None
     jitter_tolerance: float = JITTER_TOLERANCE
     time_scale: float | None = None
+    segment_from_start: bool = False
+
+    @property
+    def window(self) -> TimeWindow | None:
+        """The segment as a :class:`~vehid.identification.dataio.timewindow.TimeWindow` (None: the whole file)."""
+        return None if self.segment is None else TimeWindow(*self.segment, self.segment_from_start)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "inputs", tuple(str(n).strip() for n in self.inputs))
         object.__setattr__(self, "outputs", tuple(str(n).strip() for n in self.outputs))
-        object.__setattr__(self, "segment", parse_segment(self.segment))
+        window = parse_segment(self.segment)
+        if window is not None and not isinstance(self.segment, (tuple, list)):  # text or a window: says which time
+            object.__setattr__(self, "segment_from_start", window.from_start)
+        object.__setattr__(self, "segment", None if window is None else (window.start, window.stop))
+        if window is None:
+            object.__setattr__(self, "segment_from_start", False)
         for kind, names in (("input", self.inputs), ("output", self.outputs)):
             if any(not name for name in names):
                 raise InputError(f"an empty {kind} column name was given")
@@ -138,7 +154,7 @@ def read_record(path: str | Path, settings: ReadSettings | None = None, **option
         n_inputs = len(inputs)
     raw, time_scale = _time_in_seconds(raw, settings.time_scale)
     data = uniform_record(raw, n_inputs=n_inputs, dt=settings.dt, resample=settings.resample,
-                          decimate=settings.decimate, segment=settings.segment,
+                          decimate=settings.decimate, segment=settings.window,
                           jitter_tolerance=settings.jitter_tolerance)
     data.meta["time_base"]["time_scale"] = time_scale
     return data

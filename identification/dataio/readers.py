@@ -242,6 +242,31 @@ def _has_column(header: tuple[str, ...], name: str) -> bool:
     return name in header or any(_name_and_unit(column)[0] == name for column in header)
 
 
+#: Names a time column goes by without --time-column (compared in lower case, without the unit:
+#: ``t``, ``t(s)``, ``t [s]``, ``Time``, ``time(ms)``), in order of preference.
+TIME_COLUMN_NAMES = ("t", "time")
+
+
+def _default_time_column(path: Path, header: tuple[str, ...] | None) -> str | None:
+    """The header cell that is the time column by its name (:data:`TIME_COLUMN_NAMES`), or None.
+
+    ``t`` (or ``t(s)``) is taken as it always was; otherwise a single cell named ``time`` in any case,
+    with or without its unit. Two such cells are an error naming them: --time-column chooses.
+    """
+    if header is None:
+        return None
+    if _has_column(header, "t"):
+        return "t"
+    for name in TIME_COLUMN_NAMES[1:]:
+        found = [cell for cell in header if _name_and_unit(cell)[0].strip().lower() == name]
+        if len(found) > 1:
+            raise InputError(f"{path.name} has {len(found)} time columns ({', '.join(found)}): choose one with "
+                             "--time-column NAME")
+        if found:
+            return found[0]
+    return None
+
+
 def _column_index(path: Path, header: tuple[str, ...] | None, name: str, kind: str) -> int:
     if header is not None:
         places = [i for i, column in enumerate(header) if column == name]
@@ -340,7 +365,8 @@ def read_table(
     layout = _layout(path)
     names = [str(name).strip() for name in channels]
     indices = [_column_index(path, layout.header, name, "data") for name in names]
-    time_name = _time_name(path, layout.header is not None and _has_column(layout.header, "t"), time_column, dt)
+    time_name = _time_name(path, _default_time_column(path, layout.header) if time_column is None else None,
+                           time_column, dt)
     read_names = list(names)
     if time_name is not None:
         indices.append(_column_index(path, layout.header, time_name, "time"))
@@ -390,9 +416,10 @@ def _unit(layout: _Layout, column: int) -> str:
     return "-"
 
 
-def _time_name(path: Path, has_t: bool, time_column: str | None, dt: float | None, kind: str = "column"
+def _time_name(path: Path, found: str | None, time_column: str | None, dt: float | None, kind: str = "column"
                ) -> str | None:
-    """The time column in use: given, or ``t`` when present; None when disabled or absent."""
+    """The time column in use: given, or the one ``found`` by its name (``t``, ``time(s)``); None when
+    disabled or absent."""
     if _is_time_disabled(time_column):
         if dt is None:
             raise InputError(f"the time {kind} of {path.name} is disabled (--time-column none): give --dt")
@@ -401,12 +428,13 @@ def _time_name(path: Path, has_t: bool, time_column: str | None, dt: float | Non
         if dt is not None:
             raise _dt_conflict(path, time_column)
         return time_column.strip()
-    if has_t:
+    if found is not None:
         if dt is not None:
-            raise _dt_conflict(path, "t")
-        return "t"
+            raise _dt_conflict(path, found)
+        return found
     if dt is None:
-        raise InputError(f"{path.name} has no time {kind} 't': name one with --time-column NAME, or give --dt")
+        raise InputError(f"{path.name} has no time {kind} 't' or 'time': name one with --time-column NAME, "
+                         "or give --dt")
     return None
 
 
@@ -554,7 +582,8 @@ def read_mat(
     lookup, available = _mat_variables(path)
     names = [str(name).strip() for name in channels]
     values = [_mat_column(path, lookup, name, available) for name in names]
-    time_name = _time_name(path, lookup("t") is not None, time_column, dt, kind="variable")
+    found = next((name for name in TIME_COLUMN_NAMES if lookup(name) is not None), None)
+    time_name = _time_name(path, found if time_column is None else None, time_column, dt, kind="variable")
     t = _mat_column(path, lookup, time_name, available) if time_name is not None else None
     lengths = {v.size for v in values} | ({t.size} if t is not None else set())
     if len(lengths) > 1:

@@ -32,7 +32,8 @@ def register_data_options(parser: argparse.ArgumentParser) -> None:
     """
     group = parser.add_argument_group("data files")
     group.add_argument("--time-column", metavar="NAME",
-                       help="time column or variable (default: t when present; 'none' disables it)")
+                       help="time column or variable (default: t, or time, when present, with or without "
+                            "a unit as in time(s); 'none' disables it)")
     group.add_argument("--dt", type=float, help="sample interval in s, for files without a time column")
     group.add_argument("--time-scale", type=float, metavar="FACTOR",
                        help="seconds per unit of the time column, 0.001 for ms (default: from the column's unit, "
@@ -40,7 +41,14 @@ def register_data_options(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--resample", type=float, metavar="HZ",
                        help="interpolate every channel linearly onto a uniform grid at HZ (low-passed first when the rate falls)")
     group.add_argument("--decimate", type=int, metavar="K", help="keep every K-th sample after an anti-aliasing FIR filter")
-    group.add_argument("--segment", metavar="T0:T1", help="use only T0 <= t <= T1 (s, file time)")
+    group.add_argument("--segment", metavar="T0:T1",
+                       help="use only T0 <= t <= T1: the file's time in s, or +T0:+T1 in s from the log's first sample")
+    group.add_argument("--exclude", action="append", metavar="T0:T1", default=None,
+                       help="leave out T0 <= t <= T1 (as --segment: file time, or +T0:+T1 from the log's first "
+                            "sample); the parts before and after are records of their own; repeatable or a comma list")
+    group.add_argument("--despike", action="store_true",
+                       help="replace spikes and drop-outs (found in every channel, listed in any case) by straight "
+                            "lines between their neighbours")
     group.add_argument("--jitter-tolerance", type=float, default=JITTER_TOLERANCE, metavar="FRACTION",
                        help=f"largest stray of a sample time from a uniform grid, in steps (default {JITTER_TOLERANCE:g})")
     group.add_argument("--detrend", default="mean", choices=DETRENDS,

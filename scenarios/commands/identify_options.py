@@ -96,6 +96,10 @@ def register_schedule_options(parser: argparse.ArgumentParser) -> None:
                         help="scheduling channel (a speed such as vx), read beside the inputs and never offset: "
                              "identify a model whose coefficients vary with it (modal: piecewise linear over "
                              "--schedule-grid; --structure single-track: the speed in m/s)")
+    parser.add_argument("--min-speed", metavar="M_S", default=None,
+                        help="with --schedule (a speed) or --structure single-track: use only the samples at or above "
+                             "this speed (m/s, after --scale), each run of them its own record (default 5; none keeps "
+                             "every sample)")
     parser.add_argument("--schedule-grid", metavar="VALUES",
                         help="knots of the scheduled modal model, comma-separated and increasing (default: "
                              "--schedule-knots at evenly spaced quantiles of the channel)")
