@@ -591,7 +591,7 @@ def identify_iekf(
         if not options.allow_unstable and not model.is_stable():
             raise DivergenceError(
                 f"the identified model is unstable (eigenvalues {np.round(model.eigenvalues(), 4).tolist()}; "
-                "for an open-loop unstable plant allow unstable modes: --allow-unstable)")
+                "for an open-loop unstable plant allow unstable modes: 'allow_unstable')", options=("allow_unstable",))
         fit_filter = pooled_simulation_fit(model, records, options.simulation_method)
         fit_exact = fit_filter if options.simulation_method == "foh" else pooled_simulation_fit(model, records)
         return Assessment(theta_original, fit_filter, fit_exact, theta_filter, P_filter)
