@@ -15,7 +15,9 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from .choices import DETREND
 from .errors import ExcitationError, InputError
+from .optionspec import check_value
 
 __all__ = ["IOData", "as_records", "read_hdf5", "check_channels", "LARGEST_MAGNITUDE", "SMALLEST_MAGNITUDE",
            "ROUNDING_UNITS"]
@@ -445,8 +447,9 @@ def check_channels(records: "IOData | Sequence[IOData]", *, detrend: str = "mean
     InputError
         A channel whose largest magnitude lies outside
         [:data:`SMALLEST_MAGNITUDE`, :data:`LARGEST_MAGNITUDE`] (1e-76 to
-        1e76), or that a scale factor makes overflow.
+        1e76), or that a scale factor makes overflow; an unknown ``detrend``.
     """
+    check_value("detrend", detrend, DETREND)
     records = as_records(records)
     first = records[0]
     scales_u = np.ones(first.n_u) if input_scale is None else np.asarray(input_scale, dtype=float)

@@ -29,13 +29,14 @@ import inspect
 import math
 import numbers
 import textwrap
+from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Any, Callable, Iterable, Mapping
+from typing import Any, Callable, Iterable, Iterator, Mapping
 
 from vehid.identification.errors import OptionError
 
 __all__ = ["Constraint", "OneOf", "Number", "Numbers", "Boolean", "BOOLEAN", "POSITIVE", "OptionSpec", "option",
-           "option_specs", "check_options", "check_value", "documented", "parameters_section"]
+           "option_specs", "check_options", "check_value", "documented", "parameters_section", "renamed_options"]
 
 _SPEC = "vehid.option"  # the key of a field's metadata that holds its declaration
 
@@ -257,8 +258,26 @@ def check_value(name: str, value: Any, allowed: Constraint | None, *, optional: 
     try:
         return allowed.conform(value)
     except (ValueError, TypeError, OverflowError):
-        wanted = allowed.describe() + (" (or None)" if optional else "")
-        raise OptionError(f"'{name}' must be {wanted}; got {value!r}", name) from None
+        # None, where allowed, goes unsaid: it means "not given", which a command line cannot say otherwise
+        raise OptionError(f"'{name}' must be {allowed.describe()}; got {value!r}", name) from None
+
+
+@contextmanager
+def renamed_options(names: Mapping[str, str]) -> Iterator[None]:
+    """Within, an :class:`OptionError` naming an option of ``names`` names it by its new name instead.
+
+    For settings that reach an options object under other names (a study's ``nonlinear_p``
+    is its spline filter's ``p``), so that the error speaks of the names the caller gave.
+    """
+    try:
+        yield
+    except OptionError as exc:
+        if not set(exc.options) & set(names):
+            raise
+        text = str(exc)
+        for old, new in names.items():
+            text = text.replace(f"'{old}'", f"'{new}'")
+        raise OptionError(text, *(names.get(name, name) for name in exc.options)) from exc
 
 
 def check_options(options: Any) -> None:

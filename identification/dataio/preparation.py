@@ -18,8 +18,9 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from ..data import IOData, as_records, check_channels, read_hdf5
-from ..choices import DETRENDS
+from ..choices import DETREND, DETRENDS
 from ..errors import InputError, OptionError
+from ..optionspec import check_value
 from .readers import RawRecord, expand_channels, read_raw
 from .timebase import JITTER_TOLERANCE, parse_segment, uniform_record
 from .timewindow import TimeWindow
@@ -487,8 +488,7 @@ def estimate_preparation(
         the factor is scale / ratio.
     """
     records = as_records(records)
-    if detrend not in DETRENDS:
-        raise InputError(f"unknown detrend {detrend!r}; use one of {', '.join(DETRENDS)}")
+    check_value("detrend", detrend, DETREND)
     first = records[0]
     conversions = _conversions(first, parse_scale(scale), parse_steering_ratio(steering_ratio, first.input_names))
     input_scale, output_scale = _scale_factors(first, conversions)
@@ -528,9 +528,7 @@ def prepare(
     InputError
         Bad options, or records that cannot identify a model, naming the channel and the cause.
     """
-    records = as_records(records)
-    if detrend not in DETRENDS:
-        raise InputError(f"unknown detrend {detrend!r}; use one of {', '.join(DETRENDS)}")
+    records = as_records(records)  # check_channels checks the detrend, before anything is computed
     conversions = _conversions(records[0], parse_scale(scale),
                                parse_steering_ratio(steering_ratio, records[0].input_names))
     input_scale, output_scale = _scale_factors(records[0], conversions)
