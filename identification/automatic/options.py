@@ -112,8 +112,8 @@ class IdentifyOptions:
              "within a quarter of the even spacing merge)")
     schedule_grid: tuple[float, ...] | None = option(
         None, SCHEDULE_GRID,
-        help="the scheduled family's knots themselves (default: ``schedule_knots`` at evenly spaced quantiles of "
-             "the channel)")
+        help="the scheduled family's knots themselves, increasing (default: ``schedule_knots`` at evenly spaced "
+             "quantiles of the channel)")
     schedule_p: tuple[float, ...] | None = option(
         None, Numbers(POSITIVE),
         help=f"tuning parameter(s) of the scheduled filter, per dominant time constant; several are tried and one "
