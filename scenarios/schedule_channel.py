@@ -34,18 +34,17 @@ def parse_schedule_grid(text: str | None) -> tuple[float, ...] | None:
 
 
 def check_options(args: Any) -> None:
-    """Refuse combinations the scheduled model does not support, before any work."""
+    """Refuse combinations the scheduled model does not support, before any work.
+
+    The family's own settings (knots, grid, p) are checked where they are declared, in
+    :class:`~vehid.identification.automatic.options.IdentifyOptions`.
+    """
     if args.resume:
         raise InputError("--schedule runs are not checkpointed: give no --resume")
     if len(args.data) > 1:
         raise InputError("--schedule identifies the scheduled model from one record; give one data file")
     if not args.inputs:
         raise InputError("--schedule needs --inputs naming the inputs (the schedule is read beside them)")
-    from vehid.identification.filtering.scheduled_iekf import ScheduledIEKFOptions
-
-    for p in args.schedule_p or [None]:
-        ScheduledIEKFOptions(knots=args.schedule_knots, grid=parse_schedule_grid(args.schedule_grid),
-                             **({} if p is None else {"p": p}))
 
 
 def _without_schedule(args: Any) -> dict[str, float]:

@@ -128,7 +128,7 @@ def test_spline_tables_and_bad_input():
     assert tables["sigma1"]["variable"] == "amplitude1"
     assert np.allclose(tables["sigma1"]["values"], [-6.0, -5.2, -4.5, -4.1, -4.0])
     assert tables["b11"]["variable"] == "u1" and np.allclose(tables["b11"]["nodes"], np.linspace(-1, 1, 5))
-    with pytest.raises(InputError, match="nodes must be a whole number"):
+    with pytest.raises(InputError, match="'nodes' must be a whole number"):
         SplineIEKFOptions(nodes=2)
     with pytest.raises(InputError, match="identified at dt"):
         truth.simulate_outputs(np.zeros((10, 1)), 0.01)

@@ -115,8 +115,8 @@ class SingleTrackConfig:
         _positive("the CG to front axle distance", self.cg_to_front_axle)
         _positive("the CG to rear axle distance", self.cg_to_rear_axle)
         if isinstance(self.steering_ratio, (int, float)) and self.steering_ratio < 0:
-            raise InputError(f"the steering ratio must be positive (flip the channel's sign with --scale); "
-                             f"got {self.steering_ratio!r}")
+            raise InputError(f"the steering ratio must be positive (flip the channel's sign with 'scale'); "
+                             f"got {self.steering_ratio!r}", options=("scale",))
         _positive("the steering ratio", self.steering_ratio)
         if self.relaxation_length is not None:
             _positive("the relaxation length", self.relaxation_length)

@@ -24,7 +24,7 @@ from vehid.identification.automatic.options import IdentifyOptions
 from vehid.identification.automatic.plan import ScheduleData
 from vehid.identification.choices import SCHEDULED_DEFAULT_P, SCHEDULED_P_GRID
 from vehid.identification.data import IOData
-from vehid.identification.errors import DivergenceError, InputError
+from vehid.identification.errors import DivergenceError, OptionError
 from vehid.identification.models.modal import ModalModel
 
 __all__ = ["NONLINEAR_NOTE", "VALIDATION_MARGIN", "OUTPUT_MAP_NODES", "ScheduledOutcome", "schedule_margin",
@@ -81,8 +81,9 @@ def identify_scheduled_model(start: Any, plan: Any, options: IdentifyOptions, un
     from vehid.identification.filtering.scheduled_iekf import ScheduledIEKFOptions, identify_scheduled
 
     if not isinstance(start, ModalModel):
-        raise InputError("--schedule starts from a continuous-time modal model; this unscheduled model is "
-                         "discrete-time (a pole on the negative real axis): use --method iekf or another order")
+        raise OptionError("'schedule' starts from a continuous-time modal model; this unscheduled model is "
+                          "discrete-time (a pole on the negative real axis): use 'method' iekf or another 'order'",
+                          "schedule", "method", "order")
 
     schedule = plan.schedule
     scheduled_plan = dataclasses.replace(
@@ -117,7 +118,8 @@ def identify_scheduled_model(start: Any, plan: Any, options: IdentifyOptions, un
             candidates.append((result, divergence, evaluation, row))
     if not candidates:
         raise DivergenceError("the scheduled model diverged at every p tried: " + "; ".join(
-            f"p = {row['p']:g}: {row.get('error', 'no finite fit')}" for row in tried) + " (give a smaller --schedule-p)")
+            f"p = {row['p']:g}: {row.get('error', 'no finite fit')}" for row in tried) + " (give a smaller 'schedule_p')",
+            options=("schedule_p",))
     # as for the IEKF's p: the largest within the tolerance of the best
     top = max(c[3]["ranking_fit"] for c in candidates)
     result, divergence, evaluation, chosen = max(

@@ -19,7 +19,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, OptionError
 
 __all__ = ["RawRecord", "TEXT_SUFFIXES", "MAT_SUFFIXES", "MDF_SUFFIXES", "read_raw", "read_table",
            "read_mat", "read_mdf", "expand_channels"]
@@ -80,13 +80,13 @@ def _is_time_disabled(time_column: str | None) -> bool:
 
 def _check_dt(dt: float | None) -> None:
     if dt is not None and not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
-        raise InputError(f"dt must be a positive number; got {dt!r}")
+        raise OptionError(f"'dt' must be a positive number; got {dt!r}", "dt")
 
 
 def _dt_conflict(path: Path, time_name: str) -> InputError:
-    return InputError(
-        f"{path.name} has a time column {time_name!r}: --dt would override it; drop --dt, "
-        "or disable the time column with --time-column none"
+    return OptionError(
+        f"{path.name} has a time column {time_name!r}: 'dt' would override it; drop 'dt', "
+        "or disable the time column with 'time_column' none", "dt", "time_column"
     )
 
 
@@ -260,8 +260,8 @@ def _default_time_column(path: Path, header: tuple[str, ...] | None) -> str | No
     for name in TIME_COLUMN_NAMES[1:]:
         found = [cell for cell in header if _name_and_unit(cell)[0].strip().lower() == name]
         if len(found) > 1:
-            raise InputError(f"{path.name} has {len(found)} time columns ({', '.join(found)}): choose one with "
-                             "--time-column NAME")
+            raise OptionError(f"{path.name} has {len(found)} time columns ({', '.join(found)}): choose one with "
+                              "'time_column' NAME", "time_column")
         if found:
             return found[0]
     return None
@@ -422,7 +422,8 @@ def _time_name(path: Path, found: str | None, time_column: str | None, dt: float
     disabled or absent."""
     if _is_time_disabled(time_column):
         if dt is None:
-            raise InputError(f"the time {kind} of {path.name} is disabled (--time-column none): give --dt")
+            raise OptionError(f"the time {kind} of {path.name} is disabled ('time_column' none): give 'dt'",
+                              "time_column", "dt")
         return None
     if time_column is not None:
         if dt is not None:
@@ -433,8 +434,8 @@ def _time_name(path: Path, found: str | None, time_column: str | None, dt: float
             raise _dt_conflict(path, found)
         return found
     if dt is None:
-        raise InputError(f"{path.name} has no time {kind} 't' or 'time': name one with --time-column NAME, "
-                         "or give --dt")
+        raise OptionError(f"{path.name} has no time {kind} 't' or 'time': name one with 'time_column' NAME, "
+                          "or give 'dt'", "time_column", "dt")
     return None
 
 
@@ -610,11 +611,11 @@ def read_mdf(
     """
     path = _existing(path)
     if dt is not None:
-        raise InputError(f"{path.name} is an MDF file and carries its own time stamps: --dt does not apply "
-                         "(use --resample HZ for another rate)")
+        raise OptionError(f"{path.name} is an MDF file and carries its own time stamps: 'dt' does not apply "
+                          "(use 'resample' HZ for another rate)", "dt", "resample")
     if time_column is not None and not _is_time_disabled(time_column):
-        raise InputError(f"{path.name} is an MDF file: each channel carries its own time stamps, "
-                         "--time-column does not apply")
+        raise OptionError(f"{path.name} is an MDF file: each channel carries its own time stamps, "
+                          "'time_column' does not apply", "time_column")
     try:
         from asammdf import MDF
     except ImportError:

@@ -18,7 +18,7 @@ import numpy as np
 
 from ..data import IOData
 from ..choices import JITTER_TOLERANCE
-from ..errors import InputError
+from ..errors import InputError, OptionError
 from .readers import RawRecord
 from .timewindow import TimeWindow, edge_slack, parse_time_window, span_text, time_text
 
@@ -44,7 +44,7 @@ _GAPS_LISTED = 20
 def parse_segment(text: str | Sequence[float] | TimeWindow | None) -> TimeWindow | None:
     """A segment (``"T0:T1"`` file time, ``"+T0:+T1"`` from the log's first sample, a pair, a window):
     :func:`~vehid.identification.dataio.timewindow.parse_time_window`."""
-    return parse_time_window(text, "a segment")
+    return parse_time_window(text, option="segment")
 
 
 def _record_time_is_file_time(times: Sequence[np.ndarray]) -> bool:
@@ -88,10 +88,10 @@ def _check_increasing(raw: RawRecord, channel: int, t: np.ndarray, rows: np.ndar
     gaps = np.flatnonzero(steps > GAP_FACTOR * median)
     if gaps.size and not bridge_gaps:
         k = int(gaps[0])
-        raise InputError(
+        raise OptionError(
             f"{raw.source}: gap in time at {raw.locate(channel, _row(rows, k + 1))}: {steps[k]:.6g} s after the "
-            f"previous sample, {steps[k] / median:.1f} times the median step of {median:.6g} s; --resample HZ "
-            "interpolates across it, --segment T0:T1 leaves it out"
+            f"previous sample, {steps[k] / median:.1f} times the median step of {median:.6g} s; 'resample' HZ "
+            "interpolates across it, 'segment' T0:T1 leaves it out", "resample", "segment"
         )
     described = [{"channel": raw.names[channel], "at_s": float(t[k + 1] + offset), "length_s": float(steps[k]),
                   "steps": float(steps[k] / median), "location": raw.locate(channel, _row(rows, k + 1))}
@@ -241,10 +241,10 @@ def uniform_record(
         stray = strays[0]
         if jitter > jitter_tolerance:
             k = int(np.flatnonzero(stray > jitter_tolerance)[0])
-            raise InputError(
+            raise OptionError(
                 f"{raw.source}: sample times stray from a uniform grid by {stray[k]:.3g} of a step at "
                 f"{raw.locate(0, _row(rows[0], k))} (tolerance {jitter_tolerance:g}): resample with "
-                f"--resample HZ, or widen --jitter-tolerance"
+                f"'resample' HZ, or widen 'jitter_tolerance'", "resample", "jitter_tolerance"
             )
         count = times[0].size
         t = np.arange(count) * (times[0][-1] / (count - 1))

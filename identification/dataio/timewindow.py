@@ -58,7 +58,7 @@ class TimeWindow:
         return f"{end(self.start)}:{end(self.stop)}"
 
 
-def _end(text: str, whole: str, what: str) -> tuple[float, bool | None]:
+def _end(text: str, whole: str, what: str, options: tuple[str, ...]) -> tuple[float, bool | None]:
     """One end of a window: its value and whether it is relative (None where the end is empty)."""
     text = text.strip()
     if not text:
@@ -67,21 +67,23 @@ def _end(text: str, whole: str, what: str) -> tuple[float, bool | None]:
     try:
         value = float(text[1:] if relative else text)
     except ValueError:
-        raise InputError(f"{what} is {_GRAMMAR}; got {whole!r}") from None
+        raise InputError(f"{what} is {_GRAMMAR}; got {whole!r}", options=options) from None
     if not math.isfinite(value):
-        raise InputError(f"{what} is {_GRAMMAR}; got {whole!r}")
+        raise InputError(f"{what} is {_GRAMMAR}; got {whole!r}", options=options)
     return value, relative
 
 
-def parse_time_window(value: str | Sequence[float] | TimeWindow | None, what: str = "a segment"
-                      ) -> TimeWindow | None:
+def parse_time_window(value: str | Sequence[float] | TimeWindow | None, what: str = "a segment", *,
+                      option: str | None = None) -> TimeWindow | None:
     """``"T0:T1"``, ``"+T0:+T1"`` (either end may be empty), a pair in the file's time, or a window.
 
     Parameters
     ----------
     value : str, (float, float), TimeWindow or None
     what : str
-        How a message names the window (``"--exclude"``).
+        How a message names the window (``"a segment"``).
+    option : str, optional
+        The option that gave the window, named by the messages (as ``'exclude'``) in place of ``what``.
 
     Raises
     ------
@@ -91,38 +93,41 @@ def parse_time_window(value: str | Sequence[float] | TimeWindow | None, what: st
     """
     if value is None or isinstance(value, TimeWindow):
         return value
+    options = (option,) if option else ()
+    what = f"'{option}'" if option else what
     if isinstance(value, str):
         start, colon, stop = value.partition(":")
         if not colon:
-            raise InputError(f"{what} is {_GRAMMAR}; got {value!r}")
-        (low, low_relative), (high, high_relative) = _end(start, value, what), _end(stop, value, what)
+            raise InputError(f"{what} is {_GRAMMAR}; got {value!r}", options=options)
+        (low, low_relative), (high, high_relative) = _end(start, value, what, options), _end(stop, value, what, options)
         kinds = {kind for kind in (low_relative, high_relative) if kind is not None}
         if len(kinds) > 1:
             raise InputError(f"{what} {value!r} mixes the file's time and time from the log's start: write both "
-                             "ends with + (from the start) or neither (file time)")
+                             "ends with + (from the start) or neither (file time)", options=options)
         low = -math.inf if low_relative is None else low
         high = math.inf if high_relative is None else high
         if not low < high:
-            raise InputError(f"{what} needs T0 < T1; got {value}")
+            raise InputError(f"{what} needs T0 < T1; got {value}", options=options)
         return TimeWindow(low, high, bool(kinds and kinds.pop()))
     pair = tuple(float(v) for v in value)
     if len(pair) != 2:
-        raise InputError(f"{what} is a pair (T0, T1); got {value!r}")
+        raise InputError(f"{what} is a pair (T0, T1); got {value!r}", options=options)
     if not pair[0] < pair[1]:  # also NaN
-        raise InputError(f"{what} needs T0 < T1; got {pair[0]:g}:{pair[1]:g}")
+        raise InputError(f"{what} needs T0 < T1; got {pair[0]:g}:{pair[1]:g}", options=options)
     return TimeWindow(*pair)
 
 
-def parse_time_windows(values: str | Sequence[str | TimeWindow] | None, what: str = "--exclude"
+def parse_time_windows(values: str | Sequence[str | TimeWindow] | None, option: str = "exclude"
                        ) -> tuple[TimeWindow, ...]:
-    """Several windows: repeated options, or one text listing them separated by commas."""
+    """Several windows: repeated options, or one text listing them separated by commas (errors name ``option``)."""
     if values is None:
         return ()
     items = [values] if isinstance(values, (str, TimeWindow)) else list(values)
     windows: list[TimeWindow] = []
     for item in items:
         parts = item.split(",") if isinstance(item, str) else [item]
-        windows += [parse_time_window(part, what) for part in parts if not isinstance(part, str) or part.strip()]
+        windows += [parse_time_window(part, option=option) for part in parts
+                    if not isinstance(part, str) or part.strip()]
     return tuple(windows)
 
 

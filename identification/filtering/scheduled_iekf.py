@@ -45,7 +45,9 @@ import numpy as np
 
 from ..blas import on_one_blas_thread
 from ..data import IOData, as_records
+from ..choices import SCHEDULE_GRID, SCHEDULE_KNOT_COUNT
 from ..errors import DivergenceError, InputError, WorkbenchError
+from ..optionspec import check_value
 from .filter_models import FilterModel, check_discretization
 from .iekf import P_DECAY_FLOOR, data_measurement_noise, signal_scales
 from .iekf_pass import compiled_pass
@@ -116,8 +118,7 @@ def default_grid(schedule: Any, count: int = DEFAULT_KNOTS) -> np.ndarray:
         (no two distinct knots).
     """
     schedule = np.asarray(schedule, dtype=float).ravel()
-    if isinstance(count, bool) or int(count) != count or not MIN_KNOTS <= count <= MAX_KNOTS:
-        raise InputError(f"a schedule grid takes {MIN_KNOTS} to {MAX_KNOTS} knots; got {count!r}")
+    count = check_value("count", count, SCHEDULE_KNOT_COUNT)
     if schedule.size < 2 or not np.all(np.isfinite(schedule)):
         raise InputError("the schedule channel needs at least two finite samples")
     levels = list(np.linspace(*_END_QUANTILES, int(count)))
@@ -143,13 +144,8 @@ def default_grid(schedule: Any, count: int = DEFAULT_KNOTS) -> np.ndarray:
 
 
 def check_grid(grid: Any) -> np.ndarray:
-    """A given grid as an increasing float array of ``MIN_KNOTS..MAX_KNOTS`` finite values; InputError otherwise."""
-    grid = np.asarray(grid, dtype=float).ravel()
-    if not MIN_KNOTS <= grid.size <= MAX_KNOTS:
-        raise InputError(f"a schedule grid takes {MIN_KNOTS} to {MAX_KNOTS} knots; got {grid.size}")
-    if not np.all(np.isfinite(grid)) or np.any(np.diff(grid) <= 0):
-        raise InputError(f"the schedule grid must be finite and strictly increasing; got {grid.tolist()}")
-    return grid
+    """A given grid as an increasing float array of ``MIN_KNOTS..MAX_KNOTS`` finite values; OptionError otherwise."""
+    return np.array(check_value("grid", tuple(np.asarray(grid, dtype=float).ravel()), SCHEDULE_GRID))
 
 
 @dataclass(frozen=True)
@@ -249,8 +245,7 @@ class ScheduledIEKFOptions:
     local_starts: bool = True
 
     def __post_init__(self) -> None:
-        if isinstance(self.knots, bool) or int(self.knots) != self.knots or not MIN_KNOTS <= self.knots <= MAX_KNOTS:
-            raise InputError(f"knots must be a whole number from {MIN_KNOTS} to {MAX_KNOTS}; got {self.knots!r}")
+        check_value("knots", self.knots, SCHEDULE_KNOT_COUNT)
         if self.grid is not None:
             object.__setattr__(self, "grid", tuple(float(g) for g in check_grid(self.grid)))
         check_filter_options(self.p, self.passes, self.discretization, self.covariance)

@@ -24,12 +24,14 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from ..choices import SPLINE_NODE_COUNT
 from ..compiled import CompiledRecursion
 from ..errors import InputError
+from ..optionspec import check_value
 from ..filtering.filter_models import FilterModel, check_discretization, modal_transition
 from .modal import ModalModel, ModalStructure
 from .protocol import Mode, StateSpaceModel
-from .spline import MAX_NODES, MIN_NODES, SplineBasis, resample
+from .spline import SplineBasis, resample
 
 __all__ = [
     "AMPLITUDE_FLOOR",
@@ -57,8 +59,7 @@ class SplineModalStructure:
     nodes: int = 5
 
     def __post_init__(self) -> None:
-        if isinstance(self.nodes, bool) or int(self.nodes) != self.nodes or not MIN_NODES <= self.nodes <= MAX_NODES:
-            raise InputError(f"nodes must be a whole number from {MIN_NODES} to {MAX_NODES}; got {self.nodes!r}")
+        check_value("nodes", self.nodes, SPLINE_NODE_COUNT)
 
     @property
     def n_variables(self) -> int:

@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import argparse
 
-from vehid.identification.choices import DETRENDS, JITTER_TOLERANCE, SPLINE_NODES, SPLINE_P, SPLINE_PASSES
+from vehid.identification.automatic.options import IdentifyOptions
+from vehid.identification.choices import JITTER_TOLERANCE, SPLINE_NODES, SPLINE_P, SPLINE_PASSES
+from vehid.scenarios.commands.flags import add_option
 
 __all__ = ["common_options", "register_data_options", "add_filter_options"]
 
@@ -51,8 +53,7 @@ def register_data_options(parser: argparse.ArgumentParser) -> None:
                             "lines between their neighbours")
     group.add_argument("--jitter-tolerance", type=float, default=JITTER_TOLERANCE, metavar="FRACTION",
                        help=f"largest stray of a sample time from a uniform grid, in steps (default {JITTER_TOLERANCE:g})")
-    group.add_argument("--detrend", default="mean", choices=DETRENDS,
-                       help="offsets removed per record and stored with the model (default: the means)")
+    add_option(group, IdentifyOptions, "detrend")
     group.add_argument("--scale", action="append", metavar="NAME=FACTOR", default=None,
                        help="multiply a channel by FACTOR before identification: a unit (yawRate=0.0174533 for "
                             "deg/s), a sign (ay=-1 for an axis pointing right); repeatable or a comma list")
