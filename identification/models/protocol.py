@@ -213,7 +213,7 @@ def signature_mismatches(model: Any) -> tuple[str, ...]:
     >>> from vehid.identification import ModalModel
     >>> signature_mismatches(ModalModel)
     ()
-    >>> class Old(StateSpaceModel):
+    >>> class Old(ModalModel):  # the signature scheduled models had
     ...     def simulate_outputs(self, u, dt, *, x0=None):
     ...         ...
     >>> for line in signature_mismatches(Old):

@@ -225,8 +225,9 @@ class FrequencyResponse:
         The sample interval of a discrete-time model (its response repeats every ``1 / dt``); None if continuous.
     input_names, output_names : sequence of str, optional
         Default ``u1, ...`` and ``y1, ...``.
-    schedule : float, optional
-        The value of the scheduling variable the response holds at (a scheduled model's), for the title.
+    schedule : float or tuple of float, optional
+        The value of the scheduling variable (or each signal's) the response holds at (a scheduled
+        model's), for the title.
 
     Examples
     --------
@@ -245,9 +246,12 @@ class FrequencyResponse:
     dt: float | None = None
     input_names: tuple[str, ...] | None = None
     output_names: tuple[str, ...] | None = None
-    schedule: float | None = None
+    schedule: float | tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
+        if self.schedule is not None:
+            values = np.asarray(self.schedule, dtype=float).ravel()
+            object.__setattr__(self, "schedule", float(values[0]) if values.size == 1 else tuple(values.tolist()))
         frequencies = np.array(self.frequencies_hz, dtype=float).ravel()
         response = np.array(self.response, dtype=complex)
         if response.ndim != 3 or response.shape[0] != frequencies.size:
@@ -359,5 +363,6 @@ class FrequencyResponse:
                     axis.axvline(0.5 / self.dt, color="grey", linestyle=":", linewidth=1.0)
         grid[0, 0].legend(fontsize=8)
         if self.schedule is not None and ax is None and not title:
-            fig.suptitle(f"at schedule value {self.schedule:g}")
+            values = np.atleast_1d(self.schedule)
+            fig.suptitle(f"at schedule value {', '.join(f'{value:g}' for value in values)}")
         return fig
