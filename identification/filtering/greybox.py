@@ -319,14 +319,21 @@ def simulate_greybox(model: GreyBoxModel, theta: Any, record: IOData, *, x0: Any
 
 def greybox_outputs(model: GreyBoxModel, theta: Any, u: np.ndarray, dt: float, *, x0: Any = None,
                     discretization: str = "rk4", substeps: int = 1) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`simulate_greybox` on arrays, with its parameters and returns, but for these two.
+    """:func:`simulate_greybox` on arrays rather than a record.
 
     Parameters
     ----------
+    model, theta, x0, discretization, substeps
+        As :func:`simulate_greybox`.
     u : ndarray (N, n_u + n_s)
         The inputs, then the scheduling signals.
     dt : float
         Sample interval (s).
+
+    Returns
+    -------
+    y, x : ndarray (N, n_y), (N, n_x)
+        Outputs and states at the sample times.
     """
     _check_discretization(discretization, substeps)
     theta = model.check_parameters(theta)
