@@ -59,6 +59,7 @@ __all__ = [
     "IdentifiedSingleTrack",
     "SingleTrackAtSpeed",
     "MAX_SUBSTEPS",
+    "STEP_PER_TIME_CONSTANT",
 ]
 
 GRAVITY = 9.81  # m/s^2, as the vehicle parameters use it
@@ -388,7 +389,9 @@ class SingleTrackAtSpeed(StateSpaceModel):
         """The configuration's quantities."""
         return len(self.config.quantities)
 
-    def to_statespace(self, *, schedule: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
+    def to_statespace(self, *, schedule: float | None = None
+
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
         """``(A, B, C, D, None)`` at straight running: states as :func:`single_track_model` names them."""
         unscheduled(schedule)
         A, B, C, D = (np.asarray(m, dtype=float) for m in _linearisation(self.config)(self.parameters, self.speed))
@@ -592,7 +595,9 @@ class IdentifiedSingleTrack(StateSpaceModel):
                              f"modes are too fast for its {dt:g} s samples: leave out the slow parts")
         return max(needed, 1)
 
-    def to_statespace(self, *, schedule: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
+    def to_statespace(self, *, schedule: float | None = None
+
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
         """``(A, B, C, D, None)`` at straight running at speed ``schedule`` (m/s, required), per steer channel.
 
         Any positive speed is taken (the model is physical); the log spans :attr:`speed_range`.

@@ -206,7 +206,9 @@ class ArxModel(StateSpaceModel):
         b[: self.b.shape[0]] = self.b
         return a, b
 
-    def to_statespace(self, *, schedule: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+    def to_statespace(self, *, schedule: float | None = None
+
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
         """Discrete ``(Ad, Bd, Cd, Dd, dt)`` in block observer form; see :func:`observer_form`."""
         unscheduled(schedule)
         return (*observer_form(*self.padded()), sample_interval(self.dt, "ARX model"))

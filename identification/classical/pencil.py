@@ -78,7 +78,9 @@ class PencilModel(StateSpaceModel):
         """The observer-form SP model of an ARX model (appendix eq. A.104-A.105)."""
         return cls.from_state_space(*observer_form(*model.padded()), dt=model.dt)
 
-    def to_statespace(self, *, schedule: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+    def to_statespace(self, *, schedule: float | None = None
+
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
         """``(A, B, C, D, dt)`` of this pencil.
 
         A row transformation ``T`` (from the QR factorisation of E) brings E

@@ -98,7 +98,9 @@ class SubspaceResult(StateSpaceModel):
         """Number of outputs."""
         return int(self.C.shape[0])
 
-    def to_statespace(self, *, schedule: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+    def to_statespace(self, *, schedule: float | None = None
+
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
         """Discrete ``(A, B, C, D, dt)``."""
         unscheduled(schedule)
         return self.A, self.B, self.C, self.D, sample_interval(self.dt, "subspace model")

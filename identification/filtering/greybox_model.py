@@ -86,7 +86,8 @@ def schedule_columns(u: Any, schedule: Any, n_u: int, n_s: int, variable: str) -
         values = np.asarray(schedule, dtype=float)
         values = values.reshape(-1, 1) if values.ndim == 1 else values
         if u.ndim != 2 or u.shape[1] != n_u or values.shape != (u.shape[0], n_s):
-            raise InputError(f"u must have shape (N, {n_u}) and the schedule ({variable}) (N,{'' if n_s == 1 else n_s}); "
+            shape = "(N,)" if n_s == 1 else f"(N, {n_s})"
+            raise InputError(f"u must have shape (N, {n_u}) and the schedule ({variable}) {shape}; "
                              f"got {u.shape} and {np.shape(schedule)}")
         u = np.column_stack([u, values])
     if u.ndim != 2 or u.shape[1] != n_u + n_s:
@@ -127,7 +128,8 @@ def _model_from(values: Mapping[str, Any]) -> GreyBoxModel:
     from ..dataio.casadi_codec import table_function
 
     return GreyBoxModel(dynamics=table_function(values["dynamics"]), output=table_function(values["output"]),
-                        parameter_names=tuple(values["parameter_names"]), parameter_units=tuple(values["parameter_units"]),
+                        parameter_names=tuple(values["parameter_names"]),
+                        parameter_units=tuple(values["parameter_units"]),
                         positive=tuple(bool(v) for v in values["positive"]), state_names=tuple(values["state_names"]),
                         input_names=tuple(values["input_names"]), schedule_names=tuple(values["schedule_names"]),
                         output_names=tuple(values["output_names"]), description=str(values["description"]),
@@ -206,7 +208,8 @@ class IdentifiedGreyBox(StateSpaceModel):
         object.__setattr__(self, "substeps", int(self.substeps))
         if self.schedule_range is not None:
             bounds = np.array(self.schedule_range, dtype=float).reshape(-1, 2)
-            if bounds.shape != (self.model.n_s, 2) or not np.all(np.isfinite(bounds)) or np.any(bounds[:, 0] > bounds[:, 1]):
+            ordered = bounds.shape == (self.model.n_s, 2) and bool(np.all(bounds[:, 0] <= bounds[:, 1]))
+            if not ordered or not np.all(np.isfinite(bounds)):
                 raise InputError(f"schedule_range must hold an ordered (least, greatest) pair per scheduling signal "
                                  f"({self.model.n_s}); got {np.shape(self.schedule_range)}")
             bounds.setflags(write=False)
@@ -333,7 +336,8 @@ class IdentifiedGreyBox(StateSpaceModel):
         if dt is None or not (np.isfinite(dt) and dt > 0):
             raise InputError(f"a continuous-time model needs the sample interval dt (> 0) of its input; got {dt}")
         if self.model.n_s:
-            driving = schedule_columns(u, schedule, self.model.n_u, self.model.n_s, ", ".join(self.model.schedule_names))
+            names = ", ".join(self.model.schedule_names)
+            driving = schedule_columns(u, schedule, self.model.n_u, self.model.n_s, names)
         else:
             driving = self.checked_input(u)
             unscheduled(schedule, driving.shape[0])
@@ -369,8 +373,9 @@ class IdentifiedGreyBox(StateSpaceModel):
         return ca.Function("vehid_greybox_model", inputs, values, names, ["xdot", "y"])
 
     def mat_fields(self) -> dict[str, Any]:
-        """The parameters (and covariance) and the linearisation's ``A``, ``B``, ``C``, ``D``: unscheduled, as they
-        are; scheduled on one signal with a :attr:`schedule_range`, at ``grid``, its ends and middle (grid value first)."""
+        """The parameters (and covariance) and the linearisation's ``A``, ``B``, ``C``, ``D``: unscheduled, as
+        they are; scheduled on one signal with a :attr:`schedule_range`, at ``grid``, its ends and middle (grid
+        value first)."""
         fields: dict[str, Any] = {"parameters": self.parameters, "parameter_names": list(self.model.parameter_names)}
         if self.parameter_covariance is not None:
             fields["parameter_covariance"] = self.parameter_covariance

@@ -81,7 +81,9 @@ class DiscreteModel(StateSpaceModel):
     def n_y(self) -> int:
         return int(self.C.shape[0])
 
-    def to_statespace(self, *, schedule: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+    def to_statespace(self, *, schedule: float | None = None
+
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
         """``(A, B, C, D, dt)``."""
         unscheduled(schedule)
         return self.A, self.B, self.C, self.D, self.dt
@@ -116,7 +118,9 @@ class ContinuousModel(StateSpaceModel):
     def n_y(self) -> int:
         return int(self.C.shape[0])
 
-    def to_statespace(self, *, schedule: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
+    def to_statespace(self, *, schedule: float | None = None
+
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
         """``(A, B, C, D, None)``: continuous time."""
         unscheduled(schedule)
         return self.A, self.B, self.C, self.D, None

@@ -671,7 +671,9 @@ class ModalModel(StateSpaceModel):
                 columns[d_start + i * s.n_u + j, :, i] = u[:, j]
         return x @ self.C.T + u @ self.D.T, columns.transpose(1, 2, 0)
 
-    def to_statespace(self, *, schedule: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
+    def to_statespace(self, *, schedule: float | None = None
+
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
         """``(A, B, C, D, None)``: continuous time."""
         unscheduled(schedule)
         return self.A, self.B, self.C, self.D, None

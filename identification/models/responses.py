@@ -348,7 +348,9 @@ class FrequencyResponse:
             column = i if grid.shape[1] == n_y else 0
             top, bottom = grid[0, column], grid[1, column]
             for j in range(n_u):
-                name = self.input_names[j] if grid.shape[1] == n_y else f"{self.input_names[j]} to {self.output_names[i]}"
+                name = self.input_names[j]
+                if grid.shape[1] != n_y:  # every output on one pair of axes: each line says which
+                    name = f"{name} to {self.output_names[i]}"
                 text = f"{label}: {name}" if label else name
                 lines = top.loglog(f, magnitude[:, i, j], linewidth=1.3, label=text)
                 bottom.semilogx(f, phase[:, i, j], linewidth=1.3, color=lines[0].get_color())

@@ -420,6 +420,15 @@ class ScheduledModalModel:
     output_map : OutputMap, optional
         A static map applied to the simulated outputs (``--schedule`` with ``--nonlinear``); the frozen
         models of :meth:`model_at`, their modes and :attr:`parameters` are the linear part's.
+
+    Notes
+    -----
+    The family meets the model protocol (:class:`~identification.models.protocol.IdentifiedModel`) at a
+    value of its scheduling variable: ``eigenvalues(schedule=v)``, ``modes``, ``frequency_response``,
+    ``to_statespace`` and ``to_control`` are those of :meth:`linear_at` ``v`` (the input gauge, the states of
+    :meth:`simulate_outputs`; the output offset and map aside), and ``simulate_outputs(u, dt, schedule=...)``
+    runs it along a schedule. Its ``n_u`` counts its inputs; a record adds the schedule as a last column
+    (:attr:`record_inputs`).
     """
 
     structure: ModalStructure
@@ -674,11 +683,14 @@ class ScheduledModalModel:
 
         w = self._weights(schedule_value(schedule, *self.schedule_range, self.variable))
         modal, B, C, D = (np.tensordot(w, array, axes=1) for array in (self.modal, self.B, self.C, self.D))
-        A = self.structure.matrices(np.concatenate([modal, np.zeros(self.structure.n_parameters - self.structure.n)]))[0]
+        rest = np.zeros(self.structure.n_parameters - self.structure.n)
+        A = self.structure.matrices(np.concatenate([modal, rest]))[0]
         return ContinuousModel(A, B, C, D, self.input_names, self.output_names,
                                {**self.meta, self.variable: float(schedule), "scheduled": True})
 
-    def to_statespace(self, *, schedule: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
+    def to_statespace(self, *, schedule: float | None = None
+
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
         """``(A, B, C, D, None)`` at a schedule value (required), in the input gauge (:meth:`linear_at`)."""
         return self.linear_at(schedule).to_statespace()
 
@@ -790,7 +802,8 @@ class ScheduledModalModel:
 
         path = Path(path)
         A = np.array([self.to_statespace(schedule=float(value))[0] for value in self.grid])
-        savemat(path, {"grid": self.grid, "modal": self.modal, "A": A, "B": self.B, "C": self.C, "D": self.D, "offset": self.offset,
+        savemat(path, {"grid": self.grid, "modal": self.modal, "A": A, "B": self.B, "C": self.C, "D": self.D,
+                       "offset": self.offset,
                        "variable": self.variable,
                        **({} if self.output_map is None else {"output_map_nodes": self.output_map.nodes,
                                                                "output_map_ordinates": self.output_map.ordinates}),

@@ -389,7 +389,9 @@ class SplineModalModel(StateSpaceModel):
             tables[name] = {"variable": variables[follows[index]], "nodes": basis.nodes.copy(), "values": gamma.copy()}
         return tables
 
-    def to_statespace(self, *, schedule: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
+    def to_statespace(self, *, schedule: float | None = None
+
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
         """The continuous state-space form of :meth:`linear_model` at zero amplitude."""
         return self.linear_model().to_statespace(schedule=schedule)
 
