@@ -409,7 +409,7 @@ class OrderOutcome:
 def _nonlinear_outcome(result: Any, identification: IOData, validation: IOData, n_pairs: int) -> SplineStudyRun:
     model = result.model
     curves = {}
-    modes = [model.modes(amplitude)[:n_pairs] for amplitude in MODE_AMPLITUDES]
+    modes = [model.modes(amplitude=amplitude)[:n_pairs] for amplitude in MODE_AMPLITUDES]
     for mode in range(n_pairs):  # frequency and damping curves exist for the complex pairs
         curves[mode] = (np.array([at[mode].frequency_hz for at in modes]), np.array([at[mode].damping for at in modes]))
     tables = {name: {key: value if isinstance(value, str) else np.asarray(value, dtype=float)

@@ -40,6 +40,8 @@ from vehid.identification.data import IOData, as_records
 from vehid.identification.dataio.cleaning import cleaning_notes, cleaning_summary, cleaning_warnings
 from vehid.identification.errors import InputError
 from vehid.scenarios.log_cleaning import MIN_SPEED
+# most Runge-Kutta steps per sample, and how much of a time constant one covers: the identified model's own
+from vehid.vehicle.single_track import MAX_SUBSTEPS, STEP_PER_TIME_CONSTANT
 
 __all__ = ["run", "MIN_LOG_SPEED", "CORRELATION_WARNING", "LINEAR_LIMIT_G", "MAX_SUBSTEPS"]
 
@@ -50,8 +52,6 @@ MIN_LOG_SPEED = MIN_SPEED
 CORRELATION_WARNING = 0.98
 #: Lateral acceleration (g) beyond which a linear axle characteristic averages over saturation.
 LINEAR_LIMIT_G = 0.5
-#: Most Runge-Kutta steps per sample; a log needing more reaches standstill (:func:`_substeps`).
-MAX_SUBSTEPS = 20
 
 def _config(args: Any, n_outputs: int):
     from vehid.vehicle.single_track import SingleTrackConfig
@@ -365,7 +365,7 @@ def _substeps(config: Any, *records: IOData) -> int:
     rate = (c_f + c_r) / (config.mass * low) + (lf**2 * c_f + lr**2 * c_r) / (inertia * low)
     if config.relaxation_length is not None:
         rate = max(rate, high / config.relaxation_length)
-    needed = int(np.ceil(rate * records[0].dt / 0.5))
+    needed = int(np.ceil(rate * records[0].dt / STEP_PER_TIME_CONSTANT))
     if needed > MAX_SUBSTEPS:
         raise InputError(f"the log's speed falls to {np.min(speeds):.3g} m/s, where the single-track model's modes are "
                          f"too fast for its {records[0].dt:g} s samples: --min-speed {MIN_LOG_SPEED:g} leaves the "

@@ -118,6 +118,16 @@ top.legend()
 plt.show()
 
 # %%
+# At each value of its schedule the family is a linear model: its frequency
+# response at the slowest knot, the middle of the lap's speeds and the
+# fastest knot, drawn onto one pair of axes per output.
+fig, axes = plt.subplots(2, 2, sharex=True, figsize=(8, 5), layout="constrained")
+for value in (family.grid[0], float(np.median(speed_estimation)), family.grid[-1]):
+    family.frequency_response(np.logspace(-1, 1, 120), schedule=value).plot(ax=axes, label=f"{value:.0f} m/s")
+fig.suptitle("Steer to yaw rate and lateral acceleration, at three speeds")
+plt.show()
+
+# %%
 # Is it a car? In a steady turn the lateral acceleration is the speed times
 # the yaw rate, a car's yaw rate does not answer the steer at once, its modes
 # are damped: each knot is checked against published ranges
