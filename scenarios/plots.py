@@ -48,6 +48,7 @@ __all__ = [
     "plot_convergence",
     "plot_order_study",
     "plot_time_fits",
+    "mark_spikes",
     "plot_splines",
     "eigenvalue_view",
     "plot_eigenvalue_map",
@@ -306,6 +307,7 @@ def plot_time_fits(
     title: str = "Model fits to the data",
     fig: Figure | None = None,
     scores: Mapping[str, tuple[Any, Any]] | None = None,
+    spikes: Mapping[str, Sequence[int]] | None = None,
 ) -> Figure:
     """Measured outputs against model predictions (Best & Bogdanski 2017, Figures 7 and 9).
 
@@ -326,6 +328,11 @@ def plot_time_fits(
         Per prediction label, the NRMSE fit and R per output (percent) as the
         caller scored them (e.g. past a k-step horizon); the legend then shows
         both, labelled. Without it the legend shows R over the whole record.
+    spikes : mapping of str to sequence of int, optional
+        Per output name, the sample indices of its spikes and drop-outs
+        (:func:`~vehid.identification.dataio.cleaning.find_outliers`): each is
+        marked, and the output's axis range is set by its other samples, a
+        spike beyond it drawn at the axis' edge (:func:`mark_spikes`).
 
     Returns
     -------
@@ -362,11 +369,49 @@ def plot_time_fits(
             else:
                 text = f"{label} (R = {fits[label][i]:.2f} %)"
             ax.plot(*display_samples(t[shown], value[shown, i]), linewidth=1.2, label=text)
+        marked = [k for k in (spikes or {}).get(names[i], ()) if 0 <= k < t.size and shown[k]]
+        if marked:
+            mark_spikes(ax, t, y[:, i], marked, [value[:, i] for value in predicted.values()], shown)
         ax.set_ylabel(with_unit(channel_label(names[i]), units[i]))
         add_legend(ax)
     axes[-1].set_xlabel("time (s)")
     fig.suptitle(title)
     return fig
+
+
+def mark_spikes(ax: Axes, t: np.ndarray, measured: np.ndarray, indices: Sequence[int],
+                others: Sequence[np.ndarray] = (), shown: np.ndarray | None = None) -> None:
+    """Mark a channel's spikes on its axis, the axis range set by everything else drawn on it.
+
+    The range covers the measured samples that are no spike and the ``others`` drawn (model outputs),
+    with a 5 % margin; a spike inside it is ringed where it lies, one beyond it drawn as a triangle at the
+    edge it passes, pointing out, so that one glitch does not squash the record into a line.
+    """
+    shown = np.ones(t.size, dtype=bool) if shown is None else shown
+    clean = shown.copy()
+    clean[list(indices)] = False
+    values = [measured[clean], *(np.asarray(other)[shown] for other in others)]
+    values = [v[np.isfinite(v)] for v in values if np.size(v)]
+    if not values or not any(v.size for v in values):
+        return
+    low, high = min(float(v.min()) for v in values if v.size), max(float(v.max()) for v in values if v.size)
+    margin = 0.05 * (high - low) if high > low else max(abs(high), 1.0) * 0.05
+    low, high = low - margin, high + margin
+    at = np.asarray(indices, dtype=int)
+    spike_t, spike_y = t[at], measured[at]
+    inside = (spike_y >= low) & (spike_y <= high)
+    label = f"spike or drop-out ({at.size})"
+    if inside.any():
+        ax.plot(spike_t[inside], spike_y[inside], linestyle="none", marker="o", markersize=9, markerfacecolor="none",
+                markeredgecolor="crimson", markeredgewidth=1.5, label=label)
+        label = None
+    for above, marker, edge in ((True, "^", high), (False, "v", low)):
+        beyond = (spike_y > high) if above else (spike_y < low)
+        if beyond.any():
+            ax.plot(spike_t[beyond], np.full(int(beyond.sum()), edge), linestyle="none", marker=marker, markersize=9,
+                    color="crimson", clip_on=False, label=label)
+            label = None
+    ax.set_ylim(low, high)
 
 
 def plot_splines(

@@ -17,6 +17,7 @@ import numpy as np
 
 from vehid.identification.automatic import steps
 from vehid.identification.automatic.checks import data_warnings, records_summary, uncertainty_summary
+from vehid.identification.dataio.cleaning import cleaning_notes
 from vehid.identification.automatic.options import IdentifyOptions
 from vehid.identification.automatic.plan import Plan
 from vehid.identification.automatic.result import Decision, Identification, OrderRow, float_tuple
@@ -184,6 +185,7 @@ def _finish(plan: Plan, options: IdentifyOptions, model: Any, *, estimator: Any,
             final_fit=float(np.mean(nonlinear.result.fit_percent)), allow_unstable=True, label="nonlinear")
         warnings += steps.nonlinear_warnings(nonlinear, evaluation)
     warnings += data_warnings(plan.records)
+    notes += cleaning_notes(plan.records)  # spikes interpolated, samples left out
     decisions = tuple(Decision.from_entry(name, entry) for name, entry in keys.get("decision_margins", {}).items())
     data_keys = records_summary(model, plan.records, plan.preparation)  # the unscheduled model's, as its checks
     scheduled, unscheduled = None, None
