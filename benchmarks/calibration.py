@@ -115,8 +115,9 @@ def _print(title: str, figures: dict) -> None:
                                 and np.isfinite(value))
         print(f"  {name} = {row['value']:.5g} {std}{extra}; correlations {correlation or '-'}")
     for name, row in figures["halves"].items():
-        print(f"  halves: {name} {row['first'][0]:.5g} +/- {row['first'][1]:.2g} | {row['second'][0]:.5g} +/- "
-              f"{row['second'][1]:.2g} ({row['difference_sigma']:.1f} std apart)")
+        shown = [f"{row[h][0]:.5g} +/- {row[h][1]:.2g}" if row[h] else "not determined" for h in ("first", "second")]
+        apart = "" if row["difference_sigma"] is None else f" ({row['difference_sigma']:.1f} std apart)"
+        print(f"  halves: {name} {shown[0]} | {shown[1]}{apart}")
     for line in figures["warnings"]:
         print(f"  warning: {line}")
 

@@ -25,7 +25,13 @@ from vehid.vehicle.drive_calibration import (
     start_vehicle,
     steady_balance,
 )
-from vehid.vehicle.parameters import GRAVITY, baseline, peak_lateral_friction, static_stability_factor, vehicle_from_mapping
+from vehid.vehicle.parameters import (
+    GRAVITY,
+    baseline,
+    peak_lateral_friction,
+    static_stability_factor,
+    vehicle_from_mapping,
+)
 
 RACE_LOG = Path(__file__).parent / "data" / "race_car_250lm" / "20140222_01_01_03_250lm.csv"
 #: The race car's published mass and axle positions on the baseline: the plain prior of a new user.
@@ -122,6 +128,30 @@ def test_the_start_holds_the_logs_accelerations_and_stands_lower():
                                slip_limit=0.0)
     assert kept.tyre.friction_scale == prior.tyre.friction_scale
     assert kept.chassis.yaw_inertia == prior.chassis.yaw_inertia and kept.drive.slip_limit == 0.0
+
+
+def test_the_rear_scale_holding_stiffness_keeps_the_rear_axles_cornering_stiffness():
+    """Closed form (Pacejka 2012, eq. 4.E25): the rear axle's cornering stiffness at its static load, the scale
+    times ``PKY1 F_z0 sin(PKY4 atan(F_z / (PKY2 F_z0)))``, is unchanged when PKY2 moves with the scale the
+    tie gives; the same tie made symbolic gives the same number."""
+    import casadi as ca
+
+    from vehid.vehicle.calibration import rear_scale_holding_stiffness
+    from vehid.vehicle.parameters import static_axle_loads
+
+    vehicle = vehicle_from_mapping(PLAIN_PRIOR)
+    tyre, load = vehicle.tyre, static_axle_loads(vehicle)[1] / 2
+
+    def stiffness(scale, pky2):
+        return scale * tyre.PKY1 * tyre.nominal_load * math.sin(
+            tyre.PKY4 * math.atan(load / (pky2 * tyre.nominal_load)))
+
+    for pky2 in (0.5, 1.0, 2.5):
+        scale = rear_scale_holding_stiffness(vehicle, pky2)
+        assert stiffness(scale, pky2) == pytest.approx(stiffness(1.0, tyre.PKY2), rel=1e-12)
+        symbol = ca.SX.sym("pky2")
+        tied = ca.Function("tied", [symbol], [rear_scale_holding_stiffness(vehicle, symbol)])
+        assert float(tied(pky2)) == pytest.approx(scale, rel=1e-12)
 
 
 def test_the_plain_prior_spins_on_the_committed_log_where_the_start_drives_it():
@@ -300,8 +330,11 @@ def twin_drive(tmp_path_factory):
 
     prior = vehicle_from_mapping(PLAIN_PRIOR)
     model_car = dataclasses.replace(prior, drive=dataclasses.replace(prior.drive, slip_limit=0.1))
-    names = ("tyre.front_cornering_scale", "tyre.PKY2", "tyre.friction_scale", "chassis.yaw_inertia")
-    truth = (0.8, 1.3, 1.1, 1250.0)
+    # PKY2 is left at the prior: at this drive's 5 m/s^2 the load moves too little across the car to tell it
+    # from the front scale (measured: correlation 0.997); the 10-minute drive of benchmarks/calibration.py
+    # calibrates it too
+    names = ("tyre.front_cornering_scale", "tyre.friction_scale", "chassis.yaw_inertia")
+    truth = (0.8, 1.1, 1250.0)
     drive = drive_from_rest(duration=90.0, dt=0.02, top_speed=30.0, lateral_acceleration=5.0, braking=5.0,
                             wheelbase=prior.chassis.wheelbase, seed=2)
     quantities = ("yaw_rate", "lateral_acceleration", "sideslip")
@@ -321,14 +354,14 @@ def twin_drive(tmp_path_factory):
     vehicle.write_text('base = "baseline"\n[chassis]\nmass = 982\ncg_to_front_axle = 1.33\ncg_to_rear_axle = 1.07\n')
     figure = folder / "fits.png"
     argv = ["calibrate", str(log), "--vehicle", str(vehicle), *CHANNELS, "--acceleration", "axCG", "--check",
-            "beta_true=sideslip", "--figure", str(figure), "--json"]
+            "beta_true=sideslip", "--parameters", ",".join(names), "--figure", str(figure), "--json"]
     return dict(zip(names, truth)), drive, argv, figure
 
 
 SUBSTEPS = 3  # the twin's and the calibration's RK4 steps per sample (two suffice at 30 m/s and 50 Hz)
 
 
-@pytest.mark.slow(reason="a 23-state filter with four parameters compiled, and its simulators: about 60 s of CPU cold")
+@pytest.mark.slow(reason="a 23-state filter with three parameters compiled, and its simulators: 2 min of CPU cold")
 def test_calibrate_runs_a_drive_from_rest_and_recovers_the_car(twin_drive, capsys):
     truth, drive, argv, figure = twin_drive
     status = main([*argv, "--substeps", str(SUBSTEPS)])  # the twin's discretisation
@@ -343,7 +376,7 @@ def test_calibrate_runs_a_drive_from_rest_and_recovers_the_car(twin_drive, capsy
     for name, row in body["parameters"].items():
         if row["std"] is not None:
             assert abs(row["value"] - truth[name]) <= 3 * row["std"], (name, row, truth[name])
-    assert len(body["not_identifiable"]) <= 1, body["not_identifiable"]
+    assert body["not_identifiable"] == {}, body["not_identifiable"]
     # the calibrated car predicts the held-out part better than the start, and the unfitted sideslip too
     ahead = np.subtract(body["validation_fit_percent"], body["start_validation_fit_percent"])
     assert np.all(ahead > 0), ahead

@@ -43,7 +43,8 @@ from vehid.identification.errors import InputError
 from vehid.identification.filtering.greybox import GreyBoxModel, GreyBoxOptions, GreyBoxResult, identify_greybox
 
 from .model import CORNERS, OUTPUT_NAMES, OUTPUT_UNITS, STATE_NAMES, vehicle_expressions
-from .parameters import VehicleParameters
+from .parameters import VehicleParameters, static_axle_loads
+from .tyre import cornering_stiffness
 from .simulation import simulate
 
 __all__ = [
@@ -53,6 +54,9 @@ __all__ = [
     "ROLL_PARAMETERS",
     "Calibration",
     "calibration_model",
+    "check_parameter",
+    "rear_scale_holding_stiffness",
+    "REAR_STIFFNESS_HELD",
     "calibration_record",
     "calibrate_vehicle",
     "simulated_log",
@@ -100,6 +104,12 @@ def _field(params: VehicleParameters, name: str) -> tuple[Any, str, str]:
     return holder, field_name, str(fields[field_name].metadata.get("unit", "-"))
 
 
+def check_parameter(params: VehicleParameters, name: str) -> str:
+    """The unit of the vehicle field ``name`` (``section.field``), or InputError where it is unknown or
+    selects the model's structure (it cannot be calibrated)."""
+    return _field(params, name)[2]
+
+
 def vehicle_with(params: VehicleParameters, names: Sequence[str], values: Sequence[Any]) -> VehicleParameters:
     """``params`` with the named fields set to ``values`` (numbers: validated as a vehicle file is)."""
     changes: dict[str, dict[str, Any]] = {}
@@ -126,6 +136,34 @@ def _symbolic_vehicle(params: VehicleParameters, names: Sequence[str], theta: ca
     return copy
 
 
+#: The rear axle's level tied to the tyres' load sensitivity (:func:`rear_scale_holding_stiffness`).
+REAR_STIFFNESS_HELD = "tyre.rear_cornering_scale"
+
+
+def rear_scale_holding_stiffness(params: VehicleParameters, load_sensitivity: Any) -> Any:
+    """The rear cornering scale that keeps the rear axle's cornering stiffness at its static load what it is
+    in ``params`` when ``tyre.PKY2`` becomes ``load_sensitivity`` (a number or a CasADi symbol).
+
+    ``PKY2`` sets the load at which a tyre's cornering stiffness stops growing: it changes the stiffness
+    at every load, the static one too. Where a log determines how the stiffness changes with the load
+    (the balance moving as the load moves across the car) but not the rear axle's level, which yaw rate
+    and lateral acceleration do not tell from the front's, this keeps that level at the prior's: the rear
+    scale makes up for what ``PKY2`` moved there.
+    """
+    corner_load = static_axle_loads(params)[1] / 2
+    tyre = params.tyre
+    before = cornering_stiffness(corner_load, tyre)
+    after = cornering_stiffness(corner_load, dataclasses.replace(tyre, PKY2=load_sensitivity)
+                                if isinstance(load_sensitivity, (int, float)) else _with_symbol(tyre, load_sensitivity))
+    return tyre.rear_cornering_scale * before / after
+
+
+def _with_symbol(tyre: Any, load_sensitivity: ca.SX) -> Any:
+    holder = dataclasses.replace(tyre)
+    object.__setattr__(holder, "PKY2", load_sensitivity)
+    return holder
+
+
 def _straight_direction(params: VehicleParameters) -> np.ndarray:
     """States of straight running per unit speed (forward speed and wheel spins): linear in the speed."""
     direction = np.zeros(len(STATE_NAMES))
@@ -135,8 +173,13 @@ def _straight_direction(params: VehicleParameters) -> np.ndarray:
     return direction
 
 
-def calibration_model(params: VehicleParameters, parameters: Sequence[str], quantities: Sequence[str]) -> GreyBoxModel:
+def calibration_model(params: VehicleParameters, parameters: Sequence[str], quantities: Sequence[str], *,
+                      hold_rear_stiffness: bool = False) -> GreyBoxModel:
     """The 23-state model of ``params`` with ``parameters`` symbolic, measuring ``quantities``.
+
+    With ``hold_rear_stiffness`` (``tyre.PKY2`` calibrated, the rear cornering scale not), the rear
+    cornering scale follows ``PKY2`` so that the rear axle's cornering stiffness at its static load
+    stays that of ``params`` (:func:`rear_scale_holding_stiffness`).
 
     Parameters
     ----------
@@ -173,9 +216,15 @@ def calibration_model(params: VehicleParameters, parameters: Sequence[str], quan
         positive.append(value > 0)
         starts.append(value)
     theta = ca.SX.sym("theta", len(parameters))
+    symbolic = _symbolic_vehicle(params, parameters, theta)
+    if hold_rear_stiffness:
+        if "tyre.PKY2" not in parameters or REAR_STIFFNESS_HELD in parameters:
+            raise InputError("holding the rear axle's stiffness needs tyre.PKY2 calibrated and the rear cornering "
+                             "scale not")
+        rear = rear_scale_holding_stiffness(params, theta[parameters.index("tyre.PKY2")])
+        object.__setattr__(symbolic.tyre, "rear_cornering_scale", rear)
     try:
-        x, steer, reference_speed, reference_acceleration, xdot, y = vehicle_expressions(
-            _symbolic_vehicle(params, parameters, theta))
+        x, steer, reference_speed, reference_acceleration, xdot, y = vehicle_expressions(symbolic)
     except (RuntimeError, NotImplementedError, TypeError) as exc:  # a symbol met a branch
         raise InputError(f"one of {', '.join(parameters)} cannot be a calibration parameter: {exc}") from None
     deviation = ca.SX.sym("deviation", len(STATE_NAMES))
@@ -191,7 +240,8 @@ def calibration_model(params: VehicleParameters, parameters: Sequence[str], quan
         dynamics=dynamics, output=output, parameter_names=parameters, parameter_units=tuple(units),
         positive=tuple(positive), state_names=tuple(f"d_{name}" for name in STATE_NAMES), input_names=("steer",),
         schedule_names=("reference_speed", "reference_acceleration"), output_names=quantities,
-        description=f"23-state vehicle {params.name!r}: {', '.join(parameters)} calibrated",
+        description=f"23-state vehicle {params.name!r}: {', '.join(parameters)} calibrated"
+                    + (", the rear axle's stiffness held" if hold_rear_stiffness else ""),
     )
 
 
@@ -355,7 +405,7 @@ def calibrate_vehicle(params: VehicleParameters, data: IOData | Sequence[IOData]
                       parameters: Sequence[str] | None = None, priors: Mapping[str, float] | None = None,
                       prior_std: Mapping[str, float] | None = None, correlation_limit: float = CORRELATION_LIMIT,
                       options: GreyBoxOptions | None = None, fixed: Sequence[str] = (),
-                      starts: Mapping[str, float] | None = None) -> Calibration:
+                      starts: Mapping[str, float] | None = None, hold_rear_stiffness: bool = False) -> Calibration:
     """Calibrate chosen parameters of ``params`` to logs (:func:`calibration_record`).
 
     Parameters
@@ -384,6 +434,10 @@ def calibrate_vehicle(params: VehicleParameters, data: IOData | Sequence[IOData]
     starts : mapping, optional
         ``name -> value``: where the filter starts, in place of the prior value (an earlier stage's
         estimate). The prior std still applies around it.
+    hold_rear_stiffness : bool
+        The rear cornering scale follows ``tyre.PKY2`` so that the rear axle's cornering stiffness at
+        its static load stays the prior's (:func:`calibration_model`); the calibrated vehicle carries
+        the scale that does so.
 
     Returns
     -------
@@ -423,7 +477,9 @@ def calibrate_vehicle(params: VehicleParameters, data: IOData | Sequence[IOData]
     options = options or GreyBoxOptions(coloured_residuals=True)
     relative_prior = np.array([prior_std[name] / abs(value) if name in prior_std else options.prior_std
                                for name, value in zip(parameters, prior_values)])
-    model = calibration_model(start_vehicle, parameters, quantities)
+    # built on the prior vehicle whatever the starts: one model (and compilation) for every stage, and the
+    # rear axle's stiffness, where held, held at the prior's
+    model = calibration_model(prior_vehicle, parameters, quantities, hold_rear_stiffness=hold_rear_stiffness)
     free = [name for name in parameters if name not in fixed]
     if not free:
         raise InputError("every calibration parameter is fixed: leave at least one to estimate")
@@ -455,8 +511,12 @@ def calibrate_vehicle(params: VehicleParameters, data: IOData | Sequence[IOData]
     warnings = tuple(f"{name} not identifiable from this log ({why}): held at its "
                      f"{'prior' if name not in starts else 'start'} {start_values[parameters.index(name)]:.6g}"
                      for name, why in held.items())
+    vehicle = vehicle_with(prior_vehicle, parameters, values)
+    if hold_rear_stiffness:
+        rear = rear_scale_holding_stiffness(prior_vehicle, float(values[parameters.index("tyre.PKY2")]))
+        vehicle = vehicle_with(vehicle, (REAR_STIFFNESS_HELD,), (float(rear),))
     return Calibration(
-        vehicle=vehicle_with(prior_vehicle, parameters, values), parameter_names=parameters, units=units,
+        vehicle=vehicle, parameter_names=parameters, units=units,
         values=values, std=std, correlation=correlation, held=held, result=result, warnings=warnings,
     )
 

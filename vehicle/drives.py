@@ -23,7 +23,7 @@ import numpy as np
 from vehid.identification.errors import InputError
 
 from .calibration import simulated_log
-from .manoeuvres import _speed_from_accelerations, band_limited_noise
+from .manoeuvres import speed_from_accelerations, band_limited_noise
 from .model import OUTPUT_NAMES
 from .parameters import VehicleParameters
 from .validity import MIN_SPEED
@@ -129,7 +129,7 @@ def drive_from_rest(*, duration: float = 600.0, dt: float = 0.01, top_speed: flo
     change_speed(0.0, min(6.0, braking))
     n = int(round(max(duration, clock + 2.0) / dt)) + 1
     t = dt * np.arange(n)
-    speed_profile = np.maximum(_speed_from_accelerations(t, 0.0, pulses, _EDGE), 0.0)
+    speed_profile = np.maximum(speed_from_accelerations(t, 0.0, pulses, _EDGE), 0.0)
     acceleration = np.gradient(speed_profile, dt)
     lateral = np.zeros(n)
     for start, length, size in corners:

@@ -65,6 +65,14 @@ static axle loads, blended in over the first 0.5 m/s^2 of deceleration so that
 the torques stay continuous in the reference. At a constant reference the rate
 is zero, the feed-forward and the rear torque vanish identically and
 :attr:`VehicleModel.dynamics` is the plain PI hold on the front wheels.
+
+Slip limiter (``drive.slip_limit`` above zero; none on the named vehicles). A car replayed along a
+measured drive is asked for the log's accelerations whatever its torque split: an unloaded inner wheel
+spins up under drive torque, a lightly loaded rear wheel locks under braking, and the replay stops
+there. With the limiter, as traction control and anti-lock brakes do, each wheel's torque fades once
+its lagged slip passes the limit in the torque's direction and a restoring torque brings the wheel
+back (:func:`_slip_limited`), and the brakes are shared between the axles in proportion to their loads
+as they are (electronic brake-force distribution) rather than the static ones.
 """
 
 from __future__ import annotations
@@ -141,7 +149,7 @@ def _smooth_abs(x, eps):
 
 
 def _slip_limited(torque, slip, limit, restoring):
-    """A wheel's torque as traction control and anti-lock brakes leave it (module notes).
+    """A wheel's torque as traction control and anti-lock brakes leave it (module notes, "Slip limiter").
 
     Beyond ``limit`` in the torque's direction (a driven wheel spinning up, a braked one locking)
     the torque fades by ``1 / (1 + (excess / (limit / 2))^2)`` (one up to the limit, a half at 1.5

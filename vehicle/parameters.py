@@ -241,7 +241,8 @@ _SECTIONS = {
 _OPTIONAL_SECTIONS = ("steering", "aerodynamics")
 _OPTIONAL_FIELDS = {
     "drive": ("front_drive_share", "slip_limit"),
-    "tyre": ("friction_scale", "rear_cornering_scale", "QBZ1", "QBZ2", "QBZ3", "QCZ1", "QDZ1", "QDZ2", "QEZ1", "QEZ2", "QEZ3", "QEZ4",
+    "tyre": ("friction_scale", "rear_cornering_scale", "QBZ1", "QBZ2", "QBZ3", "QCZ1", "QDZ1", "QDZ2", "QEZ1",
+             "QEZ2", "QEZ3", "QEZ4",
              "unloaded_radius"),
 }
 
@@ -291,8 +292,8 @@ def _validate(params: VehicleParameters) -> None:
         raise InputError(f"vehicle parameter drive.front_drive_share is a share of the drive torque, at most 1; "
                          f"got {params.drive.front_drive_share}")
     if params.drive.slip_limit >= 0.5:
-        raise InputError(f"vehicle parameter drive.slip_limit is a slip ratio below the envelope's 0.5 (a wheel spinning "
-                         f"up or locking); got {params.drive.slip_limit}")
+        raise InputError(f"vehicle parameter drive.slip_limit is a slip ratio below the envelope's 0.5 (a wheel "
+                         f"spinning up or locking); got {params.drive.slip_limit}")
     if params.tyre.PKY1 >= 0:
         raise InputError("vehicle parameter tyre.PKY1 must be negative (ISO sign: F_y opposes slip)")
     chassis = params.chassis

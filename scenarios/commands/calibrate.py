@@ -62,6 +62,9 @@ def register(parser: argparse.ArgumentParser) -> None:
                         help="fraction of the log at its end held out for validation (default 0.4)")
     parser.add_argument("--segment", default=None, metavar="T0:T1",
                         help="use only this part of the log (s; as the workbench's readers take it)")
+    parser.add_argument("--despike", action="store_true",
+                        help="replace the spikes and drop-outs found in the channels by straight lines between "
+                             "their neighbours (they are named either way)")
     parser.add_argument("--time-column", default=None, help="the log's time column (default t when present)")
     parser.add_argument("--scale", action="append", metavar="NAME=FACTOR", default=None,
                         help="multiply a log channel by FACTOR (a unit or a sign); repeatable or a comma list")
@@ -196,10 +199,12 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     import numpy as np
 
     from vehid.identification.dataio.archive_safety import check_output_target
-    from vehid.identification.dataio.preparation import ReadSettings, parse_scale, read_record
+    from vehid.identification.dataio.cleaning import despike, find_outliers
     from vehid.identification.filtering.greybox import GreyBoxOptions
+    from vehid.identification.dataio.timewindow import time_text
+    from vehid.scenarios.drive_log import read_drive, scaled_channels
     from vehid.vehicle import named_vehicle
-    from vehid.vehicle.drive_calibration import DriveLog, calibrate_drive
+    from vehid.vehicle.drive_calibration import DRIVE_PARAMETER_TOLERANCE, DriveLog, calibrate_drive
     from vehid.vehicle.model import OUTPUT_NAMES, speed_limit
     from vehid.vehicle.validity import MIN_SPEED
 
@@ -214,7 +219,8 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     checks = _checks(args.check)
     for channel, quantity in checks.items():
         if quantity not in OUTPUT_NAMES:
-            raise InputError(f"--check {channel}={quantity}: unknown quantity; the model offers {', '.join(OUTPUT_NAMES)}")
+            raise InputError(f"--check {channel}={quantity}: unknown quantity; the model offers "
+                             f"{', '.join(OUTPUT_NAMES)}")
     channels = (args.speed, *outputs, *checks, *((args.acceleration,) if args.acceleration else ()))
     if args.inputs in channels or len(set(channels)) != len(channels):
         raise InputError("a log channel is named twice among --inputs, --speed, --outputs, --check and --acceleration")
@@ -226,7 +232,8 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
         raise InputError(f"--slip-limit is a slip ratio in [0, 0.5); got {args.slip_limit}")
     filter_settings = {name: value for name, value in (("p", args.p), ("passes", args.passes),
                                                        ("substeps", args.substeps)) if value is not None}
-    options = GreyBoxOptions(prior_std=args.prior_std, coloured_residuals=True, **filter_settings)
+    options = GreyBoxOptions(prior_std=args.prior_std, coloured_residuals=True,
+                             parameter_tolerance=DRIVE_PARAMETER_TOLERANCE, **filter_settings)
     parameters = _names(args.parameters, "--parameters") if args.parameters else None
     priors, prior_std = _priors(args.prior)
     params = named_vehicle(args.vehicle)
@@ -234,17 +241,14 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     if args.out:
         check_output_target(args.out, inputs=[args.vehicle, args.log], force=args.force, what="vehicle file",
                             identify=lambda path: None, suffixes=(".toml",))
-    data = read_record(log, ReadSettings(inputs=(args.inputs,), outputs=channels, time_column=args.time_column,
-                                         segment=args.segment))
-    scale = parse_scale(args.scale)
-    unknown = sorted(set(scale) - {args.inputs, *channels})
-    if unknown:
-        raise InputError(f"--scale names {unknown[0]!r}, which is not a channel of this calibration")
+    data, scale = read_drive(log, args.inputs, channels, args.scale, what="a channel of this calibration",
+                             time_column=args.time_column, segment=args.segment)
+    outliers = find_outliers(data)
+    if args.despike and outliers:
+        data = despike(data, outliers)
+    channel = scaled_channels(data, args.inputs, scale)
 
-    def channel(name: str) -> np.ndarray:
-        values = data.u[:, 0] if name == args.inputs else data.y[:, data.output_names.index(name)]
-        return values * scale.get(name, 1.0)
-
+    offset = float(data.meta.get("time_base", {}).get("time_offset", 0.0) or 0.0)
     drive = DriveLog(
         t=data.t, steer=channel(args.inputs), speed=channel(args.speed),
         outputs=np.column_stack([channel(name) for name in outputs]), channels=outputs, quantities=quantities,
@@ -255,6 +259,8 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
                              prior_std=prior_std, options=options, slip_limit=args.slip_limit,
                              halves=not args.no_halves)
     summary, lines = _summary(args, log, params, drive, result, outputs, speed_limit(params), MIN_SPEED)
+    summary["outliers"] = [{**outlier.as_dict(), "treatment": "interpolated" if args.despike else "in the fit"}
+                           for outlier in outliers]
     if args.out:
         _write_vehicle(args, log, params, result, summary, lines)
     if figure is not None:
@@ -263,6 +269,14 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
         lines.append(f"wrote {figure}")
     text = "\n".join(lines)
     warnings = list(result.warnings)
+    if outliers and not args.despike:
+        shown = ", ".join(f"{o.channel} {o.value:.4g} at {time_text(o.time - offset, offset)}" for o in outliers[:5])
+        warnings.insert(0, f"{len(outliers)} spike(s) or drop-out(s) entered the calibration: {shown}"
+                           f"{' and more' if len(outliers) > 5 else ''}; --despike replaces them by interpolation")
+    elif outliers:
+        lines.append(f"{len(outliers)} spike(s) or drop-out(s) replaced by straight lines between their neighbours "
+                     "(--despike); the JSON key outliers lists their values as read")
+        text = "\n".join(lines)
     summary["warnings"] = warnings
     if result.failure is not None:
         raise PartialResultError(f"the calibration failed part of the way: {result.failure}", summary,
@@ -302,12 +316,13 @@ def _summary(args: argparse.Namespace, log: Path, params: Any, drive: Any, resul
         **_fit_keys(result.fits, "prior", outputs),
         **_fit_keys(result.fits, "start", outputs),
         "stages": [{"stage": label, "passes": len(stage.result.history),
-                    "parameters": {name: row for name, row in stage.parameters_dict().items() if row["std"] is not None}}
+                    "parameters": {name: row for name, row in stage.parameters_dict().items()
+                                   if row["std"] is not None}}
                    for label, stage in result.stages],
         "balance": result.balance.as_dict() if result.balance is not None else None,
-        "halves": {name: {"first": {"value": row["first"][0], "std": row["first"][1]},
-                          "second": {"value": row["second"][0], "std": row["second"][1]},
-                          "difference_sigma": row["difference_sigma"]} for name, row in result.halves.items()},
+        "halves": {name: {**{half: None if row[half] is None else {"value": row[half][0], "std": row[half][1]}
+                             for half in ("first", "second")}, "difference_sigma": row["difference_sigma"]}
+                   for name, row in result.halves.items()},
         "notes": list(result.notes),
         "failure": result.failure,
         "handling": None,
@@ -337,9 +352,10 @@ def _summary(args: argparse.Namespace, log: Path, params: Any, drive: Any, resul
                              if value is not None)
         lines.append(f"hold-out NRMSE fit, {label} car: {shown}" + (f"; {unfitted}" if unfitted else ""))
     for name, row in summary["halves"].items():
-        lines.append(f"halves: {name} {row['first']['value']:.5g} +/- {row['first']['std']:.2g} and "
-                     f"{row['second']['value']:.5g} +/- {row['second']['std']:.2g} "
-                     f"({row['difference_sigma']:.1f} std apart)")
+        shown = [f"{row[half]['value']:.5g} +/- {row[half]['std']:.2g}" if row[half] else "not determined"
+                 for half in ("first", "second")]
+        apart = "" if row["difference_sigma"] is None else f" ({row['difference_sigma']:.1f} std apart)"
+        lines.append(f"halves of the calibrating part: {name} {shown[0]} and {shown[1]}{apart}")
     # the calibrated car's handling where the log drove it, inside its own speed range
     lo, hi = float(np.min(driven)), float(np.max(driven))
     speeds = sorted({round(v, 1) for v in np.linspace(max(lo, 5.0), min(max(hi, 5.0), top), 3)})

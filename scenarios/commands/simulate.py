@@ -246,7 +246,7 @@ def run_replay(args: argparse.Namespace) -> tuple[dict, str]:
     import numpy as np
 
     from vehid.identification.dataio.archive_safety import check_output_target
-    from vehid.identification.dataio.preparation import ReadSettings, parse_scale, read_record
+    from vehid.scenarios.drive_log import read_drive, scaled_channels
     from vehid.vehicle import named_vehicle
     from vehid.vehicle.replay import channel_fits, replay
 
@@ -259,7 +259,8 @@ def run_replay(args: argparse.Namespace) -> tuple[dict, str]:
     if not log.is_file():
         raise InputError(f"no such log: {log}")
     compare = _compare_pairs(args.compare)
-    channels = [args.speed_channel, *compare.values(), *([args.acceleration_channel] if args.acceleration_channel else [])]
+    channels = [args.speed_channel, *compare.values(),
+                *([args.acceleration_channel] if args.acceleration_channel else [])]
     if args.steer_channel in channels or len(set(channels)) != len(channels):
         raise InputError("a log channel is named twice among --steer-channel, --speed-channel, --compare and "
                          "--acceleration-channel")
@@ -268,17 +269,10 @@ def run_replay(args: argparse.Namespace) -> tuple[dict, str]:
     if args.vehicle is None:
         args.vehicle = "saloon"
     params = named_vehicle(args.vehicle)
-    data = read_record(log, ReadSettings(inputs=(args.steer_channel,), outputs=tuple(channels),
-                                         time_column=args.time_column, resample=args.resample, segment=args.segment,
-                                         time_scale=args.time_scale))
-    scale = parse_scale(args.scale)
-    unknown = sorted(set(scale) - {args.steer_channel, *channels})
-    if unknown:
-        raise InputError(f"--scale names {unknown[0]!r}, which is not a replayed channel")
-
-    def channel(name: str) -> np.ndarray:
-        values = data.u[:, 0] if name == args.steer_channel else data.y[:, data.output_names.index(name)]
-        return values * scale.get(name, 1.0)
+    data, scale = read_drive(log, args.steer_channel, channels, args.scale, what="a replayed channel",
+                             time_column=args.time_column, resample=args.resample, segment=args.segment,
+                             time_scale=args.time_scale)
+    channel = scaled_channels(data, args.steer_channel, scale)
 
     run = run_digest(args)
     if args.out:
