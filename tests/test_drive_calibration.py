@@ -130,28 +130,30 @@ def test_the_start_holds_the_logs_accelerations_and_stands_lower():
     assert kept.chassis.yaw_inertia == prior.chassis.yaw_inertia and kept.drive.slip_limit == 0.0
 
 
-def test_the_rear_scale_holding_stiffness_keeps_the_rear_axles_cornering_stiffness():
-    """Closed form (Pacejka 2012, eq. 4.E25): the rear axle's cornering stiffness at its static load, the scale
-    times ``PKY1 F_z0 sin(PKY4 atan(F_z / (PKY2 F_z0)))``, is unchanged when PKY2 moves with the scale the
-    tie gives; the same tie made symbolic gives the same number."""
+def test_held_stiffness_scales_keep_each_axles_static_cornering_stiffness():
+    """Closed form (Pacejka 2012, eq. 4.E25): an axle's cornering stiffness at its static corner load, the
+    scale times ``PKY1 F_z0 sin(PKY4 atan(F_z / (PKY2 F_z0)))``, is what the level gives at the prior's
+    PKY2 whatever PKY2 becomes; the same tie made symbolic gives the same numbers."""
     import casadi as ca
 
-    from vehid.vehicle.calibration import rear_scale_holding_stiffness
+    from vehid.vehicle.calibration import held_stiffness_scales
     from vehid.vehicle.parameters import static_axle_loads
 
     vehicle = vehicle_from_mapping(PLAIN_PRIOR)
-    tyre, load = vehicle.tyre, static_axle_loads(vehicle)[1] / 2
+    tyre = vehicle.tyre
 
-    def stiffness(scale, pky2):
+    def stiffness(scale, pky2, load):
         return scale * tyre.PKY1 * tyre.nominal_load * math.sin(
-            tyre.PKY4 * math.atan(load / (pky2 * tyre.nominal_load)))
+            tyre.PKY4 * math.atan(load / 2 / (pky2 * tyre.nominal_load)))
 
+    levels = (0.7, 1.2)
+    symbol = ca.SX.sym("pky2")
+    tied = ca.Function("tied", [symbol], [ca.vertcat(*held_stiffness_scales(vehicle, symbol, levels))])
     for pky2 in (0.5, 1.0, 2.5):
-        scale = rear_scale_holding_stiffness(vehicle, pky2)
-        assert stiffness(scale, pky2) == pytest.approx(stiffness(1.0, tyre.PKY2), rel=1e-12)
-        symbol = ca.SX.sym("pky2")
-        tied = ca.Function("tied", [symbol], [rear_scale_holding_stiffness(vehicle, symbol)])
-        assert float(tied(pky2)) == pytest.approx(scale, rel=1e-12)
+        scales = held_stiffness_scales(vehicle, pky2, levels)
+        for scale, level, load in zip(scales, levels, static_axle_loads(vehicle)):
+            assert stiffness(scale, pky2, load) == pytest.approx(stiffness(level, tyre.PKY2, load), rel=1e-12)
+        assert np.asarray(tied(pky2)).ravel() == pytest.approx(np.asarray(scales, dtype=float), rel=1e-12)
 
 
 def test_the_plain_prior_spins_on_the_committed_log_where_the_start_drives_it():
@@ -273,7 +275,7 @@ def test_the_json_reports_nrmse_lists_in_output_order_prior_beside_and_the_check
     for key, label in (("validation_fit_percent", "calibrated"), ("prior_validation_fit_percent", "prior"),
                        ("start_validation_fit_percent", "start")):
         assert body[key] == pytest.approx(list(fake.fits[label]["validation"]["nrmse"]), abs=1e-12)
-        assert body[key.replace("_percent", "_R")] == pytest.approx(list(fake.fits[label]["validation"]["R"]),
+        assert body[key.replace("fit_percent", "R")] == pytest.approx(list(fake.fits[label]["validation"]["R"]),
                                                                     abs=1e-12)
     assert body["estimation_fit_percent"] == pytest.approx(list(fake.fits["calibrated"]["estimation"]["nrmse"]))
     assert body["check_fit_percent"] == {"beta_true": pytest.approx(fake.fits["calibrated"]["validation"]["checks"]

@@ -55,8 +55,8 @@ __all__ = [
     "Calibration",
     "calibration_model",
     "check_parameter",
-    "rear_scale_holding_stiffness",
-    "REAR_STIFFNESS_HELD",
+    "held_stiffness_scales",
+    "STIFFNESS_SCALES",
     "calibration_record",
     "calibrate_vehicle",
     "simulated_log",
@@ -136,32 +136,34 @@ def _symbolic_vehicle(params: VehicleParameters, names: Sequence[str], theta: ca
     return copy
 
 
-#: The rear axle's level tied to the tyres' load sensitivity (:func:`rear_scale_holding_stiffness`).
-REAR_STIFFNESS_HELD = "tyre.rear_cornering_scale"
+#: The cornering scales that follow the tyres' load sensitivity where it is calibrated with the axles'
+#: static stiffness held (:func:`held_stiffness_scales`).
+STIFFNESS_SCALES = ("tyre.front_cornering_scale", "tyre.rear_cornering_scale")
 
 
-def rear_scale_holding_stiffness(params: VehicleParameters, load_sensitivity: Any) -> Any:
-    """The rear cornering scale that keeps the rear axle's cornering stiffness at its static load what it is
-    in ``params`` when ``tyre.PKY2`` becomes ``load_sensitivity`` (a number or a CasADi symbol).
+def held_stiffness_scales(params: VehicleParameters, load_sensitivity: Any,
+                          scales: tuple[Any, Any] | None = None) -> tuple[Any, Any]:
+    """The front and rear cornering scales of ``params`` (or ``scales``) as they are where ``tyre.PKY2`` is
+    ``load_sensitivity`` (a number or a CasADi symbol) and each axle's cornering stiffness at its static
+    load stays what the scale gives at the PKY2 of ``params``.
 
-    ``PKY2`` sets the load at which a tyre's cornering stiffness stops growing: it changes the stiffness
-    at every load, the static one too. Where a log determines how the stiffness changes with the load
-    (the balance moving as the load moves across the car) but not the rear axle's level, which yaw rate
-    and lateral acceleration do not tell from the front's, this keeps that level at the prior's: the rear
-    scale makes up for what ``PKY2`` moved there.
+    ``PKY2`` sets the load at which a tyre's cornering stiffness stops growing (Pacejka 2012, eq. 4.E25):
+    it changes how an axle's stiffness moves with the load, and the stiffness at the static load with
+    it. With the static stiffness held, PKY2 is the shape alone and each cornering scale the axle's
+    level at the prior's PKY2: the two are then told apart by a drive (the level by the balance, the
+    shape by how the balance moves as the load moves across and along the car), which they were not
+    otherwise (on simulated drives to 0.8 g the front scale and PKY2 correlated by 0.98-0.99, and -0.64
+    with the stiffness held; benchmarks/calibration.py).
     """
-    corner_load = static_axle_loads(params)[1] / 2
     tyre = params.tyre
-    before = cornering_stiffness(corner_load, tyre)
-    after = cornering_stiffness(corner_load, dataclasses.replace(tyre, PKY2=load_sensitivity)
-                                if isinstance(load_sensitivity, (int, float)) else _with_symbol(tyre, load_sensitivity))
-    return tyre.rear_cornering_scale * before / after
-
-
-def _with_symbol(tyre: Any, load_sensitivity: ca.SX) -> Any:
-    holder = dataclasses.replace(tyre)
-    object.__setattr__(holder, "PKY2", load_sensitivity)
-    return holder
+    scales = (tyre.front_cornering_scale, tyre.rear_cornering_scale) if scales is None else scales
+    if isinstance(load_sensitivity, (int, float)):
+        shaped = dataclasses.replace(tyre, PKY2=float(load_sensitivity))
+    else:
+        shaped = dataclasses.replace(tyre)
+        object.__setattr__(shaped, "PKY2", load_sensitivity)
+    return tuple(scale * cornering_stiffness(load / 2, tyre) / cornering_stiffness(load / 2, shaped)
+                 for scale, load in zip(scales, static_axle_loads(params)))
 
 
 def _straight_direction(params: VehicleParameters) -> np.ndarray:
@@ -174,12 +176,12 @@ def _straight_direction(params: VehicleParameters) -> np.ndarray:
 
 
 def calibration_model(params: VehicleParameters, parameters: Sequence[str], quantities: Sequence[str], *,
-                      hold_rear_stiffness: bool = False) -> GreyBoxModel:
+                      hold_static_stiffness: bool = False) -> GreyBoxModel:
     """The 23-state model of ``params`` with ``parameters`` symbolic, measuring ``quantities``.
 
-    With ``hold_rear_stiffness`` (``tyre.PKY2`` calibrated, the rear cornering scale not), the rear
-    cornering scale follows ``PKY2`` so that the rear axle's cornering stiffness at its static load
-    stays that of ``params`` (:func:`rear_scale_holding_stiffness`).
+    With ``hold_static_stiffness`` (``tyre.PKY2`` calibrated) the cornering scales, calibrated or not,
+    are the axles' levels at the PKY2 of ``params``, and PKY2 moves only how the stiffness changes
+    with the load (:func:`held_stiffness_scales`).
 
     Parameters
     ----------
@@ -217,11 +219,12 @@ def calibration_model(params: VehicleParameters, parameters: Sequence[str], quan
         starts.append(value)
     theta = ca.SX.sym("theta", len(parameters))
     symbolic = _symbolic_vehicle(params, parameters, theta)
-    if hold_rear_stiffness:
-        if "tyre.PKY2" not in parameters or REAR_STIFFNESS_HELD in parameters:
-            raise InputError("holding the rear axle's stiffness needs tyre.PKY2 calibrated and the rear cornering "
-                             "scale not")
-        rear = rear_scale_holding_stiffness(params, theta[parameters.index("tyre.PKY2")])
+    if hold_static_stiffness:
+        if "tyre.PKY2" not in parameters:
+            raise InputError("holding the axles' static cornering stiffness needs tyre.PKY2 calibrated")
+        levels = tuple(getattr(symbolic.tyre, name.partition(".")[2]) for name in STIFFNESS_SCALES)
+        front, rear = held_stiffness_scales(params, theta[parameters.index("tyre.PKY2")], levels)
+        object.__setattr__(symbolic.tyre, "front_cornering_scale", front)
         object.__setattr__(symbolic.tyre, "rear_cornering_scale", rear)
     try:
         x, steer, reference_speed, reference_acceleration, xdot, y = vehicle_expressions(symbolic)
@@ -241,7 +244,7 @@ def calibration_model(params: VehicleParameters, parameters: Sequence[str], quan
         positive=tuple(positive), state_names=tuple(f"d_{name}" for name in STATE_NAMES), input_names=("steer",),
         schedule_names=("reference_speed", "reference_acceleration"), output_names=quantities,
         description=f"23-state vehicle {params.name!r}: {', '.join(parameters)} calibrated"
-                    + (", the rear axle's stiffness held" if hold_rear_stiffness else ""),
+                    + (", the axles' static cornering stiffness held" if hold_static_stiffness else ""),
     )
 
 
@@ -358,6 +361,9 @@ class Calibration:
         Name -> reason, for the parameters the log did not determine (held at the prior).
     result : GreyBoxResult
         The last grey-box fit (of the determined parameters).
+    vehicle_values : dict
+        Fields whose value in :attr:`vehicle` is not their estimate: the cornering scales where the
+        axles' static stiffness is held (``hold_static_stiffness`` of :func:`calibrate_vehicle`).
     """
 
     vehicle: VehicleParameters
@@ -369,10 +375,13 @@ class Calibration:
     held: dict[str, str]
     result: GreyBoxResult | None
     warnings: tuple[str, ...] = field(default_factory=tuple)
+    vehicle_values: dict[str, float] = field(default_factory=dict)
 
     def parameters_dict(self) -> dict[str, dict[str, Any]]:
-        """``name -> {value, std, unit}`` (std None where held at the prior)."""
-        return {name: {"value": float(v), "std": None if not math.isfinite(s) else float(s), "unit": unit}
+        """``name -> {value, std, unit}`` (std None where held at the prior), with ``in_vehicle`` where the
+        vehicle carries another value (:attr:`vehicle_values`)."""
+        return {name: {"value": float(v), "std": None if not math.isfinite(s) else float(s), "unit": unit,
+                       **({"in_vehicle": self.vehicle_values[name]} if name in self.vehicle_values else {})}
                 for name, v, s, unit in zip(self.parameter_names, self.values, self.std, self.units)}
 
 
@@ -405,7 +414,8 @@ def calibrate_vehicle(params: VehicleParameters, data: IOData | Sequence[IOData]
                       parameters: Sequence[str] | None = None, priors: Mapping[str, float] | None = None,
                       prior_std: Mapping[str, float] | None = None, correlation_limit: float = CORRELATION_LIMIT,
                       options: GreyBoxOptions | None = None, fixed: Sequence[str] = (),
-                      starts: Mapping[str, float] | None = None, hold_rear_stiffness: bool = False) -> Calibration:
+                      starts: Mapping[str, float] | None = None, hold_static_stiffness: bool = False
+                      ) -> Calibration:
     """Calibrate chosen parameters of ``params`` to logs (:func:`calibration_record`).
 
     Parameters
@@ -434,10 +444,11 @@ def calibrate_vehicle(params: VehicleParameters, data: IOData | Sequence[IOData]
     starts : mapping, optional
         ``name -> value``: where the filter starts, in place of the prior value (an earlier stage's
         estimate). The prior std still applies around it.
-    hold_rear_stiffness : bool
-        The rear cornering scale follows ``tyre.PKY2`` so that the rear axle's cornering stiffness at
-        its static load stays the prior's (:func:`calibration_model`); the calibrated vehicle carries
-        the scale that does so.
+    hold_static_stiffness : bool
+        The cornering scales are the axles' levels at the prior's ``tyre.PKY2``, which moves only how
+        the stiffness changes with the load (:func:`calibration_model`): the estimates of the scales
+        are those levels, and the calibrated vehicle carries the scales that give them at the
+        estimated PKY2 (:attr:`Calibration.vehicle_values`).
 
     Returns
     -------
@@ -479,7 +490,7 @@ def calibrate_vehicle(params: VehicleParameters, data: IOData | Sequence[IOData]
                                for name, value in zip(parameters, prior_values)])
     # built on the prior vehicle whatever the starts: one model (and compilation) for every stage, and the
     # rear axle's stiffness, where held, held at the prior's
-    model = calibration_model(prior_vehicle, parameters, quantities, hold_rear_stiffness=hold_rear_stiffness)
+    model = calibration_model(prior_vehicle, parameters, quantities, hold_static_stiffness=hold_static_stiffness)
     free = [name for name in parameters if name not in fixed]
     if not free:
         raise InputError("every calibration parameter is fixed: leave at least one to estimate")
@@ -512,12 +523,16 @@ def calibrate_vehicle(params: VehicleParameters, data: IOData | Sequence[IOData]
                      f"{'prior' if name not in starts else 'start'} {start_values[parameters.index(name)]:.6g}"
                      for name, why in held.items())
     vehicle = vehicle_with(prior_vehicle, parameters, values)
-    if hold_rear_stiffness:
-        rear = rear_scale_holding_stiffness(prior_vehicle, float(values[parameters.index("tyre.PKY2")]))
-        vehicle = vehicle_with(vehicle, (REAR_STIFFNESS_HELD,), (float(rear),))
+    vehicle_values: dict[str, float] = {}
+    if hold_static_stiffness:
+        scales = held_stiffness_scales(prior_vehicle, float(values[parameters.index("tyre.PKY2")]),
+                                       tuple(float(getattr(vehicle.tyre, n.partition(".")[2])) for n in STIFFNESS_SCALES))
+        vehicle_values = dict(zip(STIFFNESS_SCALES, map(float, scales)))
+        vehicle = vehicle_with(vehicle, STIFFNESS_SCALES, scales)
     return Calibration(
         vehicle=vehicle, parameter_names=parameters, units=units,
         values=values, std=std, correlation=correlation, held=held, result=result, warnings=warnings,
+        vehicle_values=vehicle_values,
     )
 
 

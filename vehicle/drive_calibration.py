@@ -31,9 +31,10 @@ Choices, each stated where it is made:
   acceleration within the tyres' linear range) and the front axle's cornering scale set to give it,
   the rear's kept (the front scale stands for what the tyre data leave out at the front, the
   steering's compliance above all). (2) From that start the filter estimates the steady-state part
-  (:data:`STEADY_PARAMETERS`: the balance, the tyres' load sensitivity and grip) with the yaw dynamics
-  held at the start, then (3) the yaw dynamics (the yaw inertia, any relaxation length asked for) with
-  everything else from stage 2's estimates; (4) roll, where it is measured. The order matters: with
+  (:data:`STEADY_PARAMETERS`: the balance and the tyres' load sensitivity) with the yaw dynamics and
+  the grip held at the start, then (3) the yaw dynamics and the grip (the yaw inertia, the friction,
+  any relaxation length asked for) with everything else from stage 2's estimates; (4) roll, where it
+  is measured. The order matters: with
   the balance held instead, the yaw inertia made up for it on the committed race-car log (2539
   against a start of 1397 kg m^2) and all four free at once left the front scale undetermined (a
   std of half its value) and the car no better than its start. One model is compiled for all stages
@@ -68,7 +69,7 @@ from vehid.identification.filtering.greybox import GreyBoxOptions, simulate_grey
 
 from . import calibration as _calibration
 from .calibration import Calibration, calibration_record, vehicle_with
-from .model import OUTPUT_NAMES, speed_limit
+from .model import MAX_STEER, OUTPUT_NAMES, speed_limit
 from .parameters import GRAVITY, VehicleParameters, peak_lateral_friction, static_axle_loads, static_stability_factor
 from .replay import replay_substeps
 from .tyre import cornering_stiffness
@@ -97,9 +98,11 @@ __all__ = [
 
 #: The steady-state balance: set in stage 1 (the front's), estimated first in the filter (stage 2).
 BALANCE_PARAMETERS = ("tyre.front_cornering_scale", "tyre.rear_cornering_scale")
-#: What the filter's first stage estimates, the yaw dynamics held: the balance, how it moves with the
-#: load (PKY2) and the grip, all of them properties of the steady state.
-STEADY_PARAMETERS = BALANCE_PARAMETERS + ("tyre.PKY2", "tyre.friction_scale")
+#: What the filter's first stage estimates, the yaw dynamics and the grip held: the balance and how it
+#: moves with the load (PKY2), properties of the steady state below the limit. The grip comes with the
+#: yaw dynamics: free from the start, it ran off to a friction scale of 0.2 on the committed race-car
+#: log's 48 s (the filter's corrected states need no grip) and took the balance with it.
+STEADY_PARAMETERS = BALANCE_PARAMETERS + ("tyre.PKY2",)
 #: What a drive calibrates by default: the front cornering scale (the balance), the load at which the
 #: tyres' cornering stiffness stops growing (``PKY2``: how the balance shifts as the load moves across
 #: the car in a corner), the grip and the yaw inertia (the yaw response's lag).
@@ -131,6 +134,10 @@ HALVES_LIMIT = 2.0
 #: force peaks (0.1 for the baseline tyre), where anti-lock brakes and traction control hold a wheel.
 DEFAULT_SLIP_LIMIT = 0.1
 
+# The filter's RK4 steps are at most this share of the largest step stable at the drive's top speed at
+# straight running: the modes speed up where the slip limiter holds a wheel or the load moves (a 10-minute
+# drive's filter diverged in its first pass at the replay's 0.8, one step per sample at 60 m/s and 100 Hz).
+_STEP_MARGIN = 0.5
 # The start's friction: the log's largest acceleration (of the 0.2 s mean, its 99.5th percentile:
 # an accelerometer's vibration and single spikes excluded) is taken to use this share of the grip.
 _GRIP_USED = 0.85
@@ -225,6 +232,12 @@ class DriveLog:
             bad = np.flatnonzero(~np.all(np.isfinite(values.reshape(n, -1)), axis=1))
             if bad.size:
                 raise InputError(f"the {name} is not finite at t = {t[bad[0]]:.6g} s ({bad.size} samples)")
+        beyond = np.flatnonzero(np.abs(self.steer) > MAX_STEER)
+        if beyond.size:
+            raise InputError(f"the steer reaches {math.degrees(self.steer[beyond[0]]):.4g} deg at t = "
+                             f"{t[beyond[0]]:.6g} s, beyond the model's +/-{math.degrees(MAX_STEER):g} deg at the road "
+                             "wheel: is it a road-wheel angle in rad? (a steering-wheel angle: divide by the ratio "
+                             "with --scale)")
 
     @property
     def dt(self) -> float:
@@ -531,8 +544,7 @@ class DriveCalibration:
 
 def _score(log: DriveLog, runs: Sequence[tuple[int, int]], vehicle: VehicleParameters, n_estimation: int,
            substeps: int, parameters: Sequence[str] = ("chassis.yaw_inertia",),
-           values: Sequence[float] | None = None, hold_rear_stiffness: bool = False
-           ) -> tuple[np.ndarray, dict[str, Any] | None]:
+           values: Sequence[float] | None = None) -> tuple[np.ndarray, dict[str, Any] | None]:
     """A car driven over every run from its start, scored on the estimation and the held-out samples.
 
     The car is ``vehicle`` with ``parameters`` at ``values`` (default: the vehicle's own): cars that
@@ -540,7 +552,7 @@ def _score(log: DriveLog, runs: Sequence[tuple[int, int]], vehicle: VehicleParam
     """
     quantities = log.quantities + tuple(quantity for quantity, _ in log.checks.values())
     parameters = tuple(parameters)
-    model = _calibration.calibration_model(vehicle, parameters, quantities, hold_rear_stiffness=hold_rear_stiffness)
+    model = _calibration.calibration_model(vehicle, parameters, quantities)
     theta = list(_field_values(vehicle, parameters).values()) if values is None else list(values)
     predicted = np.full((log.n_samples, len(quantities)), np.nan)
     for a, b in runs:
@@ -601,6 +613,7 @@ def calibrate_drive(
     options: GreyBoxOptions | None = None,
     slip_limit: float | None = None,
     halves: bool = True,
+    relative_prior_std: float | None = None,
 ) -> DriveCalibration:
     """Calibrate ``prior`` to a whole drive (module notes).
 
@@ -622,6 +635,9 @@ def calibrate_drive(
         The start car's slip limiter (:func:`start_vehicle`).
     halves : bool
         Compare the estimates of the estimation part's halves.
+    relative_prior_std : float, optional
+        The relative prior std of every parameter ``prior_std`` leaves out; default the plausible spread
+        of :data:`PLAUSIBLE_SPREAD` where it names the parameter, else ``options.prior_std``.
 
     Raises
     ------
@@ -674,7 +690,7 @@ def calibrate_drive(
                                                  slip_limit=slip_limit)
     notes.extend(start_notes)
     speeds = log.speed[np.concatenate([np.arange(a, b) for a, b in runs])]
-    substeps = replay_substeps(start, dt, float(speeds.max()))
+    substeps = replay_substeps(start, dt, float(speeds.max()), margin=_STEP_MARGIN)
     options = options or GreyBoxOptions(coloured_residuals=True, parameter_tolerance=DRIVE_PARAMETER_TOLERANCE)
     if options.substeps < substeps:
         options = dataclasses.replace(options, substeps=substeps)
@@ -686,23 +702,27 @@ def calibrate_drive(
     # how well the start knows each parameter: the user's std, else the plausible spread of such cars
     prior_std = dict(prior_std or {})
     for name, value in _field_values(start, parameters).items():
-        if name not in prior_std and name in PLAUSIBLE_SPREAD:
-            prior_std[name] = PLAUSIBLE_SPREAD[name] * abs(priors.get(name, value))
+        spread = PLAUSIBLE_SPREAD.get(name) if relative_prior_std is None else relative_prior_std
+        if name not in prior_std and spread is not None:
+            prior_std[name] = spread * abs(priors.get(name, value))
     stage_plan = _stage_plan(parameters, quantities)
-    # yaw rate and lateral acceleration do not tell the rear axle's level from the front's: where the tyres'
-    # load sensitivity is calibrated and the rear scale is not, the rear axle's stiffness stays the start's
-    hold = "tyre.PKY2" in parameters and "tyre.rear_cornering_scale" not in parameters
+    # where the tyres' load sensitivity is calibrated it moves the shape of the stiffness against the load,
+    # and the cornering scales the axles' levels: a level yaw rate and lateral acceleration do not tell
+    # (the rear's, without the sideslip) stays where the start has it (held_stiffness_scales)
+    hold = "tyre.PKY2" in parameters
     if hold:
-        notes.append("the rear axle's cornering stiffness at its static load is held at the start's while "
-                     "tyre.PKY2 moves (the rear cornering scale follows it): yaw rate and lateral acceleration do "
-                     "not tell the rear axle's level from the front's")
+        notes.append("tyre.PKY2 moves how the tyres' cornering stiffness changes with the load, each axle's "
+                     "stiffness at its static load held at the cornering scale's (the scales are the axles' levels "
+                     "at the start's PKY2; the vehicle file carries the scales that give them)")
+    # the start and the calibrated car differ only in these fields: one compiled simulator scores both
+    scored = tuple(dict.fromkeys(parameters + _calibration.STIFFNESS_SCALES))
     stages: list[tuple[str, Calibration]] = []
     failure = None
     calibration: Calibration | None = None
     warnings: list[str] = []
     fits: dict[str, Any] = {}
     predictions: dict[str, np.ndarray] = {}
-    predictions["start"], fits["start"] = _score(log, runs, start, n_estimation, substeps, parameters, None, hold)
+    predictions["start"], fits["start"] = _score(log, runs, start, n_estimation, substeps, scored)
     if fits["start"] is None:
         notes.append("the start car's simulation of the log is not finite: it is not scored")
     # a stage earns its place by its car's simulation of the calibrating part (the filter's estimate
@@ -717,7 +737,7 @@ def calibrate_drive(
         try:
             result = _calibration.calibrate_vehicle(start, records, quantities, parameters=parameters, priors=priors,
                                                     prior_std=prior_std, options=options, fixed=fixed,
-                                                    starts=stage_starts, hold_rear_stiffness=hold)
+                                                    starts=stage_starts, hold_static_stiffness=hold)
         except DivergenceError as exc:
             failure = f"stage '{label}' diverged: {exc}"
             break
@@ -737,12 +757,11 @@ def calibrate_drive(
         failure = "no stage determined its parameters and drove the calibrating part better than the start"
     if calibration is not None:
         warnings.extend(calibration.warnings)
-    # the start and the calibrated car differ only in the calibrated parameters: one simulator for both
-    cars = [("prior", prior, ("chassis.yaw_inertia",), None, False)]
+    cars = [("prior", prior, ("chassis.yaw_inertia",))]
     if calibration is not None:
-        cars.append(("calibrated", start, parameters, calibration.values, hold))
-    for label, vehicle, names, values, tied in cars:
-        predictions[label], fits[label] = _score(log, runs, vehicle, n_estimation, substeps, names, values, tied)
+        cars.append(("calibrated", calibration.vehicle, scored))
+    for label, vehicle, names in cars:
+        predictions[label], fits[label] = _score(log, runs, vehicle, n_estimation, substeps, names)
         if fits[label] is None:
             notes.append(f"the {label} car's simulation of the log is not finite: it is not scored")
     halves_rows: dict[str, Any] = {}
@@ -788,7 +807,7 @@ def _stage_plan(parameters: Sequence[str], quantities: Sequence[str]) -> list[tu
 def _halves(start: VehicleParameters, log: DriveLog, runs: Sequence[tuple[int, int]], n_estimation: int,
             min_samples: int, calibration: Calibration, parameters: Sequence[str], priors: Mapping[str, float],
             prior_std: Mapping[str, float] | None, options: GreyBoxOptions,
-            hold_rear_stiffness: bool) -> tuple[dict[str, Any], list[str]]:
+            hold_static_stiffness: bool) -> tuple[dict[str, Any], list[str]]:
     """Calibrate each half of the estimation part from the whole part's estimate and compare them."""
     rows = np.concatenate([np.arange(a, min(b, n_estimation)) for a, b in runs if a < n_estimation])
     middle = int(rows[rows.size // 2])
@@ -804,7 +823,7 @@ def _halves(start: VehicleParameters, log: DriveLog, runs: Sequence[tuple[int, i
             found.append(_calibration.calibrate_vehicle(start, records, log.quantities, parameters=parameters,
                                                         priors=priors, prior_std=prior_std, options=options,
                                                         fixed=fixed, starts=starts,
-                                                        hold_rear_stiffness=hold_rear_stiffness))
+                                                        hold_static_stiffness=hold_static_stiffness))
         except DivergenceError as exc:
             return {}, [f"a half of the estimation part diverged ({exc}): halves not compared"]
     return _compare_halves(calibration, *found)

@@ -2,8 +2,8 @@
 
 The twin of a measured drive (:mod:`vehid.vehicle.drive_calibration`): it starts and stops at rest,
 accelerates to a top speed and brakes hard, corners at lateral accelerations up to near the grip
-limit with quasi-steady stretches, and carries a small random steer on its straights, so that a
-calibration meets what a real log holds, standstill included.
+limit (braking into each corner, quasi-steady in its middle, accelerating out) and carries a small
+random steer on its straights, so that a calibration meets what a real log holds, standstill included.
 
 The source model is not valid below :data:`~vehid.vehicle.validity.MIN_SPEED`; there the drive runs
 straight (no steer below :data:`STRAIGHT_BELOW`), where a car neither yaws nor accelerates sideways:
@@ -35,6 +35,7 @@ __all__ = ["STRAIGHT_BELOW", "Drive", "drive_from_rest", "simulated_drive"]
 STRAIGHT_BELOW = 5.0
 
 _EDGE = 0.5  # [s] jerk-limited edge of every acceleration pulse
+_TRAIL = 2.0  # [m/s^2] braking into a corner's first part and accelerating out of its last
 _STEER_RAMP = 1.5  # [s] a corner's steer rises and falls over this time
 _UNDERSTEER_GUESS = 1.0 * math.pi / 180 / 9.81  # [rad per m/s^2] 1 deg/g: steer for a wanted lateral acceleration
 _EXCITATION_DEG = 0.3  # RMS road-wheel steer (deg) at 20 m/s on the straights, 0-2 Hz, scaled by (20 / V)^2
@@ -118,10 +119,13 @@ def drive_from_rest(*, duration: float = 600.0, dt: float = 0.01, top_speed: flo
         straight = float(rng.uniform(2.0, 5.0))
         clock += straight  # a straight at the speed reached
         change_speed(target, 4.0 if target > speed else braking)
-        # a corner at that speed: quasi-steady in its middle
+        # a corner at that speed: braked into, quasi-steady in its middle, driven out of, so that the load
+        # moves between the axles as well as across them while the car corners
         length = float(rng.uniform(4.0, 9.0))
         size = float(rng.uniform(0.3, 1.0)) * lateral_acceleration * float(rng.choice([-1.0, 1.0]))
         corners.append((clock, length, size))
+        pulses.append((clock + 0.15 * length, 0.25 * length, -_TRAIL))
+        pulses.append((clock + 0.6 * length, 0.25 * length, _TRAIL))
         clock += length + _STEER_RAMP
         # brake to the next corner's speed when the car is fast
         if speed > 0.7 * top_speed:

@@ -60,19 +60,20 @@ def _vehicle_for(params: VehicleParameters, steer_is: str) -> VehicleParameters:
     return params
 
 
-def replay_substeps(params: VehicleParameters, dt: float, top_speed: float) -> int:
+def replay_substeps(params: VehicleParameters, dt: float, top_speed: float, margin: float = _STEP_MARGIN) -> int:
     """The fewest RK4 steps per sample of ``dt`` (s) that keep every mode of ``params`` stable up to ``top_speed``.
 
     The fastest modes (the slip lags, ``-V / sigma``) grow with speed, so the
-    step is sized at the top speed; ``_STEP_MARGIN`` keeps it clear of the
-    edge of RK4's stability region.
+    step is sized at the top speed; each step is at most ``margin`` of the
+    largest stable one (default ``_STEP_MARGIN``), clear of the edge of RK4's
+    stability region.
     """
     model = build_vehicle_model(params)
     x = model.trim(top_speed)
     eigenvalues = np.linalg.eigvals(np.asarray(linearization_function(model)(x, 0.0, top_speed)[0]))
     # the margin applies to a log's own step too: a step stable only at the edge is stable, not accurate
-    stable = largest_stable_step(eigenvalues, dt / _STEP_MARGIN)
-    substeps = max(1, math.ceil(dt / (_STEP_MARGIN * stable) - 1e-12))
+    stable = largest_stable_step(eigenvalues, dt / margin)
+    substeps = max(1, math.ceil(dt / (margin * stable) - 1e-12))
     if substeps > _MAX_SUBSTEPS:
         raise InputError(f"the log's sample interval {dt:g} s needs {substeps} RK4 steps per sample at "
                          f"{top_speed:g} m/s; resample it to at least {substeps / _MAX_SUBSTEPS / dt:.3g} Hz first")

@@ -16,7 +16,7 @@ front and rear cornering scales, the friction scale and the yaw inertia, with th
 front anti-roll bar when the roll angle is measured), in stages (balance, then everything, then
 roll); the last --validation fraction is held out and predicted, the prior, start and calibrated
 cars each driven over the whole log from its start and scored alike by the NRMSE fit
-(``*_fit_percent``; R of eq. 17 under ``*_fit_R``). --check CHANNEL=QUANTITY scores a measured
+(``*_fit_percent``; R of eq. 17 under ``*_R``). --check CHANNEL=QUANTITY scores a measured
 channel that is never fitted (``check_fit_percent``). The two halves of the calibrating part are
 calibrated again and compared. Parameters the log does not determine (std above their size or half
 their prior std, or |correlation| > 0.95 with another) are held with a warning (exit 3 under
@@ -76,8 +76,9 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--prior", action="append", default=None, metavar="NAME=VALUE[:STD]",
                         help="prior value of a calibrated parameter and optionally its std in the "
                              "parameter's unit (repeatable); default the vehicle's value and --prior-std")
-    parser.add_argument("--prior-std", type=float, default=1.0,
-                        help="relative prior standard deviation of every parameter (default 1: a factor e)")
+    parser.add_argument("--prior-std", type=float, default=None,
+                        help="relative prior standard deviation of every parameter (1: a factor e); default the "
+                             "plausible spread of each default parameter (0.2-0.5), 1 for the others")
     parser.add_argument("--p", type=float, default=None,
                         help="the filter's random-walk variance of a scaled parameter per pass (default 1e-4); "
                              "smaller holds the parameters steadier")
@@ -178,7 +179,7 @@ def _fit_list(values: Any) -> list[float | None] | None:
 
 
 def _fit_keys(fits: dict, label: str, channels: tuple[str, ...]) -> dict[str, Any]:
-    """The ``*_fit_percent`` (NRMSE) and ``*_fit_R`` keys of one car's scores."""
+    """The ``*_fit_percent`` (NRMSE) keys of one car's scores and the ``*_R`` keys (R of eq. 17) beside them."""
     prefix = "" if label == "calibrated" else f"{label}_"
     scores = fits.get(label)
     keys: dict[str, Any] = {}
@@ -187,11 +188,11 @@ def _fit_keys(fits: dict, label: str, channels: tuple[str, ...]) -> dict[str, An
             continue
         score = scores.get(part) if scores else None
         keys[f"{prefix}{part}_fit_percent"] = _fit_list(score["nrmse"]) if score else None
-        keys[f"{prefix}{part}_fit_R"] = _fit_list(score["R"]) if score else None
+        keys[f"{prefix}{part}_R"] = _fit_list(score["R"]) if score else None
     validation = scores.get("validation") if scores else None
-    keys[f"{prefix}check_fit_percent"] = ({channel: (value if math.isfinite(value) else None)
-                                           for channel, value in validation["checks"].items()}
-                                          if validation else None)
+    for key, scored in (("check_fit_percent", "checks"), ("check_R", "checks_R")):
+        keys[f"{prefix}{key}"] = ({channel: (value if math.isfinite(value) else None)
+                                   for channel, value in validation[scored].items()} if validation else None)
     return keys
 
 
@@ -226,13 +227,13 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
         raise InputError("a log channel is named twice among --inputs, --speed, --outputs, --check and --acceleration")
     if not (math.isfinite(args.validation) and 0 <= args.validation < 1):
         raise InputError(f"--validation is the held-out fraction, in [0, 1); got {args.validation}")
-    if not (math.isfinite(args.prior_std) and args.prior_std > 0):
+    if args.prior_std is not None and not (math.isfinite(args.prior_std) and args.prior_std > 0):
         raise InputError(f"--prior-std must be a positive number; got {args.prior_std}")
     if args.slip_limit is not None and not (math.isfinite(args.slip_limit) and 0 <= args.slip_limit < 0.5):
         raise InputError(f"--slip-limit is a slip ratio in [0, 0.5); got {args.slip_limit}")
     filter_settings = {name: value for name, value in (("p", args.p), ("passes", args.passes),
                                                        ("substeps", args.substeps)) if value is not None}
-    options = GreyBoxOptions(prior_std=args.prior_std, coloured_residuals=True,
+    options = GreyBoxOptions(prior_std=args.prior_std or 1.0, coloured_residuals=True,
                              parameter_tolerance=DRIVE_PARAMETER_TOLERANCE, **filter_settings)
     parameters = _names(args.parameters, "--parameters") if args.parameters else None
     priors, prior_std = _priors(args.prior)
@@ -257,7 +258,7 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     )
     result = calibrate_drive(params, drive, validation=args.validation, parameters=parameters, priors=priors,
                              prior_std=prior_std, options=options, slip_limit=args.slip_limit,
-                             halves=not args.no_halves)
+                             halves=not args.no_halves, relative_prior_std=args.prior_std)
     summary, lines = _summary(args, log, params, drive, result, outputs, speed_limit(params), MIN_SPEED)
     summary["outliers"] = [{**outlier.as_dict(), "treatment": "interpolated" if args.despike else "in the fit"}
                            for outlier in outliers]
@@ -335,9 +336,17 @@ def _summary(args: argparse.Namespace, log: Path, params: Any, drive: Any, resul
     lines.extend(f"note: {note}" for note in result.notes)
     for label, stage in result.stages:
         lines.append(f"stage {label}: {len(stage.result.history)} passes")
+    earlier = {name: (label, row["std"]) for label, stage in result.stages
+               for name, row in stage.parameters_dict().items() if row["std"] is not None}
     for name, row in summary["parameters"].items():
-        std = "held" if row["std"] is None else f"+/- {row['std']:.3g}"
-        lines.append(f"  {name} = {row['value']:.6g} {std} [{row['unit']}]")
+        if row["std"] is not None:
+            std = f"+/- {row['std']:.3g}"
+        elif name in earlier:
+            std = f"held at stage '{earlier[name][0]}' (+/- {earlier[name][1]:.3g} there)"
+        else:
+            std = "held"
+        in_vehicle = f"; in the vehicle file {row['in_vehicle']:.6g}" if "in_vehicle" in row else ""
+        lines.append(f"  {name} = {row['value']:.6g} {std} [{row['unit']}]{in_vehicle}")
     for label, key in (("prior", "prior_validation_fit_percent"), ("start", "start_validation_fit_percent"),
                        ("calibrated", "validation_fit_percent")):
         values = summary.get(key)
