@@ -223,6 +223,8 @@ class Identification:
             summary["divergence"] = self.divergence
         if self.start_returned:
             summary.update(fit_percent=self.fit_percent, model_returned="start")  # a returned family's scores replace it below
+        elif self.is_iekf and model is not result.model:  # the filter's model refined: its own R
+            summary["fit_percent"] = self.fit_percent
         from .steps import scores_summary  # the public score keys are defined once, beside the scoring
 
         summary.update(scores_summary(self.evaluation, summary["fit_percent"]))

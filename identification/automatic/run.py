@@ -86,7 +86,8 @@ def _order_search(plan: Plan, options: IdentifyOptions, iekf: Any) -> Identifica
     rows, kept = steps.search_orders(plan, lambda order: steps.run_iekf_order(options, plan, iekf, order), options)
     chosen = steps.choose_order(rows)
     model, extra, _ = kept[chosen]
-    keys = {key: extra[key] for key in ("open_loop_unstable", "start_kept", "decision_margins") if key in extra}
+    keys = {key: extra[key] for key in ("open_loop_unstable", "start_kept", "decision_margins", "model_returned",
+                                        "refinement") if key in extra}
     keys["decision_margins"] = {**keys.get("decision_margins", {}), "order": steps.order_margin(rows, chosen)}
     return _finish(plan, options, model, estimator=extra["result"], tuning=extra["tuning"], keys=keys,
                    seconds=sum(row["seconds"] for row in rows), rows=rows)
@@ -138,10 +139,11 @@ def _finish(plan: Plan, options: IdentifyOptions, model: Any, *, estimator: Any,
     data = plan.records[0]
     iekf = tuning is not None
     result = estimator if iekf else None
-    start_returned = result is not None and model is not result.model
+    start_returned = result is not None and keys.get("model_returned") == "start"
     if iekf:
         order = result.structure.n
-        fit = pooled_simulation_fit(model, plan.records) if start_returned else result.fit_percent
+        # the filter's R unless another model (its start, or either refined) is returned
+        fit = pooled_simulation_fit(model, plan.records) if model is not result.model else result.fit_percent
     evaluation = steps.evaluate(model, plan, options)
     checks = tests = None
     if isinstance(model, ModalModel):  # how sure the model is; on the (first) estimation record
@@ -155,7 +157,7 @@ def _finish(plan: Plan, options: IdentifyOptions, model: Any, *, estimator: Any,
     # modes that never left their start are a problem of the run, whichever of the two models is returned
     start_fit, start_moved = steps.start_of(result, plan.records) if result is not None else (None, None)
     notes = steps.decision_notes({
-        **{key: keys[key] for key in ("open_loop_unstable", "start_kept") if key in keys},
+        **{key: keys[key] for key in ("open_loop_unstable", "start_kept", "refinement") if key in keys},
         **({"model_returned": "start"} if start_returned else {}),
         **({"start_cv_fit_percent": tuning.start_fit} if iekf else {})})
     stop_reason = None
