@@ -87,7 +87,7 @@ def _order_search(plan: Plan, options: IdentifyOptions, iekf: Any) -> Identifica
     chosen = steps.choose_order(rows)
     model, extra, _ = kept[chosen]
     keys = {key: extra[key] for key in ("open_loop_unstable", "start_kept", "decision_margins", "model_returned",
-                                        "refinement") if key in extra}
+                                        "refinement", steps.SPLINE_START) if key in extra}
     keys["decision_margins"] = {**keys.get("decision_margins", {}), "order": steps.order_margin(rows, chosen)}
     return _finish(plan, options, model, estimator=extra["result"], tuning=extra["tuning"], keys=keys,
                    seconds=sum(row["seconds"] for row in rows), rows=rows)
@@ -177,7 +177,8 @@ def _finish(plan: Plan, options: IdentifyOptions, model: Any, *, estimator: Any,
                         "since its simulation diverges (--horizon K to choose K)")
     nonlinear = None
     if options.nonlinear:
-        nonlinear = steps.identify_nonlinear(model, plan, options)
+        # from the linear model before any refinement (steps.SPLINE_START): the filter's own estimate
+        nonlinear = steps.identify_nonlinear(keys.get(steps.SPLINE_START, model), plan, options)
         scores = nonlinear.scores
         warnings += steps.run_warnings(
             model=nonlinear.result.model, evaluation=steps.Evaluation(

@@ -75,7 +75,7 @@ __all__ = [
     "unstable_warning", "start_beats_filter", "START_KEPT", "decision_margins", "margin_entry", "order_margin",
     "decision_notes", "structure_for", "FIT_FLOOR", "WHOLE_RECORD_MARGIN", "RunDecisions", "decide_run",
     "RefinedCandidates", "refined_candidates", "refined_choice", "refinement_note", "CANDIDATES",
-    "refined_cross_validation", "refines", "refine", "REFINED_MEASURE", "REFINED_CV_MEASURE",
+    "refined_cross_validation", "refines", "refine", "REFINED_MEASURE", "REFINED_CV_MEASURE", "SPLINE_START",
 ]
 
 ORDER_TOLERANCE = 0.5  # points of mean validation fit
@@ -477,6 +477,10 @@ def returned_model(result: Any, plan: Plan, settings: IdentifyOptions, tuning: P
 
 
 REFINED_CV_MEASURE = "two-fold cross-validated NRMSE fit % of each model refined by its simulation error"
+# the key of a refined run's linear model before refinement, from which the spline filter (--nonlinear) starts: it
+# continues the filter's own estimate, as the paper's spline filter continues its linear one. From the refined
+# model of the cascaded tanks it validated at 70.8 % against 75.7 % from the filter's, below its linear start.
+SPLINE_START = "spline_start"
 
 
 def _refined_by_cross_validation(result: Any, plan: Plan, settings: IdentifyOptions, tuning: PTuning,
@@ -493,6 +497,7 @@ def _refined_by_cross_validation(result: Any, plan: Plan, settings: IdentifyOpti
     other = "start" if which == "filter" else "filter"
     keys["model_returned"] = which
     keys["refinement"] = _refinement_entry(which, unrefined, refined, plan, settings, cross_validated=fits)
+    keys[SPLINE_START] = unrefined
     margins = decision_margins(tuning, unstable, None, which)
     margins["model_returned"] = margin_entry(
         which, fits[f"{which} refined"], other, fits[f"{other} refined"], measure=REFINED_CV_MEASURE,
@@ -570,6 +575,7 @@ def refined_choice(refined: RefinedCandidates, plan: Plan, settings: IdentifyOpt
                               "filter_estimation_fit_percent": fits["filter"]}
     keys["model_returned"] = returned
     keys["refinement"] = _refinement_entry(returned, refined.unrefined[returned], chosen, plan, settings)
+    keys[SPLINE_START] = refined.unrefined[returned]
     margins = decision_margins(tuning, unstable, None, returned)
     if "start" in fits:
         other = "filter" if returned == "start" else "start"
