@@ -19,10 +19,13 @@ log), ``fit_percent`` (R, eq. 17), ``estimation_fit_percent``,
 ``validation_fit_percent`` (NRMSE), ``speed_range_m_s``, ``passes_run``, ``stop_reason``,
 ``trace_p``, ``notes``, ``warnings``, ``seconds``; with ``--save-model`` (.json) ``model_file``, the
 identified model (:class:`~vehid.vehicle.single_track.IdentifiedSingleTrack`) that ``vehid handling`` reads.
+Every std is the fit's delete-one-block jackknife over the log (``uncertainty_method``), and the log's
+parts identified one by one are compared in ``segments`` (:mod:`vehid.scenarios.single_track_segments`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from types import SimpleNamespace
 from typing import Any
@@ -32,6 +35,7 @@ import numpy as np
 from vehid.identification.data import IOData
 from vehid.identification.errors import InputError
 from vehid.identification.assessment.metrics import nrmse_fit
+from vehid.scenarios import single_track_segments
 
 __all__ = ["run", "MIN_LOG_SPEED", "CORRELATION_WARNING", "LINEAR_LIMIT_G", "MAX_SUBSTEPS"]
 
@@ -159,26 +163,32 @@ def run(args: Any) -> tuple[dict, str]:
     estimation, validation = _read(args)
     model = single_track_model(config)
     substeps = _substeps(config, *[record for record in (estimation, validation) if record is not None])
-    # a log starts mid-drive, not at rest: the states' prior at its start (a sideslip of up to 0.1 rad,
-    # yaw rates of 0.5 rad/s, slip angles of 0.1 rad), so the filter estimates them rather than taking the
-    # first second's transient for a property of the car
-    start_std = {"lateral_velocity": 0.1 * max(float(estimation.u[0, 1]), MIN_LOG_SPEED), "yaw_rate": 0.5,
-                 "slip_angle_front": 0.1, "slip_angle_rear": 0.1}
-    options = GreyBoxOptions(substeps=substeps, initial_state_std=tuple(start_std[name] for name in model.state_names),
-                             **({"p": args.p} if args.p is not None else {}),
+    options = GreyBoxOptions(substeps=substeps, **({"p": args.p} if args.p is not None else {}),
                              **({"passes": args.passes} if args.passes is not None else {}))
-    result, divergence = workflow.last_good_on_divergence(
-        lambda: identify_greybox(estimation, model, single_track_start(config), options=options))
+
+    def fit(record: IOData) -> Any:
+        # a log starts mid-drive, not at rest: the states' prior at its start (a sideslip of up to 0.1 rad,
+        # yaw rates of 0.5 rad/s, slip angles of 0.1 rad), so the filter estimates them rather than taking the
+        # first second's transient for a property of the car
+        start_std = {"lateral_velocity": 0.1 * max(float(record.u[0, 1]), MIN_LOG_SPEED), "yaw_rate": 0.5,
+                     "slip_angle_front": 0.1, "slip_angle_rear": 0.1}
+        return identify_greybox(record, model, single_track_start(config), options=dataclasses.replace(
+            options, initial_state_std=tuple(start_std[name] for name in model.state_names)))
+
+    result, divergence = workflow.last_good_on_divergence(lambda: fit(estimation))
+    # the filter's covariance pass takes the innovations as white; the fit's block jackknife measures the spread
+    covariance, uncertainty = single_track_segments.honest_covariance(model, result, estimation)
+    consistency = single_track_segments.part_consistency(config, model, estimation, fit)
 
     names, units = config.parameter_names, model.parameter_units
-    std = result.std
+    std = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
     entries = [(name, {"value": float(value), "std": float(s), "unit": unit})
                for name, value, s, unit in zip(names, result.parameters, std, units)]
     parameters = dict(entries[: config.n_physical])
     offsets = dict(entries[config.n_physical:])
     speeds = estimation.u[:, 1]
     grid = sorted({float(v) for v in np.round(np.linspace(speeds.min(), speeds.max(), 3))})
-    handling = single_track_handling(config, result.parameters, result.covariance, speeds=grid)
+    handling = single_track_handling(config, result.parameters, covariance, speeds=grid)
 
     def fit_on(record: IOData) -> np.ndarray:
         y_hat, _ = simulate_greybox(model, result.parameters, record, substeps=options.substeps)
@@ -198,6 +208,8 @@ def run(args: Any) -> tuple[dict, str]:
         below_zero_remedy="the structure does not fit this log (try "
                           f"{'' if config.saturation else '--saturation, '}--relaxation-length or a --segment "
                           "within the linear range)")
+    # how well the log separates the parameters is the curvature's to say: the jackknife's correlations rest
+    # on a handful of blocks
     correlation = result.correlation
     for i in range(len(names)):
         for j in range(i + 1, len(names)):
@@ -217,6 +229,8 @@ def run(args: Any) -> tuple[dict, str]:
                             "the cornering stiffnesses average over saturation; try --saturation")
     if "lateral_acceleration" in config.quantities and config.saturation:
         warnings.extend(_friction_warnings(config, result.parameters, estimation, validation))
+    if consistency is not None and not consistency.consistent:
+        warnings.append(consistency.warning("the single-track model"))
     summary: dict[str, Any] = {
         "method": "iekf",
         "structure": "single-track",
@@ -236,7 +250,9 @@ def run(args: Any) -> tuple[dict, str]:
         "trace_p": result.trace_p,
         "measurement_noise": result.measurement_noise,
         "start": dict(zip(names, result.start.tolist())),
-        "covariance_source": result.meta.get("covariance_source"),
+        "covariance_source": uncertainty.describe(),
+        "uncertainty_method": uncertainty.as_dict(),
+        "segments": None if consistency is None else consistency.as_dict(),
         "notes": notes,
         "seconds": time.perf_counter() - started,
     }
@@ -247,9 +263,10 @@ def run(args: Any) -> tuple[dict, str]:
         from vehid.vehicle.single_track import IdentifiedSingleTrack
 
         identified = IdentifiedSingleTrack(
-            config, result.parameters, result.covariance, (float(np.min(speeds)), float(np.max(speeds))),
+            config, result.parameters, covariance, (float(np.min(speeds)), float(np.max(speeds))),
             {"data": [str(d) for d in args.data], "schedule": args.schedule.strip(),
-             "validation_fit_percent": None if validation_fit is None else [float(f) for f in validation_fit]})
+             "validation_fit_percent": None if validation_fit is None else [float(f) for f in validation_fit],
+             "uncertainty_method": uncertainty.as_dict()})
         summary["model_file"] = str(save_model(identified, args.save_model, None))
     summary["warnings"] = list(warnings)  # said on standard error (or made an error by --strict) by the command
     text = _text(summary, estimation.output_names, validation is not None)

@@ -19,7 +19,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from vehid.identification.automatic import steps
-from vehid.identification.automatic.checks import records_summary
+from vehid.identification.automatic.checks import records_summary, uncertainty_method
 from vehid.identification.automatic.options import IdentifyOptions
 from vehid.identification.automatic.plan import ScheduleData
 from vehid.identification.choices import SCHEDULED_DEFAULT_P, SCHEDULED_P_GRID
@@ -134,6 +134,7 @@ def identify_scheduled_model(start: Any, plan: Any, options: IdentifyOptions, un
     entry = {
         "channel": schedule.channel, "grid": family.grid,
         "modes_at": [{"value": at["value"], "modes": at["modes"]} for at in family.modes_at(family.grid)],
+        "uncertainty_method": uncertainty_method(family),
         "knots": int(family.grid.size), "p": chosen["p"], "p_tried": tried, "passes_run": result.passes_run,
         "stop_reason": result.stop_reason if divergence is None else f"{result.stop_reason}: {divergence}",
         "start_fit_percent": result.start_fit, "seconds": result.seconds,
@@ -187,7 +188,7 @@ def _stopped_early(result: Any, stops: list[tuple[float, Any, Any]], plan: Any, 
     validated better than ten and twenty-five worse still, so held-out data say when to stop, as
     they choose p. Without validation data every step stands.
     """
-    from vehid.identification.filtering.scheduled_iekf import HOLD_OF, scheduled_simulation_covariance
+    from vehid.identification.filtering.scheduled_iekf import HOLD_OF, with_simulation_covariance
 
     finite = [stop for stop in stops if np.isfinite(stop[0])]
     if not finite or "refine_steps" not in result.meta:
@@ -197,8 +198,7 @@ def _stopped_early(result: Any, stops: list[tuple[float, Any, Any]], plan: Any, 
     if refine_steps == result.meta["refine_steps"]:
         return result
     method = HOLD_OF[result.options.discretization]
-    covariance = scheduled_simulation_covariance(family, plan.records[0], schedule.estimation[0], method)
-    family = family.with_parameters(family.parameters, covariance)
+    family = with_simulation_covariance(family, plan.records[0], schedule.estimation[0], method)
     from vehid.identification.assessment.metrics import percentage_explanation
 
     data = plan.records[0]
