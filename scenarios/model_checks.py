@@ -35,6 +35,8 @@ def uncertainty_lines(summary: dict[str, Any], output_names: Sequence[str]) -> l
             f"  mode {index}: {eigen}; {_plus_minus(mode['frequency_hz'], mode['frequency_hz_std'], '.4g')} Hz, "
             f"damping {_plus_minus(mode['damping'], mode['damping_std'], '.3f')}"
         )
+    if covered and summary.get("uncertainty_method"):
+        lines.append(f"  standard deviations: {summary['uncertainty_method']['description']}")
     bound = summary["residual_tests"]["bound"]
     growing = any(mode["eigenvalue"][0] > 0 for mode in summary["modes"])
     lines.append(f"residual tests (99 %, {summary['residual_tests']['lags']} lags, bound {bound:.3g})"

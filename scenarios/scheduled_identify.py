@@ -19,7 +19,8 @@ JSON (public): the score keys (``fit_percent``, ``estimation_fit_percent``, ``va
 ``estimation_fit_percent`` and ``validation_fit_percent``, the refinement (``refined_from``,
 ``refine_steps``, ``refine_steps_run``), ``output_map`` (with ``--nonlinear``), ``channel``, ``grid``,
 ``modes_at`` (per grid value ``value`` and its ``modes``, each with ``frequency_hz``,
-``frequency_hz_std``, ``damping``, ``damping_std``), the run (``passes_run``, ``stop_reason``,
+``frequency_hz_std``, ``damping``, ``damping_std``), ``uncertainty_method`` (how the knots' covariance
+behind those standard deviations was obtained), the run (``passes_run``, ``stop_reason``,
 ``p`` and ``p_tried``, chosen on validation data as the IEKF's p is, ``seconds``) and ``unscheduled``: the scores of the start
 (also from rest, ``*_from_rest``, as the family is scored and the decision weighs them), whose matrices, eigenvalues and
 modes are the summary's other keys.
@@ -57,4 +58,6 @@ def text_lines(entry: dict[str, Any], output_names: Sequence[str]) -> list[str]:
         modes = "; ".join(f"{mode['frequency_hz']:.4g} +/- {2 * mode['frequency_hz_std']:.2g} Hz, "
                           f"{mode['damping']:.3f} +/- {2 * mode['damping_std']:.2g}" for mode in row["modes"])
         lines.append(f"  {entry['channel']} = {row['value']:.4g}: {modes}")
+    if entry.get("uncertainty_method"):
+        lines.append(f"  standard deviations: {entry['uncertainty_method']['description']}")
     return lines

@@ -26,6 +26,7 @@ parts identified one by one are compared in ``segments`` (:mod:`vehid.scenarios.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 from types import SimpleNamespace
 from typing import Any
@@ -37,7 +38,7 @@ from vehid.identification.errors import InputError
 from vehid.identification.assessment.metrics import nrmse_fit
 from vehid.scenarios import single_track_segments
 
-__all__ = ["run", "MIN_LOG_SPEED", "CORRELATION_WARNING", "LINEAR_LIMIT_G", "MAX_SUBSTEPS"]
+__all__ = ["run", "fit_log", "MIN_LOG_SPEED", "CORRELATION_WARNING", "LINEAR_LIMIT_G", "MAX_SUBSTEPS"]
 
 #: Below this speed (m/s) slip angles of a rolling car are not small and the model is not meant to hold.
 MIN_LOG_SPEED = 5.0
@@ -141,9 +142,9 @@ def _read(args: Any) -> tuple[IOData, IOData | None]:
 
 def run(args: Any) -> tuple[dict, str]:
     """Identify the single-track model and summarise it (module docstring)."""
-    from vehid.identification.filtering.greybox import GreyBoxOptions, identify_greybox, simulate_greybox
+    from vehid.identification.filtering.greybox import GreyBoxOptions, simulate_greybox
     from vehid.scenarios import identify_workflow as workflow
-    from vehid.vehicle.single_track import GRAVITY, single_track_handling, single_track_model, single_track_start
+    from vehid.vehicle.single_track import GRAVITY, single_track_handling, single_track_model
 
     started = time.perf_counter()
     _refuse_other_options(args)
@@ -166,15 +167,7 @@ def run(args: Any) -> tuple[dict, str]:
     options = GreyBoxOptions(substeps=substeps, **({"p": args.p} if args.p is not None else {}),
                              **({"passes": args.passes} if args.passes is not None else {}))
 
-    def fit(record: IOData) -> Any:
-        # a log starts mid-drive, not at rest: the states' prior at its start (a sideslip of up to 0.1 rad,
-        # yaw rates of 0.5 rad/s, slip angles of 0.1 rad), so the filter estimates them rather than taking the
-        # first second's transient for a property of the car
-        start_std = {"lateral_velocity": 0.1 * max(float(record.u[0, 1]), MIN_LOG_SPEED), "yaw_rate": 0.5,
-                     "slip_angle_front": 0.1, "slip_angle_rear": 0.1}
-        return identify_greybox(record, model, single_track_start(config), options=dataclasses.replace(
-            options, initial_state_std=tuple(start_std[name] for name in model.state_names)))
-
+    fit = functools.partial(fit_log, config, options=options)
     result, divergence = workflow.last_good_on_divergence(lambda: fit(estimation))
     # the filter's covariance pass takes the innovations as white; the fit's block jackknife measures the spread
     covariance, uncertainty = single_track_segments.honest_covariance(model, result, estimation)
@@ -269,8 +262,25 @@ def run(args: Any) -> tuple[dict, str]:
              "uncertainty_method": uncertainty.as_dict()})
         summary["model_file"] = str(save_model(identified, args.save_model, None))
     summary["warnings"] = list(warnings)  # said on standard error (or made an error by --strict) by the command
-    text = _text(summary, estimation.output_names, validation is not None)
+    text = _text(summary, estimation.output_names, validation is not None,
+                 [] if consistency is None else consistency.text_lines())
     return summary, text
+
+
+def fit_log(config: Any, record: IOData, *, options: Any) -> Any:
+    """The grey-box identification of the single-track model of ``config`` on one log, from the start values of
+    its mass and geometry, as the command runs it (``options`` without the states' prior, which is the log's)."""
+    from vehid.identification.filtering.greybox import identify_greybox
+    from vehid.vehicle.single_track import single_track_model, single_track_start
+
+    model = single_track_model(config)
+    # a log starts mid-drive, not at rest: the states' prior at its start (a sideslip of up to 0.1 rad,
+    # yaw rates of 0.5 rad/s, slip angles of 0.1 rad), so the filter estimates them rather than taking the
+    # first second's transient for a property of the car
+    start_std = {"lateral_velocity": 0.1 * max(float(record.u[0, 1]), MIN_LOG_SPEED), "yaw_rate": 0.5,
+                 "slip_angle_front": 0.1, "slip_angle_rear": 0.1}
+    return identify_greybox(record, model, single_track_start(config), options=dataclasses.replace(
+        options, initial_state_std=tuple(start_std[name] for name in model.state_names)))
 
 
 def _friction_warnings(config: Any, parameters: np.ndarray, estimation: IOData,
@@ -342,7 +352,7 @@ class _Scores:
         self.R = self.fit
 
 
-def _text(summary: dict[str, Any], outputs: tuple[str, ...], validated: bool) -> str:
+def _text(summary: dict[str, Any], outputs: tuple[str, ...], validated: bool, parts: list[str]) -> str:
     lines = [f"single-track model (grey-box IEKF): {summary['passes_run']} passes, "
              f"{'pass budget reached' if summary['stop_reason'] == 'passes' else summary['stop_reason']}, "
              f"speed {summary['speed_range_m_s'][0]:.1f}-{summary['speed_range_m_s'][1]:.1f} m/s, "
@@ -357,6 +367,8 @@ def _text(summary: dict[str, Any], outputs: tuple[str, ...], validated: bool) ->
         if key in handling:
             label = f"{kind} speed"
             lines.append(f"  {label:<27} {handling[key]['value']:>12.4g} +/- {2 * handling[key]['std']:.3g} m/s")
+    lines.append(f"  standard deviations: {summary['uncertainty_method']['description']}")
+    lines += [f"  {line}" for line in parts]
     for name, est, val in zip(outputs, summary["estimation_fit_percent"],
                               summary["validation_fit_percent"] if validated else [None] * len(outputs)):
         lines.append(f"  NRMSE fit % {name:<15} estimation {est:7.2f}   validation {'-' if val is None else f'{val:.2f}'}")

@@ -221,6 +221,9 @@ def test_saved_model_gives_its_handling_and_page(log, tmp_path, capsys):
         assert row["understeer_gradient_deg_per_g"]["value"] == pytest.approx(reported["value"], rel=1e-3)
         assert row["understeer_gradient_deg_per_g"]["std"] == pytest.approx(reported["std"], rel=0.02)
     assert summary["warnings"] == [] and figure.stat().st_size > 0
+    # the handling numbers' standard deviations come from the covariance identify measured, and say so
+    assert summary["uncertainty_method"] == identified["uncertainty_method"]
+    assert summary["uncertainty_method"]["name"] == "block-jackknife"
     # the model file is JSON only
     assert main(["identify", str(log), "--structure", "single-track", "--inputs", "delta", "--schedule", "vx",
                  "--outputs", "yawRate,ayCG", *GEOMETRY, "--save-model", str(tmp_path / "car.mat")]) == 2

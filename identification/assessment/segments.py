@@ -22,8 +22,12 @@ block ``k`` (Efron 1982, ch. 3; for blocks, Kuensch 1989),
 (:func:`jackknife_covariance`). The replicates come from refits
 (:func:`refit_replicates`: any estimator, one refit per block) or, for a
 least-squares fit, from one Gauss-Newton step per deleted block from the
-estimate (:func:`one_step_replicates`), the one-step jackknife (Shao and Tu
-1995, sec. 2.1.3 and 3.3), which costs no refit.
+estimate (:func:`one_step_replicates`), which costs no refit: with the
+curvature without the block, the one-step jackknife (Shao and Tu 1995); with
+the whole record's, the jackknife linearised, whose covariance is the block
+sandwich ``H^-1 S H^-1`` of the blocks' scores, the cluster covariance that
+Bester, Conley and Hansen (2011) study for a dependent series cut into a
+fixed number of blocks.
 
 **Few blocks.** The jackknife variance of ``K`` blocks carries ``K - 1``
 degrees of freedom, so ``theta +/- z std`` would cover less than its level
@@ -68,6 +72,7 @@ __all__ = [
     "block_plan",
     "interval_scale",
     "jackknife_covariance",
+    "REPLICATE_FORMS",
     "one_step_replicates",
     "refit_replicates",
     "UncertaintyMethod",
@@ -174,16 +179,18 @@ def jackknife_covariance(replicates: Any) -> np.ndarray:
 
 def _triangle(rows: np.ndarray) -> np.ndarray:
     """The R of a QR factorisation of ``rows`` (at most as many rows as columns): ``R' R = rows' rows``."""
-    import scipy.linalg  # half a second to import: paid where it is used
-
     if rows.shape[0] == 0:
         return np.zeros((0, rows.shape[1]))
-    return scipy.linalg.qr(rows, mode="r", check_finite=False)[0][: rows.shape[1]]
+    return np.linalg.qr(rows, mode="r")
 
 
-def one_step_replicates(estimate: Any, block_jacobians: Sequence[np.ndarray],
-                        block_gradients: Any) -> np.ndarray:
-    """One Gauss-Newton step per deleted block from ``estimate``: ``theta - H_(k)^-1 (G - g_k)``.
+#: The two forms of Gauss-Newton replicates (:func:`one_step_replicates`).
+REPLICATE_FORMS = ("linearised", "one-step")
+
+
+def one_step_replicates(estimate: Any, block_jacobians: Sequence[np.ndarray], block_gradients: Any, *,
+                        form: str = "linearised") -> np.ndarray:
+    """One Gauss-Newton step per deleted block from ``estimate`` on the other blocks' errors.
 
     Parameters
     ----------
@@ -194,21 +201,33 @@ def one_step_replicates(estimate: Any, block_jacobians: Sequence[np.ndarray],
         Gauss-Newton curvature ``H_k = J_k' W J_k``.
     block_gradients : array_like (K, n)
         Each block's gradient ``g_k = J_k' W e_k`` of half the weighted sum of squares of its errors ``e_k``.
+    form : {"linearised", "one-step"}
+        The curvature of the step: ``"linearised"`` the whole record's, ``(K - 1) / K H`` (the
+        jackknife to first order: its covariance is the block sandwich
+        ``K / (K - 1) H^-1 sum_k (g_k - mean)(g_k - mean)' H^-1``, the cluster covariance of Bester,
+        Conley and Hansen 2011 with contiguous blocks as clusters); ``"one-step"`` the curvature
+        without the block, ``H_(k) = sum_{j != k} H_j`` (exact on a linear fit).
 
     Returns
     -------
     ndarray (K, n)
-        The replicates ``theta_(k)``, ``H_(k) = sum_{j != k} H_j`` and ``G = sum_j g_j``. Where the
-        estimate is not the whole record's minimiser (a filter's estimate), ``G`` is not zero and
-        the replicates share its step, which the jackknife's centring removes.
+        The replicates ``theta - C_k^-1 (G - g_k)``, ``C_k`` the form's curvature and
+        ``G = sum_j g_j``. Where the estimate is not the whole record's minimiser (a filter's
+        estimate), ``G`` is not zero and the replicates share its step, which the jackknife's
+        centring removes.
 
     Notes
     -----
-    The curvature without block ``k`` is factorised from the blocks' triangular factors, columns
-    equilibrated, so the condition number is not squared as in the normal equations. A parameter
-    that only block ``k`` determines leaves ``H_(k)`` singular: InputError names it, since no
-    replicate without that block exists.
+    Columns are equilibrated. Where the curvatures have condition numbers below 1e10, their normal
+    equations are solved (their rounding, condition times eps, stays below 1e-6 relative);
+    otherwise they are factorised from the blocks' triangular factors, so the condition number is
+    not squared. The one-step form fails where a parameter is determined by block ``k`` alone
+    (``H_(k)`` singular: no replicate without that block exists), InputError naming it; with many
+    parameters that each few blocks determine (the knots of a scheduled model), its steps grow
+    without bound near that limit, which the linearised form does not (benchmarks/segment_consistency.py).
     """
+    if form not in REPLICATE_FORMS:
+        raise InputError(f"unknown replicate form {form!r}; use one of {', '.join(REPLICATE_FORMS)}")
     estimate = np.asarray(estimate, dtype=float).ravel()
     gradients = np.asarray(block_gradients, dtype=float)
     count, size = len(block_jacobians), estimate.size
@@ -217,21 +236,33 @@ def one_step_replicates(estimate: Any, block_jacobians: Sequence[np.ndarray],
                          f"got {gradients.shape}")
     scale = np.sqrt(sum(np.sum(np.square(block), axis=0) for block in block_jacobians))
     scale = np.where(scale > 0, scale, 1.0)
-    factors = [_triangle(np.asarray(block, dtype=float) / scale) for block in block_jacobians]
+    scaled_blocks = [np.asarray(block, dtype=float) / scale for block in block_jacobians]
     scaled = gradients / scale
-    total = scaled.sum(axis=0)
-    import scipy.linalg
-
+    steps = scaled.sum(axis=0)[None, :] - scaled
+    curvatures = [block.T @ block for block in scaled_blocks]
+    whole = sum(curvatures)
+    if form == "linearised":
+        curvature = np.broadcast_to((count - 1) / count * whole, (count, size, size))
+    else:
+        curvature = whole[None, :, :] - np.array(curvatures)
+    values = np.linalg.eigvalsh(curvature)
+    if np.all(values[:, 0] > 1e-10 * values[:, -1]):
+        return estimate - np.linalg.solve(curvature, steps[:, :, None])[:, :, 0] / scale
+    factors = [_triangle(block) for block in scaled_blocks]
     replicates = np.empty((count, size))
     for k in range(count):
-        upper = _triangle(np.vstack([factor for j, factor in enumerate(factors) if j != k]))
-        diagonal = np.abs(np.diag(upper)) if upper.shape[0] == size else np.zeros(size)
-        if diagonal.size < size or np.min(diagonal) <= 1e-10 * max(float(np.max(diagonal)), 1e-300):
-            weakest = int(np.argmin(np.pad(diagonal, (0, size - diagonal.size))))
+        kept = factors if form == "linearised" else [factor for j, factor in enumerate(factors) if j != k]
+        upper = _triangle(np.vstack(kept))
+        diagonal = np.zeros(size)
+        diagonal[: upper.shape[0]] = np.abs(np.diag(upper))
+        if np.min(diagonal) <= 1e-10 * max(float(np.max(diagonal)), 1e-300):
             raise InputError(f"without block {k + 1} of {count} the record no longer determines parameter "
-                             f"{weakest + 1}: no jackknife replicate leaves that block out")
-        half = scipy.linalg.solve_triangular(upper, total - scaled[k], trans="T", check_finite=False)
-        replicates[k] = estimate - scipy.linalg.solve_triangular(upper, half, check_finite=False) / scale
+                             f"{int(np.argmin(diagonal)) + 1}: no jackknife replicate leaves that block out"
+                             if form == "one-step" else
+                             f"the record does not determine parameter {int(np.argmin(diagonal)) + 1}")
+        # C_k = R'R from the blocks' triangular factors: the condition number is not squared
+        shrink = count / (count - 1) if form == "linearised" else 1.0
+        replicates[k] = estimate - shrink * np.linalg.solve(upper, np.linalg.solve(upper.T, steps[k])) / scale
     return replicates
 
 
@@ -268,7 +299,8 @@ class UncertaintyMethod:
         ``"block-jackknife"``, or ``"formal"`` where the record was too short for it (``reason``
         says why; the covariance is then the fit's curvature under white residuals).
     form : str or None
-        ``"one-step"`` (one Gauss-Newton step per deleted block) or ``"refits"``.
+        ``"linearised"`` or ``"one-step"`` (one Gauss-Newton step per deleted block, with the whole
+        record's curvature or the curvature without the block) or ``"refits"``.
     blocks : int or None
         Number of contiguous blocks ``K``.
     block_seconds : (float, float) or None
@@ -479,6 +511,19 @@ class SegmentConsistency:
         return (f"{subject} does not hold over the whole log: {named} across {len(self.spans)} parts, beyond their "
                 f"{100 * self.level:g} % intervals (JSON segments; identify on a part with --segment, or a model "
                 "that follows what changes between them)")
+
+    def text_lines(self) -> list[str]:
+        """One line per quantity: each part's estimate +/- 2 std in the display unit, and the pairs agreeing."""
+        starts = ", ".join(f"{start:g}-{end:g}" for start, end in self.spans)
+        lines = [f"parts of the log ({starts}): estimate +/- 2 sigma each; pairs agreeing within "
+                 f"{100 * self.level:g} %"]
+        for q in self.quantities:
+            cells = " | ".join("-" if not np.isfinite(value) else
+                               f"{value * q.display_factor:.4g} +/- {2 * std * q.display_factor:.2g}"
+                               for value, std in zip(q.values, q.stds))
+            unit = q.display_unit if q.display_unit is not None else q.unit
+            lines.append(f"  {q.label or q.name:<27} {cells} {unit}  ({q.agreement.agreeing} of {q.agreement.pairs})")
+        return lines
 
     def as_dict(self) -> dict[str, Any]:
         """The JSON entry ``segments``: each part's span and estimates, each quantity's agreement."""

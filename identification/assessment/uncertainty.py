@@ -33,8 +33,8 @@ import casadi as ca
 import numpy as np
 
 from ..errors import InputError
-from .segments import (UncertaintyMethod, block_jackknife, block_plan, formal_method, integrated_correlation_time,
-                       one_step_replicates)
+from .segments import (DEFAULT_BLOCKS, UncertaintyMethod, block_jackknife, block_plan, formal_method,
+                       integrated_correlation_time, one_step_replicates)
 
 __all__ = [
     "ModeEstimate",
@@ -542,7 +542,8 @@ SHORT_RECORD_REASON = ("the record holds fewer than {fewest} blocks longer than 
 
 
 def fit_covariance(jacobian: np.ndarray, residuals: np.ndarray, *, dt: float | None = None, jackknife: bool = True,
-                   level: float = 0.95, overwrite_jacobian: bool = False) -> tuple[np.ndarray, UncertaintyMethod]:
+                   blocks: int = DEFAULT_BLOCKS, form: str = "linearised", level: float = 0.95,
+                   overwrite_jacobian: bool = False) -> tuple[np.ndarray, UncertaintyMethod]:
     """The covariance of a weighted least-squares fit of several outputs' errors, and how it was obtained.
 
     Parameters
@@ -556,6 +557,11 @@ def fit_covariance(jacobian: np.ndarray, residuals: np.ndarray, *, dt: float | N
     jackknife : bool
         Measure the covariance by the delete-one-block jackknife where the record allows (default);
         False gives the formal :func:`gauss_newton_covariance`.
+    blocks : int
+        Most blocks (fewer where they would be shorter than the correlation time).
+    form : {"linearised", "one-step"}
+        The replicates' curvature (:func:`~vehid.identification.assessment.segments.one_step_replicates`):
+        the whole record's (default) or the one without the block.
     level : float
         Level at which the jackknife's few degrees of freedom are allowed for
         (:func:`~vehid.identification.assessment.segments.interval_scale`).
@@ -572,12 +578,15 @@ def fit_covariance(jacobian: np.ndarray, residuals: np.ndarray, *, dt: float | N
     Each output weighed by ``1 / s_i^2`` as :func:`gauss_newton_covariance` weighs it, the record
     is cut into at most :data:`~vehid.identification.assessment.segments.DEFAULT_BLOCKS` contiguous
     blocks, each longer than the residuals' integrated correlation time; the replicate without
-    block ``k`` is one Gauss-Newton step from the estimate on the other blocks
-    (:func:`~vehid.identification.assessment.segments.one_step_replicates`). Coloured residuals
+    block ``k`` is one Gauss-Newton step from the estimate on the other blocks, with the whole
+    record's curvature (:func:`~vehid.identification.assessment.segments.one_step_replicates`):
+    the jackknife linearised, whose covariance is the block sandwich ``H^-1 S H^-1`` with ``S``
+    the spread of the blocks' scores. Coloured residuals
     and model error move those steps as much as they move the estimate, which the curvature
     alone cannot see; on white residuals of a model that holds, the jackknife's variance agrees
-    with the curvature's on average. Where no such blocks fit, or a parameter is determined by
-    one block alone, the formal covariance stands and the method says why.
+    with the curvature's on average (before the factor ``(t(K - 1) / z)^2`` for its few degrees
+    of freedom). Where no such blocks fit, or a parameter is determined by one block alone, the
+    formal covariance stands and the method says why.
     """
     residuals = np.asarray(residuals, dtype=float)
     samples, n_y = residuals.shape
@@ -585,7 +594,7 @@ def fit_covariance(jacobian: np.ndarray, residuals: np.ndarray, *, dt: float | N
     method = formal_method("asked for the formal covariance of white residuals")
     if jackknife:
         tau = float(np.max(integrated_correlation_time(residuals)))
-        edges = block_plan(samples, min_length=np.ceil(tau))
+        edges = block_plan(samples, min_length=np.ceil(tau), most=blocks)
         if edges is None:
             from .segments import MIN_BLOCKS
 
@@ -597,11 +606,11 @@ def fit_covariance(jacobian: np.ndarray, residuals: np.ndarray, *, dt: float | N
             pieces = [(blocks[a:b] * weights[None, :, None]).reshape(-1, n_theta) for a, b in zip(edges[:-1], edges[1:])]
             gradients = [np.einsum("kin,ki->n", blocks[a:b], weighted_errors[a:b]) for a, b in zip(edges[:-1], edges[1:])]
             try:
-                replicates = one_step_replicates(np.zeros(n_theta), pieces, gradients)
+                replicates = one_step_replicates(np.zeros(n_theta), pieces, gradients, form=form)
             except InputError as exc:
                 method = formal_method(f"no jackknife: {exc}")
             else:
-                found = block_jackknife(replicates, edges, form="one-step", level=level, dt=dt, correlation_time=tau)
+                found = block_jackknife(replicates, edges, form=form, level=level, dt=dt, correlation_time=tau)
                 return found.covariance, found.method
     return gauss_newton_covariance(jacobian, residuals, overwrite_jacobian=overwrite_jacobian), method
 

@@ -67,10 +67,20 @@ def uncertainty_summary(model: ModalModel, data: IOData, nis: Sequence[float] | 
 
 
 def uncertainty_method(model: Any) -> dict[str, Any] | None:
-    """The JSON ``uncertainty_method`` of a model: how its covariance was obtained, None without one."""
+    """The JSON ``uncertainty_method`` of a model: how its covariance was obtained, None without one.
+
+    A model that carries a covariance but not how it was obtained (a file written before models
+    recorded it) is said to carry the formal one, as those did.
+    """
     if getattr(model, "parameter_covariance", None) is None:
         return None
-    return (getattr(model, "meta", None) or {}).get("uncertainty_method")
+    stored = (getattr(model, "meta", None) or {}).get("uncertainty_method")
+    if stored is None:
+        from vehid.identification.assessment.segments import formal_method
+
+        return formal_method("the model does not record how its covariance was obtained: one written before "
+                             "models did carries the formal covariance of white residuals").as_dict()
+    return stored
 
 
 def record_names(records: Sequence[IOData]) -> list[str]:

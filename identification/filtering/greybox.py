@@ -330,6 +330,7 @@ _DIFFERENCE_STEP = 1e-6
 
 def simulation_fit_covariance(model: GreyBoxModel, theta: Any, data: IOData | Sequence[IOData], *,
                               discretization: str = "rk4", substeps: int = 1, jackknife: bool = True,
+                              blocks: int | None = None, form: str = "linearised",
                               level: float = 0.95) -> tuple[np.ndarray, Any] | None:
     """The covariance of a grey-box estimate as a fit of its simulation errors, and how it was obtained.
 
@@ -352,6 +353,11 @@ def simulation_fit_covariance(model: GreyBoxModel, theta: Any, data: IOData | Se
         As the identification ran.
     jackknife : bool
         False gives the formal covariance.
+    blocks : int, optional
+        Most blocks of the jackknife (default
+        :data:`~vehid.identification.assessment.segments.DEFAULT_BLOCKS`).
+    form : {"linearised", "one-step"}
+        The jackknife replicates' curvature (:func:`~vehid.identification.assessment.uncertainty.fit_covariance`).
     level : float
         Level of the intervals the jackknife's degrees of freedom are allowed for at.
 
@@ -382,7 +388,8 @@ def simulation_fit_covariance(model: GreyBoxModel, theta: Any, data: IOData | Se
     if not (np.all(np.isfinite(jacobian)) and np.all(np.isfinite(residuals))):
         return None
     return fit_covariance(jacobian.reshape(-1, model.n_theta), residuals, dt=float(records[0].dt),
-                          jackknife=jackknife, level=level)
+                          jackknife=jackknife, form=form, level=level,
+                          **({} if blocks is None else {"blocks": blocks}))
 
 
 def _check_discretization(discretization: str, substeps: int) -> None:

@@ -277,16 +277,18 @@ def _time_weights(structure: ModalStructure, ratio: float) -> np.ndarray:
 
 
 def scheduled_simulation_covariance(model: ScheduledModalModel, data: IOData, schedule: np.ndarray,
-                                    method: str = "foh") -> np.ndarray | None:
+                                    method: str = "foh", *, jackknife: bool = True,
+                                    form: str = "linearised") -> np.ndarray | None:
     """The covariance of a family's parameters as a fit of its simulation errors on one record.
 
     :func:`~identification.assessment.uncertainty.fit_covariance` of the
     errors from rest (the delete-one-block jackknife where the record
-    allows), the Jacobian by central differences of the compiled
-    simulation (steps of ``1e-6`` of each parameter, or of the largest of its
-    kind where it is near zero). None where the simulation is not finite.
+    allows, its replicates in ``form``; ``jackknife=False``: the formal covariance of white residuals),
+    the Jacobian by central differences of the compiled simulation (steps of ``1e-6`` of each
+    parameter, or of the largest of its kind where it is near zero). None where the simulation is not
+    finite.
     """
-    found = _simulation_fit(model, data, schedule, method)
+    found = _simulation_fit(model, data, schedule, method, jackknife=jackknife, form=form)
     return None if found is None else found[0]
 
 
@@ -301,13 +303,15 @@ def with_simulation_covariance(model: ScheduledModalModel, data: IOData, schedul
     return model.with_parameters(model.parameters, covariance, uncertainty_method=how.as_dict())
 
 
-def _simulation_fit(model: ScheduledModalModel, data: IOData, schedule: np.ndarray, method: str) -> Any:
+def _simulation_fit(model: ScheduledModalModel, data: IOData, schedule: np.ndarray, method: str,
+                    jackknife: bool = True, form: str = "linearised") -> Any:
     base, jacobian = _simulation_jacobian(model, data, schedule, method)
     theta = model.parameters
     residuals = base - data.y
     if not (np.all(np.isfinite(jacobian)) and np.all(np.isfinite(residuals))):
         return None
-    return fit_covariance(jacobian.reshape(-1, theta.size), residuals, dt=float(data.dt))
+    return fit_covariance(jacobian.reshape(-1, theta.size), residuals, dt=float(data.dt), jackknife=jackknife,
+                          form=form)
 
 
 def _simulation_jacobian(model: ScheduledModalModel, data: IOData, schedule: np.ndarray, method: str,

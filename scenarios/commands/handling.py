@@ -13,6 +13,9 @@ model is evaluated at each of --speeds, a model of one speed at the one speed
 given. ``--source`` reports the source model instead: its linearisation and
 its simulated ISO 7401 step, 1 Hz sine dwell and sine sweep. Warnings (no wheelbase for the
 understeer gradient, no covariance for error bars) exit 3 under --strict.
+JSON ``uncertainty_method`` says how the model's covariance, and so every
+standard deviation, was obtained (as ``vehid identify`` says it; None
+without a covariance).
 """
 
 from __future__ import annotations
@@ -343,10 +346,15 @@ def _run_model(args: argparse.Namespace) -> tuple[dict, str, list[str]]:
     if unstable:
         warnings.append("the model is unstable or never reaches 90 % of its steady yaw rate at "
                         f"{', '.join(f'{v:g}' for v in unstable)} m/s: no step metrics there")
+    from vehid.identification.automatic.checks import uncertainty_method
+
+    method = uncertainty_method(model)
     summary = {"source": False, "model": args.model, **origin, "scheduled": hasattr(model, "model_at"),
                "wheelbase": args.wheelbase, "scales": scales, "metrics": [m.as_dict() for m in metrics],
-               "warnings": warnings}
+               "uncertainty_method": method, "warnings": warnings}
     lines = metrics_table(f"{Path(args.model).name}:", metrics)
+    if method is not None:
+        lines.append(f"standard deviations: {method['description']}")
     curves: dict[str, Any] = {"identified": metrics}
     if source is not None:
         summary["source_model"] = source.as_dict()
