@@ -70,6 +70,7 @@ __all__ = [
     "integrated_correlation_time",
     "block_edges",
     "block_plan",
+    "gram_matrix",
     "interval_scale",
     "jackknife_covariance",
     "REPLICATE_FORMS",
@@ -177,6 +178,20 @@ def jackknife_covariance(replicates: Any) -> np.ndarray:
     return 0.5 * (covariance + covariance.T)
 
 
+def gram_matrix(columns: np.ndarray, rows_per_block: int = 1024) -> np.ndarray:
+    """``columns' columns`` summed over blocks of rows.
+
+    A block of about a thousand rows is a product BLAS runs on one thread:
+    on a shared two-core machine the threaded product of the whole long
+    array took 2-4 times as long (0.8 against 1.6-4 ms at 50,000 x 17).
+    """
+    gram = np.zeros((columns.shape[1], columns.shape[1]))
+    for start in range(0, columns.shape[0], rows_per_block):
+        block = columns[start:start + rows_per_block]
+        gram += block.T @ block
+    return gram
+
+
 def _triangle(rows: np.ndarray) -> np.ndarray:
     """The R of a QR factorisation of ``rows`` (at most as many rows as columns): ``R' R = rows' rows``."""
     if rows.shape[0] == 0:
@@ -239,7 +254,7 @@ def one_step_replicates(estimate: Any, block_jacobians: Sequence[np.ndarray], bl
     scaled_blocks = [np.asarray(block, dtype=float) / scale for block in block_jacobians]
     scaled = gradients / scale
     steps = scaled.sum(axis=0)[None, :] - scaled
-    curvatures = [block.T @ block for block in scaled_blocks]
+    curvatures = [gram_matrix(block) for block in scaled_blocks]
     whole = sum(curvatures)
     if form == "linearised":
         curvature = np.broadcast_to((count - 1) / count * whole, (count, size, size))

@@ -33,7 +33,7 @@ import casadi as ca
 import numpy as np
 
 from ..errors import InputError
-from .segments import (DEFAULT_BLOCKS, UncertaintyMethod, block_jackknife, block_plan, formal_method,
+from .segments import (DEFAULT_BLOCKS, UncertaintyMethod, block_jackknife, block_plan, formal_method, gram_matrix,
                        integrated_correlation_time, one_step_replicates)
 
 __all__ = [
@@ -503,7 +503,7 @@ def gauss_newton_covariance(jacobian: np.ndarray, residuals: np.ndarray, *, over
     # the normal equations, equilibrated, where they are well conditioned: a Gram product costs a
     # fraction of a QR factorisation of the long Jacobian; their rounding (about sqrt(N) eps of each
     # entry, relative) then moves the covariance by less than 1e-5 relative below condition 1e6
-    gram = sum(_gram(blocks[:, i, :]) / variance[i] for i in range(n_y))
+    gram = sum(gram_matrix(blocks[:, i, :]) / variance[i] for i in range(n_y))
     scale = np.sqrt(np.diag(gram))
     if np.all(scale > 0) and np.all(np.isfinite(gram)):
         values, vectors = np.linalg.eigh(gram / np.outer(scale, scale))
@@ -613,20 +613,6 @@ def fit_covariance(jacobian: np.ndarray, residuals: np.ndarray, *, dt: float | N
                 found = block_jackknife(replicates, edges, form=form, level=level, dt=dt, correlation_time=tau)
                 return found.covariance, found.method
     return gauss_newton_covariance(jacobian, residuals, overwrite_jacobian=overwrite_jacobian), method
-
-
-def _gram(columns: np.ndarray, rows_per_block: int = 1024) -> np.ndarray:
-    """``columns' columns`` summed over blocks of rows.
-
-    A block of about a thousand rows is a product BLAS runs on one thread:
-    on a shared two-core machine the threaded product of the whole long
-    array took 2-4 times as long (0.8 against 1.6-4 ms at 50,000 x 17).
-    """
-    gram = np.zeros((columns.shape[1], columns.shape[1]))
-    for start in range(0, columns.shape[0], rows_per_block):
-        block = columns[start:start + rows_per_block]
-        gram += block.T @ block
-    return gram
 
 
 def simulation_error_covariance(model: Any, records: Any, *, with_step: bool = False, with_method: bool = False,
