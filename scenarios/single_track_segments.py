@@ -17,9 +17,10 @@ Two things `vehid identify --structure single-track` adds to the grey-box fit
   the parts' estimates of every physical parameter and of the understeer
   gradient are compared pair by pair within their 95 % intervals
   (:func:`vehid.identification.assessment.segments.segment_consistency`).
-  Where a quantity's parts agree in fewer than 80 % of their pairs, the
-  model does not hold over the whole log (one warning names them); the
-  parts' estimates are the JSON ``segments``.
+  Where a quantity's parts agree in fewer than 80 % of their pairs and the
+  joint test (Cochran's Q at 1 %) rejects one common value, the model does
+  not hold over the whole log (one warning names them); the parts'
+  estimates are the JSON ``segments``.
 """
 
 from __future__ import annotations

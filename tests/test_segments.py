@@ -16,6 +16,7 @@ from vehid.identification.assessment.segments import (
     UncertaintyMethod,
     block_edges,
     block_plan,
+    homogeneity,
     interval_scale,
     jackknife_covariance,
     one_step_replicates,
@@ -109,8 +110,22 @@ def test_consistency_names_the_quantities_whose_parts_disagree():
                                                                           "unit": "N/rad"}
     assert entry["agreement"]["yaw_inertia"]["holds"] and entry["agreement"]["yaw_inertia"]["agreeing"] == 10
     assert segment_consistency(spans, {"yaw_inertia": inertia}).warning() is None
+    # one pair in three outside its interval (2 of 3 agree, below 80 %) but Cochran's Q = 7.29 on 2 degrees of
+    # freedom (p = exp(-7.29 / 2) = 0.026) does not reject one common value at 1 %: not named
+    chance = {"values": [0.0, 1.0, 3.0], "stds": [0.8] * 3, "unit": "-"}
+    found = segment_consistency(spans[:3], {"x": chance})
+    assert found.quantities[0].agreement.agreeing == 2 and found.consistent
+    assert found.quantities[0].homogeneity_p == pytest.approx(np.exp(-(42 / 9 / 0.64) / 2), rel=1e-9)
     with pytest.raises(InputError, match="3 estimates for 5 parts"):
         segment_consistency(spans, {"x": {"values": [1, 2, 3], "stds": [1, 1, 1]}})
+
+
+def test_homogeneity_is_cochrans_q():
+    # two estimates 0 and 2 with unit std: Q = 1 + 1 = 2 on one degree of freedom, P(chi2_1 > 2) = 0.15730
+    # (table); a part without an estimate is left out
+    statistic, dof, p = homogeneity([0.0, 2.0, np.nan], [1.0, 1.0, 1.0])
+    assert (statistic, dof) == (pytest.approx(2.0, rel=1e-12), 1) and p == pytest.approx(0.15730, abs=1e-5)
+    assert homogeneity([1.0], [1.0]) == (0.0, 0, 1.0)
 
 
 def test_blocks_and_the_t_factor():
