@@ -21,16 +21,22 @@ def _vehid(*args):
     return run_vehid(*args)
 
 
+def _drive(rng: np.random.Generator, n: int, *parameters: list[float]) -> tuple[IOData, list[np.ndarray]]:
+    """``n`` samples at 100 Hz, speed 10 -> 30 m/s, 0-2 Hz steer, and the car's outputs with each set of parameters."""
+    dt = 0.01
+    t = dt * np.arange(n)
+    steer = 0.02 * band_limited_noise(n, dt, 2.0, rng)
+    record = IOData(t=t, u=np.column_stack([steer, 10.0 + 20.0 * t / t[-1]]), y=np.zeros((n, 2)))
+    model = single_track_model(SingleTrackConfig(1500.0, 1.2, 1.5))
+    return record, [simulate_greybox(model, theta, record)[0] for theta in parameters]
+
+
 @pytest.fixture(scope="module")
 def log(tmp_path_factory):
     """90 s at 100 Hz, speed 10 -> 30 m/s, 0-2 Hz steer; yaw rate logged in deg/s; 3 % noise per output."""
     rng = np.random.default_rng(5)
-    dt, n = 0.01, 9000
-    t = dt * np.arange(n)
-    steer = 0.02 * band_limited_noise(n, dt, 2.0, rng)
-    speed = 10.0 + 20.0 * t / t[-1]
-    record = IOData(t=t, u=np.column_stack([steer, speed]), y=np.zeros((n, 2)))
-    y, _ = simulate_greybox(single_track_model(SingleTrackConfig(1500.0, 1.2, 1.5)), list(TRUTH.values()), record)
+    record, (y,) = _drive(rng, 9000, list(TRUTH.values()))
+    t, steer, speed = record.t, record.u[:, 0], record.u[:, 1]
     y += 0.03 * np.std(y, axis=0) * rng.standard_normal(y.shape)
     path = tmp_path_factory.mktemp("logs") / "log.csv"
     np.savetxt(path, np.column_stack([t, steer, speed, y[:, 0] / DEG, y[:, 1]]), delimiter=",",
@@ -241,18 +247,11 @@ def test_a_car_that_changes_halfway_is_named_and_a_steady_one_is_not(log, tmp_pa
     (measured: 0.06-0.5 kN/rad), so every pair across the change disagrees: 2 of 6 pairs agree; the rear
     stiffness and the yaw inertia, unchanged, agree in 6 of 6."""
     rng = np.random.default_rng(8)
-    dt, n = 0.01, 8000
-    t = dt * np.arange(n)
-    steer = 0.02 * band_limited_noise(n, dt, 2.0, rng)
-    speed = 10.0 + 20.0 * t / t[-1]
-    record = IOData(t=t, u=np.column_stack([steer, speed]), y=np.zeros((n, 2)))
-    model = single_track_model(SingleTrackConfig(1500.0, 1.2, 1.5))
-    before, _ = simulate_greybox(model, list(TRUTH.values()), record)
-    after, _ = simulate_greybox(model, [48_000.0, *list(TRUTH.values())[1:]], record)
-    y = np.where((t < 40.0)[:, None], before, after)
+    record, (before, after) = _drive(rng, 8000, list(TRUTH.values()), [48_000.0, *list(TRUTH.values())[1:]])
+    y = np.where((record.t < 40.0)[:, None], before, after)
     y += 0.03 * np.std(y, axis=0) * rng.standard_normal(y.shape)
     path = tmp_path / "changing.csv"
-    np.savetxt(path, np.column_stack([t, steer, speed, y]), delimiter=",", header="t,delta,vx,yawRate,ayCG",
+    np.savetxt(path, np.column_stack([record.t, record.u, y]), delimiter=",", header="t,delta,vx,yawRate,ayCG",
                comments="")
     assert main(["identify", str(path), "--structure", "single-track", "--inputs", "delta", "--schedule", "vx",
                  "--outputs", "yawRate,ayCG", *GEOMETRY, "--json"]) == 0
