@@ -89,7 +89,8 @@ def _record(path: Path, span: tuple[float, float]) -> IOData:
     table, column = read_log(path)
     keep = (table[:, 0] >= span[0] - 1e-9) & (table[:, 0] < span[1] - 1e-9)
     rows = table[keep]
-    return IOData(t=rows[:, 0], u=rows[:, [column["delta"], column["vx"]]], y=rows[:, [column["yawRate"], column["ayCG"]]],
+    return IOData(t=rows[:, 0], u=rows[:, [column["delta"], column["vx"]]],
+                  y=rows[:, [column["yawRate"], column["ayCG"]]],
                   input_names=("delta", "vx"), output_names=("yawRate", "ayCG"))
 
 

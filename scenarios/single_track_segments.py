@@ -88,7 +88,8 @@ def _file_time(record: IOData) -> np.ndarray:
     return record.t + float(record.meta.get("time_base", {}).get("time_offset", 0.0))
 
 
-def part_consistency(config: Any, model: Any, record: IOData, fit: Callable[[IOData], Any]) -> SegmentConsistency | None:
+def part_consistency(config: Any, model: Any, record: IOData,
+                     fit: Callable[[IOData], Any]) -> SegmentConsistency | None:
     """Identify each part of ``record`` with ``fit`` and compare the parts' estimates (module docstring).
 
     ``fit(part)`` identifies one part as the whole log was identified and returns its grey-box

@@ -173,7 +173,7 @@ def n4sid_on_the_calibration_system():
 
 
 def test_n4sid_asymptotic_covariance_agrees_with_its_residual_bootstrap(n4sid_on_the_calibration_system):
-    """N4SID's formal covariance (Gauss-Newton of the simulation errors, white residuals) against a 30-replicate bootstrap.
+    """N4SID's formal covariance (Gauss-Newton, white residuals) against a 30-replicate bootstrap.
 
     On the calibration system (10 % output noise, 30 s) with block rows
     spanning half a period of the slow mode, where N4SID is nearly

@@ -450,7 +450,8 @@ def iekf_parameter_covariance(
             deviations = samples - (estimate.parameters + step)
             total = fit + deviations.T @ deviations / samples.shape[0]
             return answer(0.5 * (total + total.T), method.with_note("plus the filter's spread along one more pass"))
-    return answer(upper_envelope(covariance, fit), method.with_note("at least half the filter's P, direction by direction"))
+    return answer(upper_envelope(covariance, fit),
+                  method.with_note("at least half the filter's P, direction by direction"))
 
 
 def upper_envelope(first: np.ndarray, second: np.ndarray) -> np.ndarray:
@@ -603,8 +604,9 @@ def fit_covariance(jacobian: np.ndarray, residuals: np.ndarray, *, dt: float | N
             weights = 1.0 / np.sqrt(_error_variances(residuals, n_theta))
             blocks = np.asarray(jacobian, dtype=float).reshape(samples, n_y, n_theta)
             weighted_errors = residuals * weights**2
-            pieces = [(blocks[a:b] * weights[None, :, None]).reshape(-1, n_theta) for a, b in zip(edges[:-1], edges[1:])]
-            gradients = [np.einsum("kin,ki->n", blocks[a:b], weighted_errors[a:b]) for a, b in zip(edges[:-1], edges[1:])]
+            spans = list(zip(edges[:-1], edges[1:]))
+            pieces = [(blocks[a:b] * weights[None, :, None]).reshape(-1, n_theta) for a, b in spans]
+            gradients = [blocks[a:b].reshape(-1, n_theta).T @ weighted_errors[a:b].ravel() for a, b in spans]
             try:
                 replicates = one_step_replicates(np.zeros(n_theta), pieces, gradients, form=form)
             except InputError as exc:

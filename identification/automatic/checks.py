@@ -40,7 +40,8 @@ from vehid.identification.models.modal import ModalModel
 from vehid.identification.assessment.multirecord import score_records
 from vehid.identification.assessment.residuals import ResidualTests, nis_band, residual_tests
 
-__all__ = ["model_residual_tests", "uncertainty_summary", "uncertainty_method", "record_names", "records_summary", "data_warnings"]
+__all__ = ["model_residual_tests", "uncertainty_summary", "uncertainty_method", "record_names", "records_summary",
+           "data_warnings"]
 
 
 def model_residual_tests(model: Any, data: IOData) -> ResidualTests:
