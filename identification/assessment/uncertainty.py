@@ -47,6 +47,7 @@ __all__ = [
     "iekf_parameter_covariance",
     "gauss_newton_covariance",
     "fit_covariance",
+    "difference_fit_covariance",
     "simulation_error_covariance",
     "with_covariance",
     "with_simulation_error_covariance",
@@ -681,6 +682,47 @@ def simulation_error_covariance(model: Any, records: Any, *, with_step: bool = F
     if not (with_step or with_method):
         return covariance
     return (covariance, *((step,) if with_step else ()), *((method,) if with_method else ()))
+
+
+def difference_fit_covariance(simulate: Callable[[np.ndarray], np.ndarray], theta: Any, measured: Any, *,
+                              steps: Any, dt: float | None = None, **options: Any) -> tuple | None:
+    """:func:`fit_covariance` of a model's simulation errors, the Jacobian by central differences.
+
+    Parameters
+    ----------
+    simulate : callable
+        ``simulate(theta) -> y (N, n_y)``, the model's outputs over the record(s) with parameters ``theta``.
+    theta : array_like (n_theta,)
+        The estimate.
+    measured : array_like (N, n_y)
+        The measured outputs.
+    steps : array_like (n_theta,)
+        The difference step of each parameter (``2 n_theta`` simulations).
+    dt : float, optional
+        Sample interval (s), to state the blocks in seconds.
+    **options
+        Passed to :func:`fit_covariance` (``jackknife``, ``blocks``, ``form``, ``level``).
+
+    Returns
+    -------
+    (covariance, UncertaintyMethod) or None
+        None where a simulation is not finite.
+    """
+    theta = np.asarray(theta, dtype=float).ravel()
+    steps = np.broadcast_to(np.asarray(steps, dtype=float), theta.shape)
+    if not np.all(steps > 0):
+        raise InputError("every parameter needs a positive difference step")
+    with np.errstate(all="ignore"):
+        base = np.asarray(simulate(theta), dtype=float)
+        jacobian = np.empty(base.shape + (theta.size,))
+        for i in range(theta.size):
+            shift = np.zeros(theta.size)
+            shift[i] = steps[i]
+            jacobian[:, :, i] = (simulate(theta + shift) - simulate(theta - shift)) / (2 * steps[i])
+    residuals = base - np.asarray(measured, dtype=float)
+    if not (np.all(np.isfinite(jacobian)) and np.all(np.isfinite(residuals))):
+        return None
+    return fit_covariance(jacobian.reshape(-1, theta.size), residuals, dt=dt, **options)
 
 
 def with_covariance(model: Any, covariance: Any, method: UncertaintyMethod) -> Any:

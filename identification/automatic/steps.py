@@ -53,6 +53,7 @@ from vehid.identification.filtering.iekf import (INVARIANT_P, INVARIANT_P_DECAY,
                                                  signal_scales, start_structure)
 from vehid.identification.models.modal import ModalModel, ModalStructure
 from vehid.identification.assessment.uncertainty import with_simulation_error_covariance
+from vehid.identification.automatic.checks import uncertainty_method
 from vehid.identification.assessment.validation import UNSTABLE_HORIZON, Scores, default_horizon, score, split_holdout
 from vehid.identification.automatic.plan import (AUTO_HOLDOUT, AUTO_MAX_ORDER, Plan, holdout_fraction, make_plan,
                                                  parse_orders, supported_orders)
@@ -697,6 +698,7 @@ def identify_nonlinear(linear: ModalModel, plan: Plan, settings: IdentifyOptions
         "stop_reason": result.stop_reason, "fit_percent": scores.estimation.R,
         "estimation_fit_percent": scores.estimation.fit, "validation_fit_percent": scores.validation_fit,
         "validation_R": scores.validation_R, "start_fit_percent": result.start_fit, "seconds": result.seconds,
+        "uncertainty_method": uncertainty_method(result.model),
     }
     return NonlinearOutcome(result, summary, scores)
 

@@ -365,7 +365,7 @@ def simulation_fit_covariance(model: GreyBoxModel, theta: Any, data: IOData | Se
     -------
     (covariance, UncertaintyMethod) or None
     """
-    from ..assessment.uncertainty import fit_covariance
+    from ..assessment.uncertainty import difference_fit_covariance
 
     records = as_records(data)
     theta = model.check_parameters(theta)
@@ -378,18 +378,9 @@ def simulation_fit_covariance(model: GreyBoxModel, theta: Any, data: IOData | Se
         return np.vstack([simulate_greybox(model, values, record, discretization=discretization,
                                            substeps=substeps)[0] for record in records])
 
-    base = simulated(theta)
-    jacobian = np.empty(base.shape + (model.n_theta,))
-    for i in range(model.n_theta):
-        shift = np.zeros(model.n_theta)
-        shift[i] = steps[i]
-        jacobian[:, :, i] = (simulated(theta + shift) - simulated(theta - shift)) / (2 * steps[i])
-    residuals = base - np.vstack([record.y for record in records])
-    if not (np.all(np.isfinite(jacobian)) and np.all(np.isfinite(residuals))):
-        return None
-    return fit_covariance(jacobian.reshape(-1, model.n_theta), residuals, dt=float(records[0].dt),
-                          jackknife=jackknife, form=form, level=level,
-                          **({} if blocks is None else {"blocks": blocks}))
+    return difference_fit_covariance(simulated, theta, np.vstack([record.y for record in records]), steps=steps,
+                                     dt=float(records[0].dt), jackknife=jackknife, form=form, level=level,
+                                     **({} if blocks is None else {"blocks": blocks}))
 
 
 def _check_discretization(discretization: str, substeps: int) -> None:
