@@ -53,9 +53,9 @@ def _without_schedule(args: Any) -> dict[str, float]:
     return {name: factor for name, factor in parse_scale(args.scale).items() if name != args.schedule}
 
 
-def read_with_schedule(args: Any, paths: Sequence[str]) -> tuple[tuple[IOData, ...], Any, list[np.ndarray], dict]:
-    """Raw records without the schedule, their reading settings, each record's schedule (scaled) and
-    the ``--scale`` factors of the other channels."""
+def read_with_schedule(args: Any, paths: Sequence[str]) -> tuple[tuple[IOData, ...], Any, list[np.ndarray], dict, str]:
+    """Raw records without the schedule, their reading settings, each record's schedule (scaled), the
+    ``--scale`` factors of the other channels and the schedule's unit ("-" where unknown or scaled)."""
     from vehid.identification.dataio.preparation import parse_scale, read_raw_records
     from vehid.scenarios.data_options import settings_from_args
 
@@ -69,8 +69,9 @@ def read_with_schedule(args: Any, paths: Sequence[str]) -> tuple[tuple[IOData, .
     factor = parse_scale(args.scale).get(channel, 1.0)
     schedules = [record.u[:, -1] * factor for record in raw]
     inputs = full_settings.inputs[:-1]
+    unit = raw[0].input_units[-1] if factor == 1.0 else "-"  # a scaled channel's unit is the user's to name
     return (tuple(record.select_inputs(inputs) for record in raw), dataclasses.replace(full_settings, inputs=inputs),
-            schedules, _without_schedule(args))
+            schedules, _without_schedule(args), unit)
 
 
 def schedule_loader(args: Any, preparation: Any, channels: Any, found: list[np.ndarray]):
