@@ -210,7 +210,7 @@ def test_a_wide_band_pole_is_marked_at_the_edge_and_the_slow_modes_fill_the_map(
     # The two fast poles, outside, are drawn at the left edge and counted with their values.
     edge = [line for line in ax.get_lines() if line.get_marker() == "<"]
     assert len(edge) == 2 and all(left <= line.get_xdata()[0] <= right for line in edge)
-    note = ax.get_xlabel().splitlines()[1]
+    note = " ".join(ax.get_xlabel().splitlines()[1:])
     assert note.startswith("2 eigenvalues beyond the view") and "-2.9e+03" in note and "-3.1e+03" in note
     assert not legibility_problems(fig)
 

@@ -28,6 +28,8 @@ __all__ = [
     "estimate_initial_state",
     "predict",
     "score",
+    "predicted_scores",
+    "iterated_initial_state",
     "split_holdout",
     "default_horizon",
     "UNSTABLE_HORIZON",
@@ -288,6 +290,12 @@ def predict(model: Any, data: IOData, *, initial_state: str = "estimate", horizo
 
 def score(model: Any, data: IOData, *, initial_state: str = "estimate", horizon: int | None = None) -> Scores:
     """NRMSE fit and R per output of :func:`predict` against the record (``-inf`` where not finite)."""
+    return predicted_scores(model, data, initial_state=initial_state, horizon=horizon)[1]
+
+
+def predicted_scores(model: Any, data: IOData, *, initial_state: str = "estimate", horizon: int | None = None
+                     ) -> tuple[np.ndarray, Scores]:
+    """:func:`predict`'s outputs (N, n_y) and their :func:`score`, from one prediction (for a caller drawing it)."""
     predicted = predict(model, data, initial_state=initial_state, horizon=horizon)
     start = 0 if horizon is None else min(int(horizon), data.n_samples - 2)
     y, y_hat = data.y[start:], predicted[start:]
@@ -296,8 +304,8 @@ def score(model: Any, data: IOData, *, initial_state: str = "estimate", horizon:
             fit, R = nrmse_fit(y, y_hat), percentage_explanation(y, y_hat)
         else:
             fit = R = np.full(data.n_y, -np.inf)
-    return Scores(fit, R, initial_state if horizon is None or not model.is_linear else "zero",
-                  horizon, int(y.shape[0]))
+    return predicted, Scores(fit, R, initial_state if horizon is None or not model.is_linear else "zero",
+                             horizon, int(y.shape[0]))
 
 
 def split_holdout(data: IOData, fraction: float) -> tuple[IOData, IOData]:

@@ -111,10 +111,11 @@ VERDICT_KEYS = ("method", "order", "passes_run", "stop_reason", "estimation_fit_
 
 
 def _output_names(archive, verdict) -> tuple[str, ...]:
-    """The returned model's output names (else the first record's), to label the verdict's per-output scores."""
+    """The returned model's output names (else the first record's channels, where the model kept only
+    placeholders ``y1``, ...), to label the verdict's per-output scores."""
+    from vehid.scenarios.report import output_names_of, record_output_names
+
     returned = archive.runs.get((verdict.get("scoring_rule") or {}).get("returned_run"))
-    names = getattr(getattr(returned, "model", None), "output_names", None)
-    if names:
-        return tuple(names)
-    record = next(iter(archive.records.values()), None)
-    return tuple(record.output_names) if record is not None else ()
+    record_names = record_output_names(archive)
+    count = len(verdict.get("estimation_fit_percent") or record_names)
+    return tuple(output_names_of(getattr(returned, "model", None), record_names, count) or record_names)
