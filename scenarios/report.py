@@ -34,6 +34,7 @@ __all__ = [
     "archive_handling",
     "output_names_of",
     "record_output_names",
+    "verdict_output_names",
 ]
 
 _SAFE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
@@ -566,6 +567,15 @@ def verdict_lines(verdict: Mapping[str, Any], output_names: Sequence[str]) -> li
     lines += [f"warning: {line}" for line in warnings] if warnings else ["warnings: none"]
     lines += [f"note: {line}" for line in verdict.get("notes") or []]
     return lines
+
+
+def verdict_output_names(archive: Any, verdict: Mapping[str, Any]) -> tuple[str, ...]:
+    """The returned model's output names, else the first record's channels (where the model kept only
+    placeholders ``y1``, ...): what labels the verdict's per-output scores."""
+    returned = archive.runs.get((verdict.get("scoring_rule") or {}).get("returned_run"))
+    names = record_output_names(archive)
+    count = len(verdict.get("estimation_fit_percent") or names)
+    return tuple(output_names_of(getattr(returned, "model", None), names, count) or names)
 
 
 _PAGE_COLUMNS = 95  # characters per line of the verdict page at 9 pt on the report's width
