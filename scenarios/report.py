@@ -435,7 +435,8 @@ def archive_figures(archive: Any, *, window: tuple[float, float] | None = None, 
             sorted(orders), [run.history["fit_filter"].mean(axis=1) for run in studied],
             [run.history["trace_p"] for run in studied],
             drift=[_most_divergent(run.history["parameters"]) for run in studied])
-    schedule_unit = (archive.schedule or {}).get("unit") if isinstance(archive.schedule, Mapping) else None
+    stored = getattr(archive, "schedule", None)  # archives written before schedules were kept have none
+    schedule_unit = stored.get("unit") if isinstance(stored, Mapping) else None
     views: dict[str, Any] = {}  # linear views of every run, the returned model's first
     for name, run, label in _ordered_runs(runs, returned):
         views.update(_linear_views(label, run.model, schedule_unit))
