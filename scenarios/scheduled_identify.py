@@ -46,18 +46,18 @@ __all__ = ["NONLINEAR_NOTE", "OUTPUT_MAP_NODES", "VALIDATION_MARGIN", "P_GRID", 
            "identify_scheduled_model", "schedule_margin", "unscheduled_fit", "with_output_map", "text_lines"]
 
 
-def archive_schedule(archive: Any, plan: Any) -> None:
+def archive_schedule(archive: Any, plan: Any, validation_prefix: str) -> None:
     """The schedule channel of every archived record (root member ``schedule``), so that a report can simulate
-    the family on them: ``channel``, ``unit`` and ``records`` (record name to samples)."""
+    the family on them: ``channel``, ``unit`` and ``records`` (record name to samples); the held-out parts are
+    archived under ``validation_prefix``."""
     from vehid.identification.dataio.archive import SCHEDULE_MEMBER
     from vehid.identification.dataio.storage import write_value
     from vehid.scenarios.data_options import RECORD_PREFIX, record_series_name
-    from vehid.scenarios.commands.identify import VALIDATION_PREFIX
 
     schedule = plan.schedule
     records = {record_series_name(RECORD_PREFIX, i): np.asarray(values, dtype=float)
                for i, values in enumerate(schedule.estimation)}
-    records.update({record_series_name(VALIDATION_PREFIX, i): np.asarray(values, dtype=float)
+    records.update({record_series_name(validation_prefix, i): np.asarray(values, dtype=float)
                     for i, values in enumerate(schedule.validation[:plan.held_out_count])})
     write_value(archive, SCHEDULE_MEMBER, {"channel": schedule.channel, "unit": schedule.unit,
                                            "records": records})

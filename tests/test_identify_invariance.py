@@ -298,6 +298,8 @@ def test_the_spline_model_is_returned_only_where_it_beats_the_other_model_by_the
     margin = nonlinear_margin(scored(79.0, 70.0), linear, "scheduled")
     note = nonlinear_note(margin)
     assert "not returned" in note and "scheduled" in note and "70.00 against 80.00" in note
+    note = nonlinear_note(nonlinear_margin(scored(99.0, 85.0), linear, "scheduled"))
+    assert note.startswith("the spline-nonlinear model is returned") and "85.00 against 80.00" in note
     # without validation data the estimation fits decide, and the spline model fitted that record too
     alone = scored(90.0, None)
     assert nonlinear_margin(scored(90.0 + WHOLE_RECORD_MARGIN - 0.1, None), alone, "filter")["choice"] == "filter"

@@ -136,11 +136,9 @@ def _finish(plan: Plan, options: IdentifyOptions, model: Any, *, estimator: Any,
             order: int | None = None, fit: Any = None, time_domain: str | None = None) -> Identification:
     """Scores, checks, notes, warnings and the other candidates: the common end of every run.
 
-    The linear model above is the first candidate; the spline model (``nonlinear``) and the
-    scheduled family (a plan with a schedule) are scored by the same rule
-    (:func:`~vehid.identification.automatic.steps.evaluate`), and the one returned is the better by
-    it (:func:`_returned`). Warnings, checks and scores are the returned model's; what became of the
-    others, their own problems included, is said in notes.
+    The linear model above is the first candidate; the scheduled family and the spline model are
+    the others (:func:`_candidates`). Warnings, checks and scores are the returned model's; what
+    became of the others, their own problems included, is said in notes.
     """
     from vehid.identification.assessment.multirecord import pooled_simulation_fit
 
@@ -183,44 +181,12 @@ def _finish(plan: Plan, options: IdentifyOptions, model: Any, *, estimator: Any,
     decisions = tuple(Decision.from_entry(name, entry) for name, entry in keys.get("decision_margins", {}).items())
     linear = _Candidate("start" if start_returned else ("filter" if iekf else options.method), model, evaluation,
                         warnings, fit, plan.records)
-    chosen, others, nonlinear, scheduled = linear, [], None, None
-    if options.nonlinear:
-        nonlinear = steps.identify_nonlinear(model, plan, options)
-        scores = nonlinear.scores
-        spline = _Candidate("nonlinear", nonlinear.result.model, steps.Evaluation(
-            scores.estimation, scores.estimation.R, scores.validation, scores.horizon), steps.run_warnings(
-            model=nonlinear.result.model, evaluation=steps.Evaluation(
-                scores.estimation, scores.estimation.R, scores.validation, scores.horizon),
-            stop_reason=nonlinear.result.stop_reason, start_fit=float(np.mean(nonlinear.result.start_fit)),
-            final_fit=float(np.mean(nonlinear.result.fit_percent)), allow_unstable=True, label="nonlinear"),
-            nonlinear.summary["R"], plan.records)
-    if plan.schedule is not None:  # the scheduled family, started from the model above, returned where it validates better
-        from vehid.identification.automatic.scheduled import NONLINEAR_NOTE, identify_scheduled_model
-
-        scheduled = identify_scheduled_model(model, plan, options, evaluation)
-        decisions += (Decision.from_entry("schedule", scheduled.margin),)
-        family = _Candidate("scheduled", scheduled.model, scheduled.evaluation, scheduled.warnings,
-                            scheduled.scores["R"], plan.records, scores=scheduled.scores)
-        if nonlinear is not None:
-            notes.append(NONLINEAR_NOTE)
-        if scheduled.returned:
-            chosen, others = family, [linear]
-        else:
-            others = [family]
-            notes.append(scheduled.note)
-    if nonlinear is not None:
-        margin = steps.nonlinear_margin(spline.evaluation, chosen.evaluation, chosen.name)
-        decisions += (Decision.from_entry("nonlinear", margin),)
-        if margin["choice"] == "nonlinear":
-            chosen, others = spline, [chosen, *others]
-        else:
-            others.append(spline)
-            notes.append(steps.nonlinear_note(margin))
-        if scheduled is not None:
-            scheduled.summary["model_returned"] = "scheduled" if chosen is family else (
-                "nonlinear" if chosen is spline else "unscheduled")
+    chosen, others, nonlinear, scheduled, more, said = _candidates(plan, options, linear)
+    decisions += more
+    notes += said
     for other in others:  # what went wrong with a model not returned is no warning about the one returned
-        notes += [f"not returned, the {other.label} model: {line}" for line in other.warnings]
+        notes += [f"not returned, the {other.label} model: {line.removeprefix(other.name + ': ')}"
+                  for line in other.warnings]
     warnings = list(chosen.warnings) + data_warnings(plan.records)
     checks, tests = returned_checks(chosen.model, chosen.first_record(plan),
                                     [record.nis for record in result.history] if result and chosen is linear else None)
@@ -252,7 +218,6 @@ class _Candidate:
     warnings: list[str]
     R: Any  # per output, the model simulated from rest over the estimation records, pooled
     estimation_records: tuple
-    scores: Mapping[str, Any] | None = None
 
     @property
     def label(self) -> str:
@@ -273,3 +238,42 @@ class _Candidate:
 
     def first_record(self, plan: Plan) -> Any:
         return self.records(plan)[0]
+
+
+def _candidates(plan: Plan, options: IdentifyOptions, linear: _Candidate
+                ) -> tuple[_Candidate, list[_Candidate], Any, Any, tuple[Decision, ...], list[str]]:
+    """The model returned among the linear one and the others asked for, every one scored by the run's rule.
+
+    The scheduled family (a plan with a schedule) replaces the linear model where it beats it by
+    its margin (decision ``schedule``); the spline model (``nonlinear``) replaces whichever of the two
+    stands where it beats that by its own (decision ``nonlinear``). Returns the model returned, the
+    others, the spline and scheduled outcomes, the decisions and their notes.
+    """
+    chosen, others, decisions, notes = linear, [], (), []
+    nonlinear = scheduled = spline = family = None
+    if options.nonlinear:
+        nonlinear = steps.identify_nonlinear(linear.model, plan, options)
+        scores = nonlinear.scores
+        scored = steps.Evaluation(scores.estimation, scores.estimation.R, scores.validation, scores.horizon)
+        spline = _Candidate("nonlinear", nonlinear.result.model, scored, steps.run_warnings(
+            model=nonlinear.result.model, evaluation=scored, stop_reason=nonlinear.result.stop_reason,
+            start_fit=float(np.mean(nonlinear.result.start_fit)), final_fit=float(np.mean(nonlinear.result.fit_percent)),
+            allow_unstable=True, label="nonlinear"), nonlinear.summary["R"], plan.records)
+    if plan.schedule is not None:  # the scheduled family, started from the linear model
+        from vehid.identification.automatic.scheduled import NONLINEAR_NOTE, identify_scheduled_model
+
+        scheduled = identify_scheduled_model(linear.model, plan, options, linear.evaluation)
+        decisions += (Decision.from_entry("schedule", scheduled.margin),)
+        family = _Candidate("scheduled", scheduled.model, scheduled.evaluation, scheduled.warnings,
+                            scheduled.scores["R"], plan.records)
+        notes += ([NONLINEAR_NOTE] if nonlinear is not None else []) + ([scheduled.note] if scheduled.note else [])
+        chosen, others = (family, [linear]) if scheduled.returned else (linear, [family])
+    if spline is not None:
+        margin = steps.nonlinear_margin(spline.evaluation, chosen.evaluation, chosen.name)
+        decisions += (Decision.from_entry("nonlinear", margin),)
+        notes.append(steps.nonlinear_note(margin))
+        chosen, others = (spline, [chosen, *others]) if margin["choice"] == "nonlinear" else (chosen, [*others, spline])
+        if scheduled is not None:
+            scheduled.summary["model_returned"] = {"scheduled": "scheduled", "nonlinear": "nonlinear"}.get(
+                chosen.name, "unscheduled")
+    return chosen, others, nonlinear, scheduled, decisions, notes

@@ -694,10 +694,14 @@ def nonlinear_margin(spline: Any, other: Any, other_name: str) -> dict[str, Any]
 
 
 def nonlinear_note(margin: dict[str, Any]) -> str:
-    """The note of a spline model not returned (the decision ``nonlinear``)."""
+    """The note of the decision ``nonlinear``: the spline model returned in the other's place, or not and why."""
     def shown(value: Any) -> str:
         return "-" if value is None else f"{value:.2f}"
 
+    if margin["choice"] == "nonlinear":
+        return (f"the spline-nonlinear model is returned: it beats the {margin['runner_up']} model by more than "
+                f"{margin['margin']:g} points ({margin['measure']} {shown(margin['score'])} against "
+                f"{shown(margin['runner_up_score'])})")
     return (f"the spline-nonlinear model is not returned: it does not beat the {margin['choice']} model by the margin "
             f"({margin['measure']} {shown(margin['runner_up_score'])} against {shown(margin['score'])}); try a "
             "smaller --nonlinear-p or fewer --nodes")

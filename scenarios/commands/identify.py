@@ -386,7 +386,7 @@ def _finish(args, plan, result, archive_path=None) -> tuple[dict, str, object]:
                 write_pass_history(archive, "nonlinear", result.nonlinear.result.history)
             if scheduled is not None:
                 write_run(archive, "scheduled", model=scheduled.model)
-                scheduled_identify.archive_schedule(archive, plan)
+                scheduled_identify.archive_schedule(archive, plan, VALIDATION_PREFIX)
             if result.start_returned:
                 write_run(archive, "start", model=linear)
             if result.residual_tests is not None:
