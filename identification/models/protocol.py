@@ -4,8 +4,9 @@
 archives and exports rely on, and the only one callers that take any model use:
 
 * ``n_states``, ``n_u``, ``n_y``; ``is_linear`` (False where the model is
-  nonlinear: scores then simulate it from rest, and its state-space form is
-  a linearisation);
+  not linear time-invariant: scores then simulate it whatever the horizon,
+  its initial state fitted by Gauss-Newton, and its state-space form is a
+  linearisation);
 * ``simulate_outputs(u, dt=None, *, x0=None)``: outputs (N, n_y) driven by
   ``u`` (N, n_u) from the state ``x0`` (default rest); ``simulate(record)``
   does the same for an :class:`~identification.data.IOData` record. A class
@@ -135,7 +136,7 @@ class StateSpaceModel:
     """The protocol's methods from ``to_statespace`` (continuous models add ``simulate_outputs``)."""
 
     output_names: tuple[str, ...] | None = None
-    #: False for a model whose state-space form is only a linearisation (scores simulate it from rest).
+    #: False for a model whose state-space form is only a linearisation (scores simulate it, never predict k steps).
     is_linear = True
 
     def to_statespace(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float | None]:
