@@ -50,6 +50,7 @@ __all__ = [
     "plot_convergence",
     "plot_order_study",
     "plot_time_fits",
+    "mark_spikes",
     "plot_splines",
     "eigenvalue_view",
     "plot_eigenvalue_map",
@@ -327,6 +328,7 @@ def plot_time_fits(
     title: str = "Model fits to the data",
     fig: Figure | None = None,
     scores: Mapping[str, tuple[Any, Any]] | None = None,
+    spikes: Mapping[str, Sequence[int]] | None = None,
 ) -> Figure:
     """Measured outputs against model predictions (Best & Bogdanski 2017, Figures 7 and 9).
 
@@ -347,6 +349,11 @@ def plot_time_fits(
         Per prediction label, the NRMSE fit and R per output (percent) as the
         caller scored them (e.g. past a k-step horizon); the legend then shows
         both, labelled. Without it the legend shows R over the whole record.
+    spikes : mapping of str to sequence of int, optional
+        Per output name, the sample indices of its spikes and drop-outs
+        (:func:`~vehid.identification.dataio.cleaning.find_outliers`): each is
+        marked, and the output's axis range is set by its other samples, a
+        spike beyond it drawn at the axis' edge (:func:`mark_spikes`).
 
     Returns
     -------
@@ -383,13 +390,43 @@ def plot_time_fits(
             else:
                 text = f"{label} (R = {fits[label][i]:.2f} %)"
             ax.plot(*display_samples(t[shown], value[shown, i]), linewidth=1.2, label=text)
-        # the measurement sets the range; a spike in it or a prediction that runs away is cut at the frame
-        set_robust_limits(ax, y[shown, i], extra=[value[shown, i] for value in predicted.values()])
+        marked = [k for k in (spikes or {}).get(names[i], ()) if 0 <= k < t.size and shown[k]]
+        clean = shown.copy()
+        clean[marked] = False
+        # the measurement without its listed spikes sets the range; an unlisted spike or a prediction that
+        # runs away is cut at the frame, a listed spike marked where it lies or at the edge it passes
+        set_robust_limits(ax, y[clean, i], extra=[value[shown, i] for value in predicted.values()])
+        if marked:
+            mark_spikes(ax, t, y[:, i], marked)
         ax.set_ylabel(with_unit(channel_label(names[i]), units[i]))
         add_legend(ax)
     axes[-1].set_xlabel("time (s)")
     fig.suptitle(title)
     return fig
+
+
+def mark_spikes(ax: Axes, t: np.ndarray, measured: np.ndarray, indices: Sequence[int]) -> None:
+    """Mark a channel's spikes on its axis, whose range the other samples have set.
+
+    A spike inside the range is ringed where it lies; one beyond it is drawn as a triangle at the edge
+    it passes, pointing out, so that one glitch neither squashes the record into a line nor goes unseen.
+    """
+    low, high = ax.get_ylim()
+    at = np.asarray(indices, dtype=int)
+    spike_t, spike_y = t[at], measured[at]
+    inside = (spike_y >= low) & (spike_y <= high)
+    label = f"spike or drop-out ({at.size})"
+    if inside.any():
+        ax.plot(spike_t[inside], spike_y[inside], linestyle="none", marker="o", markersize=9, markerfacecolor="none",
+                markeredgecolor="crimson", markeredgewidth=1.5, label=label)
+        label = None
+    for above, marker, edge in ((True, "^", high), (False, "v", low)):
+        beyond = (spike_y > high) if above else (spike_y < low)
+        if beyond.any():
+            ax.plot(spike_t[beyond], np.full(int(beyond.sum()), edge), linestyle="none", marker=marker, markersize=9,
+                    color="crimson", clip_on=False, label=label)
+            label = None
+    ax.set_ylim(low, high)
 
 
 def plot_splines(

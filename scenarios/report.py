@@ -468,7 +468,8 @@ def archive_figures(archive: Any, *, window: tuple[float, float] | None = None, 
         if shown is not None:
             figures[_stem("fits", record_name)] = plots.plot_time_fits(
                 shown.t, shown.y, predictions, shown.output_names, shown.output_units, window=window,
-                title=f"Model fits to {record_name} ({_rule_text(rule)})", scores=scores)
+                title=f"Model fits to {record_name} ({_rule_text(rule)})", scores=scores,
+                spikes=spike_indices(record, shown.t))
     curves = archive_handling(archive)
     if curves:
         figures["handling"] = handling_page(curves)
@@ -488,6 +489,20 @@ def output_names_of(model: Any, record_names: Sequence[str], count: int) -> list
     if len(own) == count and own != placeholders:
         return list(own)
     return list(record_names) if len(record_names) == count else None
+
+
+def spike_indices(record: Any, t: np.ndarray) -> dict[str, list[int]]:
+    """Per channel, the samples of ``t`` (a record's time) at the spikes its cleaning listed (``meta["cleaning"]``)."""
+    report = record.meta.get("cleaning") or {}
+    found: dict[str, list[int]] = {}
+    if t.size < 2:
+        return found
+    step = float(t[1] - t[0])
+    for outlier in report.get("outliers", ()):
+        k = int(round((outlier["time"] - float(report.get("time_offset", 0.0)) - float(t[0])) / step))
+        if 0 <= k < t.size:
+            found.setdefault(outlier["channel"], []).append(k)
+    return found
 
 
 def _rule_text(rule: ScoringRule) -> str:

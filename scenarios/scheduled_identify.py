@@ -1,7 +1,9 @@
 """`vehid identify --schedule CHANNEL`: a speed-scheduled modal model from one varying-schedule record.
 
 The scheduling channel (a car's speed) is read beside the inputs, scaled by ``--scale`` where one names
-it and never offset (the model's coefficients are functions of its measured value). The unscheduled
+it and never offset (the model's coefficients are functions of its measured value); the samples below
+``--min-speed`` are left out and each run of the rest is a record of its own, simulated from rest
+(:mod:`vehid.scenarios.log_cleaning`). The unscheduled
 model of the default pipeline starts the scheduled IEKF
 (:mod:`vehid.identification.filtering.scheduled_iekf`) at every knot; the family returned is a
 :class:`~vehid.identification.models.scheduled.ScheduledModalModel`, scored like every model on the
@@ -22,10 +24,13 @@ are the summary's ``A`` ... ``eigenvalues``; ``decision_margins.schedule`` the d
 ``scheduled`` holds ``model_returned`` ("scheduled", "unscheduled" or "nonlinear"), the family's
 own ``estimation_fit_percent`` and ``validation_fit_percent``, the refinement (``refined_from``,
 ``refine_steps``, ``refine_steps_run``), ``output_map`` (with ``--nonlinear``), ``channel``,
-``grid``, ``modes_at`` (per grid value ``value`` and its ``modes``, each with ``frequency_hz``,
-``frequency_hz_std``, ``damping``, ``damping_std``), the run (``passes_run``, ``stop_reason``,
-``p`` and ``p_tried``, chosen on validation data as the IEKF's p is, ``start_fit_percent`` and
-``start_R`` of its start, ``seconds``) and ``unscheduled``: the scores of the start by the same
+``grid``, ``modes_at`` (per grid value ``value``, its ``modes``, each with ``frequency_hz``,
+``frequency_hz_std``, ``damping``, ``damping_std``, and ``extrapolated``: the knot rests on too few
+samples), ``knot_coverage`` (per knot ``value``, ``samples``, ``seconds``, ``excitation``: the first
+input's RMS there over the record's, and ``extrapolated``;
+:func:`~vehid.identification.filtering.scheduled_iekf.knot_coverage`), the run (``passes_run``,
+``stop_reason``, ``p`` and ``p_tried``, chosen on validation data as the IEKF's p is, ``start_fit_percent``
+and ``start_R`` of its start, ``seconds``) and ``unscheduled``: the scores of the start by the same
 rule (and from rest, ``*_from_rest``). Every ``*fit_percent`` is an NRMSE fit, every ``*R`` the
 fit R of eq. 17.
 """
@@ -86,5 +91,6 @@ def text_lines(entry: dict[str, Any], output_names: Sequence[str]) -> list[str]:
         for row in entry["modes_at"]:
             modes = "; ".join(f"{mode['frequency_hz']:.4g} +/- {2 * mode['frequency_hz_std']:.2g} Hz, "
                               f"{mode['damping']:.3f} +/- {2 * mode['damping_std']:.2g}" for mode in row["modes"])
-            lines.append(f"  {entry['channel']} = {row['value']:.4g}: {modes}")
+            sparse = " (extrapolated: too few samples at this knot)" if row.get("extrapolated") else ""
+            lines.append(f"  {entry['channel']} = {row['value']:.4g}: {modes}{sparse}")
     return lines

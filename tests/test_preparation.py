@@ -40,7 +40,8 @@ def test_means_and_lines_are_removed_and_scales_applied(record):
     np.testing.assert_allclose(prepared.u, raw.u - line[1] - np.outer(raw.t - raw.t[0], line[0]), atol=1e-9)
     with pytest.raises(InputError) as caught:
         prepare(raw, scale=["steer=0.0625"])
-    assert str(caught.value) == "--scale names 'steer', which is not a chosen channel; inputs: u1, u2; outputs: y1"
+    assert str(caught.value) == "'scale' names 'steer', which is not a chosen channel; inputs: u1, u2; outputs: y1"
+    assert caught.value.options == ("scale",)  # the command line says --scale
     with pytest.raises(InputError) as caught:
         prepare(raw, scale=["u1=0"])
     assert str(caught.value) == "the scale factor of 'u1' must be a finite non-zero number; got 0.0"

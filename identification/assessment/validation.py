@@ -82,8 +82,10 @@ class Scores:
 def _check(model: Any, data: IOData) -> None:
     if not isinstance(data, IOData):
         raise InputError("scores need an IOData record")
-    if (data.n_u, data.n_y) != (model.n_u, model.n_y):
-        raise InputError(f"the model has {model.n_u} inputs and {model.n_y} outputs; "
+    # a scheduled model's record holds its schedule as a last input column
+    columns = getattr(model, "record_inputs", model.n_u)
+    if (data.n_u, data.n_y) != (columns, model.n_y):
+        raise InputError(f"the model takes {columns} input columns and has {model.n_y} outputs; "
                          f"the record has {data.n_u} and {data.n_y}")
 
 

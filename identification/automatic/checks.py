@@ -21,7 +21,10 @@ Public JSON keys of the model checks (a contract once released):
 The data's keys: ``records`` (the model scored per estimation record),
 ``sample_jitter``, ``preparation`` and ``conversions`` (offsets and scale
 factors removed), ``time_offset`` and ``resample`` where the time base was
-shifted or resampled; one warning per record whose gaps were bridged.
+shifted or resampled; one warning per record whose gaps were bridged. Where the
+records were cleaned (:func:`~vehid.identification.dataio.cleaning.clean_record`):
+``outliers``, ``left_out``, and ``despiked`` and ``excluded`` where asked, with
+one warning naming the spikes that entered the fit.
 """
 
 from __future__ import annotations
@@ -31,6 +34,8 @@ from typing import Any, Sequence
 import numpy as np
 
 from vehid.identification.data import IOData
+from vehid.identification.dataio.cleaning import cleaning_summary, cleaning_warnings
+from vehid.identification.dataio.timewindow import time_text
 from vehid.identification.models.modal import ModalModel
 from vehid.identification.assessment.multirecord import score_records
 from vehid.identification.assessment.residuals import ResidualTests, nis_band, residual_tests
@@ -112,19 +117,23 @@ def records_summary(model: Any, records: Sequence[IOData], preparation: Any) -> 
     resampled = [r.meta.get("time_base", {}).get("resample") for r in records]
     if any(resampled):
         summary["resample"] = next(r for r in resampled if r)
+    summary.update(cleaning_summary(records))  # outliers, and what was left out, where the records were cleaned
     return summary
 
 
 def data_warnings(records: Sequence[IOData]) -> list[str]:
-    """One line per record whose gaps in time were bridged by resampling, naming where they were."""
+    """One line per record whose gaps in time were bridged by resampling, naming where they were, and one
+    naming the spikes and drop-outs that entered the fit."""
     lines = []
     for name, record in zip(record_names(records), records):
         base = record.meta.get("time_base", {})
         gaps, count = base.get("gaps") or [], int(base.get("gap_count", 0))
         if not count:
             continue
-        shown = ", ".join(f"{gap['length_s']:.3g} s at {gap['at_s']:.9g} s ({gap['location']})" for gap in gaps[:3])
+        offset = float(base.get("time_offset", 0.0))  # at_s is file time; the message speaks the axes' time
+        shown = ", ".join(f"{gap['length_s']:.3g} s at {time_text(gap['at_s'] - offset, offset)} ({gap['location']})"
+                          for gap in gaps[:3])
         more = f" and {count - 3} more" if count > 3 else ""
         lines.append(f"{name}: {count} gap{'s' if count > 1 else ''} in time bridged by straight lines when "
                      f"resampling ({shown}{more}): the model sees no data there; --segment T0:T1 leaves a gap out")
-    return lines
+    return lines + cleaning_warnings(records)

@@ -17,6 +17,7 @@ import numpy as np
 
 from vehid.identification.automatic import steps
 from vehid.identification.automatic.checks import data_warnings, records_summary, returned_checks
+from vehid.identification.dataio.cleaning import cleaning_notes
 from vehid.identification.automatic.options import IdentifyOptions
 from vehid.identification.automatic.plan import Plan
 from vehid.identification.automatic.result import Decision, Identification, OrderRow, float_tuple
@@ -178,6 +179,7 @@ def _finish(plan: Plan, options: IdentifyOptions, model: Any, *, estimator: Any,
     if evaluation.horizon is not None and options.horizon is None:
         scoring_note = (f"the model is unstable: scored by {evaluation.horizon}-step-ahead prediction, "
                         "since its simulation diverges (--horizon K to choose K)")
+    notes += cleaning_notes(plan.records)  # spikes interpolated, samples left out
     decisions = tuple(Decision.from_entry(name, entry) for name, entry in keys.get("decision_margins", {}).items())
     linear = _Candidate("start" if start_returned else ("filter" if iekf else options.method), model, evaluation,
                         warnings, fit, plan.records)

@@ -27,7 +27,7 @@ from vehid.identification.automatic.options import IdentifyOptions
 from vehid.identification.automatic.plan import ScheduleData
 from vehid.identification.choices import SCHEDULED_DEFAULT_P, SCHEDULED_P_GRID
 from vehid.identification.data import IOData
-from vehid.identification.errors import DivergenceError, InputError
+from vehid.identification.errors import DivergenceError, OptionError
 from vehid.identification.models.modal import ModalModel
 
 __all__ = ["NONLINEAR_NOTE", "VALIDATION_MARGIN", "OUTPUT_MAP_NODES", "ScheduledOutcome", "schedule_margin",
@@ -99,8 +99,9 @@ def identify_scheduled_model(start: Any, plan: Any, options: IdentifyOptions, un
     from vehid.identification.filtering.scheduled_iekf import ScheduledIEKFOptions, identify_scheduled
 
     if not isinstance(start, ModalModel):
-        raise InputError("--schedule starts from a continuous-time modal model; this unscheduled model is "
-                         "discrete-time (a pole on the negative real axis): use --method iekf or another order")
+        raise OptionError("'schedule' starts from a continuous-time modal model; this unscheduled model is "
+                          "discrete-time (a pole on the negative real axis): use 'method' iekf or another 'order'",
+                          "schedule", "method", "order")
 
     schedule = plan.schedule
     scheduled_plan = dataclasses.replace(
@@ -120,7 +121,7 @@ def identify_scheduled_model(start: Any, plan: Any, options: IdentifyOptions, un
 
         try:
             result, divergence = steps.last_good_on_divergence(
-                lambda: identify_scheduled(plan.records[0], schedule.estimation[0], start, variable=schedule.channel,
+                lambda: identify_scheduled(plan.records, schedule.estimation, start, variable=schedule.channel,
                                            options=filter_options, on_refine=on_refine))
         except DivergenceError as exc:
             tried.append({"p": p, "error": str(exc)})
@@ -135,7 +136,8 @@ def identify_scheduled_model(start: Any, plan: Any, options: IdentifyOptions, un
             candidates.append((result, divergence, evaluation, row))
     if not candidates:
         raise DivergenceError("the scheduled model diverged at every p tried: " + "; ".join(
-            f"p = {row['p']:g}: {row.get('error', 'no finite fit')}" for row in tried) + " (give a smaller --schedule-p)")
+            f"p = {row['p']:g}: {row.get('error', 'no finite fit')}" for row in tried) + " (give a smaller 'schedule_p')",
+            options=("schedule_p",))
     # as for the IEKF's p: the largest within the tolerance of the best
     top = max(c[3]["ranking_fit"] for c in candidates)
     result, divergence, evaluation, chosen = max(
@@ -149,9 +151,13 @@ def identify_scheduled_model(start: Any, plan: Any, options: IdentifyOptions, un
     scores = {**steps.scores_summary(evaluation, fit_percent, plan.records[:1]),
               **records_summary(family, scheduled_plan.records, plan.preparation)}
     scores.pop("preparation", None)  # the unscheduled preparation stands: the schedule is never offset
+    coverage = list(family.meta.get("knot_coverage") or [])
+    sparse = {float(knot["value"]) for knot in coverage if knot["extrapolated"]}
     entry = {
         "channel": schedule.channel, "grid": family.grid,
-        "modes_at": [{"value": at["value"], "modes": at["modes"]} for at in family.modes_at(family.grid)],
+        "modes_at": [{"value": at["value"], "modes": at["modes"], "extrapolated": float(at["value"]) in sparse}
+                     for at in family.modes_at(family.grid)],
+        "knot_coverage": coverage,
         "knots": int(family.grid.size), "p": chosen["p"], "p_tried": tried, "passes_run": result.passes_run,
         "stop_reason": result.stop_reason if divergence is None else f"{result.stop_reason}: {divergence}",
         **_percent_and_R("start_", result.start_fit, plan.records[0].y), "seconds": result.seconds,
@@ -188,7 +194,12 @@ def identify_scheduled_model(start: Any, plan: Any, options: IdentifyOptions, un
     entry.update(model_returned="scheduled" if returned else "unscheduled",
                  estimation_fit_percent=evaluation.estimation.fit, validation_fit_percent=evaluation.validation_fit)
     note = None
-    if not returned:
+    if returned:
+        warnings += [f"scheduled: the knot at {schedule.channel} = {knot['value']:.4g} rests on {knot['seconds']:.3g} s "
+                     f"of the record with the first input at {knot['excitation']:.2f} of its RMS: too little to say "
+                     "its modes, which are extrapolated from its neighbours' data" for knot in coverage
+                     if knot["extrapolated"]]
+    else:
         scheduled_fit, other_fit = margin["runner_up_score"], margin["score"]
         note = ("the scheduled model " + ("is unstable at some grid value where stability was asked" if not stable
                                           else (f"does not beat the unscheduled one by the margin ({margin['measure']} "
@@ -218,7 +229,7 @@ def _stopped_early(result: Any, stops: list[tuple[float, Any, Any]], plan: Any, 
     validated better than ten and twenty-five worse still, so held-out data say when to stop, as
     they choose p. Without validation data every step stands.
     """
-    from vehid.identification.filtering.scheduled_iekf import HOLD_OF, scheduled_simulation_covariance
+    from vehid.identification.filtering.scheduled_iekf import HOLD_OF, Runs, scheduled_simulation_covariance
 
     finite = [stop for stop in stops if np.isfinite(stop[0])]
     if not finite or "refine_steps" not in result.meta:
@@ -228,14 +239,13 @@ def _stopped_early(result: Any, stops: list[tuple[float, Any, Any]], plan: Any, 
     if refine_steps == result.meta["refine_steps"]:
         return result
     method = HOLD_OF[result.options.discretization]
-    covariance = scheduled_simulation_covariance(family, plan.records[0], schedule.estimation[0], method)
+    runs = Runs.of(plan.records, schedule.estimation)
+    covariance = scheduled_simulation_covariance(family, runs, None, method)
     family = family.with_parameters(family.parameters, covariance)
     from vehid.identification.assessment.metrics import percentage_explanation
 
-    data = plan.records[0]
     with np.errstate(all="ignore"):
-        fit_percent = percentage_explanation(data.y, family.simulate_outputs(
-            data.u, data.dt, schedule=schedule.estimation[0], method=method))
+        fit_percent = percentage_explanation(runs.y, runs.simulate(family, method))
     return dataclasses.replace(result, model=family, meta={**result.meta, "refine_steps": refine_steps, "fit_percent": fit_percent,
                                                             "refine_steps_run": result.meta["refine_steps"]})
 
@@ -264,16 +274,16 @@ def with_output_map(family: Any, evaluation: Any, plan: Any, scheduled_plan: Any
     """
     from vehid.identification.assessment.metrics import percentage_explanation
     from vehid.identification.models.scheduled import OutputMap
-    from vehid.identification.filtering.scheduled_iekf import HOLD_OF
+    from vehid.identification.filtering.scheduled_iekf import HOLD_OF, Runs
 
-    data, schedule = plan.records[0], plan.schedule.estimation[0]
+    runs = Runs.of(plan.records, plan.schedule.estimation)
     method = HOLD_OF[options.discretization]
     with np.errstate(all="ignore"):
-        linear_outputs = family.simulate_outputs(data.u, data.dt, schedule=schedule, method=method)
+        linear_outputs = runs.simulate(family, method)
     rows, best = [], None
     if np.all(np.isfinite(linear_outputs)):
         for count in OUTPUT_MAP_NODES:
-            mapped = dataclasses.replace(family, output_map=OutputMap.fit(linear_outputs, data.y, count))
+            mapped = dataclasses.replace(family, output_map=OutputMap.fit(linear_outputs, runs.y, count))
             scored = steps.evaluate(mapped, scheduled_plan, options)
             rows.append({"nodes": count, "estimation_fit_percent": scored.estimation.fit,
                          "validation_fit_percent": scored.validation_fit, "ranking_fit": scored.ranking_fit()})
@@ -286,8 +296,8 @@ def with_output_map(family: Any, evaluation: Any, plan: Any, scheduled_plan: Any
         return family, evaluation, entry
     mapped, scored, row = best
     with np.errstate(all="ignore"):
-        fit = percentage_explanation(data.y, mapped.simulate_outputs(data.u, data.dt, schedule=schedule, method=method))
-    entry.update(nodes=row["nodes"], **_percent_and_R("", fit, data.y), map=mapped.output_map.to_dict())
+        fit = percentage_explanation(runs.y, runs.simulate(mapped, method))
+    entry.update(nodes=row["nodes"], **_percent_and_R("", fit, runs.y), map=mapped.output_map.to_dict())
     return mapped, scored, entry
 
 

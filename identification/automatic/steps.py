@@ -47,7 +47,7 @@ import numpy as np
 
 from vehid.identification.data import IOData
 from vehid.identification.decisions import SCHEDULE_MARGIN, ScheduleCandidate, choose_p_and_schedule
-from vehid.identification.errors import DivergenceError, InputError, WorkbenchError
+from vehid.identification.errors import DivergenceError, InputError, OptionError, WorkbenchError
 from vehid.identification.filtering.iekf import (INVARIANT_P, INVARIANT_P_DECAY, START_CHOICES, IEKFOptions,
                                                  identify_iekf, invariant_noise_settings, normalized_data_start,
                                                  signal_scales, start_structure)
@@ -712,10 +712,11 @@ def identify_nonlinear(linear: ModalModel, plan: Plan, settings: IdentifyOptions
     from vehid.identification.filtering.spline_iekf import SplineIEKFOptions, identify_spline_iekf
 
     if not isinstance(linear, ModalModel):
-        raise InputError("--nonlinear starts from a continuous-time modal model; this linear model is discrete-time "
-                         "(a pole on the negative real axis): use --method iekf or another order")
+        raise OptionError("'nonlinear' starts from a continuous-time modal model; this linear model is discrete-time "
+                          "(a pole on the negative real axis): use 'method' iekf or another 'order'",
+                          "nonlinear", "method", "order")
     if len(plan.records) > 1:
-        raise InputError("--nonlinear identifies the spline model from one record; give one data file")
+        raise OptionError("'nonlinear' identifies the spline model from one record; give one data file", "nonlinear")
     grid = settings.nonlinear_p or (list(NONLINEAR_P_GRID) if plan.validation else [NONLINEAR_P])
     tried, candidates = [], []
     for p in grid:

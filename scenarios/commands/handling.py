@@ -13,6 +13,11 @@ model is evaluated at each of --speeds, a model of one speed at the one speed
 given. ``--source`` reports the source model instead: its linearisation and
 its simulated ISO 7401 step, 1 Hz sine dwell and sine sweep. Warnings (no wheelbase for the
 understeer gradient, no covariance for error bars) exit 3 under --strict.
+
+A model of a car is checked for physical plausibility (:mod:`vehid.scenarios.plausibility_checks`): each
+failure joins the JSON list ``plausibility`` (``quantity``, ``value``, ``range``, ``speed``, ``cause``) and
+the warnings. Each row of ``metrics`` says whether the model is ``extrapolated`` at its speed (a scheduled
+family's knot with too few samples, a speed beyond the log's).
 """
 
 from __future__ import annotations
@@ -355,10 +360,23 @@ def _run_model(args: argparse.Namespace) -> tuple[dict, str, list[str]]:
     if unstable:
         warnings.append("the model is unstable or never reaches 90 % of its steady yaw rate at "
                         f"{', '.join(f'{v:g}' for v in unstable)} m/s: no step metrics there")
+    from vehid.scenarios import plausibility_checks as plausibility
+
+    findings, sparse = plausibility.handling_findings(model, speeds, metrics, yaw_rate=args.yaw_rate,
+                                                      lateral_acceleration=args.lateral_acceleration,
+                                                      sideslip=args.sideslip)
+    if sparse:
+        warnings.append(f"the model rests on too few samples at {', '.join(f'{v:g}' for v in sparse)} m/s (a knot "
+                        "with little data, or beyond the log's speeds): its metrics there are extrapolated")
     summary = {"source": False, "model": args.model, **origin, "scheduled": hasattr(model, "model_at"),
-               "wheelbase": args.wheelbase, "scales": scales, "metrics": [m.as_dict() for m in metrics],
-               "units": JSON_UNITS, "warnings": warnings}
+               "wheelbase": args.wheelbase, "scales": scales,
+               "metrics": [{**m.as_dict(), "extrapolated": m.speed in sparse} for m in metrics], "units": JSON_UNITS}
+    plausibility.record_findings(summary, warnings, findings)
+    summary["warnings"] = warnings
     lines = metrics_table(f"{Path(args.model).name} ({STEER_UNIT_TEXT}):", metrics)
+    if sparse:
+        lines.append(f"{'extrapolated (too few samples)':<32}"
+                     + "".join(f"{'yes' if m.speed in sparse else '':>20}" for m in metrics))
     curves: dict[str, Any] = {"identified": metrics}
     if source is not None:
         summary["source_model"] = source.as_dict()

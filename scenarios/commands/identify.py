@@ -39,7 +39,9 @@ better by that rule is returned, and what became of the others is said in
 notes. It also says how sure the returned model is (scenarios.model_checks): each mode with
 standard deviations (text: value +/- 2 sigma; JSON: the list `modes`), the
 residual tests per output (`residual_whiteness_p`, `input_correlation_max`)
-and, for the IEKF, the innovation NIS per pass with its band.
+and, for the IEKF, the innovation NIS per pass with its band. A model of a
+car (an output named, or by --quantities, yaw_rate) is checked for physical
+plausibility: each failure joins `plausibility` and the warnings.
 
 With --out ARCHIVE the record and every finished pass are written to an HDF5
 archive as the run goes (atomically, so a killed run leaves the archive of
@@ -132,7 +134,9 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     from vehid.scenarios import schedule_channel
     from vehid.scenarios.data_options import check_model_target
     from vehid.scenarios.paths import HDF5_SUFFIXES, run_digest
+    from vehid.scenarios.plausibility_checks import check_quantities
 
+    check_quantities(args)
     if args.structure == "single-track":
         from vehid.scenarios import single_track_identify
 
@@ -223,11 +227,11 @@ def load_plan(args: argparse.Namespace, paths: list[str]):
     The split comes before the preparation, so the offsets kept with the model
     are the estimation part's own (the held-out part plays no role in them).
     """
-    from vehid.identification.assessment.validation import split_holdout
     from vehid.identification.automatic.plan import make_plan
     from vehid.identification.dataio.preparation import prepare, prepare_validation
     from vehid.scenarios import schedule_channel
     from vehid.scenarios.data_options import preparation_options, read_from_args
+    from vehid.scenarios.log_cleaning import clean_records, min_speed_of
 
     fraction, note = holdout_of(args)
     scale, schedules = args.scale, None
@@ -235,12 +239,15 @@ def load_plan(args: argparse.Namespace, paths: list[str]):
         raw, settings, schedules, scale, schedule_unit = schedule_channel.read_with_schedule(args, paths)
     else:
         raw, settings = read_from_args(args, paths)
-    held_raw = ()
-    if fraction is not None:
-        parts = [split_holdout(record, fraction) for record in raw]
-        raw, held_raw = tuple(part[0] for part in parts), tuple(part[1] for part in parts)
-    records, preparation = prepare(raw, settings=settings, **{**preparation_options(args), "scale": scale})
-    held = tuple(prepare_validation(part, preparation, record=i) for i, part in enumerate(held_raw))
+    # spikes found (and repaired with --despike), --exclude windows and a standing car left out, the hold-out
+    # cut: each run of what is left is its own record
+    cleaned = clean_records(args, raw, speeds=schedules, speed_name=args.schedule and args.schedule.strip(),
+                            speed_factor=schedule_channel.schedule_factor(args) if args.schedule else 1.0,
+                            min_speed=min_speed_of(args, moving_model=bool(args.schedule)), holdout=fraction)
+    records, preparation = prepare(cleaned.estimation, settings=settings,
+                                   **{**preparation_options(args), "scale": scale})
+    held = tuple(prepare_validation(part, preparation, record=i)
+                 for i, part in zip(cleaned.validation_follows, cleaned.validation))
     channels = validation_channels(args, preparation)
     # a validation file is another experiment: its offsets are its own, as each estimation record's are
     load = lambda path: prepare_validation(path, preparation, own_offsets=True, channels=channels)  # noqa: E731
@@ -250,10 +257,10 @@ def load_plan(args: argparse.Namespace, paths: list[str]):
     plan = make_plan(records, order=args.order, validation=[(path, path) for path in args.validation_file],
                      load=load, held_out=held, fraction=fraction, note=note, preparation=preparation)
     if schedules is not None:
-        cut = [record.n_samples for record in records]
+        channel = args.schedule.strip()
         plan = dataclasses.replace(plan, schedule=schedule_channel.ScheduleData(
-            args.schedule.strip(), tuple(s[:n] for s, n in zip(schedules, cut)),
-            tuple(s[n:] for s, n in zip(schedules, cut))[:len(held)] + tuple(found), schedule_unit))
+            channel, cleaned.extra_estimation[channel], cleaned.extra_validation[channel] + tuple(found),
+            schedule_unit))
     return plan
 
 
@@ -369,11 +376,16 @@ def _finish(args, plan, result, archive_path=None) -> tuple[dict, str, object]:
     from vehid.scenarios import scheduled_identify
     from vehid.scenarios.data_options import save_model
     from vehid.scenarios.model_checks import uncertainty_lines
+    from vehid.scenarios.plausibility_checks import identify_findings, record_findings
 
     data = plan.records[0]
     summary = result.render()
     model = result.model
     warnings = list(result.warnings)
+    findings = identify_findings(args, plan, model)
+    if findings is not None:  # a car's model: named checks of its physics (JSON plausibility), as warnings
+        record_findings(summary, warnings, findings)
+        summary["warnings"] = list(warnings)
     nonlinear = result.nonlinear.result.model if result.nonlinear is not None else None
     scheduled = result.scheduled
     linear = result.unscheduled if result.unscheduled is not None else model
