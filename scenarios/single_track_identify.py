@@ -17,8 +17,9 @@ JSON (public contract): ``structure``, ``physical_parameters`` (``cornering_stif
 ``<quantity>_offset``, alike), ``parameter_correlation`` (in the order of ``parameter_names``),
 ``handling`` (``understeer_gradient_deg_per_g``, ``characteristic_speed_m_s`` or
 ``critical_speed_m_s``, each ``{value, std, unit}``, and ``yaw_rate_gain`` at speeds spanning the
-log), ``fit_percent`` (R, eq. 17), ``estimation_fit_percent``,
-``validation_fit_percent`` (NRMSE), ``speed_range_m_s``, ``passes_run``, ``stop_reason``,
+log), ``fit_percent`` and ``R`` (NRMSE fit and fit R of eq. 17 of the model simulated from rest over
+the estimation data), ``estimation_fit_percent`` and ``validation_fit_percent`` (NRMSE; every key ending
+in ``fit_percent`` is an NRMSE fit), ``speed_range_m_s``, ``passes_run``, ``stop_reason``,
 ``trace_p``, ``notes``, ``warnings``, ``seconds``, the data's cleaning (``outliers``, ``left_out``, and
 ``despiked`` and ``excluded`` where asked: :func:`~vehid.identification.dataio.cleaning.cleaning_summary`),
 ``plausibility`` (each failed check of the car's physics, ``{quantity, value, range, speed, cause}``, also a
@@ -273,7 +274,8 @@ def run(args: Any) -> tuple[dict, str]:
         "quantities": list(config.quantities),
         "schedule": args.schedule.strip(),
         "speed_range_m_s": [float(np.min(speeds)), float(np.max(speeds))],
-        "fit_percent": result.fit_percent,
+        "fit_percent": result.nrmse_fit_percent,
+        "R": result.fit_percent,
         "estimation_fit_percent": estimation_fit,
         "validation_fit_percent": validation_fit,
         "passes_run": result.passes_run,
