@@ -25,13 +25,13 @@ Two things `vehid identify --structure single-track` adds to the grey-box fit
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
 from vehid.identification.assessment.segments import SegmentConsistency, UncertaintyMethod, block_edges, \
     formal_method, segment_consistency
-from vehid.identification.data import IOData
+from vehid.identification.data import IOData, as_records
 from vehid.identification.errors import DivergenceError
 
 __all__ = ["MIN_PART_SECONDS", "MOST_PARTS", "JACKKNIFE_FORM", "honest_covariance", "part_edges",
@@ -77,10 +77,13 @@ def honest_covariance(model: Any, result: Any, records: Any) -> tuple[np.ndarray
     return found
 
 
-def part_edges(record: IOData) -> np.ndarray | None:
-    """Sample edges of the parts the consistency check cuts ``record`` into, or None where fewer than two fit."""
-    count = min(MOST_PARTS, int(record.n_samples * record.dt // MIN_PART_SECONDS))
-    return block_edges(record.n_samples, count) if count >= 2 else None
+def part_edges(records: IOData | Sequence[IOData]) -> np.ndarray | None:
+    """Edges, in samples of the runs taken one after the other, of the parts the consistency check cuts
+    ``records`` into, or None where fewer than two fit."""
+    runs = as_records(records)
+    samples = sum(run.n_samples for run in runs)
+    count = min(MOST_PARTS, int(samples * runs[0].dt // MIN_PART_SECONDS))
+    return block_edges(samples, count) if count >= 2 else None
 
 
 def _file_time(record: IOData) -> np.ndarray:
@@ -88,18 +91,34 @@ def _file_time(record: IOData) -> np.ndarray:
     return record.t + float(record.meta.get("time_base", {}).get("time_offset", 0.0))
 
 
-def part_consistency(config: Any, model: Any, record: IOData,
-                     fit: Callable[[IOData], Any]) -> SegmentConsistency | None:
-    """Identify each part of ``record`` with ``fit`` and compare the parts' estimates (module docstring).
+def _pieces(runs: Sequence[IOData], start: int, stop: int) -> tuple[IOData, ...]:
+    """The runs' samples ``start:stop`` of their joined count, a piece per run they fall in; a piece too short
+    to identify from (:data:`~vehid.identification.dataio.cleaning.MIN_RUN_SAMPLES`) is left out."""
+    from vehid.identification.dataio.cleaning import MIN_RUN_SAMPLES
 
-    ``fit(part)`` identifies one part as the whole log was identified and returns its grey-box
-    result (a run that diverged gives its last good pass). None where the log is shorter than two
-    parts. A part whose identification fails outright counts as no estimate (NaN), and its pairs as
-    not judged.
+    pieces, offset = [], 0
+    for run in runs:
+        low, high = max(start, offset) - offset, min(stop, offset + run.n_samples) - offset
+        if high - low >= MIN_RUN_SAMPLES:
+            pieces.append(run[low:high])
+        offset += run.n_samples
+    return tuple(pieces)
+
+
+def part_consistency(config: Any, model: Any, records: IOData | Sequence[IOData],
+                     fit: Callable[[tuple[IOData, ...]], Any]) -> SegmentConsistency | None:
+    """Identify each part of ``records`` with ``fit`` and compare the parts' estimates (module docstring).
+
+    ``records`` are the log's runs (a log cut where the car stood is several); the parts are cut from
+    them taken one after the other, a part holding a piece of each run it spans. ``fit(part)``
+    identifies one part's pieces as the whole log was identified and returns its grey-box result (a
+    run that diverged gives its last good pass). None where the log is shorter than two parts. A part
+    whose identification fails outright counts as no estimate (NaN), and its pairs as not judged.
     """
     from vehid.vehicle.single_track import single_track_handling
 
-    edges = part_edges(record)
+    runs = as_records(records)
+    edges = part_edges(runs)
     if edges is None:
         return None
     physical = config.parameter_names[: config.n_physical]
@@ -107,10 +126,11 @@ def part_consistency(config: Any, model: Any, record: IOData,
     values = {name: [] for name in (*physical, "understeer_gradient")}
     stds = {name: [] for name in values}
     spans, methods = [], []
-    times = _file_time(record)
     for start, stop in zip(edges[:-1], edges[1:]):
-        part = record[int(start):int(stop)]
-        spans.append((float(times[start]), float(times[stop - 1] + record.dt)))
+        part = _pieces(runs, int(start), int(stop))
+        if not part:
+            continue
+        spans.append((float(_file_time(part[0])[0]), float(_file_time(part[-1])[-1] + part[-1].dt)))
         try:
             result = fit(part)
         except DivergenceError as exc:

@@ -125,13 +125,15 @@ def test_sensor_offsets_have_their_own_key(log, capsys):
     assert len(summary["parameter_correlation"]) == len(summary["parameter_names"]) == 6
 
 
-def test_slow_parts_take_substeps_and_standstill_is_refused(tmp_path, capsys):
-    """A log from 1.5 m/s needs several RK4 steps per sample (the bicycle's modes near 200 1/s); one from
-    standstill cannot be simulated at any step and is refused, naming the cure."""
+def test_slow_parts_take_substeps_and_standstill_is_left_out(tmp_path, capsys):
+    """A log from 1.5 m/s, kept whole with --min-speed 1, needs several RK4 steps per sample (the bicycle's
+    modes near 200 1/s) and is warned about; from standstill the samples below 5 m/s are left out by default
+    (before: refused), and kept with --min-speed none the log is refused, naming the cure."""
     dt, n = 0.01, 3000
     t = dt * np.arange(n)
     steer = 0.02 * band_limited_noise(n, dt, 2.0, np.random.default_rng(2))
-    for first_speed, expected in ((1.5, 0), (0.0, 2)):
+    cases = ((1.5, ["--min-speed", "1"], 0), (0.0, [], 0), (0.0, ["--min-speed", "none"], 2))
+    for first_speed, extra, expected in cases:
         speed = first_speed + 10.0 * t / t[-1]
         record = IOData(t=t, u=np.column_stack([steer, speed]), y=np.zeros((n, 2)))
         y, _ = simulate_greybox(single_track_model(SingleTrackConfig(1500.0, 1.2, 1.5)), list(TRUTH.values()),
@@ -140,7 +142,7 @@ def test_slow_parts_take_substeps_and_standstill_is_refused(tmp_path, capsys):
         np.savetxt(path, np.column_stack([t, steer, speed, y]), delimiter=",", header="t,delta,vx,r,ay",
                    comments="")
         status = main(["identify", str(path), "--structure", "single-track", "--inputs", "delta", "--schedule", "vx",
-                       "--outputs", "r,ay", *GEOMETRY, "--json"])
+                       "--outputs", "r,ay", *GEOMETRY, "--json", *extra])
         captured = capsys.readouterr()
         assert status == expected, captured.err
         if expected == 0:
@@ -148,9 +150,15 @@ def test_slow_parts_take_substeps_and_standstill_is_refused(tmp_path, capsys):
             # noise-free: the generating parameters to 1 % despite the slow start
             for name, truth in TRUTH.items():
                 assert summary["physical_parameters"][name]["value"] == pytest.approx(truth, rel=0.01)
-            assert any("below 5 m/s" in line for line in summary["warnings"])
+            slow = int(np.count_nonzero(speed < 5.0))  # 1500 samples from rest, 1052 from 1.5 m/s
+            if extra:
+                assert any("below 5 m/s" in line for line in summary["warnings"])
+                assert summary["left_out"]["below_min_speed"] == int(np.count_nonzero(speed < 1.0)) == 0
+            else:
+                assert summary["left_out"]["below_min_speed"] == summary["left_out"]["samples"] == slow
+                assert summary["speed_range_m_s"][0] >= 5.0 and summary["warnings"] == []
         else:
-            assert "--segment" in captured.err
+            assert "--min-speed" in captured.err
 
 
 def test_a_workbench_record_gives_its_speed_output_as_the_schedule(tmp_path, capsys):

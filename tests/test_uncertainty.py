@@ -339,7 +339,7 @@ def test_spline_bands_match_monte_carlo_sampling():
     sigma_std = spline.coefficient_std("sigma1", amplitudes)
     draws = theta + rng.standard_normal((1500, theta.size)) * std
     sampled = [spline.with_parameters(draw) for draw in draws]
-    curves = np.array([[[(mode := model.modes(a)[0]).frequency_hz, mode.damping] for a in amplitudes]
+    curves = np.array([[[(mode := model.modes(amplitude=a)[0]).frequency_hz, mode.damping] for a in amplitudes]
                        for model in sampled]).transpose(0, 2, 1)
     np.testing.assert_allclose(frequency_std, curves[:, 0].std(axis=0), rtol=0.06)
     np.testing.assert_allclose(damping_std, curves[:, 1].std(axis=0), rtol=0.06)

@@ -71,6 +71,7 @@ __all__ = [
     "integrated_correlation_time",
     "simulate_greybox",
     "simulation_fit_covariance",
+    "greybox_outputs",
 ]
 
 GREYBOX_DISCRETIZATIONS = ("rk4", "euler")
@@ -314,13 +315,36 @@ def simulate_greybox(model: GreyBoxModel, theta: Any, record: IOData, *, x0: Any
     x : ndarray (N, n_x)
         States at the sample times.
     """
+    return greybox_outputs(model, theta, _driving(model, record), float(record.dt), x0=x0,
+                           discretization=discretization, substeps=substeps)
+
+
+def greybox_outputs(model: GreyBoxModel, theta: Any, u: np.ndarray, dt: float, *, x0: Any = None,
+                    discretization: str = "rk4", substeps: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`simulate_greybox` on arrays rather than a record.
+
+    Parameters
+    ----------
+    model, theta, x0, discretization, substeps
+        As :func:`simulate_greybox`.
+    u : ndarray (N, n_u + n_s)
+        The inputs, then the scheduling signals.
+    dt : float
+        Sample interval (s).
+
+    Returns
+    -------
+    y, x : ndarray (N, n_y), (N, n_x)
+        Outputs and states at the sample times.
+    """
     _check_discretization(discretization, substeps)
     theta = model.check_parameters(theta)
-    u = _driving(model, record)
-    simulator = _simulator(model.cache_key(), model, float(record.dt), discretization, int(substeps))
+    simulator = _simulator(model.cache_key(), model, float(dt), discretization, int(substeps))
     x0 = np.zeros(model.n_x) if x0 is None else np.asarray(x0, dtype=float).ravel()
+    if x0.shape != (model.n_x,) or not np.all(np.isfinite(x0)):
+        raise InputError(f"x0 must hold {model.n_x} finite entries; got shape {x0.shape}")
     with np.errstate(all="ignore"):
-        return simulator(x0, u, theta)
+        return simulator(x0, np.asarray(u, dtype=float), theta)
 
 
 #: Central-difference step of the simulation's Jacobian, relative to each parameter (or to its scale where

@@ -25,13 +25,13 @@ import numpy as np
 
 from ..blas import on_one_blas_thread
 from ..data import IOData
-from ..choices import SPLINE_NODES, SPLINE_P, SPLINE_PASSES
-from ..errors import DivergenceError, InputError
+from ..choices import SPLINE_NODE_COUNT, SPLINE_NODES, SPLINE_P, SPLINE_PASSES
+from ..errors import DivergenceError
 from .iekf_pass import compiled_pass
+from ..optionspec import check_value
 from ..assessment.metrics import percentage_explanation
 from ..models.modal import ModalModel
 from .rinse import Assessment, PassHistory, PassRecord, RinseHooks, check_filter_options, check_records, rinse
-from ..models.spline import MAX_NODES, MIN_NODES
 from ..models.spline_modal import SplineModalFilterModel, SplineModalModel, SplineModalStructure
 from ..assessment.segments import formal_method
 from ..assessment.uncertainty import difference_fit_covariance, with_covariance
@@ -88,8 +88,7 @@ class SplineIEKFOptions:
     min_passes: int = 3
 
     def __post_init__(self) -> None:
-        if isinstance(self.nodes, bool) or int(self.nodes) != self.nodes or not MIN_NODES <= self.nodes <= MAX_NODES:
-            raise InputError(f"nodes must be a whole number from {MIN_NODES} to {MAX_NODES}; got {self.nodes!r}")
+        check_value("nodes", self.nodes, SPLINE_NODE_COUNT)
         check_filter_options(self.p, self.passes, self.discretization, self.covariance)
 
 
