@@ -53,6 +53,8 @@ def uncertainty_lines(summary: dict[str, Any], output_names: Sequence[str]) -> l
     title = f"modes of the returned {returned} model" if returned in ("scheduled", "nonlinear") else "modes"
     lines = mode_lines(summary["modes"], title=title + (" at rest" if returned == "nonlinear" else ""),
                        channel=channel)
+    if any(np.isfinite(mode["frequency_hz_std"]) for mode in summary["modes"]) and summary.get("uncertainty_method"):
+        lines.append(f"  standard deviations: {summary['uncertainty_method']['description']}")
     bound = summary["residual_tests"]["bound"]
     growing = any(mode["eigenvalue"][0] > 0 for mode in summary["modes"])
     lines.append(f"residual tests (99 %, {summary['residual_tests']['lags']} lags, bound {bound:.3g})"

@@ -26,7 +26,8 @@ own ``estimation_fit_percent`` and ``validation_fit_percent``, the refinement (`
 ``refine_steps``, ``refine_steps_run``), ``output_map`` (with ``--nonlinear``), ``channel``,
 ``grid``, ``modes_at`` (per grid value ``value``, its ``modes``, each with ``frequency_hz``,
 ``frequency_hz_std``, ``damping``, ``damping_std``, and ``extrapolated``: the knot rests on too few
-samples), ``knot_coverage`` (per knot ``value``, ``samples``, ``seconds``, ``excitation``: the first
+samples), ``uncertainty_method`` (how the knots' covariance behind those standard deviations was
+obtained), ``knot_coverage`` (per knot ``value``, ``samples``, ``seconds``, ``excitation``: the first
 input's RMS there over the record's, and ``extrapolated``;
 :func:`~vehid.identification.filtering.scheduled_iekf.knot_coverage`), the run (``passes_run``,
 ``stop_reason``, ``p`` and ``p_tried``, chosen on validation data as the IEKF's p is, ``start_fit_percent``
@@ -93,4 +94,6 @@ def text_lines(entry: dict[str, Any], output_names: Sequence[str]) -> list[str]:
                               f"{mode['damping']:.3f} +/- {2 * mode['damping_std']:.2g}" for mode in row["modes"])
             sparse = " (extrapolated: too few samples at this knot)" if row.get("extrapolated") else ""
             lines.append(f"  {entry['channel']} = {row['value']:.4g}: {modes}{sparse}")
+    if entry.get("uncertainty_method"):
+        lines.append(f"  standard deviations: {entry['uncertainty_method']['description']}")
     return lines

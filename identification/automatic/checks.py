@@ -6,6 +6,11 @@ Public JSON keys of the model checks (a contract once released):
     ``eigenvalue_std`` as [re, im], ``frequency_hz``, ``frequency_hz_std``,
     ``damping``, ``damping_std`` (NaN standard deviations where the
     estimator gave no covariance).
+``uncertainty_method``
+    How the parameter covariance behind every standard deviation was
+    obtained (:class:`~vehid.identification.assessment.segments.UncertaintyMethod`:
+    ``name`` ``block-jackknife`` or ``formal``, the blocks, the degrees of
+    freedom, the factor applied, a ``description``); None without a covariance.
 ``residual_whiteness_p``, ``input_correlation_max``
     Per output, of the continuous model's simulation residuals on the
     record (:mod:`vehid.identification.assessment.residuals`); ``residual_tests`` holds the
@@ -40,7 +45,8 @@ from vehid.identification.models.modal import ModalModel
 from vehid.identification.assessment.multirecord import score_records
 from vehid.identification.assessment.residuals import ResidualTests, nis_band, residual_tests
 
-__all__ = ["model_residual_tests", "uncertainty_summary", "returned_checks", "record_names", "records_summary", "data_warnings"]
+__all__ = ["model_residual_tests", "uncertainty_summary", "uncertainty_method", "returned_checks", "record_names",
+           "records_summary", "data_warnings"]
 
 
 def model_residual_tests(model: Any, data: IOData, inputs: int | None = None) -> ResidualTests:
@@ -60,6 +66,7 @@ def uncertainty_summary(model: ModalModel, data: IOData, nis: Sequence[float] | 
     tests = model_residual_tests(model, data)
     summary: dict[str, Any] = {
         "modes": [mode.as_dict() for mode in model.uncertainty().modes],
+        "uncertainty_method": uncertainty_method(model),
         "residual_whiteness_p": tests.residual_whiteness_p,
         "input_correlation_max": tests.input_correlation_max,
         "residual_tests": tests.as_dict(),
@@ -68,6 +75,23 @@ def uncertainty_summary(model: ModalModel, data: IOData, nis: Sequence[float] | 
         summary["innovation_nis"] = np.asarray(nis, dtype=float)
         summary["innovation_nis_band"] = list(nis_band(data.n_samples, data.n_y))
     return summary, tests
+
+
+def uncertainty_method(model: Any) -> dict[str, Any] | None:
+    """The JSON ``uncertainty_method`` of a model: how its covariance was obtained, None without one.
+
+    A model that carries a covariance but not how it was obtained (a file written before models
+    recorded it) is said to carry the formal one, as those did.
+    """
+    if getattr(model, "parameter_covariance", None) is None:
+        return None
+    stored = (getattr(model, "meta", None) or {}).get("uncertainty_method")
+    if stored is None:
+        from vehid.identification.assessment.segments import formal_method
+
+        return formal_method("the model does not record how its covariance was obtained: one written before "
+                             "models did carries the formal covariance of white residuals").as_dict()
+    return stored
 
 
 def returned_checks(model: Any, data: IOData, nis: Sequence[float] | None = None
@@ -91,7 +115,8 @@ def returned_checks(model: Any, data: IOData, nis: Sequence[float] | None = None
     else:
         return None, None
     return {"modes": modes, "residual_whiteness_p": tests.residual_whiteness_p,
-            "input_correlation_max": tests.input_correlation_max, "residual_tests": tests.as_dict()}, tests
+            "input_correlation_max": tests.input_correlation_max, "residual_tests": tests.as_dict(),
+            "uncertainty_method": uncertainty_method(model)}, tests
 
 
 def record_names(records: Sequence[IOData]) -> list[str]:

@@ -22,7 +22,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from vehid.identification.automatic import steps
-from vehid.identification.automatic.checks import records_summary
+from vehid.identification.automatic.checks import records_summary, uncertainty_method
 from vehid.identification.automatic.options import IdentifyOptions
 from vehid.identification.automatic.plan import ScheduleData
 from vehid.identification.choices import SCHEDULED_DEFAULT_P, SCHEDULED_P_GRID
@@ -158,6 +158,7 @@ def identify_scheduled_model(start: Any, plan: Any, options: IdentifyOptions, un
         "modes_at": [{"value": at["value"], "modes": at["modes"], "extrapolated": float(at["value"]) in sparse}
                      for at in family.modes_at(family.grid)],
         "knot_coverage": coverage,
+        "uncertainty_method": uncertainty_method(family),
         "knots": int(family.grid.size), "p": chosen["p"], "p_tried": tried, "passes_run": result.passes_run,
         "stop_reason": result.stop_reason if divergence is None else f"{result.stop_reason}: {divergence}",
         **_percent_and_R("start_", result.start_fit, plan.records[0].y), "seconds": result.seconds,
@@ -229,7 +230,7 @@ def _stopped_early(result: Any, stops: list[tuple[float, Any, Any]], plan: Any, 
     validated better than ten and twenty-five worse still, so held-out data say when to stop, as
     they choose p. Without validation data every step stands.
     """
-    from vehid.identification.filtering.scheduled_iekf import HOLD_OF, Runs, scheduled_simulation_covariance
+    from vehid.identification.filtering.scheduled_iekf import HOLD_OF, Runs, with_simulation_covariance
 
     finite = [stop for stop in stops if np.isfinite(stop[0])]
     if not finite or "refine_steps" not in result.meta:
@@ -240,8 +241,7 @@ def _stopped_early(result: Any, stops: list[tuple[float, Any, Any]], plan: Any, 
         return result
     method = HOLD_OF[result.options.discretization]
     runs = Runs.of(plan.records, schedule.estimation)
-    covariance = scheduled_simulation_covariance(family, runs, None, method)
-    family = family.with_parameters(family.parameters, covariance)
+    family = with_simulation_covariance(family, runs, None, method)
     from vehid.identification.assessment.metrics import percentage_explanation
 
     with np.errstate(all="ignore"):

@@ -52,7 +52,8 @@ from vehid.identification.filtering.iekf import (INVARIANT_P, INVARIANT_P_DECAY,
                                                  identify_iekf, invariant_noise_settings, normalized_data_start,
                                                  signal_scales, start_structure)
 from vehid.identification.models.modal import ModalModel, ModalStructure
-from vehid.identification.assessment.uncertainty import simulation_error_covariance
+from vehid.identification.assessment.uncertainty import with_simulation_error_covariance
+from vehid.identification.automatic.checks import uncertainty_method
 from vehid.identification.assessment.validation import UNSTABLE_HORIZON, Scores, default_horizon, score, split_holdout
 from vehid.identification.automatic.plan import (AUTO_HOLDOUT, AUTO_MAX_ORDER, Plan, holdout_fraction, make_plan,
                                                  parse_orders, supported_orders)
@@ -173,8 +174,7 @@ def returned_start(result: Any, records: Sequence[IOData]) -> ModalModel:
     (:func:`~vehid.identification.assessment.uncertainty.simulation_error_covariance`), as
     ``--method n4sid`` gives; None where its simulation diverges (a growing mode).
     """
-    start = start_model(result)
-    return start.with_parameter_covariance(simulation_error_covariance(start, records))
+    return with_simulation_error_covariance(start_model(result), records)
 
 
 def given_p(options: IEKFOptions) -> PTuning:
@@ -753,6 +753,7 @@ def identify_nonlinear(linear: ModalModel, plan: Plan, settings: IdentifyOptions
         "validation_fit_percent": scores.validation_fit, "validation_R": scores.validation_R,
         "initial_state": scores.estimation.initial_state,
         "start_fit_percent": start_fit, "start_R": result.start_fit, "seconds": result.seconds,
+        "uncertainty_method": uncertainty_method(result.model),
     }
     return NonlinearOutcome(result, summary, scores)
 

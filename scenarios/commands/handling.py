@@ -13,6 +13,9 @@ model is evaluated at each of --speeds, a model of one speed at the one speed
 given. ``--source`` reports the source model instead: its linearisation and
 its simulated ISO 7401 step, 1 Hz sine dwell and sine sweep. Warnings (no wheelbase for the
 understeer gradient, no covariance for error bars) exit 3 under --strict.
+JSON ``uncertainty_method`` says how the model's covariance, and so every
+standard deviation, was obtained (as ``vehid identify`` says it; None
+without a covariance).
 
 A model of a car is checked for physical plausibility (:mod:`vehid.scenarios.plausibility_checks`): each
 failure joins the JSON list ``plausibility`` (``quantity``, ``value``, ``range``, ``speed``, ``cause``) and
@@ -360,8 +363,10 @@ def _run_model(args: argparse.Namespace) -> tuple[dict, str, list[str]]:
     if unstable:
         warnings.append("the model is unstable or never reaches 90 % of its steady yaw rate at "
                         f"{', '.join(f'{v:g}' for v in unstable)} m/s: no step metrics there")
+    from vehid.identification.automatic.checks import uncertainty_method
     from vehid.scenarios import plausibility_checks as plausibility
 
+    method = uncertainty_method(model)
     findings, sparse = plausibility.handling_findings(model, speeds, metrics, yaw_rate=args.yaw_rate,
                                                       lateral_acceleration=args.lateral_acceleration,
                                                       sideslip=args.sideslip)
@@ -370,13 +375,16 @@ def _run_model(args: argparse.Namespace) -> tuple[dict, str, list[str]]:
                         "with little data, or beyond the log's speeds): its metrics there are extrapolated")
     summary = {"source": False, "model": args.model, **origin, "scheduled": hasattr(model, "model_at"),
                "wheelbase": args.wheelbase, "scales": scales,
-               "metrics": [{**m.as_dict(), "extrapolated": m.speed in sparse} for m in metrics], "units": JSON_UNITS}
+               "metrics": [{**m.as_dict(), "extrapolated": m.speed in sparse} for m in metrics], "units": JSON_UNITS,
+               "uncertainty_method": method}
     plausibility.record_findings(summary, warnings, findings)
     summary["warnings"] = warnings
     lines = metrics_table(f"{Path(args.model).name} ({STEER_UNIT_TEXT}):", metrics)
     if sparse:
         lines.append(f"{'extrapolated (too few samples)':<32}"
                      + "".join(f"{'yes' if m.speed in sparse else '':>20}" for m in metrics))
+    if method is not None:
+        lines.append(f"standard deviations: {method['description']}")
     curves: dict[str, Any] = {"identified": metrics}
     if source is not None:
         summary["source_model"] = source.as_dict()
