@@ -13,8 +13,8 @@ from the validation input from the least-squares initial state (MATLAB
 ``compare``), an unstable one predicted 10 samples ahead, the workbench's
 and the linear peers' models alike (``score_as_identify``; each peer row
 keeps ``compare``'s own figure, simulated whatever the stability, as
-``compare_fit_percent``); the spline model from rest, as ``identify
---nonlinear`` scores it. Every method scores the same centred samples
+``compare_fit_percent``); the spline model by the same rule, its initial state
+estimated, as ``identify --nonlinear`` scores it. Every method scores the same centred samples
 (``_real_records.validation_offsets``).
 
 Workbench rows run the command line a user runs on the raw file as
@@ -168,8 +168,8 @@ def run_workbench(entry: records.RecordSet, scratch: Path, default_only: bool = 
             row["validation_fit_percent"] = summary.get("validation_fit_percent")
         row.update({key: summary[key] for key in summary if key in SUMMARY_KEYS or "nonlinear" in key})
         if label == NONLINEAR_ROW and status in (0, 3):
-            # the spline model's own hold-out fit; validation_fit_percent stays the linear start's
-            row["linear_validation_fit_percent"] = row["validation_fit_percent"]
+            # the spline model's own hold-out fit, and its linear start's (the model returned is the better)
+            row["linear_validation_fit_percent"] = summary["orders_tried"][0]["validation_fit_percent"]
             row["validation_fit_percent"] = _nonlinear_validation_fit(summary)
         if label == DEFAULT_ROW and status in (0, 3):
             row["decisions"] = decisions_of(summary)

@@ -3,18 +3,24 @@
 The modules that compute with them import them from here; the command line
 reads them to list an option's choices and default (and check an argument
 against them) without importing NumPy, SciPy or CasADi, which would delay
-every ``--help`` by a second.
+every ``--help`` by a second. The constraints below state, once, the values
+of a setting that several options objects take
+(:mod:`~vehid.identification.optionspec`).
 """
 
 from __future__ import annotations
 
-__all__ = ["DETRENDS", "JITTER_TOLERANCE", "DATA_STARTS", "START_VALUES", "START_CHOICES", "DISCRETIZATIONS",
+from vehid.identification.optionspec import Number, Numbers, OneOf
+
+__all__ = ["DETRENDS", "DETREND", "SPLINE_MIN_NODES", "SPLINE_MAX_NODES", "SPLINE_NODE_COUNT", "SCHEDULE_KNOT_COUNT",
+           "SCHEDULE_GRID", "JITTER_TOLERANCE", "DATA_STARTS", "START_VALUES", "START_CHOICES", "DISCRETIZATIONS",
            "COVARIANCE_FORMS", "TIMESCALES", "INITIAL_STATES", "C_PATTERNS", "SPLINE_NODES", "SPLINE_P",
            "SPLINE_PASSES", "SCHEDULE_DEFAULT_KNOTS", "SCHEDULE_MIN_KNOTS", "SCHEDULE_MAX_KNOTS",
            "SCHEDULED_DEFAULT_P", "SCHEDULED_P_GRID"]
 
 #: How offsets are estimated: each record's mean, a line through each record, or none.
 DETRENDS = ("mean", "linear", "none")
+DETREND = OneOf(DETRENDS)
 
 #: Largest stray of a sample time from the uniform grid accepted without resampling, as a fraction of a step.
 JITTER_TOLERANCE = 0.05
@@ -53,6 +59,11 @@ INITIAL_STATES = ("zero", "estimate")
 #: workbench's generalisation (pairs first, outputs assigned in turn).
 C_PATTERNS = ("default", "all-ones", "eq18", "eq19")
 
+#: Nodes per spline: the paper found the symbolic model manageable up to 9.
+SPLINE_MIN_NODES = 3
+SPLINE_MAX_NODES = 9
+SPLINE_NODE_COUNT = Number(low=SPLINE_MIN_NODES, high=SPLINE_MAX_NODES, whole=True)
+
 #: The spline IEKF's defaults: nodes per nonlinearity, tuning parameter p, largest number of passes.
 SPLINE_NODES = 5
 SPLINE_P = 1e-7
@@ -62,6 +73,9 @@ SPLINE_PASSES = 60
 SCHEDULE_DEFAULT_KNOTS = 5
 SCHEDULE_MIN_KNOTS = 2
 SCHEDULE_MAX_KNOTS = 9
+SCHEDULE_KNOT_COUNT = Number(low=SCHEDULE_MIN_KNOTS, high=SCHEDULE_MAX_KNOTS, whole=True)
+#: Knots given as such: finite and strictly increasing, as many as a default grid may have.
+SCHEDULE_GRID = Numbers(fewest=SCHEDULE_MIN_KNOTS, most=SCHEDULE_MAX_KNOTS, increasing=True)
 
 #: The scheduled filter's p per dominant time constant, and the values tried on validation data
 #: (largest first; the default alone without them).

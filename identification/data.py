@@ -15,7 +15,9 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from .choices import DETREND
 from .errors import ExcitationError, InputError
+from .optionspec import check_value
 
 __all__ = ["IOData", "as_records", "read_hdf5", "check_channels", "LARGEST_MAGNITUDE", "SMALLEST_MAGNITUDE",
            "ROUNDING_UNITS"]
@@ -334,7 +336,7 @@ def as_records(data: "IOData | Sequence[IOData]") -> tuple[IOData, ...]:
         if not math.isclose(record.dt, first.dt, rel_tol=1e-9):
             raise InputError(
                 f"record {index} is sampled every {record.dt:.9g} s, record 1 every {first.dt:.9g} s: "
-                "resample them to one rate (--resample HZ)"
+                "resample them to one rate ('resample' HZ)", options=("resample",)
             )
     return records
 
@@ -372,14 +374,14 @@ def _channel_problem(kind: str, name: str, columns: list[np.ndarray], times: lis
     nothing = "nothing is excited" if kind == "input" else "there is no response to identify"
     if level == 0.0:
         return ExcitationError(f"{kind} {name!r} is zero throughout{every}: {nothing}")
-    raw = f" ({level / abs(scale):.3g} before --scale)" if scale != 1.0 else ""
+    raw = f" ({level / abs(scale):.3g} before 'scale')" if scale != 1.0 else ""
     if level > LARGEST_MAGNITUDE or level < SMALLEST_MAGNITUDE:
         if level > LARGEST_MAGNITUDE:
             found = f"reaches {level:.3g}{raw}: values beyond {LARGEST_MAGNITUDE:.0e} overflow"
         else:
             found = f"is at most {level:.3g}{raw} in magnitude: values below {SMALLEST_MAGNITUDE:.0e} underflow"
         return InputError(f"{kind} {name!r} {found} the squares and products the estimators form; rescale it, "
-                          f"e.g. --scale {name}={_power_of_ten(level)}")
+                          f"e.g. 'scale' {name}={_power_of_ten(level)}", options=("scale",))
     if all(np.all(column == column[0]) for column in columns):
         values = ", ".join(f"{column[0]:.6g}" for column in columns[:3]) + (", ..." if len(columns) > 3 else "")
         return ExcitationError(f"{kind} {name!r} is constant ({values} throughout{every}): {nothing}")
@@ -388,8 +390,8 @@ def _channel_problem(kind: str, name: str, columns: list[np.ndarray], times: lis
     rounding = ROUNDING_UNITS * np.finfo(float).eps
     if spread <= rounding:
         if detrend == "linear" and max(float(np.std(column / level)) for column in columns) > rounding:
-            return ExcitationError(f"{kind} {name!r} is a straight line in time{every}: --detrend linear leaves nothing "
-                                   f"of it; {nothing}")
+            return ExcitationError(f"{kind} {name!r} is a straight line in time{every}: 'detrend' linear leaves "
+                                   f"nothing of it; {nothing}", options=("detrend",))
         return ExcitationError(f"{kind} {name!r} is nearly constant{every}: it varies by {spread:.1g} of its level "
                                f"{level:.6g}, within rounding error; {nothing}")
     return None
@@ -445,8 +447,9 @@ def check_channels(records: "IOData | Sequence[IOData]", *, detrend: str = "mean
     InputError
         A channel whose largest magnitude lies outside
         [:data:`SMALLEST_MAGNITUDE`, :data:`LARGEST_MAGNITUDE`] (1e-76 to
-        1e76), or that a scale factor makes overflow.
+        1e76), or that a scale factor makes overflow; an unknown ``detrend``.
     """
+    check_value("detrend", detrend, DETREND)
     records = as_records(records)
     first = records[0]
     scales_u = np.ones(first.n_u) if input_scale is None else np.asarray(input_scale, dtype=float)

@@ -11,6 +11,7 @@ from __future__ import annotations
 __all__ = [
     "WorkbenchError",
     "InputError",
+    "OptionError",
     "ExcitationError",
     "DivergenceError",
     "ArchiveError",
@@ -21,15 +22,43 @@ __all__ = [
 
 
 class WorkbenchError(Exception):
-    """Base class of every error the workbench raises on purpose."""
+    """Base class of every error the workbench raises on purpose.
+
+    Attributes
+    ----------
+    options : tuple of str
+        The options the message names, each by its keyword in single quotes (``'schedule_knots'``,
+        as scikit-learn names parameters): the library speaks of its keywords, and the command line
+        shows each as its flag (``--schedule-knots``).
+    """
 
     exit_status: int = 1
+    options: tuple[str, ...] = ()
+
+    def __init__(self, *args: object, options: tuple[str, ...] = ()):
+        super().__init__(*args)
+        self.options = tuple(options)
 
 
 class InputError(WorkbenchError, ValueError):
     """Bad user input: wrong shape, non-finite values, unknown option or column."""
 
     exit_status = 2
+
+
+class OptionError(InputError):
+    """A bad option value or combination of options, naming the options by their keywords.
+
+    Parameters
+    ----------
+    message : str
+        What is wrong, naming each option by its keyword in single quotes (``'bootstrap'``).
+    *options : str
+        The options the message names (unquoted).
+    """
+
+    def __init__(self, message: str, *options: str):
+        super().__init__(message, options=options)
 
 
 class ExcitationError(InputError):
@@ -46,8 +75,8 @@ class DivergenceError(WorkbenchError):
         the result holding every completed pass), so nothing computed is lost.
     """
 
-    def __init__(self, message: str, last_good: object | None = None):
-        super().__init__(message)
+    def __init__(self, message: str, last_good: object | None = None, *, options: tuple[str, ...] = ()):
+        super().__init__(message, options=options)
         self.last_good = last_good
 
 

@@ -32,7 +32,8 @@ __all__ = ["DEFAULT_PASSES", "MIN_PASSES", "DEFAULT_NONLINEAR_PASSES", "DEFAULT_
 def identify(data: IOData | Sequence[IOData], *, order: int | str = 4,
              validation: float | IOData | Sequence[IOData] | None = None,
              options: IdentifyOptions = IdentifyOptions(), schedule: Any = None,
-             schedule_channel: str = "schedule") -> Identification:
+             schedule_channel: str = "schedule", despike: bool = False, exclude: Any = (),
+             min_speed: float | None = None) -> Identification:
     """Identify a modal model from raw records as `vehid identify` does.
 
     Parameters
@@ -53,6 +54,15 @@ def identify(data: IOData | Sequence[IOData], *, order: int | str = 4,
         schedule is the tail of this one.
     schedule_channel : str
         The schedule channel's name (in the family's grid and the summary).
+    despike : bool
+        Replace the spikes and drop-outs found in every channel by interpolation (they are listed in
+        the summary's ``outliers`` either way; :mod:`~vehid.identification.dataio.cleaning`).
+    exclude : str, TimeWindow or a sequence of them
+        Windows of time left out (``"T0:T1"`` file time, ``"+T0:+T1"`` from the record's first
+        sample); the parts around them are records of their own.
+    min_speed : float, optional
+        With a schedule (a speed): only the samples where it is at least this, each run of them a
+        record of its own.
 
     Returns
     -------
@@ -66,13 +76,14 @@ def identify(data: IOData | Sequence[IOData], *, order: int | str = 4,
     StrictWarningsError
         With ``options.strict``, where the run ends with warnings.
     """
-    from vehid.identification.assessment.validation import split_holdout
     import numpy as np
 
     from vehid.identification.automatic.plan import ScheduleData, holdout_fraction, make_plan
     from vehid.identification.automatic.run import identify_plan
     from vehid.identification.blas import one_blas_thread
+    from vehid.identification.dataio.cleaning import MIN_RUN_SAMPLES, clean_records
     from vehid.identification.dataio.preparation import prepare, prepare_validation
+    from vehid.identification.dataio.timewindow import parse_time_windows
 
     raw = (data,) if isinstance(data, IOData) else tuple(data)
     if not raw or not all(isinstance(record, IOData) for record in raw):
@@ -96,12 +107,16 @@ def identify(data: IOData | Sequence[IOData], *, order: int | str = 4,
         if schedule_samples.shape != (raw[0].n_samples,) or not np.all(np.isfinite(schedule_samples)):
             raise InputError(f"schedule must hold one finite value per sample ({raw[0].n_samples}); "
                              f"got shape {schedule_samples.shape}")
-    held_raw: tuple[IOData, ...] = ()
-    if fraction is not None:
-        parts = [split_holdout(record, fraction) for record in raw]
-        raw, held_raw = tuple(part[0] for part in parts), tuple(part[1] for part in parts)
-    records, preparation = prepare(raw, detrend=options.detrend)
-    held = tuple(prepare_validation(part, preparation, record=i) for i, part in enumerate(held_raw))
+    if min_speed is not None and schedule_samples is None:
+        raise InputError("min_speed needs the speed: give schedule")
+    # spikes found (repaired where asked), windows and slow samples left out, the hold-out cut: runs as records
+    cleaned = clean_records(raw, extras=None if schedule_samples is None else [{schedule_channel: schedule_samples}],
+                            keeps=None if min_speed is None else [schedule_samples >= min_speed],
+                            min_run_samples=MIN_RUN_SAMPLES, despike_outliers=despike,
+                            exclude=parse_time_windows(exclude), holdout=fraction)
+    records, preparation = prepare(cleaned.estimation, detrend=options.detrend)
+    held = tuple(prepare_validation(part, preparation, record=i)
+                 for i, part in zip(cleaned.validation_follows, cleaned.validation))
     # each named by its source, as the command names validation files by their paths
     named = tuple((str(record.meta.get("source", f"validation record {i + 1}")), record)
                   for i, record in enumerate(extra))
@@ -109,9 +124,8 @@ def identify(data: IOData | Sequence[IOData], *, order: int | str = 4,
                      load=lambda record: prepare_validation(record, preparation, own_offsets=True),
                      held_out=held, fraction=fraction, note=note, preparation=preparation)
     if schedule_samples is not None:
-        cut = records[0].n_samples
         plan = dataclasses.replace(plan, schedule=ScheduleData(
-            schedule_channel, (schedule_samples[:cut],), (schedule_samples[cut:],) if held else ()))
+            schedule_channel, cleaned.extra_estimation[schedule_channel], cleaned.extra_validation[schedule_channel]))
     with one_blas_thread():
         result = identify_plan(plan, options)
     if options.strict and result.warnings:

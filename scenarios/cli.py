@@ -21,6 +21,7 @@ from typing import Any, Callable, Sequence
 
 from vehid.identification.errors import DivergenceError, StrictWarningsError, WorkbenchError
 from vehid.identification.jsonable import to_jsonable
+from vehid.scenarios.commands.flags import command_line_message
 from vehid.scenarios.commands.parser import GROUPS, MESSAGE_LIMIT, UsageError, build_parser, one_line
 
 __all__ = ["main", "build_parser", "to_jsonable", "one_line", "MESSAGE_LIMIT", "GROUPS"]
@@ -94,11 +95,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("vehid: error: warnings under --strict", file=sys.stderr)
         return _failed(args, exc, exc.exit_status, exc.summary)
     except DivergenceError as exc:
-        print(f"vehid: diverged: {one_line(str(exc))}", file=sys.stderr)
-        return _failed(args, exc, exc.exit_status)
+        text = command_line_message(exc)  # the options it names, as flags
+        print(f"vehid: diverged: {one_line(text)}", file=sys.stderr)
+        return _failed(args, exc, exc.exit_status, message=text)
     except WorkbenchError as exc:
-        print(f"vehid: error: {one_line(str(exc))}", file=sys.stderr)
-        return _failed(args, exc, exc.exit_status)
+        text = command_line_message(exc)
+        print(f"vehid: error: {one_line(text)}", file=sys.stderr)
+        return _failed(args, exc, exc.exit_status, message=text)
     except KeyboardInterrupt as exc:
         name, status = signal_name(exc)
         print(f"vehid: interrupted by {name}", file=sys.stderr)

@@ -238,6 +238,6 @@ def write_handling_report(archive: Archive | str | Path, out_dir: str | Path) ->
     nonlinear = _models(archive, "nonlinear")
     if chosen in nonlinear:
         export = out_dir / f"nonlinear_n{chosen}.casadi"
-        nonlinear[chosen].to_casadi(archive.records["identification"].n_samples).save(str(export))
+        nonlinear[chosen].to_casadi(n_samples=archive.records["identification"].n_samples).save(str(export))
         written.append(export)
     return written

@@ -40,6 +40,7 @@ from vehid.identification.errors import DivergenceError, InputError
 from vehid.identification.filtering.iekf import IEKFOptions, IEKFResult, identify_iekf
 from vehid.identification.filtering.iekf_archive import write_iekf_run
 from vehid.identification.jsonable import to_jsonable
+from vehid.identification.optionspec import renamed_options
 from vehid.identification.filtering.spline_iekf import SplineIEKFOptions, identify_spline_iekf
 from vehid.identification.assessment.metrics import percentage_explanation
 from vehid.identification.models.modal import ModalStructure
@@ -177,9 +178,14 @@ def study_linear_options(p: float = STUDY_LINEAR_P, passes: int = STUDY_LINEAR_P
 
 
 def spline_options(nodes: int | None = None, passes: int | None = None, p: float | None = None) -> SplineIEKFOptions:
-    """The spline IEKF's options; settings left at None take its defaults."""
-    return SplineIEKFOptions(nodes=SplineIEKFOptions.nodes if nodes is None else nodes, passes=SplineIEKFOptions.passes if passes is None else passes,
-                             p=SplineIEKFOptions.p if p is None else p)
+    """The spline IEKF's options; settings left at None take its defaults.
+
+    A bad value is named as the study names it (``nonlinear_p``, ``nonlinear_passes``).
+    """
+    with renamed_options({"p": "nonlinear_p", "passes": "nonlinear_passes"}):
+        return SplineIEKFOptions(nodes=SplineIEKFOptions.nodes if nodes is None else nodes,
+                                 passes=SplineIEKFOptions.passes if passes is None else passes,
+                                 p=SplineIEKFOptions.p if p is None else p)
 
 
 @dataclass(frozen=True)
@@ -403,7 +409,7 @@ class OrderOutcome:
 def _nonlinear_outcome(result: Any, identification: IOData, validation: IOData, n_pairs: int) -> SplineStudyRun:
     model = result.model
     curves = {}
-    modes = [model.modes(amplitude)[:n_pairs] for amplitude in MODE_AMPLITUDES]
+    modes = [model.modes(amplitude=amplitude)[:n_pairs] for amplitude in MODE_AMPLITUDES]
     for mode in range(n_pairs):  # frequency and damping curves exist for the complex pairs
         curves[mode] = (np.array([at[mode].frequency_hz for at in modes]), np.array([at[mode].damping for at in modes]))
     tables = {name: {key: value if isinstance(value, str) else np.asarray(value, dtype=float)

@@ -18,7 +18,8 @@ from vehid.identification.automatic.plan import ScheduleData
 from vehid.identification.automatic.scheduled import scheduled_records
 from vehid.identification.errors import InputError
 
-__all__ = ["ScheduleData", "parse_schedule_grid", "check_options", "read_with_schedule", "schedule_loader",
+__all__ = ["ScheduleData", "parse_schedule_grid", "check_options", "read_with_schedule", "schedule_factor",
+           "schedule_loader",
            "scheduled_records"]
 
 
@@ -33,18 +34,17 @@ def parse_schedule_grid(text: str | None) -> tuple[float, ...] | None:
 
 
 def check_options(args: Any) -> None:
-    """Refuse combinations the scheduled model does not support, before any work."""
+    """Refuse combinations the scheduled model does not support, before any work.
+
+    The family's own settings (knots, grid, p) are checked where they are declared, in
+    :class:`~vehid.identification.automatic.options.IdentifyOptions`.
+    """
     if args.resume:
         raise InputError("--schedule runs are not checkpointed: give no --resume")
     if len(args.data) > 1:
         raise InputError("--schedule identifies the scheduled model from one record; give one data file")
     if not args.inputs:
         raise InputError("--schedule needs --inputs naming the inputs (the schedule is read beside them)")
-    from vehid.identification.filtering.scheduled_iekf import ScheduledIEKFOptions
-
-    for p in args.schedule_p or [None]:
-        ScheduledIEKFOptions(knots=args.schedule_knots, grid=parse_schedule_grid(args.schedule_grid),
-                             **({} if p is None else {"p": p}))
 
 
 def _without_schedule(args: Any) -> dict[str, float]:
@@ -53,10 +53,11 @@ def _without_schedule(args: Any) -> dict[str, float]:
     return {name: factor for name, factor in parse_scale(args.scale).items() if name != args.schedule}
 
 
-def read_with_schedule(args: Any, paths: Sequence[str]) -> tuple[tuple[IOData, ...], Any, list[np.ndarray], dict]:
-    """Raw records without the schedule, their reading settings, each record's schedule (scaled) and
-    the ``--scale`` factors of the other channels."""
-    from vehid.identification.dataio.preparation import parse_scale, read_raw_records
+def read_with_schedule(args: Any, paths: Sequence[str]) -> tuple[tuple[IOData, ...], Any, list[np.ndarray], dict, str]:
+    """Raw records without the schedule, their reading settings, each record's schedule as read (its
+    ``--scale`` factor is :func:`schedule_factor`'s), the ``--scale`` factors of the other channels and the
+    schedule's unit ("-" where unknown or scaled)."""
+    from vehid.identification.dataio.preparation import read_raw_records
     from vehid.scenarios.data_options import settings_from_args
 
     check_options(args)
@@ -66,19 +67,26 @@ def read_with_schedule(args: Any, paths: Sequence[str]) -> tuple[tuple[IOData, .
         raise InputError(f"--schedule {channel} is also named among --inputs or --outputs: the schedule is a "
                          "channel of its own")
     raw, full_settings = read_raw_records(list(paths), dataclasses.replace(settings, inputs=settings.inputs + (channel,)))
-    factor = parse_scale(args.scale).get(channel, 1.0)
-    schedules = [record.u[:, -1] * factor for record in raw]
+    schedules = [record.u[:, -1] for record in raw]
     inputs = full_settings.inputs[:-1]
+    unit = raw[0].input_units[-1] if schedule_factor(args) == 1.0 else "-"  # a scaled channel's unit is the user's to name
     return (tuple(record.select_inputs(inputs) for record in raw), dataclasses.replace(full_settings, inputs=inputs),
-            schedules, _without_schedule(args))
+            schedules, _without_schedule(args), unit)
+
+
+def schedule_factor(args: Any) -> float:
+    """The ``--scale`` factor of the schedule channel (1 where none names it)."""
+    from vehid.identification.dataio.preparation import parse_scale
+
+    return parse_scale(args.scale).get(args.schedule.strip(), 1.0)
 
 
 def schedule_loader(args: Any, preparation: Any, channels: Any, found: list[np.ndarray]):
     """A validation-file loader that also reads the file's schedule (appended to ``found``, in order)."""
-    from vehid.identification.dataio.preparation import parse_scale, prepare_validation, read_record
+    from vehid.identification.dataio.preparation import prepare_validation, read_record
 
     channel = args.schedule.strip()
-    factor = parse_scale(args.scale).get(channel, 1.0)
+    factor = schedule_factor(args)
 
     def load(path: str) -> IOData:
         inputs, outputs = channels if channels is not None else (preparation.settings.inputs, preparation.settings.outputs)

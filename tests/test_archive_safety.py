@@ -162,7 +162,7 @@ def test_target_checks(tmp_path):
     data.write_text("t,u,y\n0,0,0\n")
     with pytest.raises(OutputTargetError, match="is an input of this run"):
         check_output_target(data, inputs=[data], force=True)  # never, even forced
-    with pytest.raises(OutputTargetError, match="exists and is not a workbench archive.*--force"):
+    with pytest.raises(OutputTargetError, match="exists and is not a workbench archive.*'force'"):
         check_output_target(data)
     assert check_output_target(data, force=True) == data
     with pytest.raises(OutputTargetError, match=f"{tmp_path}: Is a directory"):

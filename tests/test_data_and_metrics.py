@@ -60,8 +60,8 @@ def test_csv_round_trip(tmp_path):
     np.testing.assert_array_equal(data.y[:, 0], [1, 2, 3])
     with pytest.raises(InputError, match="unknown column 'yaw'"):
         read_record(path, inputs=("steer",), outputs=("yaw",))
-    # --dt beside a time column would silently override it: an error unless the time column is disabled
-    with pytest.raises(InputError, match="has a time column 't': --dt would override it"):
+    # dt beside a time column would silently override it: an error unless the time column is disabled
+    with pytest.raises(InputError, match="has a time column 't': 'dt' would override it"):
         read_record(path, inputs=("steer",), outputs=("ay",), dt=0.1)
     by_dt = read_record(path, inputs=("steer",), outputs=("ay",), dt=0.1, time_column="none")
     assert by_dt.dt == pytest.approx(0.1)

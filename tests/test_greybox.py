@@ -14,6 +14,7 @@ import scipy.linalg
 from vehid.identification.data import IOData
 from vehid.identification.errors import DivergenceError, InputError
 from vehid.identification.filtering.greybox import GreyBoxModel, GreyBoxOptions, identify_greybox, simulate_greybox
+from vehid.identification.filtering.greybox_model import IdentifiedGreyBox
 
 
 def _scheduled_first_order() -> GreyBoxModel:
@@ -66,6 +67,12 @@ def test_recovers_a_scheduled_lag_from_a_wrong_start(lag_record):
     assert result.measurement_noise[0] == pytest.approx(noise**2, rel=0.1)
     assert result.correlation.shape == (2, 2) and result.correlation[0, 0] == pytest.approx(1.0)
     assert np.all(np.diff(result.trace_p) < 0)  # P shrinks from pass to pass as Q does
+    # the estimate as a model value: the estimator's own recursion, its covariance, and at any schedule value
+    # the lag's one pole -1 / tau (the schedule scales the gain only)
+    model = IdentifiedGreyBox.from_result(result, schedule_range=[[0.5, 1.5]])
+    np.testing.assert_array_equal(model.simulate(data).y, result.simulate(data))
+    np.testing.assert_array_equal(model.parameter_covariance, result.covariance)
+    assert model.eigenvalues(schedule=1.3)[0] == pytest.approx(-1 / result.parameters[0], rel=1e-12)
 
 
 def test_the_rk4_simulation_matches_the_exact_one(lag_record):

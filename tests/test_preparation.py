@@ -40,7 +40,8 @@ def test_means_and_lines_are_removed_and_scales_applied(record):
     np.testing.assert_allclose(prepared.u, raw.u - line[1] - np.outer(raw.t - raw.t[0], line[0]), atol=1e-9)
     with pytest.raises(InputError) as caught:
         prepare(raw, scale=["steer=0.0625"])
-    assert str(caught.value) == "--scale names 'steer', which is not a chosen channel; inputs: u1, u2; outputs: y1"
+    assert str(caught.value) == "'scale' names 'steer', which is not a chosen channel; inputs: u1, u2; outputs: y1"
+    assert caught.value.options == ("scale",)  # the command line says --scale
     with pytest.raises(InputError) as caught:
         prepare(raw, scale=["u1=0"])
     assert str(caught.value) == "the scale factor of 'u1' must be a finite non-zero number; got 0.0"
@@ -104,7 +105,7 @@ def test_raw_file_identify_archive_reapply_gives_the_same_fit(record, tmp_path):
     fit = score_records(model, again).records[0].metrics.percentage_explanation
     # the same arithmetic on the same file: equal to rounding (the JSON carries full double precision)
     np.testing.assert_allclose(fit, summary["records"][0]["fits"], rtol=1e-12)
-    np.testing.assert_allclose(fit, summary["fit_percent"], rtol=1e-12)
+    np.testing.assert_allclose(fit, summary["R"], rtol=1e-12)
     # simulate on raw data: outputs in the raw file's units and offset
     simulated = preparation.simulate(model, raw.replace(u=raw.u * [1.0, 0.5]), record=0)
     assert abs(np.mean(simulated) - raw.y.mean()) < 0.05 * np.std(raw.y)
@@ -133,9 +134,11 @@ def test_identify_several_files_of_different_formats(record, tmp_path):
     # each record's offsets are its own means (the added offsets plus the signal's small mean)
     found = [r["output_offset"][0] for r in summary["preparation"]["records"]]
     np.testing.assert_allclose(found, [first.y.mean(), second.y.mean()], rtol=1e-9)
-    # pooled R (eq. 17) lies between the per-record fits, which are both high on noise-free data
+    # pooled R (eq. 17) and NRMSE fit lie between the per-record ones, which are both high on noise-free data
     fits = [r["fits"][0] for r in summary["records"]]
-    assert min(fits) - 1e-9 <= summary["fit_percent"][0] <= max(fits) + 1e-9 and min(fits) > 99.0
+    assert min(fits) - 1e-9 <= summary["R"][0] <= max(fits) + 1e-9 and min(fits) > 99.0
+    nrmse = [r["metrics"]["nrmse_fit"][0] for r in summary["records"]]
+    assert min(nrmse) - 1e-9 <= summary["fit_percent"][0] <= max(nrmse) + 1e-9
     # a file whose rate differs cannot join: one clear line, exit status 2
     scipy.io.savemat(tmp_path / "fast.mat", {"t": second.t / 2, "u1": second.u[:, 0], "u2": second.u[:, 1],
                                             "y1": second.y[:, 0]})

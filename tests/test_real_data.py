@@ -203,7 +203,8 @@ def default_run(tmp_path_factory):
 @pytest.mark.parametrize("name", list(DEFAULT_FITS))
 def test_default_identify_holdout_fit_on_raw_record(name, default_run):
     summary = default_run(name)
-    fits = np.array(summary["validation_fit_percent"], dtype=float)
+    # the default linear model's (a --nonlinear run returns its spline model where that validates better)
+    fits = np.array(summary["orders_tried"][0]["validation_fit_percent"], dtype=float)
     assert summary["order"] == 4 and summary["preparation"]["detrend"] == "mean"
     assert np.all(fits >= np.array(DEFAULT_FITS[name]) - MARGIN), (fits, DEFAULT_FITS[name])
     if name == "ballbeam":
@@ -258,7 +259,9 @@ def test_comparator_holdout_fit_on_raw_record(name, method, measured, tmp_path):
 # sample perturbed by 1e-9 relative 76.52 / 65.25, an AVX-512 machine 73.5; on the exchanger 77.46 / 63.36.
 # What holds across all of them, and is the claim: the spline model beats its linear start (by 3.9 to 14.1
 # points where the start was recorded; asserted by half the smallest gap) and every peer (the lowest spline
-# fit, 73.5, is 4.8 points above the best peer's 68.7).
+# fit, 73.5, is 4.8 points above the best peer's 68.7), so that it is the model returned. Those figures
+# simulate the spline model from rest; scored as its linear start is, from an estimated initial state, it
+# gains (the exchanger: 81.3 % here, its start 63.4 %), which leaves the floors below standing.
 SPLINE_BEST_PEERS = [("exchanger", 58.2), ("cascaded_tanks", 68.7)]
 
 
@@ -268,8 +271,10 @@ def test_spline_model_holdout_fit_on_raw_nonlinear_records(name, best_peer, defa
     """``--nonlinear`` on a raw nonlinear record: the spline model beats its linear start and every peer held out."""
     summary = default_run(name)  # on these records, the --nonlinear run
     spline = summary["nonlinear"]["validation_fit_percent"]
-    assert spline[0] > summary["validation_fit_percent"][0] + (75.69 - 71.76) / 2, summary["nonlinear"]
+    start = summary["orders_tried"][0]["validation_fit_percent"]  # the linear model it refined (one order)
+    assert spline[0] > start[0] + (75.69 - 71.76) / 2, summary["nonlinear"]
     assert spline[0] > best_peer, summary["nonlinear"]
+    assert summary["model_returned"] == "nonlinear" and summary["validation_fit_percent"] == spline
 
 
 def test_a_validation_file_holding_the_estimation_samples_is_refused():

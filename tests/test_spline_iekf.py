@@ -31,7 +31,7 @@ def test_constant_splines_equal_the_linear_model():
     back = model.linear_model()
     for name in "ABCD":
         assert np.allclose(getattr(back, name), getattr(linear, name), rtol=0, atol=1e-12)
-    pair = [model.modes(amplitude)[0] for amplitude in (0.0, 0.5, 2.0)]
+    pair = [model.modes(amplitude=amplitude)[0] for amplitude in (0.0, 0.5, 2.0)]
     assert np.allclose([mode.frequency_hz for mode in pair], np.hypot(15, 10) / (2 * np.pi))
     assert np.allclose([mode.damping for mode in pair], 15 / np.hypot(15, 10))
 
@@ -114,7 +114,7 @@ def test_recovers_a_known_spline_nonlinear_system():
 def test_export_as_a_casadi_function_simulates_the_same(tmp_path):
     truth = _true_nonlinear_system()
     u = np.sin(np.linspace(0, 20, 800))[:, None]
-    function = truth.to_casadi(u.shape[0])
+    function = truth.to_casadi(n_samples=u.shape[0])
     path = tmp_path / "model.casadi"
     function.save(str(path))
     loaded = ca.Function.load(str(path))
@@ -128,7 +128,7 @@ def test_spline_tables_and_bad_input():
     assert tables["sigma1"]["variable"] == "amplitude1"
     assert np.allclose(tables["sigma1"]["values"], [-6.0, -5.2, -4.5, -4.1, -4.0])
     assert tables["b11"]["variable"] == "u1" and np.allclose(tables["b11"]["nodes"], np.linspace(-1, 1, 5))
-    with pytest.raises(InputError, match="nodes must be a whole number"):
+    with pytest.raises(InputError, match="'nodes' must be a whole number"):
         SplineIEKFOptions(nodes=2)
     with pytest.raises(InputError, match="identified at dt"):
         truth.simulate_outputs(np.zeros((10, 1)), 0.01)

@@ -64,6 +64,8 @@ from .parameters import GRAVITY, VehicleParameters, named_vehicle
 
 __all__ = [
     "HandlingMetrics",
+    "HandlingResponse",
+    "PLOTTED_METRICS",
     "METRIC_UNITS",
     "handling_metrics",
     "linear_handling",
@@ -157,6 +159,115 @@ class HandlingMetrics:
         return {"speed": self.speed, "source": self.source,
                 **{name: {"value": number(getattr(self, name)), "std": number(self.std[name]), "unit": unit}
                    for name, unit in METRIC_UNITS.items()}}
+
+
+#: The metrics a handling figure shows unless told otherwise: the steady gains and the understeer gradient.
+PLOTTED_METRICS = ("yaw_rate_gain", "lateral_acceleration_gain", "understeer_gradient_deg_per_g")
+
+
+@dataclass(frozen=True)
+class HandlingResponse:
+    """Handling metrics of one model at each speed: a frozen value with the data as attributes and ``.plot()``.
+
+    It unpacks, iterates and indexes as the tuple of :class:`HandlingMetrics` it holds (what
+    :func:`handling_metrics` returned before it returned this value): ``(at_20,) = handling_metrics(...)``.
+
+    Parameters
+    ----------
+    metrics : tuple of HandlingMetrics
+        One per speed, in the order asked.
+    label : str
+        How the figure names the model.
+
+    Examples
+    --------
+    >>> from vehid.identification import ContinuousModel
+    >>> bicycle = ContinuousModel([[-6.0, -18.2], [1.08, -6.804]], [[53.33], [38.4]], [[0.0, 1.0]], [[0.0]],
+    ...                           input_names=("steer",), output_names=("yaw_rate",))  # at 20 m/s
+    >>> response = handling_metrics(bicycle, 20.0, wheelbase=2.7)
+    >>> response.speeds, response.value("yaw_rate_gain").round(3)  # V / (L + K V^2) = 20 / (2.7 + 1.5)
+    (array([20.]), array([4.762]))
+    >>> fig = response.plot()
+    """
+
+    metrics: tuple[HandlingMetrics, ...]
+    label: str = "model"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "metrics", tuple(self.metrics))
+
+    def __iter__(self) -> Any:
+        return iter(self.metrics)
+
+    def __len__(self) -> int:
+        return len(self.metrics)
+
+    def __getitem__(self, index: Any) -> Any:
+        return self.metrics[index]
+
+    @property
+    def speeds(self) -> np.ndarray:
+        """The speeds (m/s), one per metrics entry."""
+        return np.array([m.speed for m in self.metrics])
+
+    def value(self, name: str) -> np.ndarray:
+        """One metric (a name of :data:`METRIC_UNITS`) at each speed, in its unit; NaN where the model has none.
+
+        Parameters
+        ----------
+        name : str
+
+        Returns
+        -------
+        ndarray (n_speeds,)
+        """
+        return np.array([getattr(m, _metric_name(name)) for m in self.metrics])
+
+    def std(self, name: str) -> np.ndarray:
+        """The standard deviation of one metric at each speed (NaN without a parameter covariance).
+
+        Parameters
+        ----------
+        name : str
+
+        Returns
+        -------
+        ndarray (n_speeds,)
+        """
+        return np.array([m.std[_metric_name(name)] for m in self.metrics])
+
+    def as_dict(self) -> list[dict[str, Any]]:
+        """JSON-ready: each speed's :meth:`HandlingMetrics.as_dict`."""
+        return [m.as_dict() for m in self.metrics]
+
+    def plot(self, names: Sequence[str] = PLOTTED_METRICS, *, ax: Any = None, label: str | None = None,
+             title: str | None = None) -> Any:
+        """The metrics against speed with bands of two standard deviations where known.
+
+        Parameters
+        ----------
+        names : sequence of str
+            The metrics (:data:`METRIC_UNITS`), one panel each.
+        ax : matplotlib Axes or sequence of Axes, optional
+            One per metric (for instance a figure's ``axes`` to draw a second model beside the first).
+            Default: a new Figure, leaving out the metrics the model does not have.
+        label : str, optional
+            The line's legend entry; default :attr:`label`.
+        title : str, optional
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+        """
+        from .handling_figure import plot_handling
+
+        return plot_handling({label or self.label: self.metrics}, names, METRIC_UNITS, ax=ax, title=title)
+
+
+def _metric_name(name: str) -> str:
+    if name not in METRIC_UNITS:
+        raise InputError(f"unknown handling metric {name!r}; use {', '.join(METRIC_UNITS)}")
+    return name
 
 
 def _metrics_from_vector(speed: float, source: str, vector: np.ndarray, std: np.ndarray | None) -> HandlingMetrics:
@@ -407,7 +518,7 @@ def handling_metrics(
     steer: str | None = None,
     wheelbase: float | None = None,
     scales: Mapping[str, float] | None = None,
-) -> tuple[HandlingMetrics, ...]:
+) -> HandlingResponse:
     """Handling metrics of an identified model at each speed (module notes).
 
     Parameters
@@ -431,8 +542,9 @@ def handling_metrics(
 
     Returns
     -------
-    tuple of HandlingMetrics
-        One per speed, with standard deviations where the model has a parameter covariance.
+    HandlingResponse
+        One :class:`HandlingMetrics` per speed, with standard deviations where the model has a parameter
+        covariance; it unpacks and indexes as their tuple.
     """
     speeds = [float(v) for v in np.atleast_1d(np.asarray(speeds, dtype=float))]
     if not speeds or not all(math.isfinite(v) and v > 0 for v in speeds):
@@ -482,7 +594,7 @@ def handling_metrics(
                 std = np.sqrt(np.maximum(np.diag(spread), 0.0))
             std[~np.isfinite(vector)] = math.nan
         results.append(_metrics_from_vector(speed, "model", vector, std))
-    return tuple(results)
+    return HandlingResponse(tuple(results))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -520,10 +632,32 @@ class SourceHandling:
         return tuple(m.speed for m in self.linearisation)
 
     def as_dict(self) -> dict[str, Any]:
+        """JSON-ready: the vehicle, its wheelbase, the step's level and both sets of metrics."""
         return {"vehicle": self.vehicle, "wheelbase": self.wheelbase,
                 "step_lateral_acceleration": self.step_lateral_acceleration,
                 "linearisation": [m.as_dict() for m in self.linearisation],
                 "simulation": [m.as_dict() for m in self.simulation]}
+
+    def plot(self, names: Sequence[str] = PLOTTED_METRICS, *, ax: Any = None, title: str | None = None) -> Any:
+        """The linearisation's metrics and, where simulated, the nonlinear model's, against speed.
+
+        Parameters
+        ----------
+        names : sequence of str
+            The metrics (:data:`METRIC_UNITS`), one panel each.
+        ax : matplotlib Axes or sequence of Axes, optional
+            One per metric; default a new Figure.
+        title : str, optional
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+        """
+        from .handling_figure import plot_handling
+
+        curves = {f"{self.vehicle} (linearisation)": self.linearisation,
+                  **({f"{self.vehicle} (simulation)": self.simulation} if self.simulation else {})}
+        return plot_handling(curves, names, METRIC_UNITS, ax=ax, title=title or f"Handling of {self.vehicle}")
 
 
 def _source_linearisation(params: VehicleParameters, speed: float) -> np.ndarray:

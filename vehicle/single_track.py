@@ -37,8 +37,12 @@ from typing import Any, Mapping, Sequence
 import casadi as ca
 import numpy as np
 
+from vehid.identification.dataio.storage import register_codec
 from vehid.identification.errors import InputError
-from vehid.identification.filtering.greybox import GreyBoxModel
+from vehid.identification.filtering.greybox import GreyBoxModel, greybox_outputs
+from vehid.identification.filtering.greybox_model import IdentifiedGreyBox, schedule_columns, stable_over
+from vehid.identification.models.discrete import ContinuousModel
+from vehid.identification.models.protocol import StateSpaceModel, schedule_value, unscheduled
 
 __all__ = [
     "GRAVITY",
@@ -54,10 +58,16 @@ __all__ = [
     "config_from_vehicle",
     "IdentifiedSingleTrack",
     "SingleTrackAtSpeed",
+    "MAX_SUBSTEPS",
+    "STEP_PER_TIME_CONSTANT",
 ]
 
 GRAVITY = 9.81  # m/s^2, as the vehicle parameters use it
 MIN_SPEED = 0.1  # m/s: the smooth floor under the speed (module docstring); 5e-5 of the speed at 10 m/s
+#: Most Runge-Kutta steps per sample an identified model takes; a record needing more reaches standstill.
+MAX_SUBSTEPS = 20
+#: A Runge-Kutta step covers at most this fraction of the fastest mode's time constant (RK4 is stable to 2.8).
+STEP_PER_TIME_CONSTANT = 0.5
 
 #: The outputs the model offers: name -> unit.
 QUANTITIES = {"yaw_rate": "rad/s", "lateral_acceleration": "m/s^2", "sideslip": "rad", "lateral_velocity": "m/s"}
@@ -115,8 +125,8 @@ class SingleTrackConfig:
         _positive("the CG to front axle distance", self.cg_to_front_axle)
         _positive("the CG to rear axle distance", self.cg_to_rear_axle)
         if isinstance(self.steering_ratio, (int, float)) and self.steering_ratio < 0:
-            raise InputError(f"the steering ratio must be positive (flip the channel's sign with --scale); "
-                             f"got {self.steering_ratio!r}")
+            raise InputError(f"the steering ratio must be positive (flip the channel's sign with 'scale'); "
+                             f"got {self.steering_ratio!r}", options=("scale",))
         _positive("the steering ratio", self.steering_ratio)
         if self.relaxation_length is not None:
             _positive("the relaxation length", self.relaxation_length)
@@ -340,13 +350,20 @@ def _linearisation(config: SingleTrackConfig) -> ca.Function:
                        ["theta", "speed"], ["A", "B", "C", "D"])
 
 
+@functools.lru_cache(maxsize=16)
+def _structure(config: SingleTrackConfig) -> GreyBoxModel:
+    """:func:`single_track_model` of ``config``, built once (its functions key the compiled simulation)."""
+    return single_track_model(config)
+
+
 @dataclass(frozen=True, eq=False)
-class SingleTrackAtSpeed:
+class SingleTrackAtSpeed(StateSpaceModel):
     """An identified single-track model linearised at one speed: continuous time, input the road-wheel angle.
 
-    It meets what :func:`vehid.vehicle.handling.handling_metrics` asks of a linear model
-    (``to_statespace``, names, ``parameters`` with ``parameter_covariance`` and ``with_parameters``),
-    so the handling metrics carry the parameters' uncertainty by the delta method.
+    A linear model of the protocol (:class:`~vehid.identification.models.protocol.IdentifiedModel`), and
+    what :func:`vehid.vehicle.handling.handling_metrics` asks of one (``parameters`` with
+    ``parameter_covariance`` and ``with_parameters``), so the handling metrics carry the parameters'
+    uncertainty by the delta method.
     """
 
     config: SingleTrackConfig
@@ -362,23 +379,77 @@ class SingleTrackAtSpeed:
     def output_names(self) -> tuple[str, ...]:
         return self.config.quantities
 
-    def to_statespace(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
+    @property
+    def n_u(self) -> int:
+        """One input: the road-wheel angle."""
+        return 1
+
+    @property
+    def n_y(self) -> int:
+        """The configuration's quantities."""
+        return len(self.config.quantities)
+
+    def to_statespace(self, *, schedule: float | None = None
+
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
         """``(A, B, C, D, None)`` at straight running: states as :func:`single_track_model` names them."""
+        unscheduled(schedule)
         A, B, C, D = (np.asarray(m, dtype=float) for m in _linearisation(self.config)(self.parameters, self.speed))
         return A, B, C, D, None
 
+    def simulate_outputs(self, u: Any, dt: float | None = None, *, x0: Any = None,
+                         schedule: Any = None) -> np.ndarray:
+        """Outputs (N, n_y) for road-wheel angles (N, 1) linear between samples, exact (first-order hold).
+
+        Parameters
+        ----------
+        u : array_like (N, 1)
+        dt : float
+            Sample interval (s); required.
+        x0 : array_like, optional
+            Initial state (default straight running).
+        schedule : array_like (N,), optional
+            Changes nothing: the model holds at its one speed.
+
+        Returns
+        -------
+        ndarray (N, n_y)
+        """
+        return ContinuousModel(*self.to_statespace()[:4]).simulate_outputs(u, dt, x0=x0, schedule=schedule)
+
     def with_parameters(self, theta: Any) -> "SingleTrackAtSpeed":
+        """The same model with parameters ``theta``."""
         return replace(self, parameters=np.asarray(theta, dtype=float).ravel())
 
 
 @dataclass(frozen=True, eq=False)
-class IdentifiedSingleTrack:
+class IdentifiedSingleTrack(StateSpaceModel):
     """A single-track model identified from a log: its configuration, parameters and their covariance.
 
     Speed is a parameter of the model, so it is a family over speed like the scheduled modal models:
-    :meth:`model_at` gives the linear model at a speed, :attr:`grid` the speeds the log spans (the handling
-    command's default). Saved as JSON (``kind: single-track``) by ``vehid identify --structure single-track
-    --save-model``.
+    :meth:`model_at` gives the linear model at a speed (input the road-wheel angle), :attr:`grid` the
+    speeds the log spans (the handling command's default). Saved as JSON (``kind: single-track``) by
+    ``vehid identify --structure single-track --save-model``.
+
+    It meets the model protocol (:class:`~vehid.identification.models.protocol.IdentifiedModel`) as a
+    nonlinear model scheduled on speed: its input is the steer channel (road-wheel angle times the
+    steering ratio) and a record holds the speed as its last input column (``schedule=`` takes it apart).
+    It simulates by the compiled Runge-Kutta recursion the grey-box IEKF used
+    (:attr:`greybox`), with as many steps per sample as the record's speeds need
+    (:meth:`substeps_for`); at a speed, its state-space form is the linearisation at straight running
+    per steer channel. Its extras: the configuration, the named parameters, :meth:`model_at` and the
+    closed-form :meth:`handling`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> car = IdentifiedSingleTrack(SingleTrackConfig(mass=1500.0, cg_to_front_axle=1.2, cg_to_rear_axle=1.5),
+    ...                             [80_000.0, 100_000.0, 2500.0], None, (10.0, 30.0))
+    >>> [f"{mode.frequency_hz:.2f} Hz, damping {mode.damping:.2f}" for mode in car.modes(schedule=20.0)]
+    ... # at 20 m/s: det A = 60.5 1/s^2, trace A = -12.8 1/s
+    ['1.24 Hz, damping 0.82']
+    >>> car.is_stable()  # an understeering car, at every speed of its log
+    True
 
     Parameters
     ----------
@@ -426,9 +497,203 @@ class IdentifiedSingleTrack:
         return rounded if rounded[0] >= low and rounded[-1] <= high else np.unique(np.linspace(low, high, 3))
 
     def model_at(self, speed: float) -> SingleTrackAtSpeed:
+        """The model linearised at ``speed`` (m/s), input the road-wheel angle (for the handling metrics)."""
         return SingleTrackAtSpeed(self.config, self.parameters, self.parameter_covariance, float(speed))
 
+    def handling(self, speeds: Sequence[float] | None = None) -> SingleTrackHandling:
+        """The closed-form handling numbers with their standard deviations (:func:`single_track_handling`).
+
+        Parameters
+        ----------
+        speeds : sequence of float, optional
+            Speeds (m/s) of the yaw-rate gains; default :attr:`grid`.
+
+        Returns
+        -------
+        SingleTrackHandling
+        """
+        return single_track_handling(self.config, self.parameters, self.parameter_covariance,
+                                     tuple(self.grid) if speeds is None else speeds)
+
+    # -- the model protocol ------------------------------------------------------------------
+
+    #: Nonlinear where saturating or lagged, and varying with speed along a record: scored from rest.
+    is_linear = False
+    #: Scheduled on the speed (m/s).
+    is_scheduled = True
+
+    @property
+    def n_states(self) -> int:
+        """Lateral velocity and yaw rate, and the slip angles with a relaxation length."""
+        return 4 if self.config.relaxation_length is not None else 2
+
+    @property
+    def n_u(self) -> int:
+        """One input: the steer channel."""
+        return 1
+
+    @property
+    def n_y(self) -> int:
+        """The configuration's quantities."""
+        return len(self.config.quantities)
+
+    @property
+    def record_inputs(self) -> int:
+        """Input columns of a record: the steer channel, then the speed."""
+        return 2
+
+    @property
+    def input_names(self) -> tuple[str, ...]:
+        return ("steer",)
+
+    @property
+    def output_names(self) -> tuple[str, ...]:  # type: ignore[override]
+        return self.config.quantities
+
+    @property
+    def schedule_range(self) -> tuple[float, float]:
+        """The log's speed range (m/s)."""
+        return self.speed_range
+
+    @functools.cached_property
+    def greybox(self) -> IdentifiedGreyBox:
+        """The model as the grey-box IEKF identified it: :func:`single_track_model` with these parameters."""
+        return IdentifiedGreyBox(_structure(self.config), self.parameters, self.parameter_covariance,
+                                 schedule_range=np.array([self.speed_range]), meta=dict(self.meta))
+
+    def substeps_for(self, speeds: Any, dt: float) -> int:
+        """Runge-Kutta steps per sample that keep every mode well inside RK4's stability region.
+
+        The fastest eigenvalue of the linearisation at the least and at the greatest of ``speeds`` (the
+        bicycle's rates fall as ``1 / v``, a relaxation length's rise as ``v / sigma``); a step covers at
+        most :data:`STEP_PER_TIME_CONSTANT` of its time constant.
+
+        Parameters
+        ----------
+        speeds : array_like
+            The record's speeds (m/s).
+        dt : float
+            Its sample interval (s).
+
+        Returns
+        -------
+        int
+
+        Raises
+        ------
+        InputError
+            Where more than :data:`MAX_SUBSTEPS` would be needed: the record reaches standstill, where the
+            model does not hold.
+        """
+        speeds = np.asarray(speeds, dtype=float)
+        low, high = max(float(np.min(speeds)), MIN_SPEED), max(float(np.max(speeds)), MIN_SPEED)
+        rate = max(float(np.max(np.abs(np.linalg.eigvals(self.to_statespace(schedule=v)[0]))))
+                   for v in (low, high))
+        needed = int(np.ceil(rate * dt / STEP_PER_TIME_CONSTANT))
+        if needed > MAX_SUBSTEPS:
+            raise InputError(f"the record's speed falls to {np.min(speeds):.3g} m/s, where the single-track model's "
+                             f"modes are too fast for its {dt:g} s samples: leave out the slow parts")
+        return max(needed, 1)
+
+    def to_statespace(self, *, schedule: float | None = None
+
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
+        """``(A, B, C, D, None)`` at straight running at speed ``schedule`` (m/s, required), per steer channel.
+
+        Any positive speed is taken (the model is physical); the log spans :attr:`speed_range`.
+        """
+        speed = schedule_value(schedule, 0.0, math.inf, "speed")
+        A, B, C, D, _ = self.model_at(speed).to_statespace()
+        ratio = self.config.steering_ratio  # model_at's input is the road-wheel angle, the channel's is times it
+        return A, B / ratio, C, D / ratio, None
+
+    def is_stable(self, *, schedule: float | None = None) -> bool:
+        """Stable at speed ``schedule``; without one, at speeds across :attr:`speed_range`
+        (:func:`~vehid.identification.filtering.greybox_model.stable_over`)."""
+        if schedule is None:
+            return stable_over(self, *self.speed_range)
+        return super().is_stable(schedule=schedule)
+
+    def simulate_outputs(self, u: Any, dt: float | None = None, *, x0: Any = None, schedule: Any = None,
+                         substeps: int | None = None, return_states: bool = False) -> Any:
+        """Outputs (N, n_y) driven by the steer channel along the measured speed, compiled (RK4).
+
+        Parameters
+        ----------
+        u : array_like (N, 1), or (N, 2) with the speed last
+        dt : float
+            Sample interval (s); required.
+        x0 : array_like (n_states,), optional
+            Initial state (default straight running).
+        schedule : array_like (N,), optional
+            The speed (m/s) at each sample; without it, ``u``'s last column.
+        substeps : int, optional
+            Runge-Kutta steps per sample; default :meth:`substeps_for` the record's speeds.
+        return_states : bool
+            Also return the states (N, n_states).
+
+        Returns
+        -------
+        y : ndarray (N, n_y)  (and x, (N, n_states), if asked)
+        """
+        if dt is None or not (np.isfinite(dt) and dt > 0):
+            raise InputError(f"the single-track model needs the sample interval dt (> 0) of its input; got {dt}")
+        driving = schedule_columns(u, schedule, 1, 1, "speed")
+        steps = self.substeps_for(driving[:, 1], dt) if substeps is None else substeps
+        y, x = greybox_outputs(_structure(self.config), self.parameters, driving, float(dt), x0=x0, substeps=steps)
+        return (y, x) if return_states else y
+
+    def simulate(self, record: Any, *, x0: Any = None, substeps: int | None = None) -> Any:
+        """The model's response to ``record`` (steer channel, then speed) from ``x0`` (default straight running).
+
+        Parameters
+        ----------
+        record : IOData
+        x0 : array_like (n_states,), optional
+        substeps : int, optional
+            As :meth:`simulate_outputs`.
+
+        Returns
+        -------
+        TimeResponse
+            With the states and, where the record has n_y outputs, them as ``measured``.
+        """
+        from vehid.identification.models.responses import simulated_response
+
+        y, x = self.simulate_outputs(record.u, record.dt, x0=x0, substeps=substeps, return_states=True)
+        return simulated_response(record, y, x=x, output_names=self.output_names,
+                                  state_names=_structure(self.config).state_names)
+
+    def to_casadi(self) -> ca.Function:
+        """``(x, u, s) -> (xdot, y)``: the continuous-time model, parameters in it, ``s`` the speed (m/s)."""
+        return self.greybox.to_casadi()
+
+    def mat_fields(self) -> dict[str, Any]:
+        """The parameters (and covariance), the configuration's numbers and, at each speed of :attr:`grid`,
+        the state-space form: ``A`` (n_grid, n, n), ``B``, ``C``, ``D`` likewise."""
+        config = self.config
+        forms = [self.to_statespace(schedule=float(v)) for v in self.grid]
+        return {"parameters": self.parameters, "parameter_names": list(config.parameter_names),
+                **({} if self.parameter_covariance is None else {"parameter_covariance": self.parameter_covariance}),
+                "mass": config.mass, "cg_to_front_axle": config.cg_to_front_axle,
+                "cg_to_rear_axle": config.cg_to_rear_axle, "steering_ratio": config.steering_ratio,
+                "speed_range": np.array(self.speed_range), "grid": self.grid,
+                **{name: np.array([form[i] for form in forms]) for i, name in enumerate("ABCD")}}
+
+    def save_json(self, path: Any) -> Any:
+        """Write :meth:`to_dict` (what ``vehid handling`` reads) as JSON, with the time domain first."""
+        import json
+        from pathlib import Path
+
+        from vehid.identification.jsonable import to_jsonable
+
+        path = Path(path)
+        path.write_text(json.dumps(to_jsonable({"time_domain": "continuous", "dt": None, **self.to_dict()}),
+                                   indent=2) + "\n")
+        return path
+
     def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form (``kind: single-track``): configuration, parameters, covariance, speed range, meta."""
         config = self.config
         return {
             "kind": "single-track",
@@ -445,6 +710,7 @@ class IdentifiedSingleTrack:
 
     @classmethod
     def from_dict(cls, content: Mapping[str, Any]) -> "IdentifiedSingleTrack":
+        """Inverse of :meth:`to_dict` (also reads the model files ``vehid identify --save-model`` wrote)."""
         if content.get("kind") != "single-track":
             raise InputError("not a single-track model (kind single-track)")
         config = SingleTrackConfig(**{**content["config"], "quantities": tuple(content["config"]["quantities"])})
@@ -454,3 +720,10 @@ class IdentifiedSingleTrack:
         covariance = content.get("parameter_covariance")
         return cls(config, content["parameters"], None if covariance is None else np.asarray(covariance, dtype=float),
                    tuple(content["speed_range_m_s"]), dict(content.get("meta", {})))
+
+
+# archived under names that stay as long as such archives exist (results/RESULTS_LAYOUT.md): the model as its
+# to_dict, the linearisation at a speed and the configuration one member per field
+register_codec(IdentifiedSingleTrack, "single_track_model")
+register_codec(SingleTrackAtSpeed, "single_track_at_speed")
+register_codec(SingleTrackConfig, "single_track_config")

@@ -59,14 +59,17 @@ for label in ("yaw-sideslip", "roll"):
         print(f"car, {label}: {mode.frequency_hz:.2f} Hz, damping {mode.damping:.2f}")
 
 # %%
-# The validation record against the model's simulation.
-simulated = model.simulate_outputs(validation.u, validation.dt)
+# The validation record against the model's simulation. ``simulate`` returns a
+# response: the record's time and inputs, the model's outputs, the record's own
+# outputs as ``measured``, and a ``plot`` that draws both (black: the vehicle model).
+response = model.simulate(validation)
+print(f"largest residual: {np.max(np.abs(response.residuals), axis=0).round(3)}")
 fig, axes = plt.subplots(3, 1, sharex=True, figsize=(8, 6), layout="constrained")
-for i, axis in enumerate(axes):
-    axis.plot(validation.t, validation.y[:, i], label="vehicle model")
-    axis.plot(validation.t, simulated[:, i], "--", label="identified, n = 4")
-    axis.set_ylabel(f"{validation.output_names[i]}\n[{validation.output_units[i]}]")
-axes[0].legend(loc="upper right")
-axes[-1].set_xlabel("time [s]")
+response.plot(ax=axes, label="identified, n = 4")
 fig.suptitle("Validation manoeuvre")
+
+# %%
+# The model's frequency response from steer, a response too.
+fig, axes = plt.subplots(2, 3, sharex=True, figsize=(9, 5), layout="constrained")
+model.frequency_response(np.logspace(-1, 1.2, 150)).plot(ax=axes, label="identified")
 plt.show()

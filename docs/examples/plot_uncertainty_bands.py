@@ -54,7 +54,7 @@ uncertainty = model.uncertainty()
 for mode in uncertainty.modes:
     print(f"{mode.frequency_hz:6.2f} +/- {2 * mode.frequency_hz_std:.2f} Hz, "
           f"damping {mode.damping:.3f} +/- {2 * mode.damping_std:.3f}")
-true_gain = true_model(1).frequency_response(np.array([0.0]))[0].real
+true_gain = true_model(1).frequency_response(np.array([0.0])).real[0]
 for j in range(data.n_u):
     print(f"gain u{j + 1} to y1: {uncertainty.gain[0, j]:.4f} +/- {2 * uncertainty.gain_std[0, j]:.4f} "
           f"(eq. 15: {true_gain[0, j]:.4f})")
@@ -65,7 +65,7 @@ for j in range(data.n_u):
 frequencies = np.logspace(-1, 1.5, 200)
 band = model.frequency_response_band(frequencies)
 lower, upper = band.magnitude_band()
-truth = np.abs(true_model(1).frequency_response(frequencies))
+truth = true_model(1).frequency_response(frequencies).magnitude
 fig, axes = plt.subplots(1, 2, sharey=True, figsize=(9, 3.8), layout="constrained")
 for j, axis in enumerate(axes):
     axis.fill_between(frequencies, lower[:, 0, j], upper[:, 0, j], alpha=0.3, label="95 % band")

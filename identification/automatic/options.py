@@ -1,4 +1,11 @@
-"""The settings of the automatic identification pipeline, each defined and checked once, here.
+"""The settings of the automatic identification pipeline, each declared and checked once, here.
+
+:class:`IdentifyOptions` declares every setting with its default, the values it
+may take and its help (:func:`~vehid.identification.optionspec.option`); a bad
+value or combination raises :class:`~vehid.identification.errors.OptionError`
+naming the option when the object is built, before any work. `vehid identify`
+defines its flags from the same declarations
+(:func:`~vehid.identification.optionspec.option_specs`).
 
 This module imports nothing heavy, so that a command line can name the defaults
 in its help without loading the numerical stack.
@@ -6,129 +13,115 @@ in its help without loading the numerical stack.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
-from typing import Any
 
-from vehid.identification.choices import SCHEDULE_DEFAULT_KNOTS, SCHEDULE_MIN_KNOTS
-from vehid.identification.errors import InputError
+from vehid.identification.choices import (C_PATTERNS, COVARIANCE_FORMS, DETREND, DISCRETIZATIONS, INITIAL_STATES,
+                                          SCHEDULE_DEFAULT_KNOTS, SCHEDULE_GRID, SCHEDULE_KNOT_COUNT,
+                                          SCHEDULED_DEFAULT_P, SCHEDULED_P_GRID, SPLINE_NODE_COUNT, SPLINE_NODES,
+                                          START_CHOICES, TIMESCALES)
+from vehid.identification.errors import OptionError
+from vehid.identification.optionspec import (BOOLEAN, POSITIVE, Number, Numbers, OneOf, check_options, documented,
+                                             option)
 
-__all__ = ["DEFAULT_PASSES", "MIN_PASSES", "DEFAULT_NONLINEAR_PASSES", "DEFAULT_NODES", "IdentifyOptions"]
+__all__ = ["DEFAULT_PASSES", "MIN_PASSES", "DEFAULT_NONLINEAR_PASSES", "DEFAULT_NODES", "IdentifyOptions",
+           "estimators"]
 
 DEFAULT_PASSES = 50  # the IEKF's largest number of passes
 MIN_PASSES = 1  # one pass is a complete (if unconverged) run of the filter
 DEFAULT_NONLINEAR_PASSES = 30
-DEFAULT_NODES = 5  # spline nodes per nonlinearity
+DEFAULT_NODES = SPLINE_NODES  # spline nodes per nonlinearity
+_PASSES = Number(low=MIN_PASSES, whole=True)
 
 
-def _positive_number(name: str, value: Any) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
-        raise InputError(f"{name} must be a positive finite number; got {value!r}")
+def estimators() -> tuple[str, ...]:
+    """The estimators by name: the IEKF and the classical comparators, as registered now.
+
+    :data:`~vehid.identification.classical.comparators.COMPARATORS` is read when asked
+    (importing it loads the numerical stack), so that a method registered later is accepted.
+    """
+    from vehid.identification.classical.comparators import COMPARATORS
+
+    return tuple(COMPARATORS)
 
 
-def _whole_at_least(name: str, value: Any, low: int) -> None:
-    if isinstance(value, bool) or not isinstance(value, int) or value < low:
-        raise InputError(f"{name} must be a whole number >= {low}; got {value!r}")
+def _p_list(values: tuple[float, ...]) -> str:
+    return ", ".join(f"{p:g}" for p in values)
 
 
+@documented
 @dataclass(frozen=True)
 class IdentifyOptions:
     """Settings of the automatic pipeline; the defaults are those of `vehid identify`.
 
-    Parameters
-    ----------
-    p : float or None
-        The IEKF's tuning parameter; None chooses it by two-fold cross-validation.
-    passes : int
-        Largest number of IEKF passes (at least :data:`MIN_PASSES`).
-    start : str
-        Start values: "data", "band", "default" or "paper".
-    normalize : bool
-        Scale inputs and outputs by their RMS while filtering.
-    discretization, covariance : str
-        The filter's discretisation and covariance numerics.
-    pattern : str or None
-        The C pattern; None lets the start model choose.
-    timescale : str
-        "auto" (time in samples, p per dominant time constant) or "seconds".
-    allow_unstable : bool
-        Keep unstable modes (an open-loop unstable plant).
-    initial_state : str
-        How linear models are simulated for scoring: "estimate" or "rest".
-    horizon : int or None
-        Score by this many steps of prediction instead of simulation.
-    nonlinear : bool
-        Identify the spline-nonlinear model started from the linear one.
-    nodes : int
-        Spline nodes per nonlinearity.
-    nonlinear_p : tuple of float or None
-        The spline model's p values; None takes the command's default.
-    nonlinear_passes : int
-        Largest number of passes of the spline model.
-    detrend : str
-        Offsets removed from each record: "mean", "linear" or "none".
-    strict : bool
-        Raise :class:`~vehid.identification.errors.StrictWarningsError` when the run ends with warnings.
-    method : str
-        The estimator: "iekf" (the automatic pipeline above) or a classical comparator
-        (:data:`~vehid.identification.classical.comparators.COMPARATORS`) scored and checked alike.
-    bootstrap : int or None
-        With ``method="n4sid"``: residual-bootstrap replicates for its parameter covariance
-        (None: the asymptotic covariance of its simulation errors; 0: no covariance).
-    schedule_knots : int
-        Knots of the speed-scheduled family at the schedule channel's quantiles (where a schedule is given).
-    schedule_grid : tuple of float or None
-        The family's knots themselves, increasing (None: ``schedule_knots`` at quantiles).
-    schedule_p : tuple of float or None
-        The scheduled filter's p values, one chosen on validation data (None: the default grid).
+    Each is checked when the object is built: a value outside those listed below
+    raises :class:`~vehid.identification.errors.OptionError` naming it, as does
+    ``bootstrap`` with a method other than n4sid.
     """
 
-    p: float | None = None
-    passes: int = DEFAULT_PASSES
-    start: str = "data"
-    normalize: bool = True
-    discretization: str = "exact"
-    covariance: str = "joseph"
-    pattern: str | None = None
-    timescale: str = "auto"
-    allow_unstable: bool = False
-    initial_state: str = "estimate"
-    horizon: int | None = None
-    nonlinear: bool = False
-    nodes: int = DEFAULT_NODES
-    nonlinear_p: tuple[float, ...] | None = None
-    nonlinear_passes: int = DEFAULT_NONLINEAR_PASSES
-    detrend: str = "mean"
-    strict: bool = False
-    method: str = "iekf"
-    bootstrap: int | None = None
-    schedule_knots: int = SCHEDULE_DEFAULT_KNOTS
-    schedule_grid: tuple[float, ...] | None = None
-    schedule_p: tuple[float, ...] | None = None
+    p: float | None = option(
+        None, POSITIVE,
+        help="tuning parameter p of the IEKF, Q = p I' (default: 1e-4, 1e-5 or 1e-6 per dominant time constant, "
+             "chosen by two-fold cross-validation on the estimation data; 1 with ``timescale`` seconds)")
+    passes: int = option(DEFAULT_PASSES, _PASSES, help="largest number of passes of the IEKF")
+    start: str = option(
+        "data", OneOf(START_CHOICES),
+        help="start values: data (a subspace model of the record), band (modes across the record's band), "
+             "default (sigma = -10, omega = 10 rad/s, absolute) or paper (sigma = -1, omega = 1)")
+    normalize: bool = option(True, BOOLEAN, help="scale inputs and outputs by their RMS while filtering")
+    discretization: str = option("exact", OneOf(DISCRETIZATIONS), help="discretisation of the filter's model")
+    covariance: str = option("joseph", OneOf(COVARIANCE_FORMS), help="covariance numerics of the filter")
+    pattern: str | None = option(
+        None, OneOf(C_PATTERNS),
+        help="C pattern, complex pairs first (default: with ``start`` data the start model's complex pairs and "
+             "real poles, else the default pattern; either way modes tied to outputs in turn)")
+    timescale: str = option(
+        "auto", OneOf(TIMESCALES),
+        help="the filter's time unit: auto (samples; p per dominant time constant) or seconds (absolute, the "
+             "paper's)")
+    allow_unstable: bool = option(False, BOOLEAN,
+                                  help="keep unstable modes (open-loop unstable plants) instead of stopping")
+    initial_state: str = option(
+        "estimate", OneOf(INITIAL_STATES),
+        help="how linear models are simulated to score them: from a least-squares initial state (estimate) or "
+             "from rest (zero)")
+    horizon: int | None = option(
+        None, Number(low=1, whole=True),
+        help="score by K-step-ahead prediction instead of simulation (automatic for unstable models)")
+    nonlinear: bool = option(False, BOOLEAN,
+                             help="after the linear model, identify the spline-nonlinear model started from it")
+    nodes: int = option(DEFAULT_NODES, SPLINE_NODE_COUNT, help="nodes per spline of the nonlinear model")
+    nonlinear_p: tuple[float, ...] | None = option(
+        None, Numbers(POSITIVE),
+        help="tuning parameter(s) of the spline model; several are tried and one chosen on validation data "
+             "(default 1e-7, or 1e-7, 1e-8, 1e-9 with validation data)")
+    nonlinear_passes: int = option(DEFAULT_NONLINEAR_PASSES, _PASSES,
+                                   help="largest number of passes of the spline model")
+    detrend: str = option("mean", DETREND,
+                          help="offsets removed per record and stored with the model: means, lines or none")
+    strict: bool = option(False, BOOLEAN, help="fail a run that ends with warnings (StrictWarningsError, exit status 3)")
+    method: str = option(
+        "iekf", OneOf(estimators),
+        help="estimator: the IEKF, or a classical comparator on the same data, scored and checked alike")
+    bootstrap: int | None = option(
+        None, Number(low=0, whole=True),
+        help="with ``method`` n4sid: residual-bootstrap replicates for its parameter covariance, each one subspace "
+             "fit (default: none, the asymptotic covariance of its simulation errors; 0 for no covariance)")
+    schedule_knots: int = option(
+        SCHEDULE_DEFAULT_KNOTS, SCHEDULE_KNOT_COUNT,
+        help="the most knots of a speed-scheduled family, at the schedule channel's quantiles (knots crowded "
+             "within a quarter of the even spacing merge)")
+    schedule_grid: tuple[float, ...] | None = option(
+        None, SCHEDULE_GRID,
+        help="the scheduled family's knots themselves, increasing (default: ``schedule_knots`` at evenly spaced "
+             "quantiles of the channel)")
+    schedule_p: tuple[float, ...] | None = option(
+        None, Numbers(POSITIVE),
+        help=f"tuning parameter(s) of the scheduled filter, per dominant time constant; several are tried and one "
+             f"chosen on validation data (default {SCHEDULED_DEFAULT_P:g}, or {_p_list(SCHEDULED_P_GRID)} with "
+             f"validation data)")
 
     def __post_init__(self) -> None:
-        if self.p is not None:
-            _positive_number("p", self.p)
-        _whole_at_least("passes", self.passes, MIN_PASSES)
-        if self.horizon is not None:
-            _whole_at_least("horizon", self.horizon, 1)
-        _whole_at_least("nodes", self.nodes, 2)
-        _whole_at_least("nonlinear_passes", self.nonlinear_passes, MIN_PASSES)
-        if self.nonlinear_p is not None:
-            if not self.nonlinear_p:
-                raise InputError("nonlinear_p must name at least one value (or be None for the default)")
-            for value in self.nonlinear_p:
-                _positive_number("nonlinear_p", value)
-        if not isinstance(self.method, str) or not self.method:
-            raise InputError(f"method must name an estimator; got {self.method!r}")
-        _whole_at_least("schedule_knots", self.schedule_knots, SCHEDULE_MIN_KNOTS)
-        for name in ("schedule_grid", "schedule_p"):
-            values = getattr(self, name)
-            if values is not None and not values:
-                raise InputError(f"{name} must name at least one value (or be None for the default)")
-        for value in self.schedule_p or ():
-            _positive_number("schedule_p", value)
-        if self.bootstrap is not None:
-            _whole_at_least("bootstrap", self.bootstrap, 0)
-            if self.method != "n4sid":
-                raise InputError("--bootstrap applies to --method n4sid (the other methods' covariances cost no refits)")
+        check_options(self)
+        if self.bootstrap is not None and self.method != "n4sid":
+            raise OptionError("'bootstrap' applies to 'method' n4sid (the other methods' covariances cost no refits)",
+                              "bootstrap", "method")

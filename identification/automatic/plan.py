@@ -15,7 +15,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from vehid.identification.data import IOData
-from vehid.identification.errors import InputError
+from vehid.identification.errors import InputError, OptionError
 
 __all__ = ["AUTO_MAX_ORDER", "AUTO_HOLDOUT", "ScheduleData", "Plan", "parse_orders", "supported_orders", "holdout_fraction",
            "make_plan"]
@@ -35,9 +35,9 @@ def parse_orders(text: Any) -> tuple[list[int], bool]:
         else:
             low = high = int(value)
     except ValueError:
-        raise InputError(f"--order takes a whole number, a range such as 2-8, or auto; got {text!r}") from None
+        raise OptionError(f"'order' takes a whole number, a range such as 2-8, or auto; got {text!r}", "order") from None
     if low < 1 or high < low:
-        raise InputError(f"--order {text!r}: orders must be >= 1 and the range increasing")
+        raise OptionError(f"'order' {text!r}: orders must be >= 1 and the range increasing", "order")
     return list(range(low, high + 1)), False
 
 
@@ -62,19 +62,22 @@ def supported_orders(orders: list[int], auto: bool, records: tuple[IOData, ...],
         samples = (f"{lengths[0]} estimation samples" if len(lengths) == 1
                    else f"{len(lengths)} records of {sum(lengths)} estimation samples")
         supports = f"they support orders up to {limit}" if limit else "they support no order"
-        raise InputError(f"--order {text}: {samples} with {first.n_u} input(s) and {first.n_y} output(s) cannot "
-                         f"identify a model of order {max(orders or [limit + 1])}; {supports} (the data start needs "
-                         "N >= 4 n (1 + n_u + n_y) - 1 samples per record): give a lower order or a longer record")
+        raise OptionError(f"'order' {text}: {samples} with {first.n_u} input(s) and {first.n_y} output(s) cannot "
+                          f"identify a model of order {max(orders or [limit + 1])}; {supports} (the data start needs "
+                          "N >= 4 n (1 + n_u + n_y) - 1 samples per record): give a lower order or a longer record",
+                          "order")
     return orders
 
 
 @dataclass(frozen=True, eq=False)
 class ScheduleData:
-    """The schedule channel of a plan's records: its name and its samples per estimation and validation record."""
+    """The schedule channel of a plan's records: its name, its samples per estimation and validation record and
+    its unit ("-" where unknown)."""
 
     channel: str
     estimation: tuple[np.ndarray, ...]
     validation: tuple[np.ndarray, ...]
+    unit: str = "-"
 
 
 @dataclass(frozen=True, eq=False)
@@ -119,7 +122,7 @@ def holdout_fraction(order: int | str, validation: float | None, has_validation_
     orders, _ = parse_orders(order)
     if validation is not None:
         if isinstance(validation, bool) or not 0 < validation < 1:
-            raise InputError(f"--validation takes a fraction between 0 and 1; got {validation}")
+            raise OptionError(f"'validation' takes a fraction between 0 and 1; got {validation}", "validation")
         return validation, None
     if len(orders) > 1 and not has_validation_records:
         return AUTO_HOLDOUT, f"the last {AUTO_HOLDOUT:.0%} of the record held out to choose the order"
@@ -158,9 +161,10 @@ def make_plan(records: tuple[IOData, ...], *, order: int | str, validation: Sequ
         if record.input_names != first.input_names or record.output_names != first.output_names:
             raise InputError(f"{path} names its columns differently from the identification record")
         if any(_same_samples(record, estimation) for estimation in records):
-            raise InputError(f"{path} holds the same samples as the estimation record: validating on it would score "
-                             "the model on its own data (where the validation record lies in other channels of the "
-                             "file, name them with --validation-inputs and --validation-outputs)")
+            raise OptionError(f"{path} holds the same samples as the estimation record: validating on it would score "
+                              "the model on its own data (where the validation record lies in other channels of the "
+                              "file, name them with 'validation_inputs' and 'validation_outputs')",
+                              "validation_inputs", "validation_outputs")
         validation_records.append(record)
         names.append(str(path))
     return Plan(tuple(records), tuple(validation_records), tuple(names), tuple(orders), auto, (note,) if note else (),

@@ -54,12 +54,13 @@ import numpy as np
 from vehid.identification.data import IOData
 from vehid.identification.decisions import (SCHEDULE_MARGIN, ScheduleCandidate, choose_p_and_schedule,
                                              choose_refined)
-from vehid.identification.errors import DivergenceError, InputError, WorkbenchError
+from vehid.identification.errors import DivergenceError, InputError, OptionError, WorkbenchError
 from vehid.identification.filtering.iekf import (INVARIANT_P, INVARIANT_P_DECAY, START_CHOICES, IEKFOptions,
                                                  identify_iekf, invariant_noise_settings, normalized_data_start,
                                                  signal_scales, start_structure)
 from vehid.identification.models.modal import ModalModel, ModalStructure
-from vehid.identification.assessment.uncertainty import simulation_error_covariance
+from vehid.identification.assessment.uncertainty import with_simulation_error_covariance
+from vehid.identification.automatic.checks import uncertainty_method
 from vehid.identification.assessment.validation import UNSTABLE_HORIZON, Scores, default_horizon, score, split_holdout
 from vehid.identification.automatic.plan import (AUTO_HOLDOUT, AUTO_MAX_ORDER, Plan, holdout_fraction, make_plan,
                                                  parse_orders, supported_orders)
@@ -69,9 +70,10 @@ __all__ = [
     "START_CHOICES", "Evaluation", "search_orders", "identify_nonlinear", "start_of", "run_iekf_order",
     "last_good_on_divergence", "scores_summary", "AUTO_MAX_ORDER", "AUTO_HOLDOUT", "ORDER_TOLERANCE", "Plan",
     "parse_orders", "supported_orders", "holdout_fraction", "make_plan", "iekf_options", "choose_order", "evaluate",
-    "run_warnings", "PTuning", "tune_p", "tunes_p", "given_p", "q_schedule_of", "P_GRID", "Q_SCHEDULES", "P_TOLERANCE",
+    "run_warnings", "pooled_fit_percent", "PTuning", "tune_p", "tunes_p", "given_p", "q_schedule_of", "P_GRID", "Q_SCHEDULES", "P_TOLERANCE",
     "NONLINEAR_P", "START_RETURNED", "start_model", "returned_start", "returned_model", "NONLINEAR_P_GRID",
-    "NonlinearOutcome", "NonlinearScores", "nonlinear_warnings", "UNSTABLE_MARGIN", "assume_unstable",
+    "NonlinearOutcome", "NonlinearScores", "nonlinear_margin", "nonlinear_note",
+    "NONLINEAR_MARGIN", "UNSTABLE_MARGIN", "assume_unstable",
     "unstable_warning", "start_beats_filter", "START_KEPT", "decision_margins", "margin_entry", "order_margin",
     "decision_notes", "structure_for", "FIT_FLOOR", "WHOLE_RECORD_MARGIN", "RunDecisions", "decide_run",
     "RefinedCandidates", "refined_candidates", "refined_choice", "refinement_note", "CANDIDATES",
@@ -172,7 +174,9 @@ START_RETURNED = "the data start scores better than the filter's model in cross-
 def start_model(result: Any) -> ModalModel:
     """The IEKF run's start model, in the record's units (from its ``start_parameters``)."""
     return ModalModel.from_parameters(result.structure, result.meta["start_parameters"],
-                                      meta={"start": result.meta.get("start")})
+                                      meta={"start": result.meta.get("start")},
+                                      input_names=getattr(result.model, "input_names", None),
+                                      output_names=getattr(result.model, "output_names", None))
 
 
 def returned_start(result: Any, records: Sequence[IOData]) -> ModalModel:
@@ -182,8 +186,7 @@ def returned_start(result: Any, records: Sequence[IOData]) -> ModalModel:
     (:func:`~vehid.identification.assessment.uncertainty.simulation_error_covariance`), as
     ``--method n4sid`` gives; None where its simulation diverges (a growing mode).
     """
-    start = start_model(result)
-    return start.with_parameter_covariance(simulation_error_covariance(start, records))
+    return with_simulation_error_covariance(start_model(result), records)
 
 
 def given_p(options: IEKFOptions) -> PTuning:
@@ -676,11 +679,11 @@ def decision_notes(summary: dict[str, Any]) -> list[str]:
         if "start_kept" in summary:
             kept = summary["start_kept"]
             notes.append(f"{START_KEPT} (fit {kept['start_estimation_fit_percent']:.2f} % against "
-                         f"{kept['filter_estimation_fit_percent']:.2f} %); the matrices and scores are the start "
-                         "model's")
+                         f"{kept['filter_estimation_fit_percent']:.2f} %); the linear model's matrices and scores are "
+                         "the start model's")
         else:
             notes.append(f"{START_RETURNED} (fit {summary['start_cv_fit_percent']:.2f} % against the filter's best p); "
-                         "the matrices and scores are the start model's")
+                         "the linear model's matrices and scores are the start model's")
     if summary.get("refinement"):
         notes.append(refinement_note(summary["refinement"]))
     return notes
@@ -827,10 +830,24 @@ def choose_order(rows: list[dict[str, Any]]) -> int:
     return min(row["order"] for row in eligible if row["ranking_fit"] >= best - ORDER_TOLERANCE)
 
 
-def scores_summary(evaluation: Evaluation, fit_percent: Any) -> dict[str, Any]:
-    """The public score keys of a model: ``fit_percent`` (R, estimation, as before), NRMSE fits and ``validation_R``."""
+def pooled_fit_percent(R: Any, records: Sequence[IOData]) -> np.ndarray:
+    """The NRMSE fit per output of a simulation whose R pooled over ``records`` is ``R`` (both pooled alike)."""
+    from vehid.identification.assessment.multirecord import pooled_nrmse_fit_of_R
+
+    return pooled_nrmse_fit_of_R(R, records)
+
+
+def scores_summary(evaluation: Evaluation, R: Any, records: Sequence[IOData]) -> dict[str, Any]:
+    """The public score keys of a model, each ``*fit_percent`` an NRMSE fit and each ``*R`` its eq. 17 twin.
+
+    ``fit_percent`` and ``R`` are the model simulated from rest over the estimation ``records`` (``R``
+    given, pooled over them, as the IEKF reports it); the others are by the run's scoring rule:
+    ``estimation_*`` on the estimation records, ``validation_*`` the mean over the validation records,
+    and ``validation_records`` each of them.
+    """
     return {
-        "fit_percent": fit_percent,
+        "fit_percent": pooled_fit_percent(R, records),
+        "R": R,
         "estimation_fit_percent": evaluation.estimation.fit,
         "estimation_R": evaluation.estimation.R,
         "validation_fit_percent": evaluation.validation_fit,
@@ -891,14 +908,43 @@ class NonlinearOutcome:
     scores: Any = None  # NonlinearScores of the chosen model, so that nothing simulates it again
 
 
-def nonlinear_warnings(outcome: NonlinearOutcome, linear: Evaluation) -> list[str]:
-    """A warning where the spline model validates worse than the linear model it started from."""
-    spline, start = outcome.scores.validation_fit, linear.validation_fit
-    if spline is None or start is None or not np.mean(spline) < np.mean(start):
-        return []
-    return [f"nonlinear: the spline model validates worse than its linear start (mean fit {np.mean(spline):.2f} % "
-            f"against {np.mean(start):.2f} %): the linear model is the better one here; try a smaller "
-            "--nonlinear-p or fewer --nodes"]
+#: points of mean validation fit by which the spline model must beat the model otherwise returned (the same
+#: margin as a scheduled family's: it has several times the parameters); without validation data
+#: :data:`WHOLE_RECORD_MARGIN` on the estimation fit
+NONLINEAR_MARGIN = 0.5
+
+
+def nonlinear_margin(spline: Any, other: Any, other_name: str) -> dict[str, Any]:
+    """The decision ``nonlinear``: the spline model or the model otherwise returned, both scored by the run's rule.
+
+    The spline model is returned where its ranking fit (mean validation fit, else mean estimation fit)
+    beats the other's by :data:`NONLINEAR_MARGIN` points (:data:`WHOLE_RECORD_MARGIN` without
+    validation data, where both fitted the record they are scored on).
+    """
+    held_out = bool(spline.validation) and other.validation_fit is not None
+    margin = NONLINEAR_MARGIN if held_out else WHOLE_RECORD_MARGIN
+    score, runner = spline.ranking_fit(), other.ranking_fit()
+    wins = bool(np.isfinite(score) and (not np.isfinite(runner) or score > runner + margin))
+    how = (f"{spline.horizon}-step-ahead prediction" if spline.horizon is not None
+           else f"simulation, initial state {spline.estimation.initial_state}")
+    entry = margin_entry(*(("nonlinear", score, other_name, runner) if wins else (other_name, runner, "nonlinear", score)),
+                         measure=("mean validation" if held_out else "mean estimation") + f" NRMSE fit % ({how})",
+                         rule=f"the spline model where it beats the model otherwise returned by more than {margin} points")
+    return {**entry, "margin": margin}
+
+
+def nonlinear_note(margin: dict[str, Any]) -> str:
+    """The note of the decision ``nonlinear``: the spline model returned in the other's place, or not and why."""
+    def shown(value: Any) -> str:
+        return "-" if value is None else f"{value:.2f}"
+
+    if margin["choice"] == "nonlinear":
+        return (f"the spline-nonlinear model is returned: it beats the {margin['runner_up']} model by more than "
+                f"{margin['margin']:g} points ({margin['measure']} {shown(margin['score'])} against "
+                f"{shown(margin['runner_up_score'])})")
+    return (f"the spline-nonlinear model is not returned: it does not beat the {margin['choice']} model by the margin "
+            f"({margin['measure']} {shown(margin['runner_up_score'])} against {shown(margin['score'])}); try a "
+            "smaller --nonlinear-p or fewer --nodes")
 
 
 def identify_nonlinear(linear: ModalModel, plan: Plan, settings: IdentifyOptions) -> NonlinearOutcome:
@@ -906,10 +952,11 @@ def identify_nonlinear(linear: ModalModel, plan: Plan, settings: IdentifyOptions
     from vehid.identification.filtering.spline_iekf import SplineIEKFOptions, identify_spline_iekf
 
     if not isinstance(linear, ModalModel):
-        raise InputError("--nonlinear starts from a continuous-time modal model; this linear model is discrete-time "
-                         "(a pole on the negative real axis): use --method iekf or another order")
+        raise OptionError("'nonlinear' starts from a continuous-time modal model; this linear model is discrete-time "
+                          "(a pole on the negative real axis): use 'method' iekf or another 'order'",
+                          "nonlinear", "method", "order")
     if len(plan.records) > 1:
-        raise InputError("--nonlinear identifies the spline model from one record; give one data file")
+        raise OptionError("'nonlinear' identifies the spline model from one record; give one data file", "nonlinear")
     grid = settings.nonlinear_p or (list(NONLINEAR_P_GRID) if plan.validation else [NONLINEAR_P])
     tried, candidates = [], []
     for p in grid:
@@ -920,7 +967,7 @@ def identify_nonlinear(linear: ModalModel, plan: Plan, settings: IdentifyOptions
         except DivergenceError as exc:
             tried.append({"p": p, "error": str(exc), "seconds": time.perf_counter() - started})
             continue
-        scores = NonlinearScores(result.model, plan)
+        scores = NonlinearScores(result.model, plan, settings)
         row = {"p": p, "estimation_fit_percent": scores.estimation.fit, "validation_fit_percent": scores.validation_fit,
                "seconds": time.perf_counter() - started, "ranking_fit": scores.ranking_fit()}
         tried.append(row)
@@ -933,21 +980,34 @@ def identify_nonlinear(linear: ModalModel, plan: Plan, settings: IdentifyOptions
     top = max(row["ranking_fit"] for _, row, _ in candidates)
     result, row, scores = max((c for c in candidates if c[1]["ranking_fit"] >= top - P_TOLERANCE),
                               key=lambda c: c[1]["p"])
+    from vehid.identification.assessment.metrics import nrmse_fit_of_R
+    from vehid.identification.assessment.multirecord import pooled_simulation_fit
+
+    from_rest = pooled_simulation_fit(result.model, plan.records)
+    with np.errstate(all="ignore"):  # the spline filter's start R is over the (one) estimation record
+        start_fit = nrmse_fit_of_R(result.start_fit, plan.records[0].y)
     summary = {
         "nodes": settings.nodes, "p": row["p"], "p_tried": tried, "passes_run": result.passes_run,
-        "stop_reason": result.stop_reason, "fit_percent": scores.estimation.R,
-        "estimation_fit_percent": scores.estimation.fit, "validation_fit_percent": scores.validation_fit,
-        "validation_R": scores.validation_R, "start_fit_percent": result.start_fit, "seconds": result.seconds,
+        "stop_reason": result.stop_reason, "fit_percent": pooled_fit_percent(from_rest, plan.records), "R": from_rest,
+        "estimation_fit_percent": scores.estimation.fit, "estimation_R": scores.estimation.R,
+        "validation_fit_percent": scores.validation_fit, "validation_R": scores.validation_R,
+        "initial_state": scores.estimation.initial_state,
+        "start_fit_percent": start_fit, "start_R": result.start_fit, "seconds": result.seconds,
+        "uncertainty_method": uncertainty_method(result.model),
     }
     return NonlinearOutcome(result, summary, scores)
 
 
 class NonlinearScores(_RankedScores):
-    """Scores of a spline model (simulated from rest in its own time base) on the plan's records."""
+    """Scores of a spline model on the plan's records, by the run's rule (``settings``), as every candidate's.
 
-    def __init__(self, model: Any, plan: Plan):
-        self.estimation = _mean_scores(model, plan.records, initial_state="zero")
-        self.validation = tuple(score(model, record, initial_state="zero") for record in plan.validation)
+    The initial state and the records are those of :func:`evaluate`; a spline model is simulated
+    (in its own time base) whatever the horizon, since only a linear model predicts k steps ahead.
+    """
+
+    def __init__(self, model: Any, plan: Plan, settings: IdentifyOptions | None = None):
+        scored = evaluate(model, plan, settings if settings is not None else IdentifyOptions())
+        self.estimation, self.validation, self.horizon = scored.estimation, scored.validation, scored.horizon
 
 
 def start_of(result: Any, records: tuple[IOData, ...]) -> tuple[float | None, bool | None]:

@@ -20,7 +20,7 @@ import scipy.linalg
 
 from .._checks import finite_matrix, io_arrays, non_negative_int, per_input
 from ..errors import ExcitationError, InputError
-from ..models.protocol import StateSpaceModel, sample_interval
+from ..models.protocol import StateSpaceModel, sample_interval, unscheduled
 
 __all__ = [
     "CONDITION_LIMIT",
@@ -206,8 +206,11 @@ class ArxModel(StateSpaceModel):
         b[: self.b.shape[0]] = self.b
         return a, b
 
-    def to_statespace(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+    def to_statespace(self, *, schedule: float | None = None
+
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
         """Discrete ``(Ad, Bd, Cd, Dd, dt)`` in block observer form; see :func:`observer_form`."""
+        unscheduled(schedule)
         return (*observer_form(*self.padded()), sample_interval(self.dt, "ARX model"))
 
     def predict(self, u: Any, y: Any) -> np.ndarray:

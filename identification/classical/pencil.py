@@ -21,7 +21,7 @@ from .._checks import finite_matrix, io_arrays, non_negative_int, per_input
 from ..errors import InputError
 from .kalman import KalmanResult, kalman_filter
 from .least_squares import ArxModel, observer_form
-from ..models.protocol import StateSpaceModel, sample_interval
+from ..models.protocol import StateSpaceModel, sample_interval, unscheduled
 
 __all__ = ["PencilModel", "PencilEstimate", "estimate_pencil"]
 
@@ -78,7 +78,9 @@ class PencilModel(StateSpaceModel):
         """The observer-form SP model of an ARX model (appendix eq. A.104-A.105)."""
         return cls.from_state_space(*observer_form(*model.padded()), dt=model.dt)
 
-    def to_statespace(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+    def to_statespace(self, *, schedule: float | None = None
+
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
         """``(A, B, C, D, dt)`` of this pencil.
 
         A row transformation ``T`` (from the QR factorisation of E) brings E
@@ -87,6 +89,7 @@ class PencilModel(StateSpaceModel):
         the first n rows. Needs E of full column rank and ``G2y`` invertible
         (y determined by x and u).
         """
+        unscheduled(schedule)
         dt = sample_interval(self.dt, "pencil model")
         n, n_u, n_y = self.n, self.n_u, self.n_y
         q, r = scipy.linalg.qr(self.E)

@@ -52,7 +52,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 
 from .._checks import io_arrays, positive_int
 from ..errors import ExcitationError, InputError
-from ..models.protocol import StateSpaceModel, sample_interval
+from ..models.protocol import StateSpaceModel, sample_interval, unscheduled
 
 __all__ = ["SubspaceResult", "estimate_subspace", "estimate_subspace_states", "largest_subspace_order"]
 
@@ -98,8 +98,11 @@ class SubspaceResult(StateSpaceModel):
         """Number of outputs."""
         return int(self.C.shape[0])
 
-    def to_statespace(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+    def to_statespace(self, *, schedule: float | None = None
+
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
         """Discrete ``(A, B, C, D, dt)``."""
+        unscheduled(schedule)
         return self.A, self.B, self.C, self.D, sample_interval(self.dt, "subspace model")
 
 

@@ -237,7 +237,8 @@ def _same_file(a: Path, b: Path) -> bool:
 
 def _refuse_to_replace(path: Path, cause: str) -> OutputTargetError:
     return OutputTargetError(
-        f"{path} exists and {cause}; refusing to overwrite it (give --force to replace it, or choose another file)")
+        f"{path} exists and {cause}; refusing to overwrite it (give 'force' to replace it, or choose another file)",
+        options=("force",))
 
 
 def check_output_target(
@@ -401,7 +402,7 @@ def check_report_folder(folder: str | Path, *, force: bool = False, what: str = 
     if folder.is_dir() and not force and report_files(folder) is None and any(folder.iterdir()):
         raise OutputTargetError(
             f"{folder} is a folder of other files, not a report of the workbench; refusing to write into it "
-            "(give --force to add the report's files beside them, or choose another folder)")
+            "(give 'force' to add the report's files beside them, or choose another folder)", options=("force",))
     _check_writable_directory(folder, what)
     if folder.is_dir() and not os.access(folder, os.W_OK | os.X_OK):
         raise OutputTargetError(f"cannot write the {what} {folder}: {os.strerror(errno.EACCES)}")

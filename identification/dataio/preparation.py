@@ -18,10 +18,12 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from ..data import IOData, as_records, check_channels, read_hdf5
-from ..choices import DETRENDS
-from ..errors import InputError
+from ..choices import DETREND, DETRENDS
+from ..errors import InputError, OptionError
+from ..optionspec import check_value
 from .readers import RawRecord, expand_channels, read_raw
 from .timebase import JITTER_TOLERANCE, parse_segment, uniform_record
+from .timewindow import TimeWindow
 
 __all__ = [
     "DETRENDS",
@@ -65,12 +67,16 @@ class ReadSettings:
     decimate : int or None
         Keep every K-th sample after an anti-aliasing filter.
     segment : (float, float) or None
-        Only ``T0 <= t <= T1`` (file time, s).
+        Only ``T0 <= t <= T1`` (s): file time, or from the log's first sample where
+        ``segment_from_start``. Given as text, ``"T0:T1"`` or ``"+T0:+T1"``
+        (:func:`~vehid.identification.dataio.timewindow.parse_time_window`), it sets both fields.
     jitter_tolerance : float
         Largest stray of a sample time from the uniform grid, as a fraction of a step.
     time_scale : float or None
         Seconds per unit of the time column (0.001 for milliseconds); None:
         from the unit the file gives the column (:data:`TIME_UNITS`), else 1.
+    segment_from_start : bool
+        The segment counts from the log's first sample (``+T0:+T1``).
     """
 
     inputs: tuple[str, ...] = ()
@@ -82,11 +88,22 @@ class ReadSettings:
     segment: tuple[float, float] | None = None
     jitter_tolerance: float = JITTER_TOLERANCE
     time_scale: float | None = None
+    segment_from_start: bool = False
+
+    @property
+    def window(self) -> TimeWindow | None:
+        """The segment as a :class:`~vehid.identification.dataio.timewindow.TimeWindow` (None: the whole file)."""
+        return None if self.segment is None else TimeWindow(*self.segment, self.segment_from_start)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "inputs", tuple(str(n).strip() for n in self.inputs))
         object.__setattr__(self, "outputs", tuple(str(n).strip() for n in self.outputs))
-        object.__setattr__(self, "segment", parse_segment(self.segment))
+        window = parse_segment(self.segment)
+        if window is not None and not isinstance(self.segment, (tuple, list)):  # text or a window: says which time
+            object.__setattr__(self, "segment_from_start", window.from_start)
+        object.__setattr__(self, "segment", None if window is None else (window.start, window.stop))
+        if window is None:
+            object.__setattr__(self, "segment_from_start", False)
         for kind, names in (("input", self.inputs), ("output", self.outputs)):
             if any(not name for name in names):
                 raise InputError(f"an empty {kind} column name was given")
@@ -99,7 +116,7 @@ class ReadSettings:
                 raise InputError(f"the time scale is a positive number of seconds per unit of the time column; "
                                  f"got {self.time_scale!r}")
             if self.dt is not None:
-                raise InputError("--time-scale converts a time column; --dt is already in seconds")
+                raise OptionError("'time_scale' converts a time column; 'dt' is already in seconds", "time_scale", "dt")
 
 
 def read_record(path: str | Path, settings: ReadSettings | None = None, **options: Any) -> IOData:
@@ -131,14 +148,14 @@ def read_record(path: str | Path, settings: ReadSettings | None = None, **option
         raw, n_inputs = _as_raw(data), data.n_u
     else:
         if not settings.inputs or not settings.outputs:
-            raise InputError(f"{path.name} needs --inputs and --outputs naming its columns")
+            raise OptionError(f"{path.name} needs 'inputs' and 'outputs' naming its columns", "inputs", "outputs")
         # a MATLAB matrix named without a column stands for all of its columns
         inputs, outputs = expand_channels(path, settings.inputs), expand_channels(path, settings.outputs)
         raw = read_raw(path, channels=inputs + outputs, time_column=settings.time_column, dt=settings.dt)
         n_inputs = len(inputs)
     raw, time_scale = _time_in_seconds(raw, settings.time_scale)
     data = uniform_record(raw, n_inputs=n_inputs, dt=settings.dt, resample=settings.resample,
-                          decimate=settings.decimate, segment=settings.segment,
+                          decimate=settings.decimate, segment=settings.window,
                           jitter_tolerance=settings.jitter_tolerance)
     data.meta["time_base"]["time_scale"] = time_scale
     return data
@@ -159,8 +176,8 @@ def _time_in_seconds(raw: RawRecord, time_scale: float | None) -> tuple[RawRecor
 
 def _hdf5_record(path: Path, settings: ReadSettings) -> IOData:
     if settings.dt is not None or settings.time_scale is not None:
-        option = "--dt" if settings.dt is not None else "--time-scale"
-        raise InputError(f"{option} applies to files' time columns; an HDF5 record carries its own time base")
+        option = "dt" if settings.dt is not None else "time_scale"
+        raise OptionError(f"'{option}' applies to files' time columns; an HDF5 record carries its own time base", option)
     data = read_hdf5(path)
     if settings.inputs:
         data = data.select_inputs(settings.inputs)
@@ -260,8 +277,8 @@ def parse_steering_ratio(items: Mapping[str, float] | Sequence[str] | str | floa
         for name, ratio in _named_numbers(items, "a steering ratio", "RATIO or NAME=RATIO"):
             if name is None:
                 if len(inputs) != 1:
-                    raise InputError(f"there are {len(inputs)} inputs ({', '.join(inputs)}): name the steering "
-                                     f"channel as --steering-ratio NAME={ratio}")
+                    raise OptionError(f"there are {len(inputs)} inputs ({', '.join(inputs)}): name the steering "
+                                      f"channel as 'steering_ratio' NAME={ratio}", "steering_ratio")
                 name = inputs[0]
             pairs.append((name, _number(ratio, f"the steering ratio of {name!r}")))
     ratios: dict[str, float] = {}
@@ -410,18 +427,18 @@ def _conversions(first: IOData, scale: Mapping[str, float], steering_ratio: Mapp
     """Per channel, its scale and steering ratio; a name that is not a chosen channel is an error."""
     channels = first.input_names + first.output_names
     conversions: dict[str, dict[str, float]] = {}
-    for option, key, values in (("--scale", "scale", scale), ("--steering-ratio", "steering_ratio", steering_ratio)):
+    for option, values in (("scale", scale), ("steering_ratio", steering_ratio)):
         for name, value in values.items():
             named = _named_channels(name, channels)
             if not named:
-                raise InputError(
-                    f"{option} names {name!r}, which is not a chosen channel; inputs: "
-                    f"{', '.join(first.input_names)}; outputs: {', '.join(first.output_names)}"
+                raise OptionError(
+                    f"'{option}' names {name!r}, which is not a chosen channel; inputs: "
+                    f"{', '.join(first.input_names)}; outputs: {', '.join(first.output_names)}", option
                 )
             for channel in named:
-                if key in conversions.setdefault(channel, {}):
-                    raise InputError(f"channel {channel!r} is given {option} twice (as {name!r})")
-                conversions[channel][key] = value
+                if option in conversions.setdefault(channel, {}):
+                    raise OptionError(f"channel {channel!r} is given '{option}' twice (as {name!r})", option)
+                conversions[channel][option] = value
     return {name: conversions[name] for name in channels if name in conversions}
 
 
@@ -471,8 +488,7 @@ def estimate_preparation(
         the factor is scale / ratio.
     """
     records = as_records(records)
-    if detrend not in DETRENDS:
-        raise InputError(f"unknown detrend {detrend!r}; use one of {', '.join(DETRENDS)}")
+    check_value("detrend", detrend, DETREND)
     first = records[0]
     conversions = _conversions(first, parse_scale(scale), parse_steering_ratio(steering_ratio, first.input_names))
     input_scale, output_scale = _scale_factors(first, conversions)
@@ -512,9 +528,7 @@ def prepare(
     InputError
         Bad options, or records that cannot identify a model, naming the channel and the cause.
     """
-    records = as_records(records)
-    if detrend not in DETRENDS:
-        raise InputError(f"unknown detrend {detrend!r}; use one of {', '.join(DETRENDS)}")
+    records = as_records(records)  # check_channels checks the detrend, before anything is computed
     conversions = _conversions(records[0], parse_scale(scale),
                                parse_steering_ratio(steering_ratio, records[0].input_names))
     input_scale, output_scale = _scale_factors(records[0], conversions)

@@ -19,7 +19,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, OptionError
 
 __all__ = ["RawRecord", "TEXT_SUFFIXES", "MAT_SUFFIXES", "MDF_SUFFIXES", "read_raw", "read_table",
            "read_mat", "read_mdf", "expand_channels"]
@@ -80,13 +80,13 @@ def _is_time_disabled(time_column: str | None) -> bool:
 
 def _check_dt(dt: float | None) -> None:
     if dt is not None and not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
-        raise InputError(f"dt must be a positive number; got {dt!r}")
+        raise OptionError(f"'dt' must be a positive number; got {dt!r}", "dt")
 
 
 def _dt_conflict(path: Path, time_name: str) -> InputError:
-    return InputError(
-        f"{path.name} has a time column {time_name!r}: --dt would override it; drop --dt, "
-        "or disable the time column with --time-column none"
+    return OptionError(
+        f"{path.name} has a time column {time_name!r}: 'dt' would override it; drop 'dt', "
+        "or disable the time column with 'time_column' none", "dt", "time_column"
     )
 
 
@@ -242,6 +242,31 @@ def _has_column(header: tuple[str, ...], name: str) -> bool:
     return name in header or any(_name_and_unit(column)[0] == name for column in header)
 
 
+#: Names a time column goes by without --time-column (compared in lower case, without the unit:
+#: ``t``, ``t(s)``, ``t [s]``, ``Time``, ``time(ms)``), in order of preference.
+TIME_COLUMN_NAMES = ("t", "time")
+
+
+def _default_time_column(path: Path, header: tuple[str, ...] | None) -> str | None:
+    """The header cell that is the time column by its name (:data:`TIME_COLUMN_NAMES`), or None.
+
+    ``t`` (or ``t(s)``) is taken as it always was; otherwise a single cell named ``time`` in any case,
+    with or without its unit. Two such cells are an error naming them: --time-column chooses.
+    """
+    if header is None:
+        return None
+    if _has_column(header, "t"):
+        return "t"
+    for name in TIME_COLUMN_NAMES[1:]:
+        found = [cell for cell in header if _name_and_unit(cell)[0].strip().lower() == name]
+        if len(found) > 1:
+            raise OptionError(f"{path.name} has {len(found)} time columns ({', '.join(found)}): choose one with "
+                              "'time_column' NAME", "time_column")
+        if found:
+            return found[0]
+    return None
+
+
 def _column_index(path: Path, header: tuple[str, ...] | None, name: str, kind: str) -> int:
     if header is not None:
         places = [i for i, column in enumerate(header) if column == name]
@@ -340,7 +365,8 @@ def read_table(
     layout = _layout(path)
     names = [str(name).strip() for name in channels]
     indices = [_column_index(path, layout.header, name, "data") for name in names]
-    time_name = _time_name(path, layout.header is not None and _has_column(layout.header, "t"), time_column, dt)
+    time_name = _time_name(path, _default_time_column(path, layout.header) if time_column is None else None,
+                           time_column, dt)
     read_names = list(names)
     if time_name is not None:
         indices.append(_column_index(path, layout.header, time_name, "time"))
@@ -390,23 +416,26 @@ def _unit(layout: _Layout, column: int) -> str:
     return "-"
 
 
-def _time_name(path: Path, has_t: bool, time_column: str | None, dt: float | None, kind: str = "column"
+def _time_name(path: Path, found: str | None, time_column: str | None, dt: float | None, kind: str = "column"
                ) -> str | None:
-    """The time column in use: given, or ``t`` when present; None when disabled or absent."""
+    """The time column in use: given, or the one ``found`` by its name (``t``, ``time(s)``); None when
+    disabled or absent."""
     if _is_time_disabled(time_column):
         if dt is None:
-            raise InputError(f"the time {kind} of {path.name} is disabled (--time-column none): give --dt")
+            raise OptionError(f"the time {kind} of {path.name} is disabled ('time_column' none): give 'dt'",
+                              "time_column", "dt")
         return None
     if time_column is not None:
         if dt is not None:
             raise _dt_conflict(path, time_column)
         return time_column.strip()
-    if has_t:
+    if found is not None:
         if dt is not None:
-            raise _dt_conflict(path, "t")
-        return "t"
+            raise _dt_conflict(path, found)
+        return found
     if dt is None:
-        raise InputError(f"{path.name} has no time {kind} 't': name one with --time-column NAME, or give --dt")
+        raise OptionError(f"{path.name} has no time {kind} 't' or 'time': name one with 'time_column' NAME, "
+                          "or give 'dt'", "time_column", "dt")
     return None
 
 
@@ -554,7 +583,8 @@ def read_mat(
     lookup, available = _mat_variables(path)
     names = [str(name).strip() for name in channels]
     values = [_mat_column(path, lookup, name, available) for name in names]
-    time_name = _time_name(path, lookup("t") is not None, time_column, dt, kind="variable")
+    found = next((name for name in TIME_COLUMN_NAMES if lookup(name) is not None), None)
+    time_name = _time_name(path, found if time_column is None else None, time_column, dt, kind="variable")
     t = _mat_column(path, lookup, time_name, available) if time_name is not None else None
     lengths = {v.size for v in values} | ({t.size} if t is not None else set())
     if len(lengths) > 1:
@@ -581,11 +611,11 @@ def read_mdf(
     """
     path = _existing(path)
     if dt is not None:
-        raise InputError(f"{path.name} is an MDF file and carries its own time stamps: --dt does not apply "
-                         "(use --resample HZ for another rate)")
+        raise OptionError(f"{path.name} is an MDF file and carries its own time stamps: 'dt' does not apply "
+                          "(use 'resample' HZ for another rate)", "dt", "resample")
     if time_column is not None and not _is_time_disabled(time_column):
-        raise InputError(f"{path.name} is an MDF file: each channel carries its own time stamps, "
-                         "--time-column does not apply")
+        raise OptionError(f"{path.name} is an MDF file: each channel carries its own time stamps, "
+                          "'time_column' does not apply", "time_column")
     try:
         from asammdf import MDF
     except ImportError:

@@ -114,6 +114,8 @@ def _register_identification_types() -> None:
     from ..classical.least_squares import ArxModel  # by name: the package's ``least_squares`` is the function
     from ..classical.pencil import PencilModel
     from ..classical.subspace import SubspaceResult
+    from ..filtering.greybox_model import IdentifiedGreyBox
+    from ..models.responses import TimeResponse
 
     for cls, schema, legacy_path in (
         (data.IOData, "io_data", "identification.data:IOData"),
@@ -140,6 +142,8 @@ def _register_identification_types() -> None:
         (ArxModel, "arx_model"),
         (PencilModel, "pencil_model"),
         (SubspaceResult, "subspace_model"),
+        (IdentifiedGreyBox, "grey_box_model"),
+        (TimeResponse, "time_response"),
     ):
         register_codec(cls, schema)
 

@@ -1,6 +1,7 @@
 """From raw sample times to one uniform time base: segment, jitter, gaps, resampling, decimation.
 
-Applied to a :class:`~identification.dataio.readers.RawRecord` in this order: ``segment`` (file time); time
+Applied to a :class:`~identification.dataio.readers.RawRecord` in this order: ``segment`` (file time, or
+from the log's first sample: :mod:`~vehid.identification.dataio.timewindow`); time
 counted from the first sample; the checks that time increases with no gap (:data:`GAP_FACTOR`; with
 ``resample`` a gap is bridged and reported instead); sample times within ``jitter_tolerance`` of the
 uniform grid put on it; ``resample`` (linear interpolation, a faster channel low-passed first);
@@ -17,8 +18,9 @@ import numpy as np
 
 from ..data import IOData
 from ..choices import JITTER_TOLERANCE
-from ..errors import InputError
+from ..errors import InputError, OptionError
 from .readers import RawRecord
+from .timewindow import TimeWindow, edge_slack, parse_time_window, span_text, time_text
 
 __all__ = ["JITTER_TOLERANCE", "GAP_FACTOR", "ANTI_ALIAS_CUTOFF", "uniform_record", "parse_segment"]
 
@@ -39,25 +41,20 @@ _SAME_RATE = 1e-3
 _GAPS_LISTED = 20
 
 
-def parse_segment(text: str | Sequence[float] | None) -> tuple[float, float] | None:
-    """``"T0:T1"`` (either end may be empty) or a pair, as ``(T0, T1)`` in seconds."""
-    if text is None:
-        return None
-    if isinstance(text, str):
-        start, colon, stop = text.partition(":")
-        if not colon:
-            raise InputError(f"a segment is T0:T1 in seconds; got {text!r}")
-        try:
-            pair = (float(start) if start.strip() else -math.inf, float(stop) if stop.strip() else math.inf)
-        except ValueError:
-            raise InputError(f"a segment is T0:T1 in seconds; got {text!r}") from None
-    else:
-        pair = tuple(float(v) for v in text)
-        if len(pair) != 2:
-            raise InputError(f"a segment is a pair (T0, T1); got {text!r}")
-    if not pair[0] < pair[1] or math.isnan(pair[0]) or math.isnan(pair[1]):
-        raise InputError(f"a segment needs T0 < T1; got {pair[0]:g}:{pair[1]:g}")
-    return pair  # type: ignore[return-value]
+def parse_segment(text: str | Sequence[float] | TimeWindow | None) -> TimeWindow | None:
+    """A segment (``"T0:T1"`` file time, ``"+T0:+T1"`` from the log's first sample, a pair, a window):
+    :func:`~vehid.identification.dataio.timewindow.parse_time_window`."""
+    return parse_time_window(text, option="segment")
+
+
+def _record_time_is_file_time(times: Sequence[np.ndarray]) -> bool:
+    """Whether the record will keep the file's own time (:data:`FILE_TIME_STEPS`), judged from the raw times."""
+    first = times[0]
+    if first.size < 2:
+        return True
+    step = float(np.median(np.diff(first)))
+    span = max(abs(float(t[0])) for t in times) + max(float(t[-1] - t[0]) for t in times)
+    return step > 0 and span <= FILE_TIME_STEPS * step
 
 
 def _row(rows: np.ndarray | None, k: int) -> int:
@@ -65,13 +62,18 @@ def _row(rows: np.ndarray | None, k: int) -> int:
 
 
 def _check_increasing(raw: RawRecord, channel: int, t: np.ndarray, rows: np.ndarray | None, offset: float,
-                      bridge_gaps: bool) -> tuple[float, list[dict[str, Any]], int]:
+                      bridge_gaps: bool, file_time: bool = True) -> tuple[float, list[dict[str, Any]], int]:
     """The median step of ``t`` (counted from ``offset``), after checking that time increases.
 
     A gap (a step longer than :data:`GAP_FACTOR` median steps) is an error, unless ``bridge_gaps``
     (resampling interpolates across it): then the gaps are returned, the first :data:`_GAPS_LISTED` of
-    them described, with their total count.
+    them described, with their total count. Messages give times as the record will (``file_time``:
+    the file's own, else from its first sample).
     """
+
+    def shown(value: float) -> str:
+        return time_text(value + offset) if file_time else time_text(value, offset)
+
     if t.size < 2:
         raise InputError(f"{raw.source}: {raw.names[channel]!r} has fewer than 2 samples")
     steps = np.diff(t)
@@ -80,16 +82,16 @@ def _check_increasing(raw: RawRecord, channel: int, t: np.ndarray, rows: np.ndar
         k = int(falling[0])
         raise InputError(
             f"{raw.source}: time does not increase at {raw.locate(channel, _row(rows, k + 1))} "
-            f"({t[k + 1] + offset:.9g} s after {t[k] + offset:.9g} s)"
+            f"({shown(t[k + 1])} after {shown(t[k])})"
         )
     median = float(np.median(steps))
     gaps = np.flatnonzero(steps > GAP_FACTOR * median)
     if gaps.size and not bridge_gaps:
         k = int(gaps[0])
-        raise InputError(
+        raise OptionError(
             f"{raw.source}: gap in time at {raw.locate(channel, _row(rows, k + 1))}: {steps[k]:.6g} s after the "
-            f"previous sample, {steps[k] / median:.1f} times the median step of {median:.6g} s; --resample HZ "
-            "interpolates across it, --segment T0:T1 leaves it out"
+            f"previous sample, {steps[k] / median:.1f} times the median step of {median:.6g} s; 'resample' HZ "
+            "interpolates across it, 'segment' T0:T1 leaves it out", "resample", "segment"
         )
     described = [{"channel": raw.names[channel], "at_s": float(t[k + 1] + offset), "length_s": float(steps[k]),
                   "steps": float(steps[k] / median), "location": raw.locate(channel, _row(rows, k + 1))}
@@ -170,7 +172,8 @@ def uniform_record(
         Rate in Hz of the uniform grid to interpolate onto.
     decimate : int, optional
         Keep every K-th sample after anti-aliasing.
-    segment : (T0, T1) or "T0:T1", optional
+    segment : TimeWindow, (T0, T1), "T0:T1" or "+T0:+T1", optional
+        Only the samples in this window (:func:`~vehid.identification.dataio.timewindow.parse_time_window`).
     jitter_tolerance : float
         See :data:`JITTER_TOLERANCE`.
     meta : dict, optional
@@ -196,14 +199,20 @@ def uniform_record(
         times = [np.arange(raw.values[0].size) * float(dt)] * len(times)
     values = list(raw.values)
     rows: list[np.ndarray | None] = [None] * len(values)  # file rows of the samples, where a segment selected them
+    file_time = _record_time_is_file_time(times)
+    first_sample = min(float(t[0]) for t in times)  # the log's first sample: where "+T0" counts from
     if segment is not None:
+        low, high = segment.in_file_time(first_sample)
         for c, t in enumerate(times):
-            keep = np.flatnonzero((t >= segment[0]) & (t <= segment[1]))
+            slack = edge_slack(float(t[-1]), float(t[1] - t[0]) if t.size > 1 else 0.0)
+            keep = np.flatnonzero((t >= low - slack) & (t <= high + slack))
             if keep.size < 2:
-                raise InputError(
-                    f"the segment {segment[0]:g}:{segment[1]:g} s selects {keep.size} samples of "
-                    f"{raw.names[c]!r} in {raw.source}, whose time runs from {t.min():.6g} to {t.max():.6g} s"
-                )
+                span = span_text(float(t[0]), float(t[-1])) if file_time else span_text(
+                    float(t[0]) - first_sample, float(t[-1]) - first_sample, first_sample)
+                hint = "" if segment.from_start or file_time else (
+                    ": a segment without + is in the file's time; +T0:+T1 counts from the log's first sample")
+                raise InputError(f"the segment {segment} s selects {keep.size} samples of {raw.names[c]!r} in "
+                                 f"{raw.source}, which {span}{hint}")
             times[c], values[c], rows[c] = t[keep], values[c][keep], keep
     # time from the first sample, before any check: epoch stamps keep their resolution in the differences
     offset = min(float(t[0]) for t in times)
@@ -214,13 +223,14 @@ def uniform_record(
         for c in range(len(times)):
             times[c], values[c], rows[c], merged = _merge_repeated_stamps(times[c], values[c], rows[c])
             repeated = max(repeated, merged)
-    checked = [_check_increasing(raw, c, times[c], rows[c], offset, bridge_gaps=resample is not None)
+    checked = [_check_increasing(raw, c, times[c], rows[c], offset, bridge_gaps=resample is not None,
+                                 file_time=file_time)
                for c in (range(1) if shared else range(len(times)))]
     steps = [median for median, _, _ in checked]
     strays = [_stray(t) for t in (times[:1] if shared else times)]
     jitter = max(float(np.max(stray)) for stray in strays)
-    report: dict[str, Any] = {"sample_jitter": jitter, "resample": None, "decimate": None,
-                              "segment": None if segment is None else list(segment)}
+    report: dict[str, Any] = {"sample_jitter": jitter, "resample": None, "decimate": None, "log_start": first_sample,
+                              "segment": None if segment is None else list(segment.in_file_time(first_sample))}
     if repeated:
         report["repeated_stamps"] = repeated
     gap_count = sum(count for _, _, count in checked)
@@ -231,10 +241,10 @@ def uniform_record(
         stray = strays[0]
         if jitter > jitter_tolerance:
             k = int(np.flatnonzero(stray > jitter_tolerance)[0])
-            raise InputError(
+            raise OptionError(
                 f"{raw.source}: sample times stray from a uniform grid by {stray[k]:.3g} of a step at "
                 f"{raw.locate(0, _row(rows[0], k))} (tolerance {jitter_tolerance:g}): resample with "
-                f"--resample HZ, or widen --jitter-tolerance"
+                f"'resample' HZ, or widen 'jitter_tolerance'", "resample", "jitter_tolerance"
             )
         count = times[0].size
         t = np.arange(count) * (times[0][-1] / (count - 1))

@@ -41,6 +41,7 @@ from ..blas import on_one_blas_thread
 from ..data import IOData, as_records
 from ..choices import START_CHOICES, START_VALUES, TIMESCALES
 from ..errors import DivergenceError, InputError
+from ..optionspec import OneOf, check_value
 from .filter_models import LinearModalFilterModel
 from .iekf_pass import compiled_pass, pack_covariance, unpack_covariance
 from ..models.modal import ModalModel, ModalStructure
@@ -189,10 +190,8 @@ class IEKFOptions:
             raise InputError(f"p_decay must be in (0, 1]; got {self.p_decay!r}")
         if isinstance(self.back_off, bool) or not isinstance(self.back_off, int) or self.back_off < 0:
             raise InputError(f"back_off must be a whole number >= 0; got {self.back_off!r}")
-        if self.start not in START_CHOICES:
-            raise InputError(f"unknown start {self.start!r}; use one of {', '.join(START_CHOICES)}")
-        if self.timescale not in TIMESCALES:
-            raise InputError(f"unknown timescale {self.timescale!r}; use one of {', '.join(TIMESCALES)}")
+        check_value("start", self.start, OneOf(START_CHOICES))
+        check_value("timescale", self.timescale, OneOf(TIMESCALES))
 
     @property
     def simulation_method(self) -> str:
@@ -531,19 +530,20 @@ def identify_iekf(
 
     def result(stop_reason: str, history: tuple[PassRecord, ...], theta: np.ndarray, P: np.ndarray) -> IEKFResult:
         last = history[-1].parameters if history else original_units(theta)
-        covariance = None
+        covariance, how = None, {}
         if parameter_covariance and history and np.isfinite(history[-1].nis):
             # the fit's sensitivity costs n_u + 1 simulations and the sampled pass one pass: for the
             # finished run, not every checkpoint
             finished = stop_reason != "running"
-            covariance = iekf_parameter_covariance(
+            covariance, method = iekf_parameter_covariance(
                 structure, P[n:, n:], input_scale, output_scale, history[-1].nis / structure.n_y, time_unit=time_unit,
                 estimate=ModalModel.from_parameters(structure, last), records=records if finished else None,
-                pass_parameters=sampled_pass(theta, P) if finished else None)
+                pass_parameters=sampled_pass(theta, P) if finished else None, with_method=True)
+            how = {"uncertainty_method": method.as_dict()}
         return IEKFResult(
             model=ModalModel.from_parameters(
                 structure, last, input_names=data.input_names, output_names=data.output_names,
-                meta={"estimator": "iekf", "discretization": options.discretization, "passes": len(history)},
+                meta={"estimator": "iekf", "discretization": options.discretization, "passes": len(history), **how},
                 parameter_covariance=covariance,
             ),
             structure=structure, options=options, history=history,
@@ -591,7 +591,7 @@ def identify_iekf(
         if not options.allow_unstable and not model.is_stable():
             raise DivergenceError(
                 f"the identified model is unstable (eigenvalues {np.round(model.eigenvalues(), 4).tolist()}; "
-                "for an open-loop unstable plant allow unstable modes: --allow-unstable)")
+                "for an open-loop unstable plant allow unstable modes: 'allow_unstable')", options=("allow_unstable",))
         fit_filter = pooled_simulation_fit(model, records, options.simulation_method)
         fit_exact = fit_filter if options.simulation_method == "foh" else pooled_simulation_fit(model, records)
         return Assessment(theta_original, fit_filter, fit_exact, theta_filter, P_filter)

@@ -10,17 +10,17 @@ changes from pass to pass and a smaller p to restart a diverged pass with.
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 from typing import Callable, Generic, TypeVar
 
 import numpy as np
 
+from ..choices import COVARIANCE_FORMS, DISCRETIZATIONS
 from ..data import IOData, check_channels
 from ..errors import DivergenceError, InputError
-from .filter_models import check_discretization
-from .iekf_pass import COVARIANCE_FORMS, pack_covariance, unpack_covariance
+from ..optionspec import POSITIVE, Number, OneOf, check_value
+from .iekf_pass import pack_covariance, unpack_covariance
 
 __all__ = ["PassRecord", "PassHistory", "Assessment", "RinseHooks", "rinse", "check_filter_options",
            "check_records", "parameters_settled"]
@@ -28,15 +28,18 @@ __all__ = ["PassRecord", "PassHistory", "Assessment", "RinseHooks", "rinse", "ch
 ResultT = TypeVar("ResultT")
 
 
+# the values every IEKF's options share (check_filter_options)
+_FILTER_OPTIONS = {"p": POSITIVE, "passes": Number(low=1, whole=True), "discretization": OneOf(DISCRETIZATIONS),
+                   "covariance": OneOf(COVARIANCE_FORMS)}
+
+
 def check_filter_options(p: float, passes: int, discretization: str, covariance: str) -> None:
-    """The checks every IEKF's options share: a positive p, a whole number of passes, known forms."""
-    if not (isinstance(p, (int, float)) and math.isfinite(p) and p > 0):
-        raise InputError(f"the tuning parameter p must be a positive number; got {p!r}")
-    if isinstance(passes, bool) or int(passes) != passes or passes < 1:
-        raise InputError(f"passes must be a whole number >= 1; got {passes!r}")
-    check_discretization(discretization)
-    if covariance not in COVARIANCE_FORMS:
-        raise InputError(f"unknown covariance form {covariance!r}; use one of {', '.join(COVARIANCE_FORMS)}")
+    """The checks every IEKF's options share: a positive p, a whole number of passes, known forms.
+
+    Raises :class:`~vehid.identification.errors.OptionError` naming the option.
+    """
+    for name, value in (("p", p), ("passes", passes), ("discretization", discretization), ("covariance", covariance)):
+        check_value(name, value, _FILTER_OPTIONS[name])
 
 
 @dataclass(frozen=True, eq=False)

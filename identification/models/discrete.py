@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError
-from .protocol import StateSpaceModel
+from .protocol import StateSpaceModel, unscheduled
 from .statespace import continuous_to_discrete, hold_state_shift
 
 __all__ = ["ContinuousModel", "DiscreteModel", "has_no_continuous_equivalent"]
@@ -81,8 +81,11 @@ class DiscreteModel(StateSpaceModel):
     def n_y(self) -> int:
         return int(self.C.shape[0])
 
-    def to_statespace(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+    def to_statespace(self, *, schedule: float | None = None
+
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
         """``(A, B, C, D, dt)``."""
+        unscheduled(schedule)
         return self.A, self.B, self.C, self.D, self.dt
 
     def to_dict(self) -> dict[str, Any]:
@@ -115,11 +118,15 @@ class ContinuousModel(StateSpaceModel):
     def n_y(self) -> int:
         return int(self.C.shape[0])
 
-    def to_statespace(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
+    def to_statespace(self, *, schedule: float | None = None
+
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
         """``(A, B, C, D, None)``: continuous time."""
+        unscheduled(schedule)
         return self.A, self.B, self.C, self.D, None
 
-    def simulate_outputs(self, u: Any, dt: float | None = None, *, x0: Any = None) -> np.ndarray:
+    def simulate_outputs(self, u: Any, dt: float | None = None, *, x0: Any = None,
+                         schedule: Any = None) -> np.ndarray:
         """Outputs (N, n_y) for inputs (N, n_u) linear between samples ``dt`` apart, from ``x0`` (default rest).
 
         Exact: the first-order-hold equivalent (:func:`~identification.models.statespace.continuous_to_discrete`),
@@ -128,6 +135,7 @@ class ContinuousModel(StateSpaceModel):
         if dt is None:
             raise InputError("a continuous-time model needs the sample interval dt of its input")
         u = self.checked_input(u)
+        unscheduled(schedule, u.shape[0])
         x = self.checked_state(x0)
         Ad, Bd, Cd, Dd = continuous_to_discrete(self.A, self.B, self.C, self.D, dt, hold="foh")
         equivalent = DiscreteModel(Ad, Bd, Cd, Dd, dt)

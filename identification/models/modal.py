@@ -36,7 +36,7 @@ import numpy as np
 
 from ..choices import C_PATTERNS
 from ..errors import InputError
-from .protocol import Mode, StateSpaceModel, eigenvalues_stable
+from .protocol import Mode, StateSpaceModel, eigenvalues_stable, unscheduled
 
 __all__ = [
     "ModalStructure",
@@ -484,20 +484,23 @@ class ModalModel(StateSpaceModel):
             values.append(complex(theta[2 * self.structure.n_complex_pairs + pole], 0.0))
         return np.array(values)
 
-    def eigenvalues(self) -> np.ndarray:
+    def eigenvalues(self, *, schedule: float | None = None) -> np.ndarray:
         """All n eigenvalues: each pair as ``sigma + j|omega|, sigma - j|omega|``, then the real poles."""
+        unscheduled(schedule)
         values: list[complex] = []
         for value in self.mode_eigenvalues()[: self.structure.n_complex_pairs]:
             values += [value, value.conjugate()]
         values += list(self.mode_eigenvalues()[self.structure.n_complex_pairs:])
         return np.array(values)
 
-    def modes(self) -> tuple[Mode, ...]:
+    def modes(self, *, schedule: float | None = None) -> tuple[Mode, ...]:
         """One :class:`Mode` per mode, in the structure's order (pairs first)."""
+        unscheduled(schedule)
         return tuple(Mode.of(value) for value in self.mode_eigenvalues())
 
-    def is_stable(self) -> bool:
+    def is_stable(self, *, schedule: float | None = None) -> bool:
         """Every eigenvalue in the left half-plane, within rounding (:func:`~.protocol.eigenvalues_stable`)."""
+        unscheduled(schedule)
         return eigenvalues_stable(self.mode_eigenvalues())
 
     @property
@@ -515,8 +518,8 @@ class ModalModel(StateSpaceModel):
         """Number of states (the order n)."""
         return self.structure.n
 
-    def simulate_outputs(self, u: Any, dt: float | None = None, *, x0: Any = None, method: str = "foh",
-                         return_states: bool = False) -> Any:
+    def simulate_outputs(self, u: Any, dt: float | None = None, *, x0: Any = None, schedule: Any = None,
+                         method: str = "foh", return_states: bool = False) -> Any:
         """Output of the model driven by ``u`` from state ``x0`` (default zero).
 
         Parameters
@@ -525,6 +528,8 @@ class ModalModel(StateSpaceModel):
         dt : float
             Sample interval (s); required (the argument is optional only in the protocol's signature).
         x0 : array_like, shape (n,), optional
+        schedule : array_like, shape (N,), optional
+            Changes nothing: the model is the same at every value of a scheduling variable.
         method : {"foh", "zoh", "euler"}
             ``foh``: exact, inputs linear between samples (the continuous model
             simulated exactly for such inputs); ``zoh``: exact, inputs held;
@@ -545,6 +550,7 @@ class ModalModel(StateSpaceModel):
         """
         s = self.structure
         u = self._checked_input(u, dt, method)
+        unscheduled(schedule, u.shape[0])
         x0 = self.checked_state(x0)
         # without states asked for, y gathers each mode in turn: no (N, n) state array held for a long record
         x = np.empty((u.shape[0], s.n)) if return_states else None
@@ -744,8 +750,10 @@ class ModalModel(StateSpaceModel):
             by_parameters[:, i, c_start + k] += states[:, j]
         return y, by_parameters, by_state
 
-    def to_statespace(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
+    def to_statespace(self, *, schedule: float | None = None
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
         """``(A, B, C, D, None)``: continuous time."""
+        unscheduled(schedule)
         return self.A, self.B, self.C, self.D, None
 
     def to_dict(self) -> dict[str, Any]:

@@ -4,21 +4,37 @@
 archives and exports rely on, and the only one callers that take any model use:
 
 * ``n_states``, ``n_u``, ``n_y``; ``is_linear`` (False where the model is
-  nonlinear: scores then simulate it from rest, and its state-space form is
-  a linearisation);
-* ``simulate_outputs(u, dt=None, *, x0=None)``: outputs (N, n_y) driven by
-  ``u`` (N, n_u) from the state ``x0`` (default rest); ``simulate(record)``
-  does the same for an :class:`~identification.data.IOData` record. A class
-  may add keyword-only options of its own, which such callers never pass;
+  not linear time-invariant: scores then simulate it whatever the horizon,
+  its initial state fitted by Gauss-Newton, and its state-space form is a
+  linearisation); ``is_scheduled`` (True where the model varies with a
+  measured scheduling variable, e.g. a car's speed);
+* ``simulate_outputs(u, dt=None, *, x0=None, schedule=None)``: outputs
+  (N, n_y) driven by ``u`` (N, n_u) from the state ``x0`` (default rest) along
+  the scheduling variable ``schedule`` (N,); ``simulate(record, *, x0=None)``
+  does the same for an :class:`~identification.data.IOData` record (a
+  scheduled model's record holds the schedule as its last input column) and
+  returns a :class:`~identification.models.responses.TimeResponse`. A class may
+  add keyword-only options of its own, which such callers never pass;
 * ``eigenvalues()`` (s-plane if continuous, z-plane if discrete),
   ``modes()`` (frequency in Hz, damping ratio) and ``is_stable()``;
 * ``frequency_response(f_hz)``: ``C (p I - A)^-1 B + D`` at ``p = j 2 pi f``
-  in continuous time and ``p = exp(j 2 pi f dt)`` in discrete time;
+  in continuous time and ``p = exp(j 2 pi f dt)`` in discrete time, as a
+  :class:`~identification.models.responses.FrequencyResponse`;
 * ``to_statespace()`` giving ``(A, B, C, D, dt)`` (``dt`` None if
-  continuous), ``to_control()``, ``to_casadi()``, ``save_mat(path)``,
-  ``save_json(path)``;
+  continuous; the state basis that ``simulate_outputs``' ``x0`` is in),
+  ``to_control()``, ``to_casadi()``, ``save_mat(path)``, ``save_json(path)``;
 * a codec registered in :mod:`vehid.identification.dataio.storage`, so that an
   archive holds the model and gives it back.
+
+Schedules. Every method that describes the model at one operating point
+(``eigenvalues``, ``modes``, ``is_stable``, ``frequency_response``,
+``to_statespace``, ``to_control``) takes the keyword ``schedule``: a scheduled
+model is the linear model it is at that value of its scheduling variable
+(which it needs: InputError without one, except ``is_stable``, which then
+holds at every value), and a model without a schedule is the same at every
+value, so it accepts a finite value and is unchanged by it. One call serves
+both, ``model.eigenvalues(schedule=20.0)``. :func:`signature_mismatches`
+checks a class's methods against these signatures.
 
 :class:`StateSpaceModel` implements all of it from ``to_statespace()`` and
 the class's ``n_u`` and ``n_y``, discrete-time simulation included, so a
@@ -31,7 +47,9 @@ interval ``dt`` is the continuous ``lambda = log(z) / dt`` (principal branch).
 
 from __future__ import annotations
 
+import inspect
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
@@ -40,8 +58,10 @@ import numpy as np
 
 from ..data import IOData
 from ..errors import InputError
+from .responses import FrequencyResponse, TimeResponse, simulated_response
 
-__all__ = ["Mode", "IdentifiedModel", "StateSpaceModel", "sample_interval", "MARGINAL_TOLERANCE", "eigenvalues_stable"]
+__all__ = ["Mode", "IdentifiedModel", "StateSpaceModel", "sample_interval", "MARGINAL_TOLERANCE", "eigenvalues_stable",
+           "PROTOCOL_METHODS", "signature_mismatches", "unscheduled", "schedule_value", "statespace_response"]
 
 #: An eigenvalue whose growth rate lies within this fraction of the fastest eigenvalue's magnitude is on the
 #: stability boundary to rounding, not beyond it: an integrator identified at z = 1 (ARX of too high an order
@@ -98,6 +118,7 @@ class IdentifiedModel(Protocol):
     """The protocol every identified model meets (see the module docstring)."""
 
     is_linear: bool
+    is_scheduled: bool
 
     @property
     def n_states(self) -> int: ...
@@ -108,21 +129,23 @@ class IdentifiedModel(Protocol):
     @property
     def n_y(self) -> int: ...
 
-    def simulate(self, record: IOData) -> IOData: ...
+    def simulate(self, record: IOData, *, x0: Any = None) -> TimeResponse: ...
 
-    def simulate_outputs(self, u: Any, dt: float | None = None, *, x0: Any = None) -> np.ndarray: ...
+    def simulate_outputs(self, u: Any, dt: float | None = None, *, x0: Any = None,
+                         schedule: Any = None) -> np.ndarray: ...
 
-    def is_stable(self) -> bool: ...
+    def is_stable(self, *, schedule: float | None = None) -> bool: ...
 
-    def eigenvalues(self) -> np.ndarray: ...
+    def eigenvalues(self, *, schedule: float | None = None) -> np.ndarray: ...
 
-    def modes(self) -> tuple[Mode, ...]: ...
+    def modes(self, *, schedule: float | None = None) -> tuple[Mode, ...]: ...
 
-    def frequency_response(self, f_hz: Any) -> np.ndarray: ...
+    def frequency_response(self, f_hz: Any, *, schedule: float | None = None) -> FrequencyResponse: ...
 
-    def to_statespace(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float | None]: ...
+    def to_statespace(self, *, schedule: float | None = None
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float | None]: ...
 
-    def to_control(self) -> Any: ...
+    def to_control(self, *, schedule: float | None = None) -> Any: ...
 
     def to_casadi(self) -> Any: ...
 
@@ -131,14 +154,147 @@ class IdentifiedModel(Protocol):
     def save_json(self, path: str | Path) -> Path: ...
 
 
+#: The protocol's methods, whose signatures :func:`signature_mismatches` compares.
+PROTOCOL_METHODS = ("simulate", "simulate_outputs", "is_stable", "eigenvalues", "modes", "frequency_response",
+                    "to_statespace", "to_control", "to_casadi", "save_mat", "save_json")
+_PROTOCOL_ATTRIBUTES = ("is_linear", "is_scheduled", "n_states", "n_u", "n_y")
+_POSITIONAL = (inspect.Parameter.POSITIONAL_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD)
+
+
+def _plain(signature: inspect.Signature) -> str:
+    """A signature as it reads without annotations: ``(self, u, dt=None, *, x0=None)``."""
+    return str(signature.replace(parameters=[p.replace(annotation=p.empty) for p in signature.parameters.values()],
+                                 return_annotation=inspect.Signature.empty))
+
+
+def _signature_problems(name: str, expected: inspect.Signature, got: inspect.Signature) -> list[str]:
+    """How ``got`` departs from ``expected``: its positional parameters must be the same (names, kinds,
+    defaults), the keyword-only ones present with the same defaults, and any other keyword-only with a default."""
+    wanted, have = list(expected.parameters.values()), list(got.parameters.values())
+    got = _plain(got)
+    problems = []
+    wanted_positional = [p for p in wanted if p.kind in _POSITIONAL]
+    have_positional = [p for p in have if p.kind in _POSITIONAL]
+    if [(p.name, p.default) for p in have_positional] != [(p.name, p.default) for p in wanted_positional]:
+        shown = ", ".join(p.name + ("" if p.default is p.empty else f"={p.default!r}") for p in wanted_positional)
+        problems.append(f"{name}{got}: the positional parameters must be ({shown})")
+    by_name = {p.name: p for p in have}
+    for parameter in (p for p in wanted if p.kind is inspect.Parameter.KEYWORD_ONLY):
+        found = by_name.get(parameter.name)
+        if found is None or found.kind is not inspect.Parameter.KEYWORD_ONLY or found.default != parameter.default:
+            problems.append(f"{name}{got}: needs the keyword-only {parameter.name}={parameter.default!r}")
+    expected_names = {p.name for p in wanted}
+    for parameter in have:
+        if parameter.name in expected_names or parameter.kind in _POSITIONAL:
+            continue
+        if parameter.kind is not inspect.Parameter.KEYWORD_ONLY or parameter.default is parameter.empty:
+            problems.append(f"{name}{got}: its own option {parameter.name} must be keyword-only with a default")
+    return problems
+
+
+def signature_mismatches(model: Any) -> tuple[str, ...]:
+    """Where a model (or model class) departs from the protocol's attributes and method signatures.
+
+    A method matches when its positional parameters are the protocol's (names, kinds and defaults), it
+    has the protocol's keyword-only parameters with their defaults, and its own options are keyword-only
+    with defaults (so that a caller using the protocol never passes them and never misses one).
+
+    Parameters
+    ----------
+    model : object or type
+        An instance, or a class (whose attributes set in ``__init__`` cannot be seen).
+
+    Returns
+    -------
+    tuple of str
+        One line per problem; empty where the model meets the protocol's signatures.
+
+    Examples
+    --------
+    >>> from vehid.identification import ModalModel
+    >>> signature_mismatches(ModalModel)
+    ()
+    >>> class Old(ModalModel):  # the signature scheduled models had
+    ...     def simulate_outputs(self, u, dt, *, x0=None):
+    ...         ...
+    >>> for line in signature_mismatches(Old):
+    ...     print(line)
+    simulate_outputs(self, u, dt, *, x0=None): the positional parameters must be (self, u, dt=None)
+    simulate_outputs(self, u, dt, *, x0=None): needs the keyword-only schedule=None
+    """
+    cls = model if isinstance(model, type) else type(model)
+    problems = [f"{name} is missing" for name in _PROTOCOL_ATTRIBUTES
+                if not hasattr(model, name) and not (isinstance(model, type) and name in _annotated(cls))]
+    for name in PROTOCOL_METHODS:
+        member = inspect.getattr_static(cls, name, None)
+        if member is None or not callable(getattr(cls, name)):
+            problems.append(f"{name}() is missing")
+            continue
+        problems += _signature_problems(name, inspect.signature(getattr(IdentifiedModel, name)),
+                                        inspect.signature(getattr(cls, name)))
+    return tuple(problems)
+
+
+def _annotated(cls: type) -> set[str]:
+    """Names a class declares as fields or properties (present on instances though not on the class)."""
+    names: set[str] = set()
+    for base in cls.__mro__:
+        names.update(getattr(base, "__annotations__", {}))
+    return names
+
+
+def schedule_value(schedule: Any, low: float, high: float, variable: str) -> float:
+    """A scheduled model's one schedule value, within ``low``..``high``; InputError naming what is wrong.
+
+    Parameters
+    ----------
+    schedule : float or None
+        The value asked for.
+    low, high : float
+        The range over which the model is defined.
+    variable : str
+        The scheduling variable's name, for the messages.
+
+    Returns
+    -------
+    float
+    """
+    if schedule is None:
+        raise InputError(f"this model is scheduled on {variable}: give schedule= a value in {low:g}..{high:g}")
+    if not isinstance(schedule, (int, float, np.number)) or isinstance(schedule, (bool, np.bool_)) \
+            or not math.isfinite(schedule):
+        raise InputError(f"schedule must be one finite value of {variable}; got {schedule!r}")
+    if not low <= float(schedule) <= high:
+        raise InputError(f"{variable} {float(schedule):g} lies outside the model's range {low:g}..{high:g}")
+    return float(schedule)
+
+
+def unscheduled(schedule: Any, samples: int | None = None) -> None:
+    """Check the ``schedule`` given to a model without one, which is the same at every value.
+
+    ``samples`` None: a value (or None) for a method at one operating point; otherwise a schedule of
+    that many samples (or None) for a simulation. Either must be finite; it changes nothing.
+    """
+    if schedule is None:
+        return
+    values = np.asarray(schedule, dtype=float) if not isinstance(schedule, (bool, np.bool_)) else np.array([np.nan])
+    wanted = () if samples is None else (samples,)
+    if values.shape != wanted or not np.all(np.isfinite(values)):
+        what = "one finite value" if samples is None else f"{samples} finite values (N,)"
+        raise InputError(f"schedule must be {what}; got {np.shape(schedule)}")
+
+
 class StateSpaceModel:
     """The protocol's methods from ``to_statespace`` (continuous models add ``simulate_outputs``)."""
 
     output_names: tuple[str, ...] | None = None
-    #: False for a model whose state-space form is only a linearisation (scores simulate it from rest).
+    #: False for a model whose state-space form is only a linearisation (scores simulate it, never predict k steps).
     is_linear = True
+    #: A state-space model is the same at every value of any scheduling variable.
+    is_scheduled = False
 
-    def to_statespace(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float | None]:
+    def to_statespace(self, *, schedule: float | None = None
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float | None]:
         """``(A, B, C, D, dt)``; ``dt`` is None for a continuous-time model."""
         raise NotImplementedError
 
@@ -168,11 +324,13 @@ class StateSpaceModel:
             raise InputError(f"x0 must hold {n} finite entries; got shape {x0.shape}")
         return x0
 
-    def simulate_outputs(self, u: Any, dt: float | None = None, *, x0: Any = None) -> np.ndarray:
+    def simulate_outputs(self, u: Any, dt: float | None = None, *, x0: Any = None,
+                         schedule: Any = None) -> np.ndarray:
         """Outputs (N, n_y) driven by ``u`` (N, n_u) from ``x0`` (default zero).
 
         This form serves discrete-time models, ``x(k+1) = A x(k) + B u(k)``,
-        ``y(k) = C x(k) + D u(k)``: ``dt``, if given, must be the model's.
+        ``y(k) = C x(k) + D u(k)``: ``dt``, if given, must be the model's;
+        ``schedule`` (N,), if given, changes nothing (module notes).
         """
         A, B, C, D, model_dt = self.to_statespace()
         if model_dt is None:
@@ -180,6 +338,7 @@ class StateSpaceModel:
         if dt is not None and not np.isclose(dt, model_dt, rtol=1e-6):
             raise InputError(f"this discrete model has dt = {model_dt} s; the record has {dt} s")
         u = self.checked_input(u)
+        unscheduled(schedule, u.shape[0])
         x = self.checked_state(x0)
         states = np.empty((u.shape[0], A.shape[0]))
         drive = u @ B.T
@@ -188,17 +347,26 @@ class StateSpaceModel:
             x = A @ x + drive[k]
         return states @ C.T + u @ D.T
 
-    def simulate(self, record: IOData, *, x0: Any = None) -> IOData:
-        """``record`` with its outputs replaced by the model's, driven by its inputs from ``x0`` (default rest)."""
-        y = self.simulate_outputs(record.u, record.dt, x0=x0)
-        names = self.output_names if self.output_names and len(self.output_names) == y.shape[1] else None
-        return IOData(t=record.t, u=record.u, y=y, input_names=record.input_names, output_names=names,
-                      input_units=record.input_units, meta=dict(record.meta))
+    def simulate(self, record: IOData, *, x0: Any = None) -> TimeResponse:
+        """The model's response to ``record``'s inputs from ``x0`` (default rest), with its outputs as the measurement.
 
-    def is_stable(self) -> bool:
+        Parameters
+        ----------
+        record : IOData
+        x0 : array_like (n_states,), optional
+
+        Returns
+        -------
+        TimeResponse
+            The record's time and inputs, the model's outputs, and the record's outputs as ``measured``.
+        """
+        y = self.simulate_outputs(record.u, record.dt, x0=x0)
+        return simulated_response(record, y, output_names=self.output_names)
+
+    def is_stable(self, *, schedule: float | None = None) -> bool:
         """Every eigenvalue in the left half-plane (continuous) or inside the unit circle (discrete), within rounding
         (:func:`eigenvalues_stable`)."""
-        return eigenvalues_stable(self.eigenvalues(), self.to_statespace()[4])
+        return eigenvalues_stable(self.eigenvalues(schedule=schedule), self.to_statespace(schedule=schedule)[4])
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready state-space form: time domain, dt, matrices, eigenvalues as [re, im]."""
@@ -207,13 +375,14 @@ class StateSpaceModel:
                 "B": B.tolist(), "C": C.tolist(), "D": D.tolist(),
                 "eigenvalues": [[float(v.real), float(v.imag)] for v in self.eigenvalues()]}
 
-    def eigenvalues(self) -> np.ndarray:
+    def eigenvalues(self, *, schedule: float | None = None) -> np.ndarray:
         """Eigenvalues of A (s-plane for continuous models, z-plane for discrete ones)."""
-        return np.linalg.eigvals(self.to_statespace()[0])
+        return np.linalg.eigvals(self.to_statespace(schedule=schedule)[0])
 
-    def modes(self) -> tuple[Mode, ...]:
+    def modes(self, *, schedule: float | None = None) -> tuple[Mode, ...]:
         """One :class:`Mode` per complex pair (positive imaginary part) and per real pole, pairs first."""
-        values, dt = np.asarray(self.eigenvalues(), dtype=complex), self.to_statespace()[4]
+        values = np.asarray(self.eigenvalues(schedule=schedule), dtype=complex)
+        dt = self.to_statespace(schedule=schedule)[4]
         if dt is not None:
             with np.errstate(divide="ignore"):
                 values = np.log(values) / dt
@@ -222,25 +391,31 @@ class StateSpaceModel:
         real = sorted((v for v in values if abs(v.imag) <= 1e-9 * scale), key=lambda v: v.real)
         return tuple(Mode.of(v) for v in (*pairs, *real))
 
-    def frequency_response(self, f_hz: Any) -> np.ndarray:
-        """``C (s I - A)^-1 B + D`` at ``s = j 2 pi f`` (``z = exp(s dt)`` if discrete): (n_f, n_y, n_u) complex."""
-        A, B, C, D, dt = self.to_statespace()
-        f_hz = np.atleast_1d(np.asarray(f_hz, dtype=float))
-        if f_hz.ndim != 1 or not np.all(np.isfinite(f_hz)):
-            raise InputError("f_hz must be a finite 1-D array of frequencies (Hz)")
-        s = 2j * np.pi * f_hz
-        points = s if dt is None else np.exp(s * dt)
-        resolvent = points[:, None, None] * np.eye(A.shape[0]) - A
-        states = np.linalg.solve(resolvent, np.broadcast_to(B.astype(complex), (f_hz.size, *B.shape)))
-        return C @ states + D
+    def frequency_response(self, f_hz: Any, *, schedule: float | None = None) -> FrequencyResponse:
+        """``C (s I - A)^-1 B + D`` at ``s = j 2 pi f`` (``z = exp(s dt)`` if discrete).
 
-    def to_control(self) -> Any:
+        Parameters
+        ----------
+        f_hz : array_like (n_f,)
+            Frequencies (Hz).
+        schedule : float, optional
+            The scheduling variable's value (module notes).
+
+        Returns
+        -------
+        FrequencyResponse
+            Converts to the complex array (n_f, n_y, n_u).
+        """
+        return statespace_response(self.to_statespace(schedule=schedule), f_hz,
+                                   getattr(self, "input_names", None), self.output_names, schedule)
+
+    def to_control(self, *, schedule: float | None = None) -> Any:
         """A ``control.StateSpace`` (python-control, imported only here)."""
         try:
             import control
         except ImportError:  # pragma: no cover - optional dependency
             raise ImportError("python-control is not installed: pip install control") from None
-        A, B, C, D, dt = self.to_statespace()
+        A, B, C, D, dt = self.to_statespace(schedule=schedule)
         return control.ss(A, B, C, D) if dt is None else control.ss(A, B, C, D, dt)
 
     def to_casadi(self) -> Any:
@@ -273,6 +448,38 @@ class StateSpaceModel:
         values = {"time_domain": "continuous" if dt is None else "discrete", "dt": dt, **self.to_dict()}
         path.write_text(json.dumps(values, indent=2, default=str) + "\n")
         return path
+
+
+def statespace_response(statespace: tuple, f_hz: Any, input_names: Any = None, output_names: Any = None,
+                        schedule: float | None = None) -> FrequencyResponse:
+    """The :class:`FrequencyResponse` of ``(A, B, C, D, dt)`` at ``f_hz`` (Hz), by one solve per frequency.
+
+    Parameters
+    ----------
+    statespace : tuple
+        ``(A, B, C, D, dt)``, ``dt`` None for continuous time.
+    f_hz : array_like (n_f,)
+    input_names, output_names : sequence of str, optional
+        Kept where they count the channels.
+    schedule : float, optional
+        The schedule value the matrices hold at, kept for the plot's title.
+
+    Returns
+    -------
+    FrequencyResponse
+    """
+    A, B, C, D, dt = statespace
+    f_hz = np.atleast_1d(np.asarray(f_hz, dtype=float))
+    if f_hz.ndim != 1 or not np.all(np.isfinite(f_hz)):
+        raise InputError("f_hz must be a finite 1-D array of frequencies (Hz)")
+    s = 2j * np.pi * f_hz
+    points = s if dt is None else np.exp(s * dt)
+    resolvent = points[:, None, None] * np.eye(A.shape[0]) - A
+    states = np.linalg.solve(resolvent, np.broadcast_to(B.astype(complex), (f_hz.size, *B.shape)))
+    names = {key: tuple(value) if value is not None and len(value) == count else None
+             for key, value, count in (("input_names", input_names, B.shape[1]),
+                                       ("output_names", output_names, C.shape[0]))}
+    return FrequencyResponse(f_hz, C @ states + D, dt, schedule=schedule, **names)
 
 
 def sample_interval(dt: float | None, what: str) -> float:

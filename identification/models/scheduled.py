@@ -420,6 +420,15 @@ class ScheduledModalModel:
     output_map : OutputMap, optional
         A static map applied to the simulated outputs (``--schedule`` with ``--nonlinear``); the frozen
         models of :meth:`model_at`, their modes and :attr:`parameters` are the linear part's.
+
+    Notes
+    -----
+    The family meets the model protocol (:class:`~identification.models.protocol.IdentifiedModel`) at a
+    value of its scheduling variable: ``eigenvalues(schedule=v)``, ``modes``, ``frequency_response``,
+    ``to_statespace`` and ``to_control`` are those of :meth:`linear_at` ``v`` (the input gauge, the states of
+    :meth:`simulate_outputs`; the output offset and map aside), and ``simulate_outputs(u, dt, schedule=...)``
+    runs it along a schedule. Its ``n_u`` counts its inputs; a record adds the schedule as a last column
+    (:attr:`record_inputs`).
     """
 
     structure: ModalStructure
@@ -544,9 +553,11 @@ class ScheduledModalModel:
             rows.append({"value": float(value), "modes": [mode.as_dict() for mode in modes]})
         return rows
 
-    def is_stable(self) -> bool:
-        """Every mode in the open left half-plane at every grid value (the frozen models between are
-        interpolated, so their real parts lie between)."""
+    def is_stable(self, *, schedule: float | None = None) -> bool:
+        """Every mode in the open left half-plane at ``schedule``, or without one at every grid value (the
+        frozen models between are interpolated, so their real parts lie between)."""
+        if schedule is not None:
+            return self.linear_at(schedule).is_stable()
         real = np.array([[self.modal[k, s[0]] for s in self.structure.mode_states()] for k in range(self.grid.size)])
         return bool(np.all(real < 0))
 
@@ -555,14 +566,17 @@ class ScheduledModalModel:
         """Input columns of a record the family simulates: its inputs and, last, the schedule."""
         return self.structure.n_u + 1
 
-    #: the family is linear at each schedule value but varies along a record: simulated from rest, as a
-    #: nonlinear model is, by the scorers of the model protocol
+    #: the family is linear at each schedule value but varies along a record: the scorers of the model protocol
+    #: simulate it, as a nonlinear model, its initial state fitted where the rule estimates one
     is_linear = False
+
+    #: varies with its scheduling variable: the protocol's methods take its value (``schedule=``)
+    is_scheduled = True
 
     @property
     def n_u(self) -> int:
-        """Input columns of a record, the schedule last (:attr:`record_inputs`); ``model_at`` has ``structure.n_u``."""
-        return self.record_inputs
+        """The model's inputs, without the schedule (a record has :attr:`record_inputs` columns)."""
+        return self.structure.n_u
 
     @property
     def n_y(self) -> int:
@@ -572,23 +586,23 @@ class ScheduledModalModel:
     def n_states(self) -> int:
         return self.structure.n
 
-    def simulate_outputs(self, u: Any, dt: float, *, schedule: Any = None, method: str = "foh", x0: Any = None,
-                         return_states: bool = False) -> Any:
+    def simulate_outputs(self, u: Any, dt: float | None = None, *, x0: Any = None, schedule: Any = None,
+                         method: str = "foh", return_states: bool = False) -> Any:
         """Outputs (N, n_y) of the family driven by ``u`` along a measured schedule, compiled.
 
         Parameters
         ----------
         u : array_like (N, n_u), or (N, n_u + 1) with the schedule last
         dt : float
-            Sample interval (s).
+            Sample interval (s); required (optional only in the protocol's signature).
+        x0 : array_like (n,), optional
+            Initial state in the input gauge (:meth:`to_statespace`'s basis; default rest).
         schedule : array_like (N,), optional
             The scheduling variable at each sample; without it, ``u``'s last column.
         method : {"foh", "zoh", "euler"}
             Each mode advanced exactly over a sample (inputs linear or held
             between samples), or by Euler's step, with the coefficients of
             the sample's start.
-        x0 : array_like (n,), optional
-            Initial state in the input gauge (default rest).
         return_states : bool
             Also return the input-gauge states (N, n).
         """
@@ -607,7 +621,9 @@ class ScheduledModalModel:
                              f"schedule=; got {u.shape}")
         if not np.all(np.isfinite(u)):
             raise InputError("u or the schedule contains a non-finite value (NaN or inf)")
-        if not (dt is not None and dt > 0 and np.isfinite(dt)):
+        if dt is None:
+            raise InputError("a scheduled model (continuous time) needs the sample interval dt of its input")
+        if not (dt > 0 and np.isfinite(dt)):
             raise InputError(f"dt must be positive; got {dt}")
         if method not in _HOLDS:
             raise InputError(f"unknown simulation method {method!r}; use one of {', '.join(_HOLDS)}")
@@ -620,11 +636,97 @@ class ScheduledModalModel:
             y = self.output_map.apply(y)
         return (y, x) if return_states else y
 
-    def simulate(self, record: Any, **options: Any) -> Any:
-        """``record`` (inputs, then the schedule) with its outputs replaced by the family's, from rest."""
-        return record.replace(y=self.simulate_outputs(record.u, record.dt, **options))
+    def simulate(self, record: Any, *, x0: Any = None, method: str = "foh") -> Any:
+        """The family's response to ``record`` (inputs, then the schedule) from ``x0`` (default rest).
 
-    def to_casadi(self, name: str = "scheduled_modal_model", *, gauge: str = "canonical") -> ca.Function:
+        Parameters
+        ----------
+        record : IOData
+            Its last input column is the schedule.
+        x0 : array_like (n,), optional
+            Initial state in the input gauge.
+        method : {"foh", "zoh", "euler"}
+            As :meth:`simulate_outputs`.
+
+        Returns
+        -------
+        TimeResponse
+            The record's time and inputs (the schedule among them), the family's outputs, and the record's
+            outputs as ``measured``.
+        """
+        from .responses import simulated_response
+
+        y = self.simulate_outputs(record.u, record.dt, x0=x0, method=method)
+        return simulated_response(record, y, output_names=self.output_names)
+
+    @property
+    def schedule_range(self) -> tuple[float, float]:
+        """The least and greatest value of the scheduling variable the family is defined at (its grid's ends)."""
+        return float(self.grid[0]), float(self.grid[-1])
+
+    def linear_at(self, schedule: float) -> Any:
+        """The linear model the family is at one schedule value, in the input gauge (the states of
+        :meth:`simulate_outputs`), without the output offset and output map.
+
+        Parameters
+        ----------
+        schedule : float
+            Within :attr:`schedule_range`.
+
+        Returns
+        -------
+        ContinuousModel
+            Its eigenvalues, modes and frequency response are those of :meth:`model_at` (a similarity apart).
+        """
+        from .discrete import ContinuousModel
+        from .protocol import schedule_value
+
+        w = self._weights(schedule_value(schedule, *self.schedule_range, self.variable))
+        modal, B, C, D = (np.tensordot(w, array, axes=1) for array in (self.modal, self.B, self.C, self.D))
+        rest = np.zeros(self.structure.n_parameters - self.structure.n)
+        A = self.structure.matrices(np.concatenate([modal, rest]))[0]
+        return ContinuousModel(A, B, C, D, self.input_names, self.output_names,
+                               {**self.meta, self.variable: float(schedule), "scheduled": True})
+
+    def to_statespace(self, *, schedule: float | None = None
+
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
+        """``(A, B, C, D, None)`` at a schedule value (required), in the input gauge (:meth:`linear_at`)."""
+        return self.linear_at(schedule).to_statespace()
+
+    def eigenvalues(self, *, schedule: float | None = None) -> np.ndarray:
+        """The eigenvalues (s-plane) at a schedule value (required)."""
+        return self.linear_at(schedule).eigenvalues()
+
+    def modes(self, *, schedule: float | None = None) -> tuple[Any, ...]:
+        """One :class:`~identification.models.protocol.Mode` per pair and real pole at a schedule value (required)."""
+        return self.linear_at(schedule).modes()
+
+    def frequency_response(self, f_hz: Any, *, schedule: float | None = None) -> Any:
+        """The linear part's :class:`~identification.models.responses.FrequencyResponse` at a schedule value
+        (required), the output map aside.
+
+        Parameters
+        ----------
+        f_hz : array_like (n_f,)
+            Frequencies (Hz).
+        schedule : float
+            Within :attr:`schedule_range`.
+
+        Returns
+        -------
+        FrequencyResponse
+        """
+        from .protocol import statespace_response
+
+        return statespace_response(self.to_statespace(schedule=schedule), f_hz, self.input_names, self.output_names,
+                                   float(schedule))
+
+    def to_control(self, *, schedule: float | None = None) -> Any:
+        """A ``control.StateSpace`` (python-control) of the linear model at a schedule value (required)."""
+        return self.linear_at(schedule).to_control()
+
+    def to_casadi(self, *, name: str = "scheduled_modal_model", gauge: str = "canonical") -> ca.Function:
         """One CasADi Function ``(x, u, <variable>) -> (xdot, y)`` of the continuous-time family.
 
         With ``gauge="canonical"`` its states are those of :meth:`model_at`
@@ -687,17 +789,21 @@ class ScheduledModalModel:
         from ..jsonable import to_jsonable
 
         path = Path(path)
-        path.write_text(json.dumps(to_jsonable(self.to_dict()), indent=2) + "\n")
+        values = {"time_domain": "continuous", "dt": None, **self.to_dict()}
+        path.write_text(json.dumps(to_jsonable(values), indent=2) + "\n")
         return path
 
     def save_mat(self, path: Any) -> Any:
-        """Write the grid and the input-gauge arrays (grid value first) to a MATLAB file; returns the path."""
+        """Write the grid and the input-gauge arrays (grid value first; ``A``, ``B``, ``C``, ``D`` each grid value's
+        :meth:`to_statespace`) to a MATLAB file; returns the path."""
         from pathlib import Path
 
         from scipy.io import savemat
 
         path = Path(path)
-        savemat(path, {"grid": self.grid, "modal": self.modal, "B": self.B, "C": self.C, "D": self.D, "offset": self.offset,
+        A = np.array([self.to_statespace(schedule=float(value))[0] for value in self.grid])
+        savemat(path, {"grid": self.grid, "modal": self.modal, "A": A, "B": self.B, "C": self.C, "D": self.D,
+                       "offset": self.offset,
                        "variable": self.variable,
                        **({} if self.output_map is None else {"output_map_nodes": self.output_map.nodes,
                                                                "output_map_ordinates": self.output_map.ordinates}),

@@ -16,12 +16,11 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from ..choices import SPLINE_MAX_NODES as MAX_NODES
+from ..choices import SPLINE_MIN_NODES as MIN_NODES
 from ..errors import InputError
 
 __all__ = ["SplineBasis", "resample", "covering_basis"]
-
-MIN_NODES = 3
-MAX_NODES = 9  # the paper found the symbolic model manageable up to p = 9
 
 # A range narrower than this, relative to its ends' magnitude, leaves the node
 # spacing at the level of rounding noise in x: the basis would be meaningless.

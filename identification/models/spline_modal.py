@@ -24,12 +24,14 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from ..choices import SPLINE_NODE_COUNT
 from ..compiled import CompiledRecursion
 from ..errors import InputError
+from ..optionspec import check_value
 from ..filtering.filter_models import FilterModel, check_discretization, modal_transition
 from .modal import ModalModel, ModalStructure
-from .protocol import Mode, StateSpaceModel
-from .spline import MAX_NODES, MIN_NODES, SplineBasis, resample
+from .protocol import Mode, StateSpaceModel, unscheduled
+from .spline import SplineBasis, resample
 
 __all__ = [
     "AMPLITUDE_FLOOR",
@@ -57,8 +59,7 @@ class SplineModalStructure:
     nodes: int = 5
 
     def __post_init__(self) -> None:
-        if isinstance(self.nodes, bool) or int(self.nodes) != self.nodes or not MIN_NODES <= self.nodes <= MAX_NODES:
-            raise InputError(f"nodes must be a whole number from {MIN_NODES} to {MAX_NODES}; got {self.nodes!r}")
+        check_value("nodes", self.nodes, SPLINE_NODE_COUNT)
 
     @property
     def n_variables(self) -> int:
@@ -331,7 +332,8 @@ class SplineModalModel(StateSpaceModel):
         x0 = np.zeros(self.structure.linear.n) if x0 is None else x0
         return sim(x0, u_normalised, np.concatenate([self.theta, self.constants, [float(self.dt)]]))
 
-    #: Nonlinear: its state-space form is the linearisation at rest, and scores simulate it from rest.
+    #: Nonlinear: its state-space form is the linearisation at rest, and scores simulate it (its initial state fitted
+    #: by Gauss-Newton where the rule estimates one).
     is_linear = False
 
     @property
@@ -349,14 +351,15 @@ class SplineModalModel(StateSpaceModel):
         """Number of states (the order n)."""
         return self.structure.linear.n
 
-    def simulate_outputs(self, u: Any, dt: float | None = None, *, x0: Any = None,
+    def simulate_outputs(self, u: Any, dt: float | None = None, *, x0: Any = None, schedule: Any = None,
                          return_states: bool = False) -> Any:
         """Outputs (N, n_y) in original units from ``x0`` (original units; default rest), for inputs (N, n_u).
 
         ``dt`` must equal the sample interval the model was identified at
-        (its discrete-time behaviour is tied to it).
+        (its discrete-time behaviour is tied to it); ``schedule`` changes nothing.
         """
         u = self.checked_input(u)
+        unscheduled(schedule, u.shape[0])
         if dt is not None and not np.isclose(dt, self.dt, rtol=1e-9):
             raise InputError(f"this model was identified at dt = {self.dt} s; got {dt} s")
         start = self.checked_state(x0) / self.state_scale()
@@ -388,17 +391,19 @@ class SplineModalModel(StateSpaceModel):
             tables[name] = {"variable": variables[follows[index]], "nodes": basis.nodes.copy(), "values": gamma.copy()}
         return tables
 
-    def to_statespace(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
+    def to_statespace(self, *, schedule: float | None = None
+
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
         """The continuous state-space form of :meth:`linear_model` at zero amplitude."""
-        return self.linear_model().to_statespace()
+        return self.linear_model().to_statespace(schedule=schedule)
 
-    def eigenvalues(self) -> np.ndarray:
+    def eigenvalues(self, *, schedule: float | None = None) -> np.ndarray:
         """Eigenvalues of :meth:`linear_model` at zero amplitude."""
-        return self.linear_model().eigenvalues()
+        return self.linear_model().eigenvalues(schedule=schedule)
 
-    def modes(self, amplitude: float = 0.0) -> tuple[Mode, ...]:
+    def modes(self, *, schedule: float | None = None, amplitude: float = 0.0) -> tuple[Mode, ...]:
         """The modes of :meth:`linear_model` at ``amplitude`` (normalised): each pair where its own amplitude is that."""
-        return self.linear_model(amplitude).modes()
+        return self.linear_model(amplitude).modes(schedule=schedule)
 
     def mat_fields(self) -> dict[str, Any]:
         """The linearisation's A, B, C, D with the splines' ordinates, node ranges, scales and Ts."""
@@ -500,7 +505,7 @@ class SplineModalModel(StateSpaceModel):
             self.input_names, self.output_names, {**self.meta, **meta},
         )
 
-    def to_casadi(self, n_samples: int | None = None) -> ca.Function:
+    def to_casadi(self, *, n_samples: int | None = None) -> ca.Function:
         """A self-contained CasADi Function in original units, splines, ranges and scales embedded.
 
         Without ``n_samples``: one step ``vehid_spline_step(x, u0, u1) -> (x_next, y)``, the state in

@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import argparse
 
-from vehid.identification.choices import DETRENDS, JITTER_TOLERANCE, SPLINE_NODES, SPLINE_P, SPLINE_PASSES
+from vehid.identification.automatic.options import IdentifyOptions
+from vehid.identification.choices import JITTER_TOLERANCE, SPLINE_NODES, SPLINE_P, SPLINE_PASSES
+from vehid.scenarios.commands.flags import add_option
 
 __all__ = ["common_options", "register_data_options", "add_filter_options"]
 
@@ -32,7 +34,8 @@ def register_data_options(parser: argparse.ArgumentParser) -> None:
     """
     group = parser.add_argument_group("data files")
     group.add_argument("--time-column", metavar="NAME",
-                       help="time column or variable (default: t when present; 'none' disables it)")
+                       help="time column or variable (default: t, or time, when present, with or without "
+                            "a unit as in time(s); 'none' disables it)")
     group.add_argument("--dt", type=float, help="sample interval in s, for files without a time column")
     group.add_argument("--time-scale", type=float, metavar="FACTOR",
                        help="seconds per unit of the time column, 0.001 for ms (default: from the column's unit, "
@@ -40,11 +43,17 @@ def register_data_options(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--resample", type=float, metavar="HZ",
                        help="interpolate every channel linearly onto a uniform grid at HZ (low-passed first when the rate falls)")
     group.add_argument("--decimate", type=int, metavar="K", help="keep every K-th sample after an anti-aliasing FIR filter")
-    group.add_argument("--segment", metavar="T0:T1", help="use only T0 <= t <= T1 (s, file time)")
+    group.add_argument("--segment", metavar="T0:T1",
+                       help="use only T0 <= t <= T1: the file's time in s, or +T0:+T1 in s from the log's first sample")
+    group.add_argument("--exclude", action="append", metavar="T0:T1", default=None,
+                       help="leave out T0 <= t <= T1 (as --segment: file time, or +T0:+T1 from the log's first "
+                            "sample); the parts before and after are records of their own; repeatable or a comma list")
+    group.add_argument("--despike", action="store_true",
+                       help="replace spikes and drop-outs (found in every channel, listed in any case) by straight "
+                            "lines between their neighbours")
     group.add_argument("--jitter-tolerance", type=float, default=JITTER_TOLERANCE, metavar="FRACTION",
                        help=f"largest stray of a sample time from a uniform grid, in steps (default {JITTER_TOLERANCE:g})")
-    group.add_argument("--detrend", default="mean", choices=DETRENDS,
-                       help="offsets removed per record and stored with the model (default: the means)")
+    add_option(group, IdentifyOptions, "detrend")
     group.add_argument("--scale", action="append", metavar="NAME=FACTOR", default=None,
                        help="multiply a channel by FACTOR before identification: a unit (yawRate=0.0174533 for "
                             "deg/s), a sign (ay=-1 for an axis pointing right); repeatable or a comma list")

@@ -65,10 +65,11 @@ def register(parser: argparse.ArgumentParser) -> None:
                               help="model outputs and the log channels that measured them, e.g. "
                                    "yaw_rate=yawRate,lateral_acceleration=ayCG,sideslip=beta_true")
     replay_group.add_argument("--time-column", metavar="NAME",
-                              help="the log's time column (default: t when present)")
+                              help="the log's time column (default: t or time when present)")
     replay_group.add_argument("--time-scale", type=float, metavar="FACTOR",
                               help="seconds per unit of the time column (default: from its unit)")
-    replay_group.add_argument("--segment", metavar="T0:T1", help="replay only T0 <= t <= T1 (s, log time)")
+    replay_group.add_argument("--segment", metavar="T0:T1",
+                              help="replay only T0 <= t <= T1 (s, log time; +T0:+T1 from the log's first sample)")
     replay_group.add_argument("--resample", type=float, metavar="HZ",
                               help="interpolate the log onto a uniform grid at HZ first")
     replay_group.add_argument("--scale", action="append", metavar="NAME=FACTOR", default=None,
