@@ -508,7 +508,7 @@ def _refined_by_cross_validation(result: Any, plan: Plan, settings: IdentifyOpti
              f"models as they are beat both by more than that")
     keys["decision_margins"] = margins
     model = refined.model
-    return model.with_parameter_covariance(simulation_error_covariance(model, plan.records)), keys
+    return with_simulation_error_covariance(model, plan.records), keys
 
 
 def _estimation_fit(model: ModalModel, plan: Plan, settings: IdentifyOptions) -> float:
@@ -587,7 +587,7 @@ def refined_choice(refined: RefinedCandidates, plan: Plan, settings: IdentifyOpt
             rule=f"the start where its refined model beats the filter's by more than {P_TOLERANCE} points here")
     keys["decision_margins"] = margins
     model = chosen.model
-    return model.with_parameter_covariance(simulation_error_covariance(model, plan.records)), keys
+    return with_simulation_error_covariance(model, plan.records), keys
 
 
 def start_beats_filter(result: Any, plan: Plan, settings: IdentifyOptions) -> dict[str, Any] | None:
