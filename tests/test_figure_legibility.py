@@ -22,7 +22,7 @@ from vehid.identification.assessment.metrics import percentage_explanation
 from vehid.scenarios import plots
 from vehid.scenarios.cli import main
 from vehid.scenarios.handling_report import handling_figures
-from vehid.scenarios.commands.identify import RETURNED_RUNS
+from vehid.scenarios.commands.identify import SCORING_RULE
 from vehid.scenarios.report import archive_figures, archive_verdict, verdict_lines, verdict_output_names, verdict_page
 
 DATA = Path(__file__).parent / "data"
@@ -203,7 +203,7 @@ def test_a_report_of_a_scheduled_run_on_a_real_log_draws_the_family_names_the_ch
     figures = archive_figures(archive)
     verdict = archive_verdict(archive)
     figures["verdict"] = verdict_page(verdict_lines(verdict, verdict_output_names(archive, verdict)))
-    returned = f"{RETURNED_RUNS[summary['model_returned']]} (returned)"
+    returned = f"{verdict[SCORING_RULE]['returned_run']} (returned)"  # the run the archive names as returned
     for name in ("fits_identification", "fits_validation"):
         for ax in figures[name].axes:
             legend = [text.get_text() for text in ax.get_legend().get_texts()]

@@ -66,9 +66,11 @@ def check_fit_keys(summary: Mapping[str, Any], archive_path: Any, table: FitKeys
         assert path in table.drawn or path in table.from_rest, f"{path}: no table accounts for this key"
     archive = read_archive(archive_path)
     rule = _scoring_rule(archive)
+    runs = _run_names(summary, archive)
     checked = set()
     for path, indices, value in found:
         run, record = (table.drawn.get(path) or table.from_rest[path])(summary, indices)
+        run = runs.get(run, run)
         drawn = _model_prediction(archive.runs[run].model, archive.records[record],
                                   rule if path in table.drawn else ScoringRule(initial_state="zero"),
                                   _schedule_of(archive, record))
@@ -80,13 +82,26 @@ def check_fit_keys(summary: Mapping[str, Any], archive_path: Any, table: FitKeys
     return checked
 
 
+RETURNED, LINEAR = "<returned>", "<linear>"  # runs a table names by role, resolved in the archive (_run_names)
+
+
 def _returned(summary: Mapping[str, Any]) -> str:
-    return {"filter": "iekf"}.get(summary.get("model_returned", "filter"), summary.get("model_returned"))
+    return RETURNED
 
 
 def _linear(summary: Mapping[str, Any]) -> str:
-    """The archive's run of the linear model (the filter's or its start), whichever model was returned."""
-    return "start" if summary["decision_margins"]["model_returned"]["choice"] == "start" else "iekf"
+    return LINEAR
+
+
+def _run_names(summary: Mapping[str, Any], archive: Any) -> dict[str, str]:
+    """The archive's runs of the roles: the model returned (the run the archive names), and the linear model (the
+    filter's or its start, refined by its simulation error where the archive holds that run), whichever is returned."""
+    from vehid.scenarios.commands.identify import SCORING_RULE
+
+    choice = (summary.get("decision_margins", {}).get("model_returned") or {}).get("choice")
+    linear = "start" if choice == "start" else "refined" if "refined" in archive.runs else "iekf"
+    returned = (archive.summary or {}).get(SCORING_RULE, {}).get("returned_run")
+    return {RETURNED: returned or linear, LINEAR: linear}
 
 
 def _validation(index: int) -> str:

@@ -327,7 +327,9 @@ def test_a_returned_start_is_what_the_summary_and_the_archive_describe(tmp_path,
 
     def start_preferred(*args, **kwargs):
         tuning = real_tune(*args, **kwargs)
-        return identify_workflow.PTuning(tuning.p, tuning.tried, tuning.seconds, 200.0)  # beyond any fit
+        # beyond any fit: the start as it is, and refined by its simulation error
+        fits = {**(tuning.candidate_fits or {}), "start refined": 200.0}
+        return identify_workflow.PTuning(tuning.p, tuning.tried, tuning.seconds, 200.0, tuning.q_schedule, fits)
 
     monkeypatch.setattr(identify_workflow, "tune_p", start_preferred)
     record = _write_csv(tmp_path / "r.csv", _record(30.0, seed=21, noise=0.05))
@@ -338,7 +340,8 @@ def test_a_returned_start_is_what_the_summary_and_the_archive_describe(tmp_path,
     summary = json.loads(captured.out)
     assert summary["model_returned"] == "start"
     # said once, as a note: returning the better model is no problem to warn about
-    assert sum(note.startswith(identify_workflow.START_RETURNED) for note in summary["notes"]) == 1
+    assert sum("the data start" in note and "returned in the filter's place" in note
+               for note in summary["notes"]) == 1, summary["notes"]
     assert "the start model is returned" not in captured.err and summary["warnings"] == []
     assert summary["decision_margins"]["model_returned"]["choice"] == "start"
     archived = read_archive(out).runs["start"].model

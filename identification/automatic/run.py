@@ -87,7 +87,8 @@ def _order_search(plan: Plan, options: IdentifyOptions, iekf: Any) -> Identifica
     rows, kept = steps.search_orders(plan, lambda order: steps.run_iekf_order(options, plan, iekf, order), options)
     chosen = steps.choose_order(rows)
     model, extra, _ = kept[chosen]
-    keys = {key: extra[key] for key in ("open_loop_unstable", "start_kept", "decision_margins") if key in extra}
+    keys = {key: extra[key] for key in ("open_loop_unstable", "start_kept", "decision_margins", "model_returned",
+                                        "refinement", steps.SPLINE_START) if key in extra}
     keys["decision_margins"] = {**keys.get("decision_margins", {}), "order": steps.order_margin(rows, chosen)}
     return _finish(plan, options, model, estimator=extra["result"], tuning=extra["tuning"], keys=keys,
                    seconds=sum(row["seconds"] for row in rows), rows=rows)
@@ -146,10 +147,11 @@ def _finish(plan: Plan, options: IdentifyOptions, model: Any, *, estimator: Any,
     data = plan.records[0]
     iekf = tuning is not None
     result = estimator if iekf else None
-    start_returned = result is not None and model is not result.model
+    start_returned = result is not None and keys.get("model_returned") == "start"
     if iekf:
         order = result.structure.n
-        fit = pooled_simulation_fit(model, plan.records) if start_returned else result.fit_percent
+        # the filter's R unless another model (its start, or either refined) is returned
+        fit = pooled_simulation_fit(model, plan.records) if model is not result.model else result.fit_percent
     evaluation = steps.evaluate(model, plan, options)
     if rows is not None:
         orders = tuple(_row(row, plan.records) for row in rows)
@@ -161,7 +163,7 @@ def _finish(plan: Plan, options: IdentifyOptions, model: Any, *, estimator: Any,
     # modes that never left their start are a problem of the run, whichever of the two models is returned
     start_fit, start_moved = steps.start_of(result, plan.records) if result is not None else (None, None)
     notes = steps.decision_notes({
-        **{key: keys[key] for key in ("open_loop_unstable", "start_kept") if key in keys},
+        **{key: keys[key] for key in ("open_loop_unstable", "start_kept", "refinement") if key in keys},
         **({"model_returned": "start"} if start_returned else {}),
         **({"start_cv_fit_percent": tuning.start_fit} if iekf else {})})
     stop_reason = None
@@ -183,7 +185,9 @@ def _finish(plan: Plan, options: IdentifyOptions, model: Any, *, estimator: Any,
     decisions = tuple(Decision.from_entry(name, entry) for name, entry in keys.get("decision_margins", {}).items())
     linear = _Candidate("start" if start_returned else ("filter" if iekf else options.method), model, evaluation,
                         warnings, fit, plan.records)
-    chosen, others, nonlinear, scheduled, more, said = _candidates(plan, options, linear)
+    # the spline model starts from the linear model before any refinement (steps.SPLINE_START): the filter's own
+    chosen, others, nonlinear, scheduled, more, said = _candidates(plan, options, linear,
+                                                                   spline_start=keys.get(steps.SPLINE_START, model))
     decisions += more
     notes += said
     for other in others:  # what went wrong with a model not returned is no warning about the one returned
@@ -242,19 +246,20 @@ class _Candidate:
         return self.records(plan)[0]
 
 
-def _candidates(plan: Plan, options: IdentifyOptions, linear: _Candidate
+def _candidates(plan: Plan, options: IdentifyOptions, linear: _Candidate, *, spline_start: Any = None
                 ) -> tuple[_Candidate, list[_Candidate], Any, Any, tuple[Decision, ...], list[str]]:
     """The model returned among the linear one and the others asked for, every one scored by the run's rule.
 
     The scheduled family (a plan with a schedule) replaces the linear model where it beats it by
     its margin (decision ``schedule``); the spline model (``nonlinear``) replaces whichever of the two
     stands where it beats that by its own (decision ``nonlinear``). Returns the model returned, the
-    others, the spline and scheduled outcomes, the decisions and their notes.
+    others, the spline and scheduled outcomes, the decisions and their notes. The spline model starts
+    from ``spline_start`` (default: the linear candidate's model).
     """
     chosen, others, decisions, notes = linear, [], (), []
     nonlinear = scheduled = spline = family = None
     if options.nonlinear:
-        nonlinear = steps.identify_nonlinear(linear.model, plan, options)
+        nonlinear = steps.identify_nonlinear(linear.model if spline_start is None else spline_start, plan, options)
         scores = nonlinear.scores
         scored = steps.Evaluation(scores.estimation, scores.estimation.R, scores.validation, scores.horizon)
         spline = _Candidate("nonlinear", nonlinear.result.model, scored, steps.run_warnings(

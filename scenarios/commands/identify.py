@@ -163,6 +163,7 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     return summary, text
 
 
+REFINED_RUN = "refined"  # the archive's run holding the filter's model refined by its simulation error
 DECISIONS = "decisions_json"  # root attribute: the p tuning and the stability decision taken before the passes
 
 
@@ -184,7 +185,8 @@ def _read_decisions(archive) -> tuple:
         stored = json.loads(archive.attrs[DECISIONS])
         tuning = stored["tuning"]
         return (PTuning(p=float(tuning["p"]), tried=tuple(tuning["tried"]), seconds=float(tuning["seconds"]),
-                                 start_fit=tuning["start_fit"], q_schedule=tuning.get("q_schedule", "constant")),
+                                 start_fit=tuning["start_fit"], q_schedule=tuning.get("q_schedule", "constant"),
+                                 candidate_fits=tuning.get("candidate_fits")),
                 stored["open_loop_unstable"])
     except (ValueError, KeyError, TypeError):
         raise InputError(f"{archive.filename} holds an unreadable record of the run's decisions") from None
@@ -399,12 +401,17 @@ def _finish(args, plan, result, archive_path=None) -> tuple[dict, str, object]:
             if scheduled is not None:
                 write_run(archive, "scheduled", model=scheduled.model)
                 scheduled_identify.archive_schedule(archive, plan, VALIDATION_PREFIX)
+            # the filter's model refined by its simulation error is a model of its own, beside the filter's
+            refined = result.is_iekf and not result.start_returned and linear is not result.estimator.model
             if result.start_returned:
                 write_run(archive, "start", model=linear)
+            elif refined:
+                write_run(archive, REFINED_RUN, model=linear)
+            returned_run = REFINED_RUN if refined and result.returned == "filter" else \
+                RETURNED_RUNS.get(result.returned, own_run)
             if result.residual_tests is not None:
-                write_value(run_group(archive, RETURNED_RUNS.get(result.returned, own_run)), "residual_tests",
-                            result.residual_tests)
-            _archive_verdict(archive, summary, args, returned=RETURNED_RUNS.get(result.returned, own_run))
+                write_value(run_group(archive, returned_run), "residual_tests", result.residual_tests)
+            _archive_verdict(archive, summary, args, returned=returned_run)
     if args.save_model:
         summary["model_file"] = str(save_model(model, args.save_model, plan.preparation))
     text = text_summary(summary, data, plan)
