@@ -13,8 +13,8 @@ from the validation input from the least-squares initial state (MATLAB
 ``compare``), an unstable one predicted 10 samples ahead, the workbench's
 and the linear peers' models alike (``score_as_identify``; each peer row
 keeps ``compare``'s own figure, simulated whatever the stability, as
-``compare_fit_percent``); the spline model from rest, as ``identify
---nonlinear`` scores it. Every method scores the same centred samples
+``compare_fit_percent``); the spline model by the same rule, its initial state
+estimated, as ``identify --nonlinear`` scores it. Every method scores the same centred samples
 (``_real_records.validation_offsets``).
 
 Workbench rows run the command line a user runs on the raw file as
@@ -60,6 +60,13 @@ own order (``best_peer_at_default_order``), the default not searching its
 order.
 
 The table goes to ``results/benchmarks.json`` under ``real_data``.
+
+Regressions: every workbench row's hold-out fit per output at the usual
+split, and the default's at every held-out fraction, are compared with the
+figures committed in ``benchmarks/baselines/real_data.json``
+(``_baselines.py``); an output that lost more than a point is named and the
+script exits with status 1 (``--update-baseline`` writes this run's figures
+there instead, after a change meant to move them).
 """
 
 from __future__ import annotations
@@ -76,7 +83,8 @@ from pathlib import Path
 
 import numpy as np
 
-import _real_records as records  # beside this script, so on sys.path when it runs
+import _baselines as baselines  # beside this script, so on sys.path when it runs
+import _real_records as records
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -160,8 +168,8 @@ def run_workbench(entry: records.RecordSet, scratch: Path, default_only: bool = 
             row["validation_fit_percent"] = summary.get("validation_fit_percent")
         row.update({key: summary[key] for key in summary if key in SUMMARY_KEYS or "nonlinear" in key})
         if label == NONLINEAR_ROW and status in (0, 3):
-            # the spline model's own hold-out fit; validation_fit_percent stays the linear start's
-            row["linear_validation_fit_percent"] = row["validation_fit_percent"]
+            # the spline model's own hold-out fit, and its linear start's (the model returned is the better)
+            row["linear_validation_fit_percent"] = summary["orders_tried"][0]["validation_fit_percent"]
             row["validation_fit_percent"] = _nonlinear_validation_fit(summary)
         if label == DEFAULT_ROW and status in (0, 3):
             row["decisions"] = decisions_of(summary)
@@ -640,6 +648,24 @@ def print_perturbations(sets: dict) -> None:
                   + ("" if gap is None else f", {gap:+.1f}") + fixed + same)
 
 
+def baseline_figures(sets: dict) -> dict[str, list]:
+    """The figures the committed baseline guards: ``"record | row | split" -> fit per output`` (an empty list
+    where the run failed), for every workbench row at the usual split and the default at every fraction."""
+    figures: dict[str, list] = {}
+    for name, rows in sets.items():
+        entry = records.record_set(name)
+        for key, row in rows.items():
+            if key.startswith("workbench:") and isinstance(row, dict):
+                label = key[len("workbench:"):]
+                figures[f"{name} | {label} | {_fraction(entry, records.HOLDOUT)}"] = list(
+                    row.get("validation_fit_percent") or [])
+        spread = rows.get("perturbations") or {}
+        for run in spread.get("runs", []) if isinstance(spread, dict) else spread:
+            if run["perturbation"].startswith("fraction"):
+                figures[f"{name} | {DEFAULT_ROW} | {run['fraction']}"] = list(run.get("validation_fit_percent") or [])
+    return figures
+
+
 def _numbers(kind):
     return lambda text: [kind(item) for item in text.split(",") if item.strip()]
 
@@ -665,6 +691,9 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--workbench-from", type=Path, metavar="FILE",
                         help="a benchmarks.json whose real_data section holds the workbench's rows and perturbed runs "
                              "for these records, reused instead of running identify")
+    parser.add_argument("--update-baseline", action="store_true",
+                        help="write this run's workbench figures to benchmarks/baselines/real_data.json instead of "
+                             "comparing them with it")
     parser.add_argument("--order-rule", choices=("holdout", "estimation-split"), default="holdout",
                         help="what chooses a peer's order: the held-out fits (as identify --validation F --order "
                              "2-8) or a split of the estimation part")
@@ -753,8 +782,14 @@ def main(argv: list[str] | None = None) -> dict:
     from vehid.scenarios.benchmarking import record_figures
 
     print(f"figures written to {record_figures('real_data', figures)}")
+    figures["regressions"] = baselines.check(
+        "real_data", baseline_figures(sets), update=args.update_baseline,
+        about={"benchmark": "benchmarks/real_data.py", "score": figures["score"], "split": figures["split"],
+               "cases": "record | workbench row | held-out fraction (published: the record's own validation "
+                        "record): hold-out NRMSE fit % per output"})
     return figures
 
 
 if __name__ == "__main__":
-    sys.exit(1 if "peers_error" in main() else 0)
+    outcome = main()
+    sys.exit(1 if "peers_error" in outcome or outcome["regressions"] else 0)

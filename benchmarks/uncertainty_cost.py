@@ -41,6 +41,7 @@ import vehid.identification.filtering.iekf as iekf
 from vehid.identification.classical.comparators import identify_with
 from vehid.identification.filtering.iekf import IEKFOptions, identify_iekf
 from vehid.identification.models.modal import ModalStructure
+from vehid.identification.assessment.segments import formal_method
 from vehid.identification.assessment.uncertainty import frequency_response
 from vehid.scenarios.benchmarking import median_seconds, record_figures
 from vehid.scenarios.cli import main as cli_main
@@ -62,18 +63,18 @@ def _alternating(bare, run, repeats: int) -> tuple[float, float, float]:
     Also the baseline's interquartile range over its median: the run-to-run spread against which
     a difference of the two medians is read.
     """
-    shipped = (iekf.iekf_parameter_covariance, comparators.gauss_newton_covariance)
+    shipped = (iekf.iekf_parameter_covariance, comparators.fit_covariance)
     times: dict[str, list[float]] = {"bare": [], "run": []}
     run()  # warm-up: compiled pass and CasADi functions
     for _ in range(repeats):
-        iekf.iekf_parameter_covariance = lambda *args, **kwargs: None
-        comparators.gauss_newton_covariance = lambda *args, **kwargs: None
+        iekf.iekf_parameter_covariance = lambda *args, **kwargs: (None, None)
+        comparators.fit_covariance = lambda *args, **kwargs: (None, formal_method("switched off"))
         try:
             started = time.perf_counter()
             bare()
             times["bare"].append(time.perf_counter() - started)
         finally:
-            iekf.iekf_parameter_covariance, comparators.gauss_newton_covariance = shipped
+            iekf.iekf_parameter_covariance, comparators.fit_covariance = shipped
         started = time.perf_counter()
         run()
         times["run"].append(time.perf_counter() - started)
@@ -86,7 +87,9 @@ def _added_steps(identify, covariance: str, record, repeats: int) -> dict:
     """The seconds of each step uncertainty adds, timed where it runs (right after the fit), medians.
 
     ``identify()`` returns the model with its covariance, which the
-    comparators' function named ``covariance`` computes. A difference of two
+    comparators' function named ``covariance`` computes (output error's
+    ``fit_covariance``, the delete-one-block jackknife of its fit; N4SID's
+    ``with_simulation_error_covariance``, the same of its simulation errors). A difference of two
     medians of whole runs carries the noise of two fits (their run-to-run
     spread, ``baseline_iqr_percent``, is as large as what is measured);
     the steps timed themselves do not. ``identify_s`` is what `vehid
@@ -179,8 +182,9 @@ def main() -> dict:
                          "baseline_iqr_percent": 100 * spread}
     for name, identify, covariance, record, repeats in (
         ("output-error", lambda: identify_with(data, method="output-error", order=5, start=start).model,
-         "gauss_newton_covariance", data, 7),
-        ("n4sid", lambda: identify_with(clean, method="n4sid", order=5).model, "simulation_error_covariance", clean, 21),
+         "fit_covariance", data, 7),
+        ("n4sid", lambda: identify_with(clean, method="n4sid", order=5).model, "with_simulation_error_covariance",
+         clean, 21),
     ):
         steps = _added_steps(identify, covariance, record, repeats)
         baseline = figures[name]["baseline_s"]

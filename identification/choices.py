@@ -16,7 +16,7 @@ __all__ = ["DETRENDS", "DETREND", "SPLINE_MIN_NODES", "SPLINE_MAX_NODES", "SPLIN
            "SCHEDULE_GRID", "JITTER_TOLERANCE", "DATA_STARTS", "START_VALUES", "START_CHOICES", "DISCRETIZATIONS",
            "COVARIANCE_FORMS", "TIMESCALES", "INITIAL_STATES", "C_PATTERNS", "SPLINE_NODES", "SPLINE_P",
            "SPLINE_PASSES", "SCHEDULE_DEFAULT_KNOTS", "SCHEDULE_MIN_KNOTS", "SCHEDULE_MAX_KNOTS",
-           "SCHEDULED_DEFAULT_P", "SCHEDULED_P_GRID"]
+           "SCHEDULED_DEFAULT_P", "SCHEDULED_P_GRID", "ESTIMATORS"]
 
 #: How offsets are estimated: each record's mean, a line through each record, or none.
 DETRENDS = ("mean", "linear", "none")
@@ -58,6 +58,10 @@ INITIAL_STATES = ("zero", "estimate")
 #: order-study patterns of eq. 19 (n = 3..7, three outputs); ``default`` the
 #: workbench's generalisation (pairs first, outputs assigned in turn).
 C_PATTERNS = ("default", "all-ones", "eq18", "eq19")
+
+#: The built-in estimators by name (``--method``): the IEKF and the classical comparators, the keys of
+#: :data:`~vehid.identification.classical.comparators.COMPARATORS` before any other is registered.
+ESTIMATORS = ("iekf", "arx", "rls", "n4sid", "output-error")
 
 #: Nodes per spline: the paper found the symbolic model manageable up to 9.
 SPLINE_MIN_NODES = 3

@@ -9,9 +9,9 @@ scores better by more than the scores themselves move.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Mapping, Sequence
 
-__all__ = ["ScheduleCandidate", "SCHEDULE_MARGIN", "choose_p_and_schedule"]
+__all__ = ["ScheduleCandidate", "SCHEDULE_MARGIN", "choose_p_and_schedule", "choose_refined"]
 
 # Points of two-fold cross-validated fit by which a constant Q must beat the best shrinking Q.
 # On the public hair-dryer and heat-exchanger records (held-out fractions 0.3-0.4) a constant Q
@@ -68,3 +68,34 @@ def choose_p_and_schedule(candidates: Sequence[ScheduleCandidate], p_tolerance: 
         schedule = challenger
     near = [c.p for c in candidates if c.schedule == schedule and c.fit >= best[schedule] - p_tolerance]
     return max(near), schedule
+
+
+def choose_refined(fits: Mapping[str, float | None], margin: float = SCHEDULE_MARGIN) -> str | None:
+    """Which model to return refined by its simulation error, ``"filter"`` or ``"start"``; None for neither.
+
+    Parameters
+    ----------
+    fits : mapping
+        Cross-validated fits (%) of ``"filter"``, ``"start"``, ``"filter refined"`` and
+        ``"start refined"`` (None where not scored).
+    margin : float
+        Points of cross-validated fit that rank two models (the schedule margin: smaller
+        leads of such fits did not rank the hold-out fits).
+
+    Returns
+    -------
+    The refined models are returned unless the best model as it is beats the best refined one by
+    more than ``margin`` (a refinement that fits one half of the record and predicts the other
+    worse); of the two the filter's, unless the start's beats it by more than ``margin``. None
+    where no refined model was scored or the refinement loses.
+    """
+    refined = {name: fits.get(f"{name} refined") for name in ("filter", "start")}
+    scored = [fit for fit in refined.values() if fit is not None]
+    if not scored:
+        return None
+    plain = [fit for fit in (fits.get("filter"), fits.get("start")) if fit is not None]
+    if plain and max(plain) > max(scored) + margin:
+        return None
+    if refined["filter"] is None:
+        return "start"
+    return "start" if refined["start"] is not None and refined["start"] > refined["filter"] + margin else "filter"

@@ -16,7 +16,7 @@ from matplotlib.figure import Figure
 from vehid.identification.errors import InputError
 
 __all__ = ["REPORT_SIZE", "new_figure", "figure_of_size", "style_axes", "add_legend", "figure_legend", "known_unit", "with_unit",
-           "channel_label", "display_samples"]
+           "channel_label", "display_samples", "OUTLIER_SPREADS", "robust_range", "set_robust_limits"]
 
 #: Default figure size in inches: legible on an A4 page at 100 % with 9-10 pt text.
 REPORT_SIZE = (7.0, 4.5)
@@ -120,3 +120,69 @@ def display_samples(x: Any, y: Any, bins: int = 1000) -> tuple[np.ndarray, np.nd
                            np.flatnonzero(~np.isfinite(y)), [0, count - 1]])  # gaps stay gaps
     kept = np.unique(kept[kept < count])
     return x[kept], y[kept]
+
+
+#: How far from the median, in robust standard deviations (1.4826 median absolute deviations), a value still
+#: sets an axis's range: a sine's extremes lie within 1.5 of them and a settling fit's first passes within
+#: a few, while a one-sample spike or a diverged prediction lies thousands away
+OUTLIER_SPREADS = 30.0
+_PAD = 0.05  # of the range, each side
+_SPREAD_FLOOR = 1e-3  # of a constant series' magnitude: the span its axis is given
+
+
+def robust_range(values: Any, *, log: bool = False, outliers: bool = True) -> tuple[float, float] | None:
+    """The range of ``values`` without their outliers: the finite values within :data:`OUTLIER_SPREADS` robust
+    standard deviations of their median (in decades where ``log``, positive values only). Where most values
+    are equal (no spread), the others count up to the first that lies that factor farther from the
+    median than the one before. With ``outliers`` False, every finite value counts. None where no value is
+    finite."""
+    v = np.asarray(values, dtype=float).ravel()
+    v = v[np.isfinite(v) & (v > 0)] if log else v[np.isfinite(v)]
+    if v.size == 0:
+        return None
+    if log:
+        v = np.log10(v)
+    if not outliers:
+        return (10.0 ** v.min(), 10.0 ** v.max()) if log else (float(v.min()), float(v.max()))
+    median = float(np.median(v))
+    deviation = np.abs(v - median)
+    spread = 1.4826 * float(np.median(deviation))
+    if spread > 0:
+        kept = v[deviation <= OUTLIER_SPREADS * spread]
+    else:  # most values equal (a settled fit, a flat phase): the others count up to a jump by that factor
+        steps = np.unique(deviation[deviation > 0])
+        jumps = np.flatnonzero(steps[1:] > OUTLIER_SPREADS * steps[:-1])
+        reach = steps[jumps[0]] if jumps.size else (steps[-1] if steps.size else 0.0)
+        kept = v[deviation <= reach]
+    low, high = float(kept.min()), float(kept.max())
+    return (10.0**low, 10.0**high) if log else (low, high)
+
+
+def set_robust_limits(ax: Axes, values: Any, *, extra: Any = None, axis: str = "y", log: bool = False,
+                      outliers: bool = True) -> int:
+    """Set ``ax``'s ``axis`` range from ``values`` without their outliers (:func:`robust_range`), widened to take in
+    ``extra`` (other curves, bands) only as far as one more such range each side, then padded.
+
+    A spike in a record, a failed candidate's diverging prediction or a confidence band that
+    runs to nothing then leaves the data's own range legible; what lies beyond is cut at the frame.
+    With ``outliers`` False every value of ``values`` is in range (curves that are all data, whose
+    ``extra`` bands may run off). Returns how many of ``values`` lie beyond the range set (a caller
+    may say so).
+    """
+    found = robust_range(values, log=log, outliers=outliers)
+    if found is None:
+        return 0
+    low, high = (np.log10(found[0]), np.log10(found[1])) if log else found
+    span = high - low if high > low else max(abs(high), 1.0) * _SPREAD_FLOOR
+    if extra is not None:
+        more = np.asarray(extra, dtype=float).ravel()
+        more = more[np.isfinite(more) & (more > 0)] if log else more[np.isfinite(more)]
+        if more.size:
+            more = np.log10(more) if log else more
+            low, high = max(min(low, float(more.min())), low - span), min(max(high, float(more.max())), high + span)
+            span = high - low
+    low, high = low - _PAD * span, high + _PAD * span
+    limits = (10.0**low, 10.0**high) if log else (low, high)
+    (ax.set_ylim if axis == "y" else ax.set_xlim)(*limits)
+    v = np.asarray(values, dtype=float).ravel()
+    return int(np.count_nonzero(np.isfinite(v) & ((v < limits[0]) | (v > limits[1]))))

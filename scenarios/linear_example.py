@@ -40,7 +40,7 @@ from vehid.identification.errors import InputError
 from vehid.identification.filtering.iekf import IEKFOptions, IEKFResult, identify_iekf
 from vehid.identification.filtering.iekf_archive import write_iekf_run
 from vehid.identification.jsonable import to_jsonable
-from vehid.identification.assessment.metrics import percentage_explanation
+from vehid.identification.assessment.metrics import nrmse_fit_of_R, percentage_explanation
 from vehid.identification.models.modal import ModalModel, ModalStructure
 from vehid.identification.assessment.order import OrderAssessment, assess_orders
 
@@ -203,11 +203,24 @@ def _eigen_text(values: Any) -> str:
     return ", ".join(parts)
 
 
-def _model_summary(result: IEKFResult) -> dict[str, Any]:
+def _model_summary(result: IEKFResult, data: IOData) -> dict[str, Any]:
+    """A run's JSON keys: every ``*fit_percent`` an NRMSE fit and every ``*R`` its fit R (eq. 17) on ``data``.
+
+    ``fit_percent``/``R`` per output of the continuous model simulated exactly from rest; the ``*_by_pass``
+    lists the mean over the outputs after each pass, ``fit_percent_by_pass``/``R_by_pass`` of the model
+    simulated with the filter's discretisation, ``fit_continuous_by_pass``/``R_continuous_by_pass``
+    exactly. The fits are converted from the filter's R on the same samples
+    (:func:`~vehid.identification.assessment.metrics.nrmse_fit_of_R`).
+    """
     model = result.model
+
+    def fit(R: Any) -> np.ndarray:
+        return nrmse_fit_of_R(R, data.y)
+
     return {
         "eigenvalues": model.eigenvalues(),
-        "fit_percent": result.fit_percent,
+        "fit_percent": fit(result.fit_percent),
+        "R": result.fit_percent,
         "passes_run": result.passes_run,
         "discretization": result.options.discretization,
         "A": model.A,
@@ -215,8 +228,10 @@ def _model_summary(result: IEKFResult) -> dict[str, Any]:
         "C": model.C,
         "D": model.D,
         "seconds": result.seconds,
-        "fit_percent_by_pass": [record.mean_fit_filter for record in result.history],
-        "fit_continuous_by_pass": [record.mean_fit_continuous for record in result.history],
+        "fit_percent_by_pass": [float(np.mean(fit(record.fit_filter))) for record in result.history],
+        "R_by_pass": [record.mean_fit_filter for record in result.history],
+        "fit_continuous_by_pass": [float(np.mean(fit(record.fit_continuous))) for record in result.history],
+        "R_continuous_by_pass": [record.mean_fit_continuous for record in result.history],
         "trace_p_by_pass": [record.trace_p for record in result.history],
         "stop_reason": result.stop_reason,
     }
@@ -296,7 +311,7 @@ def run_case(
          "paper": "~100", "reference": "-"},
         {"quantity": "trace(P) final", "workbench": f"{result.history[-1].trace_p:.4g}", "paper": "-", "reference": "-"},
     ]
-    summary = {"case": case, **_model_summary(result), "paper": paper, "seed": seed}
+    summary = {"case": case, **_model_summary(result, data), "paper": paper, "seed": seed}
     converged = "converged" if result.stop_reason == "converged" else f"not converged ({result.stop_reason})"
     text = _table_text(f"Linear example, {case} ({discretization}, {result.passes_run} passes, {converged}, seed {seed})", rows)
     return CaseResult(case, settings, {case: result}, {"identification": data}, tuple(rows), summary, text,

@@ -33,6 +33,8 @@ from .figure_style import (  # noqa: F401
     figure_of_size,
     known_unit,
     new_figure,
+    robust_range,
+    set_robust_limits,
     style_axes,
     with_unit,
 )
@@ -68,6 +70,7 @@ _GROUP_LABELS = {
     "D": "d_ij (output/input)",
 }
 _GROUP_PATTERNS = (("modal", r"(sigma|omega)\d+"), ("B", r"b\d+"), ("C", r"c\d+"), ("D", r"d\d+"))
+_NODE = re.compile(r"(?P<coefficient>.+)\[(?P<node>\d+)\]")  # a spline coefficient's node ordinate: ``sigma1[3]``
 
 
 def _matrix(name: str, value: Any, columns: int | None = None) -> np.ndarray:
@@ -103,11 +106,14 @@ def parameter_groups(names: Sequence[str]) -> dict[str, list[int]]:
     """Indices of theta by group (``modal``, ``B``, ``C``, ``D``, ``other``) from parameter names.
 
     Names as :meth:`ModalStructure.parameter_names` gives them (``sigma1``,
-    ``omega1``, ``b11``, ``c21``, ``d11``); groups that would be empty are left out.
+    ``omega1``, ``b11``, ``c21``, ``d11``), or a spline coefficient's node
+    ordinates (``sigma1[3]``); groups that would be empty are left out.
     """
     groups: dict[str, list[int]] = {}
     for index, name in enumerate(names):
-        group = next((g for g, pattern in _GROUP_PATTERNS if re.fullmatch(pattern, name)), "other")
+        node = _NODE.fullmatch(name)
+        base = node["coefficient"] if node else name
+        group = next((g for g, pattern in _GROUP_PATTERNS if re.fullmatch(pattern, base)), "other")
         groups.setdefault(group, []).append(index)
     order = [g for g, _ in _GROUP_PATTERNS] + ["other"]
     return {g: groups[g] for g in order if g in groups}
@@ -160,11 +166,21 @@ def plot_parameter_history(
     axes = fig.subplots(count, 1, sharex=True, squeeze=False)[:, 0]
     for ax, (label, indices) in zip(axes, groups.items()):
         style_axes(ax)
+        colours: dict[str, Any] = {}  # a spline coefficient's nodes share a colour and one legend entry
         for index in indices:
-            ax.plot(x, values[:, index], label=names[index], linewidth=1.2)
-        ax.set_ylabel(_GROUP_LABELS.get(label, "value"), fontsize=10)
+            node = _NODE.fullmatch(names[index])
+            if node is None:
+                ax.plot(x, values[:, index], label=names[index], linewidth=1.2)
+                continue
+            coefficient = node["coefficient"]
+            first = coefficient not in colours
+            (line,) = ax.plot(x, values[:, index], linewidth=1.2, color=colours.get(coefficient),
+                              label=f"{coefficient} (nodes)" if first else None)
+            colours.setdefault(coefficient, line.get_color())
+        # a spline filter keeps its node ordinates in its normalised units (signals over their largest magnitude)
+        ax.set_ylabel("node ordinates (normalised)" if colours else _GROUP_LABELS.get(label, "value"), fontsize=10)
         ax.set_title(f"{label} ({len(indices)} parameters)" if label in _GROUP_LABELS else label, fontsize=10)
-        add_legend(ax, loc="center left", bbox_to_anchor=(1.02, 0.5), ncols=1 + len(indices) // 7)
+        add_legend(ax, loc="center left", bbox_to_anchor=(1.02, 0.5), ncols=1 + len(ax.get_legend_handles_labels()[1]) // 7)
     axes[-1].set_xlabel(x_label)
     fig.suptitle(title)
     return fig
@@ -221,8 +237,13 @@ def plot_convergence(
             raise InputError(f"fit_continuous has {continuous.shape[0]} passes but fit_filter {fit.shape[0]}")
         ax_fit.plot(x, continuous.mean(axis=1), color="tab:red", linestyle="--", linewidth=1.8,
                     label="simulated model" + (" (mean)" if continuous.shape[1] > 1 else ""))
+    # a first pass far off (R of -80,000 %) would flatten every other pass: the range leaves such passes out
+    shown = [fit, continuous] if fit_continuous is not None else [fit]
+    beyond = set_robust_limits(ax_fit, np.concatenate([part.ravel() for part in shown]))
+    ax_fit.ticklabel_format(axis="y", useOffset=False)  # a settled fit's ticks in percent, not "+9.78e1" above them
     ax_fit.set_ylabel("R (%)")
-    ax_fit.set_title("(a) percentage explanation R (eq. 17)", fontsize=10)
+    ax_fit.set_title("(a) percentage explanation R (eq. 17)"
+                     + (f"; {beyond} value{'s' if beyond > 1 else ''} beyond the frame" if beyond else ""), fontsize=10)
     add_legend(ax_fit)
     ax_trace.semilogy(x, trace, color="tab:blue", linewidth=1.8, label="trace(P)")
     if min_eig_p is not None:
@@ -370,8 +391,13 @@ def plot_time_fits(
                 text = f"{label} (R = {fits[label][i]:.2f} %)"
             ax.plot(*display_samples(t[shown], value[shown, i]), linewidth=1.2, label=text)
         marked = [k for k in (spikes or {}).get(names[i], ()) if 0 <= k < t.size and shown[k]]
+        clean = shown.copy()
+        clean[marked] = False
+        # the measurement without its listed spikes sets the range; an unlisted spike or a prediction that
+        # runs away is cut at the frame, a listed spike marked where it lies or at the edge it passes
+        set_robust_limits(ax, y[clean, i], extra=[value[shown, i] for value in predicted.values()])
         if marked:
-            mark_spikes(ax, t, y[:, i], marked, [value[:, i] for value in predicted.values()], shown)
+            mark_spikes(ax, t, y[:, i], marked)
         ax.set_ylabel(with_unit(channel_label(names[i]), units[i]))
         add_legend(ax)
     axes[-1].set_xlabel("time (s)")
@@ -379,24 +405,13 @@ def plot_time_fits(
     return fig
 
 
-def mark_spikes(ax: Axes, t: np.ndarray, measured: np.ndarray, indices: Sequence[int],
-                others: Sequence[np.ndarray] = (), shown: np.ndarray | None = None) -> None:
-    """Mark a channel's spikes on its axis, the axis range set by everything else drawn on it.
+def mark_spikes(ax: Axes, t: np.ndarray, measured: np.ndarray, indices: Sequence[int]) -> None:
+    """Mark a channel's spikes on its axis, whose range the other samples have set.
 
-    The range covers the measured samples that are no spike and the ``others`` drawn (model outputs),
-    with a 5 % margin; a spike inside it is ringed where it lies, one beyond it drawn as a triangle at the
-    edge it passes, pointing out, so that one glitch does not squash the record into a line.
+    A spike inside the range is ringed where it lies; one beyond it is drawn as a triangle at the edge
+    it passes, pointing out, so that one glitch neither squashes the record into a line nor goes unseen.
     """
-    shown = np.ones(t.size, dtype=bool) if shown is None else shown
-    clean = shown.copy()
-    clean[list(indices)] = False
-    values = [measured[clean], *(np.asarray(other)[shown] for other in others)]
-    values = [v[np.isfinite(v)] for v in values if np.size(v)]
-    if not values or not any(v.size for v in values):
-        return
-    low, high = min(float(v.min()) for v in values if v.size), max(float(v.max()) for v in values if v.size)
-    margin = 0.05 * (high - low) if high > low else max(abs(high), 1.0) * 0.05
-    low, high = low - margin, high + margin
+    low, high = ax.get_ylim()
     at = np.asarray(indices, dtype=int)
     spike_t, spike_y = t[at], measured[at]
     inside = (spike_y >= low) & (spike_y <= high)
@@ -542,12 +557,15 @@ def plot_bode(
     title: str | None = None,
     fig: Figure | None = None,
     confidence: bool = True,
+    bands: Sequence[str] | None = None,
 ) -> Figure:
     """Magnitude and phase from one input to every output, for several models.
 
     Models that carry a parameter covariance get their 95 % band shaded
     (delta method, :func:`vehid.identification.assessment.uncertainty.frequency_response`)
-    unless ``confidence`` is False.
+    unless ``confidence`` is False; with ``bands``, only the models of those labels. The curves set
+    each axis's range, all of them (:func:`~vehid.scenarios.figure_style.set_robust_limits`): a band that
+    runs to nothing or round the circle is cut at the frame.
 
     Parameters
     ----------
@@ -580,8 +598,9 @@ def plot_bode(
     n_y = next(iter(curves.values())).shape[1]
     if any(g.shape[1] != n_y for g in curves.values()):
         raise InputError("all models must have the same number of outputs")
-    bands = {label: response_band(model, frequencies) for label, model in models.items()
-             if confidence and getattr(model, "parameter_covariance", None) is not None}
+    shaded = {label: response_band(model, frequencies) for label, model in models.items()
+              if confidence and getattr(model, "parameter_covariance", None) is not None
+              and (bands is None or label in bands)}
     if output_names is None:
         first = next(iter(models.values()), None)
         output_names = getattr(first, "output_names", None)
@@ -594,18 +613,23 @@ def plot_bode(
     axes = fig.subplots(2, n_y, sharex=True, squeeze=False)
     for i in range(n_y):
         ax_mag, ax_phase = style_axes(axes[0, i]), style_axes(axes[1, i])
+        phases = []
         for label, g in curves.items():
             style = {"color": "k", "linestyle": "--"} if label == "reference" else {}
             lines = ax_mag.loglog(frequencies, np.abs(g[:, i]), linewidth=1.4, label=label, **style)
             phase = np.degrees(np.unwrap(np.angle(g[:, i])))
+            phases.append(phase)
             ax_phase.semilogx(frequencies, phase, linewidth=1.4, **style)
-            if label in bands:
-                band = bands[label]
+            if label in shaded:
+                band = shaded[label]
                 lower, upper = (edge[:, i, input_index] for edge in band.magnitude_band())
                 ax_mag.fill_between(frequencies, lower, upper, color=lines[0].get_color(), alpha=0.2, linewidth=0)
                 spread = band.normal_quantile() * band.phase_deg_std[:, i, input_index]
                 ax_phase.fill_between(frequencies, phase - spread, phase + spread, color=lines[0].get_color(),
                                       alpha=0.2, linewidth=0)
+        # the curves set the ranges; a band that runs to nothing or round the circle is cut at the frame
+        set_robust_limits(ax_mag, [np.abs(g[:, i]) for g in curves.values()], log=True, outliers=False)
+        set_robust_limits(ax_phase, phases, outliers=False)
         _log_ticks(ax_mag)
         ax_mag.set_title(channel_label(names[i]), fontsize=10)
         ax_mag.set_ylabel(_gain_label(units[i], input_unit))
@@ -633,7 +657,7 @@ def _gain_label(output_unit: str, input_unit: str) -> str:
     """``|G| (out/in)``, saying so where a unit is unknown instead of printing ``(-/-)``."""
     output_unit, input_unit = known_unit(output_unit), known_unit(input_unit)
     if not (output_unit or input_unit):
-        return "|G|"
+        return "|G| (output unit/input unit)"
     if not input_unit:
         return f"|G| ({output_unit} per input unit)"
     return f"|G| ({output_unit or 'output unit'}/{input_unit})"

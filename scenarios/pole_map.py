@@ -294,8 +294,9 @@ def plot_eigenvalue_map(
     if beyond:
         upper = sorted({complex(round(v.real, 12), round(abs(v.imag), 12)) for v in beyond}, key=abs)
         listed = ", ".join(_format_pole(v) for v in upper[:3]) + (", ..." if len(upper) > 3 else "")
+        # the list on a line of its own: beside the legend the axis is narrower than the page
         x_label += f"\n{len(beyond)} eigenvalue{'s' if len(beyond) > 1 else ''} beyond the view (open triangles " \
-                   f"at the edge): {listed}"
+                   f"at the edge):\n{listed}"
     ax.set_xlabel(x_label)
     ax.set_ylabel("imaginary part (rad/s)")
     ax.set_title(title)

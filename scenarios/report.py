@@ -15,9 +15,10 @@ from matplotlib.figure import Figure
 
 from vehid.identification.errors import InputError, WorkbenchError
 from vehid.identification.assessment.residuals import DEFAULT_LAGS, nis_band, residual_tests
-from vehid.identification.assessment.validation import default_horizon, predict, score
+from vehid.identification.assessment.validation import default_horizon, predicted_scores
 
 from . import plots
+from .figure_style import known_unit
 
 __all__ = [
     "write_report",
@@ -31,6 +32,9 @@ __all__ = [
     "verdict_page",
     "handling_page",
     "archive_handling",
+    "output_names_of",
+    "record_output_names",
+    "verdict_output_names",
 ]
 
 _SAFE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
@@ -198,12 +202,23 @@ def _mean_last(history: Mapping[str, np.ndarray], key: str) -> float | None:
     return float(np.mean(values[-1]))
 
 
-def _parameter_names(model: Any, n_theta: int) -> Sequence[str] | None:
+def _parameter_names(model: Any, n_theta: int) -> tuple[Sequence[str] | None, dict[str, list[int]] | None]:
+    """The names of a run's parameters and their panels (None: the plot's own grouping by name).
+
+    A modal model names each parameter (``sigma1``, ``b11``, ...). A spline model's parameters are the
+    node ordinates of each coefficient's spline: named ``<coefficient>[k]`` and grouped, as the
+    modal model's, into the modal, B, C and D panels.
+    """
     structure = getattr(model, "structure", None)
-    names = getattr(structure, "parameter_names", None)  # a spline structure's ordinates have no names
+    coefficients = getattr(structure, "coefficient_names", None)
+    nodes = getattr(structure, "nodes", None)
+    if callable(coefficients) and isinstance(nodes, int) and getattr(structure, "n_parameters", None) == n_theta:
+        names = [f"{name}[{k + 1}]" for name in coefficients() for k in range(nodes)]
+        return names, plots.parameter_groups(names)
+    names = getattr(structure, "parameter_names", None)
     if callable(names) and getattr(structure, "n_parameters", None) == n_theta:
-        return names()
-    return None
+        return names(), None
+    return None, None
 
 
 @dataclass(frozen=True)
@@ -245,16 +260,37 @@ def archive_verdict(archive: Any) -> dict[str, Any] | None:
     return dict(summary)
 
 
+#: archive kinds whose study scores every model simulated from rest (the paper's R), as their reports draw them
+FROM_REST_KINDS = ("linear-example",)
+
+
 def _scoring_rule(archive: Any) -> ScoringRule:
+    if getattr(archive, "kind", None) in FROM_REST_KINDS:
+        return ScoringRule(initial_state="zero")
     rule = (archive_verdict(archive) or {}).get("scoring_rule") or {}
     return ScoringRule(initial_state=rule.get("initial_state") or "estimate", horizon=rule.get("horizon"))
 
 
-def _model_prediction(model: Any, record: Any, rule: ScoringRule = ScoringRule()) -> Prediction | None:
+def _schedule_of(archive: Any, record_name: str) -> tuple[str, str, np.ndarray] | None:
+    """The schedule channel (name, unit, samples) of an archived record, where a scheduled run kept it."""
+    stored = getattr(archive, "schedule", None)
+    if not isinstance(stored, Mapping) or record_name not in (stored.get("records") or {}):
+        return None
+    return str(stored.get("channel")), str(stored.get("unit") or "-"), np.asarray(stored["records"][record_name])
+
+
+def _is_scheduled(model: Any) -> bool:
+    return hasattr(model, "model_at") and hasattr(model, "grid")
+
+
+def _model_prediction(model: Any, record: Any, rule: ScoringRule = ScoringRule(),
+                      schedule: tuple[str, str, np.ndarray] | None = None) -> Prediction | None:
     """The model on the record restricted to its inputs and outputs: outputs, NRMSE fit and R, by ``rule``.
 
     The same functions score it as the identify command (:func:`~vehid.identification.assessment.validation.score`),
-    with the same initial state, so that a drawn curve is the one whose fit the command stated.
+    with the same initial state, so that a drawn curve is the one whose fit the command stated. A
+    scheduled family simulates along the record's ``schedule`` (its name, unit and samples), which it
+    needs: without one it is not drawn.
     """
     if not hasattr(model, "simulate_outputs"):
         return None
@@ -266,15 +302,21 @@ def _model_prediction(model: Any, record: Any, rule: ScoringRule = ScoringRule()
     sizes = getattr(structure, "linear", structure)  # a spline-modal structure keeps its sizes on its linear one
     if sizes is None or (record.n_u, record.n_y) != (sizes.n_u, sizes.n_y):
         return None
+    shown = record
+    if _is_scheduled(model):
+        if schedule is None or len(schedule[2]) != record.n_samples:
+            return None
+        record = record.replace(u=np.column_stack([record.u, schedule[2]]), input_names=record.input_names + (schedule[0],),
+                                input_units=record.input_units + (schedule[1],))
     horizon = rule.horizon_for(model)
     try:
-        predicted = np.asarray(predict(model, record, initial_state=rule.initial_state, horizon=horizon), dtype=float)
-        scores = score(model, record, initial_state=rule.initial_state, horizon=horizon)
+        predicted, scores = predicted_scores(model, record, initial_state=rule.initial_state, horizon=horizon)
     except WorkbenchError:  # a model the scores do not cover: nothing to draw, as for a diverging one
         return None
+    predicted = np.asarray(predicted, dtype=float)
     if not np.all(np.isfinite(predicted)):
         return None
-    return Prediction(record, predicted, scores.fit, scores.R)
+    return Prediction(shown, predicted, scores.fit, scores.R)
 
 
 def _channel_units(model: Any, records: Mapping[str, Any]) -> dict[str, Any]:
@@ -294,6 +336,35 @@ def _channel_units(model: Any, records: Mapping[str, Any]) -> dict[str, Any]:
             return {"input_name": record.input_names[0], "input_unit": record.input_units[0],
                     "output_names": list(record.output_names), "output_units": list(record.output_units)}
     return {}
+
+
+#: frozen models of a scheduled family drawn in the Bode and eigenvalue figures: its lowest, middle and highest knot
+_FROZEN_KNOTS = 3
+
+
+def _linear_views(name: str, model: Any, schedule_unit: str | None) -> dict[str, Any]:
+    """The linear models that show ``model`` in a Bode plot and an eigenvalue map, by label.
+
+    A modal model is itself; a scheduled family the frozen models at its lowest, middle and highest
+    knot; a spline model its linearisation at rest. Anything else has none.
+    """
+    if all(hasattr(model, m) for m in "ABCD") and not hasattr(model, "linear_model"):
+        return {name: model}
+    if _is_scheduled(model):
+        grid = np.asarray(model.grid, dtype=float)
+        picked = sorted({0, grid.size // 2, grid.size - 1})[:_FROZEN_KNOTS]
+        unit = known_unit(schedule_unit)
+        return {f"{name} at {model.variable} = {grid[k]:.3g}" + (f" {unit}" if unit else ""): model.model_at(grid[k])
+                for k in picked}
+    if hasattr(model, "linear_model"):
+        return {f"{name} (at rest)": model.linear_model()}
+    return {}
+
+
+def _ordered_runs(runs: Mapping[str, Any], returned: str | None) -> list[tuple[str, Any, str]]:
+    """The runs as ``(name, run, label)``, the returned model's first and labelled so."""
+    names = sorted(runs, key=lambda name: name != returned)
+    return [(name, runs[name], f"{name} (returned)" if name == returned else name) for name in names]
 
 
 def _most_divergent(parameters: np.ndarray) -> np.ndarray:
@@ -332,19 +403,22 @@ def archive_figures(archive: Any, *, window: tuple[float, float] | None = None, 
     """
     figures: dict[str, Figure] = {}
     runs = archive.runs
+    verdict = archive_verdict(archive) or {}
+    returned = (verdict.get("scoring_rule") or {}).get("returned_run")
+    names = record_output_names(archive)
     for name, run in runs.items():
         history = run.history
         if "parameters" in history and len(history["parameters"]):
-            names = _parameter_names(run.model, history["parameters"].shape[1])
+            names_theta, groups = _parameter_names(run.model, history["parameters"].shape[1])
             figures[_stem("parameters", name)] = plots.plot_parameter_history(
-                history["parameters"], names, title=f"Parameter development over the passes: {name}")
+                history["parameters"], names_theta, groups=groups,
+                title=f"Parameter development over the passes: {name}")
         if "fit_filter" in history and "trace_p" in history and len(history["trace_p"]):
-            outputs = getattr(run.model, "output_names", None)
             fit = np.atleast_2d(history["fit_filter"].T).T
+            outputs = output_names_of(run.model, names, fit.shape[1])
             figures[_stem("convergence", name)] = plots.plot_convergence(
                 fit, history["trace_p"], fit_continuous=history.get("fit_continuous"),
-                min_eig_p=history.get("min_eig_p"),
-                output_names=outputs if outputs is not None and len(outputs) == fit.shape[1] else None,
+                min_eig_p=history.get("min_eig_p"), output_names=outputs,
                 title=f"Explanation and convergence per pass: {name}")
         nis = history.get("nis")
         record = archive.records.get("identification")
@@ -361,22 +435,28 @@ def archive_figures(archive: Any, *, window: tuple[float, float] | None = None, 
             sorted(orders), [run.history["fit_filter"].mean(axis=1) for run in studied],
             [run.history["trace_p"] for run in studied],
             drift=[_most_divergent(run.history["parameters"]) for run in studied])
-    models = {name: run.model for name, run in runs.items() if all(hasattr(run.model, m) for m in "ABCD")}
-    if models:
-        figures["eigenvalues"] = plots.plot_eigenvalue_map(models)
-        n_y = np.shape(next(iter(models.values())).C)[0]
-        figures["bode"] = plots.plot_bode({k: m for k, m in models.items() if np.shape(m.C)[0] == n_y},
-                                          **_channel_units(next(iter(models.values())), archive.records))
+    stored = getattr(archive, "schedule", None)  # archives written before schedules were kept have none
+    schedule_unit = stored.get("unit") if isinstance(stored, Mapping) else None
+    views: dict[str, Any] = {}  # linear views of every run, the returned model's first
+    for name, run, label in _ordered_runs(runs, returned):
+        views.update(_linear_views(label, run.model, schedule_unit))
+    if views:
+        figures["eigenvalues"] = plots.plot_eigenvalue_map(views)
+        first = next(iter(views.values()))
+        n_y = np.shape(first.C)[0]
+        banded = [label for label in views if label.startswith(f"{returned} ")] if returned else None
+        figures["bode"] = plots.plot_bode({k: m for k, m in views.items() if np.shape(m.C)[0] == n_y},
+                                          bands=banded, **_channel_units(first, archive.records))
     rule = _scoring_rule(archive)
     for record_name, record in archive.records.items():
         predictions: dict[str, np.ndarray] = {}
         scores: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         shown = None
-        for name, run in runs.items():
-            result = _model_prediction(run.model, record, rule)
+        for name, run, label in _ordered_runs(runs, returned):
+            result = _model_prediction(run.model, record, rule, _schedule_of(archive, record_name))
             if result is None or (shown is not None and result.record.output_names != shown.output_names):
                 continue
-            shown, predictions[name], scores[name] = result.record, result.outputs, (result.fit, result.R)
+            shown, predictions[label], scores[label] = result.record, result.outputs, (result.fit, result.R)
             figures[_stem("residuals", record_name, name)] = plots.plot_residual_autocorrelation(
                 shown.y - result.outputs, min(max_lag, shown.n_samples - 1), shown.output_names, dt=shown.dt,
                 title=f"Residual autocorrelation: {name} on {record_name}")
@@ -394,6 +474,21 @@ def archive_figures(archive: Any, *, window: tuple[float, float] | None = None, 
     if curves:
         figures["handling"] = handling_page(curves)
     return figures
+
+
+def record_output_names(archive: Any) -> tuple[str, ...]:
+    """The output channels of the archive's first record (the names a model without its own describes)."""
+    record = next(iter(archive.records.values()), None)
+    return tuple(record.output_names) if record is not None else ()
+
+
+def output_names_of(model: Any, record_names: Sequence[str], count: int) -> list[str] | None:
+    """A model's output names, else the record's where the model kept only placeholders (``y1``, ...)."""
+    own = tuple(getattr(model, "output_names", None) or ())
+    placeholders = tuple(f"y{i + 1}" for i in range(count))
+    if len(own) == count and own != placeholders:
+        return list(own)
+    return list(record_names) if len(record_names) == count else None
 
 
 def spike_indices(record: Any, t: np.ndarray) -> dict[str, list[int]]:
@@ -440,7 +535,7 @@ def archive_table(archive: Any) -> list[dict[str, Any]]:
             "trace(P)": _mean_last(run.history, "trace_p"),
         }
         for record_name, record in archive.records.items():
-            result = _model_prediction(model, record, rule)
+            result = _model_prediction(model, record, rule, _schedule_of(archive, record_name))
             if result is not None:
                 row[f"NRMSE fit {record_name} (%)"] = float(np.mean(result.fit))
                 row[f"R {record_name} (%)"] = float(np.mean(result.R))
@@ -451,8 +546,8 @@ def archive_table(archive: Any) -> list[dict[str, Any]]:
 
 def _passes_run(verdict: Mapping[str, Any], name: str, returned: str | None) -> int:
     """The passes a run without a stored history made, as the command counted them (0 where unknown)."""
-    if name == "nonlinear":
-        return int((verdict.get("nonlinear") or {}).get("passes_run") or 0)
+    if name in ("nonlinear", "scheduled"):  # their own runs, whichever model was returned
+        return int((verdict.get(name) or {}).get("passes_run") or 0)
     if name == returned and name != "start":
         return int(verdict.get("passes_run") or 0)
     return 0
@@ -475,7 +570,8 @@ def verdict_lines(verdict: Mapping[str, Any], output_names: Sequence[str]) -> li
     how = (f"{verdict['horizon']}-step-ahead prediction" if verdict.get("horizon")
            else f"simulated, initial state {verdict.get('initial_state', 'estimate')}")
     lines = [f"model returned: {rule.get('returned_run', verdict.get('method', '-'))} "
-             f"({verdict.get('method', '-')}, order {verdict.get('order', '-')}; scores {how})",
+             f"({verdict.get('method', '-')}, order {verdict.get('order', '-')}; scores {how})"
+             + ("" if not verdict.get("scheduled") else f"; scheduled on {verdict['scheduled'].get('channel')}"),
              f"estimation: NRMSE fit {_per_output(output_names, verdict.get('estimation_fit_percent'))}; "
              f"R {_per_output(output_names, verdict.get('estimation_R'))}"]
     if verdict.get("validation_fit_percent") is not None:
@@ -485,7 +581,17 @@ def verdict_lines(verdict: Mapping[str, Any], output_names: Sequence[str]) -> li
         lines.append("validation: none held out")
     warnings = verdict.get("warnings") or []
     lines += [f"warning: {line}" for line in warnings] if warnings else ["warnings: none"]
+    lines += [f"note: {line}" for line in verdict.get("notes") or []]
     return lines
+
+
+def verdict_output_names(archive: Any, verdict: Mapping[str, Any]) -> tuple[str, ...]:
+    """The returned model's output names, else the first record's channels (where the model kept only
+    placeholders ``y1``, ...): what labels the verdict's per-output scores."""
+    returned = archive.runs.get((verdict.get("scoring_rule") or {}).get("returned_run"))
+    names = record_output_names(archive)
+    count = len(verdict.get("estimation_fit_percent") or names)
+    return tuple(output_names_of(getattr(returned, "model", None), names, count) or names)
 
 
 _PAGE_COLUMNS = 95  # characters per line of the verdict page at 9 pt on the report's width

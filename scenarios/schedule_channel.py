@@ -53,9 +53,10 @@ def _without_schedule(args: Any) -> dict[str, float]:
     return {name: factor for name, factor in parse_scale(args.scale).items() if name != args.schedule}
 
 
-def read_with_schedule(args: Any, paths: Sequence[str]) -> tuple[tuple[IOData, ...], Any, list[np.ndarray], dict]:
+def read_with_schedule(args: Any, paths: Sequence[str]) -> tuple[tuple[IOData, ...], Any, list[np.ndarray], dict, str]:
     """Raw records without the schedule, their reading settings, each record's schedule as read (its
-    ``--scale`` factor is :func:`schedule_factor`'s) and the ``--scale`` factors of the other channels."""
+    ``--scale`` factor is :func:`schedule_factor`'s), the ``--scale`` factors of the other channels and the
+    schedule's unit ("-" where unknown or scaled)."""
     from vehid.identification.dataio.preparation import read_raw_records
     from vehid.scenarios.data_options import settings_from_args
 
@@ -68,8 +69,9 @@ def read_with_schedule(args: Any, paths: Sequence[str]) -> tuple[tuple[IOData, .
     raw, full_settings = read_raw_records(list(paths), dataclasses.replace(settings, inputs=settings.inputs + (channel,)))
     schedules = [record.u[:, -1] for record in raw]
     inputs = full_settings.inputs[:-1]
+    unit = raw[0].input_units[-1] if schedule_factor(args) == 1.0 else "-"  # a scaled channel's unit is the user's to name
     return (tuple(record.select_inputs(inputs) for record in raw), dataclasses.replace(full_settings, inputs=inputs),
-            schedules, _without_schedule(args))
+            schedules, _without_schedule(args), unit)
 
 
 def schedule_factor(args: Any) -> float:

@@ -11,28 +11,36 @@ estimation and held-out data, simulated from rest along their measured schedules
 
 The family is returned only where it validates better than the unscheduled model by
 :data:`VALIDATION_MARGIN` points of mean fit (without validation data: its estimation fit by the
-start-or-filter rule's whole-record margin), and never where a knot is unstable unless that was
-allowed; otherwise the unscheduled model is returned with a warning. With ``--nonlinear`` the family
-may gain a static output map (:func:`with_output_map`).
+start-or-filter rule's whole-record margin), both scored by the run's one rule (initial state,
+horizon, records), and never where a knot is unstable unless that was allowed; otherwise the
+unscheduled model is returned and a note says why. With ``--nonlinear`` the family may gain a
+static output map (:func:`with_output_map`), and the spline model is a third candidate.
 
-JSON (public): the score keys (``fit_percent``, ``estimation_fit_percent``, ``validation_fit_percent``,
-``validation_R``, ``records``) describe the model returned; ``decision_margins.schedule`` the decision;
-``scheduled`` holds ``model_returned`` ("scheduled" or "unscheduled"), the family's own
-``estimation_fit_percent`` and ``validation_fit_percent``, the refinement (``refined_from``,
-``refine_steps``, ``refine_steps_run``), ``output_map`` (with ``--nonlinear``), ``channel``, ``grid``,
-``modes_at`` (per grid value ``value``, its ``modes``, each with ``frequency_hz``,
+JSON (public): the score keys (``fit_percent``, ``R``, ``estimation_fit_percent``,
+``validation_fit_percent``, ``validation_R``, ``records``), the checks (``modes``, each with its
+``schedule_value``, and the residual tests) and ``warnings`` describe the model returned
+(``model_returned``); ``linear_modes`` the unscheduled model's modes, whose matrices and eigenvalues
+are the summary's ``A`` ... ``eigenvalues``; ``decision_margins.schedule`` the decision;
+``scheduled`` holds ``model_returned`` ("scheduled", "unscheduled" or "nonlinear"), the family's
+own ``estimation_fit_percent`` and ``validation_fit_percent``, the refinement (``refined_from``,
+``refine_steps``, ``refine_steps_run``), ``output_map`` (with ``--nonlinear``), ``channel``,
+``grid``, ``modes_at`` (per grid value ``value``, its ``modes``, each with ``frequency_hz``,
 ``frequency_hz_std``, ``damping``, ``damping_std``, and ``extrapolated``: the knot rests on too few
-samples), ``knot_coverage`` (per knot ``value``, ``samples``, ``seconds``, ``excitation``: the first
+samples), ``uncertainty_method`` (how the knots' covariance behind those standard deviations was
+obtained), ``knot_coverage`` (per knot ``value``, ``samples``, ``seconds``, ``excitation``: the first
 input's RMS there over the record's, and ``extrapolated``;
-:func:`~vehid.identification.filtering.scheduled_iekf.knot_coverage`), the run (``passes_run``, ``stop_reason``,
-``p`` and ``p_tried``, chosen on validation data as the IEKF's p is, ``seconds``) and ``unscheduled``: the scores of the start
-(also from rest, ``*_from_rest``, as the family is scored and the decision weighs them), whose matrices, eigenvalues and
-modes are the summary's other keys.
+:func:`~vehid.identification.filtering.scheduled_iekf.knot_coverage`), the run (``passes_run``,
+``stop_reason``, ``p`` and ``p_tried``, chosen on validation data as the IEKF's p is, ``start_fit_percent``
+and ``start_R`` of its start, ``seconds``) and ``unscheduled``: the scores of the start by the same
+rule (and from rest, ``*_from_rest``). Every ``*fit_percent`` is an NRMSE fit, every ``*R`` the
+fit R of eq. 17.
 """
 
 from __future__ import annotations
 
 from typing import Any, Sequence
+
+import numpy as np
 
 # the scheduled variant is the pipeline's (vehid.identification.automatic.scheduled); its names stay reachable here
 from vehid.identification.automatic.scheduled import (NONLINEAR_NOTE, OUTPUT_MAP_NODES, VALIDATION_MARGIN,
@@ -44,23 +52,48 @@ __all__ = ["NONLINEAR_NOTE", "OUTPUT_MAP_NODES", "VALIDATION_MARGIN", "P_GRID", 
            "identify_scheduled_model", "schedule_margin", "unscheduled_fit", "with_output_map", "text_lines"]
 
 
+def archive_schedule(archive: Any, plan: Any, validation_prefix: str) -> None:
+    """The schedule channel of every archived record (root member ``schedule``), so that a report can simulate
+    the family on them: ``channel``, ``unit`` and ``records`` (record name to samples); the held-out parts are
+    archived under ``validation_prefix``."""
+    from vehid.identification.dataio.archive import SCHEDULE_MEMBER
+    from vehid.identification.dataio.storage import write_value
+    from vehid.scenarios.data_options import RECORD_PREFIX, record_series_name
+
+    schedule = plan.schedule
+    records = {record_series_name(RECORD_PREFIX, i): np.asarray(values, dtype=float)
+               for i, values in enumerate(schedule.estimation)}
+    records.update({record_series_name(validation_prefix, i): np.asarray(values, dtype=float)
+                    for i, values in enumerate(schedule.validation[:plan.held_out_count])})
+    write_value(archive, SCHEDULE_MEMBER, {"channel": schedule.channel, "unit": schedule.unit,
+                                           "records": records})
+
+
 def text_lines(entry: dict[str, Any], output_names: Sequence[str]) -> list[str]:
-    """The text face of the ``scheduled`` entry: the run, the unscheduled scores and the modes at each grid value."""
+    """The text face of the ``scheduled`` entry: the run, the unscheduled scores, and the family's modes where
+    it is not returned (the returned model's modes head the summary's modes)."""
     unscheduled = entry["unscheduled"]
     validation = unscheduled.get("validation_fit_percent")
+    returned = entry.get("model_returned")
+    state = {"scheduled": "returned: the scores above are its own",
+             "unscheduled": "NOT returned (the scores above are the unscheduled model's)",
+             "nonlinear": "NOT returned (the scores above are the spline model's)"}.get(returned, "")
     lines = [
         f"scheduled on {entry['channel']} ({entry['knots']} knots, p {entry['p']:g}, {entry['passes_run']} passes, "
-        f"{'converged' if entry['stop_reason'] == 'converged' else 'NOT converged'}): "
-        + ("the scores above are its own; unscheduled start: estimation " if entry.get("model_returned") != "unscheduled"
-           else "NOT returned (the scores above are the unscheduled model's); unscheduled: estimation ")
+        f"{'converged' if entry['stop_reason'] == 'converged' else 'NOT converged'}): {state}; unscheduled "
+        + ("start" if returned != "unscheduled" else "model") + ": NRMSE fit estimation "
         + ", ".join(f"{n} {v:.2f}" for n, v in zip(output_names, unscheduled["estimation_fit_percent"]))
         + ("" if validation is None else "; validation " + ", ".join(
-            f"{n} {v:.2f}" for n, v in zip(output_names, validation))),
-        f"modes at {entry['channel']} (frequency Hz, damping; +/- 2 sigma):",
+            f"{n} {v:.2f}" for n, v in zip(output_names, validation))) + " %",
     ]
-    for row in entry["modes_at"]:
-        modes = "; ".join(f"{mode['frequency_hz']:.4g} +/- {2 * mode['frequency_hz_std']:.2g} Hz, "
-                          f"{mode['damping']:.3f} +/- {2 * mode['damping_std']:.2g}" for mode in row["modes"])
-        sparse = " (extrapolated: too few samples at this knot)" if row.get("extrapolated") else ""
-        lines.append(f"  {entry['channel']} = {row['value']:.4g}: {modes}{sparse}")
+    if returned != "scheduled":
+        lines.append(f"modes of the scheduled family (not returned) at {entry['channel']} (frequency Hz, damping; "
+                     "+/- 2 sigma):")
+        for row in entry["modes_at"]:
+            modes = "; ".join(f"{mode['frequency_hz']:.4g} +/- {2 * mode['frequency_hz_std']:.2g} Hz, "
+                              f"{mode['damping']:.3f} +/- {2 * mode['damping_std']:.2g}" for mode in row["modes"])
+            sparse = " (extrapolated: too few samples at this knot)" if row.get("extrapolated") else ""
+            lines.append(f"  {entry['channel']} = {row['value']:.4g}: {modes}{sparse}")
+    if entry.get("uncertainty_method"):
+        lines.append(f"  standard deviations: {entry['uncertainty_method']['description']}")
     return lines

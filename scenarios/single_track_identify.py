@@ -17,18 +17,23 @@ JSON (public contract): ``structure``, ``physical_parameters`` (``cornering_stif
 ``<quantity>_offset``, alike), ``parameter_correlation`` (in the order of ``parameter_names``),
 ``handling`` (``understeer_gradient_deg_per_g``, ``characteristic_speed_m_s`` or
 ``critical_speed_m_s``, each ``{value, std, unit}``, and ``yaw_rate_gain`` at speeds spanning the
-log), ``fit_percent`` (R, eq. 17), ``estimation_fit_percent``,
-``validation_fit_percent`` (NRMSE), ``speed_range_m_s``, ``passes_run``, ``stop_reason``,
+log), ``fit_percent`` and ``R`` (NRMSE fit and fit R of eq. 17 of the model simulated from rest over
+the estimation data), ``estimation_fit_percent`` and ``validation_fit_percent`` (NRMSE; every key ending
+in ``fit_percent`` is an NRMSE fit), ``speed_range_m_s``, ``passes_run``, ``stop_reason``,
 ``trace_p``, ``notes``, ``warnings``, ``seconds``, the data's cleaning (``outliers``, ``left_out``, and
 ``despiked`` and ``excluded`` where asked: :func:`~vehid.identification.dataio.cleaning.cleaning_summary`),
 ``plausibility`` (each failed check of the car's physics, ``{quantity, value, range, speed, cause}``, also a
 warning: :mod:`vehid.scenarios.plausibility_checks`; ``--measured-sideslip CHANNEL`` adds the predicted
 sideslip against a measured one); with ``--save-model`` (.json) ``model_file``, the identified model
 (:class:`~vehid.vehicle.single_track.IdentifiedSingleTrack`) that ``vehid handling`` reads.
+Every std is the fit's delete-one-block jackknife over the log (``uncertainty_method``), and the log's
+parts identified one by one are compared in ``segments`` (:mod:`vehid.scenarios.single_track_segments`).
 """
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import time
 from types import SimpleNamespace
 from typing import Any
@@ -39,6 +44,7 @@ from vehid.identification.assessment.metrics import nrmse_fit
 from vehid.identification.data import IOData, as_records
 from vehid.identification.dataio.cleaning import cleaning_notes, cleaning_summary, cleaning_warnings
 from vehid.identification.errors import InputError
+from vehid.scenarios import single_track_segments
 from vehid.scenarios.log_cleaning import MIN_SPEED
 # most Runge-Kutta steps per sample, and how much of a time constant one covers: the identified model's own
 from vehid.vehicle.single_track import MAX_SUBSTEPS, STEP_PER_TIME_CONSTANT
@@ -176,9 +182,9 @@ def _read(args: Any) -> tuple[tuple[IOData, ...], tuple[IOData, ...], tuple[np.n
 
 def run(args: Any) -> tuple[dict, str]:
     """Identify the single-track model and summarise it (module docstring)."""
-    from vehid.identification.filtering.greybox import GreyBoxOptions, identify_greybox, simulate_greybox
+    from vehid.identification.filtering.greybox import GreyBoxOptions, simulate_greybox
     from vehid.scenarios import identify_workflow as workflow
-    from vehid.vehicle.single_track import GRAVITY, single_track_handling, single_track_model, single_track_start
+    from vehid.vehicle.single_track import GRAVITY, single_track_handling, single_track_model
 
     started = time.perf_counter()
     _refuse_other_options(args)
@@ -198,27 +204,24 @@ def run(args: Any) -> tuple[dict, str]:
     estimation, validation, measured_sideslip = _read(args)
     model = single_track_model(config)
     substeps = _substeps(config, *estimation, *validation)
-    # a log (and each run of it) starts mid-drive, not at rest: the states' prior at its start (a sideslip of
-    # up to 0.1 rad, yaw rates of 0.5 rad/s, slip angles of 0.1 rad), so the filter estimates them rather than
-    # taking the first second's transient for a property of the car
-    first_speed = max(float(record.u[0, 1]) for record in estimation)
-    start_std = {"lateral_velocity": 0.1 * max(first_speed, MIN_LOG_SPEED), "yaw_rate": 0.5,
-                 "slip_angle_front": 0.1, "slip_angle_rear": 0.1}
-    options = GreyBoxOptions(substeps=substeps, initial_state_std=tuple(start_std[name] for name in model.state_names),
-                             **({"p": args.p} if args.p is not None else {}),
+    options = GreyBoxOptions(substeps=substeps, **({"p": args.p} if args.p is not None else {}),
                              **({"passes": args.passes} if args.passes is not None else {}))
-    result, divergence = workflow.last_good_on_divergence(
-        lambda: identify_greybox(estimation, model, single_track_start(config), options=options))
+
+    fit = functools.partial(fit_log, config, options=options)
+    result, divergence = workflow.last_good_on_divergence(lambda: fit(estimation))
+    # the filter's covariance pass takes the innovations as white; the fit's block jackknife measures the spread
+    covariance, uncertainty = single_track_segments.honest_covariance(model, result, estimation)
+    consistency = single_track_segments.part_consistency(config, model, estimation, fit)
 
     names, units = config.parameter_names, model.parameter_units
-    std = result.std
+    std = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
     entries = [(name, {"value": float(value), "std": float(s), "unit": unit})
                for name, value, s, unit in zip(names, result.parameters, std, units)]
     parameters = dict(entries[: config.n_physical])
     offsets = dict(entries[config.n_physical:])
     speeds = np.concatenate([record.u[:, 1] for record in estimation])
     grid = sorted({float(v) for v in np.round(np.linspace(speeds.min(), speeds.max(), 3))})
-    handling = single_track_handling(config, result.parameters, result.covariance, speeds=grid)
+    handling = single_track_handling(config, result.parameters, covariance, speeds=grid)
 
     def fit_on(records: tuple[IOData, ...]) -> np.ndarray:
         """NRMSE fit over the runs, each simulated from its start (pooled: the runs as one series)."""
@@ -241,6 +244,8 @@ def run(args: Any) -> tuple[dict, str]:
         below_zero_remedy="the structure does not fit this log (try "
                           f"{'' if config.saturation else '--saturation, '}--relaxation-length or a --segment "
                           "within the linear range)")
+    # how well the log separates the parameters is the curvature's to say: the jackknife's correlations rest
+    # on a handful of blocks
     correlation = result.correlation
     for i in range(len(names)):
         for j in range(i + 1, len(names)):
@@ -262,6 +267,8 @@ def run(args: Any) -> tuple[dict, str]:
                             "the cornering stiffnesses average over saturation; try --saturation")
     if "lateral_acceleration" in config.quantities and config.saturation:
         warnings.extend(_friction_warnings(config, result.parameters, estimation, validation))
+    if consistency is not None and not consistency.consistent:
+        warnings.append(consistency.warning("the single-track model"))
     summary: dict[str, Any] = {
         "method": "iekf",
         "structure": "single-track",
@@ -273,7 +280,8 @@ def run(args: Any) -> tuple[dict, str]:
         "quantities": list(config.quantities),
         "schedule": args.schedule.strip(),
         "speed_range_m_s": [float(np.min(speeds)), float(np.max(speeds))],
-        "fit_percent": result.fit_percent,
+        "fit_percent": result.nrmse_fit_percent,
+        "R": result.fit_percent,
         "estimation_fit_percent": estimation_fit,
         "validation_fit_percent": validation_fit,
         "passes_run": result.passes_run,
@@ -281,7 +289,9 @@ def run(args: Any) -> tuple[dict, str]:
         "trace_p": result.trace_p,
         "measurement_noise": result.measurement_noise,
         "start": dict(zip(names, result.start.tolist())),
-        "covariance_source": result.meta.get("covariance_source"),
+        "covariance_source": uncertainty.describe(),
+        "uncertainty_method": uncertainty.as_dict(),
+        "segments": None if consistency is None else consistency.as_dict(),
         "notes": notes,
         **cleaning_summary(estimation),
         "seconds": time.perf_counter() - started,
@@ -293,9 +303,10 @@ def run(args: Any) -> tuple[dict, str]:
         from vehid.vehicle.single_track import IdentifiedSingleTrack
 
         identified = IdentifiedSingleTrack(
-            config, result.parameters, result.covariance, (float(np.min(speeds)), float(np.max(speeds))),
+            config, result.parameters, covariance, (float(np.min(speeds)), float(np.max(speeds))),
             {"data": [str(d) for d in args.data], "schedule": args.schedule.strip(),
-             "validation_fit_percent": None if validation_fit is None else [float(f) for f in validation_fit]})
+             "validation_fit_percent": None if validation_fit is None else [float(f) for f in validation_fit],
+             "uncertainty_method": uncertainty.as_dict()})
         summary["model_file"] = str(save_model(identified, args.save_model, None))
     from vehid.scenarios import plausibility_checks as plausibility
     from vehid.vehicle.single_track import IdentifiedSingleTrack
@@ -305,8 +316,28 @@ def run(args: Any) -> tuple[dict, str]:
         estimation, plausibility.single_track_sideslip(config, result.parameters, estimation, measured_sideslip,
                                                        options.substeps)))
     summary["warnings"] = list(warnings)  # said on standard error (or made an error by --strict) by the command
-    text = _text(summary, estimation[0].output_names, bool(validation))
+    text = _text(summary, estimation[0].output_names, bool(validation),
+                 [] if consistency is None else consistency.text_lines())
     return summary, text
+
+
+def fit_log(config: Any, records: IOData | tuple[IOData, ...], *, options: Any) -> Any:
+    """The grey-box identification of the single-track model of ``config`` on a log (or its runs), from the
+    start values of its mass and geometry, as the command runs it (``options`` without the states' prior,
+    which is the log's)."""
+    from vehid.identification.filtering.greybox import identify_greybox
+    from vehid.vehicle.single_track import single_track_model, single_track_start
+
+    records = as_records(records)
+    model = single_track_model(config)
+    # a log (and each run of it) starts mid-drive, not at rest: the states' prior at its start (a sideslip of
+    # up to 0.1 rad, yaw rates of 0.5 rad/s, slip angles of 0.1 rad), so the filter estimates them rather than
+    # taking the first second's transient for a property of the car
+    first_speed = max(float(record.u[0, 1]) for record in records)
+    start_std = {"lateral_velocity": 0.1 * max(first_speed, MIN_LOG_SPEED), "yaw_rate": 0.5,
+                 "slip_angle_front": 0.1, "slip_angle_rear": 0.1}
+    return identify_greybox(records, model, single_track_start(config), options=dataclasses.replace(
+        options, initial_state_std=tuple(start_std[name] for name in model.state_names)))
 
 
 def _friction_warnings(config: Any, parameters: np.ndarray, estimation: IOData | tuple[IOData, ...],
@@ -381,7 +412,7 @@ class _Scores:
         self.R = self.fit
 
 
-def _text(summary: dict[str, Any], outputs: tuple[str, ...], validated: bool) -> str:
+def _text(summary: dict[str, Any], outputs: tuple[str, ...], validated: bool, parts: list[str]) -> str:
     lines = [f"single-track model (grey-box IEKF): {summary['passes_run']} passes, "
              f"{'pass budget reached' if summary['stop_reason'] == 'passes' else summary['stop_reason']}, "
              f"speed {summary['speed_range_m_s'][0]:.1f}-{summary['speed_range_m_s'][1]:.1f} m/s, "
@@ -396,6 +427,8 @@ def _text(summary: dict[str, Any], outputs: tuple[str, ...], validated: bool) ->
         if key in handling:
             label = f"{kind} speed"
             lines.append(f"  {label:<27} {handling[key]['value']:>12.4g} +/- {2 * handling[key]['std']:.3g} m/s")
+    lines.append(f"  standard deviations: {summary['uncertainty_method']['description']}")
+    lines += [f"  {line}" for line in parts]
     for name, est, val in zip(outputs, summary["estimation_fit_percent"],
                               summary["validation_fit_percent"] if validated else [None] * len(outputs)):
         lines.append(f"  NRMSE fit % {name:<15} estimation {est:7.2f}   validation {'-' if val is None else f'{val:.2f}'}")

@@ -120,3 +120,32 @@ def run_vehid(*argv: str, cwd: str | os.PathLike | None = None) -> CommandRun:
 def vehid_command():
     """:func:`run_vehid`, for tests and module fixtures that run commands."""
     return run_vehid
+
+
+#: The committed race car's lap (tests/data/race_car_250lm/SOURCE.md), its first 40 s: a scheduled run on a real
+#: log that costs a few seconds (order 2, p given, ten passes, three knots, one scheduled p)
+RACE_CAR_LOG = os.path.join(os.path.dirname(__file__), "data", "race_car_250lm", "20140222_01_01_03_250lm.csv")
+SCHEDULED_RACE_CAR_ARGS = ("--inputs", "delta", "--outputs", "yawRate,ayCG", "--schedule", "vx", "--order", "2",
+                           "--p", "1e-5", "--passes", "10", "--schedule-p", "1e-2", "--schedule-knots", "3",
+                           "--validation", "0.3", "--segment", "390:430")
+
+
+@pytest.fixture(scope="session")
+def scheduled_race_car_run(tmp_path_factory):
+    """``vehid identify --schedule vx --json --out`` on the race car's log: its JSON summary and its archive's path."""
+    import json
+
+    archive = tmp_path_factory.mktemp("scheduled_race_car") / "run.h5"
+    completed = run_vehid("identify", RACE_CAR_LOG, *SCHEDULED_RACE_CAR_ARGS, "--json", "--quiet", "--out", archive)
+    assert completed.returncode == 0, completed.stderr
+    return json.loads(completed.stdout), archive
+
+
+def returned_run(archive_path: str | os.PathLike) -> str:
+    """The run of an identification archive that holds the model its command returned (the filter's own run,
+    its refined model's, its start's, the scheduled family's or the spline model's), as the archive names it."""
+    from vehid.identification.dataio.archive import read_archive
+    from vehid.scenarios.report import archive_verdict
+
+    verdict = archive_verdict(read_archive(archive_path)) or {}
+    return (verdict.get("scoring_rule") or {})["returned_run"]

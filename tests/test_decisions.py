@@ -1,7 +1,8 @@
 """The choices `vehid identify` makes by itself: one rule each, reported with their margins, stable.
 
 Properties checked: the model returned is the better scoring of the filter's
-model and its start at every order; each entry of ``decision_margins``
+model and its start at every order, each refined by its simulation error
+where that means something (a stable run scored by simulation); each entry of ``decision_margins``
 agrees with the choice the run made and with its own rule; a healthy run
 warns of nothing; the data start's note names no library call; and on the
 public ball-and-beam record a slightly different hold-out fraction or a
@@ -18,7 +19,7 @@ import pytest
 from conftest import run_vehid
 
 from vehid.identification.data import IOData
-from vehid.identification.decisions import SCHEDULE_MARGIN, ScheduleCandidate, choose_p_and_schedule
+from vehid.identification.decisions import SCHEDULE_MARGIN, ScheduleCandidate, choose_p_and_schedule, choose_refined
 from vehid.identification.models.modal import ModalModel, ModalStructure
 from vehid.scenarios import identify_workflow as workflow
 
@@ -42,33 +43,92 @@ def _truth(order: int) -> ModalModel:
     return ModalModel(structure, modes.A, np.linspace(1.0, 0.3, order)[:, None], modes.C, modes.D)
 
 
-def _run(start: ModalModel, final: ModalModel) -> SimpleNamespace:
-    """What :func:`workflow.returned_model` reads of an IEKF result: its structure, start and final model."""
+def _run(start: ModalModel, final: ModalModel, *, refined: bool = True) -> SimpleNamespace:
+    """What :func:`workflow.returned_model` reads of an IEKF result: its structure, start and final model.
+
+    ``refined=False`` makes it a run that allows unstable modes, where no simulation-error refinement runs
+    and the start is weighed against the filter's model as they are (both models here are stable, so both
+    are still scored by simulation).
+    """
     return SimpleNamespace(structure=start.structure, model=final, meta={"start_parameters": start.parameters},
-                           options=SimpleNamespace(allow_unstable=False))
+                           options=SimpleNamespace(allow_unstable=not refined, timescale="auto"))
 
 
-def _spoiled(model: ModalModel) -> ModalModel:
+def _spoiled(model: ModalModel, factor: float = 1.3) -> ModalModel:
     """The model with every parameter 30 % off: a clearly worse fit of the model's own record."""
-    return ModalModel.from_parameters(model.structure, model.parameters * 1.3)
+    return ModalModel.from_parameters(model.structure, model.parameters * factor)
+
+
+def _fit(model: ModalModel, record: IOData) -> float:
+    from vehid.identification.assessment.validation import score
+
+    return float(np.mean(score(model, record).fit))
+
+
+@pytest.mark.parametrize("order", [1, 2, 3])
+def test_both_models_refined_the_filters_is_returned_and_fits_at_least_as_well_as_either(order):
+    """Filter's model 20 % off one way, start 20 % off the other, noise-free truth: both refine to the truth,
+    so they tie and the filter's model is returned, refined: better than either unrefined model, and the truth
+    to rounding of the refinement (its tolerance leaves the parameters within 1e-4 of it)."""
+    truth = _truth(order)
+    record = _record(truth)
+    plan = SimpleNamespace(records=(record,))
+    args = SimpleNamespace(horizon=None, initial_state="estimate", timescale="auto")
+    start, final = _spoiled(truth, 1.2), _spoiled(truth, 0.8)
+    model, keys = workflow.returned_model(_run(start, final), plan, args, workflow.PTuning(1e-5, (), 0.0), None)
+    margin = keys["decision_margins"]["model_returned"]
+    assert keys["model_returned"] == margin["choice"] == "filter" and "start_kept" not in keys
+    assert margin["measure"] == workflow.REFINED_MEASURE and abs(margin["score"] - margin["runner_up_score"]) <= 0.1
+    assert _fit(model, record) > max(_fit(start, record), _fit(final, record))
+    np.testing.assert_allclose(model.parameters, truth.parameters, rtol=1e-4, atol=1e-6)
+    assert model.parameter_covariance is not None  # a simulation-error estimate's
+    assert keys["refinement"]["model"] == "filter" and keys["refinement"]["fit_after"] > keys["refinement"]["fit_before"]
+
+
+def test_the_refined_start_is_returned_only_where_it_fits_clearly_better():
+    """The rule on refined candidates: the start's refined model wins by more than the tolerance, or not at all."""
+    from vehid.identification.classical.simulation_error import Refinement
+
+    truth = _truth(3)
+    record = _record(truth)
+    plan = SimpleNamespace(records=(record,))
+    args = SimpleNamespace(horizon=None, initial_state="estimate", timescale="auto")
+
+    def refinement(model):
+        return Refinement(model, 1.0, 0.5, 3, "converged", (np.zeros(3),), np.ones(1), 0.0)
+
+    def choose(filter_model, start_model):
+        candidates = workflow.RefinedCandidates(refinement(filter_model), refinement(start_model),
+                                                {"filter": filter_model, "start": start_model})
+        return workflow.refined_choice(candidates, plan, args, workflow.PTuning(1e-5, (), 0.0), None, {})
+
+    model, keys = choose(_spoiled(truth), truth)
+    margin = keys["decision_margins"]["model_returned"]
+    assert keys["model_returned"] == margin["choice"] == "start" and "start_kept" in keys
+    np.testing.assert_allclose(model.parameters, truth.parameters, rtol=1e-12)  # algebra: the start's model itself
+    assert margin["score"] > margin["runner_up_score"] + workflow.P_TOLERANCE
+    _, keys = choose(truth, _spoiled(truth))
+    assert keys["model_returned"] == "filter" and "start_kept" not in keys
+    _, keys = choose(truth, truth)  # a tie keeps the filter's
+    assert keys["model_returned"] == "filter"
 
 
 @pytest.mark.parametrize("order", [1, 2, 3, 4, 5])
-def test_the_better_of_filter_and_start_is_returned_at_every_order(order):
+def test_without_refinement_the_better_of_filter_and_start_is_returned_at_every_order(order):
     """A filter's model worse than its start returns the start; a better one is returned itself (noise-free truth)."""
     truth = _truth(order)
     plan = SimpleNamespace(records=(_record(truth),))
-    args = SimpleNamespace(horizon=None, initial_state="estimate")
+    args = SimpleNamespace(horizon=None, initial_state="estimate", timescale="auto")
     no_tuning = workflow.PTuning(1e-5, (), 0.0)
 
-    model, keys = workflow.returned_model(_run(truth, _spoiled(truth)), plan, args, no_tuning, None)
+    model, keys = workflow.returned_model(_run(truth, _spoiled(truth), refined=False), plan, args, no_tuning, None)
     margin = keys["decision_margins"]["model_returned"]
     assert margin["choice"] == "start" and "start_kept" in keys
     np.testing.assert_allclose(model.parameters, truth.parameters, rtol=1e-12)  # algebra: the start itself
     # the truth explains its own noise-free record (algebra and simulation rounding: above 99.9 %)
     assert margin["score"] > 99.9 and margin["score"] > margin["runner_up_score"] + workflow.WHOLE_RECORD_MARGIN
 
-    model, keys = workflow.returned_model(_run(_spoiled(truth), truth), plan, args, no_tuning, None)
+    model, keys = workflow.returned_model(_run(_spoiled(truth), truth, refined=False), plan, args, no_tuning, None)
     assert keys["decision_margins"]["model_returned"]["choice"] == "filter" and "start_kept" not in keys
     assert model is not None and np.allclose(model.parameters, truth.parameters, rtol=1e-12)
 
@@ -77,9 +137,9 @@ def test_a_run_that_diverged_gives_way_to_a_slightly_better_start():
     """An interrupted pass is no cross-validated result: the start wins it by the small tolerance."""
     truth = _truth(3)
     plan = SimpleNamespace(records=(_record(truth),))
-    args = SimpleNamespace(horizon=None, initial_state="estimate")
+    args = SimpleNamespace(horizon=None, initial_state="estimate", timescale="auto")
     slightly = ModalModel.from_parameters(truth.structure, truth.parameters * 1.01)
-    finished, interrupted = _run(truth, slightly), _run(truth, slightly)
+    finished, interrupted = _run(truth, slightly, refined=False), _run(truth, slightly, refined=False)
     interrupted.stop_reason = "diverged at pass 2"
     _, kept = workflow.returned_model(finished, plan, args, workflow.PTuning(1e-5, (), 0.0), None)
     margin = kept["decision_margins"]["model_returned"]
@@ -94,10 +154,28 @@ def test_a_decision_within_its_margin_keeps_the_filter():
     """Equal fits: the filter's model stands (the start must win by more than the margin)."""
     truth = _truth(3)
     plan = SimpleNamespace(records=(_record(truth),))
-    args = SimpleNamespace(horizon=None, initial_state="estimate")
-    _, keys = workflow.returned_model(_run(truth, truth), plan, args, workflow.PTuning(1e-5, (), 0.0), None)
+    args = SimpleNamespace(horizon=None, initial_state="estimate", timescale="auto")
+    _, keys = workflow.returned_model(_run(truth, truth, refined=False), plan, args, workflow.PTuning(1e-5, (), 0.0),
+                                      None)
     margin = keys["decision_margins"]["model_returned"]
     assert margin["choice"] == "filter" and margin["score"] == margin["runner_up_score"]
+
+
+def test_the_refined_models_are_weighed_by_their_cross_validated_fits():
+    """choose_refined on plain values: the refined filter's model unless the refined start's leads it by more than
+    the margin, and no refinement where a model as it is leads every refined one by more than the margin."""
+    m = SCHEDULE_MARGIN
+
+    def fits(filter_, start, filter_refined, start_refined):
+        return {"filter": filter_, "start": start, "filter refined": filter_refined, "start refined": start_refined}
+
+    assert choose_refined(fits(80.0, 79.0, 81.0, 81.0 + 0.9 * m)) == "filter"  # a lead within the margin
+    assert choose_refined(fits(80.0, 79.0, 81.0, 81.0 + 1.1 * m)) == "start"
+    assert choose_refined(fits(80.0 + 1.1 * m, 70.0, 80.0, 79.0)) is None  # the refinement predicts worse
+    assert choose_refined(fits(80.0 + 0.9 * m, 70.0, 80.0, 79.0)) == "filter"
+    assert choose_refined(fits(80.0, None, 81.0, None)) == "filter"  # no start scored
+    assert choose_refined(fits(80.0, 79.0, None, 81.0)) == "start"  # the filter's refinement not scored
+    assert choose_refined(fits(80.0, 79.0, None, None)) is None
 
 
 def test_the_data_start_note_names_no_library_call():

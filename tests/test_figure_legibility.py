@@ -4,12 +4,13 @@ The checks look at what matplotlib's Agg renderer lays out (``fig.canvas.draw()`
 then each artist's window extent in pixels): no two texts overlap, no text runs
 past the edge of the figure, no axis is left empty and no legend lies on top of
 the data. The records are the public ones under ``tests/data`` (the dryer and the
-flexible robot arm of DaISy) and the handling study's archive.
+flexible robot arm of DaISy), the handling study's archive and a scheduled run on the committed race car's lap.
 """
 
 from __future__ import annotations
 
 import itertools
+import re
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +22,8 @@ from vehid.identification.assessment.metrics import percentage_explanation
 from vehid.scenarios import plots
 from vehid.scenarios.cli import main
 from vehid.scenarios.handling_report import handling_figures
-from vehid.scenarios.report import archive_figures
+from vehid.scenarios.commands.identify import SCORING_RULE
+from vehid.scenarios.report import archive_figures, archive_verdict, verdict_lines, verdict_output_names, verdict_page
 
 DATA = Path(__file__).parent / "data"
 
@@ -190,6 +192,33 @@ def test_a_long_real_record_is_drawn_as_its_envelope_and_kept_whole(tmp_path):
     _assert_legible(figures)
 
 
+def test_a_report_of_a_scheduled_run_on_a_real_log_draws_the_family_names_the_channels_and_is_legible(
+        scheduled_race_car_run):
+    """The race car's lap identified with ``--schedule vx`` (tests/conftest.py): the family is drawn in the fits,
+    frequency-response and eigenvalue figures, the returned model first and marked; every figure and the verdict
+    page name the log's channels (never ``y1``, ``y2``); and the pages that show the family are legible (the
+    residual pages are those of every report, checked on the robot arm's above)."""
+    summary, path = scheduled_race_car_run
+    archive = read_archive(path)
+    figures = archive_figures(archive)
+    verdict = archive_verdict(archive)
+    figures["verdict"] = verdict_page(verdict_lines(verdict, verdict_output_names(archive, verdict)))
+    returned = f"{verdict[SCORING_RULE]['returned_run']} (returned)"  # the run the archive names as returned
+    for name in ("fits_identification", "fits_validation"):
+        for ax in figures[name].axes:
+            legend = [text.get_text() for text in ax.get_legend().get_texts()]
+            assert legend[1].startswith(returned) and any(text.startswith("scheduled") for text in legend), legend
+    for name in ("bode", "eigenvalues"):
+        legend = figures[name].legends[0] if figures[name].legends else figures[name].axes[0].get_legend()
+        frozen = [text.get_text() for text in legend.get_texts() if text.get_text().startswith("scheduled")]
+        assert len(frozen) == 3 and all("at vx = " in text and text.endswith(" m/s") for text in frozen), frozen
+    texts = [text for fig in figures.values() for text in fig.findobj(lambda artist: hasattr(artist, "get_text"))]
+    shown = " ".join(text.get_text() for text in texts)
+    assert "yawRate" in shown and "ayCG" in shown and not re.search(r"\by[12]\b", shown)
+    _assert_legible({name: figures[name] for name in ("verdict", "fits_identification", "fits_validation", "bode",
+                                                      "eigenvalues", "convergence_iekf")})
+
+
 @pytest.mark.slow
 def test_every_figure_of_the_handling_report_is_legible():
     _assert_legible(handling_figures(read_archive(DATA / "archives" / "handling_study.h5")))
@@ -210,7 +239,7 @@ def test_a_wide_band_pole_is_marked_at_the_edge_and_the_slow_modes_fill_the_map(
     # The two fast poles, outside, are drawn at the left edge and counted with their values.
     edge = [line for line in ax.get_lines() if line.get_marker() == "<"]
     assert len(edge) == 2 and all(left <= line.get_xdata()[0] <= right for line in edge)
-    note = ax.get_xlabel().splitlines()[1]
+    note = " ".join(ax.get_xlabel().splitlines()[1:])
     assert note.startswith("2 eigenvalues beyond the view") and "-2.9e+03" in note and "-3.1e+03" in note
     assert not legibility_problems(fig)
 

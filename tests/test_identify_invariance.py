@@ -275,26 +275,35 @@ def test_a_divergence_after_good_passes_reports_the_last_good_one_with_a_warning
     assert len(lines) == 1 and "diverged" in lines[0] and "last good pass" in lines[0]
 
 
-def test_a_spline_model_that_validates_worse_than_its_linear_start_is_warned_about():
-    """The warning compares the two models' mean validation fits; no validation data, no comparison."""
-    from types import SimpleNamespace
+def test_the_spline_model_is_returned_only_where_it_beats_the_other_model_by_the_margin():
+    """Both scored by one rule; the spline model must win by NONLINEAR_MARGIN on validation data, by the
+    whole-record margin on the estimation data without them, and its loss is a note, not a warning."""
+    from vehid.identification.assessment.validation import Scores
+    from vehid.scenarios.identify_workflow import (NONLINEAR_MARGIN, WHOLE_RECORD_MARGIN, Evaluation,
+                                                   nonlinear_margin, nonlinear_note)
 
-    from vehid.scenarios.identify_workflow import Evaluation, nonlinear_warnings
+    def scored(estimation: float, validation: float | None) -> Evaluation:
+        def scores(fit: float) -> Scores:
+            return Scores(np.array([fit]), np.array([fit]), "estimate", None, 100)
 
-    record = _record(20.0, seed=3)
-    linear = identify_iekf(record, STRUCTURE, options=IEKFOptions.invariant(passes=2)).model
-    held_out = score(linear, record)  # a validation record scored by the linear model
-    evaluation = Evaluation(held_out, held_out.R, (held_out,), None)
-    linear_fit = float(np.mean(held_out.fit))
+        return Evaluation(scores(estimation), np.array([estimation]),
+                          () if validation is None else (scores(validation),), None)
 
-    def spline(fit):
-        return SimpleNamespace(scores=SimpleNamespace(validation_fit=None if fit is None else np.array([fit])))
-
-    lines = nonlinear_warnings(spline(linear_fit - 1.0), evaluation)
-    assert len(lines) == 1 and "validates worse than its linear start" in lines[0]
-    assert nonlinear_warnings(spline(linear_fit), evaluation) == []  # as good: the spline model may stand
-    assert nonlinear_warnings(spline(None), evaluation) == []
-    assert nonlinear_warnings(spline(linear_fit - 1.0), Evaluation(held_out, held_out.R, (), None)) == []
+    linear = scored(90.0, 80.0)
+    for validation, returned in ((80.0 + NONLINEAR_MARGIN + 0.1, "nonlinear"), (80.0 + NONLINEAR_MARGIN - 0.1, "filter"),
+                                 (79.0, "filter")):
+        margin = nonlinear_margin(scored(99.0, validation), linear, "filter")
+        assert margin["choice"] == returned and margin["margin"] == NONLINEAR_MARGIN
+        assert margin["score"] == pytest.approx(validation if returned == "nonlinear" else 80.0)
+    margin = nonlinear_margin(scored(79.0, 70.0), linear, "scheduled")
+    note = nonlinear_note(margin)
+    assert "not returned" in note and "scheduled" in note and "70.00 against 80.00" in note
+    note = nonlinear_note(nonlinear_margin(scored(99.0, 85.0), linear, "scheduled"))
+    assert note.startswith("the spline-nonlinear model is returned") and "85.00 against 80.00" in note
+    # without validation data the estimation fits decide, and the spline model fitted that record too
+    alone = scored(90.0, None)
+    assert nonlinear_margin(scored(90.0 + WHOLE_RECORD_MARGIN - 0.1, None), alone, "filter")["choice"] == "filter"
+    assert nonlinear_margin(scored(90.0 + WHOLE_RECORD_MARGIN + 0.1, None), alone, "filter")["choice"] == "nonlinear"
 
 
 def test_the_start_is_returned_only_where_it_beats_every_p_in_cross_validation():
@@ -318,7 +327,9 @@ def test_a_returned_start_is_what_the_summary_and_the_archive_describe(tmp_path,
 
     def start_preferred(*args, **kwargs):
         tuning = real_tune(*args, **kwargs)
-        return identify_workflow.PTuning(tuning.p, tuning.tried, tuning.seconds, 200.0)  # beyond any fit
+        # beyond any fit: the start as it is, and refined by its simulation error
+        fits = {**(tuning.candidate_fits or {}), "start refined": 200.0}
+        return identify_workflow.PTuning(tuning.p, tuning.tried, tuning.seconds, 200.0, tuning.q_schedule, fits)
 
     monkeypatch.setattr(identify_workflow, "tune_p", start_preferred)
     record = _write_csv(tmp_path / "r.csv", _record(30.0, seed=21, noise=0.05))
@@ -329,7 +340,8 @@ def test_a_returned_start_is_what_the_summary_and_the_archive_describe(tmp_path,
     summary = json.loads(captured.out)
     assert summary["model_returned"] == "start"
     # said once, as a note: returning the better model is no problem to warn about
-    assert sum(note.startswith(identify_workflow.START_RETURNED) for note in summary["notes"]) == 1
+    assert sum("the data start" in note and "returned in the filter's place" in note
+               for note in summary["notes"]) == 1, summary["notes"]
     assert "the start model is returned" not in captured.err and summary["warnings"] == []
     assert summary["decision_margins"]["model_returned"]["choice"] == "start"
     archived = read_archive(out).runs["start"].model

@@ -57,7 +57,7 @@ def test_identify_json_summary(record_at_100_hz, tmp_path):
     found = [complex(*v) for v in summary["eigenvalues"]]
     for truth in (-15 + 10j, -15 - 10j, -8 + 40j, -8 - 40j, -4):
         assert min(abs(f - truth) for f in found) / abs(truth) < 0.02
-    assert summary["fit_percent"][0] > 99.9
+    assert summary["R"][0] > 99.9
     assert json.loads((tmp_path / "model.json").read_text())["structure"]["n"] == 5
     # no --p: each p of the grid cross-validated on the halves with each Q schedule; the shrinking Q unless the
     # constant one's best beats its best by more than the schedule margin, then the largest p of that schedule

@@ -186,6 +186,30 @@ def test_output_sensitivity_equals_central_differences_of_the_simulation(method)
         assert np.abs(sensitivity[:, :, index] - difference).max() < 1e-7 * scale, model.structure.parameter_names()[index]
 
 
+@pytest.mark.parametrize("method", ["foh", "euler"])
+def test_free_response_sensitivity_equals_central_differences_of_the_simulation(method):
+    """The free response from x0 is a simulation from x0 less one from rest; its derivatives in the
+    parameters and in x0 match central differences (step and tolerance as for the forced response)."""
+    model = _two_input_two_output_model()
+    x0 = np.random.default_rng(6).normal(size=model.n_states)
+    zero, dt = np.zeros((400, 2)), 0.01
+    y, by_parameters, by_state = model.free_response_sensitivity(x0, 400, dt, method=method)
+    np.testing.assert_allclose(y, model.simulate_outputs(zero, dt, x0=x0, method=method), rtol=0, atol=1e-12)
+
+    def free(theta, state):
+        return ModalModel.from_parameters(model.structure, theta).simulate_outputs(zero, dt, x0=state, method=method)
+
+    for point, columns, shift in ((model.parameters, by_parameters, lambda p: free(p, x0)),
+                                  (x0, by_state, lambda s: free(model.parameters, s))):
+        for index in range(point.size):
+            step = 1e-5 * max(abs(point[index]), 1.0)
+            up, down = point.copy(), point.copy()
+            up[index] += step
+            down[index] -= step
+            difference = (shift(up) - shift(down)) / (2 * step)
+            assert np.abs(columns[:, :, index] - difference).max() <= 1e-7 * max(np.abs(difference).max(), 1e-12), index
+
+
 def test_output_sensitivity_rejects_bad_input_by_name():
     model = _two_input_two_output_model()
     with pytest.raises(InputError, match="u must have shape"):

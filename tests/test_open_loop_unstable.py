@@ -86,13 +86,14 @@ def test_a_stable_plant_stays_stable(tmp_path):
 
 
 def test_the_text_summary_says_what_an_unstable_model_s_simulation_scores_mean(tmp_path):
-    """R and the residual tests simulate from rest, where the growing mode diverges: the text says so, once each."""
+    """The fits from rest and the residual tests simulate from rest, where the growing mode diverges: the text says
+    so, once each."""
     u, y = _record(POLES[0].real, 0.01)
     path = tmp_path / "record.csv"
     np.savetxt(path, np.column_stack([np.arange(len(u)) * DT, u, y]), delimiter=",", header="t,u,y", comments="")
     done = run_vehid("identify", path, "--inputs", "u", "--outputs", "y", "--validation", "0.3")
     assert done.returncode == 0, done.stderr[-500:]
     lines = done.stdout.splitlines()
-    r_line = next(line for line in lines if line.startswith("fit R"))
+    r_line = next(line for line in lines if line.startswith("simulated from rest"))
     assert "unstable model's simulation diverges" in r_line
     assert sum("an unstable mode makes diverge" in line for line in lines) == 1

@@ -301,3 +301,59 @@ def test_no_pyplot_anywhere():
     )
     completed = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=False)
     assert completed.returncode == 0, completed.stderr
+
+
+# ------------------------------------------------------------ axis ranges robust to outliers and failed candidates
+def test_a_far_first_pass_leaves_the_convergence_axis_to_the_others():
+    """A run whose first pass explained -80,000 % (a filter far from its start) and then settled at 90-98 %:
+    the axis spans the settled passes, and the title counts the passes cut off."""
+    fit = np.column_stack([np.r_[-80_000.0, np.linspace(60.0, 98.0, 19)], np.r_[-60_000.0, np.linspace(50.0, 90.0, 19)]])
+    fig = plots.plot_convergence(fit, np.geomspace(1.0, 1e-3, 20), output_names=["yawRate", "ayCG"])
+    low, high = fig.axes[0].get_ylim()
+    assert 40.0 < low < 50.0 and 98.0 < high < 110.0  # the smallest settled value (50 %) is in view
+    assert "beyond the frame" in fig.axes[0].get_title()
+    labels = [text.get_text() for text in fig.axes[0].get_legend().get_texts()]
+    assert "filter, yawRate" in labels and "filter, ayCG" in labels  # channel names, not y1, y2
+
+
+def test_a_spike_and_a_diverging_candidate_do_not_set_the_time_fit_axis():
+    """A one-sample spike of 100 times the signal and a candidate whose prediction runs off to 1e6."""
+    t = np.arange(2000) * 0.01
+    y = np.sin(2 * np.pi * 0.5 * t)[:, None]
+    spiked = y.copy()
+    spiked[700] = 100.0
+    runaway = y * np.exp(t / 2.0)[:, None]  # 2e4 at the end
+    fig = plots.plot_time_fits(t, spiked, {"returned": y, "failed": runaway}, ["ayCG"], ["m/s^2"])
+    low, high = fig.axes[0].get_ylim()
+    # the measured sine's range (one each side), widened by at most one such range for the predictions
+    assert -3.5 < low < -1.0 and 1.0 < high < 3.5
+
+
+def test_a_band_does_not_stretch_the_bode_axes_and_the_gain_has_a_unit():
+    """A model whose covariance is huge: its band runs to zero gain and round the circle; the axes follow the curves."""
+    model = _model(n=2, n_u=1, n_y=1)
+    wide = model.with_parameter_covariance(1e4 * np.eye(model.parameters.size))
+    frequencies = np.logspace(-1, 1, 50)
+    fig = plots.plot_bode({"returned": wide}, frequencies=frequencies)
+    magnitude, phase = fig.axes[0], fig.axes[1]
+    response = np.abs(plots.frequency_response(model, frequencies)[:, 0])
+    curve_phase = np.degrees(np.unwrap(np.angle(plots.frequency_response(model, frequencies)[:, 0])))
+    low, high = magnitude.get_ylim()
+    assert response.min() / 2 < low <= response.min() and response.max() <= high < 2 * response.max()
+    low, high = phase.get_ylim()
+    span = np.ptp(curve_phase)
+    assert curve_phase.min() - 0.1 * span <= low <= curve_phase.min() and curve_phase.max() <= high
+    assert high <= curve_phase.max() + 0.1 * span
+    assert magnitude.get_ylabel() == "|G| (output unit/input unit)"  # units not given: said, not left out
+
+
+def test_the_nodes_of_a_spline_model_are_grouped_by_matrix_with_legends():
+    """A spline model's node ordinates (``sigma1[3]``): panels modal, B and D, one legend entry per coefficient."""
+    coefficients = ("sigma1", "omega1", "b11", "b21", "d11")
+    names = [f"{name}[{k}]" for name in coefficients for k in range(1, 6)]
+    history = np.linspace(0.0, 1.0, 4)[:, None] + np.arange(len(names))[None, :]
+    fig = plots.plot_parameter_history(history, names, groups=plots.parameter_groups(names))
+    assert [ax.get_title() for ax in fig.axes] == ["modal (10 parameters)", "B (10 parameters)", "D (5 parameters)"]
+    legends = [[text.get_text() for text in ax.get_legend().get_texts()] for ax in fig.axes]
+    assert legends == [["sigma1 (nodes)", "omega1 (nodes)"], ["b11 (nodes)", "b21 (nodes)"], ["d11 (nodes)"]]
+    assert sum(len(ax.get_lines()) for ax in fig.axes) == len(names)

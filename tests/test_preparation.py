@@ -4,12 +4,11 @@ import json
 
 import numpy as np
 import pytest
-from conftest import run_vehid
+from conftest import returned_run, run_vehid
 
 from vehid.identification import (IEKFOptions, InputError, ModalStructure, identify_iekf, identify_with, prepare,
                                   prepare_validation)
-from vehid.identification.dataio.archive import open_archive
-from vehid.identification.filtering.iekf_archive import read_iekf_run
+from vehid.identification.dataio.archive import open_archive, read_archive
 from vehid.identification.assessment.multirecord import score_records
 from vehid.scenarios.data_options import archived_preparation
 from vehid.scenarios.linear_example import make_data
@@ -100,12 +99,12 @@ def test_raw_file_identify_archive_reapply_gives_the_same_fit(record, tmp_path):
     assert summary["preparation"]["input_scale"] == [1.0, 2.0]
     with open_archive(archive) as handle:
         preparation = archived_preparation(handle)
-        model = read_iekf_run(handle, "iekf").model
+    model = read_archive(archive).runs[returned_run(archive)].model  # the model the command returned
     again = prepare_validation(path, preparation, record=0)
     fit = score_records(model, again).records[0].metrics.percentage_explanation
     # the same arithmetic on the same file: equal to rounding (the JSON carries full double precision)
     np.testing.assert_allclose(fit, summary["records"][0]["fits"], rtol=1e-12)
-    np.testing.assert_allclose(fit, summary["fit_percent"], rtol=1e-12)
+    np.testing.assert_allclose(fit, summary["R"], rtol=1e-12)
     # simulate on raw data: outputs in the raw file's units and offset
     simulated = preparation.simulate(model, raw.replace(u=raw.u * [1.0, 0.5]), record=0)
     assert abs(np.mean(simulated) - raw.y.mean()) < 0.05 * np.std(raw.y)
@@ -134,9 +133,11 @@ def test_identify_several_files_of_different_formats(record, tmp_path):
     # each record's offsets are its own means (the added offsets plus the signal's small mean)
     found = [r["output_offset"][0] for r in summary["preparation"]["records"]]
     np.testing.assert_allclose(found, [first.y.mean(), second.y.mean()], rtol=1e-9)
-    # pooled R (eq. 17) lies between the per-record fits, which are both high on noise-free data
+    # pooled R (eq. 17) and NRMSE fit lie between the per-record ones, which are both high on noise-free data
     fits = [r["fits"][0] for r in summary["records"]]
-    assert min(fits) - 1e-9 <= summary["fit_percent"][0] <= max(fits) + 1e-9 and min(fits) > 99.0
+    assert min(fits) - 1e-9 <= summary["R"][0] <= max(fits) + 1e-9 and min(fits) > 99.0
+    nrmse = [r["metrics"]["nrmse_fit"][0] for r in summary["records"]]
+    assert min(nrmse) - 1e-9 <= summary["fit_percent"][0] <= max(nrmse) + 1e-9
     # a file whose rate differs cannot join: one clear line, exit status 2
     scipy.io.savemat(tmp_path / "fast.mat", {"t": second.t / 2, "u1": second.u[:, 0], "u2": second.u[:, 1],
                                             "y1": second.y[:, 0]})

@@ -52,11 +52,11 @@ from scipy.signal import BadCoefficients, dfreqresp, freqresp
 
 from vehid.identification import (ArxModel, DiscreteModel, GreyBoxModel, IdentifiedGreyBox, IdentifiedModel, IOData,
                                   ModalModel, ModalStructure, Mode, SplineModalModel, TimeResponse, estimate_subspace,
-                                  identify_with, percentage_explanation, read_archive, read_value,
+                                  identify_with, nrmse_fit, percentage_explanation, read_archive, read_value,
                                   signature_mismatches, write_value)
-from vehid.identification.classical.pencil import PencilModel
-from vehid.identification.errors import InputError
 from vehid.identification.models.discrete import ContinuousModel
+from vehid.identification.errors import InputError
+from vehid.identification.classical.pencil import PencilModel
 from vehid.identification.models.protocol import statespace_response
 from vehid.identification.models.scheduled import ScheduledModalModel, gauge_parameters, input_gauge
 from vehid.identification.models.statespace import continuous_to_discrete, hold_state_shift
@@ -618,9 +618,10 @@ def test_the_identify_command_archives_a_discrete_model_and_reads_it_back(tmp_pa
         np.testing.assert_array_equal(getattr(run.model, name), summary[name])
     record = next(iter(archive.records.values()))
     # the archived model on the archived (prepared) record scores what the summary says, to rounding
-    fit = percentage_explanation(record.y, run.model.simulate(record).y)
-    np.testing.assert_allclose(fit, summary["fit_percent"], rtol=0, atol=1e-9)
-    np.testing.assert_allclose(run.metrics.percentage_explanation, summary["fit_percent"], rtol=0, atol=1e-12)
+    simulated = run.model.simulate(record).y
+    np.testing.assert_allclose(percentage_explanation(record.y, simulated), summary["R"], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(nrmse_fit(record.y, simulated), summary["fit_percent"], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(run.metrics.percentage_explanation, summary["R"], rtol=0, atol=1e-12)
 
 
 def test_the_uncertainty_band_is_centred_on_the_model_s_own_response():

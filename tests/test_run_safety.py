@@ -219,7 +219,8 @@ def test_comparators_archive_their_model(tmp_path, capsys):
     run = archive.runs["arx"]
     assert np.allclose(np.sort_complex(run.model.eigenvalues()),
                        np.sort_complex([complex(*v) for v in summary["eigenvalues"]]), rtol=1e-12)
-    assert np.allclose(run.metrics.percentage_explanation, summary["fit_percent"], rtol=1e-12)
+    assert np.allclose(run.metrics.percentage_explanation, summary["R"], rtol=1e-12)
+    assert np.allclose(run.metrics.nrmse_fit, summary["fit_percent"], rtol=1e-12)
     assert archive.records["identification"].n_samples == 5000  # 10 s at 500 Hz
     assert main(["report", str(out), "--out", str(tmp_path / "figs"), "--dpi", "30", "--quiet"]) == 0
 

@@ -173,7 +173,7 @@ def n4sid_on_the_calibration_system():
 
 
 def test_n4sid_asymptotic_covariance_agrees_with_its_residual_bootstrap(n4sid_on_the_calibration_system):
-    """The default N4SID covariance (Gauss-Newton of the simulation errors) against a 30-replicate bootstrap.
+    """N4SID's formal covariance (Gauss-Newton, white residuals) against a 30-replicate bootstrap.
 
     On the calibration system (10 % output noise, 30 s) with block rows
     spanning half a period of the slow mode, where N4SID is nearly
@@ -184,7 +184,8 @@ def test_n4sid_asymptotic_covariance_agrees_with_its_residual_bootstrap(n4sid_on
     errors below and 3 above. A covariance off by a factor of 2 fails.
     """
     data, default = n4sid_on_the_calibration_system
-    asymptotic = default.uncertainty().modes
+    asymptotic = default.with_parameter_covariance(
+        simulation_error_covariance(default, [data], jackknife=False)).uncertainty().modes
     bootstrap = identify_with(data, method="n4sid", order=4, block_rows=50, bootstrap=30, seed=1).model
     assert bootstrap.meta["bootstrap_replicates"] >= 28
     for fast, slow in zip(asymptotic, bootstrap.uncertainty().modes):
@@ -223,9 +224,9 @@ def test_simulation_error_covariance_equals_the_finite_difference_one_within_its
     """
     data, default = n4sid_on_the_calibration_system
     model = default.with_parameter_covariance(None)
-    exact = simulation_error_covariance(model, [data])
-    # the default fit's covariance is this one, computed by the comparator
-    np.testing.assert_allclose(default.parameter_covariance, exact, rtol=1e-12)
+    # the default fit's covariance is this one (the fit's block jackknife), computed by the comparator
+    np.testing.assert_allclose(default.parameter_covariance, simulation_error_covariance(model, [data]), rtol=1e-12)
+    exact = simulation_error_covariance(model, [data], jackknife=False)
     std = np.sqrt(np.diag(exact))
     for relative_step, central, tolerance in ((1e-6, False, 2e-4), (1e-5, True, 1e-6)):
         reference = _difference_covariance(model, data, relative_step, central)

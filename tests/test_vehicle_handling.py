@@ -348,6 +348,26 @@ def test_handling_command_on_a_model_file(capsys, tmp_path):
     assert main(["handling", str(path), "--speeds", "20", "--wheelbase", str(WHEELBASE), "--strict"]) == 3
 
 
+def test_the_handling_text_gives_steer_angles_in_one_unit_and_the_json_its_units(capsys, tmp_path):
+    """The JSON's gains are per radian of steer, each with its unit; the text gives every steer angle in
+    degrees (as the understeer gradient's deg/g), the lateral-acceleration gain too, and says so."""
+    A, B, C, D, _ = Bicycle(20.0).to_statespace()
+    model = dataclasses.replace(to_modal(A, B, C[:2], D[:2]), input_names=("steer",),
+                                output_names=("yaw_rate", "lateral_acceleration"))
+    path = model.save_json(tmp_path / "car.json")
+    assert main(["handling", str(path), "--speeds", "20", "--wheelbase", str(WHEELBASE), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    (row,) = summary["metrics"]
+    assert row["lateral_acceleration_gain"]["unit"] == "m/s^2/rad" and summary["units"]["steer"].startswith("rad")
+    assert main(["handling", str(path), "--speeds", "20", "--wheelbase", str(WHEELBASE)]) == 0
+    text = capsys.readouterr().out
+    assert "steer angles in degrees" in text and "/rad" not in text
+    (line,) = [line for line in text.splitlines() if line.startswith("lateral acc. gain (m/s^2 per deg)")]
+    per_degree = float(line.split()[-1])
+    assert per_degree == pytest.approx(row["lateral_acceleration_gain"]["value"] * math.pi / 180, rel=1e-3)  # 4 digits
+    assert any(line.startswith("yaw-rate gain r/delta (deg/s per deg)") for line in text.splitlines())
+
+
 @pytest.mark.parametrize("argv, message", [
     (["handling"], "give a MODEL"),
     (["handling", "--source", "--speeds", "10,x"], "comma-separated numbers"),

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["percentage_explanation", "nrmse_fit", "r_squared", "FitMetrics", "fit_metrics"]
+__all__ = ["percentage_explanation", "nrmse_fit", "nrmse_fit_of_R", "r_squared", "FitMetrics", "fit_metrics"]
 
 
 def _pair(y: np.ndarray, y_hat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -59,6 +59,30 @@ def nrmse_fit(y: np.ndarray, y_hat: np.ndarray) -> np.ndarray:
     if np.any(spread == 0):
         raise InputError("an output is constant: the NRMSE fit is undefined")
     return (1.0 - np.linalg.norm(y - y_hat, axis=0) / spread) * 100.0
+
+
+def nrmse_fit_of_R(R: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """The NRMSE fit (percent, per output) of a prediction whose R (eq. 17) against ``y`` is ``R``.
+
+    Both measure the same squared error, ``(1 - R/100) sum y^2``, against the
+    output's energy and its spread about its mean: the identity converts a
+    stored R (a filter's pass, a start's fit) to the fit without the
+    prediction, provided ``y`` (N, n_y) are the very samples R was taken over.
+
+    Examples
+    --------
+    >>> y, y_hat = np.array([[1.0], [2.0], [4.0]]), np.array([[1.5], [2.0], [3.5]])
+    >>> bool(np.allclose(nrmse_fit_of_R(percentage_explanation(y, y_hat), y), nrmse_fit(y, y_hat)))
+    True
+    """
+    y = np.asarray(y, dtype=float)
+    if y.ndim == 1:
+        y = y[:, None]
+    spread = np.linalg.norm(y - y.mean(axis=0), axis=0)
+    if np.any(spread == 0):
+        raise InputError("an output is constant: the NRMSE fit is undefined")
+    error = np.maximum(1.0 - np.asarray(R, dtype=float) / 100.0, 0.0) * np.sum(y**2, axis=0)
+    return (1.0 - np.sqrt(error) / spread) * 100.0
 
 
 def r_squared(y: np.ndarray, y_hat: np.ndarray) -> np.ndarray:

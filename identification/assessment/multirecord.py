@@ -17,7 +17,8 @@ from ..data import IOData, as_records
 from ..errors import InputError
 from .metrics import FitMetrics, nrmse_fit, percentage_explanation, r_squared
 
-__all__ = ["RecordFit", "MultiRecordFit", "score_records", "pooled_percentage_explanation", "pooled_simulation_fit"]
+__all__ = ["RecordFit", "MultiRecordFit", "score_records", "pooled_percentage_explanation", "pooled_simulation_fit",
+           "pooled_nrmse_fit_of_R"]
 
 
 def pooled_percentage_explanation(pairs: Iterable[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
@@ -30,6 +31,23 @@ def pooled_percentage_explanation(pairs: Iterable[tuple[np.ndarray, np.ndarray]]
     if np.any(energy == 0):
         raise InputError("an output is identically zero over all records: R (eq. 17) is undefined")
     return (1.0 - error / energy) * 100.0
+
+
+def pooled_nrmse_fit_of_R(R: Any, records: Sequence[IOData]) -> np.ndarray:
+    """The NRMSE fit per output pooled over records, of a prediction whose pooled R (eq. 17) over them is ``R``.
+
+    Pooled as R is: the summed squared error of all records against the summed
+    spread of each record's outputs about that record's own mean (each record
+    is its own experiment). With one record this is
+    :func:`~vehid.identification.assessment.metrics.nrmse_fit_of_R`.
+    """
+    energy = sum(np.sum(record.y**2, axis=0) for record in records)
+    spread = np.sqrt(sum(np.sum((record.y - record.y.mean(axis=0)) ** 2, axis=0) for record in records))
+    if np.any(spread == 0):
+        raise InputError("an output is constant over all records: the NRMSE fit is undefined")
+    with np.errstate(all="ignore"):
+        error = np.maximum(1.0 - np.asarray(R, dtype=float) / 100.0, 0.0) * energy
+        return (1.0 - np.sqrt(error) / spread) * 100.0
 
 
 def _simulation_options(method: str | None) -> dict[str, Any]:

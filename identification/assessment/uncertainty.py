@@ -10,10 +10,17 @@ simulation-error bound (:func:`simulation_error_covariance`; too narrow where
 its block rows miss the slow modes) or a residual bootstrap on request
 (:func:`bootstrap_covariance`).
 
+Where the record allows, the covariance of a fit of simulation errors is not
+the curvature's ``(J' W J)^-1``, which assumes white residuals and a model
+that holds the system, but the delete-one-block jackknife of the fit
+(:func:`fit_covariance`; :mod:`vehid.identification.assessment.segments`): one
+Gauss-Newton step per deleted block of the record, so that coloured
+residuals and model error count as much as they move the estimate. The
+model's ``meta["uncertainty_method"]`` says which
+(:class:`~vehid.identification.assessment.segments.UncertaintyMethod`).
+
 What follows from a covariance (modes, gains, the frequency response) is
-propagated by the delta method with exact CasADi derivatives. Every interval
-assumes white residuals: where :mod:`vehid.identification.assessment.residuals` rejects
-whiteness, model error dominates and the intervals are formal.
+propagated by the delta method with exact CasADi derivatives.
 """
 
 from __future__ import annotations
@@ -26,6 +33,8 @@ import casadi as ca
 import numpy as np
 
 from ..errors import InputError
+from .segments import (DEFAULT_BLOCKS, UncertaintyMethod, block_jackknife, block_plan, formal_method, gram_matrix,
+                       integrated_correlation_time, normal_quantile, one_step_replicates)
 
 __all__ = [
     "ModeEstimate",
@@ -37,7 +46,11 @@ __all__ = [
     "frequency_response",
     "iekf_parameter_covariance",
     "gauss_newton_covariance",
+    "fit_covariance",
+    "difference_fit_covariance",
     "simulation_error_covariance",
+    "with_covariance",
+    "with_simulation_error_covariance",
     "upper_envelope",
     "propagate_by_differences",
     "bootstrap_covariance",
@@ -58,14 +71,6 @@ def checked_covariance(covariance: Any, size: int) -> np.ndarray:
     array = 0.5 * (array + array.T)
     array.setflags(write=False)
     return array
-
-
-def normal_quantile(level: float) -> float:
-    """``z`` of a two-sided interval ``+/- z sigma`` holding ``level`` of a normal distribution."""
-    if not 0 < level < 1:
-        raise InputError(f"a confidence level lies between 0 and 1; got {level!r}")
-    from scipy.special import ndtri  # scipy.stats.norm.ppf, without scipy.stats's import time
-    return float(ndtri(0.5 + level / 2))
 
 
 def _spread(jacobian: np.ndarray, covariance: np.ndarray | None) -> np.ndarray:
@@ -336,7 +341,8 @@ def iekf_parameter_covariance(
     estimate: Any = None,
     records: Any = None,
     pass_parameters: np.ndarray | None = None,
-) -> np.ndarray:
+    with_method: bool = False,
+) -> Any:
     """The IEKF's parameter covariance in original units: its fit's covariance plus its measured fluctuation.
 
     Parameters
@@ -364,6 +370,9 @@ def iekf_parameter_covariance(
         one more pass over ``records`` from its final state: with
         ``estimate`` and ``records``, the covariance is the fit's plus
         their mean square deviation from the fit's minimiser (Notes).
+    with_method : bool
+        Return the pair of the covariance and how it was obtained
+        (:class:`~vehid.identification.assessment.segments.UncertaintyMethod`).
 
     Notes
     -----
@@ -378,7 +387,8 @@ def iekf_parameter_covariance(
     simulation error (the states carry no process noise, so the filter
     predicts by simulation), whose covariance is
     :func:`simulation_error_covariance` at the estimate. So the covariance
-    is that plus ``S``, measured on the pass itself. ``S`` is taken about
+    is that (:func:`simulation_error_covariance`: the fit's delete-one-block
+    jackknife where the record allows) plus ``S``, measured on the pass itself. ``S`` is taken about
     that minimiser (one Gauss-Newton step from the estimate) rather than
     about the samples' own mean: where a filter of high gain does not
     average to the minimiser, the offset (a bias the fit does not have) is
@@ -415,19 +425,26 @@ def iekf_parameter_covariance(
     P_parameters = np.asarray(P_parameters, dtype=float)
     covariance = 0.5 * noise_ratio * jacobian @ P_parameters @ jacobian.T
     covariance = 0.5 * (covariance + covariance.T)
+
+    def answer(value: np.ndarray, method: UncertaintyMethod) -> Any:
+        return (value, method) if with_method else value
+
+    filter_only = formal_method("the filter's P (half of it, scaled by the measured innovations): no finished "
+                                "run's fit to measure the spread on")
     if estimate is None or records is None:
-        return covariance
-    found = simulation_error_covariance(estimate, records, with_step=True)
+        return answer(covariance, filter_only)
+    found = simulation_error_covariance(estimate, records, with_step=True, with_method=True)
     if found is None:
-        return covariance
-    fit, step = found
+        return answer(covariance, filter_only)
+    fit, step, method = found
     if pass_parameters is not None:
         samples = np.asarray(pass_parameters, dtype=float)
         if samples.ndim == 2 and samples.shape[0] >= 2 and samples.shape[1] == n_theta and np.all(np.isfinite(samples)):
             deviations = samples - (estimate.parameters + step)
             total = fit + deviations.T @ deviations / samples.shape[0]
-            return 0.5 * (total + total.T)
-    return upper_envelope(covariance, fit)
+            return answer(0.5 * (total + total.T), method.with_note("plus the filter's spread along one more pass"))
+    return answer(upper_envelope(covariance, fit),
+                  method.with_note("at least half the filter's P, direction by direction"))
 
 
 def upper_envelope(first: np.ndarray, second: np.ndarray) -> np.ndarray:
@@ -480,7 +497,7 @@ def gauss_newton_covariance(jacobian: np.ndarray, residuals: np.ndarray, *, over
     # the normal equations, equilibrated, where they are well conditioned: a Gram product costs a
     # fraction of a QR factorisation of the long Jacobian; their rounding (about sqrt(N) eps of each
     # entry, relative) then moves the covariance by less than 1e-5 relative below condition 1e6
-    gram = sum(_gram(blocks[:, i, :]) / variance[i] for i in range(n_y))
+    gram = sum(gram_matrix(blocks[:, i, :]) / variance[i] for i in range(n_y))
     scale = np.sqrt(np.diag(gram))
     if np.all(scale > 0) and np.all(np.isfinite(gram)):
         values, vectors = np.linalg.eigh(gram / np.outer(scale, scale))
@@ -513,22 +530,89 @@ def _error_variances(residuals: np.ndarray, n_theta: int) -> np.ndarray:
     return np.maximum(np.mean(residuals**2, axis=0) / dof, 1e-300)
 
 
-def _gram(columns: np.ndarray, rows_per_block: int = 1024) -> np.ndarray:
-    """``columns' columns`` summed over blocks of rows.
+#: Why a fit's covariance stays formal where the record cannot be cut into enough blocks.
+SHORT_RECORD_REASON = ("the record holds fewer than {fewest} blocks longer than its residuals' correlation time "
+                       "({tau:.3g} samples): the intervals assume white residuals")
 
-    A block of about a thousand rows is a product BLAS runs on one thread:
-    on a shared two-core machine the threaded product of the whole long
-    array took 2-4 times as long (0.8 against 1.6-4 ms at 50,000 x 17).
+
+def fit_covariance(jacobian: np.ndarray, residuals: np.ndarray, *, dt: float | None = None, jackknife: bool = True,
+                   blocks: int = DEFAULT_BLOCKS, form: str = "linearised", level: float = 0.95,
+                   overwrite_jacobian: bool = False) -> tuple[np.ndarray, UncertaintyMethod]:
+    """The covariance of a weighted least-squares fit of several outputs' errors, and how it was obtained.
+
+    Parameters
+    ----------
+    jacobian : ndarray, shape (N n_y, n_theta)
+        Derivatives of the errors, rows time-major (sample k, output i at row ``k n_y + i``).
+    residuals : ndarray, shape (N, n_y)
+        The errors at the estimate.
+    dt : float, optional
+        Sample interval (s), to state the blocks in seconds.
+    jackknife : bool
+        Measure the covariance by the delete-one-block jackknife where the record allows (default);
+        False gives the formal :func:`gauss_newton_covariance`.
+    blocks : int
+        Most blocks (fewer where they would be shorter than the correlation time).
+    form : {"linearised", "one-step"}
+        The replicates' curvature (:func:`~vehid.identification.assessment.segments.one_step_replicates`):
+        the whole record's (default) or the one without the block.
+    level : float
+        Level at which the jackknife's few degrees of freedom are allowed for
+        (:func:`~vehid.identification.assessment.segments.interval_scale`).
+    overwrite_jacobian : bool
+        As :func:`gauss_newton_covariance`, for the formal covariance.
+
+    Returns
+    -------
+    covariance : ndarray (n_theta, n_theta)
+    method : UncertaintyMethod
+
+    Notes
+    -----
+    Each output weighed by ``1 / s_i^2`` as :func:`gauss_newton_covariance` weighs it, the record
+    is cut into at most :data:`~vehid.identification.assessment.segments.DEFAULT_BLOCKS` contiguous
+    blocks, each longer than the residuals' integrated correlation time; the replicate without
+    block ``k`` is one Gauss-Newton step from the estimate on the other blocks, with the whole
+    record's curvature (:func:`~vehid.identification.assessment.segments.one_step_replicates`):
+    the jackknife linearised, whose covariance is the block sandwich ``H^-1 S H^-1`` with ``S``
+    the spread of the blocks' scores. Coloured residuals
+    and model error move those steps as much as they move the estimate, which the curvature
+    alone cannot see; on white residuals of a model that holds, the jackknife's variance agrees
+    with the curvature's on average (before the factor ``(t(K - 1) / z)^2`` for its few degrees
+    of freedom). Where no such blocks fit, or a parameter is determined by one block alone, the
+    formal covariance stands and the method says why.
     """
-    gram = np.zeros((columns.shape[1], columns.shape[1]))
-    for start in range(0, columns.shape[0], rows_per_block):
-        block = columns[start:start + rows_per_block]
-        gram += block.T @ block
-    return gram
+    residuals = np.asarray(residuals, dtype=float)
+    samples, n_y = residuals.shape
+    n_theta = jacobian.shape[1]
+    method = formal_method("asked for the formal covariance of white residuals")
+    if jackknife:
+        tau = float(np.max(integrated_correlation_time(residuals)))
+        edges = block_plan(samples, min_length=np.ceil(tau), most=blocks)
+        if edges is None:
+            from .segments import MIN_BLOCKS
+
+            method = formal_method(SHORT_RECORD_REASON.format(fewest=MIN_BLOCKS, tau=tau))
+        else:
+            weights = 1.0 / np.sqrt(_error_variances(residuals, n_theta))
+            blocks = np.asarray(jacobian, dtype=float).reshape(samples, n_y, n_theta)
+            weighted_errors = residuals * weights**2
+            spans = list(zip(edges[:-1], edges[1:]))
+            pieces = [(blocks[a:b] * weights[None, :, None]).reshape(-1, n_theta) for a, b in spans]
+            gradients = [blocks[a:b].reshape(-1, n_theta).T @ weighted_errors[a:b].ravel() for a, b in spans]
+            try:
+                replicates = one_step_replicates(np.zeros(n_theta), pieces, gradients, form=form)
+            except InputError as exc:
+                method = formal_method(f"no jackknife: {exc}")
+            else:
+                found = block_jackknife(replicates, edges, form=form, level=level, dt=dt, correlation_time=tau)
+                return found.covariance, found.method
+    return gauss_newton_covariance(jacobian, residuals, overwrite_jacobian=overwrite_jacobian), method
 
 
-def simulation_error_covariance(model: Any, records: Any, *, with_step: bool = False) -> Any:
-    """The asymptotic covariance of a modal model's parameters as a fit of its simulation errors.
+def simulation_error_covariance(model: Any, records: Any, *, with_step: bool = False, with_method: bool = False,
+                                jackknife: bool = True) -> Any:
+    """The covariance of a modal model's parameters as a fit of its simulation errors.
 
     Parameters
     ----------
@@ -538,23 +622,32 @@ def simulation_error_covariance(model: Any, records: Any, *, with_step: bool = F
     records : sequence of IOData
         The records it was identified from, each simulated from rest
         (first-order hold), as output error fits them.
+    with_step : bool
+        Also return the Gauss-Newton step from the model's parameters towards
+        the minimiser of the weighted simulation error.
+    with_method : bool
+        Also return how the covariance was obtained
+        (:class:`~vehid.identification.assessment.segments.UncertaintyMethod`).
+    jackknife : bool
+        The delete-one-block jackknife of the fit where the records allow
+        (:func:`fit_covariance`, default); False: the formal covariance.
 
     Returns
     -------
     ndarray, shape (n_theta, n_theta), or None
-        :func:`gauss_newton_covariance` of the errors' exact Jacobian
+        :func:`fit_covariance` of the errors' exact Jacobian
         (:meth:`~identification.models.modal.ModalModel.output_sensitivity`); None
         where the model cannot be simulated to finite values (an unstable
-        estimate over a long record). With ``with_step``, the pair of it and
-        the Gauss-Newton step from the model's parameters towards the
-        minimiser of the weighted simulation error (or None).
+        estimate over a long record). With ``with_step`` or ``with_method``, a
+        tuple of the covariance, then the step, then the method, as asked (or None).
 
     Notes
     -----
-    This is the covariance a prediction-error (output-error) estimate would
+    The formal covariance is the one a prediction-error (output-error) estimate would
     have at this point with white output noise of the measured variance
     (Ljung 1999, eq. 9.17); for a consistent estimator that does not
     minimise that criterion (subspace methods) it is the efficient bound.
+    The records are cut into blocks as one record (a block may span two).
     """
     errors, jacobians = [], []
     with np.errstate(all="ignore"):
@@ -567,13 +660,76 @@ def simulation_error_covariance(model: Any, records: Any, *, with_step: bool = F
     jacobian = jacobians[0] if len(jacobians) == 1 else np.concatenate(jacobians)
     if not (np.all(np.isfinite(jacobian)) and np.all(np.isfinite(base))):
         return None
-    if not with_step:
-        return gauss_newton_covariance(jacobian, base, overwrite_jacobian=True)
-    # the step -(J' W J)^-1 J' W e with the covariance's weights W (1 / each output's error variance),
-    # its gradient taken before the covariance may overwrite J
-    gradient = jacobian.T @ (base / _error_variances(base, jacobian.shape[1])).ravel()
-    covariance = gauss_newton_covariance(jacobian, base, overwrite_jacobian=True)
-    return covariance, -covariance @ gradient
+    step = None
+    if with_step:
+        # the step -(J' W J)^-1 J' W e with the covariance's weights W (1 / each output's error variance),
+        # its gradient taken before the formal covariance may overwrite J
+        gradient = jacobian.T @ (base / _error_variances(base, jacobian.shape[1])).ravel()
+    covariance, method = fit_covariance(jacobian, base, dt=float(records[0].dt), jackknife=jackknife,
+                                        overwrite_jacobian=not with_step)
+    if with_step:
+        formal = covariance if method.name == "formal" else gauss_newton_covariance(jacobian, base,
+                                                                                     overwrite_jacobian=True)
+        step = -formal @ gradient
+    if not (with_step or with_method):
+        return covariance
+    return (covariance, *((step,) if with_step else ()), *((method,) if with_method else ()))
+
+
+def difference_fit_covariance(simulate: Callable[[np.ndarray], np.ndarray], theta: Any, measured: Any, *,
+                              steps: Any, dt: float | None = None, **options: Any) -> tuple | None:
+    """:func:`fit_covariance` of a model's simulation errors, the Jacobian by central differences.
+
+    Parameters
+    ----------
+    simulate : callable
+        ``simulate(theta) -> y (N, n_y)``, the model's outputs over the record(s) with parameters ``theta``.
+    theta : array_like (n_theta,)
+        The estimate.
+    measured : array_like (N, n_y)
+        The measured outputs.
+    steps : array_like (n_theta,)
+        The difference step of each parameter (``2 n_theta`` simulations).
+    dt : float, optional
+        Sample interval (s), to state the blocks in seconds.
+    **options
+        Passed to :func:`fit_covariance` (``jackknife``, ``blocks``, ``form``, ``level``).
+
+    Returns
+    -------
+    (covariance, UncertaintyMethod) or None
+        None where a simulation is not finite.
+    """
+    theta = np.asarray(theta, dtype=float).ravel()
+    steps = np.broadcast_to(np.asarray(steps, dtype=float), theta.shape)
+    if not np.all(steps > 0):
+        raise InputError("every parameter needs a positive difference step")
+    with np.errstate(all="ignore"):
+        base = np.asarray(simulate(theta), dtype=float)
+        jacobian = np.empty(base.shape + (theta.size,))
+        for i in range(theta.size):
+            shift = np.zeros(theta.size)
+            shift[i] = steps[i]
+            jacobian[:, :, i] = (simulate(theta + shift) - simulate(theta - shift)) / (2 * steps[i])
+    residuals = base - np.asarray(measured, dtype=float)
+    if not (np.all(np.isfinite(jacobian)) and np.all(np.isfinite(residuals))):
+        return None
+    return fit_covariance(jacobian.reshape(-1, theta.size), residuals, dt=dt, **options)
+
+
+def with_covariance(model: Any, covariance: Any, method: UncertaintyMethod) -> Any:
+    """``model`` (a frozen dataclass with ``meta``) carrying ``covariance`` and ``meta["uncertainty_method"]``."""
+    import dataclasses
+
+    return dataclasses.replace(model, parameter_covariance=covariance,
+                               meta={**model.meta, "uncertainty_method": method.as_dict()})
+
+
+def with_simulation_error_covariance(model: Any, records: Any) -> Any:
+    """``model`` carrying :func:`simulation_error_covariance` on ``records`` and how it was obtained
+    (without a covariance where the model's simulation is not finite)."""
+    found = simulation_error_covariance(model, records, with_method=True)
+    return model.with_parameter_covariance(None) if found is None else with_covariance(model, *found)
 
 
 def propagate_by_differences(

@@ -2,7 +2,8 @@
 
 Each function takes a model and an :class:`~identification.data.IOData` record, so that any preparation
 of the record happens before and outside. :func:`estimate_initial_state` explains a record that starts
-mid-motion (``y = y_forced + O x0`` is linear in ``x0``); :func:`predict` with a horizon ``K`` (from a
+mid-motion (``y = y_forced + O x0`` is linear in ``x0``; for a model that is not linear time-invariant, a
+scheduled family or a spline model, by Gauss-Newton on ``x0``); :func:`predict` with a horizon ``K`` (from a
 steady-state Kalman filter's state) is the score that means something for a model whose simulation
 diverges; :func:`score` gives NRMSE fit and the paper's R (eq. 17) per output; :func:`split_holdout`
 holds out the last fraction of a record.
@@ -27,6 +28,8 @@ __all__ = [
     "estimate_initial_state",
     "predict",
     "score",
+    "predicted_scores",
+    "iterated_initial_state",
     "split_holdout",
     "default_horizon",
     "UNSTABLE_HORIZON",
@@ -87,16 +90,23 @@ def _check(model: Any, data: IOData) -> None:
 
 
 def estimate_initial_state(model: Any, data: IOData) -> np.ndarray:
-    """The initial state ``x0`` (n,) of a linear model that fits the record best, by linear least squares.
+    """The initial state ``x0`` (n,) that fits the record best, by least squares on the outputs.
 
-    The regressors are the free responses of the model's states (one
-    simulation from each unit state with zero input); each output is
-    weighted by the inverse of its RMS so that units do not matter.
-    ``model`` is any linear :class:`~identification.models.protocol.IdentifiedModel`.
+    Each output is weighted by the inverse of its RMS so that units do not
+    matter. For a linear model (``is_linear``) the outputs are linear in
+    ``x0``: the regressors are the free responses of its states (one
+    simulation from each unit state with zero input). A model that is not
+    linear time-invariant (a scheduled family, linear along its schedule;
+    a spline model) is fitted by Gauss-Newton on ``x0`` from rest
+    (:func:`iterated_initial_state`), which for a family linear in its state
+    lands on the least-squares state at its first step. ``model`` is any
+    :class:`~identification.models.protocol.IdentifiedModel`.
     """
     _check(model, data)
+    if not model.is_linear:
+        return iterated_initial_state(model, data)
     n = model.n_states
-    weights = 1.0 / np.maximum(np.sqrt(np.mean(data.y**2, axis=0)), 1e-300)
+    weights = _output_weights(data)
     window = _free_response_samples(model, data)
     u, y = data.u[:window], data.y[:window]
     with np.errstate(all="ignore"):
@@ -109,6 +119,66 @@ def estimate_initial_state(model: Any, data: IOData) -> np.ndarray:
     if not (np.all(np.isfinite(free)) and np.all(np.isfinite(target))):
         return np.zeros(n)
     return np.linalg.lstsq(free, target, rcond=None)[0]
+
+
+def _output_weights(data: IOData) -> np.ndarray:
+    return 1.0 / np.maximum(np.sqrt(np.mean(data.y**2, axis=0)), 1e-300)
+
+
+#: Gauss-Newton steps of :func:`iterated_initial_state` at most: a model linear in its state needs one (the
+#: second finds nothing to gain); a spline model's mild nonlinearity a few more
+GAUSS_NEWTON_STEPS = 8
+#: finite-difference step of each state, as a fraction of that state's RMS in the forced simulation
+_STATE_STEP = 1e-3
+#: relative fall of the weighted squared error below which the iteration stops
+_SETTLED_COST = 1e-10
+
+
+def iterated_initial_state(model: Any, data: IOData, *, steps: int = GAUSS_NEWTON_STEPS) -> np.ndarray:
+    """``x0`` (n,) of any model whose simulation starts from a given state, by Gauss-Newton from rest.
+
+    The residual is the RMS-weighted output error over the record; its
+    Jacobian in ``x0`` is taken by forward differences, each state stepped
+    by :data:`_STATE_STEP` of its RMS in the simulation from rest. A step is
+    kept only where it lowers the error (halved up to three times
+    otherwise), so the state returned never fits worse than rest, which it
+    stays at where no step helps or a simulation is not finite.
+    """
+    n = model.n_states
+    weights = _output_weights(data)
+
+    def residual(x0: np.ndarray) -> np.ndarray:
+        with np.errstate(all="ignore"):
+            return ((data.y - model.simulate_outputs(data.u, data.dt, x0=x0)) * weights).ravel()
+
+    x = np.zeros(n)
+    with np.errstate(all="ignore"):
+        _, states = model.simulate_outputs(data.u, data.dt, x0=x, return_states=True)
+    scale = np.sqrt(np.mean(np.asarray(states, dtype=float) ** 2, axis=0))
+    scale = np.where(np.isfinite(scale) & (scale > 0), scale, 1.0)
+    r = residual(x)
+    cost = float(r @ r)
+    if not np.isfinite(cost):
+        return x
+    for _ in range(steps):
+        delta = _STATE_STEP * np.maximum(scale, np.abs(x))
+        jacobian = np.column_stack([(residual(x + delta[i] * np.eye(n)[i]) - r) / delta[i] for i in range(n)])
+        if not np.all(np.isfinite(jacobian)):
+            break
+        step = -np.linalg.lstsq(jacobian, r, rcond=None)[0]
+        for _ in range(4):
+            trial = residual(x + step)
+            trial_cost = float(trial @ trial)
+            if np.isfinite(trial_cost) and trial_cost < cost:
+                break
+            step = step / 2
+        else:
+            break
+        settled = cost - trial_cost <= _SETTLED_COST * cost
+        x, r, cost = x + step, trial, trial_cost
+        if settled:
+            break
+    return x
 
 
 _FREE_RESPONSE_TIME_CONSTANTS = 10  # e^-10: beyond this the initial state's response is below rounding of the fit
@@ -199,20 +269,19 @@ def predict(model: Any, data: IOData, *, initial_state: str = "estimate", horizo
     Parameters
     ----------
     model : IdentifiedModel
-        A nonlinear model (``is_linear`` False) is simulated from rest; a scheduled
-        family (also ``is_linear`` False) along the record's last input column, its schedule.
+        A scheduled family (``is_linear`` False) is simulated along the record's last input column,
+        its schedule.
     data : IOData
     initial_state : {"zero", "estimate"}
-        Linear models only; ``estimate`` by :func:`estimate_initial_state`.
+        ``estimate`` by :func:`estimate_initial_state`, for every model.
     horizon : int, optional
-        Predict this many samples ahead (linear models only) instead of simulating.
+        Predict this many samples ahead (linear models only) instead of simulating; a model that is
+        not linear is simulated whatever the horizon.
     """
     _check(model, data)
     if initial_state not in INITIAL_STATES:
         raise InputError(f"unknown initial state {initial_state!r}; use one of {', '.join(INITIAL_STATES)}")
-    if not model.is_linear:
-        return model.simulate_outputs(data.u, data.dt)
-    if horizon is not None:
+    if horizon is not None and model.is_linear:
         if isinstance(horizon, bool) or int(horizon) != horizon or horizon < 1:
             raise InputError(f"the prediction horizon must be a whole number of samples >= 1; got {horizon!r}")
         return _k_step(model, data, int(horizon))
@@ -223,6 +292,12 @@ def predict(model: Any, data: IOData, *, initial_state: str = "estimate", horizo
 
 def score(model: Any, data: IOData, *, initial_state: str = "estimate", horizon: int | None = None) -> Scores:
     """NRMSE fit and R per output of :func:`predict` against the record (``-inf`` where not finite)."""
+    return predicted_scores(model, data, initial_state=initial_state, horizon=horizon)[1]
+
+
+def predicted_scores(model: Any, data: IOData, *, initial_state: str = "estimate", horizon: int | None = None
+                     ) -> tuple[np.ndarray, Scores]:
+    """:func:`predict`'s outputs (N, n_y) and their :func:`score`, from one prediction (for a caller drawing it)."""
     predicted = predict(model, data, initial_state=initial_state, horizon=horizon)
     start = 0 if horizon is None else min(int(horizon), data.n_samples - 2)
     y, y_hat = data.y[start:], predicted[start:]
@@ -231,8 +306,8 @@ def score(model: Any, data: IOData, *, initial_state: str = "estimate", horizon:
             fit, R = nrmse_fit(y, y_hat), percentage_explanation(y, y_hat)
         else:
             fit = R = np.full(data.n_y, -np.inf)
-    return Scores(fit, R, initial_state if model.is_linear and horizon is None else "zero",
-                  horizon, int(y.shape[0]))
+    return predicted, Scores(fit, R, initial_state if horizon is None or not model.is_linear else "zero",
+                             horizon, int(y.shape[0]))
 
 
 def split_holdout(data: IOData, fraction: float) -> tuple[IOData, IOData]:

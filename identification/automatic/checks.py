@@ -6,6 +6,11 @@ Public JSON keys of the model checks (a contract once released):
     ``eigenvalue_std`` as [re, im], ``frequency_hz``, ``frequency_hz_std``,
     ``damping``, ``damping_std`` (NaN standard deviations where the
     estimator gave no covariance).
+``uncertainty_method``
+    How the parameter covariance behind every standard deviation was
+    obtained (:class:`~vehid.identification.assessment.segments.UncertaintyMethod`:
+    ``name`` ``block-jackknife`` or ``formal``, the blocks, the degrees of
+    freedom, the factor applied, a ``description``); None without a covariance.
 ``residual_whiteness_p``, ``input_correlation_max``
     Per output, of the continuous model's simulation residuals on the
     record (:mod:`vehid.identification.assessment.residuals`); ``residual_tests`` holds the
@@ -40,14 +45,20 @@ from vehid.identification.models.modal import ModalModel
 from vehid.identification.assessment.multirecord import score_records
 from vehid.identification.assessment.residuals import ResidualTests, nis_band, residual_tests
 
-__all__ = ["model_residual_tests", "uncertainty_summary", "record_names", "records_summary", "data_warnings"]
+__all__ = ["model_residual_tests", "uncertainty_summary", "uncertainty_method", "returned_checks", "record_names",
+           "records_summary", "data_warnings"]
 
 
-def model_residual_tests(model: Any, data: IOData) -> ResidualTests:
-    """The residual tests of ``model`` simulated exactly (first-order hold) from rest over ``data``."""
+def model_residual_tests(model: Any, data: IOData, inputs: int | None = None) -> ResidualTests:
+    """The residual tests of ``model`` simulated exactly (first-order hold) from rest over ``data``.
+
+    ``inputs``: how many of the record's input columns the residuals are tested against (default
+    all; a scheduled family's record carries its schedule last, which is not one of its inputs).
+    """
     residuals = data.y - model.simulate_outputs(data.u, data.dt)
-    return residual_tests(data.u, residuals, input_names=data.input_names, output_names=data.output_names,
-                          output_scale=np.sqrt(np.mean(data.y**2, axis=0)))
+    count = data.n_u if inputs is None else inputs
+    return residual_tests(data.u[:, :count], residuals, input_names=data.input_names[:count],
+                          output_names=data.output_names, output_scale=np.sqrt(np.mean(data.y**2, axis=0)))
 
 
 def uncertainty_summary(model: ModalModel, data: IOData, nis: Sequence[float] | None = None) -> tuple[dict[str, Any], ResidualTests]:
@@ -55,6 +66,7 @@ def uncertainty_summary(model: ModalModel, data: IOData, nis: Sequence[float] | 
     tests = model_residual_tests(model, data)
     summary: dict[str, Any] = {
         "modes": [mode.as_dict() for mode in model.uncertainty().modes],
+        "uncertainty_method": uncertainty_method(model),
         "residual_whiteness_p": tests.residual_whiteness_p,
         "input_correlation_max": tests.input_correlation_max,
         "residual_tests": tests.as_dict(),
@@ -63,6 +75,48 @@ def uncertainty_summary(model: ModalModel, data: IOData, nis: Sequence[float] | 
         summary["innovation_nis"] = np.asarray(nis, dtype=float)
         summary["innovation_nis_band"] = list(nis_band(data.n_samples, data.n_y))
     return summary, tests
+
+
+def uncertainty_method(model: Any) -> dict[str, Any] | None:
+    """The JSON ``uncertainty_method`` of a model: how its covariance was obtained, None without one.
+
+    A model that carries a covariance but not how it was obtained (a file written before models
+    recorded it) is said to carry the formal one, as those did.
+    """
+    if getattr(model, "parameter_covariance", None) is None:
+        return None
+    stored = (getattr(model, "meta", None) or {}).get("uncertainty_method")
+    if stored is None:
+        from vehid.identification.assessment.segments import formal_method
+
+        return formal_method("the model does not record how its covariance was obtained: one written before "
+                             "models did carries the formal covariance of white residuals").as_dict()
+    return stored
+
+
+def returned_checks(model: Any, data: IOData, nis: Sequence[float] | None = None
+                    ) -> tuple[dict[str, Any] | None, ResidualTests | None]:
+    """The checks of the module docstring for whichever model is returned, on its (first) estimation record.
+
+    A modal model as :func:`uncertainty_summary`; a scheduled family (``model_at``) its modes at
+    each grid value, each mode with ``schedule_value`` (the grid value), and the residual tests of
+    its simulation along ``data``'s schedule (the record's last input); a spline model (``linear_model``)
+    its modes at rest. ``nis`` (the IEKF's) belongs to a linear model's run only. None where the
+    model offers no modes.
+    """
+    if isinstance(model, ModalModel):
+        return uncertainty_summary(model, data, nis)
+    if hasattr(model, "model_at") and hasattr(model, "grid"):
+        modes = [{**mode, "schedule_value": row["value"]} for row in model.modes_at(model.grid) for mode in row["modes"]]
+        tests = model_residual_tests(model, data, inputs=data.n_u - 1)
+    elif hasattr(model, "linear_model"):
+        modes = [mode.as_dict() for mode in model.linear_model().uncertainty().modes]
+        tests = model_residual_tests(model, data)
+    else:
+        return None, None
+    return {"modes": modes, "residual_whiteness_p": tests.residual_whiteness_p,
+            "input_correlation_max": tests.input_correlation_max, "residual_tests": tests.as_dict(),
+            "uncertainty_method": uncertainty_method(model)}, tests
 
 
 def record_names(records: Sequence[IOData]) -> list[str]:

@@ -71,11 +71,13 @@ def supported_orders(orders: list[int], auto: bool, records: tuple[IOData, ...],
 
 @dataclass(frozen=True, eq=False)
 class ScheduleData:
-    """The schedule channel of a plan's records: its name and its samples per estimation and validation record."""
+    """The schedule channel of a plan's records: its name, its samples per estimation and validation record and
+    its unit ("-" where unknown)."""
 
     channel: str
     estimation: tuple[np.ndarray, ...]
     validation: tuple[np.ndarray, ...]
+    unit: str = "-"
 
 
 @dataclass(frozen=True, eq=False)

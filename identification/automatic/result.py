@@ -21,6 +21,10 @@ __all__ = ["OrderRow", "Decision", "Identification", "float_tuple"]
 class OrderRow:
     """One order tried: its fits (percent, per output), ranking and run time.
 
+    ``fit_percent`` is the NRMSE fit and ``R`` the fit R (eq. 17) of the order's model simulated
+    from rest over the estimation records; ``estimation_fit_percent`` and ``validation_fit_percent``
+    its NRMSE fits by the run's scoring rule.
+
     ``ranking_fit``, ``eligible``, ``stop_reason``, ``p`` and ``q_schedule`` are
     those of an order search (None for the one order of a single run, ``p`` and
     ``q_schedule`` also for a classical method); ``error`` says why an order gave
@@ -32,6 +36,7 @@ class OrderRow:
     estimation_fit_percent: Any
     validation_fit_percent: Any
     seconds: float
+    R: Any = None
     ranking_fit: float | None = None
     eligible: bool | None = None
     stop_reason: str | None = None
@@ -44,7 +49,7 @@ class OrderRow:
         """The row's keys in ``orders_tried``."""
         if self.error is not None:
             return {"order": self.order, "error": self.error, "eligible": False, "seconds": self.seconds}
-        row: dict[str, Any] = {"order": self.order, "fit_percent": self.fit_percent,
+        row: dict[str, Any] = {"order": self.order, "fit_percent": self.fit_percent, "R": self.R,
                                "estimation_fit_percent": self.estimation_fit_percent,
                                "validation_fit_percent": self.validation_fit_percent}
         if not self.searched:
@@ -101,15 +106,17 @@ class Identification:
     Attributes
     ----------
     model : object
-        The model returned (the filter's, or its start's where that scores better).
+        The model returned: the filter's, or its start's where that scores better; the scheduled
+        family or the spline model where either scores better by the same rule (``returned``).
     method : str
         The estimator.
     order : int
         The model order.
-    fit_percent : tuple of float
-        Fit R (eq. 17) per output of the model simulated on the estimation data.
+    fit_percent, R : tuple of float
+        NRMSE fit and fit R (eq. 17) per output of the returned model simulated from rest on the
+        estimation data (pooled over its records).
     estimation_fit_percent, validation_fit_percent : tuple of float or None
-        NRMSE fits per output on the estimation and validation data.
+        NRMSE fits per output on the estimation and validation data, by the run's scoring rule.
     decisions : tuple of Decision
         The choices made (p, Q schedule, stability, start or filter, order), each with its margin.
     notes, warnings : tuple of str
@@ -149,14 +156,19 @@ class Identification:
     scheduled : ScheduledOutcome or None
         The speed-scheduled family started from the unscheduled model (where the plan holds a schedule).
     unscheduled : object or None
-        The unscheduled model, where the scheduled family is returned in its place; the
-        summary's matrices, eigenvalues and checks are the unscheduled model's.
+        The linear (unscheduled) model, where the scheduled family or the spline model is returned in
+        its place; the summary's matrices and eigenvalues are its (JSON ``linear_modes`` its modes),
+        the scores, checks and warnings the returned model's.
+    returned : str
+        Which model is returned: ``filter``, ``start``, ``scheduled``, ``nonlinear`` or a classical
+        method's name (JSON ``model_returned``).
     """
 
     model: Any
     method: str
     order: int
     fit_percent: tuple[float, ...]
+    R: tuple[float, ...] | None
     estimation_fit_percent: tuple[float, ...] | None
     validation_fit_percent: tuple[float, ...] | None
     decisions: tuple[Decision, ...]
@@ -180,6 +192,7 @@ class Identification:
     time_domain: str | None = None
     scheduled: Any = field(default=None, repr=False)
     unscheduled: Any = field(default=None, repr=False)
+    returned: str = ""
 
     @property
     def p(self) -> float | None:
@@ -197,16 +210,19 @@ class Identification:
 
     def render(self) -> dict[str, Any]:
         """A fresh summary dict (:attr:`summary`), for a caller that adds keys of its own."""
+        from .steps import pooled_fit_percent, scores_summary  # the public score keys are defined once, beside the scoring
+
         model = self.unscheduled if self.unscheduled is not None else self.model
+        records = self.plan.records
         summary: dict[str, Any] = {"method": self.method, "order": self.order, "eigenvalues": model.eigenvalues()}
         result = self.estimator
         if self.is_iekf:
-            summary.update(fit_percent=result.fit_percent, fit_percent_filter=result.history[-1].fit_filter,
+            filter_R = result.history[-1].fit_filter
+            summary.update(fit_percent_filter=pooled_fit_percent(filter_R, records), R_filter=filter_R,
                            passes_run=result.passes_run, stop_reason=result.stop_reason,
                            discretization=result.options.discretization)
         else:
-            summary.update(fit_percent=self.fit_percent, passes_run=0, discretization="exact",
-                           time_domain=self.time_domain)
+            summary.update(passes_run=0, discretization="exact", time_domain=self.time_domain)
         summary.update(A=model.A, B=model.B, C=model.C, D=model.D, seconds=self.seconds)
         if self.tuning is not None:
             summary.update(self.tuning.summary())
@@ -221,11 +237,9 @@ class Identification:
             summary["decision_margins"] = {decision.name: decision.as_dict() for decision in self.decisions}
         if self.divergence:
             summary["divergence"] = self.divergence
-        if self.start_returned:
-            summary.update(fit_percent=self.fit_percent, model_returned="start")  # a returned family's scores replace it below
-        from .steps import scores_summary  # the public score keys are defined once, beside the scoring
-
-        summary.update(scores_summary(self.evaluation, summary["fit_percent"]))
+        if self.returned and (self.is_iekf or self.returned != self.method):
+            summary["model_returned"] = self.returned
+        summary.update(scores_summary(self.evaluation, self.R, records))
         summary.update(self.data)
         if self.checks is not None:
             summary.update(self.checks)
@@ -240,7 +254,5 @@ class Identification:
             summary["nonlinear"] = self.nonlinear.summary
         if self.scheduled is not None:
             summary["scheduled"] = self.scheduled.summary
-            if self.scheduled.returned:  # the scores are the family's; the matrices stay the unscheduled model's
-                summary.update(self.scheduled.scores)
         summary["warnings"] = list(self.warnings)
         return summary

@@ -16,7 +16,7 @@ from typing import Any, Mapping, Protocol
 import numpy as np
 
 from vehid.identification.automatic import steps
-from vehid.identification.automatic.checks import data_warnings, records_summary, uncertainty_summary
+from vehid.identification.automatic.checks import data_warnings, records_summary, returned_checks
 from vehid.identification.dataio.cleaning import cleaning_notes
 from vehid.identification.automatic.options import IdentifyOptions
 from vehid.identification.automatic.plan import Plan
@@ -87,7 +87,8 @@ def _order_search(plan: Plan, options: IdentifyOptions, iekf: Any) -> Identifica
     rows, kept = steps.search_orders(plan, lambda order: steps.run_iekf_order(options, plan, iekf, order), options)
     chosen = steps.choose_order(rows)
     model, extra, _ = kept[chosen]
-    keys = {key: extra[key] for key in ("open_loop_unstable", "start_kept", "decision_margins") if key in extra}
+    keys = {key: extra[key] for key in ("open_loop_unstable", "start_kept", "decision_margins", "model_returned",
+                                        "refinement", steps.SPLINE_START) if key in extra}
     keys["decision_margins"] = {**keys.get("decision_margins", {}), "order": steps.order_margin(rows, chosen)}
     return _finish(plan, options, model, estimator=extra["result"], tuning=extra["tuning"], keys=keys,
                    seconds=sum(row["seconds"] for row in rows), rows=rows)
@@ -120,9 +121,11 @@ def _comparator(plan: Plan, options: IdentifyOptions) -> Identification:
                    time_domain=outcome.model.meta.get("time_domain", "continuous"))
 
 
-def _row(row: Mapping[str, Any]) -> OrderRow:
-    """An order search's row as a typed row."""
-    return OrderRow(order=int(row["order"]), fit_percent=row.get("fit_percent"),
+def _row(row: Mapping[str, Any], records: Any) -> OrderRow:
+    """An order search's row as a typed row (its R from rest also as an NRMSE fit over ``records``)."""
+    R = row.get("fit_percent")  # the order search keeps each run's R from rest
+    return OrderRow(order=int(row["order"]), fit_percent=None if R is None else steps.pooled_fit_percent(R, records),
+                    R=R,
                     estimation_fit_percent=row.get("estimation_fit_percent"),
                     validation_fit_percent=row.get("validation_fit_percent"), seconds=float(row["seconds"]),
                     ranking_fit=row.get("ranking_fit"), eligible=row.get("eligible"),
@@ -133,30 +136,34 @@ def _row(row: Mapping[str, Any]) -> OrderRow:
 def _finish(plan: Plan, options: IdentifyOptions, model: Any, *, estimator: Any, keys: Mapping[str, Any],
             seconds: float, tuning: Any = None, divergence: str | None = None, rows: Any = None,
             order: int | None = None, fit: Any = None, time_domain: str | None = None) -> Identification:
-    """Scores, checks, notes, warnings and the nonlinear model: the common end of every run."""
+    """Scores, checks, notes, warnings and the other candidates: the common end of every run.
+
+    The linear model above is the first candidate; the scheduled family and the spline model are
+    the others (:func:`_candidates`). Warnings, checks and scores are the returned model's; what
+    became of the others, their own problems included, is said in notes.
+    """
     from vehid.identification.assessment.multirecord import pooled_simulation_fit
 
     data = plan.records[0]
     iekf = tuning is not None
     result = estimator if iekf else None
-    start_returned = result is not None and model is not result.model
+    start_returned = result is not None and keys.get("model_returned") == "start"
     if iekf:
         order = result.structure.n
-        fit = pooled_simulation_fit(model, plan.records) if start_returned else result.fit_percent
+        # the filter's R unless another model (its start, or either refined) is returned
+        fit = pooled_simulation_fit(model, plan.records) if model is not result.model else result.fit_percent
     evaluation = steps.evaluate(model, plan, options)
-    checks = tests = None
-    if isinstance(model, ModalModel):  # how sure the model is; on the (first) estimation record
-        checks, tests = uncertainty_summary(model, data, [record.nis for record in result.history] if result else None)
     if rows is not None:
-        orders = tuple(_row(row) for row in rows)
+        orders = tuple(_row(row, plan.records) for row in rows)
     else:
-        orders = (OrderRow(order=order, fit_percent=fit, estimation_fit_percent=evaluation.estimation.fit,
+        orders = (OrderRow(order=order, fit_percent=steps.pooled_fit_percent(fit, plan.records), R=fit,
+                           estimation_fit_percent=evaluation.estimation.fit,
                            validation_fit_percent=evaluation.validation_fit, seconds=seconds),)
     allow_unstable = options.allow_unstable or (result is not None and result.options.allow_unstable)
     # modes that never left their start are a problem of the run, whichever of the two models is returned
     start_fit, start_moved = steps.start_of(result, plan.records) if result is not None else (None, None)
     notes = steps.decision_notes({
-        **{key: keys[key] for key in ("open_loop_unstable", "start_kept") if key in keys},
+        **{key: keys[key] for key in ("open_loop_unstable", "start_kept", "refinement") if key in keys},
         **({"model_returned": "start"} if start_returned else {}),
         **({"start_cv_fit_percent": tuning.start_fit} if iekf else {})})
     stop_reason = None
@@ -174,41 +181,106 @@ def _finish(plan: Plan, options: IdentifyOptions, model: Any, *, estimator: Any,
     if evaluation.horizon is not None and options.horizon is None:
         scoring_note = (f"the model is unstable: scored by {evaluation.horizon}-step-ahead prediction, "
                         "since its simulation diverges (--horizon K to choose K)")
-    nonlinear = None
-    if options.nonlinear:
-        nonlinear = steps.identify_nonlinear(model, plan, options)
-        scores = nonlinear.scores
-        warnings += steps.run_warnings(
-            model=nonlinear.result.model, evaluation=steps.Evaluation(
-                scores.estimation, scores.estimation.R, scores.validation, None),
-            stop_reason=nonlinear.result.stop_reason, start_fit=float(np.mean(nonlinear.result.start_fit)),
-            final_fit=float(np.mean(nonlinear.result.fit_percent)), allow_unstable=True, label="nonlinear")
-        warnings += steps.nonlinear_warnings(nonlinear, evaluation)
-    warnings += data_warnings(plan.records)
     notes += cleaning_notes(plan.records)  # spikes interpolated, samples left out
     decisions = tuple(Decision.from_entry(name, entry) for name, entry in keys.get("decision_margins", {}).items())
-    data_keys = records_summary(model, plan.records, plan.preparation)  # the unscheduled model's, as its checks
-    scheduled, unscheduled = None, None
-    fits = (fit, evaluation.estimation.fit, evaluation.validation_fit)
-    if plan.schedule is not None:  # the scheduled family, started from the model above, returned where it validates better
-        from vehid.identification.automatic.scheduled import NONLINEAR_NOTE, identify_scheduled_model
-
-        scheduled = identify_scheduled_model(model, plan, options, evaluation)
-        decisions += (Decision.from_entry("schedule", scheduled.margin),)
-        warnings += scheduled.warnings
-        if nonlinear is not None:
-            notes.append(NONLINEAR_NOTE)
-        if scheduled.returned:
-            unscheduled, model = model, scheduled.model
-            fits = tuple(scheduled.scores[key] for key in ("fit_percent", "estimation_fit_percent",
-                                                           "validation_fit_percent"))
+    linear = _Candidate("start" if start_returned else ("filter" if iekf else options.method), model, evaluation,
+                        warnings, fit, plan.records)
+    # the spline model starts from the linear model before any refinement (steps.SPLINE_START): the filter's own
+    chosen, others, nonlinear, scheduled, more, said = _candidates(plan, options, linear,
+                                                                   spline_start=keys.get(steps.SPLINE_START, model))
+    decisions += more
+    notes += said
+    for other in others:  # what went wrong with a model not returned is no warning about the one returned
+        notes += [f"not returned, the {other.label} model: {line.removeprefix(other.name + ': ')}"
+                  for line in other.warnings]
+    warnings = list(chosen.warnings) + data_warnings(plan.records)
+    checks, tests = returned_checks(chosen.model, chosen.first_record(plan),
+                                    [record.nis for record in result.history] if result and chosen is linear else None)
+    data_keys = records_summary(chosen.model, chosen.records(plan), plan.preparation)
+    if chosen is not linear:  # the matrices and eigenvalues stay the linear model's: its modes beside them
+        linear_checks, _ = returned_checks(model, data)
+        if linear_checks is not None:
+            data_keys["linear_modes"] = linear_checks["modes"]
     return Identification(
-        model=model, method=options.method if not iekf else "iekf", order=int(order), fit_percent=float_tuple(fits[0]),
-        estimation_fit_percent=float_tuple(fits[1]),
-        validation_fit_percent=float_tuple(fits[2]), decisions=decisions, notes=tuple(notes),
-        warnings=tuple(warnings), orders=orders, seconds=float(seconds), plan=plan, evaluation=evaluation,
+        model=chosen.model, method=options.method if not iekf else "iekf", order=int(order),
+        fit_percent=float_tuple(chosen.fit_percent), R=float_tuple(chosen.R),
+        estimation_fit_percent=float_tuple(chosen.evaluation.estimation.fit),
+        validation_fit_percent=float_tuple(chosen.evaluation.validation_fit), decisions=decisions, notes=tuple(notes),
+        warnings=tuple(warnings), orders=orders, seconds=float(seconds), plan=plan, evaluation=chosen.evaluation,
         estimator=estimator, tuning=tuning, open_loop_unstable=keys.get("open_loop_unstable"),
         start_kept=keys.get("start_kept"), start_returned=start_returned, divergence=divergence,
         checks=checks, residual_tests=tests, data=data_keys,
-        scoring_note=scoring_note, nonlinear=nonlinear, time_domain=time_domain, scheduled=scheduled,
-        unscheduled=unscheduled)
+        scoring_note=scoring_note if chosen is linear else None, nonlinear=nonlinear, time_domain=time_domain,
+        scheduled=scheduled, unscheduled=model if chosen is not linear else None, returned=chosen.name)
+
+
+@dataclass(frozen=True, eq=False)
+class _Candidate:
+    """A model the run may return: its name, scores by the run's rule, own warnings and R from rest."""
+
+    name: str
+    model: Any
+    evaluation: Any
+    warnings: list[str]
+    R: Any  # per output, the model simulated from rest over the estimation records, pooled
+    estimation_records: tuple
+
+    @property
+    def label(self) -> str:
+        return {"filter": "linear", "start": "linear (the filter's start)", "scheduled": "scheduled",
+                "nonlinear": "spline-nonlinear"}.get(self.name, self.name)
+
+    @property
+    def fit_percent(self) -> np.ndarray:
+        return steps.pooled_fit_percent(self.R, self.estimation_records)
+
+    def records(self, plan: Plan) -> tuple:
+        """The estimation records as this model reads them (a scheduled family's with its schedule last)."""
+        if self.name != "scheduled":
+            return plan.records
+        from vehid.identification.automatic.scheduled import scheduled_records
+
+        return scheduled_records(plan.records, plan.schedule.estimation, plan.schedule.channel)
+
+    def first_record(self, plan: Plan) -> Any:
+        return self.records(plan)[0]
+
+
+def _candidates(plan: Plan, options: IdentifyOptions, linear: _Candidate, *, spline_start: Any = None
+                ) -> tuple[_Candidate, list[_Candidate], Any, Any, tuple[Decision, ...], list[str]]:
+    """The model returned among the linear one and the others asked for, every one scored by the run's rule.
+
+    The scheduled family (a plan with a schedule) replaces the linear model where it beats it by
+    its margin (decision ``schedule``); the spline model (``nonlinear``) replaces whichever of the two
+    stands where it beats that by its own (decision ``nonlinear``). Returns the model returned, the
+    others, the spline and scheduled outcomes, the decisions and their notes. The spline model starts
+    from ``spline_start`` (default: the linear candidate's model).
+    """
+    chosen, others, decisions, notes = linear, [], (), []
+    nonlinear = scheduled = spline = family = None
+    if options.nonlinear:
+        nonlinear = steps.identify_nonlinear(linear.model if spline_start is None else spline_start, plan, options)
+        scores = nonlinear.scores
+        scored = steps.Evaluation(scores.estimation, scores.estimation.R, scores.validation, scores.horizon)
+        spline = _Candidate("nonlinear", nonlinear.result.model, scored, steps.run_warnings(
+            model=nonlinear.result.model, evaluation=scored, stop_reason=nonlinear.result.stop_reason,
+            start_fit=float(np.mean(nonlinear.result.start_fit)), final_fit=float(np.mean(nonlinear.result.fit_percent)),
+            allow_unstable=True, label="nonlinear"), nonlinear.summary["R"], plan.records)
+    if plan.schedule is not None:  # the scheduled family, started from the linear model
+        from vehid.identification.automatic.scheduled import NONLINEAR_NOTE, identify_scheduled_model
+
+        scheduled = identify_scheduled_model(linear.model, plan, options, linear.evaluation)
+        decisions += (Decision.from_entry("schedule", scheduled.margin),)
+        family = _Candidate("scheduled", scheduled.model, scheduled.evaluation, scheduled.warnings,
+                            scheduled.scores["R"], plan.records)
+        notes += ([NONLINEAR_NOTE] if nonlinear is not None else []) + ([scheduled.note] if scheduled.note else [])
+        chosen, others = (family, [linear]) if scheduled.returned else (linear, [family])
+    if spline is not None:
+        margin = steps.nonlinear_margin(spline.evaluation, chosen.evaluation, chosen.name)
+        decisions += (Decision.from_entry("nonlinear", margin),)
+        notes.append(steps.nonlinear_note(margin))
+        chosen, others = (spline, [chosen, *others]) if margin["choice"] == "nonlinear" else (chosen, [*others, spline])
+        if scheduled is not None:
+            scheduled.summary["model_returned"] = {"scheduled": "scheduled", "nonlinear": "nonlinear"}.get(
+                chosen.name, "unscheduled")
+    return chosen, others, nonlinear, scheduled, decisions, notes

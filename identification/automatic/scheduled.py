@@ -3,10 +3,13 @@
 Started from the unscheduled model the pipeline returns, the scheduled IEKF
 (:mod:`vehid.identification.filtering.scheduled_iekf`) fits the family on the
 estimation record with the schedule channel beside its inputs; p is chosen on
-validation data from a small grid, the family is scored like every model, and
-it is returned in the unscheduled model's place only where it validates better
-by :data:`VALIDATION_MARGIN` (the decision ``schedule``). The channel is data
-(a car's speed, never offset), held by the plan
+validation data from a small grid, the family is scored by the run's one rule
+(initial state, horizon, records: :func:`~vehid.identification.automatic.steps.evaluate`),
+as the unscheduled model is, and it is returned in the unscheduled model's
+place only where it validates better by :data:`VALIDATION_MARGIN` (the
+decision ``schedule``). What became of the model not returned is said in
+notes, never in warnings: those concern the model returned. The channel is
+data (a car's speed, never offset), held by the plan
 (:class:`~vehid.identification.automatic.plan.ScheduleData`).
 """
 
@@ -19,7 +22,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from vehid.identification.automatic import steps
-from vehid.identification.automatic.checks import records_summary
+from vehid.identification.automatic.checks import records_summary, uncertainty_method
 from vehid.identification.automatic.options import IdentifyOptions
 from vehid.identification.automatic.plan import ScheduleData
 from vehid.identification.choices import SCHEDULED_DEFAULT_P, SCHEDULED_P_GRID
@@ -38,7 +41,11 @@ NONLINEAR_NOTE = ("--nonlinear with --schedule: the scheduled family may gain a 
 
 @dataclass
 class ScheduledOutcome:
-    """The scheduled family, its summary entry, the score keys it replaces and its warnings."""
+    """The scheduled family, its summary entry, the score keys it replaces, its warnings and the decision's note.
+
+    ``warnings`` are the family's own problems (they become the run's warnings where the family is
+    returned, notes where it is not); ``note`` says why the family was not returned.
+    """
 
     model: Any
     summary: dict[str, Any]
@@ -47,6 +54,8 @@ class ScheduledOutcome:
     result: Any = None
     returned: bool = True  # the scheduled family is the model returned (else the unscheduled start)
     margin: dict[str, Any] | None = None  # the decision, as an entry of ``decision_margins``
+    evaluation: Any = None  # the family's scores by the run's rule
+    note: str | None = None
 
 
 #: points of mean validation fit by which the scheduled family must beat the unscheduled model to be returned:
@@ -56,6 +65,8 @@ VALIDATION_MARGIN = 0.5
 
 def schedule_margin(evaluation: Any, unscheduled: Any) -> dict[str, Any]:
     """The scheduled family's and the unscheduled model's ranking fits, the measure and the margin to beat.
+
+    Both evaluations are by the run's one rule (:func:`~vehid.identification.automatic.steps.evaluate`).
 
     On validation data the mean validation fit with :data:`VALIDATION_MARGIN`; without, the estimation
     fit, where the family fitted its own record with many more parameters, so it must win by the
@@ -69,8 +80,15 @@ def schedule_margin(evaluation: Any, unscheduled: Any) -> dict[str, Any]:
     margin = VALIDATION_MARGIN if held_out else steps.WHOLE_RECORD_MARGIN
     return {"score": number(evaluation.ranking_fit()), "runner_up_score": number(unscheduled.ranking_fit()),
             "margin": margin,
-            "measure": ("mean validation" if held_out else "mean estimation") + " NRMSE fit % (simulation from rest)",
+            "measure": ("mean validation" if held_out else "mean estimation") + f" NRMSE fit % ({rule_text(evaluation)})",
             "rule": f"the scheduled model where it beats the unscheduled one by more than {margin} points"}
+
+
+def rule_text(evaluation: Any) -> str:
+    """How an evaluation scored its model: ``simulation, initial state estimate`` or ``10-step-ahead prediction``."""
+    if evaluation.horizon is not None:
+        return f"{evaluation.horizon}-step-ahead prediction"
+    return f"simulation, initial state {evaluation.estimation.initial_state}"
 
 
 def identify_scheduled_model(start: Any, plan: Any, options: IdentifyOptions, unscheduled: Any) -> ScheduledOutcome:
@@ -129,8 +147,8 @@ def identify_scheduled_model(start: Any, plan: Any, options: IdentifyOptions, un
     if options.nonlinear:
         family, evaluation, output_map = with_output_map(family, evaluation, plan, scheduled_plan, options)
     fit_percent = result.fit_percent if output_map is None or output_map["nodes"] is None else \
-        output_map["fit_percent"]
-    scores = {**steps.scores_summary(evaluation, fit_percent),
+        output_map["R"]
+    scores = {**steps.scores_summary(evaluation, fit_percent, plan.records[:1]),
               **records_summary(family, scheduled_plan.records, plan.preparation)}
     scores.pop("preparation", None)  # the unscheduled preparation stands: the schedule is never offset
     coverage = list(family.meta.get("knot_coverage") or [])
@@ -140,15 +158,18 @@ def identify_scheduled_model(start: Any, plan: Any, options: IdentifyOptions, un
         "modes_at": [{"value": at["value"], "modes": at["modes"], "extrapolated": float(at["value"]) in sparse}
                      for at in family.modes_at(family.grid)],
         "knot_coverage": coverage,
+        "uncertainty_method": uncertainty_method(family),
         "knots": int(family.grid.size), "p": chosen["p"], "p_tried": tried, "passes_run": result.passes_run,
         "stop_reason": result.stop_reason if divergence is None else f"{result.stop_reason}: {divergence}",
-        "start_fit_percent": result.start_fit, "seconds": result.seconds,
+        **_percent_and_R("start_", result.start_fit, plan.records[0].y), "seconds": result.seconds,
         "refined_from": result.meta.get("refined_from"), "refine_steps": result.meta.get("refine_steps"),
         "refine_steps_run": result.meta.get("refine_steps_run", result.meta.get("refine_steps")),
         **({} if output_map is None else {"output_map": output_map}),
-        "unscheduled": {"fit_percent": unscheduled_fit(plan, start),
+        "unscheduled": {**_pooled_percent_and_R(unscheduled_fit(plan, start), plan.records),
                         "estimation_fit_percent": unscheduled.estimation.fit,
-                        "validation_fit_percent": unscheduled.validation_fit},
+                        "estimation_R": unscheduled.estimation.R,
+                        "validation_fit_percent": unscheduled.validation_fit,
+                        "validation_R": unscheduled.validation_R},
     }
     # where the refinement started from the unscheduled start, how far the filter's passes got does not matter
     filtered = result.meta.get("refined_from") != "start"
@@ -160,13 +181,12 @@ def identify_scheduled_model(start: Any, plan: Any, options: IdentifyOptions, un
     if not family.is_stable() and options.allow_unstable:  # allowed, and said: a family is judged at every knot
         warnings.append("scheduled: the model is unstable at some grid value (--allow-unstable); its simulation "
                         "grows wherever the schedule dwells there")
-    # the family is simulated from rest (its initial state is not estimated), so the unscheduled model is
-    # weighed alike: a record cut mid-drive costs a start from rest several points of fit
-    # (a car whose dynamics ignore the speed: 92 % from rest against 99 % from an estimated state)
+    # both models are scored by the run's one rule (their initial states estimated alike, by default); the
+    # start's fits from rest stay in the summary for callers that read them
     from_rest = steps.evaluate(start, plan, dataclasses.replace(options, initial_state="zero"))
     entry["unscheduled"].update(estimation_fit_percent_from_rest=from_rest.estimation.fit,
                                 validation_fit_percent_from_rest=from_rest.validation_fit)
-    margin = schedule_margin(evaluation, from_rest)
+    margin = schedule_margin(evaluation, unscheduled)
     returned = stable and margin["score"] is not None and (
         margin["runner_up_score"] is None or margin["score"] > margin["runner_up_score"] + margin["margin"])
     margin = steps.margin_entry(*(("scheduled", margin["score"], "unscheduled", margin["runner_up_score"]) if returned
@@ -174,6 +194,7 @@ def identify_scheduled_model(start: Any, plan: Any, options: IdentifyOptions, un
                               measure=margin["measure"], rule=margin["rule"])
     entry.update(model_returned="scheduled" if returned else "unscheduled",
                  estimation_fit_percent=evaluation.estimation.fit, validation_fit_percent=evaluation.validation_fit)
+    note = None
     if returned:
         warnings += [f"scheduled: the knot at {schedule.channel} = {knot['value']:.4g} rests on {knot['seconds']:.3g} s "
                      f"of the record with the first input at {knot['excitation']:.2f} of its RMS: too little to say "
@@ -181,14 +202,25 @@ def identify_scheduled_model(start: Any, plan: Any, options: IdentifyOptions, un
                      if knot["extrapolated"]]
     else:
         scheduled_fit, other_fit = margin["runner_up_score"], margin["score"]
-        warnings.append(
-            "scheduled: the scheduled model " + ("is unstable at some grid value where stability was asked" if not
-                                                 stable else (
-                f"does not beat the unscheduled one by the margin ({margin['measure']} "
-                f"{_or_nan(scheduled_fit):.2f} against {_or_nan(other_fit):.2f})"))
-            + ": the unscheduled model is returned; the schedule does not explain these data better (try fewer "
-            "--schedule-knots or another --schedule-p)")
-    return ScheduledOutcome(family, entry, scores, warnings, result, returned, margin)
+        note = ("the scheduled model " + ("is unstable at some grid value where stability was asked" if not stable
+                                          else (f"does not beat the unscheduled one by the margin ({margin['measure']} "
+                                                f"{_or_nan(scheduled_fit):.2f} against {_or_nan(other_fit):.2f})"))
+                + ": the unscheduled model is returned; the schedule does not explain these data better (try fewer "
+                "--schedule-knots or another --schedule-p)")
+    return ScheduledOutcome(family, entry, scores, warnings, result, returned, margin, evaluation, note)
+
+
+def _percent_and_R(prefix: str, R: Any, y: np.ndarray) -> dict[str, Any]:
+    """``<prefix>fit_percent`` (NRMSE) and ``<prefix>R`` (eq. 17) of a fit stored as R over the outputs ``y``."""
+    from vehid.identification.assessment.metrics import nrmse_fit_of_R
+
+    with np.errstate(all="ignore"):
+        return {f"{prefix}fit_percent": nrmse_fit_of_R(R, y), f"{prefix}R": np.asarray(R, dtype=float)}
+
+
+def _pooled_percent_and_R(R: Any, records: Sequence[IOData]) -> dict[str, Any]:
+    """``fit_percent`` (NRMSE) and ``R`` of a fit pooled over records (:func:`steps.pooled_fit_percent`)."""
+    return {"fit_percent": steps.pooled_fit_percent(R, records), "R": np.asarray(R, dtype=float)}
 
 
 def _stopped_early(result: Any, stops: list[tuple[float, Any, Any]], plan: Any, schedule: ScheduleData) -> Any:
@@ -198,7 +230,7 @@ def _stopped_early(result: Any, stops: list[tuple[float, Any, Any]], plan: Any, 
     validated better than ten and twenty-five worse still, so held-out data say when to stop, as
     they choose p. Without validation data every step stands.
     """
-    from vehid.identification.filtering.scheduled_iekf import HOLD_OF, Runs, scheduled_simulation_covariance
+    from vehid.identification.filtering.scheduled_iekf import HOLD_OF, Runs, with_simulation_covariance
 
     finite = [stop for stop in stops if np.isfinite(stop[0])]
     if not finite or "refine_steps" not in result.meta:
@@ -209,8 +241,7 @@ def _stopped_early(result: Any, stops: list[tuple[float, Any, Any]], plan: Any, 
         return result
     method = HOLD_OF[result.options.discretization]
     runs = Runs.of(plan.records, schedule.estimation)
-    covariance = scheduled_simulation_covariance(family, runs, None, method)
-    family = family.with_parameters(family.parameters, covariance)
+    family = with_simulation_covariance(family, runs, None, method)
     from vehid.identification.assessment.metrics import percentage_explanation
 
     with np.errstate(all="ignore"):
@@ -266,7 +297,7 @@ def with_output_map(family: Any, evaluation: Any, plan: Any, scheduled_plan: Any
     mapped, scored, row = best
     with np.errstate(all="ignore"):
         fit = percentage_explanation(runs.y, runs.simulate(mapped, method))
-    entry.update(nodes=row["nodes"], fit_percent=fit, map=mapped.output_map.to_dict())
+    entry.update(nodes=row["nodes"], **_percent_and_R("", fit, runs.y), map=mapped.output_map.to_dict())
     return mapped, scored, entry
 
 

@@ -56,11 +56,13 @@ from ..models.modal import ModalModel, ModalStructure
 from .recursive import recursive_least_squares
 from ..models.statespace import balanced_truncation, discrete_to_continuous, modal_structure_for, to_modal
 from .subspace import estimate_subspace
+from ..assessment.segments import UncertaintyMethod, formal_method
 from ..assessment.uncertainty import (
     bootstrap_covariance,
-    gauss_newton_covariance,
+    fit_covariance,
     propagate_by_differences,
-    simulation_error_covariance,
+    with_covariance,
+    with_simulation_error_covariance,
 )
 
 __all__ = [
@@ -195,7 +197,8 @@ def _arx_modal(data: IOData, order: int, thetas: list[np.ndarray], covariances: 
                                               scipy.linalg.block_diag(*covariances))
     except InputError:  # a mode on the edge of real and complex: no smooth map, the model stands without
         return model
-    return model.with_parameter_covariance(covariance)
+    return with_covariance(model, covariance, formal_method(
+        "the least-squares covariance of the ARX coefficients (white equation errors), carried through the conversion"))
 
 
 def _difference_matrix(size: int) -> np.ndarray:
@@ -262,7 +265,7 @@ def n4sid_comparator(data: IOData, *, order: int, **options: Any) -> ModalModel:
     if replicates == 0 or isinstance(model, DiscreteModel):  # asked for none, or no modal parameters to cover
         return model
     if replicates is None:
-        return model.with_parameter_covariance(simulation_error_covariance(model, records))
+        return with_simulation_error_covariance(model, records)
 
     def replicate(y: np.ndarray) -> np.ndarray | None:
         try:
@@ -281,8 +284,11 @@ def n4sid_comparator(data: IOData, *, order: int, **options: Any) -> ModalModel:
                                                 samples=replicates, rng=np.random.default_rng(seed))
     except InputError:  # no replicate fits the structure: the model stands, without a covariance
         covariance, used = None, 0
-    return dataclasses.replace(model, parameter_covariance=covariance,
-                               meta={**model.meta, "bootstrap_replicates": used})
+    model = dataclasses.replace(model, meta={**model.meta, "bootstrap_replicates": used})
+    if covariance is None:
+        return model
+    return with_covariance(model, covariance, UncertaintyMethod(
+        name="residual-block-bootstrap", note=f"{used} of {replicates} replicates, one subspace fit each"))
 
 
 def output_error_comparator(data: IOData, *, order: int, **options: Any) -> ModalModel:
@@ -338,8 +344,8 @@ def output_error_comparator(data: IOData, *, order: int, **options: Any) -> Moda
     )
     meta = {"method": "output-error", "start": initial.meta.get("method", "given"),
             "evaluations": int(solution.nfev), "cost": float(solution.cost), "status": int(solution.status)}
-    covariance = gauss_newton_covariance(solution.jac, solution.fun.reshape(-1, data.n_y))
-    return ModalModel.from_parameters(structure, solution.x, meta=meta, parameter_covariance=covariance)
+    return with_covariance(ModalModel.from_parameters(structure, solution.x, meta=meta),
+                           *fit_covariance(solution.jac, solution.fun.reshape(-1, data.n_y), dt=dt))
 
 
 def _start_model(method: str, records: list[IOData], order: int) -> ModalModel | DiscreteModel:

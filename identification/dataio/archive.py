@@ -28,7 +28,7 @@ from .archive_safety import archive_lock, verify_checksums, write_checksums
 from ..data import IOData
 from ..errors import ArchiveError
 from ..jsonable import to_jsonable
-from .storage import member_name, read_group, write_group
+from .storage import member_name, read_group, read_value, write_group
 
 __all__ = [
     "SCHEMA_VERSION",
@@ -70,6 +70,7 @@ REQUIRED_ATTRIBUTES = (
 )
 
 _RUN_MEMBERS = ("model", "metrics", "state")
+SCHEDULE_MEMBER = "schedule"  # root member: the schedule channel of each record a scheduled run was fitted on
 
 
 @dataclass(frozen=True)
@@ -141,6 +142,9 @@ class Archive:
         The ``runs/<name>`` groups.
     summary : object or None
         The study's summary (root attribute ``summary_json``, decoded), written once a study finishes.
+    schedule : object or None
+        The root member ``schedule`` where a run was scheduled on a channel: its ``channel``, ``unit``
+        and ``records`` (record name to the channel's samples, one per sample of that record).
     """
 
     kind: str
@@ -154,6 +158,7 @@ class Archive:
     records: dict[str, IOData] = field(default_factory=dict)
     runs: dict[str, RunRecord] = field(default_factory=dict)
     summary: Any = None
+    schedule: Any = None
 
 
 def _package_version(name: str) -> str:
@@ -431,6 +436,7 @@ def read_archive(path: str | Path, kinds: Sequence[str] | None = None) -> Archiv
                 records=read_records(handle),
                 runs={name: read_run(group) for name, group in handle["runs"].items()},
                 summary=json.loads(attrs["summary_json"]) if "summary_json" in attrs else None,
+                schedule=read_value(handle, SCHEDULE_MEMBER) if SCHEDULE_MEMBER in handle else None,
             )
         except (OSError, RuntimeError, KeyError) as exc:
             raise ArchiveError(f"{path} is truncated or corrupt: reading it failed ({exc})") from None

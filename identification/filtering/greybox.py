@@ -59,6 +59,7 @@ from ..errors import DivergenceError, InputError
 from .iekf import NOISE_FLOOR, P_DECAY_FLOOR, output_noise_variance
 from .iekf_pass import compiled_pass, pack_covariance, unpack_covariance
 from ..assessment.metrics import nrmse_fit, percentage_explanation
+from ..assessment.segments import integrated_correlation_time
 from .rinse import Assessment, PassHistory, PassRecord, RinseHooks, rinse
 
 __all__ = [
@@ -69,6 +70,7 @@ __all__ = [
     "identify_greybox",
     "integrated_correlation_time",
     "simulate_greybox",
+    "simulation_fit_covariance",
     "greybox_outputs",
 ]
 
@@ -345,6 +347,66 @@ def greybox_outputs(model: GreyBoxModel, theta: Any, u: np.ndarray, dt: float, *
         return simulator(x0, np.asarray(u, dtype=float), theta)
 
 
+#: Central-difference step of the simulation's Jacobian, relative to each parameter (or to its scale where
+#: that is larger): truncation (step^2) and rounding (eps / step) both near 1e-10 of a column
+_DIFFERENCE_STEP = 1e-6
+
+
+def simulation_fit_covariance(model: GreyBoxModel, theta: Any, data: IOData | Sequence[IOData], *,
+                              discretization: str = "rk4", substeps: int = 1, jackknife: bool = True,
+                              blocks: int | None = None, form: str = "linearised",
+                              level: float = 0.95) -> tuple[np.ndarray, Any] | None:
+    """The covariance of a grey-box estimate as a fit of its simulation errors, and how it was obtained.
+
+    Each record is simulated from rest with ``theta``; the Jacobian of the outputs is taken by
+    central differences (``2 n_theta`` simulations). The covariance is
+    :func:`~vehid.identification.assessment.uncertainty.fit_covariance` of those errors: the
+    delete-one-block jackknife of the fit where the records allow, which counts coloured
+    residuals and model error as much as they move the estimate, else the formal Gauss-Newton
+    covariance. Unlike the filter's own covariance pass, it does not take the innovations as
+    white. None where the simulation is not finite.
+
+    Parameters
+    ----------
+    model : GreyBoxModel
+    theta : array_like (n_theta,)
+        The estimate.
+    data : IOData or sequence of IOData
+        The records it was identified from (cut into blocks as one record).
+    discretization, substeps
+        As the identification ran.
+    jackknife : bool
+        False gives the formal covariance.
+    blocks : int, optional
+        Most blocks of the jackknife (default
+        :data:`~vehid.identification.assessment.segments.DEFAULT_BLOCKS`).
+    form : {"linearised", "one-step"}
+        The jackknife replicates' curvature (:func:`~vehid.identification.assessment.uncertainty.fit_covariance`).
+    level : float
+        Level of the intervals the jackknife's degrees of freedom are allowed for at.
+
+    Returns
+    -------
+    (covariance, UncertaintyMethod) or None
+    """
+    from ..assessment.uncertainty import difference_fit_covariance
+
+    records = as_records(data)
+    theta = model.check_parameters(theta)
+    typical = np.asarray(model.parameter_scale, dtype=float) if model.parameter_scale else np.zeros(model.n_theta)
+    steps = _DIFFERENCE_STEP * np.maximum(np.abs(theta), typical)
+    if np.any(steps == 0):
+        raise InputError("a parameter at zero without a scale has no difference step: give the model a parameter_scale")
+
+    def simulated(values: np.ndarray) -> np.ndarray:
+        return np.vstack([simulate_greybox(model, values, record, discretization=discretization,
+                                           substeps=substeps)[0] for record in records])
+
+    return difference_fit_covariance(simulated, theta, np.vstack([record.y for record in records]), steps=steps,
+                                     dt=float(records[0].dt), jackknife=jackknife, form=form, level=level,
+                                     **({} if blocks is None else {"blocks": blocks}))
+
+
 def _check_discretization(discretization: str, substeps: int) -> None:
     if discretization not in GREYBOX_DISCRETIZATIONS:
         raise InputError(f"unknown discretization {discretization!r}; use one of {', '.join(GREYBOX_DISCRETIZATIONS)}")
@@ -527,33 +589,6 @@ class GreyBoxResult(PassHistory):
         y, _ = simulate_greybox(self.model, self.parameters, record, discretization=self.options.discretization,
                                 substeps=self.options.substeps)
         return y
-
-
-def integrated_correlation_time(residuals: np.ndarray) -> np.ndarray:
-    """Each column's integrated autocorrelation time ``1 + 2 sum rho_k`` (in samples), at least one.
-
-    ``N`` samples of a series with that time carry the information of about ``N / tau`` independent
-    ones. The sum runs over the lags up to the first whose autocorrelation is no longer positive (the
-    initial positive sequence: beyond it the estimates are noise around zero) and at most a tenth of
-    the record, so that a slow drift does not count the whole record as one sample.
-    """
-    residuals = np.asarray(residuals, dtype=float)
-    residuals = residuals.reshape(-1, 1) if residuals.ndim == 1 else residuals
-    n = residuals.shape[0]
-    times = np.ones(residuals.shape[1])
-    if n < 20:
-        return times
-    centred = residuals - residuals.mean(axis=0)
-    size = 1 << int(np.ceil(np.log2(2 * n)))
-    spectrum = np.fft.rfft(centred, size, axis=0)
-    autocovariance = np.fft.irfft(np.abs(spectrum) ** 2, size, axis=0)[: n // 10 + 1]
-    for j in range(residuals.shape[1]):
-        if autocovariance[0, j] <= 0:
-            continue
-        rho = autocovariance[1:, j] / autocovariance[0, j]
-        stop = int(np.argmax(rho <= 0)) if np.any(rho <= 0) else rho.size
-        times[j] = max(1.0, 1.0 + 2.0 * float(np.sum(rho[:stop])))
-    return times
 
 
 def _pooled_fits(y_parts: Sequence[np.ndarray], y_hat_parts: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:

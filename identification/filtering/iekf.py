@@ -530,19 +530,20 @@ def identify_iekf(
 
     def result(stop_reason: str, history: tuple[PassRecord, ...], theta: np.ndarray, P: np.ndarray) -> IEKFResult:
         last = history[-1].parameters if history else original_units(theta)
-        covariance = None
+        covariance, how = None, {}
         if parameter_covariance and history and np.isfinite(history[-1].nis):
             # the fit's sensitivity costs n_u + 1 simulations and the sampled pass one pass: for the
             # finished run, not every checkpoint
             finished = stop_reason != "running"
-            covariance = iekf_parameter_covariance(
+            covariance, method = iekf_parameter_covariance(
                 structure, P[n:, n:], input_scale, output_scale, history[-1].nis / structure.n_y, time_unit=time_unit,
                 estimate=ModalModel.from_parameters(structure, last), records=records if finished else None,
-                pass_parameters=sampled_pass(theta, P) if finished else None)
+                pass_parameters=sampled_pass(theta, P) if finished else None, with_method=True)
+            how = {"uncertainty_method": method.as_dict()}
         return IEKFResult(
             model=ModalModel.from_parameters(
                 structure, last, input_names=data.input_names, output_names=data.output_names,
-                meta={"estimator": "iekf", "discretization": options.discretization, "passes": len(history)},
+                meta={"estimator": "iekf", "discretization": options.discretization, "passes": len(history), **how},
                 parameter_covariance=covariance,
             ),
             structure=structure, options=options, history=history,

@@ -29,9 +29,10 @@ so the result is one: the knots are its grid, the ordinates its grid models.
   divided by their RMS, time counted in samples, ``p`` per dominant time constant of the start,
   Q shrinking from pass to pass (larger and slower than the linear filter's: :data:`DEFAULT_P`),
   R from each output's measured noise.
-* **Covariance**: that of the ordinates as a fit of the simulation errors (Gauss-Newton,
-  :func:`~identification.assessment.uncertainty.gauss_newton_covariance`), the simulation's Jacobian by central
-  differences of the compiled simulation.
+* **Covariance**: that of the ordinates as a fit of the simulation errors, by the delete-one-block
+  jackknife of the fit where the record allows (:func:`~identification.assessment.uncertainty.fit_covariance`),
+  the simulation's Jacobian by central differences of the compiled simulation; the family's
+  ``meta["uncertainty_method"]`` says how.
 """
 
 from __future__ import annotations
@@ -56,12 +57,12 @@ from ..models.modal import ModalModel, ModalStructure
 from .rinse import Assessment, PassHistory, PassRecord, RinseHooks, check_filter_options, check_records, rinse
 from ..models.scheduled import (ScheduledModalModel, gauge_parameters, input_gauge, interpolation_weights, knot_size,
                         scheduled_matrices, scheduled_step)
-from ..assessment.uncertainty import gauss_newton_covariance
+from ..assessment.uncertainty import fit_covariance
 
 __all__ = ["ScheduledFilterModel", "ScheduledIEKFOptions", "ScheduledIEKFResult", "Runs", "default_grid",
            "identify_scheduled", "knot_cells", "KnotCoverage", "knot_coverage", "MIN_KNOT_SPACING",
-           "refine_by_simulation", "scheduled_simulation_covariance", "DEFAULT_KNOTS", "DEFAULT_P", "DEFAULT_P_DECAY",
-           "MIN_KNOTS", "MAX_KNOTS"]
+           "refine_by_simulation", "scheduled_simulation_covariance", "with_simulation_covariance", "DEFAULT_KNOTS",
+           "DEFAULT_P", "DEFAULT_P_DECAY", "MIN_KNOTS", "MAX_KNOTS"]
 
 from vehid.identification.choices import SCHEDULE_DEFAULT_KNOTS as DEFAULT_KNOTS  # noqa: E402
 from vehid.identification.choices import SCHEDULE_MAX_KNOTS as MAX_KNOTS  # noqa: E402
@@ -358,23 +359,44 @@ class Runs:
 
 
 def scheduled_simulation_covariance(model: ScheduledModalModel, data: IOData | Sequence[IOData], schedule: Any,
-                                    method: str = "foh") -> np.ndarray | None:
+                                    method: str = "foh", *, jackknife: bool = True,
+                                    form: str = "linearised") -> np.ndarray | None:
     """The covariance of a family's parameters as a fit of its simulation errors on a record (or several
     records, each simulated from rest along its schedule: ``schedule`` then one array per record; or
     :class:`Runs`, ``schedule`` None).
 
-    :func:`~identification.assessment.uncertainty.gauss_newton_covariance` of the
-    errors from rest, the Jacobian by central differences of the compiled
-    simulation (steps of ``1e-6`` of each parameter, or of the largest of its
-    kind where it is near zero). None where the simulation is not finite.
+    :func:`~identification.assessment.uncertainty.fit_covariance` of the
+    errors from rest (the delete-one-block jackknife where the record
+    allows, its replicates in ``form``; ``jackknife=False``: the formal covariance of white residuals),
+    the Jacobian by central differences of the compiled simulation (steps of ``1e-6`` of each
+    parameter, or of the largest of its kind where it is near zero). None where the simulation is not
+    finite.
     """
+    found = _simulation_fit(model, data, schedule, method, jackknife=jackknife, form=form)
+    return None if found is None else found[0]
+
+
+def with_simulation_covariance(model: ScheduledModalModel, data: IOData | Sequence[IOData], schedule: Any,
+                               method: str = "foh") -> ScheduledModalModel:
+    """The family carrying :func:`scheduled_simulation_covariance`, its ``meta["uncertainty_method"]`` saying how
+    (without a covariance where the simulation is not finite)."""
+    found = _simulation_fit(model, data, schedule, method)
+    if found is None:
+        return model.with_parameters(model.parameters, None)
+    covariance, how = found
+    return model.with_parameters(model.parameters, covariance, uncertainty_method=how.as_dict())
+
+
+def _simulation_fit(model: ScheduledModalModel, data: IOData | Sequence[IOData], schedule: Any, method: str,
+                    jackknife: bool = True, form: str = "linearised") -> Any:
     runs = Runs.of(data, schedule)
     base, jacobian = _simulation_jacobian(model, runs, method)
     theta = model.parameters
     residuals = base - runs.y
     if not (np.all(np.isfinite(jacobian)) and np.all(np.isfinite(residuals))):
         return None
-    return gauss_newton_covariance(jacobian.reshape(-1, theta.size), residuals)
+    return fit_covariance(jacobian.reshape(-1, theta.size), residuals, dt=float(runs.records[0].dt),
+                          jackknife=jackknife, form=form)
 
 
 def _simulation_jacobian(model: ScheduledModalModel, runs: Runs, method: str,
@@ -805,9 +827,7 @@ def identify_scheduled(
                        ("record" if chosen is record_family else "local"), "refine_steps": steps,
                        "fit_percent": percentage_explanation(data.y, simulate(final))}
         if stop_reason != "running" and history:
-            covariance = scheduled_simulation_covariance(final, runs.records, runs.schedules, method)
-            if covariance is not None:
-                final = final.with_parameters(final.parameters, covariance)
+            final = with_simulation_covariance(final, runs.records, runs.schedules, method)
         return ScheduledIEKFResult(final, start_family, options, history, P.copy(), start_fit, stop_reason,
                                    time.perf_counter() - started, {"grid": grid, "time_constant": time_constant,
                                                                     "local_starts": tuple(local_starts), **refined})

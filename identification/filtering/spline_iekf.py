@@ -7,11 +7,16 @@ frozen model, recomputed after every pass; ``p`` is much lower, so that ``P`` an
 Signals are normalised by their largest magnitude (not the RMS of the linear filter), because the B and
 D nodes over -1..1 must hold every input sample. After each pass the A and C node ranges move to the
 range their variable reached, the splines re-sampled at the new nodes and ``P`` mapped alike.
+
+The finished model's covariance is that of its node ordinates as a fit of its simulation errors
+(:func:`~vehid.identification.assessment.uncertainty.difference_fit_covariance`, the Jacobian by central
+differences; the delete-one-block jackknife where the record allows), in the normalised units ``P``
+holds; the filter's ``P`` stands for a checkpoint of a running filter. ``meta["uncertainty_method"]``
+says which.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable
@@ -28,6 +33,8 @@ from ..assessment.metrics import percentage_explanation
 from ..models.modal import ModalModel
 from .rinse import Assessment, PassHistory, PassRecord, RinseHooks, check_filter_options, check_records, rinse
 from ..models.spline_modal import SplineModalFilterModel, SplineModalModel, SplineModalStructure
+from ..assessment.segments import formal_method
+from ..assessment.uncertainty import difference_fit_covariance, with_covariance
 
 __all__ = [
     "SplineIEKFOptions",
@@ -38,6 +45,10 @@ __all__ = [
 ]
 
 _RANGE_PERCENTILES = (0.5, 99.5)
+#: Central-difference step of the node ordinates, relative to each (truncation and rounding near 1e-10),
+#: and its floor relative to the largest ordinate (a node at zero still moves the simulation)
+_DIFFERENCE_STEP = 1e-6
+_STEP_FLOOR = 1e-3
 _RANGE_MARGIN = 0.1  # widen each moving range by this fraction of its span at each end
 _R_FLOOR = 1e-9  # relative floor on R's diagonal (a perfect fit must not make R singular)
 
@@ -182,9 +193,19 @@ def identify_spline_iekf(
     run_pass = compiled_pass(SplineModalFilterModel(structure), data.dt, options.discretization, options.covariance)
 
     def result(stop_reason: str, history: tuple[PassRecord, ...], theta: np.ndarray, P: np.ndarray) -> SplineIEKFResult:
-        # R is the measured residual covariance, so P needs no rescaling (see identification.uncertainty)
+        finished = model
+        if history:
+            # R is the measured residual covariance, so P needs no rescaling (see identification.uncertainty)
+            covariance, method = P[n:, n:], formal_method("the filter's P of a running filter")
+            found = None if stop_reason == "running" else difference_fit_covariance(
+                lambda values: model.with_parameters(values).simulate_normalised(u_n)[0], model.theta, y_n,
+                steps=_DIFFERENCE_STEP * np.maximum(np.abs(model.theta), _STEP_FLOOR * np.max(np.abs(model.theta))),
+                dt=float(data.dt))
+            if found is not None:
+                covariance, method = found
+            finished = with_covariance(model, covariance, method)
         return SplineIEKFResult(
-            model=dataclasses.replace(model, parameter_covariance=P[n:, n:]) if history else model, start=start,
+            model=finished, start=start,
             options=options, history=history, P=P.copy(), R=R.copy(), start_fit=start_fit, stop_reason=stop_reason,
             seconds=time.perf_counter() - started,
         )

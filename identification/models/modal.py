@@ -671,8 +671,86 @@ class ModalModel(StateSpaceModel):
                 columns[d_start + i * s.n_u + j, :, i] = u[:, j]
         return x @ self.C.T + u @ self.D.T, columns.transpose(1, 2, 0)
 
-    def to_statespace(self, *, schedule: float | None = None
+    def free_response_sensitivity(self, x0: Any, n_samples: int, dt: float, *, method: str = "foh"
+                                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The output of the initial state ``x0`` with zero input, and its exact derivatives.
 
+        A simulation from ``x0`` is the simulation from rest
+        (:meth:`output_sensitivity`) plus this free response, and so are
+        their derivatives with respect to :attr:`parameters`.
+
+        Parameters
+        ----------
+        x0 : array_like, shape (n,)
+            The initial state.
+        n_samples : int
+            The response's length N.
+        dt, method
+            As for :meth:`output_sensitivity`.
+
+        Returns
+        -------
+        y : ndarray, shape (N, n_y)
+            The free response.
+        by_parameters : ndarray, shape (N, n_y, n_theta)
+            ``d y[k, i] / d theta[p]``: a mode's eigenvalue through its
+            free decay, the free C entries through the free states.
+        by_state : ndarray, shape (N, n_y, n)
+            ``d y[k, i] / d x0[j]``.
+
+        Notes
+        -----
+        A mode's free state is ``xi_k = g^k xi_0`` with ``g`` the hold
+        equivalent's pole (:func:`_hold_weights`), so ``d xi_k / d lambda =
+        k g^(k-1) g' xi_0`` (``g' = dt g`` for an exact hold). A pair's
+        ``xi_0`` is ``x0[a] + j x0[b]`` and its ``lambda`` is ``sigma - j omega``,
+        as in :meth:`output_sensitivity`.
+        """
+        s = self.structure
+        x0 = self.checked_state(x0)
+        if method not in SIMULATION_METHODS:
+            raise InputError(f"unknown simulation method {method!r}; use one of {', '.join(SIMULATION_METHODS)}")
+        steps = np.arange(int(n_samples))
+        theta = self.parameters
+        C = self.C
+        y = np.zeros((steps.size, s.n_y))
+        by_parameters = np.zeros((steps.size, s.n_y, s.n_parameters))
+        by_state = np.zeros((steps.size, s.n_y, s.n))
+        states = np.zeros((steps.size, s.n))
+        for mode in s.mode_states():
+            a, b = mode[0], mode[-1]
+            pair = len(mode) == 2
+            lam = complex(theta[a], -theta[a + 1]) if pair else complex(theta[a], 0.0)
+            g = _hold_weights(lam * dt, method)[0]
+            slope = dt if method == "euler" else dt * g  # d g / d lambda
+            # past e^-50 of its start (k |g|^k too, for any record shorter than e^14 samples) a decaying mode's
+            # response is zero to rounding: only its head is computed
+            live = steps.size if abs(g) >= 1.0 else min(steps.size, int(np.ceil(50.0 / -np.log(abs(g)))) + 1)
+            head = steps[:live]
+            with np.errstate(all="ignore"):  # a growing mode may overflow: its sensitivities say so
+                powers = g ** head
+                by_lambda = head * slope * g ** np.maximum(head - 1, 0)
+            start = complex(x0[a], x0[b]) if pair else complex(x0[a], 0.0)
+            free, by_eigenvalue = powers * start, by_lambda * start
+            states[:live, a] = free.real
+            y[:live] += np.multiply.outer(free.real, C[:, a])
+            by_parameters[:live, :, a] += np.multiply.outer(by_eigenvalue.real, C[:, a])
+            by_state[:live, :, a] += np.multiply.outer(powers.real, C[:, a])
+            if pair:  # the imaginary part through column b; d/d omega = -j d/d lambda, d/d x0[b] = j d/d xi_0
+                states[:live, b] = free.imag
+                y[:live] += np.multiply.outer(free.imag, C[:, b])
+                by_parameters[:live, :, a] += np.multiply.outer(by_eigenvalue.imag, C[:, b])
+                by_parameters[:live, :, a + 1] += (np.multiply.outer(by_eigenvalue.imag, C[:, a])
+                                                   - np.multiply.outer(by_eigenvalue.real, C[:, b]))
+                by_state[:live, :, a] += np.multiply.outer(powers.imag, C[:, b])
+                by_state[:live, :, b] += (np.multiply.outer(powers.real, C[:, b])
+                                          - np.multiply.outer(powers.imag, C[:, a]))
+        c_start = s.slices()["C"].start
+        for k, (i, j) in enumerate(s.free_c):
+            by_parameters[:, i, c_start + k] += states[:, j]
+        return y, by_parameters, by_state
+
+    def to_statespace(self, *, schedule: float | None = None
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
         """``(A, B, C, D, None)``: continuous time."""
         unscheduled(schedule)

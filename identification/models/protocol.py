@@ -4,9 +4,10 @@
 archives and exports rely on, and the only one callers that take any model use:
 
 * ``n_states``, ``n_u``, ``n_y``; ``is_linear`` (False where the model is
-  nonlinear or varies along a record: scores then simulate it from rest, and
-  its state-space form is a linearisation); ``is_scheduled`` (True where the
-  model varies with a measured scheduling variable, e.g. a car's speed);
+  not linear time-invariant: scores then simulate it whatever the horizon,
+  its initial state fitted by Gauss-Newton, and its state-space form is a
+  linearisation); ``is_scheduled`` (True where the model varies with a
+  measured scheduling variable, e.g. a car's speed);
 * ``simulate_outputs(u, dt=None, *, x0=None, schedule=None)``: outputs
   (N, n_y) driven by ``u`` (N, n_u) from the state ``x0`` (default rest) along
   the scheduling variable ``schedule`` (N,); ``simulate(record, *, x0=None)``
@@ -287,7 +288,7 @@ class StateSpaceModel:
     """The protocol's methods from ``to_statespace`` (continuous models add ``simulate_outputs``)."""
 
     output_names: tuple[str, ...] | None = None
-    #: False for a model whose state-space form is only a linearisation (scores simulate it from rest).
+    #: False for a model whose state-space form is only a linearisation (scores simulate it, never predict k steps).
     is_linear = True
     #: A state-space model is the same at every value of any scheduling variable.
     is_scheduled = False

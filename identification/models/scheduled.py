@@ -566,8 +566,8 @@ class ScheduledModalModel:
         """Input columns of a record the family simulates: its inputs and, last, the schedule."""
         return self.structure.n_u + 1
 
-    #: the family is linear at each schedule value but varies along a record: simulated from rest, as a
-    #: nonlinear model is, by the scorers of the model protocol
+    #: the family is linear at each schedule value but varies along a record: the scorers of the model protocol
+    #: simulate it, as a nonlinear model, its initial state fitted where the rule estimates one
     is_linear = False
 
     #: varies with its scheduling variable: the protocol's methods take its value (``schedule=``)

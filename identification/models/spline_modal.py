@@ -332,7 +332,8 @@ class SplineModalModel(StateSpaceModel):
         x0 = np.zeros(self.structure.linear.n) if x0 is None else x0
         return sim(x0, u_normalised, np.concatenate([self.theta, self.constants, [float(self.dt)]]))
 
-    #: Nonlinear: its state-space form is the linearisation at rest, and scores simulate it from rest.
+    #: Nonlinear: its state-space form is the linearisation at rest, and scores simulate it (its initial state fitted
+    #: by Gauss-Newton where the rule estimates one).
     is_linear = False
 
     @property

@@ -13,6 +13,9 @@ model is evaluated at each of --speeds, a model of one speed at the one speed
 given. ``--source`` reports the source model instead: its linearisation and
 its simulated ISO 7401 step, 1 Hz sine dwell and sine sweep. Warnings (no wheelbase for the
 understeer gradient, no covariance for error bars) exit 3 under --strict.
+JSON ``uncertainty_method`` says how the model's covariance, and so every
+standard deviation, was obtained (as ``vehid identify`` says it; None
+without a covariance).
 
 A model of a car is checked for physical plausibility (:mod:`vehid.scenarios.plausibility_checks`): each
 failure joins the JSON list ``plausibility`` (``quantity``, ``value``, ``range``, ``speed``, ``cause``) and
@@ -208,10 +211,14 @@ def _format(value: float, digits: int = 4) -> str:
     return "-" if value is None or not math.isfinite(value) else f"{value:.{digits}g}"
 
 
+#: The text gives every steer angle in degrees (road wheel), as the understeer gradient's deg/g does; the JSON in
+#: radians, each number with its unit. A gain per angle is the same per degree and per radian when the response
+#: is an angle too (yaw rate, sideslip): it says so by its unit.
+STEER_UNIT_TEXT = "steer angles in degrees (road wheel); the JSON gives each value with its unit, angles in rad"
 _TEXT_ROWS = (
-    ("yaw-rate gain r/delta (1/s)", "yaw_rate_gain", 1.0),
-    ("lateral acc. gain (m/s^2/deg)", "lateral_acceleration_gain", math.pi / 180),
-    ("sideslip gain (deg/deg)", "sideslip_gain", 1.0),
+    ("yaw-rate gain r/delta (deg/s per deg)", "yaw_rate_gain", 1.0),
+    ("lateral acc. gain (m/s^2 per deg)", "lateral_acceleration_gain", math.pi / 180),
+    ("sideslip gain (deg per deg)", "sideslip_gain", 1.0),
     ("understeer gradient (deg/g)", "understeer_gradient_deg_per_g", 1.0),
     ("characteristic speed (m/s)", "characteristic_speed_m_s", 1.0),
     ("critical speed (m/s)", "critical_speed_m_s", 1.0),
@@ -228,7 +235,7 @@ _TEXT_ROWS = (
 
 def metrics_table(title: str, metrics: tuple) -> list[str]:
     """One row per metric, one column per speed; ``value +/- std`` where a std is known."""
-    lines = [title, f"{'speed (m/s)':<32}" + "".join(f"{m.speed:>20g}" for m in metrics)]
+    lines = [title, f"{'speed (m/s)':<40}" + "".join(f"{m.speed:>20g}" for m in metrics)]
     for label, name, factor in _TEXT_ROWS:
         cells = []
         for m in metrics:
@@ -236,8 +243,15 @@ def metrics_table(title: str, metrics: tuple) -> list[str]:
             cells.append(_format(value) + (f" +/- {_format(std, 2)}" if math.isfinite(std) else ""))
         if all(cell == "-" for cell in cells):
             continue
-        lines.append(f"{label:<32}" + "".join(f"{cell:>20}" for cell in cells))
+        lines.append(f"{label:<40}" + "".join(f"{cell:>20}" for cell in cells))
     return lines
+
+
+#: the units of the JSON's numbers that carry none of their own (``metrics`` entries carry theirs)
+JSON_UNITS = {"speed": "m/s", "wheelbase": "m", "steer": "rad (road-wheel angle)",
+              "lateral_acceleration": "m/s^2", "reached_lateral_acceleration": "m/s^2", "yaw_rate_gain": "1/s",
+              "lateral_acceleration_gain": "m/s^2/rad", "understeer_gradient_deg_per_g": "deg/g",
+              "characteristic_speed_m_s": "m/s", "critical_speed_m_s": "m/s"}
 
 
 _FIGURE_SUFFIXES = (".png", ".pdf", ".svg")
@@ -283,7 +297,7 @@ def _run_source(args: argparse.Namespace) -> tuple[dict, str, list[str]]:
     if args.steady_range is not None and not (math.isfinite(args.steady_range) and args.steady_range > 0):
         raise InputError(f"--steady-range must be a positive lateral acceleration (m/s^2); got {args.steady_range}")
     result = source_handling(params, speeds, simulate=not args.no_simulation, step_lateral_acceleration=level)
-    summary = {"source": True, **result.as_dict(), "warnings": []}
+    summary = {"source": True, **result.as_dict(), "units": JSON_UNITS, "warnings": []}
     steady = ()
     if args.steady_range is not None:
         steady = source_steady_state(params, speeds, lateral_acceleration=args.steady_range)
@@ -296,7 +310,7 @@ def _run_source(args: argparse.Namespace) -> tuple[dict, str, list[str]]:
     written = _write_figure(figure, curves, f"Handling of the source model {result.vehicle}")
     if written:
         summary["figure"] = written
-    lines = [f"source model {result.vehicle} (wheelbase {result.wheelbase:g} m)",
+    lines = [f"source model {result.vehicle} (wheelbase {result.wheelbase:g} m; {STEER_UNIT_TEXT})",
              *metrics_table("linearisation:", result.linearisation)]
     if result.simulation:
         lines += metrics_table(f"simulation (step to {level:g} m/s^2; 1 Hz sine dwell and sweep of that steer):",
@@ -305,7 +319,8 @@ def _run_source(args: argparse.Namespace) -> tuple[dict, str, list[str]]:
         lines.append(f"steady state over +/- {args.steady_range:g} m/s^2 (ISO 4138 steer steps):")
         lines += [f"  {entry.speed:g} m/s: understeer gradient {entry.understeer_gradient_deg_per_g:.4g} deg/g, "
                   f"characteristic speed {_format(entry.characteristic_speed_m_s)} m/s, "
-                  f"yaw-rate gain {entry.yaw_rate_gain:.4g} 1/s" for entry in steady]
+                  f"yaw-rate gain {entry.yaw_rate_gain:.4g} deg/s per deg, lateral acc. gain "
+                  f"{entry.lateral_acceleration_gain * math.pi / 180:.4g} m/s^2 per deg" for entry in steady]
     if written:
         lines.append(f"wrote {written}")
     return summary, "\n".join(lines), summary["warnings"]
@@ -348,8 +363,10 @@ def _run_model(args: argparse.Namespace) -> tuple[dict, str, list[str]]:
     if unstable:
         warnings.append("the model is unstable or never reaches 90 % of its steady yaw rate at "
                         f"{', '.join(f'{v:g}' for v in unstable)} m/s: no step metrics there")
+    from vehid.identification.automatic.checks import uncertainty_method
     from vehid.scenarios import plausibility_checks as plausibility
 
+    method = uncertainty_method(model)
     findings, sparse = plausibility.handling_findings(model, speeds, metrics, yaw_rate=args.yaw_rate,
                                                       lateral_acceleration=args.lateral_acceleration,
                                                       sideslip=args.sideslip)
@@ -358,13 +375,16 @@ def _run_model(args: argparse.Namespace) -> tuple[dict, str, list[str]]:
                         "with little data, or beyond the log's speeds): its metrics there are extrapolated")
     summary = {"source": False, "model": args.model, **origin, "scheduled": hasattr(model, "model_at"),
                "wheelbase": args.wheelbase, "scales": scales,
-               "metrics": [{**m.as_dict(), "extrapolated": m.speed in sparse} for m in metrics]}
+               "metrics": [{**m.as_dict(), "extrapolated": m.speed in sparse} for m in metrics], "units": JSON_UNITS,
+               "uncertainty_method": method}
     plausibility.record_findings(summary, warnings, findings)
     summary["warnings"] = warnings
-    lines = metrics_table(f"{Path(args.model).name}:", metrics)
+    lines = metrics_table(f"{Path(args.model).name} ({STEER_UNIT_TEXT}):", metrics)
     if sparse:
         lines.append(f"{'extrapolated (too few samples)':<32}"
                      + "".join(f"{'yes' if m.speed in sparse else '':>20}" for m in metrics))
+    if method is not None:
+        lines.append(f"standard deviations: {method['description']}")
     curves: dict[str, Any] = {"identified": metrics}
     if source is not None:
         summary["source_model"] = source.as_dict()

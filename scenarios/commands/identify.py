@@ -25,13 +25,18 @@ the data start is returned where it beats every p in cross-validation or
 the filter's model on the estimation data (`start_kept`), at every order.
 These choices are said once as notes (JSON `notes`), each with its margin
 (JSON `decision_margins`: choice, score, runner-up and its score). The
-summary gives the eigenvalues, the
-fit R (eq. 17) per output of the continuous model simulated exactly, NRMSE
-fits on estimation and validation data (--validation, --validation-file),
-whether the run converged, any warnings (--strict: the summary, then exit status 3), the
-matrices and the run time. --order takes a number, a range (2-8) or auto,
-chosen on validation data; --nonlinear adds the spline-nonlinear model. It
-also says how sure the model is (scenarios.model_checks): each mode with
+summary first names the model returned (`model_returned`), then gives its
+NRMSE fits on estimation and validation data (--validation,
+--validation-file) with the fit R (eq. 17) beside each (every JSON key
+ending in `fit_percent` is an NRMSE fit, every key ending in `R` the fit R;
+lists in --outputs order), the eigenvalues and matrices of the linear model,
+whether the run converged, any warnings about the model returned (--strict:
+the summary, then exit status 3) and the run time. --order takes a number, a
+range (2-8) or auto, chosen on validation data; --nonlinear adds the
+spline-nonlinear model and --schedule the scheduled family: each is scored
+by the same rule as the linear model (initial state, horizon, records), the
+better by that rule is returned, and what became of the others is said in
+notes. It also says how sure the returned model is (scenarios.model_checks): each mode with
 standard deviations (text: value +/- 2 sigma; JSON: the list `modes`), the
 residual tests per output (`residual_whiteness_p`, `input_correlation_max`)
 and, for the IEKF, the innovation NIS per pass with its band. A model of a
@@ -158,6 +163,7 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     return summary, text
 
 
+REFINED_RUN = "refined"  # the archive's run holding the filter's model refined by its simulation error
 DECISIONS = "decisions_json"  # root attribute: the p tuning and the stability decision taken before the passes
 
 
@@ -179,7 +185,8 @@ def _read_decisions(archive) -> tuple:
         stored = json.loads(archive.attrs[DECISIONS])
         tuning = stored["tuning"]
         return (PTuning(p=float(tuning["p"]), tried=tuple(tuning["tried"]), seconds=float(tuning["seconds"]),
-                                 start_fit=tuning["start_fit"], q_schedule=tuning.get("q_schedule", "constant")),
+                                 start_fit=tuning["start_fit"], q_schedule=tuning.get("q_schedule", "constant"),
+                                 candidate_fits=tuning.get("candidate_fits")),
                 stored["open_loop_unstable"])
     except (ValueError, KeyError, TypeError):
         raise InputError(f"{archive.filename} holds an unreadable record of the run's decisions") from None
@@ -231,7 +238,7 @@ def load_plan(args: argparse.Namespace, paths: list[str]):
     fraction, note = holdout_of(args)
     scale, schedules = args.scale, None
     if args.schedule:  # the schedule channel is read beside the inputs, kept apart and never offset
-        raw, settings, schedules, scale = schedule_channel.read_with_schedule(args, paths)
+        raw, settings, schedules, scale, schedule_unit = schedule_channel.read_with_schedule(args, paths)
     else:
         raw, settings = read_from_args(args, paths)
     # spikes found (and repaired with --despike), --exclude windows and a standing car left out, the hold-out
@@ -254,7 +261,8 @@ def load_plan(args: argparse.Namespace, paths: list[str]):
     if schedules is not None:
         channel = args.schedule.strip()
         plan = dataclasses.replace(plan, schedule=schedule_channel.ScheduleData(
-            channel, cleaned.extra_estimation[channel], cleaned.extra_validation[channel] + tuple(found)))
+            channel, cleaned.extra_estimation[channel], cleaned.extra_validation[channel] + tuple(found),
+            schedule_unit))
     return plan
 
 
@@ -382,7 +390,7 @@ def _finish(args, plan, result, archive_path=None) -> tuple[dict, str, object]:
         summary["warnings"] = list(warnings)
     nonlinear = result.nonlinear.result.model if result.nonlinear is not None else None
     scheduled = result.scheduled
-    unscheduled = result.unscheduled if result.unscheduled is not None else model
+    linear = result.unscheduled if result.unscheduled is not None else model
     if archive_path is not None:
         summary["archive"] = str(archive_path)
         own_run = RUN_NAME if result.is_iekf else args.method
@@ -392,13 +400,18 @@ def _finish(args, plan, result, archive_path=None) -> tuple[dict, str, object]:
                 write_pass_history(archive, "nonlinear", result.nonlinear.result.history)
             if scheduled is not None:
                 write_run(archive, "scheduled", model=scheduled.model)
+                scheduled_identify.archive_schedule(archive, plan, VALIDATION_PREFIX)
+            # the filter's model refined by its simulation error is a model of its own, beside the filter's
+            refined = result.is_iekf and not result.start_returned and linear is not result.estimator.model
             if result.start_returned:
-                write_run(archive, "start", model=unscheduled)
+                write_run(archive, "start", model=linear)
+            elif refined:
+                write_run(archive, REFINED_RUN, model=linear)
+            returned_run = REFINED_RUN if refined and result.returned == "filter" else \
+                RETURNED_RUNS.get(result.returned, own_run)
             if result.residual_tests is not None:
-                write_value(run_group(archive, own_run), "residual_tests", result.residual_tests)
-            returned_scheduled = scheduled is not None and scheduled.returned
-            _archive_verdict(archive, summary, args, returned="scheduled" if returned_scheduled else (
-                "start" if result.start_returned else own_run))
+                write_value(run_group(archive, returned_run), "residual_tests", result.residual_tests)
+            _archive_verdict(archive, summary, args, returned=returned_run)
     if args.save_model:
         summary["model_file"] = str(save_model(model, args.save_model, plan.preparation))
     text = text_summary(summary, data, plan)
@@ -415,6 +428,8 @@ def _finish(args, plan, result, archive_path=None) -> tuple[dict, str, object]:
 
 
 SCORING_RULE = "scoring_rule"  # key of the archived summary only: how every model of the run is scored
+#: the archive's run of each returned model (``Identification.returned``); the filter's is the IEKF's run
+RETURNED_RUNS = {"filter": RUN_NAME, "start": "start", "scheduled": "scheduled", "nonlinear": "nonlinear"}
 VERDICT = "summary_json"  # root attribute, as a study keeps its summary
 
 
@@ -468,8 +483,24 @@ def _fits(names: tuple[str, ...], values: Any) -> str:
     return ", ".join(f"{name} {value:.2f}" for name, value in zip(names, values))
 
 
+def _fit_and_R(fit: Any, R: Any) -> str:
+    """One output's NRMSE fit with its R labelled beside it (``-`` where there is none)."""
+    if fit is None:
+        return "-"
+    return f"{fit:.2f}" + ("" if R is None else f" (R {R:.2f})")
+
+
+def _at(values: Any, index: int) -> Any:
+    return None if values is None else values[index]
+
+
+#: what the text calls each model the command may return (``model_returned``)
+RETURNED_TEXT = {"filter": "the IEKF's linear model", "start": "the IEKF's start model (linear)",
+                 "scheduled": "the scheduled family", "nonlinear": "the spline-nonlinear model"}
+
+
 def text_summary(summary: dict[str, Any], data, plan) -> str:
-    """The text face: model, convergence, estimation and validation scores side by side."""
+    """The text face: the model returned, its NRMSE fits (R beside) on estimation and validation data, the run."""
     import numpy as np
 
     from vehid.identification.automatic.steps import ORDER_TOLERANCE, P_TOLERANCE, decision_notes
@@ -481,21 +512,28 @@ def text_summary(summary: dict[str, Any], data, plan) -> str:
     stop = summary.get("stop_reason")
     converged = "converged" if stop == "converged" else (f"NOT converged ({stop})" if stop else "direct method (no iterations)")
     kind = summary.get("time_domain", "continuous")
+    returned = summary.get("model_returned", summary["method"])
+    linear_returned = returned not in ("scheduled", "nonlinear")
     lines = [
+        f"model returned: {RETURNED_TEXT.get(returned, returned)}, order {summary['order']}"
+        + ("" if linear_returned else f" (the linear {summary['method']} model it started from is not returned)"),
         f"{summary['method']}: order {summary['order']}, {summary['passes_run']} passes, "
         f"{summary['discretization']} discretisation, {summary['seconds']:.2f} s, {converged}",
-        f"eigenvalues ({kind}-time): {eigen}",
-        f"fit R (continuous model simulated exactly): {_fits(data.output_names, summary['fit_percent'])}"
-        + (" (from rest, where an unstable model's simulation diverges: the k-step scores below measure it)"
-           if np.any(np.asarray(summary["eigenvalues"], dtype=complex).real > 0) else ""),
+        f"eigenvalues ({kind}-time{'' if linear_returned else ', of the linear model'}): {eigen}",
     ]
     how = (f"{summary['horizon']}-step-ahead prediction" if summary.get("horizon")
            else f"simulation, initial state {summary.get('initial_state', 'zero')}")
-    lines.append(f"{'NRMSE fit %':<14} {'estimation':>28} {'validation':>28}   ({how})")
+    lines.append(f"{'NRMSE fit %':<14} {'estimation':>28} {'validation':>28}   ({how}; R of eq. 17 beside)")
     for i, name in enumerate(data.output_names):
-        est = summary["estimation_fit_percent"][i]
-        val = summary["validation_fit_percent"][i] if summary.get("validation_fit_percent") is not None else None
-        lines.append(f"{name:<14} {est:>28.2f} {('-' if val is None else f'{val:.2f}'):>28}")
+        est = _fit_and_R(summary["estimation_fit_percent"][i], _at(summary.get("estimation_R"), i))
+        val = _fit_and_R(_at(summary.get("validation_fit_percent"), i), _at(summary.get("validation_R"), i))
+        lines.append(f"{name:<14} {est:>28} {val:>28}")
+    unstable = np.any(np.asarray(summary["eigenvalues"], dtype=complex).real > 0) and linear_returned
+    lines.append(
+        "simulated from rest over the estimation data (continuous model, exact): NRMSE fit "
+        + ", ".join(f"{name} {_fit_and_R(fit, R)}" for name, fit, R in zip(data.output_names, summary["fit_percent"],
+                                                                            summary["R"])) + " %"
+        + (" (an unstable model's simulation diverges: the k-step scores above measure it)" if unstable else ""))
     if plan.validation:
         lines.append("validation on: " + "; ".join(plan.validation_names))
     for note in summary.get("notes", decision_notes(summary)):
@@ -505,7 +543,7 @@ def text_summary(summary: dict[str, Any], data, plan) -> str:
                           + ("failed" if row["cv_fit_percent"] is None else f"{row['cv_fit_percent']:.2f}")
                           for row in summary["p_tried"])
         lines.append(f"p {summary['p']:g}, {summary.get('q_schedule', 'constant')} Q, by two-fold cross-validation "
-                     f"(fit %: {tried}; a shrinking Q unless a constant one is {SCHEDULE_MARGIN:g} points better, "
+                     f"(NRMSE fit %: {tried}; a shrinking Q unless a constant one is {SCHEDULE_MARGIN:g} points better, "
                      f"the largest p within {P_TOLERANCE} points of its best), {summary['tuning_seconds']:.1f} s")
     if summary.get("scoring_note"):
         lines.append(f"note: {summary['scoring_note']}")
@@ -515,14 +553,15 @@ def text_summary(summary: dict[str, Any], data, plan) -> str:
         tried = ", ".join(
             f"n={row['order']}: " + (f"{row['ranking_fit']:.2f}" if "ranking_fit" in row else "failed")
             for row in summary["orders_tried"])
-        lines.append(f"orders tried (mean validation fit %): {tried}; chosen {summary['order']} "
+        lines.append(f"orders tried (mean validation NRMSE fit %): {tried}; chosen {summary['order']} "
                      f"(smallest within {ORDER_TOLERANCE} points of the best)")
     if "nonlinear" in summary:
         nl = summary["nonlinear"]
         lines.append(f"nonlinear (spline, {nl['nodes']} nodes, p {nl['p']:g}, {nl['passes_run']} passes, "
-                     f"{'converged' if nl['stop_reason'] == 'converged' else 'NOT converged'}): "
+                     f"{'converged' if nl['stop_reason'] == 'converged' else 'NOT converged'}"
+                     f"{', returned' if returned == 'nonlinear' else ', NOT returned'}): NRMSE fit "
                      f"estimation {_fits(data.output_names, nl['estimation_fit_percent'])}; "
-                     f"validation {_fits(data.output_names, nl['validation_fit_percent'])}")
+                     f"validation {_fits(data.output_names, nl['validation_fit_percent'])} %")
     if "model_file" in summary:
         lines.append(f"wrote {summary['model_file']}")
     return "\n".join(lines)

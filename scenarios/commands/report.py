@@ -47,7 +47,7 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
     from vehid.identification.dataio.archive import read_archive
     from vehid.identification.dataio.archive_safety import check_report_folder, writing_report_folder
     from vehid.scenarios.report import (archive_figures, archive_table, archive_verdict, markdown_table, verdict_lines,
-                                        verdict_page, write_report)
+                                        verdict_output_names, verdict_page, write_report)
 
     if args.max_lag < 1:
         raise InputError(f"--max-lag must be at least 1; got {args.max_lag}")
@@ -71,7 +71,7 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
         raise InputError(f"nothing to draw in {path}: it holds no records and no runs with histories or models")
     rows = archive_table(archive)
     verdict = archive_verdict(archive)
-    stated = verdict_lines(verdict, _output_names(archive, verdict)) if verdict is not None else []
+    stated = verdict_lines(verdict, verdict_output_names(archive, verdict)) if verdict is not None else []
     if stated:  # the command's verdict is the report's first page
         figures = {"verdict": verdict_page(stated), **figures}
     with writing_report_folder(folder, force=args.force) as partial:
@@ -107,14 +107,4 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
 
 
 VERDICT_KEYS = ("method", "order", "passes_run", "stop_reason", "estimation_fit_percent", "estimation_R",
-                "validation_fit_percent", "validation_R", "initial_state", "horizon", "warnings")
-
-
-def _output_names(archive, verdict) -> tuple[str, ...]:
-    """The returned model's output names (else the first record's), to label the verdict's per-output scores."""
-    returned = archive.runs.get((verdict.get("scoring_rule") or {}).get("returned_run"))
-    names = getattr(getattr(returned, "model", None), "output_names", None)
-    if names:
-        return tuple(names)
-    record = next(iter(archive.records.values()), None)
-    return tuple(record.output_names) if record is not None else ()
+                "validation_fit_percent", "validation_R", "initial_state", "horizon", "warnings", "notes")
