@@ -221,9 +221,8 @@ def _fake_calibration(log: DriveLog, *, failure: str | None = None):
     """A drive calibration with known scores and predictions: what the command renders, without the filter."""
     from types import SimpleNamespace
 
-    from vehid.identification.assessment.metrics import nrmse_fit, percentage_explanation
     from vehid.vehicle.calibration import Calibration
-    from vehid.vehicle.drive_calibration import DriveCalibration
+    from vehid.vehicle.drive_calibration import DriveCalibration, drive_scores
 
     prior = vehicle_from_mapping(PLAIN_PRIOR)
     start = dataclasses.replace(prior, drive=dataclasses.replace(prior.drive, slip_limit=0.1))
@@ -233,19 +232,16 @@ def _fake_calibration(log: DriveLog, *, failure: str | None = None):
         parameter_names=names, units=("-", "kg m^2"), values=np.array([0.8, 1400.0]), std=np.array([0.02, 90.0]),
         correlation=np.array([[1.0, 0.3], [0.3, 1.0]]), held={}, result=SimpleNamespace(history=(0, 1, 2)))
     n, split = log.n_samples, int(round(0.6 * log.n_samples))
-    runs = ((0, n),)
+    # two stretches, a gap left out in the held-out part (as above the speed range): NaN there, not scored
+    runs = ((0, split + 500), (split + 800, n))
     measured = np.column_stack([log.outputs, log.checks["beta_true"][1]])
     rng = np.random.default_rng(0)
     predictions, fits = {}, {}
     for label, error in (("prior", 0.6), ("start", 0.4), ("calibrated", 0.2)):
         predicted = measured + error * measured.std(axis=0) * rng.standard_normal(measured.shape)
+        predicted[split + 500:split + 800] = np.nan
         predictions[label] = predicted
-        fits[label] = {}
-        for part, rows in (("estimation", slice(0, split)), ("validation", slice(split, n))):
-            nrmse, explained = nrmse_fit(measured[rows], predicted[rows]), percentage_explanation(measured[rows],
-                                                                                              predicted[rows])
-            fits[label][part] = {"nrmse": nrmse[:2], "R": explained[:2], "checks": {"beta_true": float(nrmse[2])},
-                                 "checks_R": {"beta_true": float(explained[2])}}
+        fits[label] = drive_scores(log, runs, predicted, split)
     return DriveCalibration(
         calibration=calibration, prior=prior, start=start, balance=None, stages=(("yaw dynamics", calibration),),
         runs=runs, n_estimation=split, fits=fits, predictions=predictions, halves={}, substeps=2,

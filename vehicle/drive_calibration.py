@@ -94,6 +94,7 @@ __all__ = [
     "start_vehicle",
     "calibrate_drive",
     "drive_records",
+    "drive_scores",
 ]
 
 #: The steady-state balance: set in stage 1 (the front's), estimated first in the filter (stage 2).
@@ -558,12 +559,24 @@ def _score(log: DriveLog, runs: Sequence[tuple[int, int]], vehicle: VehicleParam
     for a, b in runs:
         y, _ = simulate_greybox(model, theta, log.record(a, b, with_checks=True), substeps=substeps)
         predicted[a:b] = y
+    return predicted, drive_scores(log, runs, predicted, n_estimation)
+
+
+def drive_scores(log: DriveLog, runs: Sequence[tuple[int, int]], predicted: np.ndarray,
+                 n_estimation: int) -> dict[str, Any] | None:
+    """A car's outputs over the log (``predicted``, fitted channels then checks) scored on the driven samples.
+
+    Returns ``{"estimation": ..., "validation": ...}``, each ``{"nrmse", "R", "checks", "checks_R"}`` (NRMSE
+    fit and R of eq. 17 per fitted channel, ``{channel: value}`` per check) over the samples of ``runs``
+    before and from ``n_estimation`` (None for a part with fewer than two), or None where the car's
+    outputs are not finite on every driven sample.
+    """
     measured = np.column_stack([log.outputs] + [values for _, values in log.checks.values()])
     driven = np.zeros(log.n_samples, dtype=bool)
     for a, b in runs:
         driven[a:b] = True
     if not np.all(np.isfinite(predicted[driven])):
-        return predicted, None
+        return None
     n_y = len(log.quantities)
     scores: dict[str, Any] = {}
     for part, rows in (("estimation", driven[:n_estimation]), ("validation", driven[n_estimation:])):
@@ -577,7 +590,7 @@ def _score(log: DriveLog, runs: Sequence[tuple[int, int]], vehicle: VehicleParam
         scores[part] = {"nrmse": nrmse[:n_y], "R": explained[:n_y],
                         "checks": dict(zip(log.checks, map(float, nrmse[n_y:]))),
                         "checks_R": dict(zip(log.checks, map(float, explained[n_y:])))}
-    return predicted, scores
+    return scores
 
 
 def _compare_halves(whole: Calibration, first: Calibration, second: Calibration) -> tuple[dict[str, Any], list[str]]:
