@@ -357,3 +357,23 @@ def test_a_drive_from_rest_is_cut_to_what_the_model_drives_and_a_late_failure_ke
     assert result.failure.startswith("stage 'yaw dynamics' diverged") and [s for s, _ in result.stages] == ["balance"]
     assert result.calibration is result.stages[0][1]
     assert any("stopped early" in warning for warning in result.warnings)
+
+
+def test_segment_counts_from_the_logs_start_and_the_parameters_reach_the_calibration(monkeypatch, capsys):
+    """``--segment +10:+50`` is the 40 s from 10 s after the log's first sample (the committed log starts at
+    t = 390 s), and ``--parameters`` is what the calibration is asked for."""
+    _, table = _race_log()
+    seen = {}
+
+    def calibrate(prior, drive, **kwargs):
+        seen.update(drive=drive, **kwargs)
+        raise InputError("stopped here")
+
+    monkeypatch.setattr("vehid.vehicle.drive_calibration.calibrate_drive", calibrate)
+    status = main(["calibrate", str(RACE_LOG), *CHANNELS, "--segment", "+10:+50", "--parameters",
+                   "tyre.front_cornering_scale,chassis.yaw_inertia"])
+    assert status == 2 and "stopped here" in capsys.readouterr().err
+    t = seen["drive"].t
+    dt = float(np.median(np.diff(table[:, 0])))
+    assert t[0] == pytest.approx(table[0, 0] + 10.0, abs=dt) and t[-1] - t[0] == pytest.approx(40.0, abs=2 * dt)
+    assert seen["parameters"] == ("tyre.front_cornering_scale", "chassis.yaw_inertia")
