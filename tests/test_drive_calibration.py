@@ -305,6 +305,7 @@ def test_a_late_failure_keeps_the_last_stage_its_files_and_names_the_failure(ren
     status, body, err, fake, out, figure = rendered(failure="stage 'balance and yaw dynamics' diverged: non-finite")
     assert status == 1
     assert "diverged: non-finite" in body["error"] and body["exit_status"] == 1
+    assert "--prior NAME=VALUE" in body["error"] and "--p " in body["error"]  # the advice in this command's options
     assert body["failure"].startswith("stage 'balance and yaw dynamics'")
     assert body["validation_fit_percent"] == pytest.approx(list(fake.fits["calibrated"]["validation"]["nrmse"]))
     assert "last stage that finished" in out.read_text() and figure.is_file()

@@ -280,7 +280,10 @@ def run(args: argparse.Namespace) -> tuple[dict, str]:
         text = "\n".join(lines)
     summary["warnings"] = warnings
     if result.failure is not None:
-        raise PartialResultError(f"the calibration failed part of the way: {result.failure}", summary,
+        # the filter's advice (other start values, a smaller p) in this command's options
+        advice = ("; here --prior NAME=VALUE gives a parameter another start and --p a smaller random walk"
+                  if "diverged" in result.failure else "")
+        raise PartialResultError(f"the calibration failed part of the way: {result.failure}{advice}", summary,
                                  text + "".join(f"\nwarning: {line}" for line in warnings))
     if warnings and not args.json and not args.strict:
         text += "\n" + "\n".join(f"warning: {line}" for line in warnings)
