@@ -312,7 +312,12 @@ def test_a_late_failure_keeps_the_last_stage_its_files_and_names_the_failure(ren
     assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
 
 
-def test_a_drive_from_rest_is_cut_to_what_the_model_drives_and_a_late_failure_keeps_the_last_stage(monkeypatch):
+@pytest.mark.parametrize("error, named", [
+    ("diverge", "diverged"),
+    ("tip", "left no valid vehicle"),  # an estimate the vehicle's checks refuse, after the work began: not bad input
+])
+def test_a_drive_from_rest_is_cut_to_what_the_model_drives_and_a_late_failure_keeps_the_last_stage(
+        monkeypatch, error, named):
     """A drive from rest (a standing start, a stop midway, rest at the end) from the plain prior: the standstills
     and the crawl are left out with a note naming how many samples, the two moving stretches are records of
     their own; a second stage that diverges leaves the first stage's car, named as the failure. The filter and
@@ -338,7 +343,8 @@ def test_a_drive_from_rest_is_cut_to_what_the_model_drives_and_a_late_failure_ke
     def stage(start, records, quantities, *, parameters, fixed, **kwargs):
         calls.append((tuple(fixed), [record.n_samples for record in records]))
         if len(calls) > 1:
-            raise DivergenceError("the identified model's simulation blows up")
+            raise (DivergenceError("the identified model's simulation blows up") if error == "diverge" else
+                   InputError("vehicle would tip over before its tyres slide"))
         values = np.array([getattr(getattr(start, n.split(".")[0]), n.split(".")[1]) for n in parameters])
         std = np.where([name in fixed for name in parameters], np.nan, 0.01 * values)
         return Calibration(vehicle=start, parameter_names=tuple(parameters), units=("-",) * len(parameters),
@@ -355,7 +361,7 @@ def test_a_drive_from_rest_is_cut_to_what_the_model_drives_and_a_late_failure_ke
     assert all(np.all(drive.speed[a:b] >= 3.0) for a, b in result.runs)
     # the first stage (the balance, the yaw dynamics held) finished; the second diverged and is the failure
     assert len(calls) == 2 and "chassis.yaw_inertia" in calls[0][0] and calls[1][0] == ()
-    assert result.failure.startswith("stage 'yaw dynamics' diverged") and [s for s, _ in result.stages] == ["balance"]
+    assert result.failure.startswith(f"stage 'yaw dynamics' {named}") and [s for s, _ in result.stages] == ["balance"]
     assert result.calibration is result.stages[0][1]
     assert any("stopped early" in warning for warning in result.warnings)
 
@@ -378,3 +384,25 @@ def test_segment_counts_from_the_logs_start_and_the_parameters_reach_the_calibra
     dt = float(np.median(np.diff(table[:, 0])))
     assert t[0] == pytest.approx(table[0, 0] + 10.0, abs=dt) and t[-1] - t[0] == pytest.approx(40.0, abs=2 * dt)
     assert seen["parameters"] == ("tyre.front_cornering_scale", "chassis.yaw_inertia")
+
+
+def test_an_estimate_that_makes_no_valid_vehicle_holds_the_parameter_that_ran_furthest():
+    """The filter's model runs past the vehicle's own limits (the grip a centre of gravity would tip over at):
+    such an estimate is refused by the vehicle's checks, and the free parameter that moved furthest from its
+    start, in its prior std, is the one held (on the 550 s drive of the same car the estimate reached a friction
+    of 2.86 where the start's centre of gravity tips at 1.98, and the command stopped with exit 2)."""
+    from vehid.vehicle.calibration import _invalid_estimate
+
+    prior = vehicle_from_mapping(PLAIN_PRIOR)
+    names = ["tyre.friction_scale", "chassis.yaw_inertia"]
+    start = np.array([prior.tyre.friction_scale, prior.chassis.yaw_inertia])
+    relative = np.array([0.2, 0.3])
+    tipping = static_stability_factor(prior) / peak_lateral_friction(prior) * prior.tyre.friction_scale
+    # inside the limit: a valid vehicle, nothing to hold
+    assert _invalid_estimate(prior, names, names, start, np.array([0.9 * tipping, 1.3 * start[1]]), relative) is None
+    # beyond it: the friction (3.4 prior std out) is held where the inertia stayed, the inertia where it
+    # ran further (a factor 10: 30 prior std)
+    name, why = _invalid_estimate(prior, names, names, start, np.array([1.1 * tipping, start[1]]), relative)
+    assert name == "tyre.friction_scale" and "tip over" in why
+    name, _ = _invalid_estimate(prior, names, names, start, np.array([1.1 * tipping, 10 * start[1]]), relative)
+    assert name == "chassis.yaw_inertia"

@@ -410,6 +410,24 @@ def _undetermined(names: Sequence[str], values: np.ndarray, std: np.ndarray, cor
     return None
 
 
+def _invalid_estimate(prior_vehicle: VehicleParameters, parameters: Sequence[str], free: Sequence[str],
+                      start: np.ndarray, estimate: np.ndarray, relative_prior: np.ndarray) -> tuple[str, str] | None:
+    """Where the free parameters' estimate makes no valid vehicle (a grip the centre of gravity would tip
+    over at, say): the free parameter that moved furthest from its start, counted in its prior std, and
+    why; else None. The model itself runs beyond those limits, so the filter may end there."""
+    values = start.copy()
+    index = [parameters.index(name) for name in free]
+    values[index] = estimate[index]
+    try:
+        vehicle_with(prior_vehicle, parameters, values)
+    except InputError as exc:
+        moved = np.abs(values[index] - start[index]) / (relative_prior[index] * np.abs(start[index]))
+        worst = int(np.argmax(moved))
+        return free[worst], (f"its estimate {values[index[worst]]:.4g} makes no valid vehicle with the others: "
+                             f"{exc}")
+    return None
+
+
 def calibrate_vehicle(params: VehicleParameters, data: IOData | Sequence[IOData], quantities: Sequence[str], *,
                       parameters: Sequence[str] | None = None, priors: Mapping[str, float] | None = None,
                       prior_std: Mapping[str, float] | None = None, correlation_limit: float = CORRELATION_LIMIT,
@@ -504,6 +522,8 @@ def calibrate_vehicle(params: VehicleParameters, data: IOData | Sequence[IOData]
         index = [parameters.index(name) for name in free]
         reason = _undetermined(free, result.parameters[index], result.std[index],
                                result.correlation[np.ix_(index, index)], correlation_limit, relative_prior[index])
+        if reason is None:
+            reason = _invalid_estimate(prior_vehicle, parameters, free, start, result.parameters, relative_prior)
         if reason is None:
             break
         held[reason[0]] = reason[1]

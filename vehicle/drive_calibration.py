@@ -754,6 +754,9 @@ def calibrate_drive(
         except DivergenceError as exc:
             failure = f"stage '{label}' diverged: {exc}"
             break
+        except InputError as exc:  # the inputs were checked before any work: what remains is the stage's result
+            failure = f"stage '{label}' left no valid vehicle: {exc}"
+            break
         if result.result is None:  # nothing this stage frees is determined: the next starts where this one did
             notes.append(f"stage '{label}': the log determines none of its parameters ({'; '.join(result.warnings)})")
             continue
@@ -837,8 +840,8 @@ def _halves(start: VehicleParameters, log: DriveLog, runs: Sequence[tuple[int, i
                                                         priors=priors, prior_std=prior_std, options=options,
                                                         fixed=fixed, starts=starts,
                                                         hold_static_stiffness=hold_static_stiffness))
-        except DivergenceError as exc:
-            return {}, [f"a half of the estimation part diverged ({exc}): halves not compared"]
+        except (DivergenceError, InputError) as exc:
+            return {}, [f"a half of the estimation part was not calibrated ({exc}): halves not compared"]
     return _compare_halves(calibration, *found)
 
 
