@@ -23,6 +23,9 @@ Choices, each stated where it is made:
   one less certain relative to its size), is not determined by the log. It is held at its prior and
   the others are estimated again without it, until every remaining one is determined. Each
   parameter may have its own prior std (``prior_std``); the limit is then half of that one.
+  An estimate that makes no valid vehicle (the filter's model runs past the vehicle's checks: a grip
+  the centre of gravity would tip over at) is held the same way, the free parameter that moved
+  furthest from its start, counted in its prior std, first.
 * Standard deviations widen by the residuals' correlation time (the grey-box filter's
   ``coloured_residuals``): a model's error on a measured log is coloured, and the filter's own
   covariance, which counts every sample as independent, would be too small by that factor.

@@ -48,8 +48,10 @@ Choices, each stated where it is made:
   calibrated again from the whole part's estimate; an estimate whose halves differ by more than
   :data:`HALVES_LIMIT` times the root sum of their variances is named: the log's parts tell
   different stories about it (a model error, or a car that changed).
-* **Late failure.** A stage that diverges ends the calibration with the last stage that finished:
-  its car, scores and the failure (:attr:`DriveCalibration.failure`) are kept, not lost.
+* **Late failure.** A stage that diverges, or whose estimate the vehicle's own checks still refuse
+  (:func:`~vehid.vehicle.calibration.calibrate_vehicle` first holds the parameter that ran furthest),
+  ends the calibration with the last stage that finished: its car, scores and the failure
+  (:attr:`DriveCalibration.failure`) are kept, not lost.
 """
 
 from __future__ import annotations
