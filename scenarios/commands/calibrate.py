@@ -12,11 +12,12 @@ The car starts from the prior vehicle (--vehicle) made able to drive the log: th
 largest accelerations need, a centre of gravity low enough not to tip, a slip limiter (--slip-limit)
 and the front/rear cornering balance of the log's quasi-steady corners; each change is a note. The
 first part of the log calibrates the chosen parameters (--parameters section.field,..., default the
-front and rear cornering scales, the friction scale and the yaw inertia, with the roll inertia and
-front anti-roll bar when the roll angle is measured), in stages (balance, then everything, then
-roll); the last --validation fraction is held out and predicted, the prior, start and calibrated
-cars each driven over the whole log from its start and scored alike by the NRMSE fit
-(``*_fit_percent``; R of eq. 17 under ``*_R``). --check CHANNEL=QUANTITY scores a measured
+front cornering scale, the tyres' load sensitivity PKY2, the friction scale and the yaw inertia,
+with the rear cornering scale when the sideslip is fitted and the roll inertia and front anti-roll
+bar when the roll angle is measured), in stages (balance, then everything, then roll); the last
+--validation fraction is held out and predicted, the prior, start and calibrated cars each driven
+over the whole log from its start and scored alike by the NRMSE fit (``*_fit_percent``; R of eq.
+17 under ``*_R``). --check CHANNEL=QUANTITY scores a measured
 channel that is never fitted (``check_fit_percent``). The two halves of the calibrating part are
 calibrated again and compared. Parameters the log does not determine (std above their size or half
 their prior std, or |correlation| > 0.95 with another) are held with a warning (exit 3 under
@@ -70,9 +71,9 @@ def register(parser: argparse.ArgumentParser) -> None:
                         help="multiply a log channel by FACTOR (a unit or a sign); repeatable or a comma list")
     parser.add_argument("--parameters", default=None, metavar="NAME,...",
                         help="vehicle fields to calibrate, section.field as in a vehicle file (default "
-                             "tyre.front_cornering_scale, tyre.rear_cornering_scale, tyre.friction_scale, "
-                             "chassis.yaw_inertia; with the roll angle also chassis.roll_inertia and "
-                             "suspension.front_anti_roll_bar)")
+                             "tyre.front_cornering_scale, tyre.PKY2, tyre.friction_scale, chassis.yaw_inertia; "
+                             "with the sideslip fitted also tyre.rear_cornering_scale, with the roll angle "
+                             "chassis.roll_inertia and suspension.front_anti_roll_bar)")
     parser.add_argument("--prior", action="append", default=None, metavar="NAME=VALUE[:STD]",
                         help="prior value of a calibrated parameter and optionally its std in the "
                              "parameter's unit (repeatable); default the vehicle's value and --prior-std")
