@@ -406,3 +406,24 @@ def test_an_estimate_that_makes_no_valid_vehicle_holds_the_parameter_that_ran_fu
     assert name == "tyre.friction_scale" and "tip over" in why
     name, _ = _invalid_estimate(prior, names, names, start, np.array([1.1 * tipping, 10 * start[1]]), relative)
     assert name == "chassis.yaw_inertia"
+
+
+def test_a_calibrated_car_not_ahead_is_warned_of_and_a_check_it_makes_worse_is_named():
+    """The warnings compare the held-out NRMSE fits of the calibrated car with the prior's and the start's:
+    none where it is ahead on some output and no check is worse; a warning naming the car where it is ahead
+    on none; the unfitted channel named where the calibration makes it worse."""
+    from vehid.vehicle.drive_calibration import _not_ahead
+
+    log, _ = _race_log()
+
+    def fits(yaw, lateral, sideslip):
+        return {"validation": {"nrmse": np.array([yaw, lateral]), "checks": {"beta_true": sideslip}}}
+
+    ahead = {"prior": fits(85.0, 75.8, 75.3), "start": fits(82.9, 76.1, 56.4), "calibrated": fits(85.3, 75.0, 77.0)}
+    assert _not_ahead(log, ahead) == []
+    behind = {**ahead, "calibrated": fits(84.0, 75.0, 57.9)}
+    warnings = _not_ahead(log, behind)
+    assert any("better than the prior car" in w and "yawRate -1.0" in w for w in warnings), warnings
+    assert not any("better than the start car" in w for w in warnings)  # 84.0 > 82.9: ahead of the start
+    assert any("unfitted beta_true worse than the prior car's" in w and "57.9 against 75.3" in w for w in warnings)
+    assert _not_ahead(log, {**ahead, "prior": None}) == []  # a prior that did not drive the log is not compared
