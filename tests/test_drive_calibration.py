@@ -427,3 +427,31 @@ def test_a_calibrated_car_not_ahead_is_warned_of_and_a_check_it_makes_worse_is_n
     assert not any("better than the start car" in w for w in warnings)  # 84.0 > 82.9: ahead of the start
     assert any("unfitted beta_true worse than the prior car's" in w and "57.9 against 75.3" in w for w in warnings)
     assert _not_ahead(log, {**ahead, "prior": None}) == []  # a prior that did not drive the log is not compared
+
+
+def test_halves_are_compared_per_parameter_and_a_half_that_did_not_determine_one_says_why():
+    """Segment consistency: each parameter the whole part determined, as each half found it, apart by
+    |v1 - v2| / sqrt(s1^2 + s2^2); beyond HALVES_LIMIT std of the difference the parameter is named."""
+    from vehid.vehicle.calibration import Calibration
+    from vehid.vehicle.drive_calibration import HALVES_LIMIT, _compare_halves
+
+    prior = vehicle_from_mapping(PLAIN_PRIOR)
+    names = ("tyre.front_cornering_scale", "chassis.yaw_inertia")
+
+    def calibration(values, std, held=None):
+        return Calibration(vehicle=prior, parameter_names=names, units=("-", "kg m^2"), values=np.array(values),
+                           std=np.array(std), correlation=np.eye(2), held=held or {}, result=None)
+
+    whole = calibration([0.80, 1300.0], [0.01, 50.0])
+    first = calibration([0.78, 1250.0], [0.03, 40.0])
+    second = calibration([0.86, 1300.0], [0.04, math.nan], {"chassis.yaw_inertia": "correlation +0.97 with x"})
+    rows, warnings = _compare_halves(whole, first, second)
+    assert rows["tyre.front_cornering_scale"]["difference_sigma"] == pytest.approx(0.08 / 0.05)
+    assert rows["tyre.front_cornering_scale"]["not_determined"] == {} and warnings == []  # 1.6 < 2 std
+    assert rows["chassis.yaw_inertia"]["second"] is None and rows["chassis.yaw_inertia"]["difference_sigma"] is None
+    assert rows["chassis.yaw_inertia"]["not_determined"] == {"second": "correlation +0.97 with x"}
+    apart = calibration([0.90, 1300.0], [0.03, 40.0])
+    rows, warnings = _compare_halves(whole, first, apart)
+    assert rows["tyre.front_cornering_scale"]["difference_sigma"] == pytest.approx(0.12 / 0.03 / math.sqrt(2))
+    assert rows["tyre.front_cornering_scale"]["difference_sigma"] > HALVES_LIMIT
+    assert len(warnings) == 1 and warnings[0].startswith("tyre.front_cornering_scale: the halves")

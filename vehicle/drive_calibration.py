@@ -515,8 +515,9 @@ class DriveCalibration:
     predictions : mapping of str to ndarray (N, n_y + n_checks)
         Each car's outputs over the whole log (NaN outside the runs), fitted channels then checks.
     halves : mapping
-        ``parameter -> {"first": (value, std) or None, "second": ..., "difference_sigma": float or None}``
-        for each parameter the whole part determined (None where a half did not).
+        ``parameter -> {"first": (value, std) or None, "second": ..., "difference_sigma": float or None,
+        "not_determined": {half: why}}`` for each parameter the whole part determined (None where a half
+        did not, and why in ``not_determined``).
     substeps : int
         RK4 steps per sample.
     notes, warnings : tuple of str
@@ -613,7 +614,9 @@ def _compare_halves(whole: Calibration, first: Calibration, second: Calibration)
                 warnings.append(f"{name}: the halves of the estimation part disagree, {v1:.5g} +/- {s1:.2g} against "
                                 f"{v2:.5g} +/- {s2:.2g} ({sigma:.1f} std of the difference): the log's parts tell "
                                 "different stories about it (a model error or a car that changed)")
-        rows[name] = {"first": found[0], "second": found[1], "difference_sigma": sigma}
+        why = {label: half.held.get(name, "not estimated") for label, half, value in
+               (("first", first, found[0]), ("second", second, found[1])) if value is None}
+        rows[name] = {"first": found[0], "second": found[1], "difference_sigma": sigma, "not_determined": why}
     return rows, warnings
 
 

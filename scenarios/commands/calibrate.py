@@ -326,7 +326,8 @@ def _summary(args: argparse.Namespace, log: Path, params: Any, drive: Any, resul
                    for label, stage in result.stages],
         "balance": result.balance.as_dict() if result.balance is not None else None,
         "halves": {name: {**{half: None if row[half] is None else {"value": row[half][0], "std": row[half][1]}
-                             for half in ("first", "second")}, "difference_sigma": row["difference_sigma"]}
+                             for half in ("first", "second")}, "difference_sigma": row["difference_sigma"],
+                          "not_determined": dict(row.get("not_determined", {}))}
                    for name, row in result.halves.items()},
         "notes": list(result.notes),
         "failure": result.failure,
@@ -365,8 +366,8 @@ def _summary(args: argparse.Namespace, log: Path, params: Any, drive: Any, resul
                              if value is not None)
         lines.append(f"hold-out NRMSE fit, {label} car: {shown}" + (f"; {unfitted}" if unfitted else ""))
     for name, row in summary["halves"].items():
-        shown = [f"{row[half]['value']:.5g} +/- {row[half]['std']:.2g}" if row[half] else "not determined"
-                 for half in ("first", "second")]
+        shown = [f"{row[half]['value']:.5g} +/- {row[half]['std']:.2g}" if row[half] else
+                 f"not determined ({row['not_determined'].get(half, 'held')})" for half in ("first", "second")]
         apart = "" if row["difference_sigma"] is None else f" ({row['difference_sigma']:.1f} std apart)"
         lines.append(f"halves of the calibrating part: {name} {shown[0]} and {shown[1]}{apart}")
     # the calibrated car's handling where the log drove it, inside its own speed range
