@@ -455,3 +455,32 @@ def test_halves_are_compared_per_parameter_and_a_half_that_did_not_determine_one
     assert rows["tyre.front_cornering_scale"]["difference_sigma"] == pytest.approx(0.12 / 0.03 / math.sqrt(2))
     assert rows["tyre.front_cornering_scale"]["difference_sigma"] > HALVES_LIMIT
     assert len(warnings) == 1 and warnings[0].startswith("tyre.front_cornering_scale: the halves")
+
+
+def test_the_halves_split_where_the_car_runs_straight(monkeypatch):
+    """Each half is calibrated from records that start from straight running: the split is sought about the
+    middle of the calibrating samples where the steer is smallest. On the committed log the exact middle
+    (t = 418 s) lies in a 0.8 g corner; the split is at a straight, each half holding 30-70 % of the samples."""
+    from vehid.identification.filtering.greybox import GreyBoxOptions
+    from vehid.vehicle import drive_calibration
+
+    log, _ = _race_log()
+    runs = speed_runs(log.speed, 3.0, 50.0, 200)
+    split = int(round(0.6 * log.n_samples))
+    whole = _fake_calibration(log).calibration
+    starts = []
+
+    def stage(start, records, quantities, **kwargs):
+        starts.append([record.t[0] for record in records])
+        return whole
+
+    monkeypatch.setattr(drive_calibration._calibration, "calibrate_vehicle", stage)
+    drive_calibration._halves(whole.vehicle, log, runs, split, 200, whole, whole.parameter_names, {}, None,
+                              GreyBoxOptions(), False)
+    first, second = starts
+    middle = int(np.searchsorted(log.t, second[0]))
+    steer = np.abs(log.steer[middle - 25:middle + 25]).mean()  # the 0.5 s about the split
+    assert steer < math.radians(0.6), math.degrees(steer)  # straight: the corner about t = 418 s steers 4 deg
+    rows = np.concatenate([np.arange(a, min(b, split)) for a, b in runs if a < split])
+    share = np.count_nonzero(rows < middle) / rows.size
+    assert 0.3 <= share <= 0.7, share

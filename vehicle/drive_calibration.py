@@ -44,7 +44,8 @@ Choices, each stated where it is made:
 * **Scoring.** Every car is scored the same way: driven over each record of the whole log from its
   start, its outputs compared with the measured channels on the held-out samples by the NRMSE fit
   (:func:`~vehid.identification.assessment.metrics.nrmse_fit`), R of eq. 17 kept beside it.
-* **Halves.** The estimation part is split into two halves of equal samples and each is
+* **Halves.** The estimation part is split into two halves of about equal samples, where the car
+  runs straightest near the middle (a record starts from straight running), and each is
   calibrated again from the whole part's estimate; an estimate whose halves differ by more than
   :data:`HALVES_LIMIT` times the root sum of their variances is named: the log's parts tell
   different stories about it (a model error, or a car that changed).
@@ -158,6 +159,9 @@ _STEADY_WINDOW = 0.5  # [s]
 _LINEAR_RANGE = (0.05, 0.6)
 _STEADY_MIN_SPEED = 10.0  # [m/s] below, kinematic steer dominates and the gradient is poorly resolved
 _STEADY_MIN_SECONDS = 2.0  # of quasi-steady samples needed for the balance
+# the halves' split is sought among this share of the calibrating samples about their middle (each half then
+# holds 30-70 % of them): the committed race-car log's middle 20 % lies in one long corner
+_HALVES_WINDOW = 0.4
 
 
 @dataclass(frozen=True, eq=False)
@@ -831,7 +835,14 @@ def _halves(start: VehicleParameters, log: DriveLog, runs: Sequence[tuple[int, i
             hold_static_stiffness: bool) -> tuple[dict[str, Any], list[str]]:
     """Calibrate each half of the estimation part from the whole part's estimate and compare them."""
     rows = np.concatenate([np.arange(a, min(b, n_estimation)) for a, b in runs if a < n_estimation])
-    middle = int(rows[rows.size // 2])
+    # the second half is a record that starts from straight running, as every record does: it begins
+    # where the car runs straightest near the middle (the smallest 0.5 s mean steer among the middle
+    # _HALVES_WINDOW of the samples), not mid-corner (the committed race-car log's second half, begun at
+    # 0.8 g, drove its front scale to 5e8)
+    steer = _moving_mean(np.abs(log.steer), int(round(_STEADY_WINDOW / log.dt)))
+    reach = max(1, int(_HALVES_WINDOW * rows.size / 2))
+    candidates = rows[max(0, rows.size // 2 - reach):rows.size // 2 + reach]
+    middle = int(candidates[np.argmin(steer[candidates])])
     fixed = tuple(calibration.held)
     starts = {name: float(value) for name, value in zip(calibration.parameter_names, calibration.values)
               if name not in priors}
