@@ -177,10 +177,9 @@ def test_the_archived_decisions_keep_the_Q_schedule(schedule, tmp_path):
     reads as the constant Q every run had then."""
     from vehid.identification.dataio.archive import update_archive, write_archive
     from vehid.scenarios.commands.identify import DECISIONS, _archive_decisions, _read_decisions
-    from vehid.scenarios.identify_workflow import PTuning
+    from vehid.scenarios.identify_workflow import PCandidate, PTuning
 
-    tried = tuple({"p": p, "q_schedule": q, "cv_fit_percent": 90.0, "seconds": 1.0}
-                  for p in P_GRID for q in Q_SCHEDULES)
+    tried = tuple(PCandidate(p, q, 90.0, 1.0) for p in P_GRID for q in Q_SCHEDULES)
     tuning = PTuning(P_GRID[1], tried, 6.0, start_fit=80.0, q_schedule=schedule)
     with write_archive(tmp_path / "run.h5", kind="identification") as handle:
         _archive_decisions(handle, tuning, None)

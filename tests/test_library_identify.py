@@ -1,6 +1,7 @@
 """`identify()` from Python gives what `vehid identify` gives on the same file, and checks its options once."""
 
 import json
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -37,10 +38,16 @@ def _close(library, command):
     assert np.allclose(library, command, rtol=AGREEMENT, atol=AGREEMENT * max(1.0, float(np.max(np.abs(command)))))
 
 
-def test_library_reproduces_the_command_model_and_scores(capsys):
+@pytest.fixture(scope="module")
+def given_p_run():
+    """The library's run with a given p and a held-out tail (the command's twin runs in the test)."""
+    return identify(_dryer(), order=2, validation=0.3, options=IdentifyOptions(p=1e-4, passes=8))
+
+
+def test_library_reproduces_the_command_model_and_scores(capsys, given_p_run):
     """A given p and a held-out tail: the model, its eigenvalues and every score agree to 1e-9."""
     summary = _command(capsys, "--order", "2", "--p", "1e-4", "--passes", "8", "--validation", "0.3")
-    result = identify(_dryer(), order=2, validation=0.3, options=IdentifyOptions(p=1e-4, passes=8))
+    result = given_p_run
     assert isinstance(result, Identification)
     for name in "ABCD":
         _close(getattr(result.model, name), summary[name])
@@ -60,6 +67,50 @@ def test_library_reproduces_the_command_model_and_scores(capsys):
     for key in ("order", "method", "passes_run", "stop_reason", "notes", "warnings", "p", "q_schedule",
                 "decision_margins", "initial_state", "horizon"):
         assert rendered[key] == summary[key], key
+
+
+def _mutable_parts(value, path="result", seen=None):
+    """Where a value reachable from ``value`` through dataclass fields, mappings and sequences can be changed:
+    a dict, a list, a set, a writeable array, or a dataclass that is not frozen."""
+    import dataclasses
+
+    seen = set() if seen is None else seen
+    if id(value) in seen:
+        return []
+    seen.add(id(value))
+    if isinstance(value, (dict, list, set)):
+        return [path]
+    if isinstance(value, np.ndarray):
+        return [path] if value.flags.writeable else []
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        if not value.__dataclass_params__.frozen:
+            return [path]
+        return [found for field in dataclasses.fields(value)
+                for found in _mutable_parts(getattr(value, field.name), f"{path}.{field.name}", seen)]
+    if isinstance(value, Mapping):
+        return [found for key, item in value.items() for found in _mutable_parts(item, f"{path}[{key!r}]", seen)]
+    if isinstance(value, tuple):
+        return [found for i, item in enumerate(value) for found in _mutable_parts(item, f"{path}[{i}]", seen)]
+    return []
+
+
+def test_the_result_is_frozen_all_the_way_down(given_p_run):
+    """Nothing the result holds of its own can be changed (its summary included), and its summary renders
+    afresh: a caller that changes a rendered summary changes only its copy. The model, the records and the
+    estimator's result are the estimators' own values (their ``meta``), not looked into here."""
+    import dataclasses
+
+    own = {"model", "plan", "estimator", "unscheduled"}
+    mutable = [found for field in dataclasses.fields(given_p_run) if field.name not in own
+               for found in _mutable_parts(getattr(given_p_run, field.name), f"result.{field.name}")]
+    assert mutable == []
+    assert _mutable_parts(given_p_run.summary) == []
+    with pytest.raises(TypeError):
+        given_p_run.summary["order"] = 99
+    rendered = given_p_run.render()
+    rendered["order"], rendered["p_tried"][:] = 99, []
+    assert given_p_run.render()["order"] == given_p_run.summary["order"] == 2
+    assert given_p_run.render()["p_tried"] == [row.as_dict() for row in given_p_run.tuning.tried]
 
 
 def test_options_are_checked_where_they_are_defined():

@@ -171,7 +171,7 @@ def _archive_decisions(archive, tuning, unstable) -> None:
     """What the run decided before its passes, so that a resumed run returns and warns as the original did."""
     from vehid.identification.jsonable import to_jsonable
 
-    archive.attrs[DECISIONS] = json.dumps(to_jsonable({"tuning": tuning, "open_loop_unstable": unstable}),
+    archive.attrs[DECISIONS] = json.dumps(to_jsonable({"tuning": tuning.as_dict(), "open_loop_unstable": unstable}),
                                           allow_nan=False)
 
 
@@ -183,11 +183,7 @@ def _read_decisions(archive) -> tuple:
         return None, None
     try:
         stored = json.loads(archive.attrs[DECISIONS])
-        tuning = stored["tuning"]
-        return (PTuning(p=float(tuning["p"]), tried=tuple(tuning["tried"]), seconds=float(tuning["seconds"]),
-                                 start_fit=tuning["start_fit"], q_schedule=tuning.get("q_schedule", "constant"),
-                                 candidate_fits=tuning.get("candidate_fits")),
-                stored["open_loop_unstable"])
+        return PTuning.from_dict(stored["tuning"]), stored["open_loop_unstable"]
     except (ValueError, KeyError, TypeError):
         raise InputError(f"{archive.filename} holds an unreadable record of the run's decisions") from None
 
@@ -377,10 +373,9 @@ def _finish(args, plan, result, archive_path=None) -> tuple[dict, str, object]:
     from vehid.identification.errors import StrictWarningsError
     from vehid.scenarios import scheduled_identify
     from vehid.scenarios.data_options import save_model
-    from vehid.scenarios.model_checks import uncertainty_lines
+    from vehid.identification.automatic.text import identification_text
     from vehid.scenarios.plausibility_checks import identify_findings, record_findings
 
-    data = plan.records[0]
     summary = result.render()
     model = result.model
     warnings = list(result.warnings)
@@ -414,11 +409,7 @@ def _finish(args, plan, result, archive_path=None) -> tuple[dict, str, object]:
             _archive_verdict(archive, summary, args, returned=returned_run)
     if args.save_model:
         summary["model_file"] = str(save_model(model, args.save_model, plan.preparation))
-    text = text_summary(summary, data, plan)
-    if "modes" in summary:
-        text += "\n" + "\n".join(uncertainty_lines(summary, data.output_names))
-    if scheduled is not None:
-        text += "\n" + "\n".join(scheduled_identify.text_lines(summary["scheduled"], data.output_names))
+    text = identification_text(summary, plan)
     try:
         emit(summary, warnings, args)
     except StrictWarningsError as exc:  # the summary is printed all the same, then the exit status says "warnings"
@@ -474,94 +465,3 @@ def emit(summary: dict[str, Any], warnings: list[str], args: argparse.Namespace)
         raise StrictWarningsError(warnings, summary)
     for line in warnings:
         print(f"vehid: warning: {line}", file=sys.stderr)
-
-
-def _fits(names: tuple[str, ...], values: Any) -> str:
-    """Each output's name and fit, or "-" where there is none."""
-    if values is None:
-        return "-"
-    return ", ".join(f"{name} {value:.2f}" for name, value in zip(names, values))
-
-
-def _fit_and_R(fit: Any, R: Any) -> str:
-    """One output's NRMSE fit with its R labelled beside it (``-`` where there is none)."""
-    if fit is None:
-        return "-"
-    return f"{fit:.2f}" + ("" if R is None else f" (R {R:.2f})")
-
-
-def _at(values: Any, index: int) -> Any:
-    return None if values is None else values[index]
-
-
-#: what the text calls each model the command may return (``model_returned``)
-RETURNED_TEXT = {"filter": "the IEKF's linear model", "start": "the IEKF's start model (linear)",
-                 "scheduled": "the scheduled family", "nonlinear": "the spline-nonlinear model"}
-
-
-def text_summary(summary: dict[str, Any], data, plan) -> str:
-    """The text face: the model returned, its NRMSE fits (R beside) on estimation and validation data, the run."""
-    import numpy as np
-
-    from vehid.identification.automatic.steps import ORDER_TOLERANCE, P_TOLERANCE, decision_notes
-    from vehid.identification.decisions import SCHEDULE_MARGIN
-
-    eigen = ", ".join(
-        f"{v.real:.4g}{v.imag:+.4g}j" if v.imag else f"{v.real:.4g}" for v in np.asarray(summary["eigenvalues"], dtype=complex)
-    )
-    stop = summary.get("stop_reason")
-    converged = "converged" if stop == "converged" else (f"NOT converged ({stop})" if stop else "direct method (no iterations)")
-    kind = summary.get("time_domain", "continuous")
-    returned = summary.get("model_returned", summary["method"])
-    linear_returned = returned not in ("scheduled", "nonlinear")
-    lines = [
-        f"model returned: {RETURNED_TEXT.get(returned, returned)}, order {summary['order']}"
-        + ("" if linear_returned else f" (the linear {summary['method']} model it started from is not returned)"),
-        f"{summary['method']}: order {summary['order']}, {summary['passes_run']} passes, "
-        f"{summary['discretization']} discretisation, {summary['seconds']:.2f} s, {converged}",
-        f"eigenvalues ({kind}-time{'' if linear_returned else ', of the linear model'}): {eigen}",
-    ]
-    how = (f"{summary['horizon']}-step-ahead prediction" if summary.get("horizon")
-           else f"simulation, initial state {summary.get('initial_state', 'zero')}")
-    lines.append(f"{'NRMSE fit %':<14} {'estimation':>28} {'validation':>28}   ({how}; R of eq. 17 beside)")
-    for i, name in enumerate(data.output_names):
-        est = _fit_and_R(summary["estimation_fit_percent"][i], _at(summary.get("estimation_R"), i))
-        val = _fit_and_R(_at(summary.get("validation_fit_percent"), i), _at(summary.get("validation_R"), i))
-        lines.append(f"{name:<14} {est:>28} {val:>28}")
-    unstable = np.any(np.asarray(summary["eigenvalues"], dtype=complex).real > 0) and linear_returned
-    lines.append(
-        "simulated from rest over the estimation data (continuous model, exact): NRMSE fit "
-        + ", ".join(f"{name} {_fit_and_R(fit, R)}" for name, fit, R in zip(data.output_names, summary["fit_percent"],
-                                                                            summary["R"])) + " %"
-        + (" (an unstable model's simulation diverges: the k-step scores above measure it)" if unstable else ""))
-    if plan.validation:
-        lines.append("validation on: " + "; ".join(plan.validation_names))
-    for note in summary.get("notes", decision_notes(summary)):
-        lines.append(f"note: {note}")
-    if summary.get("p_tried"):
-        tried = ", ".join(f"{row['p']:g}" + (f" {row['q_schedule']}" if "q_schedule" in row else "") + ": "
-                          + ("failed" if row["cv_fit_percent"] is None else f"{row['cv_fit_percent']:.2f}")
-                          for row in summary["p_tried"])
-        lines.append(f"p {summary['p']:g}, {summary.get('q_schedule', 'constant')} Q, by two-fold cross-validation "
-                     f"(NRMSE fit %: {tried}; a shrinking Q unless a constant one is {SCHEDULE_MARGIN:g} points better, "
-                     f"the largest p within {P_TOLERANCE} points of its best), {summary['tuning_seconds']:.1f} s")
-    if summary.get("scoring_note"):
-        lines.append(f"note: {summary['scoring_note']}")
-    for note in plan.notes:
-        lines.append(f"note: {note}")
-    if summary.get("orders_tried") and len(summary["orders_tried"]) > 1:
-        tried = ", ".join(
-            f"n={row['order']}: " + (f"{row['ranking_fit']:.2f}" if "ranking_fit" in row else "failed")
-            for row in summary["orders_tried"])
-        lines.append(f"orders tried (mean validation NRMSE fit %): {tried}; chosen {summary['order']} "
-                     f"(smallest within {ORDER_TOLERANCE} points of the best)")
-    if "nonlinear" in summary:
-        nl = summary["nonlinear"]
-        lines.append(f"nonlinear (spline, {nl['nodes']} nodes, p {nl['p']:g}, {nl['passes_run']} passes, "
-                     f"{'converged' if nl['stop_reason'] == 'converged' else 'NOT converged'}"
-                     f"{', returned' if returned == 'nonlinear' else ', NOT returned'}): NRMSE fit "
-                     f"estimation {_fits(data.output_names, nl['estimation_fit_percent'])}; "
-                     f"validation {_fits(data.output_names, nl['validation_fit_percent'])} %")
-    if "model_file" in summary:
-        lines.append(f"wrote {summary['model_file']}")
-    return "\n".join(lines)
