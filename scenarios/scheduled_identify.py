@@ -3,7 +3,7 @@
 The scheduling channel (a car's speed) is read beside the inputs, scaled by ``--scale`` where one names
 it and never offset (the model's coefficients are functions of its measured value); the samples below
 ``--min-speed`` are left out and each run of the rest is a record of its own, simulated from rest
-(:mod:`vehid.scenarios.log_cleaning`). The unscheduled
+(:mod:`vehid.identification.automatic.intake`). The unscheduled
 model of the default pipeline starts the scheduled IEKF
 (:mod:`vehid.identification.filtering.scheduled_iekf`) at every knot; the family returned is a
 :class:`~vehid.identification.models.scheduled.ScheduledModalModel`, scored like every model on the
@@ -38,10 +38,6 @@ fit R of eq. 17.
 
 from __future__ import annotations
 
-from typing import Any
-
-import numpy as np
-
 # the scheduled variant is the pipeline's (vehid.identification.automatic.scheduled); its names stay reachable here
 from vehid.identification.automatic.scheduled import (NONLINEAR_NOTE, OUTPUT_MAP_NODES, VALIDATION_MARGIN,
                                                       ScheduledOutcome, identify_scheduled_model, schedule_margin,
@@ -51,20 +47,3 @@ from vehid.identification.choices import SCHEDULED_P_GRID as P_GRID
 
 __all__ = ["NONLINEAR_NOTE", "OUTPUT_MAP_NODES", "VALIDATION_MARGIN", "P_GRID", "ScheduledOutcome",
            "identify_scheduled_model", "schedule_margin", "unscheduled_fit", "with_output_map", "text_lines"]
-
-
-def archive_schedule(archive: Any, plan: Any, validation_prefix: str) -> None:
-    """The schedule channel of every archived record (root member ``schedule``), so that a report can simulate
-    the family on them: ``channel``, ``unit`` and ``records`` (record name to samples); the held-out parts are
-    archived under ``validation_prefix``."""
-    from vehid.identification.dataio.archive import SCHEDULE_MEMBER
-    from vehid.identification.dataio.storage import write_value
-    from vehid.scenarios.data_options import RECORD_PREFIX, record_series_name
-
-    schedule = plan.schedule
-    records = {record_series_name(RECORD_PREFIX, i): np.asarray(values, dtype=float)
-               for i, values in enumerate(schedule.estimation)}
-    records.update({record_series_name(validation_prefix, i): np.asarray(values, dtype=float)
-                    for i, values in enumerate(schedule.validation[:plan.held_out_count])})
-    write_value(archive, SCHEDULE_MEMBER, {"channel": schedule.channel, "unit": schedule.unit,
-                                           "records": records})
