@@ -116,6 +116,38 @@ def run_vehid(*argv: str, cwd: str | os.PathLike | None = None) -> CommandRun:
     return CommandRun(status, out.getvalue(), err.getvalue())
 
 
+def printed_json(value):
+    """A value as a command's ``--json`` prints it (the JSON round trip of :func:`~vehid.identification.jsonable.to_jsonable`)."""
+    import json
+
+    from vehid.identification.jsonable import to_jsonable
+
+    return json.loads(json.dumps(to_jsonable(value), allow_nan=False))
+
+
+def without_run_times(value):
+    """A JSON value without its run times (keys ``seconds`` and ``*_seconds``): two runs of one computation differ in
+    them alone."""
+    if isinstance(value, dict):
+        return {key: without_run_times(item) for key, item in value.items() if not key.endswith("seconds")}
+    if isinstance(value, list):
+        return [without_run_times(item) for item in value]
+    return value
+
+
+def library_spy(monkeypatch: pytest.MonkeyPatch, module: object, name: str) -> tuple[object, list]:
+    """Replace ``module.name`` (a library function a command calls) by a spy that keeps each result it returns;
+    the original function and the list of results."""
+    library, results = getattr(module, name), []
+
+    def spy(*args, **kwargs):
+        results.append(library(*args, **kwargs))
+        return results[-1]
+
+    monkeypatch.setattr(module, name, spy)
+    return library, results
+
+
 @pytest.fixture(scope="session")
 def vehid_command():
     """:func:`run_vehid`, for tests and module fixtures that run commands."""

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import run_vehid
+from conftest import library_spy, printed_json, run_vehid, without_run_times
 
 from vehid.identification.errors import InputError
 from vehid.identification.jsonable import to_jsonable
@@ -111,6 +111,25 @@ def test_the_result_is_frozen_all_the_way_down(given_p_run):
     rendered["order"], rendered["p_tried"][:] = 99, []
     assert given_p_run.render()["order"] == given_p_run.summary["order"] == 2
     assert given_p_run.render()["p_tried"] == [row.as_dict() for row in given_p_run.tuning.tried]
+
+
+def test_the_command_prints_the_rendering_of_the_library_result(capsys, monkeypatch, tmp_path):
+    """`vehid identify --json` calls the library's identify() once and prints its result's rendering, every key and
+    value (the archive and the model file written by the library among them); identify() called from Python on
+    the same file and settings renders the same summary, its run times aside."""
+    import vehid.identification as package
+
+    library, results = library_spy(monkeypatch, package, "identify")
+    archive, model_file = tmp_path / "run.h5", tmp_path / "model.json"
+    summary = _command(capsys, "--order", "2", "--p", "1e-4", "--passes", "8", "--validation", "0.3",
+                       "--out", str(archive), "--save-model", str(model_file))
+    (result,) = results
+    assert summary == printed_json(result.render())
+    assert summary["archive"] == str(archive) and summary["model_file"] == str(model_file)
+    again = library(str(DRYER), order=2, validation=0.3, options=IdentifyOptions(p=1e-4, passes=8),
+                    reading=ReadSettings(inputs=("1",), outputs=("2",), dt=0.08), out=archive, save_model=model_file,
+                    force=True)
+    assert without_run_times(printed_json(again.render())) == without_run_times(summary)
 
 
 def test_options_are_checked_where_they_are_defined():
