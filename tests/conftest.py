@@ -171,3 +171,13 @@ def scheduled_race_car_run(tmp_path_factory):
     completed = run_vehid("identify", RACE_CAR_LOG, *SCHEDULED_RACE_CAR_ARGS, "--json", "--quiet", "--out", archive)
     assert completed.returncode == 0, completed.stderr
     return json.loads(completed.stdout), archive
+
+
+def returned_run(archive_path: str | os.PathLike) -> str:
+    """The run of an identification archive that holds the model its command returned (the filter's own run,
+    its refined model's, its start's, the scheduled family's or the spline model's), as the archive names it."""
+    from vehid.identification.dataio.archive import read_archive
+    from vehid.scenarios.report import archive_verdict
+
+    verdict = archive_verdict(read_archive(archive_path)) or {}
+    return (verdict.get("scoring_rule") or {})["returned_run"]

@@ -4,12 +4,11 @@ import json
 
 import numpy as np
 import pytest
-from conftest import run_vehid
+from conftest import returned_run, run_vehid
 
 from vehid.identification import (IEKFOptions, InputError, ModalStructure, identify_iekf, identify_with, prepare,
                                   prepare_validation)
-from vehid.identification.dataio.archive import open_archive
-from vehid.identification.filtering.iekf_archive import read_iekf_run
+from vehid.identification.dataio.archive import open_archive, read_archive
 from vehid.identification.assessment.multirecord import score_records
 from vehid.identification.automatic.archiving import archived_preparation
 from vehid.scenarios.linear_example import make_data
@@ -100,7 +99,7 @@ def test_raw_file_identify_archive_reapply_gives_the_same_fit(record, tmp_path):
     assert summary["preparation"]["input_scale"] == [1.0, 2.0]
     with open_archive(archive) as handle:
         preparation = archived_preparation(handle)
-        model = read_iekf_run(handle, "iekf").model
+    model = read_archive(archive).runs[returned_run(archive)].model  # the model the command returned
     again = prepare_validation(path, preparation, record=0)
     fit = score_records(model, again).records[0].metrics.percentage_explanation
     # the same arithmetic on the same file: equal to rounding (the JSON carries full double precision)

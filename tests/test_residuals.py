@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import run_vehid
+from conftest import returned_run, run_vehid
 from scipy.signal import lfilter
 
 from vehid.identification.dataio.archive import open_archive, read_archive, update_archive
@@ -121,14 +121,15 @@ def test_identify_json_carries_modes_with_std_and_residual_keys(tmp_path):
         assert len(mode["eigenvalue_std"]) == 2 and mode["frequency_hz_std"] > 0
     assert len(summary["residual_whiteness_p"]) == 1 and len(summary["input_correlation_max"]) == 1
     assert len(summary["innovation_nis"]) == summary["passes_run"]
+    returned = returned_run(archive)  # the residual tests are the returned model's (the filter's, or it refined)
     with open_archive(archive) as handle:
         run = read_iekf_run(handle, "iekf")
-        tests = read_value(handle["runs/iekf"], "residual_tests")
+        tests = read_value(handle[f"runs/{returned}"], "residual_tests")
     assert run.model.parameter_covariance is not None
     assert np.isfinite(run.history[-1].nis)
     np.testing.assert_allclose(tests.residual_whiteness_p, summary["residual_whiteness_p"])
     figures = archive_figures(read_archive(archive))
-    assert {"innovation_consistency_iekf", "residual_tests_identification_iekf"} <= set(figures)
+    assert {"innovation_consistency_iekf", f"residual_tests_identification_{returned}"} <= set(figures)
     # two modes: one marker line plus an ellipse and its mirror image per pair
     assert len(figures["eigenvalues"].axes[0].get_lines()) >= 1 + 2 * 2
     text = _identify(str(path), "--inputs", "u", "--outputs", "y", "--order", "4", "--normalize", "--p", "0.001",

@@ -86,6 +86,7 @@ __all__ = [
     "block_jackknife",
     "formal_method",
     "Agreement",
+    "normal_quantile",
     "pair_agreement",
     "QuantityConsistency",
     "SegmentConsistency",
@@ -450,14 +451,20 @@ class Agreement:
         return self.agreeing / self.pairs if self.pairs else 1.0
 
 
+def normal_quantile(level: float) -> float:
+    """``z`` of a two-sided interval ``+/- z sigma`` holding ``level`` of a normal distribution."""
+    if not 0 < level < 1:
+        raise InputError(f"a confidence level lies between 0 and 1; got {level!r}")
+    from scipy.special import ndtri  # scipy.stats.norm.ppf, without scipy.stats's import time
+    return float(ndtri(0.5 + level / 2))
+
+
 def pair_agreement(values: Any, stds: Any, *, level: float = 0.95) -> Agreement:
     """Pairs of estimates that agree within their ``level`` intervals (module docstring).
 
     A pair with a non-finite value or std (a part that could not be identified) is not judged: it
     counts neither way.
     """
-    from .uncertainty import normal_quantile  # that module builds on this one: imported where used
-
     values = np.asarray(values, dtype=float).ravel()
     stds = np.asarray(stds, dtype=float).ravel()
     if values.shape != stds.shape:

@@ -34,7 +34,7 @@ import numpy as np
 
 from ..errors import InputError
 from .segments import (DEFAULT_BLOCKS, UncertaintyMethod, block_jackknife, block_plan, formal_method, gram_matrix,
-                       integrated_correlation_time, one_step_replicates)
+                       integrated_correlation_time, normal_quantile, one_step_replicates)
 
 __all__ = [
     "ModeEstimate",
@@ -71,14 +71,6 @@ def checked_covariance(covariance: Any, size: int) -> np.ndarray:
     array = 0.5 * (array + array.T)
     array.setflags(write=False)
     return array
-
-
-def normal_quantile(level: float) -> float:
-    """``z`` of a two-sided interval ``+/- z sigma`` holding ``level`` of a normal distribution."""
-    if not 0 < level < 1:
-        raise InputError(f"a confidence level lies between 0 and 1; got {level!r}")
-    from scipy.special import ndtri  # scipy.stats.norm.ppf, without scipy.stats's import time
-    return float(ndtri(0.5 + level / 2))
 
 
 def _spread(jacobian: np.ndarray, covariance: np.ndarray | None) -> np.ndarray:
