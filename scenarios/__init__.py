@@ -16,7 +16,7 @@ from vehid.identification.lazy_exports import export_lazily  # noqa: E402  (afte
 # submodule -> the public names it defines, each imported when first asked for
 _EXPORTS: dict[str, tuple[str, ...]] = {
     "single_track_identify": ("identify_single_track", "SingleTrackOptions", "SingleTrackIdentification", "Estimate"),
-    "handling_metrics": ("handling", "HandlingOptions", "SourceHandlingOptions", "ModelHandling",
+    "car_handling": ("handling", "HandlingOptions", "SourceHandlingOptions", "ModelHandling",
                          "SourceModelHandling"),
     "plausibility_checks": ("CarChecks",),
 }

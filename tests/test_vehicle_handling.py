@@ -354,14 +354,14 @@ def test_the_command_prints_the_rendering_of_the_library_result(capsys, tmp_path
     Python on the same inputs renders the same summaries (no run time enters them)."""
     from conftest import library_spy, printed_json
 
-    from vehid.scenarios import handling_metrics
-    from vehid.scenarios.handling_metrics import HandlingOptions, SourceHandlingOptions
+    from vehid.scenarios import car_handling
+    from vehid.scenarios.car_handling import HandlingOptions, SourceHandlingOptions
 
     A, B, C, D, _ = Bicycle(20.0).to_statespace()
     model = dataclasses.replace(to_modal(A, B, C[:2], D[:2]), input_names=("steer",),
                                 output_names=("yaw_rate", "lateral_acceleration"))
     path = model.save_json(tmp_path / "car.json")
-    library, results = library_spy(monkeypatch, handling_metrics, "handling")
+    library, results = library_spy(monkeypatch, car_handling, "handling")
     assert main(["handling", str(path), "--speeds", "20", "--wheelbase", str(WHEELBASE), "--beside-source",
                  "baseline", "--json"]) == 0
     assert main(["handling", "--source", "--speeds", "10,30", "--no-simulation", "--json"]) == 0

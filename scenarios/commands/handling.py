@@ -23,7 +23,7 @@ the warnings. Each row of ``metrics`` says whether the model is ``extrapolated``
 family's knot with too few samples, a speed beyond the log's).
 
 The command is a client of the library: it maps its arguments to
-:func:`vehid.scenarios.handling_metrics.handling` and prints the result's rendering.
+:func:`vehid.scenarios.car_handling.handling` and prints the result's rendering.
 """
 
 from __future__ import annotations
@@ -112,7 +112,7 @@ def parse_scales(text: str | None) -> dict[str, float]:
 
 
 def run(args: argparse.Namespace) -> tuple[dict, str]:
-    from vehid.scenarios.handling_metrics import HandlingOptions, SourceHandlingOptions, handling
+    from vehid.scenarios.car_handling import HandlingOptions, SourceHandlingOptions, handling
 
     speeds = parse_speeds(args.speeds) if args.speeds is not None else None
     if args.source:
