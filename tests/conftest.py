@@ -148,6 +148,34 @@ def library_spy(monkeypatch: pytest.MonkeyPatch, module: object, name: str) -> t
     return library, results
 
 
+def mutable_parts(value, path="result", seen=None):
+    """Where a value reachable from ``value`` through dataclass fields, mappings and sequences can be changed:
+    a dict, a list, a set, a writeable array, or a dataclass that is not frozen."""
+    import dataclasses
+    from collections.abc import Mapping
+
+    import numpy as np
+
+    seen = set() if seen is None else seen
+    if id(value) in seen:
+        return []
+    seen.add(id(value))
+    if isinstance(value, (dict, list, set)):
+        return [path]
+    if isinstance(value, np.ndarray):
+        return [path] if value.flags.writeable else []
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        if not value.__dataclass_params__.frozen:
+            return [path]
+        return [found for field in dataclasses.fields(value)
+                for found in mutable_parts(getattr(value, field.name), f"{path}.{field.name}", seen)]
+    if isinstance(value, Mapping):
+        return [found for key, item in value.items() for found in mutable_parts(item, f"{path}[{key!r}]", seen)]
+    if isinstance(value, tuple):
+        return [found for i, item in enumerate(value) for found in mutable_parts(item, f"{path}[{i}]", seen)]
+    return []
+
+
 @pytest.fixture(scope="session")
 def vehid_command():
     """:func:`run_vehid`, for tests and module fixtures that run commands."""

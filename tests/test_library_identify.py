@@ -1,12 +1,11 @@
 """`identify()` from Python gives what `vehid identify` gives on the same file, and checks its options once."""
 
 import json
-from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import library_spy, printed_json, run_vehid, without_run_times
+from conftest import library_spy, mutable_parts, printed_json, run_vehid, without_run_times
 
 from vehid.identification.errors import InputError
 from vehid.identification.jsonable import to_jsonable
@@ -69,31 +68,6 @@ def test_library_reproduces_the_command_model_and_scores(capsys, given_p_run):
         assert rendered[key] == summary[key], key
 
 
-def _mutable_parts(value, path="result", seen=None):
-    """Where a value reachable from ``value`` through dataclass fields, mappings and sequences can be changed:
-    a dict, a list, a set, a writeable array, or a dataclass that is not frozen."""
-    import dataclasses
-
-    seen = set() if seen is None else seen
-    if id(value) in seen:
-        return []
-    seen.add(id(value))
-    if isinstance(value, (dict, list, set)):
-        return [path]
-    if isinstance(value, np.ndarray):
-        return [path] if value.flags.writeable else []
-    if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        if not value.__dataclass_params__.frozen:
-            return [path]
-        return [found for field in dataclasses.fields(value)
-                for found in _mutable_parts(getattr(value, field.name), f"{path}.{field.name}", seen)]
-    if isinstance(value, Mapping):
-        return [found for key, item in value.items() for found in _mutable_parts(item, f"{path}[{key!r}]", seen)]
-    if isinstance(value, tuple):
-        return [found for i, item in enumerate(value) for found in _mutable_parts(item, f"{path}[{i}]", seen)]
-    return []
-
-
 def test_the_result_is_frozen_all_the_way_down(given_p_run):
     """Nothing the result holds of its own can be changed (its summary included), and its summary renders
     afresh: a caller that changes a rendered summary changes only its copy. The model, the records and the
@@ -102,9 +76,9 @@ def test_the_result_is_frozen_all_the_way_down(given_p_run):
 
     own = {"model", "plan", "estimator", "unscheduled"}
     mutable = [found for field in dataclasses.fields(given_p_run) if field.name not in own
-               for found in _mutable_parts(getattr(given_p_run, field.name), f"result.{field.name}")]
+               for found in mutable_parts(getattr(given_p_run, field.name), f"result.{field.name}")]
     assert mutable == []
-    assert _mutable_parts(given_p_run.summary) == []
+    assert mutable_parts(given_p_run.summary) == []
     with pytest.raises(TypeError):
         given_p_run.summary["order"] = 99
     rendered = given_p_run.render()

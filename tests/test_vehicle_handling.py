@@ -352,7 +352,7 @@ def test_the_command_prints_the_rendering_of_the_library_result(capsys, tmp_path
     """`vehid handling --json` calls handling() once and prints its result's rendering, every key and value, for a
     model file (beside the source model) and for the source model; handling() called from
     Python on the same inputs renders the same summaries (no run time enters them)."""
-    from conftest import library_spy, printed_json
+    from conftest import library_spy, mutable_parts, printed_json
 
     from vehid.scenarios import car_handling
     from vehid.scenarios.car_handling import HandlingOptions, SourceHandlingOptions
@@ -367,6 +367,8 @@ def test_the_command_prints_the_rendering_of_the_library_result(capsys, tmp_path
     assert main(["handling", "--source", "--speeds", "10,30", "--no-simulation", "--json"]) == 0
     printed = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
     assert printed == [printed_json(result.render()) for result in results] and len(results) == 2
+    # frozen all the way down, but for the model read (a value of its own)
+    assert mutable_parts(dataclasses.replace(results[0], model=None)) == mutable_parts(results[1]) == []
     again = (library(str(path), speeds=[20.0], options=HandlingOptions(wheelbase=WHEELBASE, beside_source="baseline")),
              library(source="baseline", speeds=[10.0, 30.0], options=SourceHandlingOptions(simulation=False)))
     assert [printed_json(result.render()) for result in again] == printed
