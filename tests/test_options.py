@@ -92,6 +92,23 @@ def test_every_option_is_declared_with_the_choices_of_its_kind():
     assert all(f"\n{name} : " in IdentifyOptions.__doc__ for name in SPECS)
 
 
+def test_the_built_in_methods_are_the_registry_s_and_a_refused_method_loads_no_estimator():
+    """Until a method is registered the registry holds the built-in ones, named without importing it (it loads
+    scipy.optimize); a command refused for its options pays only the parser's imports."""
+    import subprocess
+    import sys
+
+    from vehid.identification.choices import ESTIMATORS
+    from vehid.identification.classical.comparators import COMPARATORS
+
+    assert ESTIMATORS == tuple(COMPARATORS)
+    probe = ("import sys\nfrom vehid.identification import IdentifyOptions, OptionError\n"
+             "try:\n    IdentifyOptions(method='bogus')\nexcept OptionError:\n    pass\n"
+             "print('vehid.identification.classical.comparators' in sys.modules, 'scipy.optimize' in sys.modules)")
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
+    assert done.stdout.split() == ["False", "False"]
+
+
 def test_bounds_are_closed_and_values_are_stored_as_checked():
     edges = IdentifyOptions(schedule_knots=SCHEDULE_MIN_KNOTS, nodes=9, passes=1, bootstrap=0, method="n4sid",
                             schedule_grid=[10, 20.5], schedule_p=[1e-2], nonlinear_p=(1e-7,), horizon=1)
