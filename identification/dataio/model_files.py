@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Iterable
 
 from ..errors import OptionError
+from ..jsonable import json_default
 
 if TYPE_CHECKING:
     from .archive_safety import OutputIdentity
@@ -66,7 +67,7 @@ def save_model(model: Any, target: str | Path, preparation: Preparation | None) 
         content = model.to_dict()
         if preparation is not None:
             content["preparation"] = preparation.as_dict()
-        path.write_text(json.dumps(content, indent=2, default=str) + "\n")
+        path.write_text(json.dumps(content, indent=2, default=json_default) + "\n")
         return path
     if suffix == ".mat":
         model.save_mat(path)
