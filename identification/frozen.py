@@ -6,6 +6,11 @@ coverage, a spline run's tried p values): those are kept as :class:`FrozenDict` 
 read as the mappings and sequences they were, and never changed by a caller who reads them.
 :func:`freeze` makes such a value (arrays become read-only copies), :func:`thaw` gives a fresh,
 mutable copy for a caller that wants one (a summary a command adds keys to).
+
+A result also holds values of other modules' types (the model, the estimator's run, the records),
+which are frozen dataclasses whose arrays and ``meta`` mappings could still be changed in place,
+and a result's rendering reads them. :func:`frozen_copy` gives the result its own unchangeable
+copy of such a value, so that nothing a caller does to what it reads changes what the result says.
 """
 
 from __future__ import annotations
@@ -13,7 +18,7 @@ from __future__ import annotations
 from collections.abc import Iterator, Mapping
 from typing import Any, Union
 
-__all__ = ["FrozenDict", "JsonValue", "freeze", "thaw"]
+__all__ = ["FrozenDict", "JsonValue", "freeze", "freeze_fields", "frozen_copy", "thaw"]
 
 #: A value as a JSON summary holds it, frozen: numbers, text, None, arrays (read-only), tuples and FrozenDicts.
 JsonValue = Union[None, bool, int, float, str, tuple, "FrozenDict", Any]
@@ -86,6 +91,79 @@ def freeze(value: Any) -> Any:
         copy.flags.writeable = False
         return copy
     return value
+
+
+def frozen_copy(value: Any, _copies: dict[int, Any] | None = None) -> Any:
+    """``value``, or a copy of it, that cannot be changed all the way down, frozen dataclasses included.
+
+    As :func:`freeze`, and further: the fields of a frozen dataclass are frozen the same way, the
+    dataclass copied (without running its ``__post_init__``) where any field had to be, and kept
+    as it is where none had (so freezing a frozen value again copies nothing). A value reached
+    twice is copied once, so parts shared within ``value`` stay shared. Instances of other
+    classes (a compiled function, a dataclass that is not frozen) are kept as they are.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from dataclasses import dataclass
+    >>> @dataclass(frozen=True)
+    ... class Fit:
+    ...     parameters: np.ndarray
+    ...     meta: dict
+    >>> fit = Fit(np.array([1.0, 2.0]), {"source": "filter"})
+    >>> kept = frozen_copy(fit)
+    >>> kept.parameters.flags.writeable, kept.meta["source"], fit.parameters.flags.writeable
+    (False, 'filter', True)
+    >>> frozen_copy(kept) is kept
+    True
+    """
+    import copy
+    import dataclasses
+    import sys
+
+    copies = {} if _copies is None else _copies
+    if id(value) in copies:
+        return copies[id(value)]
+    np = sys.modules.get("numpy")
+    if np is not None and isinstance(value, np.ndarray):
+        kept = freeze(value)
+    elif isinstance(value, Mapping):
+        items = {key: frozen_copy(item, copies) for key, item in value.items()}
+        unchanged = isinstance(value, FrozenDict) and all(items[key] is value[key] for key in items)
+        kept = value if unchanged else FrozenDict(items)
+    elif isinstance(value, (list, tuple, set, frozenset)):
+        items = [frozen_copy(item, copies) for item in value]
+        if isinstance(value, (set, frozenset)):
+            kept = value if isinstance(value, frozenset) else frozenset(items)
+        elif isinstance(value, tuple) and all(new is old for new, old in zip(items, value)):
+            kept = value
+        else:
+            kept = type(value)(*items) if hasattr(value, "_fields") else tuple(items)
+    elif (dataclasses.is_dataclass(value) and not isinstance(value, type)
+          and value.__dataclass_params__.frozen):
+        fields = {field.name: getattr(value, field.name) for field in dataclasses.fields(value)}
+        copies[id(value)] = value  # a part that refers back to its owner keeps the owner
+        frozen = {name: frozen_copy(item, copies) for name, item in fields.items()}
+        if all(frozen[name] is fields[name] for name in fields):
+            kept = value
+        else:
+            kept = copy.copy(value)
+            for name, item in frozen.items():
+                object.__setattr__(kept, name, item)
+    else:
+        kept = value
+    copies[id(value)] = kept
+    return kept
+
+
+def freeze_fields(instance: Any) -> None:
+    """Make every field of a frozen dataclass ``instance`` unchangeable all the way down (:func:`frozen_copy`),
+    in its ``__post_init__``: a result that owns what it holds."""
+    import dataclasses
+
+    copies: dict[int, Any] = {}
+    for field in dataclasses.fields(instance):
+        object.__setattr__(instance, field.name, frozen_copy(getattr(instance, field.name), copies))
 
 
 def thaw(value: Any) -> Any:

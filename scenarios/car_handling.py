@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 from vehid.identification.errors import InputError, OptionError, StrictWarningsError
-from vehid.identification.frozen import FrozenDict, freeze, thaw
+from vehid.identification.frozen import FrozenDict, freeze_fields, thaw
 from vehid.identification.optionspec import BOOLEAN, POSITIVE, Numbers, check_options, documented, option
 
 if TYPE_CHECKING:
@@ -319,10 +319,9 @@ class ModelHandling:
     figure: Path | None = None
 
     def __post_init__(self) -> None:
-        for name in ("origin", "scales", "uncertainty_method"):
-            object.__setattr__(self, name, freeze(getattr(self, name)))
         for name in ("metrics", "extrapolated", "plausibility", "warnings"):
             object.__setattr__(self, name, tuple(getattr(self, name)))
+        freeze_fields(self)  # the model read too: the summary says whether it is scheduled
 
     @property
     def name(self) -> str:
@@ -384,6 +383,7 @@ class SourceModelHandling:
     def __post_init__(self) -> None:
         object.__setattr__(self, "steady_state", tuple(self.steady_state))
         object.__setattr__(self, "warnings", tuple(self.warnings))
+        freeze_fields(self)
 
     def render(self) -> dict[str, Any]:
         """The JSON summary of `vehid handling --source`, as a fresh dict."""

@@ -47,7 +47,7 @@ import numpy as np
 from vehid.identification.assessment.metrics import nrmse_fit
 from vehid.identification.data import IOData, as_records
 from vehid.identification.errors import InputError, OptionError, StrictWarningsError
-from vehid.identification.frozen import FrozenDict, freeze, thaw
+from vehid.identification.frozen import FrozenDict, freeze_fields, thaw
 from vehid.identification.optionspec import BOOLEAN, POSITIVE, Number, check_options, documented, option
 from vehid.scenarios import single_track_segments
 from vehid.scenarios.log_cleaning import MIN_RUN_SECONDS, MIN_SPEED
@@ -165,9 +165,9 @@ class SingleTrackIdentification:
     model_file: Path | None = None
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "cleaning", freeze(self.cleaning))
         for name in ("parameters", "notes", "warnings", "plausibility", "output_names"):
             object.__setattr__(self, name, tuple(getattr(self, name)))
+        freeze_fields(self)  # the model and the filter's run too: the summary is rendered from them
 
     @property
     def config(self) -> SingleTrackConfig:

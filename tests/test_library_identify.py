@@ -69,18 +69,17 @@ def test_library_reproduces_the_command_model_and_scores(capsys, given_p_run):
 
 
 def test_the_result_is_frozen_all_the_way_down(given_p_run):
-    """Nothing the result holds of its own can be changed (its summary included), and its summary renders
-    afresh: a caller that changes a rendered summary changes only its copy. The model, the records and the
-    estimator's result are the estimators' own values (their ``meta``), not looked into here."""
-    import dataclasses
-
-    own = {"model", "plan", "estimator", "unscheduled"}
-    mutable = [found for field in dataclasses.fields(given_p_run) if field.name not in own
-               for found in mutable_parts(getattr(given_p_run, field.name), f"result.{field.name}")]
-    assert mutable == []
+    """Nothing the result holds can be changed: its summary, and the model, the records and the estimator's run it
+    renders the summary from (their arrays and ``meta``); a caller that changes a rendered summary changes only
+    its copy."""
+    assert mutable_parts(given_p_run) == []
     assert mutable_parts(given_p_run.summary) == []
     with pytest.raises(TypeError):
         given_p_run.summary["order"] = 99
+    with pytest.raises(ValueError):  # the summary's matrices are the model's
+        given_p_run.model.A[0, 0] = 99.0
+    with pytest.raises(TypeError):  # the summary's "start" is the filter's meta
+        given_p_run.estimator.meta["p_start"] = 99.0
     rendered = given_p_run.render()
     rendered["order"], rendered["p_tried"][:] = 99, []
     assert given_p_run.render()["order"] == given_p_run.summary["order"] == 2

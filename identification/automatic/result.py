@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any, Mapping, Protocol
 
 import numpy as np
 
-from vehid.identification.frozen import FrozenDict, freeze, thaw
+from vehid.identification.frozen import FrozenDict, freeze, freeze_fields, thaw
 
 if TYPE_CHECKING:
     from vehid.identification.assessment.residuals import ResidualTests
@@ -270,13 +270,12 @@ class Identification:
     model_file: Path | None = None
 
     def __post_init__(self) -> None:
-        for name in ("checks", "data"):
-            if getattr(self, name) is not None:
-                object.__setattr__(self, name, freeze(getattr(self, name)))
         for name in ("decisions", "notes", "warnings", "orders"):
             object.__setattr__(self, name, tuple(getattr(self, name)))
         if self.plausibility is not None:
             object.__setattr__(self, "plausibility", tuple(self.plausibility))
+        # the model, the estimator's run and the records too: the summary is rendered from them
+        freeze_fields(self)
 
     @property
     def p(self) -> float | None:
