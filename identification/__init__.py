@@ -59,7 +59,8 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
         "pair_agreement", "refit_replicates", "segment_consistency"),
     "models.scheduled": ("ModeMatch", "ScheduledModalModel", "schedule_models"),
     "filtering.scheduled_iekf": ("ScheduledIEKFOptions", "ScheduledIEKFResult", "identify_scheduled"),
-    "pipeline": ("IdentifyOptions", "Identification", "identify"),
+    "pipeline": ("IdentifyOptions", "Identification", "Resume", "identify"),
+    "frozen": ("FrozenDict",),
 }
 # The modules' former flat names (before the sub-packages by role), so that code importing
 # ``vehid.identification.modal`` keeps working: each resolves to the very module object of its new
@@ -271,5 +272,7 @@ __all__ = [
     "identify_scheduled",
     "IdentifyOptions",
     "Identification",
+    "Resume",
     "identify",
+    "FrozenDict",
 ]

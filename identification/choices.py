@@ -12,11 +12,14 @@ from __future__ import annotations
 
 from vehid.identification.optionspec import Number, Numbers, OneOf
 
-__all__ = ["DETRENDS", "DETREND", "SPLINE_MIN_NODES", "SPLINE_MAX_NODES", "SPLINE_NODE_COUNT", "SCHEDULE_KNOT_COUNT",
-           "SCHEDULE_GRID", "JITTER_TOLERANCE", "DATA_STARTS", "START_VALUES", "START_CHOICES", "DISCRETIZATIONS",
-           "COVARIANCE_FORMS", "TIMESCALES", "INITIAL_STATES", "C_PATTERNS", "SPLINE_NODES", "SPLINE_P",
-           "SPLINE_PASSES", "SCHEDULE_DEFAULT_KNOTS", "SCHEDULE_MIN_KNOTS", "SCHEDULE_MAX_KNOTS",
+__all__ = ["HDF5_SUFFIXES", "DETRENDS", "DETREND", "SPLINE_MIN_NODES", "SPLINE_MAX_NODES", "SPLINE_NODE_COUNT",
+           "SCHEDULE_KNOT_COUNT", "SCHEDULE_GRID", "JITTER_TOLERANCE", "DATA_STARTS", "START_VALUES", "START_CHOICES",
+           "DISCRETIZATIONS", "COVARIANCE_FORMS", "TIMESCALES", "INITIAL_STATES", "C_PATTERNS", "SPLINE_NODES",
+           "SPLINE_P", "SPLINE_PASSES", "SCHEDULE_DEFAULT_KNOTS", "SCHEDULE_MIN_KNOTS", "SCHEDULE_MAX_KNOTS",
            "SCHEDULED_DEFAULT_P", "SCHEDULED_P_GRID", "ESTIMATORS"]
+
+#: File name endings of the HDF5 files the workbench reads and writes.
+HDF5_SUFFIXES = (".h5", ".hdf5", ".hdf")
 
 #: How offsets are estimated: each record's mean, a line through each record, or none.
 DETRENDS = ("mean", "linear", "none")

@@ -239,9 +239,11 @@ def _decode(values: Any) -> tuple[str, ...]:
 def _write_iodata(group: Any, data: IOData) -> None:
     import json
 
+    from .jsonable import json_default
+
     group.attrs["kind"] = "iodata"
     group.attrs["dt"] = data.dt
-    group.attrs["meta_json"] = json.dumps(dict(data.meta), default=str)
+    group.attrs["meta_json"] = json.dumps(dict(data.meta), default=json_default)
     ds = group.create_dataset("t", data=data.t)
     ds.attrs["units"] = "s"
     for key, array, names, units in (

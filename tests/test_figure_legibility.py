@@ -22,7 +22,7 @@ from vehid.identification.assessment.metrics import percentage_explanation
 from vehid.scenarios import plots
 from vehid.scenarios.cli import main
 from vehid.scenarios.handling_report import handling_figures
-from vehid.scenarios.commands.identify import SCORING_RULE
+from vehid.identification.automatic.archiving import SCORING_RULE
 from vehid.scenarios.report import archive_figures, archive_verdict, verdict_lines, verdict_output_names, verdict_page
 
 DATA = Path(__file__).parent / "data"

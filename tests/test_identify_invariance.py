@@ -307,10 +307,10 @@ def test_the_spline_model_is_returned_only_where_it_beats_the_other_model_by_the
 
 
 def test_the_start_is_returned_only_where_it_beats_every_p_in_cross_validation():
-    from vehid.scenarios.identify_workflow import P_TOLERANCE, PTuning
+    from vehid.scenarios.identify_workflow import P_TOLERANCE, PCandidate, PTuning
 
-    rows = ({"p": 1e-4, "cv_fit_percent": 70.0, "seconds": 1.0}, {"p": 1e-5, "cv_fit_percent": 72.0, "seconds": 1.0},
-            {"p": 1e-6, "cv_fit_percent": None, "error": "diverged", "seconds": 1.0})
+    rows = (PCandidate(1e-4, None, 70.0, 1.0), PCandidate(1e-5, None, 72.0, 1.0),
+            PCandidate(1e-6, None, None, 1.0, error="diverged"))
     assert not PTuning(1e-5, rows, 3.0, 72.0 + P_TOLERANCE / 2).start_wins  # within the tolerance: the filter's
     assert PTuning(1e-5, rows, 3.0, 72.0 + 2 * P_TOLERANCE).start_wins
     assert not PTuning(1e-5, rows, 3.0, None).start_wins  # the start could not be scored

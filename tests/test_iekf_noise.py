@@ -113,7 +113,7 @@ def _cross_validated(noise_ratio: float):
     structure = start_structure(data, ModalStructure.from_pattern("default", 5, 2, 1), options)
     tuning = workflow.tune_p(argparse.Namespace(horizon=None, initial_state="estimate"),
                              SimpleNamespace(records=(data,), settle_start=None), options, structure)
-    return tuning, {(row["p"], row["q_schedule"]): row["cv_fit_percent"] for row in tuning.tried}
+    return tuning, {(row.p, row.q_schedule): row.cv_fit_percent for row in tuning.tried}
 
 
 def test_cross_validation_shrinks_Q_on_a_tie_of_clean_data():

@@ -233,12 +233,12 @@ def test_every_option_a_library_error_names_is_a_flag_of_the_command_line():
 def test_the_command_names_a_bad_option_by_its_flag_before_reading_any_data(flags, shown, monkeypatch, tmp_path):
     from conftest import run_vehid
 
-    from vehid.scenarios.commands import identify
+    from vehid.identification.automatic import intake
 
     def read_nothing(*args, **kwargs):
         raise AssertionError("the data were read before the options were checked")
 
-    monkeypatch.setattr(identify, "load_plan", read_nothing)
+    monkeypatch.setattr(intake, "plan_run", read_nothing)
     record = tmp_path / "record.csv"
     record.write_text("t,u,y\n0,0,0\n0.1,1,1\n")
     run = run_vehid("identify", str(record), "--inputs", "u", "--outputs", "y", *flags, "--json")

@@ -23,6 +23,7 @@ import numpy as np
 # of a second of every command's start-up
 
 from ..errors import InputError
+from ..frozen import freeze
 
 __all__ = [
     "DEFAULT_LAGS",
@@ -135,6 +136,11 @@ class ResidualTests:
     input_correlation_max: np.ndarray
     input_correlation_p: np.ndarray
     exact: np.ndarray
+
+    def __post_init__(self) -> None:
+        for name in ("autocorrelation", "cross_correlation", "ljung_box", "residual_whiteness_p",
+                     "input_correlation_max", "input_correlation_p", "exact"):
+            object.__setattr__(self, name, freeze(np.asarray(getattr(self, name))))  # a test's result stays as found
 
     @property
     def white(self) -> np.ndarray:

@@ -65,6 +65,7 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 
 from ..errors import InputError
+from ..frozen import freeze
 
 __all__ = [
     "DEFAULT_BLOCKS",
@@ -515,6 +516,10 @@ class QuantityConsistency:
     label: str | None = None
     display_unit: str | None = None
     display_factor: float = 1.0
+
+    def __post_init__(self) -> None:
+        for name in ("values", "stds"):  # the parts' estimates stay as measured
+            object.__setattr__(self, name, freeze(np.asarray(getattr(self, name), dtype=float)))
 
     def holds(self, share: float, level: float = HOMOGENEITY_LEVEL) -> bool:
         """Whether the parts agree: in at least ``share`` of their pairs, or by the joint test at ``level``."""

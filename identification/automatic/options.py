@@ -14,6 +14,7 @@ in its help without loading the numerical stack.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from os import PathLike
 
 from vehid.identification.choices import (C_PATTERNS, COVARIANCE_FORMS, DETREND, DISCRETIZATIONS, ESTIMATORS,
                                           INITIAL_STATES,
@@ -25,7 +26,7 @@ from vehid.identification.optionspec import (BOOLEAN, POSITIVE, Number, Numbers,
                                              option)
 
 __all__ = ["DEFAULT_PASSES", "MIN_PASSES", "DEFAULT_NONLINEAR_PASSES", "DEFAULT_NODES", "IdentifyOptions",
-           "estimators"]
+           "Resume", "estimators"]
 
 DEFAULT_PASSES = 50  # the IEKF's largest number of passes
 MIN_PASSES = 1  # one pass is a complete (if unconverged) run of the filter
@@ -129,3 +130,23 @@ class IdentifyOptions:
         if self.bootstrap is not None and self.method != "n4sid":
             raise OptionError("'bootstrap' applies to 'method' n4sid (the other methods' covariances cost no refits)",
                               "bootstrap", "method")
+
+
+@documented
+@dataclass(frozen=True)
+class Resume:
+    """A checkpointed run to go on with (`vehid identify --resume ARCHIVE`): the archive an identification wrote
+    with ``out``, and the pass budget.
+
+    The run goes on with the archive's records, preparation and filter settings, and reaches the
+    same parameters as a run that was never interrupted.
+    """
+
+    archive: str | PathLike = option(None, help="the archive of the run to go on with")
+    passes: int | None = option(None, _PASSES,
+                                help="a new budget of passes, all passes counted (default: the run's own)")
+
+    def __post_init__(self) -> None:
+        check_options(self)
+        if self.archive is None or not str(self.archive):
+            raise OptionError("'resume' names the archive of the run to go on with", "resume")

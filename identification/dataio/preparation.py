@@ -18,7 +18,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from ..data import IOData, as_records, check_channels, read_hdf5
-from ..choices import DETREND, DETRENDS
+from ..choices import DETREND, DETRENDS, HDF5_SUFFIXES
 from ..errors import InputError, OptionError
 from ..optionspec import check_value
 from .readers import RawRecord, expand_channels, read_raw
@@ -41,8 +41,6 @@ __all__ = [
     "parse_steering_ratio",
 ]
 
-
-_HDF5_SUFFIXES = (".h5", ".hdf5", ".hdf")
 
 #: Seconds per unit, for the units a file may give its time column (its header ``t(ms)`` or units row).
 TIME_UNITS = {"s": 1.0, "sec": 1.0, "secs": 1.0, "second": 1.0, "seconds": 1.0, "ms": 1e-3, "msec": 1e-3,
@@ -143,7 +141,7 @@ def read_record(path: str | Path, settings: ReadSettings | None = None, **option
     elif options:
         settings = replace(settings, **options)
     path = Path(path)
-    if path.suffix.lower() in _HDF5_SUFFIXES:
+    if path.suffix.lower() in HDF5_SUFFIXES:
         data = _hdf5_record(path, settings)
         raw, n_inputs = _as_raw(data), data.n_u
     else:

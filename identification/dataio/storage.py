@@ -23,6 +23,7 @@ import h5py
 import numpy as np
 
 from ..errors import ArchiveError
+from ..frozen import FrozenDict
 
 __all__ = ["LEGACY_CLASS_PATHS", "register_codec", "write_value", "read_value", "write_group", "read_group"]
 
@@ -67,14 +68,22 @@ def _scalar_tag(value: Any) -> str | None:
 
 
 def _json_exact(value: Mapping) -> str | None:
-    """The JSON text of a dict when decoding it gives an equal dict, else None."""
-    if type(value) is not dict:
+    """The JSON text of a dict (or a read-only mapping, a frozen result's) when decoding it gives an equal
+    dict, else None."""
+    if type(value) is not dict and not isinstance(value, FrozenDict):
         return None
     try:
-        text = json.dumps(value, allow_nan=False)
+        text = json.dumps(value, allow_nan=False, default=_mapping_as_dict)
     except (TypeError, ValueError):
         return None
     return text if json.loads(text) == value else None
+
+
+def _mapping_as_dict(value: Any) -> dict:
+    """A read-only mapping nested in a dict, as the dict it reads as (nothing else JSON cannot hold)."""
+    if isinstance(value, FrozenDict):
+        return dict(value)
+    raise TypeError(f"{type(value).__name__} is not JSON")
 
 
 _SCHEMAS: dict[str, tuple[type, int]] = {}  # schema name: (class, version)
@@ -209,7 +218,7 @@ def _write_member(group: h5py.Group, name: str, value: Any, units: str | None) -
         group.attrs[name] = h5py.Empty("f8") if tag == "none" else value
         _set_type(group, name, tag)
         return
-    if isinstance(value, dict):
+    if isinstance(value, (dict, FrozenDict)):
         text = _json_exact(value)
         if text is not None and units is None:
             group.attrs[name] = text

@@ -58,6 +58,7 @@ import numpy as np
 
 from ..data import IOData
 from ..errors import InputError
+from ..jsonable import json_default
 from .responses import FrequencyResponse, TimeResponse, simulated_response
 
 __all__ = ["Mode", "IdentifiedModel", "StateSpaceModel", "sample_interval", "MARGINAL_TOLERANCE", "eigenvalues_stable",
@@ -446,7 +447,7 @@ class StateSpaceModel:
         path = Path(path)
         dt = self.to_statespace()[4]
         values = {"time_domain": "continuous" if dt is None else "discrete", "dt": dt, **self.to_dict()}
-        path.write_text(json.dumps(values, indent=2, default=str) + "\n")
+        path.write_text(json.dumps(values, indent=2, default=json_default) + "\n")
         return path
 
 
