@@ -57,7 +57,8 @@ for knot in family.meta["knot_coverage"]:
           + (" (extrapolated)" if knot["extrapolated"] else ""))
 
 # %%
-# The family driven by the held-out steer along the held-out speed, from
+# Each ``plot()`` draws onto the axes it is given (without them, onto a
+# Figure of its own outside pyplot). The family driven by the held-out steer along the held-out speed, from
 # rest (the speed its last input), against the measured outputs (offsets removed, as the model was
 # identified): :meth:`~vehid.identification.TimeResponse.plot` draws each
 # output with the measurement under it.
@@ -65,8 +66,9 @@ held_out = result.plan.validation[0]
 speed = result.plan.schedule.validation[0]
 along_speed = held_out.replace(u=np.column_stack([held_out.u, speed]), input_names=held_out.input_names + ("vx",),
                                input_units=held_out.input_units + ("m/s",))
-family.simulate(along_speed).plot(label="speed-scheduled family",
-                                               title="Held-out part of the lap: the scheduled family")
+fig, axes = plt.subplots(2, 1, sharex=True, figsize=(8, 5), layout="constrained")
+family.simulate(along_speed).plot(ax=axes, label="speed-scheduled family")
+fig.suptitle("Held-out part of the lap: the scheduled family")
 plt.show()
 
 # %%
@@ -86,13 +88,17 @@ print("held-out NRMSE fit", [round(fit, 1) for fit in single_track.validation_fi
 # The car driven by the whole lap's steer along its measured speed, from
 # straight running (the simulation's inputs are the steer, then the speed).
 lap = read_record(path, inputs=("delta", "vx"), outputs=("yawRate", "ayCG"))
-single_track.model.simulate(lap).plot(label="single-track car", title="The whole lap: the single-track car")
+fig, axes = plt.subplots(2, 1, sharex=True, figsize=(8, 5), layout="constrained")
+single_track.model.simulate(lap).plot(ax=axes, label="single-track car")
+fig.suptitle("The whole lap: the single-track car")
 plt.show()
 
 # %%
-# Its handling against speed, each metric with a band of two standard
-# deviations from the parameters' covariance: what ``vehid handling`` prints
+# Its handling against speed (yaw-rate and lateral-acceleration gains per
+# radian of road-wheel angle, understeer gradient in deg/g), each metric with
+# a band of two standard deviations from the parameters' covariance: what ``vehid handling`` prints
 # as a table, drawn by :meth:`~vehid.vehicle.handling.HandlingResponse.plot`.
 metrics = handling(single_track.model, speeds=np.linspace(17.0, 60.0, 6))
-HandlingResponse(metrics.metrics, label="single-track car").plot()
+fig, axes = plt.subplots(1, 3, figsize=(9, 3.2), layout="constrained")
+HandlingResponse(metrics.metrics, label="single-track car").plot(ax=axes)
 plt.show()
