@@ -99,6 +99,7 @@ class SourceHandlingOptions:
 
 
 def _model_from_json(path: Path) -> Any:
+    from vehid.identification.dataio.model_files import json_model_kind
     from vehid.identification.models.modal import ModalModel
     from vehid.identification.models.scheduled import ScheduledModalModel
 
@@ -106,19 +107,21 @@ def _model_from_json(path: Path) -> Any:
         content = json.loads(path.read_text())
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise InputError(f"{path} is not a JSON model file: {exc}") from None
-    if not isinstance(content, dict):
-        raise InputError(f"{path} is not a model file of the workbench")
+    kind = json_model_kind(content)
+    if kind is None:
+        raise InputError(f"{path} holds no single-track, linear or scheduled modal model (the model file of "
+                         "vehid identify)")
     try:
-        if content.get("kind") == "single-track":
+        if kind == "single-track":
             from vehid.vehicle.single_track import IdentifiedSingleTrack
 
             return IdentifiedSingleTrack.from_dict(content)  # physical units throughout: no preparation to undo
-        if "grid" in content and "variable" in content:
+        if kind == "scheduled":
             model = ScheduledModalModel.from_dict(content)
-        elif "structure" in content and "A" in content:
+        elif kind == "modal":
             model = ModalModel.from_dict(content)
         else:
-            raise InputError(f"{path} holds no linear or scheduled modal model (the model file of vehid identify)")
+            raise InputError(f"{path} holds a {kind!r} model, which has no handling metrics")
     except (KeyError, TypeError, ValueError) as exc:
         raise InputError(f"{path} holds a damaged model: {exc}") from None
     return _named_by_preparation(model, content.get("preparation"))

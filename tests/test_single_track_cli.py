@@ -246,6 +246,11 @@ def test_saved_model_gives_its_handling_and_page(log, tmp_path, capsys):
                  "--save-model", str(model_file)]) == 0
     identified = json.loads(capsys.readouterr().out)
     assert identified["model_file"] == str(model_file)
+    # a file the workbench wrote is its own to replace: a rerun with the same --save-model was refused as "not a
+    # workbench model file"
+    from vehid.identification.dataio.model_files import check_model_target
+
+    assert check_model_target(model_file) == model_file
     assert main(["handling", str(model_file), "--figure", str(figure), "--json"]) == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["scheduled"] is True and summary["wheelbase"] == pytest.approx(2.7)

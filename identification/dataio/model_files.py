@@ -19,21 +19,37 @@ if TYPE_CHECKING:
     from .archive_safety import OutputIdentity
     from .preparation import Preparation
 
-__all__ = ["MODEL_FILE_SUFFIXES", "check_model_target", "save_model"]
+__all__ = ["MODEL_FILE_SUFFIXES", "check_model_target", "json_model_kind", "save_model"]
 
 MODEL_FILE_SUFFIXES = (".json", ".mat")
 
 
+def json_model_kind(content: Any) -> str | None:
+    """What a model file's JSON content holds: ``"modal"``, ``"scheduled"``, the ``kind`` a model of its own
+    names (e.g. ``"single-track"``, with its ``config``), or None where it is no model file of the workbench.
+
+    The one test of what a JSON model file is, for the readers and for the check that a file may be replaced.
+    """
+    if not isinstance(content, dict):
+        return None
+    if isinstance(content.get("kind"), str) and "config" in content:
+        return content["kind"]
+    if {"grid", "variable", "structure"} <= content.keys():
+        return "scheduled"
+    if {"structure", "A", "B", "C", "D"} <= content.keys():
+        return "modal"
+    return None
+
+
 def _model_file_identity(path: Path) -> OutputIdentity | None:
-    """A model file the workbench wrote (JSON or MATLAB with the matrices A, B, C, D, or a single-track model),
-    or None for any other file."""
+    """A model file the workbench wrote (JSON of any :func:`json_model_kind`, or MATLAB with the matrices
+    A, B, C, D), or None for any other file."""
     from .archive_safety import OutputIdentity
 
     matrices = {"A", "B", "C", "D"}
     try:
         if path.suffix.lower() == ".json":
-            content = json.loads(path.read_text())
-            found = isinstance(content, dict) and matrices <= content.keys() and "structure" in content
+            found = json_model_kind(json.loads(path.read_text())) is not None
         else:
             from scipy.io import whosmat
 
