@@ -36,13 +36,13 @@ from pathlib import Path
 
 import numpy as np
 
-import vehid.identification.classical.comparators as comparators
+import vehid.identification.comparators as comparators
 import vehid.identification.filtering.iekf as iekf
-from vehid.identification.classical.comparators import identify_with
+from vehid.identification.comparators import identify_with
 from vehid.identification.filtering.iekf import IEKFOptions, identify_iekf
 from vehid.identification.models.modal import ModalStructure
 from vehid.identification.assessment.segments import formal_method
-from vehid.identification.assessment.uncertainty import frequency_response
+from vehid.identification.models.delta_method import frequency_response
 from vehid.scenarios.benchmarking import median_seconds, record_figures
 from vehid.scenarios.cli import main as cli_main
 from vehid.scenarios.linear_example import make_data

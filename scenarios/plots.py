@@ -21,7 +21,7 @@ from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 from vehid.identification.errors import InputError
 from vehid.identification.assessment.metrics import percentage_explanation
 from vehid.identification.assessment.residuals import autocorrelation as residual_autocorrelation
-from vehid.identification.assessment.uncertainty import frequency_response as response_band
+from vehid.identification.models.delta_method import frequency_response as response_band
 
 # The shared style and the pole map live in their own modules; they stay part of this module's API.
 from .figure_style import (  # noqa: F401
@@ -562,7 +562,7 @@ def plot_bode(
     """Magnitude and phase from one input to every output, for several models.
 
     Models that carry a parameter covariance get their 95 % band shaded
-    (delta method, :func:`vehid.identification.assessment.uncertainty.frequency_response`)
+    (delta method, :func:`vehid.identification.models.delta_method.frequency_response`)
     unless ``confidence`` is False; with ``bands``, only the models of those labels. The curves set
     each axis's range, all of them (:func:`~vehid.scenarios.figure_style.set_robust_limits`): a band that
     runs to nothing or round the circle is cut at the frame.

@@ -178,7 +178,7 @@ def test_cli_order_range_chooses_on_validation_data(tmp_path):
 
 def test_a_negative_real_discrete_pole_gives_a_labelled_discrete_model():
     """y(k) = -0.6 y(k-1) + u(k-1): no continuous-time equivalent; ARX returns the discrete model, not an error."""
-    from vehid.identification.classical.comparators import identify_with
+    from vehid.identification.comparators import identify_with
     from vehid.identification.models.discrete import DiscreteModel
 
     u = np.random.default_rng(11).standard_normal((400, 1))

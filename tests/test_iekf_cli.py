@@ -12,7 +12,7 @@ import pytest
 from conftest import run_vehid
 
 from vehid.identification.dataio.archive import open_archive
-from vehid.identification.filtering.iekf_archive import read_iekf_run
+from vehid.identification.dataio.iekf_archive import read_iekf_run
 from vehid.identification.decisions import SCHEDULE_MARGIN
 from vehid.scenarios.identify_workflow import P_GRID, P_TOLERANCE, Q_SCHEDULES
 from vehid.scenarios.linear_example import make_data

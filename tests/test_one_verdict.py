@@ -19,7 +19,7 @@ from vehid.identification import read_archive, write_archive, write_record, writ
 from vehid.identification.dataio.archive import open_archive
 from vehid.identification.data import IOData
 from vehid.identification.filtering.iekf import IEKFOptions, identify_iekf
-from vehid.identification.filtering.iekf_archive import read_iekf_run, write_iekf_run
+from vehid.identification.dataio.iekf_archive import read_iekf_run, write_iekf_run
 from vehid.identification.assessment.metrics import nrmse_fit
 from vehid.identification.models.modal import ModalModel, ModalStructure
 from vehid.scenarios.report import archive_figures, archive_table

@@ -5,17 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vehid.identification.classical.comparators import identify_with
+from vehid.identification.comparators import identify_with
 from vehid.identification.errors import InputError
 from vehid.identification.classical.least_squares import least_squares
 from vehid.identification.models.modal import ModalModel, ModalStructure
-from vehid.identification.assessment.uncertainty import (
-    frequency_response,
-    gauss_newton_covariance,
-    model_uncertainty,
-    sample_parameters,
-    simulation_error_covariance,
-)
+from vehid.identification.assessment.uncertainty import gauss_newton_covariance, simulation_error_covariance
+from vehid.identification.models.delta_method import frequency_response, model_uncertainty, sample_parameters
 from vehid.scenarios import calibration
 
 

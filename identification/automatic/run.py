@@ -96,7 +96,7 @@ def _order_search(plan: Plan, options: IdentifyOptions, iekf: Any) -> Identifica
 
 def _comparator(plan: Plan, options: IdentifyOptions) -> Identification:
     """A classical method on the same plan, searched over orders alike where several are given."""
-    from vehid.identification.classical.comparators import identify_with
+    from vehid.identification.comparators import identify_with
 
     outcomes = {}
     extra = {"bootstrap": options.bootstrap} if options.bootstrap is not None else {}

@@ -28,7 +28,8 @@ import numpy as np
 from ..compiled import NoCompilerWarning, compile_driver, find_c_compiler
 from ..choices import COVARIANCE_FORMS
 from ..errors import DivergenceError
-from .filter_models import FilterModel, check_discretization
+from ..models.transition import check_discretization
+from .filter_models import FilterModel
 from .iekf_kernel import structured_pass_source
 
 __all__ = [

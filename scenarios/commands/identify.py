@@ -94,7 +94,7 @@ def _resume(args: argparse.Namespace):
     from vehid.identification.automatic.run import Resumed
     from vehid.identification.dataio.archive import open_archive, read_records, update_archive
     from vehid.identification.dataio.preparation import prepare_validation, read_record
-    from vehid.identification.filtering.iekf_archive import read_iekf_run
+    from vehid.identification.dataio.iekf_archive import read_iekf_run
     from vehid.scenarios.data_options import RECORD_PREFIX, archived_preparation, record_series, settings_from_args
 
     if args.data:
@@ -290,7 +290,7 @@ class _Keeper:
     def decided(self, options, tuning, unstable, previous) -> None:
         from vehid.identification.dataio.archive import write_archive
         from vehid.identification.dataio.archive_safety import RUN_ATTRIBUTE
-        from vehid.identification.filtering.iekf_archive import Checkpointer
+        from vehid.identification.dataio.iekf_archive import Checkpointer
         from vehid.scenarios.progress import Progress
 
         if self.archive_path is not None and previous is None:
@@ -360,7 +360,7 @@ def _archive_search(args, plan, options, result) -> None:
     from vehid.identification.automatic.steps import iekf_options
     from vehid.identification.dataio.archive import write_archive
     from vehid.identification.dataio.archive_safety import RUN_ATTRIBUTE
-    from vehid.identification.filtering.iekf_archive import write_iekf_run
+    from vehid.identification.dataio.iekf_archive import write_iekf_run
 
     with write_archive(Path(args.out), kind=ARCHIVE_KIND, config=iekf_options(options), seeds=[]) as archive:
         archive.attrs[RUN_ATTRIBUTE] = args.output_run
@@ -373,7 +373,7 @@ def _finish(args, plan, result, archive_path=None) -> tuple[dict, str, object]:
     """Archive, model file and the text: the command's end of every identify run."""
     from vehid.identification.dataio.archive import run_group, update_archive, write_run
     from vehid.identification.dataio.storage import write_value
-    from vehid.identification.filtering.iekf_archive import write_pass_history
+    from vehid.identification.dataio.iekf_archive import write_pass_history
     from vehid.identification.errors import StrictWarningsError
     from vehid.scenarios import scheduled_identify
     from vehid.scenarios.data_options import save_model
