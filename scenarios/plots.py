@@ -723,7 +723,7 @@ def plot_residual_tests(tests: Any, *, dt: float | None = None, title: str = "Re
 
     Parameters
     ----------
-    tests : identification.residuals.ResidualTests
+    tests : vehid.identification.assessment.residuals.ResidualTests
     dt : float, optional
         Sample interval (s): lags in seconds.
 

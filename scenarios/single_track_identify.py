@@ -183,7 +183,7 @@ def _read(args: Any) -> tuple[tuple[IOData, ...], tuple[IOData, ...], tuple[np.n
 def run(args: Any) -> tuple[dict, str]:
     """Identify the single-track model and summarise it (module docstring)."""
     from vehid.identification.filtering.greybox import GreyBoxOptions, simulate_greybox
-    from vehid.scenarios import identify_workflow as workflow
+    from vehid.identification.automatic import steps as workflow
     from vehid.vehicle.single_track import GRAVITY, single_track_handling, single_track_model
 
     started = time.perf_counter()

@@ -221,7 +221,7 @@ def test_cli_nonlinear_scores_and_archives_both_models(tmp_path):
 
 def test_order_parsing_and_the_parsimony_rule():
     from vehid.identification.errors import DivergenceError, InputError
-    from vehid.scenarios.identify_workflow import AUTO_MAX_ORDER, ORDER_TOLERANCE, choose_order, parse_orders
+    from vehid.identification.automatic.steps import AUTO_MAX_ORDER, ORDER_TOLERANCE, choose_order, parse_orders
 
     assert parse_orders("4") == ([4], False)
     assert parse_orders("2-5") == ([2, 3, 4, 5], False)
@@ -258,7 +258,7 @@ def test_cli_validation_file_is_scored_and_a_mismatched_one_refused(tmp_path):
 
 def test_a_divergence_after_good_passes_reports_the_last_good_one_with_a_warning():
     from vehid.identification.errors import DivergenceError
-    from vehid.scenarios.identify_workflow import Evaluation, last_good_on_divergence, run_warnings
+    from vehid.identification.automatic.steps import Evaluation, last_good_on_divergence, run_warnings
 
     good = identify_iekf(_record(20.0, seed=3), STRUCTURE, options=IEKFOptions.invariant(passes=2))
 
@@ -279,7 +279,7 @@ def test_the_spline_model_is_returned_only_where_it_beats_the_other_model_by_the
     """Both scored by one rule; the spline model must win by NONLINEAR_MARGIN on validation data, by the
     whole-record margin on the estimation data without them, and its loss is a note, not a warning."""
     from vehid.identification.assessment.validation import Scores
-    from vehid.scenarios.identify_workflow import (NONLINEAR_MARGIN, WHOLE_RECORD_MARGIN, Evaluation,
+    from vehid.identification.automatic.steps import (NONLINEAR_MARGIN, WHOLE_RECORD_MARGIN, Evaluation,
                                                    nonlinear_margin, nonlinear_note)
 
     def scored(estimation: float, validation: float | None) -> Evaluation:
@@ -307,7 +307,7 @@ def test_the_spline_model_is_returned_only_where_it_beats_the_other_model_by_the
 
 
 def test_the_start_is_returned_only_where_it_beats_every_p_in_cross_validation():
-    from vehid.scenarios.identify_workflow import P_TOLERANCE, PTuning
+    from vehid.identification.automatic.steps import P_TOLERANCE, PTuning
 
     rows = ({"p": 1e-4, "cv_fit_percent": 70.0, "seconds": 1.0}, {"p": 1e-5, "cv_fit_percent": 72.0, "seconds": 1.0},
             {"p": 1e-6, "cv_fit_percent": None, "error": "diverged", "seconds": 1.0})
@@ -320,18 +320,18 @@ def test_the_start_is_returned_only_where_it_beats_every_p_in_cross_validation()
 def test_a_returned_start_is_what_the_summary_and_the_archive_describe(tmp_path, capsys, monkeypatch):
     """Where cross-validation prefers the start, the command returns it, says so once, and archives it."""
     from vehid.identification.dataio.archive import read_archive
-    from vehid.scenarios import identify_workflow
+    from vehid.identification.automatic import steps
     from vehid.scenarios.cli import main
 
-    real_tune = identify_workflow.tune_p
+    real_tune = steps.tune_p
 
     def start_preferred(*args, **kwargs):
         tuning = real_tune(*args, **kwargs)
         # beyond any fit: the start as it is, and refined by its simulation error
         fits = {**(tuning.candidate_fits or {}), "start refined": 200.0}
-        return identify_workflow.PTuning(tuning.p, tuning.tried, tuning.seconds, 200.0, tuning.q_schedule, fits)
+        return steps.PTuning(tuning.p, tuning.tried, tuning.seconds, 200.0, tuning.q_schedule, fits)
 
-    monkeypatch.setattr(identify_workflow, "tune_p", start_preferred)
+    monkeypatch.setattr(steps, "tune_p", start_preferred)
     record = _write_csv(tmp_path / "r.csv", _record(30.0, seed=21, noise=0.05))
     out = tmp_path / "run.h5"
     assert main(["identify", str(record), "--inputs", "u1", "--outputs", "y1", "--order", "3", "--passes", "5",

@@ -14,7 +14,7 @@ from conftest import run_vehid
 from vehid.identification.dataio.archive import open_archive
 from vehid.identification.dataio.iekf_archive import read_iekf_run
 from vehid.identification.decisions import SCHEDULE_MARGIN
-from vehid.scenarios.identify_workflow import P_GRID, P_TOLERANCE, Q_SCHEDULES
+from vehid.identification.automatic.steps import P_GRID, P_TOLERANCE, Q_SCHEDULES
 from vehid.scenarios.linear_example import make_data
 
 VEHID = [sys.executable, "-m", "vehid.scenarios.cli"]
@@ -177,7 +177,7 @@ def test_the_archived_decisions_keep_the_Q_schedule(schedule, tmp_path):
     reads as the constant Q every run had then."""
     from vehid.identification.dataio.archive import update_archive, write_archive
     from vehid.scenarios.commands.identify import DECISIONS, _archive_decisions, _read_decisions
-    from vehid.scenarios.identify_workflow import PTuning
+    from vehid.identification.automatic.steps import PTuning
 
     tried = tuple({"p": p, "q_schedule": q, "cv_fit_percent": 90.0, "seconds": 1.0}
                   for p in P_GRID for q in Q_SCHEDULES)

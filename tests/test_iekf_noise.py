@@ -12,7 +12,7 @@ from vehid.identification import DivergenceError, IEKFOptions, IOData, ModalStru
 from vehid.identification.assessment.noise import output_noise_variance
 from vehid.identification.filtering.iekf import (BACK_OFF_FACTOR, NOISE_WEIGHT_FLOOR, data_measurement_noise,
                                                  start_structure)
-from vehid.scenarios import identify_workflow as workflow
+from vehid.identification.automatic import steps as workflow
 from vehid.scenarios.linear_example import make_data
 
 N = 2000

@@ -362,25 +362,10 @@ def test_every_workbench_import_names_a_module_and_a_name_that_exist():
     assert not missing, "\n".join(missing)
 
 
-def test_former_module_names_are_the_same_modules():
-    # code written before the sub-packages imports the flat names; each must be the module itself, or a
-    # class would exist twice and isinstance checks and archives would disagree
-    import importlib
-
-    import vehid.identification as package
-    from vehid.identification.models.modal import ModalModel
-
-    for former, current in package._FORMER_MODULES.items():
-        assert importlib.import_module(f"vehid.identification.{former}") is \
-            importlib.import_module(f"vehid.identification.{current}"), former
-    assert importlib.import_module("vehid.identification.modal").ModalModel is ModalModel
-    assert importlib.import_module("vehid.identification.modal").__spec__.name == "vehid.identification.models.modal"
-
-
 @pytest.mark.parametrize("package_name", ["vehid.identification", "vehid.vehicle"])
 def test_exported_names_stay_the_exported_values_once_every_submodule_is_imported(package_name):
     # importing a submodule sets it as an attribute of its package: an exported function of the same
-    # name (identification's ``least_squares`` and its former module name, vehicle's ``linearize``) would be replaced by the module, and ``from package import name``
+    # name (identification's ``least_squares`` beside classical's module of that name, vehicle's ``linearize``) would be replaced by the module, and ``from package import name``
     # would give a module
     import importlib
     import pkgutil
@@ -388,7 +373,5 @@ def test_exported_names_stay_the_exported_values_once_every_submodule_is_importe
     package = importlib.import_module(package_name)
     for info in pkgutil.iter_modules(package.__path__):
         importlib.import_module(f"{package_name}.{info.name}")
-    for former in getattr(package, "_FORMER_MODULES", {}):
-        importlib.import_module(f"{package_name}.{former}")
     for name, module in package._MODULE_OF.items():
         assert getattr(package, name) is getattr(importlib.import_module(f"{package_name}.{module}"), name), name
