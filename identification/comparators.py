@@ -45,7 +45,7 @@ import scipy.linalg
 import scipy.optimize
 from scipy.special import comb
 
-from ._checks import non_negative_int, positive_int
+from .argument_checks import non_negative_int, positive_int
 from .blas import on_one_blas_thread
 from .data import IOData, as_records
 from .models.discrete import DiscreteModel, has_no_continuous_equivalent

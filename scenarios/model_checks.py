@@ -1,8 +1,8 @@
 """The text of how sure a model is (modes with standard deviations); the checks themselves are the library's
-(:mod:`vehid.identification.automatic.checks`).
+(:mod:`vehid.identification.automatic.reported_checks`).
 
 The public JSON keys of the checks (a contract once released) are listed in
-:mod:`vehid.identification.automatic.checks`.
+:mod:`vehid.identification.automatic.reported_checks`.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from vehid.identification.automatic.checks import model_residual_tests, uncertainty_summary
+from vehid.identification.automatic.reported_checks import model_residual_tests, uncertainty_summary
 
 __all__ = ["model_residual_tests", "uncertainty_summary", "uncertainty_lines", "mode_lines"]
 

@@ -221,14 +221,14 @@ def test_cli_nonlinear_scores_and_archives_both_models(tmp_path):
 
 def test_order_parsing_and_the_parsimony_rule():
     from vehid.identification.errors import DivergenceError, InputError
-    from vehid.identification.automatic.steps import AUTO_MAX_ORDER, ORDER_TOLERANCE, choose_order, parse_orders
+    from vehid.identification.automatic.steps import AUTO_MAX_ORDER, ORDER_TOLERANCE, choose_order, parse_order_option
 
-    assert parse_orders("4") == ([4], False)
-    assert parse_orders("2-5") == ([2, 3, 4, 5], False)
-    assert parse_orders("auto") == (list(range(1, AUTO_MAX_ORDER + 1)), True)
+    assert parse_order_option("4") == ([4], False)
+    assert parse_order_option("2-5") == ([2, 3, 4, 5], False)
+    assert parse_order_option("auto") == (list(range(1, AUTO_MAX_ORDER + 1)), True)
     for bad in ("0", "5-2", "four", "2-"):
         with pytest.raises(InputError):
-            parse_orders(bad)
+            parse_order_option(bad)
     rows = [{"order": 2, "ranking_fit": 90.0, "eligible": True},
             {"order": 3, "ranking_fit": 97.0 - ORDER_TOLERANCE / 2, "eligible": True},
             {"order": 4, "ranking_fit": 97.0, "eligible": True},

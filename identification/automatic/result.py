@@ -142,7 +142,7 @@ class Identification:
         How the IEKF's run diverged, where the last good pass is returned.
     checks : Mapping or None
         Modes with standard deviations and residual tests (modal models;
-        :mod:`vehid.identification.automatic.checks`).
+        :mod:`vehid.identification.automatic.reported_checks`).
     residual_tests : ResidualTests or None
         The residual tests behind ``checks``.
     data : Mapping

@@ -16,7 +16,7 @@ from typing import Any, Mapping, Protocol
 import numpy as np
 
 from vehid.identification.automatic import steps
-from vehid.identification.automatic.checks import data_warnings, records_summary, returned_checks
+from vehid.identification.automatic.reported_checks import data_warnings, records_summary, returned_checks
 from vehid.identification.dataio.cleaning import cleaning_notes
 from vehid.identification.automatic.options import IdentifyOptions
 from vehid.identification.automatic.plan import Plan

@@ -25,7 +25,7 @@ __all__ = [
     "checked_covariance",
     "normal_quantile",
     "model_uncertainty",
-    "frequency_response",
+    "frequency_response_band",
     "sample_parameters",
 ]
 
@@ -253,7 +253,7 @@ def model_uncertainty(model: Any, *, level: float = 0.95) -> ModelUncertainty:
     )
 
 
-def frequency_response(model: Any, frequencies_hz: Any, *, level: float = 0.95) -> FrequencyResponseBand:
+def frequency_response_band(model: Any, frequencies_hz: Any, *, level: float = 0.95) -> FrequencyResponseBand:
     """Magnitude and phase of ``model`` at ``frequencies_hz`` with delta-method standard deviations.
 
     Parameters

@@ -469,10 +469,10 @@ class ModalModel(StateSpaceModel):
 
     def frequency_response_band(self, frequencies_hz: Any, *, level: float = 0.95) -> Any:
         """Magnitude and phase at ``frequencies_hz`` with delta-method bands
-        (:func:`vehid.identification.models.delta_method.frequency_response`)."""
-        from .delta_method import frequency_response
+        (:func:`vehid.identification.models.delta_method.frequency_response_band`)."""
+        from .delta_method import frequency_response_band
 
-        return frequency_response(self, frequencies_hz, level=level)
+        return frequency_response_band(self, frequencies_hz, level=level)
 
     def mode_eigenvalues(self) -> np.ndarray:
         """One eigenvalue per mode, ``sigma + j|omega|`` for pairs, real for poles (pairs first)."""

@@ -363,7 +363,7 @@ def _run_model(args: argparse.Namespace) -> tuple[dict, str, list[str]]:
     if unstable:
         warnings.append("the model is unstable or never reaches 90 % of its steady yaw rate at "
                         f"{', '.join(f'{v:g}' for v in unstable)} m/s: no step metrics there")
-    from vehid.identification.automatic.checks import uncertainty_method
+    from vehid.identification.automatic.reported_checks import uncertainty_method
     from vehid.scenarios import plausibility_checks as plausibility
 
     method = uncertainty_method(model)
