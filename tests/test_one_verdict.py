@@ -91,7 +91,9 @@ def test_a_resumed_or_reread_run_gives_the_original_verdict(tmp_path, options):
     resumed = json.loads(out)
     for key in ("warnings", "p", "p_tried", "start", "model_returned", "passes_run", "stop_reason",
                 "validation_fit_percent", "estimation_fit_percent"):
-        assert resumed.get(key) == original.get(key), key
+        # both runs state every key: a key lost by both (renamed, say) must not pass as agreement
+        assert key in original and key in resumed, key
+        assert resumed[key] == original[key], key
     assert resumed_status == (3 if original["warnings"] else 0) and status == 0
     if options is not STUCK:
         return
