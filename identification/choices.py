@@ -63,7 +63,7 @@ INITIAL_STATES = ("zero", "estimate")
 C_PATTERNS = ("default", "all-ones", "eq18", "eq19")
 
 #: The built-in estimators by name (``--method``): the IEKF and the classical comparators, the keys of
-#: :data:`~vehid.identification.classical.comparators.COMPARATORS` before any other is registered.
+#: :data:`~vehid.identification.comparators.COMPARATORS` before any other is registered.
 ESTIMATORS = ("iekf", "arx", "rls", "n4sid", "output-error")
 
 #: Nodes per spline: the paper found the symbolic model manageable up to 9.

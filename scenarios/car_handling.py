@@ -494,7 +494,7 @@ def _source_handling(source: Any, speeds: tuple[float, ...] | None, options: Sou
 
 def _model_handling(target: Any, speeds: tuple[float, ...] | None, options: HandlingOptions,
                     figure: Path | None) -> ModelHandling:
-    from vehid.identification.automatic.checks import uncertainty_method
+    from vehid.identification.automatic.reported_checks import uncertainty_method
     from vehid.scenarios import plausibility_checks as plausibility
     from vehid.vehicle.handling import handling_metrics
 

@@ -379,7 +379,7 @@ def archive_figures(archive: Any, *, window: tuple[float, float] | None = None, 
 
     Parameters
     ----------
-    archive : identification.archive.Archive
+    archive : vehid.identification.dataio.archive.Archive
         As :func:`vehid.identification.dataio.archive.read_archive` returns it.
     window : (float, float), optional
         Time range (s) of the time-fit figures.

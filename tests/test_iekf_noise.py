@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 
 from vehid.identification import DivergenceError, IEKFOptions, IOData, ModalStructure, identify_iekf
+from vehid.identification.assessment.noise import output_noise_variance
 from vehid.identification.filtering.iekf import (BACK_OFF_FACTOR, NOISE_WEIGHT_FLOOR, data_measurement_noise,
-                                       output_noise_variance, start_structure)
-from vehid.scenarios import identify_workflow as workflow
+                                                 start_structure)
+from vehid.identification.automatic import steps as workflow
 from vehid.scenarios.linear_example import make_data
 
 N = 2000

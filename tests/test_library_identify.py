@@ -9,10 +9,9 @@ from conftest import library_spy, mutable_parts, printed_json, run_vehid, withou
 
 from vehid.identification.errors import InputError
 from vehid.identification.jsonable import to_jsonable
-from vehid.identification.pipeline import DEFAULT_PASSES, Identification, IdentifyOptions
+from vehid.identification.pipeline import DEFAULT_PASSES, Identification, IdentifyOptions, identify
 from vehid.identification.dataio.preparation import ReadSettings, read_record
 from vehid.scenarios.cli import main
-from vehid.scenarios.identify_library import identify
 
 DRYER = Path(__file__).parent / "data" / "dryer" / "dryer.dat"
 # both run the same arithmetic on the same samples in one process; 1e-9 leaves room only for
@@ -215,12 +214,10 @@ def test_a_classical_method_runs_the_same_pipeline(capsys):
 
 
 def test_the_library_is_one_function_under_every_name():
-    """The package's identify, the pipeline module's and the former scenarios name are one function."""
+    """The package's identify and the pipeline module's are one function."""
     import vehid.identification as package
-    from vehid.identification import pipeline
-    from vehid.scenarios import identify_library
 
-    assert package.identify is pipeline.identify is identify_library.identify is identify
+    assert package.identify is identify
     assert package.IdentifyOptions is IdentifyOptions and package.Identification is Identification
 
 
@@ -249,8 +246,7 @@ def test_the_scenarios_identification_modules_parse_no_arguments():
     import ast
 
     root = Path(__file__).resolve().parents[1] / "scenarios"
-    for name in ("identify_workflow", "identify_library", "scheduled_identify", "single_track_identify",
-                 "calibration", "model_checks"):
+    for name in ("scheduled_identify", "single_track_identify", "calibration", "model_checks"):
         tree = ast.parse((root / f"{name}.py").read_text(encoding="utf-8"))
         imported = {alias.name for node in ast.walk(tree) if isinstance(node, ast.Import) for alias in node.names}
         imported |= {node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom) and node.module}

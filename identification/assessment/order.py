@@ -19,11 +19,11 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["OrderRow", "OrderAssessment", "assess_orders", "convergence_measures"]
+__all__ = ["AssessedOrder", "OrderAssessment", "assess_orders", "convergence_measures"]
 
 
 @dataclass(frozen=True)
-class OrderRow:
+class AssessedOrder:
     """One order's figures."""
 
     order: int
@@ -52,7 +52,7 @@ class OrderRow:
 class OrderAssessment:
     """The per-order table and the chosen order."""
 
-    rows: tuple[OrderRow, ...]
+    rows: tuple[AssessedOrder, ...]
     chosen_order: int
     fit_margin: float
     window: int
@@ -113,7 +113,7 @@ def assess_orders(
         trace = np.array([record.trace_p for record in history])
         growth, drift = convergence_measures(parameters, trace, window)
         rows.append(
-            OrderRow(
+            AssessedOrder(
                 order=int(order),
                 mean_fit=history[-1].mean_fit_continuous,
                 mean_fit_filter=history[-1].mean_fit_filter,

@@ -66,6 +66,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..frozen import freeze
+from ..models.delta_method import normal_quantile
 
 __all__ = [
     "DEFAULT_BLOCKS",
@@ -87,7 +88,6 @@ __all__ = [
     "block_jackknife",
     "formal_method",
     "Agreement",
-    "normal_quantile",
     "pair_agreement",
     "QuantityConsistency",
     "SegmentConsistency",
@@ -450,14 +450,6 @@ class Agreement:
     @property
     def share(self) -> float:
         return self.agreeing / self.pairs if self.pairs else 1.0
-
-
-def normal_quantile(level: float) -> float:
-    """``z`` of a two-sided interval ``+/- z sigma`` holding ``level`` of a normal distribution."""
-    if not 0 < level < 1:
-        raise InputError(f"a confidence level lies between 0 and 1; got {level!r}")
-    from scipy.special import ndtri  # scipy.stats.norm.ppf, without scipy.stats's import time
-    return float(ndtri(0.5 + level / 2))
 
 
 def pair_agreement(values: Any, stds: Any, *, level: float = 0.95) -> Agreement:

@@ -168,7 +168,7 @@ class ArchiveKeeper:
     def decided(self, options: Any, tuning: Any, unstable: Any, previous: Any) -> None:
         from vehid.identification.dataio.archive import write_archive
         from vehid.identification.dataio.archive_safety import RUN_ATTRIBUTE
-        from vehid.identification.filtering.iekf_archive import Checkpointer
+        from vehid.identification.dataio.iekf_archive import Checkpointer
 
         if self.path is not None and previous is None:
             with write_archive(self.path, kind=ARCHIVE_KIND, config=options, seeds=[]) as archive:
@@ -219,7 +219,7 @@ def resumed_plan(path: str | Path, *, order: int | str, validation: Sequence[Any
     from vehid.identification.automatic.run import Resumed
     from vehid.identification.dataio.archive import open_archive, read_records, update_archive
     from vehid.identification.dataio.preparation import ReadSettings, prepare_validation, read_record
-    from vehid.identification.filtering.iekf_archive import read_iekf_run
+    from vehid.identification.dataio.iekf_archive import read_iekf_run
 
     with open_archive(path, kinds=[ARCHIVE_KIND]) as archive:
         previous = read_iekf_run(archive, RUN_NAME)
@@ -255,7 +255,7 @@ def archive_search(path: Path, run: str, plan: Plan, options: IdentifyOptions, r
     from vehid.identification.automatic.steps import iekf_options
     from vehid.identification.dataio.archive import write_archive, write_run
     from vehid.identification.dataio.archive_safety import RUN_ATTRIBUTE
-    from vehid.identification.filtering.iekf_archive import write_iekf_run
+    from vehid.identification.dataio.iekf_archive import write_iekf_run
 
     if options.method != "iekf":
         outcome = result.estimator
@@ -284,7 +284,7 @@ def archive_outcome(path: Path, result: Identification, options: IdentifyOptions
     """
     from vehid.identification.dataio.archive import run_group, update_archive, write_run
     from vehid.identification.dataio.storage import write_value
-    from vehid.identification.filtering.iekf_archive import write_pass_history
+    from vehid.identification.dataio.iekf_archive import write_pass_history
     from vehid.identification.jsonable import to_jsonable
 
     plan = result.plan

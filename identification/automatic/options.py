@@ -38,14 +38,14 @@ _PASSES = Number(low=MIN_PASSES, whole=True)
 def estimators() -> tuple[str, ...]:
     """The estimators by name: the IEKF and the classical comparators, as registered now.
 
-    A method is registered in :data:`~vehid.identification.classical.comparators.COMPARATORS`, so
+    A method is registered in :data:`~vehid.identification.comparators.COMPARATORS`, so
     one registered later has loaded that module, and its registry is read; until then the registry
     holds the built-in methods (:data:`~vehid.identification.choices.ESTIMATORS`), named without
     loading it (it loads the numerical stack: 0.4 s of a command that refuses an option).
     """
     import sys
 
-    registry = sys.modules.get("vehid.identification.classical.comparators")
+    registry = sys.modules.get("vehid.identification.comparators")
     return ESTIMATORS if registry is None else tuple(registry.COMPARATORS)
 
 

@@ -24,7 +24,7 @@ if TYPE_CHECKING:
     from vehid.identification.automatic.plan import Plan
     from vehid.identification.automatic.scheduled import ScheduledOutcome
     from vehid.identification.automatic.steps import Evaluation, NonlinearOutcome, PTuning
-    from vehid.identification.classical.comparators import ComparatorResult
+    from vehid.identification.comparators import ComparatorResult
     from vehid.identification.filtering.iekf import IEKFResult
     from vehid.identification.models.protocol import IdentifiedModel
 
@@ -207,7 +207,7 @@ class Identification:
         How the IEKF's run diverged, where the last good pass is returned.
     checks : FrozenDict or None
         Modes with standard deviations and residual tests (JSON entries;
-        :mod:`vehid.identification.automatic.checks`).
+        :mod:`vehid.identification.automatic.reported_checks`).
     residual_tests : ResidualTests or None
         The residual tests behind ``checks``.
     data : FrozenDict

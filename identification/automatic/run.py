@@ -17,7 +17,7 @@ from typing import Any, Mapping, Protocol
 import numpy as np
 
 from vehid.identification.automatic import steps
-from vehid.identification.automatic.checks import data_warnings, records_summary, returned_checks
+from vehid.identification.automatic.reported_checks import data_warnings, records_summary, returned_checks
 from vehid.identification.dataio.cleaning import cleaning_notes
 from vehid.identification.automatic.options import IdentifyOptions
 from vehid.identification.automatic.plan import Plan
@@ -98,7 +98,7 @@ def _order_search(plan: Plan, options: IdentifyOptions, iekf: Any) -> Identifica
 
 def _comparator(plan: Plan, options: IdentifyOptions) -> Identification:
     """A classical method on the same plan, searched over orders alike where several are given."""
-    from vehid.identification.classical.comparators import identify_with
+    from vehid.identification.comparators import identify_with
 
     outcomes = {}
     extra = {"bootstrap": options.bootstrap} if options.bootstrap is not None else {}

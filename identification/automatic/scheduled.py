@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any, Sequence
 import numpy as np
 
 from vehid.identification.automatic import steps
-from vehid.identification.automatic.checks import records_summary, uncertainty_method
+from vehid.identification.automatic.reported_checks import records_summary, uncertainty_method
 from vehid.identification.automatic.options import IdentifyOptions
 from vehid.identification.automatic.plan import ScheduleData
 from vehid.identification.choices import SCHEDULED_DEFAULT_P, SCHEDULED_P_GRID

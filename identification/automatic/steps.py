@@ -61,10 +61,10 @@ from vehid.identification.filtering.iekf import (INVARIANT_P, INVARIANT_P_DECAY,
                                                  signal_scales, start_structure)
 from vehid.identification.models.modal import ModalModel, ModalStructure
 from vehid.identification.assessment.uncertainty import with_simulation_error_covariance
-from vehid.identification.automatic.checks import uncertainty_method
+from vehid.identification.automatic.reported_checks import uncertainty_method
 from vehid.identification.assessment.validation import UNSTABLE_HORIZON, Scores, default_horizon, score, split_holdout
 from vehid.identification.automatic.plan import (AUTO_HOLDOUT, AUTO_MAX_ORDER, Plan, holdout_fraction, make_plan,
-                                                 parse_orders, supported_orders)
+                                                 parse_order_option, supported_orders)
 from vehid.identification.automatic.options import IdentifyOptions
 
 if TYPE_CHECKING:
@@ -73,7 +73,7 @@ if TYPE_CHECKING:
 __all__ = [
     "START_CHOICES", "Evaluation", "search_orders", "identify_nonlinear", "start_of", "run_iekf_order",
     "last_good_on_divergence", "scores_summary", "AUTO_MAX_ORDER", "AUTO_HOLDOUT", "ORDER_TOLERANCE", "Plan",
-    "parse_orders", "supported_orders", "holdout_fraction", "make_plan", "iekf_options", "choose_order", "evaluate",
+    "parse_order_option", "supported_orders", "holdout_fraction", "make_plan", "iekf_options", "choose_order", "evaluate",
     "run_warnings", "pooled_fit_percent", "PCandidate", "PTuning", "tune_p", "tunes_p", "given_p", "q_schedule_of", "P_GRID", "Q_SCHEDULES", "P_TOLERANCE",
     "NONLINEAR_P", "START_RETURNED", "start_model", "returned_start", "returned_model", "NONLINEAR_P_GRID",
     "NonlinearOutcome", "NonlinearScores", "nonlinear_margin", "nonlinear_note",

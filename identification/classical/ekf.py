@@ -30,7 +30,7 @@ from typing import Any, Sequence
 import casadi as ca
 import numpy as np
 
-from .._checks import finite_matrix, io_arrays
+from ..argument_checks import finite_matrix, io_arrays
 from ..compiled import compile_function
 from ..errors import DivergenceError, InputError
 

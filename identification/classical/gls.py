@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from .._checks import io_arrays, positive_int
+from ..argument_checks import io_arrays, positive_int
 from ..errors import InputError
 from .least_squares import ArxResult, estimate_arx, least_squares
 

@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from .._checks import finite_matrix
+from ..argument_checks import finite_matrix
 from ..errors import DivergenceError, InputError
 
 __all__ = ["KalmanResult", "SmootherResult", "kalman_predict", "kalman_update", "kalman_filter", "rts_smoother"]

@@ -18,7 +18,7 @@ from typing import Any, Sequence
 import numpy as np
 import scipy.linalg
 
-from .._checks import finite_matrix, io_arrays, non_negative_int, per_input
+from ..argument_checks import finite_matrix, io_arrays, non_negative_int, per_input
 from ..errors import ExcitationError, InputError
 from ..models.protocol import StateSpaceModel, sample_interval, unscheduled
 

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import scipy.linalg
 
-from .._checks import finite_matrix, io_arrays, non_negative_int, per_input
+from ..argument_checks import finite_matrix, io_arrays, non_negative_int, per_input
 from ..errors import InputError
 from .kalman import KalmanResult, kalman_filter
 from .least_squares import ArxModel, observer_form

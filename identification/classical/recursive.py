@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from .._checks import finite_matrix, forgetting_factor, io_arrays, non_negative_int
+from ..argument_checks import finite_matrix, forgetting_factor, io_arrays, non_negative_int
 from ..errors import InputError
 from .factorised import sqrt_step, ud_covariance, ud_factor, ud_step
 from .least_squares import ArxModel, arx_orders, arx_regressors, least_squares, model_from_theta

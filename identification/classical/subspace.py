@@ -50,7 +50,7 @@ import numpy as np
 import scipy.linalg
 from numpy.lib.stride_tricks import sliding_window_view
 
-from .._checks import io_arrays, positive_int
+from ..argument_checks import io_arrays, positive_int
 from ..errors import ExcitationError, InputError
 from ..models.protocol import StateSpaceModel, sample_interval, unscheduled
 

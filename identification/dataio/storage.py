@@ -306,7 +306,7 @@ def write_group(group: h5py.Group, value: Any) -> None:
         return
     if dataclasses.is_dataclass(value) or hasattr(value, "to_dict"):
         raise ArchiveError(f"cannot archive a {type(value).__qualname__}: it has no registered schema "
-                           "(identification.storage.register_codec)")
+                           "(vehid.identification.dataio.storage.register_codec)")
     raise ArchiveError(f"cannot archive a value of type {type(value).__module__}.{type(value).__qualname__}")
 
 

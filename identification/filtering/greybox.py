@@ -23,7 +23,7 @@ Choices, each stated where it is made:
 * ``R`` from the data where not given: ``"residual"`` (default) takes each output's residual variance
   of the frozen model's simulation, of the start model for the first pass and of each pass's model
   after it (the spline filter's rule); ``"data"`` takes each output's white-noise variance from its
-  differences (:func:`~identification.filtering.iekf.output_noise_variance`), as the modal filter's
+  differences (:func:`~vehid.identification.assessment.noise.output_noise_variance`), as the modal filter's
   ``measurement_noise="data"``. Both are floored at :data:`~identification.filtering.iekf.NOISE_FLOOR` of the
   output's power. On a record the model fits to its noise the two agree; where the model cannot
   follow the record (model error), the residual rule counts that error as noise, so the filter
@@ -56,7 +56,8 @@ from ..compiled import CompiledRecursion
 from ..blas import on_one_blas_thread
 from ..data import IOData, as_records, check_channels
 from ..errors import DivergenceError, InputError
-from .iekf import NOISE_FLOOR, P_DECAY_FLOOR, output_noise_variance
+from ..assessment.noise import output_noise_variance
+from .iekf import NOISE_FLOOR, P_DECAY_FLOOR
 from .iekf_pass import compiled_pass, pack_covariance, unpack_covariance
 from ..assessment.metrics import nrmse_fit, percentage_explanation
 from ..assessment.segments import integrated_correlation_time

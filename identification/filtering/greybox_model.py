@@ -12,7 +12,7 @@ value its state-space form is the exact linearisation (CasADi's Jacobians) about
 deviations, and :meth:`IdentifiedGreyBox.to_casadi`, the continuous-time functions with the parameters in them.
 
 Stored (JSON, archives) as plain data: names, the functions' algorithms as tables
-(:mod:`~identification.dataio.casadi_codec`, nothing that runs code when read) and the numbers.
+(:mod:`~identification.casadi_codec`, nothing that runs code when read) and the numbers.
 """
 
 from __future__ import annotations
@@ -112,7 +112,7 @@ def _linearisation(model_key: str, model: GreyBoxModel) -> ca.Function:
 
 
 def _model_dict(model: GreyBoxModel) -> dict[str, Any]:
-    from ..dataio.casadi_codec import function_table
+    from ..casadi_codec import function_table
 
     def plain(table: dict[str, Any]) -> dict[str, Any]:
         return {key: value.tolist() if isinstance(value, np.ndarray) else value for key, value in table.items()}
@@ -125,7 +125,7 @@ def _model_dict(model: GreyBoxModel) -> dict[str, Any]:
 
 
 def _model_from(values: Mapping[str, Any]) -> GreyBoxModel:
-    from ..dataio.casadi_codec import table_function
+    from ..casadi_codec import table_function
 
     return GreyBoxModel(dynamics=table_function(values["dynamics"]), output=table_function(values["output"]),
                         parameter_names=tuple(values["parameter_names"]),

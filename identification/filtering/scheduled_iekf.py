@@ -49,7 +49,8 @@ from ..data import IOData, as_records
 from ..choices import SCHEDULE_GRID, SCHEDULE_KNOT_COUNT
 from ..errors import DivergenceError, InputError, WorkbenchError
 from ..optionspec import check_value
-from .filter_models import FilterModel, check_discretization
+from ..models.transition import check_discretization
+from .filter_models import FilterModel
 from .iekf import P_DECAY_FLOOR, data_measurement_noise, signal_scales
 from .iekf_pass import compiled_pass
 from ..assessment.metrics import percentage_explanation

@@ -195,7 +195,7 @@ def identify_spline_iekf(
     def result(stop_reason: str, history: tuple[PassRecord, ...], theta: np.ndarray, P: np.ndarray) -> SplineIEKFResult:
         finished = model
         if history:
-            # R is the measured residual covariance, so P needs no rescaling (see identification.uncertainty)
+            # R is the measured residual covariance, so P needs no rescaling (see vehid.identification.assessment.uncertainty)
             covariance, method = P[n:, n:], formal_method("the filter's P of a running filter")
             found = None if stop_reason == "running" else difference_fit_covariance(
                 lambda values: model.with_parameters(values).simulate_normalised(u_n)[0], model.theta, y_n,

@@ -433,7 +433,7 @@ class ModalModel(StateSpaceModel):
         object.__setattr__(self, "output_names", tuple(self.output_names) if self.output_names else tuple(f"y{i + 1}" for i in range(s.n_y)))
         object.__setattr__(self, "meta", dict(self.meta))
         if self.parameter_covariance is not None:
-            from ..assessment.uncertainty import checked_covariance
+            from .delta_method import checked_covariance
 
             object.__setattr__(self, "parameter_covariance", checked_covariance(self.parameter_covariance, s.n_parameters))
 
@@ -460,19 +460,19 @@ class ModalModel(StateSpaceModel):
     def uncertainty(self, *, level: float = 0.95) -> Any:
         """Modes, steady-state gains and their confidence intervals by the delta method.
 
-        Returns an :class:`vehid.identification.assessment.uncertainty.ModelUncertainty`;
+        Returns an :class:`vehid.identification.models.delta_method.ModelUncertainty`;
         without a parameter covariance every standard deviation is NaN.
         """
-        from ..assessment.uncertainty import model_uncertainty
+        from .delta_method import model_uncertainty
 
         return model_uncertainty(self, level=level)
 
     def frequency_response_band(self, frequencies_hz: Any, *, level: float = 0.95) -> Any:
         """Magnitude and phase at ``frequencies_hz`` with delta-method bands
-        (:func:`vehid.identification.assessment.uncertainty.frequency_response`)."""
-        from ..assessment.uncertainty import frequency_response
+        (:func:`vehid.identification.models.delta_method.frequency_response_band`)."""
+        from .delta_method import frequency_response_band
 
-        return frequency_response(self, frequencies_hz, level=level)
+        return frequency_response_band(self, frequencies_hz, level=level)
 
     def mode_eigenvalues(self) -> np.ndarray:
         """One eigenvalue per mode, ``sigma + j|omega|`` for pairs, real for poles (pairs first)."""

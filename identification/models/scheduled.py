@@ -204,7 +204,7 @@ def scheduled_step(structure: ModalStructure, x: Any, u0: Any, u1: Any, theta: A
     ends; states are the input gauge's (module notes). The family's parameters
     ``theta`` (K m) and ``grid`` (K) may be symbols.
     """
-    from ..filtering.filter_models import modal_transition
+    from .transition import modal_transition
 
     n_u = structure.n_u
     count = grid.numel() if isinstance(grid, (ca.SX, ca.MX, ca.DM)) else len(grid)
@@ -468,7 +468,7 @@ class ScheduledModalModel:
         object.__setattr__(self, "offset", offset)
         object.__setattr__(self, "meta", dict(self.meta))
         if self.parameter_covariance is not None:
-            from ..assessment.uncertainty import checked_covariance
+            from .delta_method import checked_covariance
 
             object.__setattr__(self, "parameter_covariance",
                                checked_covariance(self.parameter_covariance, self.n_parameters))

@@ -28,10 +28,10 @@ from ..choices import SPLINE_NODE_COUNT
 from ..compiled import CompiledRecursion
 from ..errors import InputError
 from ..optionspec import check_value
-from ..filtering.filter_models import FilterModel, check_discretization, modal_transition
 from .modal import ModalModel, ModalStructure
 from .protocol import Mode, StateSpaceModel, unscheduled
 from .spline import SplineBasis, resample
+from .transition import check_discretization, modal_transition
 
 __all__ = [
     "AMPLITUDE_FLOOR",
@@ -137,8 +137,12 @@ class SplineModalStructure:
 
 
 @dataclass(frozen=True)
-class SplineModalFilterModel(FilterModel):
-    """The spline-modal model as a filter model (normalised units); constants are the node ranges."""
+class SplineModalFilterModel:
+    """The spline-modal model as a filter model (normalised units); constants are the node ranges.
+
+    Its simulation and the IEKF both run it: it meets the filter's
+    :class:`~vehid.identification.filtering.filter_models.FilterModel` protocol by its members.
+    """
 
     structure: SplineModalStructure
 
@@ -297,7 +301,7 @@ class SplineModalModel(StateSpaceModel):
         check_discretization(self.discretization)
         object.__setattr__(self, "meta", dict(self.meta))
         if self.parameter_covariance is not None:
-            from ..assessment.uncertainty import checked_covariance
+            from .delta_method import checked_covariance
 
             object.__setattr__(self, "parameter_covariance",
                                checked_covariance(self.parameter_covariance, st.n_parameters))

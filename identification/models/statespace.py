@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from .._checks import finite_matrix
+from ..argument_checks import finite_matrix
 from ..errors import InputError
 from .modal import ModalModel, ModalStructure
 

@@ -36,7 +36,7 @@ range (2-8) or auto, chosen on validation data; --nonlinear adds the
 spline-nonlinear model and --schedule the scheduled family: each is scored
 by the same rule as the linear model (initial state, horizon, records), the
 better by that rule is returned, and what became of the others is said in
-notes. It also says how sure the returned model is (identification.automatic.checks): each mode with
+notes. It also says how sure the returned model is (identification.automatic.reported_checks): each mode with
 standard deviations (text: value +/- 2 sigma; JSON: the list `modes`), the
 residual tests per output (`residual_whiteness_p`, `input_correlation_max`)
 and, for the IEKF, the innovation NIS per pass with its band. A model of a

@@ -45,19 +45,19 @@ import scipy.linalg
 import scipy.optimize
 from scipy.special import comb
 
-from .._checks import non_negative_int, positive_int
-from ..blas import on_one_blas_thread
-from ..data import IOData, as_records
-from ..models.discrete import DiscreteModel, has_no_continuous_equivalent
-from ..errors import ConversionError, ExcitationError, InputError, WorkbenchError
-from .least_squares import estimate_arx, least_squares, model_from_theta, stacked_arx_regressors
-from ..assessment.metrics import FitMetrics, fit_metrics
-from ..models.modal import ModalModel, ModalStructure
-from .recursive import recursive_least_squares
-from ..models.statespace import balanced_truncation, discrete_to_continuous, modal_structure_for, to_modal
-from .subspace import estimate_subspace
-from ..assessment.segments import UncertaintyMethod, formal_method
-from ..assessment.uncertainty import (
+from .argument_checks import non_negative_int, positive_int
+from .blas import on_one_blas_thread
+from .data import IOData, as_records
+from .models.discrete import DiscreteModel, has_no_continuous_equivalent
+from .errors import ConversionError, ExcitationError, InputError, WorkbenchError
+from .classical.least_squares import estimate_arx, least_squares, model_from_theta, stacked_arx_regressors
+from .assessment.metrics import FitMetrics, fit_metrics
+from .models.modal import ModalModel, ModalStructure
+from .classical.recursive import recursive_least_squares
+from .models.statespace import balanced_truncation, discrete_to_continuous, modal_structure_for, to_modal
+from .classical.subspace import estimate_subspace
+from .assessment.segments import UncertaintyMethod, formal_method
+from .assessment.uncertainty import (
     bootstrap_covariance,
     fit_covariance,
     propagate_by_differences,
@@ -386,7 +386,7 @@ def iekf_comparator(data: IOData, *, order: int, **options: Any) -> ModalModel:
 
     Options are those of :class:`vehid.identification.filtering.iekf.IEKFOptions` (``p``, ``passes``, ...).
     """
-    from ..filtering.iekf import IEKFOptions, identify_iekf
+    from .filtering.iekf import IEKFOptions, identify_iekf
 
     try:
         settings = IEKFOptions(**options)
