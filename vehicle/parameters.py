@@ -70,7 +70,8 @@ def _fields_documented(cls: type) -> type:
     """
     lines = ["Parameters", "----------"]
     for item in dataclasses.fields(cls):
-        unit, source = item.metadata["unit"], item.metadata["source"].rstrip(".")
+        # a source's |x| is an absolute value, which reStructuredText would read as a substitution
+        unit, source = item.metadata["unit"], item.metadata["source"].rstrip(".").replace("|", "\\|")
         lines += [f"{item.name} : float, default {item.default!r}",
                   f"    {'Dimensionless' if unit == '-' else f'In {unit}'}: {source}."]
     cls.__doc__ = inspect.cleandoc(cls.__doc__ or "") + "\n\n" + "\n".join(lines) + "\n"
