@@ -87,12 +87,15 @@ class ComparatorResult:
     Attributes
     ----------
     method : str
+        The method's name in :data:`COMPARATORS`.
     model : ModalModel
+        The identified model, in modal form.
     metrics : FitMetrics
         Of the model simulated exactly (first-order hold) against the record.
     seconds : float
         Wall time of the identification (the scoring simulation excluded).
     meta : dict
+        The method's own notes (orders, options).
     """
 
     method: str
@@ -102,7 +105,13 @@ class ComparatorResult:
     meta: dict[str, Any] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
-        """JSON-ready summary."""
+        """Summarise the result for JSON.
+
+        Returns
+        -------
+        dict
+            Method, fits, run time, eigenvalues and the method's notes.
+        """
         return {
             "method": self.method,
             "seconds": self.seconds,
@@ -408,7 +417,17 @@ COMPARATORS: dict[str, Comparator] = {
 
 
 def register_comparator(name: str, function: Comparator, *, replace: bool = False) -> None:
-    """Add a method to :data:`COMPARATORS`: ``function(data, *, order, **options) -> ModalModel``."""
+    """Add a method to :data:`COMPARATORS`.
+
+    Parameters
+    ----------
+    name : str
+        The method's name, as ``method=`` takes it.
+    function : callable
+        ``function(data, *, order, **options) -> ModalModel``.
+    replace : bool, default False
+        Replace a method already registered under ``name`` (else that is an error).
+    """
     if not callable(function):
         raise InputError(f"the comparator {name!r} must be callable")
     if name in COMPARATORS and not replace:

@@ -29,6 +29,11 @@ class FrozenDict(Mapping):
 
     Equal to any mapping with the same items; its items keep their order.
 
+    Parameters
+    ----------
+    items : mapping or iterable of pairs, optional
+        The items, as ``dict`` takes them; none by default.
+
     Examples
     --------
     >>> entry = FrozenDict({"p": 1e-5, "q_schedule": "shrinking"})

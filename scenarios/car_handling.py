@@ -46,8 +46,10 @@ _SPEEDS = Numbers(POSITIVE)
 @documented
 @dataclass(frozen=True)
 class HandlingOptions:
-    """How an identified model's handling is computed (`vehid handling MODEL`); ``scales`` are factors to SI
-    of its channels by role (:data:`ROLES`)."""
+    """How an identified model's handling is computed (`vehid handling MODEL`).
+
+    ``scales`` are factors to SI of its channels by role (:data:`ROLES`).
+    """
 
     yaw_rate: str | None = option(None, help="the model's yaw-rate output (default: yaw_rate)")
     lateral_acceleration: str | None = option(
@@ -302,6 +304,7 @@ class ModelHandling:
     plausibility : tuple of Finding
         The failed checks of the car's physics (each also a warning).
     warnings : tuple of str
+        One line per problem found.
     source : SourceHandling or None
         The source model's linearisation at the same speeds, where asked.
     figure : Path or None
@@ -332,7 +335,13 @@ class ModelHandling:
         return Path(self.model_file).name if self.model_file is not None else type(self.model).__name__
 
     def render(self) -> dict[str, Any]:
-        """The JSON summary of `vehid handling MODEL`, as a fresh dict."""
+        """Render the JSON summary of `vehid handling MODEL`.
+
+        Returns
+        -------
+        dict
+            The summary, as a fresh dict the caller may change.
+        """
         return thaw({
             "source": False, "model": self.model_file, **self.origin, "scheduled": hasattr(self.model, "model_at"),
             "wheelbase": self.wheelbase, "scales": self.scales,
@@ -345,7 +354,18 @@ class ModelHandling:
         })
 
     def text(self, *, warnings: bool = True) -> str:
-        """The metrics table (with the warnings, one line each, unless ``warnings`` is False)."""
+        """Render the metrics table as `vehid handling MODEL` prints it.
+
+        Parameters
+        ----------
+        warnings : bool, default True
+            Add the warnings, one line each.
+
+        Returns
+        -------
+        str
+            The table.
+        """
         lines = metrics_table(f"{self.name} ({STEER_UNIT_TEXT}):", self.metrics)
         if self.extrapolated:
             lines.append(f"{'extrapolated (too few samples)':<32}"
@@ -389,7 +409,13 @@ class SourceModelHandling:
         freeze_fields(self)
 
     def render(self) -> dict[str, Any]:
-        """The JSON summary of `vehid handling --source`, as a fresh dict."""
+        """Render the JSON summary of `vehid handling --source`.
+
+        Returns
+        -------
+        dict
+            The summary, as a fresh dict the caller may change.
+        """
         return thaw({
             "source": True, **self.result.as_dict(), "units": JSON_UNITS, "warnings": list(self.warnings),
             **({"steady_state": [entry.as_dict() for entry in self.steady_state]}
@@ -398,7 +424,18 @@ class SourceModelHandling:
         })
 
     def text(self, *, warnings: bool = True) -> str:
-        """The linearisation's and the simulation's metrics tables, the steady states (and the warnings)."""
+        """Render the source model's handling as `vehid handling --source` prints it.
+
+        Parameters
+        ----------
+        warnings : bool, default True
+            Add the warnings, one line each.
+
+        Returns
+        -------
+        str
+            The linearisation's and the simulation's metrics tables and the steady states.
+        """
         result, level = self.result, self.result.step_lateral_acceleration
         lines = [f"source model {result.vehicle} (wheelbase {result.wheelbase:g} m; {STEER_UNIT_TEXT})",
                  *metrics_table("linearisation:", result.linearisation)]
@@ -451,6 +488,19 @@ def handling(model: Any = None, *, source: str | VehicleParameters | None = None
         Bad input, before any work where it can be seen then.
     StrictWarningsError
         With ``options.strict``, where the result has warnings (carrying its summary and text).
+
+    Examples
+    --------
+    The baseline car's linearisation at 20 m/s. Its understeer gradient K (deg/g) sets the
+    characteristic speed ``sqrt(57.3 L g / K)`` = 46.9 m/s on the 2.7 m wheelbase:
+
+    >>> from vehid.scenarios import SourceHandlingOptions, handling
+    >>> result = handling(source="baseline", speeds=[20.0], options=SourceHandlingOptions(simulation=False))
+    >>> metrics = result.result.linearisation[0]
+    >>> round(metrics.understeer_gradient_deg_per_g, 2), round(metrics.characteristic_speed_m_s, 1)
+    (0.69, 46.9)
+    >>> round(metrics.yaw_rate_gain, 2)  # V / (L (1 + V^2 / v_ch^2)), deg/s per deg of road-wheel steer
+    6.27
     """
     if (model is None) == (source is None):
         raise InputError("give a model (a model file, an archive or a model) or the source vehicle, not both")

@@ -150,8 +150,9 @@ def _single_track_without_lag(model: Any) -> bool:
 
 @dataclass(frozen=True)
 class CarChecks:
-    """The checks of a car's physics on the model `vehid identify` returns (:func:`identify_findings`), as
-    :func:`vehid.identification.identify` takes them (``checks``).
+    """The checks of a car's physics on the model `vehid identify` returns (:func:`identify_findings`).
+
+    :func:`vehid.identification.identify` takes them as its ``checks``.
 
     Attributes
     ----------

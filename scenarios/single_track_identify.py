@@ -76,8 +76,10 @@ LINEAR_LIMIT_G = 0.5
 @documented
 @dataclass(frozen=True)
 class SingleTrackOptions:
-    """Settings of the single-track identification (:func:`identify_single_track`); the defaults are those of
-    `vehid identify --structure single-track`."""
+    """Settings of the single-track identification (:func:`identify_single_track`).
+
+    The defaults are those of `vehid identify --structure single-track`.
+    """
 
     p: float | None = option(
         None, POSITIVE, help="tuning parameter p of the grey-box filter: the random-walk variance of a scaled "
@@ -92,7 +94,19 @@ class SingleTrackOptions:
 
 @dataclass(frozen=True)
 class Estimate:
-    """One identified parameter: its value, standard deviation and unit (JSON ``{value, std, unit}``)."""
+    """One identified parameter: its value, standard deviation and unit (JSON ``{value, std, unit}``).
+
+    Parameters
+    ----------
+    name : str
+        The parameter's name (``cornering_stiffness_front``, ...).
+    value : float
+        The estimate.
+    std : float
+        Its standard deviation.
+    unit : str
+        The unit of both.
+    """
 
     name: str
     value: float
@@ -100,13 +114,22 @@ class Estimate:
     unit: str
 
     def as_dict(self) -> dict[str, Any]:
+        """Describe the estimate for JSON.
+
+        Returns
+        -------
+        dict
+            ``{value, std, unit}``.
+        """
         return {"value": self.value, "std": self.std, "unit": self.unit}
 
 
 @dataclass(frozen=True, eq=False)
 class SingleTrackIdentification:
-    """The single-track model identified from a log: typed, frozen all the way down, rendering the JSON and
-    text of `vehid identify --structure single-track` (the module docstring lists the keys).
+    """The single-track model identified from a log: typed, frozen all the way down.
+
+    It renders the JSON and text of `vehid identify --structure single-track`
+    (the module docstring lists the keys).
 
     Attributes
     ----------
@@ -171,10 +194,17 @@ class SingleTrackIdentification:
 
     @property
     def config(self) -> SingleTrackConfig:
+        """The car's configuration: mass, axle distances, the quantities measured, the model's options."""
         return self.model.config
 
     def render(self) -> dict[str, Any]:
-        """The JSON summary of `vehid identify --structure single-track`, as a fresh dict."""
+        """Render the JSON summary of `vehid identify --structure single-track`.
+
+        Returns
+        -------
+        dict
+            The summary, as a fresh dict the caller may change.
+        """
         config, result = self.config, self.estimator
         physical = {estimate.name: estimate.as_dict() for estimate in self.parameters[:config.n_physical]}
         offsets = {estimate.name: estimate.as_dict() for estimate in self.parameters[config.n_physical:]}
@@ -212,8 +242,13 @@ class SingleTrackIdentification:
         })
 
     def text(self) -> str:
-        """What the command prints without ``--json``: the run, each parameter +/- 2 sigma, the handling, the
-        parts of the log and the fits."""
+        """Render what the command prints without ``--json``.
+
+        Returns
+        -------
+        str
+            The run, each parameter +/- 2 sigma, the handling, the parts of the log and the fits.
+        """
         summary = self.render()
         lines = [f"single-track model (grey-box IEKF): {summary['passes_run']} passes, "
                  f"{'pass budget reached' if summary['stop_reason'] == 'passes' else summary['stop_reason']}, "
@@ -360,8 +395,10 @@ def identify_single_track(data: IOData | str | os.PathLike, *, schedule: str, co
         How the file is read.
     validation : float, optional
         The fraction of the log's moving samples held out at its end.
-    despike, exclude
-        As :func:`vehid.identification.identify`'s.
+    despike : bool
+        Replace spikes and drop-outs by interpolation, as :func:`vehid.identification.identify` does.
+    exclude : str, TimeWindow or a sequence of them
+        Windows of time left out, as :func:`vehid.identification.identify` takes them.
     min_speed : float or None
         Only the samples at or above this speed (m/s), each run of them a record; None keeps every sample.
     min_run_seconds : float
@@ -379,6 +416,7 @@ def identify_single_track(data: IOData | str | os.PathLike, *, schedule: str, co
     Returns
     -------
     SingleTrackIdentification
+        The model, its parameters with standard deviations, the handling and the fits.
 
     Raises
     ------
@@ -386,6 +424,27 @@ def identify_single_track(data: IOData | str | os.PathLike, *, schedule: str, co
         Bad data or settings (before any work where they can be seen then).
     StrictWarningsError
         With ``options.strict``, where the run ends with warnings (carrying the summary and text).
+
+    Examples
+    --------
+    Ten seconds of a car at 20 m/s simulated by the model itself (cornering stiffnesses 80 and
+    100 kN/rad, yaw inertia 2500 kg m^2), and its parameters identified from the log:
+
+    >>> import numpy as np
+    >>> from vehid.identification import IOData, simulate_greybox
+    >>> from vehid.scenarios import identify_single_track
+    >>> from vehid.vehicle.single_track import SingleTrackConfig, single_track_model
+    >>> car = SingleTrackConfig(mass=1500.0, cg_to_front_axle=1.2, cg_to_rear_axle=1.5)
+    >>> steer = 0.02 * np.convolve(np.random.default_rng(1).standard_normal(1000), np.ones(10) / 10, "same")
+    >>> drive = IOData(t=np.arange(1000) * 0.01, u=np.column_stack([steer, np.full(1000, 20.0)]),
+    ...                y=np.zeros((1000, 2)), input_names=("steer", "speed"),
+    ...                output_names=("yaw_rate", "lateral_acceleration"))
+    >>> y, _ = simulate_greybox(single_track_model(car), [80_000.0, 100_000.0, 2500.0], drive)
+    >>> result = identify_single_track(drive.replace(y=y), schedule="speed", config=car)
+    >>> [(estimate.name, round(estimate.value)) for estimate in result.parameters]
+    [('cornering_stiffness_front', 80000), ('cornering_stiffness_rear', 100000), ('yaw_inertia', 2500)]
+    >>> round(result.handling.understeer_gradient.value, 2)  # m/L (l_r/C_f - l_f/C_r) g, in deg/g
+    2.11
     """
     from vehid.identification.automatic import steps as workflow
     from vehid.identification.dataio.cleaning import cleaning_notes, cleaning_summary, cleaning_warnings

@@ -61,6 +61,17 @@ class IdentifyOptions:
     Each is checked when the object is built: a value outside those listed below
     raises :class:`~vehid.identification.errors.OptionError` naming it, as does
     ``bootstrap`` with a method other than n4sid.
+
+    Examples
+    --------
+    >>> from vehid.identification import IdentifyOptions
+    >>> options = IdentifyOptions(passes=20, p=1e-5, nonlinear=True)
+    >>> options.passes, options.method, options.nodes
+    (20, 'iekf', 5)
+    >>> IdentifyOptions(start="bogus")
+    Traceback (most recent call last):
+    ...
+    vehid.identification.errors.OptionError: 'start' must be one of data, band, default, paper; got 'bogus'
     """
 
     p: float | None = option(
@@ -135,8 +146,9 @@ class IdentifyOptions:
 @documented
 @dataclass(frozen=True)
 class Resume:
-    """A checkpointed run to go on with (`vehid identify --resume ARCHIVE`): the archive an identification wrote
-    with ``out``, and the pass budget.
+    """A checkpointed run to go on with (`vehid identify --resume ARCHIVE`): an archive and a pass budget.
+
+    The archive is the one an identification wrote with ``out``.
 
     The run goes on with the archive's records, preparation and filter settings, and reaches the
     same parameters as a run that was never interrupted.

@@ -284,12 +284,16 @@ class Identification:
 
     @property
     def is_iekf(self) -> bool:
+        """Whether the estimator was the IEKF (rather than a classical method)."""
         return self.method == "iekf"
 
     @property
     def linear_model(self) -> IdentifiedModel:
-        """The linear model whose matrices and eigenvalues the summary gives: the model returned, or the
-        unscheduled model where the scheduled family or the spline model is returned in its place."""
+        """The linear model whose matrices and eigenvalues the summary gives.
+
+        The model returned, or the unscheduled model where the scheduled family
+        or the spline model is returned in its place.
+        """
         return self.unscheduled if self.unscheduled is not None else self.model
 
     @cached_property
@@ -298,8 +302,14 @@ class Identification:
         return freeze(self.render())
 
     def render(self) -> dict[str, Any]:
-        """The public JSON keys of the run (the module docstring of :mod:`vehid.scenarios.commands.identify`),
-        as a fresh dict the caller may change."""
+        """Render the run's public JSON keys (the module docstring of :mod:`vehid.scenarios.commands.identify`).
+
+        Returns
+        -------
+        dict
+            The summary `vehid identify --json` prints, as a fresh dict the caller may change
+            (arrays not yet made lists).
+        """
         from .steps import scores_summary  # the public score keys are defined once, beside the scoring
 
         model = self.linear_model
@@ -350,7 +360,13 @@ class Identification:
                 "discretization": result.options.discretization}
 
     def text(self) -> str:
-        """What `vehid identify` prints without ``--json`` (:mod:`vehid.identification.automatic.text`)."""
+        """Render the run as `vehid identify` prints it without ``--json``.
+
+        Returns
+        -------
+        str
+            The text (:mod:`vehid.identification.automatic.text`).
+        """
         from .text import identification_text
 
         return identification_text(self.render(), self.plan)

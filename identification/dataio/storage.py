@@ -188,6 +188,7 @@ def write_value(group: h5py.Group, name: str, value: Any, *, units: str | None =
     Parameters
     ----------
     group : h5py.Group
+        The open group, written into.
     name : str
         Member name: no ``/``, not ``dataclass`` and not starting ``vehid_``.
     value : object
@@ -321,6 +322,13 @@ def _write_mapping(group: h5py.Group, mapping: Mapping) -> None:
 def read_value(group: h5py.Group, name: str) -> Any:
     """Read member ``name`` of ``group`` as :func:`write_value` stored it.
 
+    Parameters
+    ----------
+    group : h5py.Group
+        The open group.
+    name : str
+        The member: a dataset, a group or an attribute.
+
     Returns
     -------
     object
@@ -375,7 +383,18 @@ def _tuples(value: Any) -> Any:
 
 
 def read_group(group: h5py.Group) -> Any:
-    """Read a group written by :func:`write_group` (or by :func:`write_value`) back into its value."""
+    """Read a group written by :func:`write_group` (or by :func:`write_value`) back into its value.
+
+    Parameters
+    ----------
+    group : h5py.Group
+        The open group.
+
+    Returns
+    -------
+    object
+        The value: a registered class's instance, a dict, tuple or list.
+    """
     attrs = group.attrs
     if _SCHEMA in attrs or _LEGACY_DATACLASS in attrs or _LEGACY_CLASS in attrs:
         return _read_registered(group)

@@ -168,12 +168,22 @@ class IEKFOptions:
 
     @classmethod
     def invariant(cls, **changes: Any) -> "IEKFOptions":
-        """Settings independent of units, scale, sample interval and record length (module docstring).
+        """Make settings independent of units, scale, sample interval and record length (module docstring).
 
         Normalised signals, the start from the data, time in samples,
         ``p = INVARIANT_P`` per dominant time constant, shrinking by ``INVARIANT_P_DECAY``
         per pass, R from the data's noise and :data:`INVARIANT_BACK_OFF` restarts after a
-        divergence; ``changes`` override any field.
+        divergence.
+
+        Parameters
+        ----------
+        **changes
+            Fields of :class:`IEKFOptions` that override these settings.
+
+        Returns
+        -------
+        IEKFOptions
+            The settings.
         """
         settings: dict[str, Any] = {"normalize": True, "start": "data", "timescale": "auto", "p": INVARIANT_P,
                                     **invariant_noise_settings()}
@@ -203,9 +213,18 @@ class IEKFOptions:
 class FilterState:
     """The filter's state between passes, in normalised units: parameters and P (what a resume needs).
 
-    ``time_unit`` (s) is the filter's time unit (1 s, or the sample interval
-    with ``timescale="auto"``); ``time_constant`` (s) the unit of time in
-    which p is stated (module docstring, "Units").
+    Attributes
+    ----------
+    theta : ndarray, shape (n_theta,)
+        The parameters, normalised.
+    P : ndarray, shape (n_theta, n_theta)
+        Their covariance in the filter.
+    input_scale, output_scale : ndarray, shapes (n_u,) and (n_y,)
+        The normalisation of the signals.
+    time_unit : float, default 1.0
+        The filter's time unit (s): 1 s, or the sample interval with ``timescale="auto"``.
+    time_constant : float, default 1.0
+        The unit of time in which p is stated (s; module docstring, "Units").
     """
 
     theta: np.ndarray
@@ -220,8 +239,27 @@ class FilterState:
 class IEKFResult(PassHistory):
     """An IEKF identification: the final model, one record per pass, and the filter state.
 
-    ``stop_reason`` is ``"converged"``, ``"passes"`` (the pass limit) or
-    ``"diverged: ..."`` (only on the result carried by a DivergenceError).
+    Attributes
+    ----------
+    model : ModalModel
+        The final model, in original units.
+    structure : ModalStructure
+        Its structure.
+    options : IEKFOptions
+        The settings used.
+    history : tuple of PassRecord
+        One record per pass.
+    state : FilterState
+        The filter's state after the last pass (what a resume needs).
+    dt : float
+        The records' sample interval (s).
+    stop_reason : str
+        ``"converged"``, ``"passes"`` (the pass limit) or ``"diverged: ..."`` (only
+        on the result carried by a DivergenceError).
+    seconds : float
+        Run time (s).
+    meta : dict
+        Provenance and the run's notes (scales, start, tuning).
     """
 
     model: ModalModel
@@ -355,6 +393,7 @@ def identify_iekf(
     structure : ModalStructure
         Order, modes and fixed C entries.
     options : IEKFOptions, optional
+        Settings; :class:`IEKFOptions`' defaults without them.
     initial_model : ModalModel, optional
         Start from these parameters instead of the named start values.
     resume : IEKFResult, optional
@@ -386,6 +425,7 @@ def identify_iekf(
     Returns
     -------
     IEKFResult
+        The final model, one record per pass and the filter's state.
 
     Raises
     ------

@@ -122,9 +122,20 @@ def _mapped_response_function(structure: Any, count: int) -> ca.Function:
 class ModeEstimate:
     """One mode's eigenvalue, natural frequency and damping with their standard deviations.
 
-    ``eigenvalue`` is ``sigma + j|omega|`` for a pair (the upper one), real
-    for a real pole; ``eigenvalue_covariance`` (2, 2) is that of its real and
-    imaginary parts (for the pole map's ellipses).
+    Attributes
+    ----------
+    eigenvalue : complex
+        ``sigma + j|omega|`` (1/s) for a pair (the upper one), real for a real pole.
+    eigenvalue_std : tuple of float
+        Standard deviations of its real and imaginary parts.
+    eigenvalue_covariance : ndarray, shape (2, 2)
+        Covariance of its real and imaginary parts (for the pole map's ellipses).
+    frequency_hz, frequency_hz_std : float
+        Natural frequency (Hz) and its standard deviation.
+    damping, damping_std : float
+        Damping ratio and its standard deviation.
+    level : float
+        Confidence level of :meth:`interval`.
     """
 
     eigenvalue: complex
@@ -137,7 +148,18 @@ class ModeEstimate:
     level: float
 
     def interval(self, name: str) -> tuple[float, float]:
-        """``value -/+ z std`` of ``frequency_hz`` or ``damping`` at :attr:`level`."""
+        """Return the confidence interval of the frequency or the damping at :attr:`level`.
+
+        Parameters
+        ----------
+        name : {"frequency_hz", "damping"}
+            The quantity.
+
+        Returns
+        -------
+        tuple of float
+            ``(value - z std, value + z std)``.
+        """
         if name not in ("frequency_hz", "damping"):
             raise InputError(f"intervals are given for frequency_hz and damping; got {name!r}")
         value, std = getattr(self, name), getattr(self, f"{name}_std")
@@ -145,7 +167,13 @@ class ModeEstimate:
         return value - z * std, value + z * std
 
     def as_dict(self) -> dict[str, Any]:
-        """The JSON form: ``eigenvalue`` and ``eigenvalue_std`` as [re, im], frequency and damping with their std."""
+        """Describe the mode for JSON.
+
+        Returns
+        -------
+        dict
+            ``eigenvalue`` and ``eigenvalue_std`` as [re, im], frequency and damping with their std.
+        """
         return {
             "eigenvalue": [float(self.eigenvalue.real), float(self.eigenvalue.imag)],
             "eigenvalue_std": [float(v) for v in self.eigenvalue_std],
@@ -180,8 +208,16 @@ class ModelUncertainty:
 class FrequencyResponseBand:
     """A frequency response with delta-method bands.
 
-    Arrays are (n_frequencies, n_y, n_u); magnitude is linear (output units
-    per input unit), phase in degrees, unwrapped along frequency.
+    Attributes
+    ----------
+    frequencies_hz : ndarray, shape (F,)
+        Frequencies (Hz).
+    magnitude, magnitude_std : ndarray, shape (F, n_y, n_u)
+        Magnitude, linear (output units per input unit), and its standard deviation.
+    phase_deg, phase_deg_std : ndarray, shape (F, n_y, n_u)
+        Phase in degrees, unwrapped along frequency, and its standard deviation.
+    level : float
+        Confidence level of the bands.
     """
 
     frequencies_hz: np.ndarray
@@ -192,18 +228,30 @@ class FrequencyResponseBand:
     level: float
 
     def normal_quantile(self) -> float:
-        """``z`` of the bands: ``value +/- z std`` holds :attr:`level`."""
+        """Return the normal quantile ``z`` of the bands.
+
+        Returns
+        -------
+        float
+            ``z`` such that ``value +/- z std`` holds :attr:`level`.
+        """
         return normal_quantile(self.level)
 
     def magnitude_band(self) -> tuple[np.ndarray, np.ndarray]:
-        """Lower and upper magnitude at :attr:`level` (the lower one floored just above zero for log axes)."""
+        """Return the magnitude band at :attr:`level`.
+
+        Returns
+        -------
+        tuple of ndarray
+            Lower and upper magnitude, shape (F, n_y, n_u); the lower one floored just above zero for log axes.
+        """
         z = normal_quantile(self.level)
         lower = np.maximum(self.magnitude - z * self.magnitude_std, 1e-3 * self.magnitude)
         return lower, self.magnitude + z * self.magnitude_std
 
 
 def model_uncertainty(model: Any, *, level: float = 0.95) -> ModelUncertainty:
-    """Modes and steady-state gains of ``model`` with their standard deviations by the delta method.
+    """Estimate the modes and steady-state gains of ``model`` with their standard deviations by the delta method.
 
     Parameters
     ----------
@@ -216,6 +264,7 @@ def model_uncertainty(model: Any, *, level: float = 0.95) -> ModelUncertainty:
     Returns
     -------
     ModelUncertainty
+        The modes (pairs first) and the gain ``D - C A^-1 B``, with standard deviations.
     """
     normal_quantile(level)
     structure = model.structure
