@@ -7,7 +7,7 @@ can go on after a kill. A checkpoint copies, rewrites and re-verifies the
 archive, which on a short record takes far longer than a pass; the
 checkpointer therefore gathers passes until the time computed since its last
 checkpoint reaches ``COMPUTE_PER_CHECKPOINT`` times what that checkpoint took
-(``identification/filtering/iekf_archive.py``). Three commands on the hair
+(``identification/dataio/iekf_archive.py``). Three commands on the hair
 dryer record (700 estimation samples, order 4, a given p, 50 passes at most),
 interleaved so that they meet the same load, each ``--repeats`` times in a
 fresh process:
@@ -49,7 +49,7 @@ TARGET_SHARE = 1 / 3  # of every pass's added CPU time that gathered checkpoints
 # The command line in a fresh interpreter, its checkpointing rule set first (None: as shipped).
 _RUN = """
 import sys
-from vehid.identification.filtering import iekf_archive
+from vehid.identification.dataio import iekf_archive
 if sys.argv[1] != "None":
     iekf_archive.COMPUTE_PER_CHECKPOINT = float(sys.argv[1])
 from vehid.scenarios import cli

@@ -14,7 +14,7 @@ from __future__ import annotations
 import os
 import time
 
-from vehid.identification.classical.comparators import identify_with
+from vehid.identification.comparators import identify_with
 from vehid.identification.classical.least_squares import arx_regressors
 from vehid.identification.classical.recursive import recursive_least_squares
 from vehid.scenarios.benchmarking import median_seconds, record_figures

@@ -32,7 +32,7 @@ import numpy as np
 from vehid.identification.compiled import compile_driver
 from vehid.identification.filtering.filter_models import LinearModalFilterModel
 from vehid.identification.filtering.iekf_kernel import structured_pass_source
-from vehid.identification.filtering.iekf_pass import _DRIVER, _CompiledPass, build_filter_step, pack_covariance
+from vehid.identification.filtering.iekf_pass import PASS_DRIVER, CompiledPass, build_filter_step, pack_covariance
 from vehid.identification.models.modal import ModalStructure
 from vehid.scenarios.benchmarking import record_figures
 
@@ -46,7 +46,7 @@ def _library(filter_step, kernel: str, flags: str):
         source, functions = structured_pass_source(filter_step)
         return compile_driver(tuple(functions), source, library_name="bench_loops", entry="vehid_iekf_pass",
                               n_integers=4, n_arrays=8, optimisation=flags)
-    return compile_driver(filter_step.timed_step, _DRIVER, library_name="bench_pass", entry="vehid_iekf_pass",
+    return compile_driver(filter_step.timed_step, PASS_DRIVER, library_name="bench_pass", entry="vehid_iekf_pass",
                           n_integers=4, n_arrays=8, optimisation=flags)
 
 
@@ -90,7 +90,7 @@ def main(samples: int, repeats: int) -> dict:
                     try:
                         start = time.perf_counter()
                         compiler_cpu = resource.getrusage(resource.RUSAGE_CHILDREN).ru_utime
-                        run = _CompiledPass(_library(filter_step, kernel, flags), filter_step)
+                        run = CompiledPass(_library(filter_step, kernel, flags), filter_step)
                         compile_seconds = time.perf_counter() - start
                         compile_cpu = resource.getrusage(resource.RUSAGE_CHILDREN).ru_utime - compiler_cpu
                         run(*inputs)

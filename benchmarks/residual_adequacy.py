@@ -31,10 +31,10 @@ import time
 from pathlib import Path
 
 from vehid.identification.dataio.archive import open_archive, read_records
-from vehid.identification.classical.comparators import identify_with
+from vehid.identification.comparators import identify_with
 from vehid.identification.errors import DivergenceError
 from vehid.identification.filtering.iekf import IEKFOptions, identify_iekf
-from vehid.identification.filtering.iekf_archive import read_iekf_run
+from vehid.identification.dataio.iekf_archive import read_iekf_run
 from vehid.identification.models.modal import ModalStructure
 from vehid.identification.dataio.storage import read_group
 from vehid.scenarios.handling_study import HandlingConfig, make_records, with_sensor_noise

@@ -124,9 +124,8 @@ def _variant(form: str, blocks: int) -> str:
 
 def scheduled_parts(path: Path, spans: list[tuple[float, float]]) -> dict[str, Any]:
     """Each part's scheduled family (``vehid identify --schedule vx``): understeer gradient at :data:`SPEED`."""
-    from vehid.identification.automatic.run import identify_plan
     from vehid.identification.filtering.scheduled_iekf import HOLD_OF, scheduled_simulation_covariance
-    from vehid.scenarios.commands.identify import load_plan, options_from_args
+    from vehid.scenarios.commands.identify import identify_from_args, options_from_args
     from vehid.scenarios.commands.parser import build_parser
     from vehid.vehicle.handling import handling_metrics
 
@@ -136,8 +135,8 @@ def scheduled_parts(path: Path, spans: list[tuple[float, float]]) -> dict[str, A
                 "--segment", f"{start:.6g}:{end:.6g}", "--quiet"]
         args = build_parser(argv).parse_args(argv)
         began = time.perf_counter()
-        plan = load_plan(args, args.data)
-        result = identify_plan(plan, options_from_args(args))
+        result = identify_from_args(args, options_from_args(args))  # the command's own call of the library
+        plan = result.plan
         rows["seconds"].append(time.perf_counter() - began)
         family = result.scheduled.model
         rows["returned"].append(result.scheduled.summary["model_returned"])

@@ -36,13 +36,13 @@ from pathlib import Path
 
 import numpy as np
 
-import vehid.identification.classical.comparators as comparators
+import vehid.identification.comparators as comparators
 import vehid.identification.filtering.iekf as iekf
-from vehid.identification.classical.comparators import identify_with
+from vehid.identification.comparators import identify_with
 from vehid.identification.filtering.iekf import IEKFOptions, identify_iekf
 from vehid.identification.models.modal import ModalStructure
 from vehid.identification.assessment.segments import formal_method
-from vehid.identification.assessment.uncertainty import frequency_response
+from vehid.identification.models.delta_method import frequency_response_band
 from vehid.scenarios.benchmarking import median_seconds, record_figures
 from vehid.scenarios.cli import main as cli_main
 from vehid.scenarios.linear_example import make_data
@@ -53,7 +53,7 @@ FREQUENCIES = np.logspace(-1, 1.5, 200)
 
 def _extras(model, data) -> None:
     model.uncertainty()
-    frequency_response(model, FREQUENCIES)
+    frequency_response_band(model, FREQUENCIES)
     model_residual_tests(model, data)
 
 
@@ -118,7 +118,7 @@ def _added_steps(identify, covariance: str, record, repeats: int) -> dict:
             model = identify()
             step("modes", model.uncertainty)
             step("residual_tests", lambda: model_residual_tests(model, record))
-            step("band", lambda: frequency_response(model, FREQUENCIES))
+            step("band", lambda: frequency_response_band(model, FREQUENCIES))
     finally:
         setattr(comparators, covariance, shipped)
     medians = {f"{name}_s": statistics.median(values[1:]) for name, values in spent.items()}  # first: warm-up

@@ -14,6 +14,7 @@ in ``docs/_ext``. Environment variables:
 from __future__ import annotations
 
 import os
+import re
 import sys
 from pathlib import Path
 
@@ -24,6 +25,7 @@ matplotlib.use("Agg")
 
 DOCS = Path(__file__).resolve().parent
 sys.path.insert(0, str(DOCS / "_ext"))
+import public_api  # noqa: E402  (the extensions' folder is on the path from here on)
 
 project = "vehid"
 author = "the vehid authors"
@@ -56,7 +58,11 @@ autodoc_default_options = {"members": True, "inherited-members": False, "show-in
 autodoc_typehints = "none"
 numpydoc_show_class_members = False
 numpydoc_class_members_toctree = False
-numpydoc_validation_checks: set[str] = set()
+# Every docstring the reference shows is validated, by the checks the docstring test
+# applies to the public API (docs/_ext/public_api.py): under -W a failure stops the build.
+numpydoc_validation_checks = set(public_api.VALIDATION_CHECKS)
+numpydoc_validation_overrides = {"PR01": [public_api.ATTRIBUTES_SECTION]}
+numpydoc_validation_exclude = {"^" + re.escape(name) + "$" for name in public_api.data_names()}
 
 quick = os.environ.get("VEHID_DOCS_QUICK", "0") == "1"
 sphinx_gallery_conf = {

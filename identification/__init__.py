@@ -8,12 +8,6 @@ pay for SciPy's signal processing, CasADi and HDF5 before they use them.
 
 from __future__ import annotations
 
-import importlib
-import importlib.abc
-import importlib.util
-import sys
-from typing import Any
-
 from .lazy_exports import export_lazily
 
 # submodule -> the public names it defines
@@ -41,7 +35,7 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
     "assessment.order": ("OrderAssessment", "assess_orders"),
     "models.spline": ("SplineBasis", "covering_basis", "resample"),
     "dataio.storage": ("read_group", "read_value", "write_group", "write_value"),
-    "classical.comparators": ("COMPARATORS", "ComparatorResult", "identify_with", "register_comparator"),
+    "comparators": ("COMPARATORS", "ComparatorResult", "identify_with", "register_comparator"),
     "classical.ekf": ("EkfResult", "NonlinearModel", "ekf_joint"),
     "classical.gls": ("GlsResult", "estimate_gls"),
     "classical.kalman": ("KalmanResult", "SmootherResult", "kalman_filter", "kalman_predict", "kalman_update", "rts_smoother"),
@@ -53,82 +47,15 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
         "modal_structure_for", "to_modal"),
     "classical.subspace": ("SubspaceResult", "estimate_subspace", "largest_subspace_order"),
     "assessment.residuals": ("ResidualTests", "residual_tests"),
-    "assessment.uncertainty": ("FrequencyResponseBand", "ModelUncertainty", "ModeEstimate", "fit_covariance",
-        "model_uncertainty"),
+    "assessment.uncertainty": ("fit_covariance",),
+    "models.delta_method": ("FrequencyResponseBand", "ModelUncertainty", "ModeEstimate", "model_uncertainty"),
     "assessment.segments": ("BlockJackknife", "SegmentConsistency", "UncertaintyMethod", "block_jackknife",
         "pair_agreement", "refit_replicates", "segment_consistency"),
     "models.scheduled": ("ModeMatch", "ScheduledModalModel", "schedule_models"),
     "filtering.scheduled_iekf": ("ScheduledIEKFOptions", "ScheduledIEKFResult", "identify_scheduled"),
-    "pipeline": ("IdentifyOptions", "Identification", "identify"),
+    "pipeline": ("IdentifyOptions", "Identification", "Resume", "identify"),
+    "frozen": ("FrozenDict",),
 }
-# The modules' former flat names (before the sub-packages by role), so that code importing
-# ``vehid.identification.modal`` keeps working: each resolves to the very module object of its new
-# place, so classes, isinstance checks and pickles agree whichever name imported them.
-_FORMER_MODULES: dict[str, str] = {
-    "protocol": "models.protocol",
-    "statespace": "models.statespace",
-    "discrete": "models.discrete",
-    "modal": "models.modal",
-    "spline": "models.spline",
-    "spline_modal": "models.spline_modal",
-    "scheduled": "models.scheduled",
-    "iekf": "filtering.iekf",
-    "iekf_pass": "filtering.iekf_pass",
-    "iekf_kernel": "filtering.iekf_kernel",
-    "filter_models": "filtering.filter_models",
-    "rinse": "filtering.rinse",
-    "start": "filtering.start",
-    "spline_iekf": "filtering.spline_iekf",
-    "scheduled_iekf": "filtering.scheduled_iekf",
-    "greybox": "filtering.greybox",
-    "iekf_archive": "filtering.iekf_archive",
-    "least_squares": "classical.least_squares",
-    "recursive": "classical.recursive",
-    "gls": "classical.gls",
-    "kalman": "classical.kalman",
-    "ekf": "classical.ekf",
-    "pencil": "classical.pencil",
-    "factorised": "classical.factorised",
-    "subspace": "classical.subspace",
-    "comparators": "classical.comparators",
-    "metrics": "assessment.metrics",
-    "multirecord": "assessment.multirecord",
-    "validation": "assessment.validation",
-    "residuals": "assessment.residuals",
-    "uncertainty": "assessment.uncertainty",
-    "order": "assessment.order",
-    "readers": "dataio.readers",
-    "timebase": "dataio.timebase",
-    "preparation": "dataio.preparation",
-    "archive": "dataio.archive",
-    "archive_safety": "dataio.archive_safety",
-    "storage": "dataio.storage",
-}
-
-
-class _FormerModuleFinder(importlib.abc.MetaPathFinder, importlib.abc.Loader):
-    """Resolves a former module name to its module's new place."""
-
-    def find_spec(self, fullname: str, path: Any = None, target: Any = None) -> Any:
-        package, _, name = fullname.rpartition(".")
-        if package != __name__ or name not in _FORMER_MODULES:
-            return None
-        return importlib.util.spec_from_loader(fullname, self)
-
-    def create_module(self, spec: Any) -> Any:
-        module = importlib.import_module(f"{__name__}.{_FORMER_MODULES[spec.name.rpartition('.')[2]]}")
-        spec.loader_state = module.__spec__
-        return module
-
-    def exec_module(self, module: Any) -> None:
-        # The module ran at its new place; the import system has just given it the former name's spec,
-        # which would misplace its own relative imports: it gets its own spec back.
-        module.__spec__ = module.__spec__.loader_state
-
-
-if not any(isinstance(finder, _FormerModuleFinder) for finder in sys.meta_path):
-    sys.meta_path.append(_FormerModuleFinder())
-
 export_lazily(__name__, _EXPORTS)
 
 
@@ -271,5 +198,7 @@ __all__ = [
     "identify_scheduled",
     "IdentifyOptions",
     "Identification",
+    "Resume",
     "identify",
+    "FrozenDict",
 ]

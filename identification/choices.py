@@ -12,11 +12,14 @@ from __future__ import annotations
 
 from vehid.identification.optionspec import Number, Numbers, OneOf
 
-__all__ = ["DETRENDS", "DETREND", "SPLINE_MIN_NODES", "SPLINE_MAX_NODES", "SPLINE_NODE_COUNT", "SCHEDULE_KNOT_COUNT",
-           "SCHEDULE_GRID", "JITTER_TOLERANCE", "DATA_STARTS", "START_VALUES", "START_CHOICES", "DISCRETIZATIONS",
-           "COVARIANCE_FORMS", "TIMESCALES", "INITIAL_STATES", "C_PATTERNS", "SPLINE_NODES", "SPLINE_P",
-           "SPLINE_PASSES", "SCHEDULE_DEFAULT_KNOTS", "SCHEDULE_MIN_KNOTS", "SCHEDULE_MAX_KNOTS",
+__all__ = ["HDF5_SUFFIXES", "DETRENDS", "DETREND", "SPLINE_MIN_NODES", "SPLINE_MAX_NODES", "SPLINE_NODE_COUNT",
+           "SCHEDULE_KNOT_COUNT", "SCHEDULE_GRID", "JITTER_TOLERANCE", "DATA_STARTS", "START_VALUES", "START_CHOICES",
+           "DISCRETIZATIONS", "COVARIANCE_FORMS", "TIMESCALES", "INITIAL_STATES", "C_PATTERNS", "SPLINE_NODES",
+           "SPLINE_P", "SPLINE_PASSES", "SCHEDULE_DEFAULT_KNOTS", "SCHEDULE_MIN_KNOTS", "SCHEDULE_MAX_KNOTS",
            "SCHEDULED_DEFAULT_P", "SCHEDULED_P_GRID", "ESTIMATORS"]
+
+#: File name endings of the HDF5 files the workbench reads and writes.
+HDF5_SUFFIXES = (".h5", ".hdf5", ".hdf")
 
 #: How offsets are estimated: each record's mean, a line through each record, or none.
 DETRENDS = ("mean", "linear", "none")
@@ -60,7 +63,7 @@ INITIAL_STATES = ("zero", "estimate")
 C_PATTERNS = ("default", "all-ones", "eq18", "eq19")
 
 #: The built-in estimators by name (``--method``): the IEKF and the classical comparators, the keys of
-#: :data:`~vehid.identification.classical.comparators.COMPARATORS` before any other is registered.
+#: :data:`~vehid.identification.comparators.COMPARATORS` before any other is registered.
 ESTIMATORS = ("iekf", "arx", "rls", "n4sid", "output-error")
 
 #: Nodes per spline: the paper found the symbolic model manageable up to 9.

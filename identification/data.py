@@ -175,14 +175,36 @@ class IOData:
         )
 
     def split(self, fraction: float) -> tuple["IOData", "IOData"]:
-        """Split in time into two records, the first holding ``fraction`` of the samples."""
+        """Split in time into two records.
+
+        Parameters
+        ----------
+        fraction : float
+            Share of the samples in the first record, in (0, 1).
+
+        Returns
+        -------
+        tuple of IOData
+            The first ``round(fraction N)`` samples and the rest.
+        """
         if not 0.0 < fraction < 1.0:
             raise InputError(f"split fraction must lie in (0, 1); got {fraction}")
         cut = int(round(fraction * self.n_samples))
         return self[:cut], self[cut:]
 
     def select_outputs(self, names: Sequence[str]) -> "IOData":
-        """A record with only the named outputs, in the order given."""
+        """Keep only the named outputs.
+
+        Parameters
+        ----------
+        names : sequence of str
+            Output names, in the order wanted.
+
+        Returns
+        -------
+        IOData
+            The record with those outputs.
+        """
         index = [self._column(self.output_names, name, "output") for name in names]
         return self.replace(
             y=self.y[:, index],
@@ -191,7 +213,18 @@ class IOData:
         )
 
     def select_inputs(self, names: Sequence[str]) -> "IOData":
-        """A record with only the named inputs, in the order given."""
+        """Keep only the named inputs.
+
+        Parameters
+        ----------
+        names : sequence of str
+            Input names, in the order wanted.
+
+        Returns
+        -------
+        IOData
+            The record with those inputs.
+        """
         index = [self._column(self.input_names, name, "input") for name in names]
         return self.replace(
             u=self.u[:, index],
@@ -200,13 +233,35 @@ class IOData:
         )
 
     def state(self, name: str) -> np.ndarray:
-        """The time history of one named state, shape (N,)."""
+        """Return the time history of one named state.
+
+        Parameters
+        ----------
+        name : str
+            One of ``state_names``.
+
+        Returns
+        -------
+        ndarray, shape (N,)
+            The state, in its unit.
+        """
         if self.x is None:
             raise InputError("this record holds no states")
         return self.x[:, self._column(self.state_names, name, "state")]
 
     def output(self, name: str) -> np.ndarray:
-        """The time history of one named output, shape (N,)."""
+        """Return the time history of one named output.
+
+        Parameters
+        ----------
+        name : str
+            One of ``output_names``.
+
+        Returns
+        -------
+        ndarray, shape (N,)
+            The output, in its unit.
+        """
         return self.y[:, self._column(self.output_names, name, "output")]
 
     @staticmethod
@@ -219,16 +274,44 @@ class IOData:
             ) from None
 
     def replace(self, **changes: Any) -> "IOData":
-        """A copy with some fields changed (validated again)."""
+        """Return a copy with some fields changed, validated again.
+
+        Parameters
+        ----------
+        **changes
+            New values of fields (``t``, ``u``, ``output_names``, ...).
+
+        Returns
+        -------
+        IOData
+            The new record.
+        """
         return dataclasses.replace(self, **changes)
 
     def to_hdf5(self, group: Any) -> None:
-        """Write into an open ``h5py.Group`` (time-first datasets, units as attributes)."""
+        """Write into an open HDF5 group: time-first datasets, units as attributes.
+
+        Parameters
+        ----------
+        group : h5py.Group
+            The open group, written into.
+        """
         _write_iodata(group, self)
 
     @classmethod
     def from_hdf5(cls, group: Any) -> "IOData":
-        """Read from an open ``h5py.Group`` written by :meth:`to_hdf5`."""
+        """Read a record that :meth:`to_hdf5` wrote.
+
+        Parameters
+        ----------
+        group : h5py.Group
+            The open group.
+
+        Returns
+        -------
+        IOData
+            The record.
+        """
         return _read_iodata(group)
 
 
@@ -239,9 +322,11 @@ def _decode(values: Any) -> tuple[str, ...]:
 def _write_iodata(group: Any, data: IOData) -> None:
     import json
 
+    from .jsonable import json_default
+
     group.attrs["kind"] = "iodata"
     group.attrs["dt"] = data.dt
-    group.attrs["meta_json"] = json.dumps(dict(data.meta), default=str)
+    group.attrs["meta_json"] = json.dumps(dict(data.meta), default=json_default)
     ds = group.create_dataset("t", data=data.t)
     ds.attrs["units"] = "s"
     for key, array, names, units in (
@@ -286,6 +371,11 @@ def read_hdf5(path: str | Path, group: str | None = None) -> IOData:
     group : str, optional
         The group holding the record; by default ``/data`` if present, else the
         first group whose ``kind`` attribute is ``iodata``, else the root.
+
+    Returns
+    -------
+    IOData
+        The record.
     """
     import h5py
 
@@ -315,10 +405,25 @@ def read_hdf5(path: str | Path, group: str | None = None) -> IOData:
 
 
 def as_records(data: "IOData | Sequence[IOData]") -> tuple[IOData, ...]:
-    """One record or several as a tuple of records of one sample interval and the same channels.
+    """Check one record or several as records of one sample interval and the same channels.
 
     Several records of one experiment campaign identify one model; they must
     share ``dt`` (to 1e-9 relative) and the input and output names.
+
+    Parameters
+    ----------
+    data : IOData or sequence of IOData
+        One record, or several.
+
+    Returns
+    -------
+    tuple of IOData
+        The records.
+
+    Raises
+    ------
+    InputError
+        For no record, an item that is not a record, or records that differ in ``dt`` or channels.
     """
     records = (data,) if isinstance(data, IOData) else tuple(data)
     if not records:

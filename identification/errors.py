@@ -25,6 +25,13 @@ __all__ = [
 class WorkbenchError(Exception):
     """Base class of every error the workbench raises on purpose.
 
+    Parameters
+    ----------
+    *args : object
+        The message, as for any exception.
+    options : tuple of str, optional
+        The options the message names.
+
     Attributes
     ----------
     options : tuple of str
@@ -42,7 +49,15 @@ class WorkbenchError(Exception):
 
 
 class InputError(WorkbenchError, ValueError):
-    """Bad user input: wrong shape, non-finite values, unknown option or column."""
+    """Bad user input: wrong shape, non-finite values, unknown option or column.
+
+    Parameters
+    ----------
+    *args : object
+        The message, naming the problem.
+    options : tuple of str, optional
+        The options it names, by keyword.
+    """
 
     exit_status = 2
 
@@ -63,11 +78,28 @@ class OptionError(InputError):
 
 
 class ExcitationError(InputError):
-    """The data do not excite the model enough to identify its parameters."""
+    """The data do not excite the model enough to identify its parameters.
+
+    Parameters
+    ----------
+    *args : object
+        The message: which regressor or mode lacks excitation.
+    options : tuple of str, optional
+        The options it names, by keyword (an order, say).
+    """
 
 
 class DivergenceError(WorkbenchError):
     """An estimator diverged (NaN or inf, covariance not positive definite, unstable model).
+
+    Parameters
+    ----------
+    message : str
+        What diverged, and where.
+    last_good : object, optional
+        Whatever the estimator had finished before it diverged.
+    options : tuple of str, optional
+        The options the message names, by keyword.
 
     Attributes
     ----------
@@ -85,6 +117,13 @@ class ArchiveError(WorkbenchError):
     """A results archive is corrupt, truncated, of an unknown schema, or not a workbench archive.
 
     Exit status 2: a missing, foreign or corrupt file is bad input.
+
+    Parameters
+    ----------
+    *args : object
+        The message, naming the file and what is wrong with it.
+    options : tuple of str, optional
+        The options it names, by keyword.
     """
 
     exit_status = 2

@@ -12,7 +12,14 @@ import sys
 from collections.abc import Mapping
 from typing import Any
 
-__all__ = ["to_jsonable"]
+__all__ = ["to_jsonable", "json_default"]
+
+
+def json_default(value: Any) -> Any:
+    """``json.dumps``'s ``default`` where a value is written as it is: a read-only mapping (a frozen result's
+    :class:`~vehid.identification.frozen.FrozenDict`, a record's ``meta``) as the dict it reads as, anything
+    else JSON cannot hold as its text."""
+    return dict(value) if isinstance(value, Mapping) else str(value)
 
 
 def to_jsonable(value: Any) -> Any:

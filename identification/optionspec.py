@@ -28,6 +28,7 @@ import dataclasses
 import inspect
 import math
 import numbers
+import re
 import textwrap
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -229,7 +230,23 @@ class OptionSpec:
         return self.allowed.choices if isinstance(self.allowed, OneOf) else None
 
     def check(self, value: Any) -> Any:
-        """``value`` as the options object stores it, or :class:`OptionError` naming this option."""
+        """Check a value of this option.
+
+        Parameters
+        ----------
+        value : object
+            The value given.
+
+        Returns
+        -------
+        object
+            The value as the options object stores it (a sequence becomes a tuple, say).
+
+        Raises
+        ------
+        OptionError
+            Naming this option, for a value it does not allow.
+        """
         return check_value(self.name, value, self.allowed, optional=self.optional)
 
 
@@ -244,7 +261,18 @@ def option(default: Any, allowed: Constraint | None = None, *, help: str, option
 
 
 def option_specs(options: Any) -> dict[str, OptionSpec]:
-    """The declared options of an options class (or object), by name, in the order of its fields."""
+    """List the declared options of an options class.
+
+    Parameters
+    ----------
+    options : type or object
+        An options dataclass (``IdentifyOptions``, say) or an instance of one.
+
+    Returns
+    -------
+    dict of str to OptionSpec
+        By name, in the order of its fields.
+    """
     return {field.name: dataclasses.replace(field.metadata[_SPEC], name=field.name)
             for field in dataclasses.fields(options) if _SPEC in field.metadata}
 
@@ -289,9 +317,19 @@ def check_options(options: Any) -> None:
             object.__setattr__(options, name, conformed)
 
 
+# numpydoc's sections that follow Parameters: the written section goes before the first of them the class's own
+# docstring has (its Examples, say), and the docstring ends on a line of its own, as numpydoc's validation wants
+_SECTIONS_AFTER_PARAMETERS = re.compile(
+    r"^(Attributes|Methods|Returns|Yields|Receives|Other Parameters|Raises|Warns|Warnings|See Also|Notes"
+    r"|References|Examples)\n-+$", re.MULTILINE)
+
+
 def documented(cls: type) -> type:
-    """Class decorator: the class's docstring followed by the Parameters section written from its declarations."""
-    cls.__doc__ = inspect.cleandoc(cls.__doc__ or "") + "\n\n" + parameters_section(option_specs(cls))
+    """Class decorator: the class's docstring with the Parameters section written from its declarations."""
+    text = inspect.cleandoc(cls.__doc__ or "")
+    later = _SECTIONS_AFTER_PARAMETERS.search(text)
+    head, tail = (text, "") if later is None else (text[:later.start()].rstrip(), "\n\n" + text[later.start():])
+    cls.__doc__ = head + "\n\n" + parameters_section(option_specs(cls)) + tail + "\n"
     return cls
 
 

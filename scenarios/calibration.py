@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from vehid.identification.classical.comparators import identify_with
+from vehid.identification.comparators import identify_with
 from vehid.identification.data import IOData
 from vehid.identification.models.discrete import DiscreteModel
 from vehid.identification.errors import ConversionError, ExcitationError, InputError

@@ -24,7 +24,7 @@ from matplotlib.figure import Figure
 from vehid.identification.dataio.archive import Archive, RunName, read_archive
 from vehid.identification.errors import InputError
 from vehid.identification.assessment.residuals import residual_tests
-from vehid.identification.assessment.uncertainty import normal_quantile
+from vehid.identification.models.delta_method import normal_quantile
 
 from . import plots
 from .figure_style import add_legend

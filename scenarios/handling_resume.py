@@ -17,7 +17,7 @@ import numpy as np
 
 from vehid.identification.dataio.archive import RunName, open_archive, read_records, read_run, update_archive
 from vehid.identification.errors import ArchiveError, InputError
-from vehid.identification.filtering.iekf_archive import read_iekf_run
+from vehid.identification.dataio.iekf_archive import read_iekf_run
 from vehid.identification.dataio.storage import read_group, read_value
 
 from .handling_study import (

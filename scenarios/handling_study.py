@@ -38,14 +38,14 @@ from vehid.identification.dataio.archive_safety import RUN_ATTRIBUTE
 from vehid.identification.data import IOData
 from vehid.identification.errors import DivergenceError, InputError
 from vehid.identification.filtering.iekf import IEKFOptions, IEKFResult, identify_iekf
-from vehid.identification.filtering.iekf_archive import write_iekf_run
+from vehid.identification.dataio.iekf_archive import write_iekf_run
 from vehid.identification.jsonable import to_jsonable
 from vehid.identification.optionspec import renamed_options
 from vehid.identification.filtering.spline_iekf import SplineIEKFOptions, identify_spline_iekf
 from vehid.identification.assessment.metrics import percentage_explanation
 from vehid.identification.models.modal import ModalStructure
 from vehid.identification.models.protocol import Mode as ModelMode
-from vehid.identification.assessment.order import OrderAssessment, OrderRow, assess_orders
+from vehid.identification.assessment.order import AssessedOrder, OrderAssessment, assess_orders
 from vehid.identification.dataio.storage import write_value
 from vehid.vehicle import DEFAULT_DT, linearize, make_manoeuvre, named_vehicle, simulate
 from vehid.vehicle.linearize import VehicleMode
@@ -614,7 +614,7 @@ def _mean(values: np.ndarray | None) -> float | None:
     return None if values is None else float(np.mean(values))
 
 
-def _rows(outcome: OrderOutcome, assessed: OrderRow | None, vehicle_modes: Mapping[str, VehicleMode]
+def _rows(outcome: OrderOutcome, assessed: AssessedOrder | None, vehicle_modes: Mapping[str, VehicleMode]
           ) -> tuple[TableRow, LinearRun, NonlinearRun, tuple[ModeComparison, ...]]:
     """One order's rows of the study's table, runs and mode comparison."""
     order, linear, nonlinear = outcome.order, outcome.linear, outcome.nonlinear

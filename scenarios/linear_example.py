@@ -38,7 +38,7 @@ from vehid.identification.dataio.archive_safety import RUN_ATTRIBUTE
 from vehid.identification.data import IOData
 from vehid.identification.errors import InputError
 from vehid.identification.filtering.iekf import IEKFOptions, IEKFResult, identify_iekf
-from vehid.identification.filtering.iekf_archive import write_iekf_run
+from vehid.identification.dataio.iekf_archive import write_iekf_run
 from vehid.identification.jsonable import to_jsonable
 from vehid.identification.assessment.metrics import nrmse_fit_of_R, percentage_explanation
 from vehid.identification.models.modal import ModalModel, ModalStructure

@@ -3,8 +3,9 @@
 `vehid identify` and `vehid handling` check a model of a car after it is identified or read: its
 handling metrics at each speed, its modes, and a single-track model's parameters and predicted sideslip.
 Which output is which quantity is named as `vehid handling` names it: an output called ``yaw_rate``,
-``lateral_acceleration`` or ``sideslip``, or ``--quantities`` (what each ``--outputs`` channel
-measures, in order, as for the single-track structure). A model without a yaw-rate output is not
+``lateral_acceleration`` or ``sideslip``, or ``quantities`` (``--quantities``: what each output
+measures, in order, as for the single-track structure). :class:`CarChecks` is what
+:func:`vehid.identification.identify` takes as its ``checks``. A model without a yaw-rate output is not
 taken for a car and is not checked. Every failure joins the JSON list ``plausibility``
 (``{quantity, value, range, speed, cause}``) and the warnings.
 
@@ -18,42 +19,36 @@ one is checked where speed does not matter (its transients and modes). A speed w
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 
 from vehid.identification.errors import WorkbenchError
 
-__all__ = ["ROLES", "check_quantities", "output_roles", "extrapolated_speeds", "model_findings", "record_findings",
+__all__ = ["ROLES", "check_quantities", "CarChecks", "output_roles", "extrapolated_speeds", "model_findings", "record_findings",
            "handling_findings", "identify_findings", "single_track_findings", "single_track_sideslip"]
 
 #: The quantities a car model's outputs are checked as.
 ROLES = ("yaw_rate", "lateral_acceleration", "sideslip")
 
 
-def check_quantities(args: Any) -> None:
-    """Refuse, before any work, a ``--quantities`` that does not name each output of a modal model
-    (a quantity of the single-track model or ``other``), and ``--measured-sideslip`` without the
-    single-track structure."""
-    from vehid.identification.errors import InputError
-    from vehid.scenarios.data_options import channel_names
+def check_quantities(quantities: Sequence[str], outputs: Sequence[str] = ()) -> tuple[str, ...]:
+    """``quantities`` (what each output of a modal model measures, in order) checked before any work: each a
+    quantity of the single-track model or ``other``, one per output where the outputs are named."""
+    from vehid.identification.errors import OptionError
     from vehid.vehicle.single_track import QUANTITIES
 
-    if getattr(args, "structure", "modal") == "single-track":
-        return
-    if getattr(args, "measured_sideslip", None):
-        raise InputError("--measured-sideslip checks a single-track model's predicted sideslip: give "
-                         "--structure single-track, or the channel among --outputs with --quantities")
-    if getattr(args, "quantities", None) is None:
-        return
-    quantities = [q.strip() for q in args.quantities.split(",") if q.strip()]
-    outputs = channel_names(args.outputs) if args.outputs else []
+    quantities = tuple(quantities)
     unknown = [q for q in quantities if q not in (*QUANTITIES, "other")]
     if unknown:
-        raise InputError(f"--quantities: unknown quantity {unknown[0]!r}; use {', '.join(QUANTITIES)} or other")
+        raise OptionError(f"'quantities': unknown quantity {unknown[0]!r}; use {', '.join(QUANTITIES)} or other",
+                          "quantities")
     if outputs and len(quantities) != len(outputs):
-        raise InputError(f"--quantities names {len(quantities)} quantities for {len(outputs)} --outputs channels: "
-                         "name what each output measures, in order (other for a channel of none)")
+        raise OptionError(f"'quantities' names {len(quantities)} quantities for {len(outputs)} 'outputs' channels: "
+                          "name what each output measures, in order (other for a channel of none)",
+                          "quantities", "outputs")
+    return quantities
 
 
 def output_roles(output_names: Sequence[str], quantities: str | Sequence[str] | None = None) -> dict[str, int]:
@@ -153,29 +148,44 @@ def _single_track_without_lag(model: Any) -> bool:
     return isinstance(model, IdentifiedSingleTrack) and model.config.relaxation_length is None
 
 
-def _wheelbase(args: Any) -> float | None:
-    """L from ``--lf`` and ``--lr`` or ``--vehicle``, where given."""
-    if getattr(args, "lf", None) is not None and getattr(args, "lr", None) is not None:
-        return float(args.lf) + float(args.lr)
-    if getattr(args, "vehicle", None):
-        from vehid.vehicle.parameters import named_vehicle
+@dataclass(frozen=True)
+class CarChecks:
+    """The checks of a car's physics on the model `vehid identify` returns (:func:`identify_findings`).
 
-        chassis = named_vehicle(args.vehicle).chassis
-        return chassis.cg_to_front_axle + chassis.cg_to_rear_axle
-    return None
+    :func:`vehid.identification.identify` takes them as its ``checks``.
+
+    Attributes
+    ----------
+    quantities : tuple of str or None
+        What each output measures, in order (:func:`check_quantities`); None: outputs named as the quantity.
+    wheelbase : float or None
+        The car's wheelbase (m), for the understeer gradient.
+    """
+
+    quantities: tuple[str, ...] | None = None
+    wheelbase: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.quantities is not None:
+            object.__setattr__(self, "quantities", check_quantities(self.quantities))
+
+    def __call__(self, model: Any, plan: Any) -> tuple[Any, ...] | None:
+        return identify_findings(plan, model, quantities=self.quantities, wheelbase=self.wheelbase)
 
 
-def identify_findings(args: Any, plan: Any, model: Any) -> tuple[Any, ...] | None:
+def identify_findings(plan: Any, model: Any, *, quantities: Sequence[str] | None = None,
+                      wheelbase: float | None = None) -> tuple[Any, ...] | None:
     """Findings on the model `vehid identify` returns, or None where its outputs are not a car's.
 
     A scheduled family is checked at its knots, with the schedule's fastest value as the fastest speed
     driven; a model of one speed at its record's ``meta["speed"]``; otherwise where speed does not
-    matter. The modes are weighed against the band the first input (the steer) excites.
+    matter. The modes are weighed against the band the first input (the steer) excites. ``quantities``
+    and ``wheelbase`` are :class:`CarChecks`'.
     """
     from vehid.vehicle.plausibility import steer_band_hz
 
     record = plan.records[0]
-    roles = output_roles(record.output_names, getattr(args, "quantities", None))
+    roles = output_roles(record.output_names, quantities)
     if "yaw_rate" not in roles or not (hasattr(model, "model_at") or hasattr(model, "to_statespace")):
         return None
     schedule = getattr(plan, "schedule", None)
@@ -188,7 +198,7 @@ def identify_findings(args: Any, plan: Any, model: Any) -> tuple[Any, ...] | Non
     else:
         speeds, known = [1.0], False  # the speed enters no check made without it
     band = steer_band_hz(record.u[:, 0], record.dt)
-    return model_findings(model, speeds, roles=roles, wheelbase=_wheelbase(args), band_hz=band, top_speed=top,
+    return model_findings(model, speeds, roles=roles, wheelbase=wheelbase, band_hz=band, top_speed=top,
                           speed_known=known)
 
 

@@ -21,7 +21,7 @@ from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 from vehid.identification.errors import InputError
 from vehid.identification.assessment.metrics import percentage_explanation
 from vehid.identification.assessment.residuals import autocorrelation as residual_autocorrelation
-from vehid.identification.assessment.uncertainty import frequency_response as response_band
+from vehid.identification.models.delta_method import frequency_response_band
 
 # The shared style and the pole map live in their own modules; they stay part of this module's API.
 from .figure_style import (  # noqa: F401
@@ -54,7 +54,7 @@ __all__ = [
     "plot_splines",
     "eigenvalue_view",
     "plot_eigenvalue_map",
-    "frequency_response",
+    "response_to_input",
     "plot_bode",
     "autocorrelation",
     "plot_residual_autocorrelation",
@@ -514,7 +514,7 @@ def _as_model(model: Any) -> Any:
                          f"{exc}") from None
 
 
-def frequency_response(model: Any, frequencies_hz: Any, input_index: int = 0) -> np.ndarray:
+def response_to_input(model: Any, frequencies_hz: Any, input_index: int = 0) -> np.ndarray:
     """The model's own frequency response from one input: column ``input_index`` of ``model.frequency_response``.
 
     A discrete-time model's response is its own, at ``z = exp(j 2 pi f dt)``.
@@ -534,7 +534,7 @@ def frequency_response(model: Any, frequencies_hz: Any, input_index: int = 0) ->
 
     Examples
     --------
-    >>> g = frequency_response(([[-1.0]], [[1.0]], [[1.0]], [[0.0]]), [1 / (2 * np.pi)])
+    >>> g = response_to_input(([[-1.0]], [[1.0]], [[1.0]], [[0.0]]), [1 / (2 * np.pi)])
     >>> np.round(g, 6)
     array([[0.5-0.5j]])
     """
@@ -562,7 +562,7 @@ def plot_bode(
     """Magnitude and phase from one input to every output, for several models.
 
     Models that carry a parameter covariance get their 95 % band shaded
-    (delta method, :func:`vehid.identification.assessment.uncertainty.frequency_response`)
+    (delta method, :func:`vehid.identification.models.delta_method.frequency_response_band`)
     unless ``confidence`` is False; with ``bands``, only the models of those labels. The curves set
     each axis's range, all of them (:func:`~vehid.scenarios.figure_style.set_robust_limits`): a band that
     runs to nothing or round the circle is cut at the frame.
@@ -590,15 +590,15 @@ def plot_bode(
         np.asarray(frequencies, dtype=float).ravel()
     if frequencies.size < 2 or np.any(frequencies <= 0):
         raise InputError("frequencies must hold at least two positive values (Hz)")
-    curves = {label: frequency_response(model, frequencies, input_index) for label, model in models.items()}
+    curves = {label: response_to_input(model, frequencies, input_index) for label, model in models.items()}
     if reference is not None:
-        curves["reference"] = frequency_response(reference, frequencies, input_index)
+        curves["reference"] = response_to_input(reference, frequencies, input_index)
     if not curves:
         raise InputError("give at least one model to plot")
     n_y = next(iter(curves.values())).shape[1]
     if any(g.shape[1] != n_y for g in curves.values()):
         raise InputError("all models must have the same number of outputs")
-    shaded = {label: response_band(model, frequencies) for label, model in models.items()
+    shaded = {label: frequency_response_band(model, frequencies) for label, model in models.items()
               if confidence and getattr(model, "parameter_covariance", None) is not None
               and (bands is None or label in bands)}
     if output_names is None:
@@ -723,7 +723,7 @@ def plot_residual_tests(tests: Any, *, dt: float | None = None, title: str = "Re
 
     Parameters
     ----------
-    tests : identification.residuals.ResidualTests
+    tests : vehid.identification.assessment.residuals.ResidualTests
     dt : float, optional
         Sample interval (s): lags in seconds.
 

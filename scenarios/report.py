@@ -379,7 +379,7 @@ def archive_figures(archive: Any, *, window: tuple[float, float] | None = None, 
 
     Parameters
     ----------
-    archive : identification.archive.Archive
+    archive : vehid.identification.dataio.archive.Archive
         As :func:`vehid.identification.dataio.archive.read_archive` returns it.
     window : (float, float), optional
         Time range (s) of the time-fit figures.
@@ -529,7 +529,7 @@ def archive_table(archive: Any) -> list[dict[str, Any]]:
             "returned": (name == returned) if returned is not None else None,
             "n": getattr(getattr(model, "structure", None), "n", None),
             "passes": run.n_pass or _passes_run(verdict, name, returned),
-            "eigenvalues": list(model.eigenvalues()) if hasattr(model, "eigenvalues") else None,
+            "eigenvalues": _table_eigenvalues(model),
             "R filter (%)": _mean_last(run.history, "fit_filter"),
             "R simulated (%)": _mean_last(run.history, "fit_continuous"),
             "trace(P)": _mean_last(run.history, "trace_p"),
@@ -542,6 +542,17 @@ def archive_table(archive: Any) -> list[dict[str, Any]]:
         rows.append(row)
     empty = {key for key in (rows[0] if rows else {}) if all(row.get(key) is None for row in rows)}
     return [{key: value for key, value in row.items() if key not in empty} for row in rows]
+
+
+def _table_eigenvalues(model: Any) -> list[complex] | None:
+    """A run's eigenvalues for the table: a scheduled family's at its middle knot (the figures draw it at
+    its lowest, middle and highest), any other model's own; None for a model without them."""
+    if not hasattr(model, "eigenvalues"):
+        return None
+    if _is_scheduled(model):
+        grid = np.asarray(model.grid, dtype=float)
+        return list(model.eigenvalues(schedule=float(grid[grid.size // 2])))
+    return list(model.eigenvalues())
 
 
 def _passes_run(verdict: Mapping[str, Any], name: str, returned: str | None) -> int:

@@ -3,7 +3,7 @@
 The scheduling channel (a car's speed) is read beside the inputs, scaled by ``--scale`` where one names
 it and never offset (the model's coefficients are functions of its measured value); the samples below
 ``--min-speed`` are left out and each run of the rest is a record of its own, simulated from rest
-(:mod:`vehid.scenarios.log_cleaning`). The unscheduled
+(:mod:`vehid.identification.automatic.intake`). The unscheduled
 model of the default pipeline starts the scheduled IEKF
 (:mod:`vehid.identification.filtering.scheduled_iekf`) at every knot; the family returned is a
 :class:`~vehid.identification.models.scheduled.ScheduledModalModel`, scored like every model on the
@@ -38,62 +38,12 @@ fit R of eq. 17.
 
 from __future__ import annotations
 
-from typing import Any, Sequence
-
-import numpy as np
-
 # the scheduled variant is the pipeline's (vehid.identification.automatic.scheduled); its names stay reachable here
 from vehid.identification.automatic.scheduled import (NONLINEAR_NOTE, OUTPUT_MAP_NODES, VALIDATION_MARGIN,
                                                       ScheduledOutcome, identify_scheduled_model, schedule_margin,
                                                       unscheduled_fit, with_output_map)
+from vehid.identification.automatic.text import scheduled_lines as text_lines
 from vehid.identification.choices import SCHEDULED_P_GRID as P_GRID
 
 __all__ = ["NONLINEAR_NOTE", "OUTPUT_MAP_NODES", "VALIDATION_MARGIN", "P_GRID", "ScheduledOutcome",
            "identify_scheduled_model", "schedule_margin", "unscheduled_fit", "with_output_map", "text_lines"]
-
-
-def archive_schedule(archive: Any, plan: Any, validation_prefix: str) -> None:
-    """The schedule channel of every archived record (root member ``schedule``), so that a report can simulate
-    the family on them: ``channel``, ``unit`` and ``records`` (record name to samples); the held-out parts are
-    archived under ``validation_prefix``."""
-    from vehid.identification.dataio.archive import SCHEDULE_MEMBER
-    from vehid.identification.dataio.storage import write_value
-    from vehid.scenarios.data_options import RECORD_PREFIX, record_series_name
-
-    schedule = plan.schedule
-    records = {record_series_name(RECORD_PREFIX, i): np.asarray(values, dtype=float)
-               for i, values in enumerate(schedule.estimation)}
-    records.update({record_series_name(validation_prefix, i): np.asarray(values, dtype=float)
-                    for i, values in enumerate(schedule.validation[:plan.held_out_count])})
-    write_value(archive, SCHEDULE_MEMBER, {"channel": schedule.channel, "unit": schedule.unit,
-                                           "records": records})
-
-
-def text_lines(entry: dict[str, Any], output_names: Sequence[str]) -> list[str]:
-    """The text face of the ``scheduled`` entry: the run, the unscheduled scores, and the family's modes where
-    it is not returned (the returned model's modes head the summary's modes)."""
-    unscheduled = entry["unscheduled"]
-    validation = unscheduled.get("validation_fit_percent")
-    returned = entry.get("model_returned")
-    state = {"scheduled": "returned: the scores above are its own",
-             "unscheduled": "NOT returned (the scores above are the unscheduled model's)",
-             "nonlinear": "NOT returned (the scores above are the spline model's)"}.get(returned, "")
-    lines = [
-        f"scheduled on {entry['channel']} ({entry['knots']} knots, p {entry['p']:g}, {entry['passes_run']} passes, "
-        f"{'converged' if entry['stop_reason'] == 'converged' else 'NOT converged'}): {state}; unscheduled "
-        + ("start" if returned != "unscheduled" else "model") + ": NRMSE fit estimation "
-        + ", ".join(f"{n} {v:.2f}" for n, v in zip(output_names, unscheduled["estimation_fit_percent"]))
-        + ("" if validation is None else "; validation " + ", ".join(
-            f"{n} {v:.2f}" for n, v in zip(output_names, validation))) + " %",
-    ]
-    if returned != "scheduled":
-        lines.append(f"modes of the scheduled family (not returned) at {entry['channel']} (frequency Hz, damping; "
-                     "+/- 2 sigma):")
-        for row in entry["modes_at"]:
-            modes = "; ".join(f"{mode['frequency_hz']:.4g} +/- {2 * mode['frequency_hz_std']:.2g} Hz, "
-                              f"{mode['damping']:.3f} +/- {2 * mode['damping_std']:.2g}" for mode in row["modes"])
-            sparse = " (extrapolated: too few samples at this knot)" if row.get("extrapolated") else ""
-            lines.append(f"  {entry['channel']} = {row['value']:.4g}: {modes}{sparse}")
-    if entry.get("uncertainty_method"):
-        lines.append(f"  standard deviations: {entry['uncertainty_method']['description']}")
-    return lines

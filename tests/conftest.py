@@ -116,6 +116,66 @@ def run_vehid(*argv: str, cwd: str | os.PathLike | None = None) -> CommandRun:
     return CommandRun(status, out.getvalue(), err.getvalue())
 
 
+def printed_json(value):
+    """A value as a command's ``--json`` prints it (the JSON round trip of :func:`~vehid.identification.jsonable.to_jsonable`)."""
+    import json
+
+    from vehid.identification.jsonable import to_jsonable
+
+    return json.loads(json.dumps(to_jsonable(value), allow_nan=False))
+
+
+def without_run_times(value):
+    """A JSON value without its run times (keys ``seconds`` and ``*_seconds``): two runs of one computation differ in
+    them alone."""
+    if isinstance(value, dict):
+        return {key: without_run_times(item) for key, item in value.items() if not key.endswith("seconds")}
+    if isinstance(value, list):
+        return [without_run_times(item) for item in value]
+    return value
+
+
+def library_spy(monkeypatch: pytest.MonkeyPatch, module: object, name: str) -> tuple[object, list]:
+    """Replace ``module.name`` (a library function a command calls) by a spy that keeps each result it returns;
+    the original function and the list of results."""
+    library, results = getattr(module, name), []
+
+    def spy(*args, **kwargs):
+        results.append(library(*args, **kwargs))
+        return results[-1]
+
+    monkeypatch.setattr(module, name, spy)
+    return library, results
+
+
+def mutable_parts(value, path="result", seen=None):
+    """Where a value reachable from ``value`` through dataclass fields, mappings and sequences can be changed:
+    a dict, a list, a set, a writeable array, or a dataclass that is not frozen."""
+    import dataclasses
+    from collections.abc import Mapping
+
+    import numpy as np
+
+    seen = set() if seen is None else seen
+    if id(value) in seen:
+        return []
+    seen.add(id(value))
+    if isinstance(value, (dict, list, set)):
+        return [path]
+    if isinstance(value, np.ndarray):
+        return [path] if value.flags.writeable else []
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        if not value.__dataclass_params__.frozen:
+            return [path]
+        return [found for field in dataclasses.fields(value)
+                for found in mutable_parts(getattr(value, field.name), f"{path}.{field.name}", seen)]
+    if isinstance(value, Mapping):
+        return [found for key, item in value.items() for found in mutable_parts(item, f"{path}[{key!r}]", seen)]
+    if isinstance(value, tuple):
+        return [found for i, item in enumerate(value) for found in mutable_parts(item, f"{path}[{i}]", seen)]
+    return []
+
+
 @pytest.fixture(scope="session")
 def vehid_command():
     """:func:`run_vehid`, for tests and module fixtures that run commands."""

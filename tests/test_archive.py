@@ -26,7 +26,7 @@ from vehid.identification import (
     write_run,
     write_value,
 )
-from vehid.identification import archive as archive_module
+from vehid.identification.dataio import archive as archive_module
 from vehid.identification.models.modal import ModalModel, ModalStructure
 from vehid.vehicle import baseline
 from vehid.vehicle.linearize import Linearization, VehicleMode

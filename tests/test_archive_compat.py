@@ -20,8 +20,8 @@ import numpy as np
 import pytest
 import scipy.signal
 
-from vehid.identification import storage
-from vehid.identification import archive as archive_module
+from vehid.identification.dataio import archive as archive_module
+from vehid.identification.dataio import storage
 from vehid.identification.dataio.archive import read_archive
 from vehid.identification.dataio.archive_safety import write_checksums
 from vehid.identification import ArxModel, DiscreteModel, IOData, estimate_subspace

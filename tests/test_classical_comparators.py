@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from vehid.identification import ExcitationError, InputError, IOData, fit_metrics
-from vehid.identification.classical.comparators import COMPARATORS, _continuous_start, identify_with, register_comparator
+from vehid.identification.comparators import COMPARATORS, _continuous_start, identify_with, register_comparator
 from vehid.identification.models.modal import ModalModel, ModalStructure
 from vehid.scenarios.linear_example import make_data, true_model
 

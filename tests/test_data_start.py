@@ -1,4 +1,4 @@
-"""Start models from the data (identification.start)."""
+"""Start models from the data (vehid.identification.filtering.start)."""
 
 import numpy as np
 import pytest

@@ -21,7 +21,7 @@ from conftest import run_vehid
 from vehid.identification.data import IOData
 from vehid.identification.decisions import SCHEDULE_MARGIN, ScheduleCandidate, choose_p_and_schedule, choose_refined
 from vehid.identification.models.modal import ModalModel, ModalStructure
-from vehid.scenarios import identify_workflow as workflow
+from vehid.identification.automatic import steps as workflow
 
 ROOT = Path(__file__).resolve().parent.parent
 BALLBEAM = ROOT / "tests" / "data" / "ballbeam" / "ballbeam.dat"

@@ -135,7 +135,7 @@ def built_site(tmp_path_factory):
     source = work / "docs"
     # What a build writes into docs/ is left out, so that the copy is what a fresh clone holds.
     generated = {"_build", "auto_examples", "generated", "sg_execution_times.rst"}
-    written_api_pages = {"identification.rst", "vehicle.rst", "command_line.rst"}
+    written_api_pages = {"identification.rst", "vehicle.rst", "scenarios.rst", "command_line.rst"}
 
     def left_out(folder, names):
         pages = written_api_pages if Path(folder).name == "api" else set()
@@ -179,7 +179,7 @@ def test_every_gallery_script_draws_a_figure(built_site):
 def test_api_reference_has_a_page_for_every_public_name(built_site):
     completed, html = built_site
     assert completed.returncode == 0, completed.stderr[-2000:]
-    for package in ("vehid.identification", "vehid.vehicle"):
+    for package in ("vehid.identification", "vehid.vehicle", "vehid.scenarios"):
         for name in importlib.import_module(package).__all__:
             assert (html / "api" / "generated" / f"{package}.{name}.html").exists(), f"{package}.{name} has no page"
 

@@ -207,7 +207,7 @@ def test_a_full_disk_names_the_file_and_exits_1(tmp_path, capsys, monkeypatch):
 def test_a_full_disk_while_writing_an_archive_names_it(tmp_path, capsys, monkeypatch):
     """fsync reporting ENOSPC (a full disk found at flush): the error names the archive the user gave, not the
     hidden copy being written, exits 1, and leaves no partial file behind."""
-    from vehid.identification import archive as archive_module
+    from vehid.identification.dataio import archive as archive_module
 
     data = tmp_path / "record.csv"
     data.write_text("t,u,y\n" + "".join(f"{k * 0.01},{(-1) ** (k // 3)},{(-1) ** (k // 4)}\n" for k in range(300)))

@@ -22,8 +22,8 @@ from vehid.identification.assessment.metrics import percentage_explanation
 from vehid.scenarios import plots
 from vehid.scenarios.cli import main
 from vehid.scenarios.handling_report import handling_figures
-from vehid.scenarios.commands.identify import SCORING_RULE
-from vehid.scenarios.report import archive_figures, archive_verdict, verdict_lines, verdict_output_names, verdict_page
+from vehid.identification.automatic.archiving import SCORING_RULE
+from vehid.scenarios.report import archive_figures, archive_table, archive_verdict, verdict_lines, verdict_output_names, verdict_page
 
 DATA = Path(__file__).parent / "data"
 
@@ -217,6 +217,14 @@ def test_a_report_of_a_scheduled_run_on_a_real_log_draws_the_family_names_the_ch
     assert "yawRate" in shown and "ayCG" in shown and not re.search(r"\by[12]\b", shown)
     _assert_legible({name: figures[name] for name in ("verdict", "fits_identification", "fits_validation", "bode",
                                                       "eigenvalues", "convergence_iekf")})
+    # the summary table too: asking the family for its eigenvalues without a speed stopped `vehid report`
+    rows = {row["run"]: row for row in archive_table(archive)}
+    assert all(len(row["eigenvalues"]) > 0 for row in rows.values()), rows
+    for name, run in archive.runs.items():
+        if hasattr(run.model, "grid"):  # a family's are those of its middle knot, drawn in the figures
+            knot = float(run.model.grid[run.model.grid.size // 2])
+            assert np.allclose(sorted(rows[name]["eigenvalues"], key=lambda z: (z.real, z.imag)),
+                               sorted(run.model.model_at(knot).eigenvalues(), key=lambda z: (z.real, z.imag)))
 
 
 @pytest.mark.slow

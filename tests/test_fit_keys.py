@@ -96,7 +96,7 @@ def _linear(summary: Mapping[str, Any]) -> str:
 def _run_names(summary: Mapping[str, Any], archive: Any) -> dict[str, str]:
     """The archive's runs of the roles: the model returned (the run the archive names), and the linear model (the
     filter's or its start, refined by its simulation error where the archive holds that run), whichever is returned."""
-    from vehid.scenarios.commands.identify import SCORING_RULE
+    from vehid.identification.automatic.archiving import SCORING_RULE
 
     choice = (summary.get("decision_margins", {}).get("model_returned") or {}).get("choice")
     linear = "start" if choice == "start" else "refined" if "refined" in archive.runs else "iekf"

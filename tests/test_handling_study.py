@@ -263,7 +263,7 @@ class _StandInResult:
 
 
 def test_nonlinear_call_site_with_a_stand_in(monkeypatch, tmp_path):
-    """The study's one call site, fed by a stand-in with the announced interface of identification.spline_iekf."""
+    """The study's one call site, fed by a stand-in with the announced interface of identification.filtering.spline_iekf."""
     calls = []
 
     def identify(data, linear_model, *, options, on_pass):

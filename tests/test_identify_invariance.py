@@ -178,7 +178,7 @@ def test_cli_order_range_chooses_on_validation_data(tmp_path):
 
 def test_a_negative_real_discrete_pole_gives_a_labelled_discrete_model():
     """y(k) = -0.6 y(k-1) + u(k-1): no continuous-time equivalent; ARX returns the discrete model, not an error."""
-    from vehid.identification.classical.comparators import identify_with
+    from vehid.identification.comparators import identify_with
     from vehid.identification.models.discrete import DiscreteModel
 
     u = np.random.default_rng(11).standard_normal((400, 1))
@@ -221,14 +221,14 @@ def test_cli_nonlinear_scores_and_archives_both_models(tmp_path):
 
 def test_order_parsing_and_the_parsimony_rule():
     from vehid.identification.errors import DivergenceError, InputError
-    from vehid.scenarios.identify_workflow import AUTO_MAX_ORDER, ORDER_TOLERANCE, choose_order, parse_orders
+    from vehid.identification.automatic.steps import AUTO_MAX_ORDER, ORDER_TOLERANCE, choose_order, parse_order_option
 
-    assert parse_orders("4") == ([4], False)
-    assert parse_orders("2-5") == ([2, 3, 4, 5], False)
-    assert parse_orders("auto") == (list(range(1, AUTO_MAX_ORDER + 1)), True)
+    assert parse_order_option("4") == ([4], False)
+    assert parse_order_option("2-5") == ([2, 3, 4, 5], False)
+    assert parse_order_option("auto") == (list(range(1, AUTO_MAX_ORDER + 1)), True)
     for bad in ("0", "5-2", "four", "2-"):
         with pytest.raises(InputError):
-            parse_orders(bad)
+            parse_order_option(bad)
     rows = [{"order": 2, "ranking_fit": 90.0, "eligible": True},
             {"order": 3, "ranking_fit": 97.0 - ORDER_TOLERANCE / 2, "eligible": True},
             {"order": 4, "ranking_fit": 97.0, "eligible": True},
@@ -258,7 +258,7 @@ def test_cli_validation_file_is_scored_and_a_mismatched_one_refused(tmp_path):
 
 def test_a_divergence_after_good_passes_reports_the_last_good_one_with_a_warning():
     from vehid.identification.errors import DivergenceError
-    from vehid.scenarios.identify_workflow import Evaluation, last_good_on_divergence, run_warnings
+    from vehid.identification.automatic.steps import Evaluation, last_good_on_divergence, run_warnings
 
     good = identify_iekf(_record(20.0, seed=3), STRUCTURE, options=IEKFOptions.invariant(passes=2))
 
@@ -279,7 +279,7 @@ def test_the_spline_model_is_returned_only_where_it_beats_the_other_model_by_the
     """Both scored by one rule; the spline model must win by NONLINEAR_MARGIN on validation data, by the
     whole-record margin on the estimation data without them, and its loss is a note, not a warning."""
     from vehid.identification.assessment.validation import Scores
-    from vehid.scenarios.identify_workflow import (NONLINEAR_MARGIN, WHOLE_RECORD_MARGIN, Evaluation,
+    from vehid.identification.automatic.steps import (NONLINEAR_MARGIN, WHOLE_RECORD_MARGIN, Evaluation,
                                                    nonlinear_margin, nonlinear_note)
 
     def scored(estimation: float, validation: float | None) -> Evaluation:
@@ -307,10 +307,10 @@ def test_the_spline_model_is_returned_only_where_it_beats_the_other_model_by_the
 
 
 def test_the_start_is_returned_only_where_it_beats_every_p_in_cross_validation():
-    from vehid.scenarios.identify_workflow import P_TOLERANCE, PTuning
+    from vehid.identification.automatic.steps import P_TOLERANCE, PCandidate, PTuning
 
-    rows = ({"p": 1e-4, "cv_fit_percent": 70.0, "seconds": 1.0}, {"p": 1e-5, "cv_fit_percent": 72.0, "seconds": 1.0},
-            {"p": 1e-6, "cv_fit_percent": None, "error": "diverged", "seconds": 1.0})
+    rows = (PCandidate(1e-4, None, 70.0, 1.0), PCandidate(1e-5, None, 72.0, 1.0),
+            PCandidate(1e-6, None, None, 1.0, error="diverged"))
     assert not PTuning(1e-5, rows, 3.0, 72.0 + P_TOLERANCE / 2).start_wins  # within the tolerance: the filter's
     assert PTuning(1e-5, rows, 3.0, 72.0 + 2 * P_TOLERANCE).start_wins
     assert not PTuning(1e-5, rows, 3.0, None).start_wins  # the start could not be scored
@@ -320,18 +320,18 @@ def test_the_start_is_returned_only_where_it_beats_every_p_in_cross_validation()
 def test_a_returned_start_is_what_the_summary_and_the_archive_describe(tmp_path, capsys, monkeypatch):
     """Where cross-validation prefers the start, the command returns it, says so once, and archives it."""
     from vehid.identification.dataio.archive import read_archive
-    from vehid.scenarios import identify_workflow
+    from vehid.identification.automatic import steps
     from vehid.scenarios.cli import main
 
-    real_tune = identify_workflow.tune_p
+    real_tune = steps.tune_p
 
     def start_preferred(*args, **kwargs):
         tuning = real_tune(*args, **kwargs)
         # beyond any fit: the start as it is, and refined by its simulation error
         fits = {**(tuning.candidate_fits or {}), "start refined": 200.0}
-        return identify_workflow.PTuning(tuning.p, tuning.tried, tuning.seconds, 200.0, tuning.q_schedule, fits)
+        return steps.PTuning(tuning.p, tuning.tried, tuning.seconds, 200.0, tuning.q_schedule, fits)
 
-    monkeypatch.setattr(identify_workflow, "tune_p", start_preferred)
+    monkeypatch.setattr(steps, "tune_p", start_preferred)
     record = _write_csv(tmp_path / "r.csv", _record(30.0, seed=21, noise=0.05))
     out = tmp_path / "run.h5"
     assert main(["identify", str(record), "--inputs", "u1", "--outputs", "y1", "--order", "3", "--passes", "5",

@@ -12,9 +12,9 @@ import pytest
 from conftest import run_vehid
 
 from vehid.identification.dataio.archive import open_archive
-from vehid.identification.filtering.iekf_archive import read_iekf_run
+from vehid.identification.dataio.iekf_archive import read_iekf_run
 from vehid.identification.decisions import SCHEDULE_MARGIN
-from vehid.scenarios.identify_workflow import P_GRID, P_TOLERANCE, Q_SCHEDULES
+from vehid.identification.automatic.steps import P_GRID, P_TOLERANCE, Q_SCHEDULES
 from vehid.scenarios.linear_example import make_data
 
 VEHID = [sys.executable, "-m", "vehid.scenarios.cli"]
@@ -176,16 +176,15 @@ def test_the_archived_decisions_keep_the_Q_schedule(schedule, tmp_path):
     """A resumed run reports the schedule its tuning chose; an archive written before schedules were kept
     reads as the constant Q every run had then."""
     from vehid.identification.dataio.archive import update_archive, write_archive
-    from vehid.scenarios.commands.identify import DECISIONS, _archive_decisions, _read_decisions
-    from vehid.scenarios.identify_workflow import PTuning
+    from vehid.identification.automatic.archiving import DECISIONS, archive_decisions, read_decisions
+    from vehid.identification.automatic.steps import PCandidate, PTuning
 
-    tried = tuple({"p": p, "q_schedule": q, "cv_fit_percent": 90.0, "seconds": 1.0}
-                  for p in P_GRID for q in Q_SCHEDULES)
+    tried = tuple(PCandidate(p, q, 90.0, 1.0) for p in P_GRID for q in Q_SCHEDULES)
     tuning = PTuning(P_GRID[1], tried, 6.0, start_fit=80.0, q_schedule=schedule)
     with write_archive(tmp_path / "run.h5", kind="identification") as handle:
-        _archive_decisions(handle, tuning, None)
+        archive_decisions(handle, tuning, None)
     with open_archive(tmp_path / "run.h5", kinds=["identification"]) as handle:
-        back, unstable = _read_decisions(handle)
+        back, unstable = read_decisions(handle)
     assert back.q_schedule == schedule and back.p == tuning.p and unstable is None
     assert back.summary()["p_tried"] == tuning.summary()["p_tried"]
     with update_archive(tmp_path / "run.h5") as handle:  # as an older workbench wrote it
@@ -193,4 +192,4 @@ def test_the_archived_decisions_keep_the_Q_schedule(schedule, tmp_path):
         del stored["tuning"]["q_schedule"]
         handle.attrs[DECISIONS] = json.dumps(stored)
     with open_archive(tmp_path / "run.h5", kinds=["identification"]) as handle:
-        assert _read_decisions(handle)[0].q_schedule == "constant"
+        assert read_decisions(handle)[0].q_schedule == "constant"

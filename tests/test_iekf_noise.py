@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 
 from vehid.identification import DivergenceError, IEKFOptions, IOData, ModalStructure, identify_iekf
+from vehid.identification.assessment.noise import output_noise_variance
 from vehid.identification.filtering.iekf import (BACK_OFF_FACTOR, NOISE_WEIGHT_FLOOR, data_measurement_noise,
-                                       output_noise_variance, start_structure)
-from vehid.scenarios import identify_workflow as workflow
+                                                 start_structure)
+from vehid.identification.automatic import steps as workflow
 from vehid.scenarios.linear_example import make_data
 
 N = 2000
@@ -113,7 +114,7 @@ def _cross_validated(noise_ratio: float):
     structure = start_structure(data, ModalStructure.from_pattern("default", 5, 2, 1), options)
     tuning = workflow.tune_p(argparse.Namespace(horizon=None, initial_state="estimate"),
                              SimpleNamespace(records=(data,), settle_start=None), options, structure)
-    return tuning, {(row["p"], row["q_schedule"]): row["cv_fit_percent"] for row in tuning.tried}
+    return tuning, {(row.p, row.q_schedule): row.cv_fit_percent for row in tuning.tried}
 
 
 def test_cross_validation_shrinks_Q_on_a_tie_of_clean_data():

@@ -140,12 +140,12 @@ def test_covariance_packing_round_trip():
 def test_a_failed_generated_step_is_an_error_naming_the_sample():
     """The C driver returns 1 + the sample at which the generated step failed; that must never pass as a finished pass."""
     from vehid.identification.errors import DivergenceError
-    from vehid.identification.filtering.iekf_pass import _CompiledPass, build_filter_step
+    from vehid.identification.filtering.iekf_pass import CompiledPass, build_filter_step
 
     structure = ModalStructure.default(2, 1, 1)
     step = build_filter_step(LinearModalFilterModel(structure), 0.01, "exact", "joseph")
     failing_at_sample_4 = lambda *args: 5  # noqa: E731  (stands in for the loaded library)
-    run = _CompiledPass(failing_at_sample_4, step)
+    run = CompiledPass(failing_at_sample_4, step)
     state = np.zeros(step.n_state)
     with pytest.raises(DivergenceError, match="failed at sample 4 of 10"):
         run(state, np.zeros((10, 1)), np.zeros((10, 1)), np.ones(step.n_z), np.eye(1))

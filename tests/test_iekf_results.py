@@ -7,7 +7,7 @@ import pytest
 
 from vehid.identification import DivergenceError, IEKFOptions, ModalStructure, identify_iekf
 from vehid.identification.dataio.archive import open_archive, read_archive, write_archive, write_run
-from vehid.identification.filtering.iekf_archive import read_iekf_run, write_iekf_run
+from vehid.identification.dataio.iekf_archive import read_iekf_run, write_iekf_run
 from vehid.identification.models.spline_modal import SplineModalModel
 from vehid.scenarios.linear_example import make_data, true_model
 

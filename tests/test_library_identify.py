@@ -5,14 +5,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import run_vehid
+from conftest import library_spy, mutable_parts, printed_json, run_vehid, without_run_times
 
 from vehid.identification.errors import InputError
 from vehid.identification.jsonable import to_jsonable
-from vehid.identification.pipeline import DEFAULT_PASSES, Identification, IdentifyOptions
+from vehid.identification.pipeline import DEFAULT_PASSES, Identification, IdentifyOptions, identify
 from vehid.identification.dataio.preparation import ReadSettings, read_record
 from vehid.scenarios.cli import main
-from vehid.scenarios.identify_library import identify
 
 DRYER = Path(__file__).parent / "data" / "dryer" / "dryer.dat"
 # both run the same arithmetic on the same samples in one process; 1e-9 leaves room only for
@@ -37,10 +36,16 @@ def _close(library, command):
     assert np.allclose(library, command, rtol=AGREEMENT, atol=AGREEMENT * max(1.0, float(np.max(np.abs(command)))))
 
 
-def test_library_reproduces_the_command_model_and_scores(capsys):
+@pytest.fixture(scope="module")
+def given_p_run():
+    """The library's run with a given p and a held-out tail (the command's twin runs in the test)."""
+    return identify(_dryer(), order=2, validation=0.3, options=IdentifyOptions(p=1e-4, passes=8))
+
+
+def test_library_reproduces_the_command_model_and_scores(capsys, given_p_run):
     """A given p and a held-out tail: the model, its eigenvalues and every score agree to 1e-9."""
     summary = _command(capsys, "--order", "2", "--p", "1e-4", "--passes", "8", "--validation", "0.3")
-    result = identify(_dryer(), order=2, validation=0.3, options=IdentifyOptions(p=1e-4, passes=8))
+    result = given_p_run
     assert isinstance(result, Identification)
     for name in "ABCD":
         _close(getattr(result.model, name), summary[name])
@@ -60,6 +65,43 @@ def test_library_reproduces_the_command_model_and_scores(capsys):
     for key in ("order", "method", "passes_run", "stop_reason", "notes", "warnings", "p", "q_schedule",
                 "decision_margins", "initial_state", "horizon"):
         assert rendered[key] == summary[key], key
+
+
+def test_the_result_is_frozen_all_the_way_down(given_p_run):
+    """Nothing the result holds can be changed: its summary, and the model, the records and the estimator's run it
+    renders the summary from (their arrays and ``meta``); a caller that changes a rendered summary changes only
+    its copy."""
+    assert mutable_parts(given_p_run) == []
+    assert mutable_parts(given_p_run.summary) == []
+    with pytest.raises(TypeError):
+        given_p_run.summary["order"] = 99
+    with pytest.raises(ValueError):  # the summary's matrices are the model's
+        given_p_run.model.A[0, 0] = 99.0
+    with pytest.raises(TypeError):  # the summary's "start" is the filter's meta
+        given_p_run.estimator.meta["p_start"] = 99.0
+    rendered = given_p_run.render()
+    rendered["order"], rendered["p_tried"][:] = 99, []
+    assert given_p_run.render()["order"] == given_p_run.summary["order"] == 2
+    assert given_p_run.render()["p_tried"] == [row.as_dict() for row in given_p_run.tuning.tried]
+
+
+def test_the_command_prints_the_rendering_of_the_library_result(capsys, monkeypatch, tmp_path):
+    """`vehid identify --json` calls the library's identify() once and prints its result's rendering, every key and
+    value (the archive and the model file written by the library among them); identify() called from Python on
+    the same file and settings renders the same summary, its run times aside."""
+    import vehid.identification as package
+
+    library, results = library_spy(monkeypatch, package, "identify")
+    archive, model_file = tmp_path / "run.h5", tmp_path / "model.json"
+    summary = _command(capsys, "--order", "2", "--p", "1e-4", "--passes", "8", "--validation", "0.3",
+                       "--out", str(archive), "--save-model", str(model_file))
+    (result,) = results
+    assert summary == printed_json(result.render())
+    assert summary["archive"] == str(archive) and summary["model_file"] == str(model_file)
+    again = library(str(DRYER), order=2, validation=0.3, options=IdentifyOptions(p=1e-4, passes=8),
+                    reading=ReadSettings(inputs=("1",), outputs=("2",), dt=0.08), out=archive, save_model=model_file,
+                    force=True)
+    assert without_run_times(printed_json(again.render())) == without_run_times(summary)
 
 
 def test_options_are_checked_where_they_are_defined():
@@ -172,12 +214,10 @@ def test_a_classical_method_runs_the_same_pipeline(capsys):
 
 
 def test_the_library_is_one_function_under_every_name():
-    """The package's identify, the pipeline module's and the former scenarios name are one function."""
+    """The package's identify and the pipeline module's are one function."""
     import vehid.identification as package
-    from vehid.identification import pipeline
-    from vehid.scenarios import identify_library
 
-    assert package.identify is pipeline.identify is identify_library.identify is identify
+    assert package.identify is identify
     assert package.IdentifyOptions is IdentifyOptions and package.Identification is Identification
 
 
@@ -206,8 +246,7 @@ def test_the_scenarios_identification_modules_parse_no_arguments():
     import ast
 
     root = Path(__file__).resolve().parents[1] / "scenarios"
-    for name in ("identify_workflow", "identify_library", "scheduled_identify", "single_track_identify",
-                 "calibration", "model_checks"):
+    for name in ("scheduled_identify", "single_track_identify", "calibration", "model_checks"):
         tree = ast.parse((root / f"{name}.py").read_text(encoding="utf-8"))
         imported = {alias.name for node in ast.walk(tree) if isinstance(node, ast.Import) for alias in node.names}
         imported |= {node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom) and node.module}

@@ -162,7 +162,7 @@ def test_resampling_bridges_gaps_and_says_where_they_were(tmp_path):
     line = ends[0] + (data.t[inside] - 599 * 0.02) * slope
     # epoch stamps resolve 2.4e-7 s (a double's spacing at 1.7e9): the line's ends sit that far off in time
     np.testing.assert_allclose(data.u[inside, 0], line, rtol=0, atol=2 * 2.4e-7 * abs(slope))
-    from vehid.identification.automatic.checks import data_warnings
+    from vehid.identification.automatic.reported_checks import data_warnings
 
     (warning,) = data_warnings([data])
     assert warning.startswith("gap.csv: 1 gap in time bridged by straight lines when resampling (0.52 s at ")

@@ -19,7 +19,7 @@ from vehid.identification import read_archive, write_archive, write_record, writ
 from vehid.identification.dataio.archive import open_archive
 from vehid.identification.data import IOData
 from vehid.identification.filtering.iekf import IEKFOptions, identify_iekf
-from vehid.identification.filtering.iekf_archive import read_iekf_run, write_iekf_run
+from vehid.identification.dataio.iekf_archive import read_iekf_run, write_iekf_run
 from vehid.identification.assessment.metrics import nrmse_fit
 from vehid.identification.models.modal import ModalModel, ModalStructure
 from vehid.scenarios.report import archive_figures, archive_table
@@ -91,7 +91,9 @@ def test_a_resumed_or_reread_run_gives_the_original_verdict(tmp_path, options):
     resumed = json.loads(out)
     for key in ("warnings", "p", "p_tried", "start", "model_returned", "passes_run", "stop_reason",
                 "validation_fit_percent", "estimation_fit_percent"):
-        assert resumed.get(key) == original.get(key), key
+        # both runs state every key: a key lost by both (renamed, say) must not pass as agreement
+        assert key in original and key in resumed, key
+        assert resumed[key] == original[key], key
     assert resumed_status == (3 if original["warnings"] else 0) and status == 0
     if options is not STUCK:
         return

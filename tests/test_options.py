@@ -83,7 +83,7 @@ def test_every_option_is_declared_with_the_choices_of_its_kind():
                                                     "initial_state", "detrend", "pattern")} == {
         "start": START_CHOICES, "discretization": DISCRETIZATIONS, "covariance": COVARIANCE_FORMS,
         "timescale": TIMESCALES, "initial_state": INITIAL_STATES, "detrend": DETRENDS, "pattern": C_PATTERNS}
-    from vehid.identification.classical.comparators import COMPARATORS
+    from vehid.identification.comparators import COMPARATORS
 
     assert SPECS["method"].choices == tuple(COMPARATORS)  # the registry itself, read when checked
     for name, spec in SPECS.items():  # the defaults pass their own checks
@@ -99,12 +99,12 @@ def test_the_built_in_methods_are_the_registry_s_and_a_refused_method_loads_no_e
     import sys
 
     from vehid.identification.choices import ESTIMATORS
-    from vehid.identification.classical.comparators import COMPARATORS
+    from vehid.identification.comparators import COMPARATORS
 
     assert ESTIMATORS == tuple(COMPARATORS)
     probe = ("import sys\nfrom vehid.identification import IdentifyOptions, OptionError\n"
              "try:\n    IdentifyOptions(method='bogus')\nexcept OptionError:\n    pass\n"
-             "print('vehid.identification.classical.comparators' in sys.modules, 'scipy.optimize' in sys.modules)")
+             "print('vehid.identification.comparators' in sys.modules, 'scipy.optimize' in sys.modules)")
     done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
     assert done.stdout.split() == ["False", "False"]
 
@@ -118,7 +118,7 @@ def test_bounds_are_closed_and_values_are_stored_as_checked():
 
 
 def test_a_registered_estimator_is_accepted_once_it_is_registered(monkeypatch):
-    from vehid.identification.classical import comparators
+    from vehid.identification import comparators
 
     with pytest.raises(OptionError, match="'method'"):
         IdentifyOptions(method="mine")
@@ -233,12 +233,12 @@ def test_every_option_a_library_error_names_is_a_flag_of_the_command_line():
 def test_the_command_names_a_bad_option_by_its_flag_before_reading_any_data(flags, shown, monkeypatch, tmp_path):
     from conftest import run_vehid
 
-    from vehid.scenarios.commands import identify
+    from vehid.identification.automatic import intake
 
     def read_nothing(*args, **kwargs):
         raise AssertionError("the data were read before the options were checked")
 
-    monkeypatch.setattr(identify, "load_plan", read_nothing)
+    monkeypatch.setattr(intake, "plan_run", read_nothing)
     record = tmp_path / "record.csv"
     record.write_text("t,u,y\n0,0,0\n0.1,1,1\n")
     run = run_vehid("identify", str(record), "--inputs", "u", "--outputs", "y", *flags, "--json")

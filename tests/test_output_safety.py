@@ -24,7 +24,8 @@ from vehid.identification.dataio.archive_safety import (REPORT_MARKER, OutputTar
                                                 output_identity, writing_report_folder)
 from vehid.scenarios.cli import build_parser, main
 from vehid.scenarios.linear_example import make_data
-from vehid.scenarios.paths import OUT_RULE, results_path, run_digest
+from vehid.scenarios.commands.arguments import run_digest
+from vehid.scenarios.paths import OUT_RULE, results_path
 
 
 def _record(path: Path, duration: float = 2.0) -> Path:
@@ -42,13 +43,13 @@ def _no_work(monkeypatch) -> None:
     """Make every command's computation fail loudly: a refusal must come before any of it."""
     import vehid.vehicle
     from vehid.scenarios import envelope, handling_study, linear_example
-    from vehid.scenarios.commands import identify
+    from vehid.identification.automatic import intake
 
     def refuse(*args, **kwargs):
         raise AssertionError("the work started before the output was checked")
 
     # the commands import what they compute with when they run: the refusal is set where they find it
-    monkeypatch.setattr(identify, "load_plan", refuse)
+    monkeypatch.setattr(intake, "plan_run", refuse)
     monkeypatch.setattr(vehid.vehicle, "simulate", refuse)
     monkeypatch.setattr(handling_study, "make_records", refuse)
     monkeypatch.setattr(linear_example, "run_case", refuse)

@@ -20,7 +20,7 @@ import pytest
 from scipy.io import loadmat
 
 from vehid.identification import IOData
-from vehid.scenarios.identify_workflow import ORDER_TOLERANCE, choose_order
+from vehid.identification.automatic.steps import ORDER_TOLERANCE, choose_order
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -35,6 +35,7 @@ def _load_benchmark_module(name: str):
     return module
 
 
+_load_benchmark_module("_baselines")  # real_data imports it by this name, as the runner does _real_records
 records = _load_benchmark_module("_real_records")
 runner = _load_benchmark_module("_peers_runner")
 

@@ -301,13 +301,12 @@ def test_a_modal_model_is_a_cars_by_its_quantities():
     record = IOData(t=0.01 * np.arange(n), u=np.sin(np.arange(n) / 10.0)[:, None], y=np.zeros((n, 2)),
                     output_names=("yawRate", "ayCG"), meta={"speed": 30.0})
     plan = SimpleNamespace(records=(record,), schedule=None)
-    args = SimpleNamespace(quantities="yaw_rate,lateral_acceleration", lf=LF, lr=LR, vehicle=None)
-    found = {f.quantity: f for f in plausibility_checks.identify_findings(args, plan, model)}
+    found = {f.quantity: f for f in plausibility_checks.identify_findings(
+        plan, model, quantities=("yaw_rate", "lateral_acceleration"), wheelbase=LF + LR)}
     assert found["yaw_rate_response_time_s"].speed == 30.0
     # the feed-through makes the steady yaw-rate gain 21 times the car's, whose a_y = V r held exactly
     assert found["steady_turn_kinematic_ratio"].value == pytest.approx(1 / 21, rel=1e-4)
-    assert plausibility_checks.identify_findings(SimpleNamespace(quantities=None, lf=None, lr=None, vehicle=None),
-                                                 plan, model) is None
+    assert plausibility_checks.identify_findings(plan, model) is None
 
 
 @pytest.mark.parametrize("extra, message", [

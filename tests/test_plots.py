@@ -155,23 +155,23 @@ def test_eigenvalue_map_draws_into_a_given_axis():
     assert ax.get_lines()
 
 
-def test_frequency_response_matches_scipy():
+def test_response_to_input_matches_scipy():
     A = np.array([[-1.0, 4.0], [-4.0, -1.0]])
     B = np.array([[1.0, 0.0], [0.5, 2.0]])
     C = np.array([[1.0, 0.0], [0.3, 1.0]])
     D = np.array([[0.3, 0.1], [0.2, -0.4]])  # no zero entry: scipy's tf conversion warns on one
     f = np.logspace(-2, 1, 30)
     for column in range(2):
-        got = plots.frequency_response((A, B, C, D), f, column)
+        got = plots.response_to_input((A, B, C, D), f, column)
         for row in range(2):
             system = signal.StateSpace(A, B[:, [column]], C[[row]], D[[row]][:, [column]])
             _, expected = signal.freqresp(system, w=2 * np.pi * f)
             np.testing.assert_allclose(got[:, row], expected, rtol=1e-10)  # algebra, via scipy's polynomials
     model = _model()
-    np.testing.assert_array_equal(plots.frequency_response(model, f),
-                                  plots.frequency_response((model.A, model.B, model.C, model.D), f))
+    np.testing.assert_array_equal(plots.response_to_input(model, f),
+                                  plots.response_to_input((model.A, model.B, model.C, model.D), f))
     with pytest.raises(InputError, match="input_index"):
-        plots.frequency_response(model, f, 1)
+        plots.response_to_input(model, f, 1)
 
 
 def test_a_discrete_model_is_plotted_with_its_own_response():
@@ -182,13 +182,13 @@ def test_a_discrete_model_is_plotted_with_its_own_response():
     model, dt = _model(n_y=1), 0.05
     discrete = DiscreteModel(*continuous_to_discrete(model.A, model.B, model.C, model.D, dt), dt)
     f = np.array([0.02, 0.2, 2.0, 7.0])
-    got = plots.frequency_response(discrete, f)
+    got = plots.response_to_input(discrete, f)
     np.testing.assert_array_equal(got, discrete.frequency_response(f)[:, :, 0])
-    np.testing.assert_allclose(plots.frequency_response(discrete, f + 1 / dt), got, rtol=1e-9)
+    np.testing.assert_allclose(plots.response_to_input(discrete, f + 1 / dt), got, rtol=1e-9)
     # at f dt = 1e-3 the first-order-hold equivalent departs from the continuous response by O((2 pi f dt)^2)
-    np.testing.assert_allclose(got[0], plots.frequency_response(model, f[:1])[0], rtol=(2 * np.pi * 1e-3) ** 2)
+    np.testing.assert_allclose(got[0], plots.response_to_input(model, f[:1])[0], rtol=(2 * np.pi * 1e-3) ** 2)
     # while at 7 Hz (f dt = 0.35) the two differ clearly: a plot evaluating the discrete model at s would be wrong
-    assert abs(got[3, 0] - plots.frequency_response(model, f[3:])[0, 0]) > 0.01 * abs(got[3, 0])
+    assert abs(got[3, 0] - plots.response_to_input(model, f[3:])[0, 0]) > 0.01 * abs(got[3, 0])
     fig = plots.plot_bode({"discrete": discrete}, reference=model, frequencies=f)
     magnitude = fig.axes[0].get_lines()[0].get_ydata()
     np.testing.assert_allclose(magnitude, np.abs(got[:, 0]), rtol=1e-12)
@@ -336,8 +336,8 @@ def test_a_band_does_not_stretch_the_bode_axes_and_the_gain_has_a_unit():
     frequencies = np.logspace(-1, 1, 50)
     fig = plots.plot_bode({"returned": wide}, frequencies=frequencies)
     magnitude, phase = fig.axes[0], fig.axes[1]
-    response = np.abs(plots.frequency_response(model, frequencies)[:, 0])
-    curve_phase = np.degrees(np.unwrap(np.angle(plots.frequency_response(model, frequencies)[:, 0])))
+    response = np.abs(plots.response_to_input(model, frequencies)[:, 0])
+    curve_phase = np.degrees(np.unwrap(np.angle(plots.response_to_input(model, frequencies)[:, 0])))
     low, high = magnitude.get_ylim()
     assert response.min() / 2 < low <= response.min() and response.max() <= high < 2 * response.max()
     low, high = phase.get_ylim()

@@ -10,7 +10,7 @@ from vehid.identification import (IEKFOptions, InputError, ModalStructure, ident
                                   prepare_validation)
 from vehid.identification.dataio.archive import open_archive, read_archive
 from vehid.identification.assessment.multirecord import score_records
-from vehid.scenarios.data_options import archived_preparation
+from vehid.identification.automatic.archiving import archived_preparation
 from vehid.scenarios.linear_example import make_data
 
 OFFSETS = [(0.3, -0.2, 5.0), (-0.1, 0.4, -3.0), (0.25, 0.05, 12.0)]  # (u1, u2, y1) added to each segment

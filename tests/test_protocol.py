@@ -1,4 +1,4 @@
-"""Every identified model class meets one protocol (identification.protocol), checked by behaviour.
+"""Every identified model class meets one protocol (vehid.identification.models.protocol), checked by behaviour.
 
 Each class is built to stand for a known continuous system whose
 eigenvalues are written down by hand (two complex pairs and a real pole, one

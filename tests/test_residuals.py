@@ -10,10 +10,10 @@ from conftest import returned_run, run_vehid
 from scipy.signal import lfilter
 
 from vehid.identification.dataio.archive import open_archive, read_archive, update_archive
-from vehid.identification.classical.comparators import identify_with
+from vehid.identification.comparators import identify_with
 from vehid.identification.errors import InputError
 from vehid.identification.filtering.iekf import IEKFOptions, identify_iekf
-from vehid.identification.filtering.iekf_archive import append_iekf_pass, read_iekf_run
+from vehid.identification.dataio.iekf_archive import append_iekf_pass, read_iekf_run
 from vehid.identification.models.modal import ModalStructure
 from vehid.identification.assessment.residuals import nis_band, residual_tests
 from vehid.identification.dataio.storage import read_value

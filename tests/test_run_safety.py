@@ -15,7 +15,7 @@ import pytest
 from vehid.identification import IEKFOptions, ModalStructure, identify_iekf
 from vehid.identification.dataio.archive import open_archive, read_archive
 from vehid.identification.errors import ConversionError
-from vehid.identification.filtering.iekf_archive import Checkpointer, read_iekf_run
+from vehid.identification.dataio.iekf_archive import Checkpointer, read_iekf_run
 from vehid.scenarios.cli import main
 from vehid.identification.automatic import run as pipeline_run
 from vehid.scenarios.linear_example import make_data
@@ -84,7 +84,7 @@ def test_fast_passes_are_checkpointed_together_and_none_is_lost(tmp_path, monkey
     times what that checkpoint took to write; the first is written at once, and a flush (an interrupted
     run) or the finish writes the rest. On a clock that this test moves: a pass takes 1 s, a write 2 s."""
     from vehid.identification.dataio.archive import write_archive
-    from vehid.identification.filtering import iekf_archive
+    from vehid.identification.dataio import iekf_archive
 
     clock = {"now": 0.0}
 
@@ -249,7 +249,7 @@ def test_a_negative_real_discrete_pole_comes_back_as_a_labelled_discrete_model(t
 
 def test_a_model_conversion_failure_on_good_input_exits_1(tmp_path, capsys, monkeypatch):
     """An estimate with no modal form is a failed computation (1), not bad input (it used to be 2)."""
-    import vehid.identification.classical.comparators as comparators
+    import vehid.identification.comparators as comparators
     def no_modal_form(*args, **kwargs):
         raise ConversionError("the arx model has no continuous modal form: a defective eigenvalue")
 

@@ -4,7 +4,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import run_vehid
+from conftest import library_spy, mutable_parts, printed_json, run_vehid, without_run_times
 
 from vehid.identification.data import IOData
 from vehid.identification.filtering.greybox import simulate_greybox
@@ -48,6 +48,28 @@ def _identify(log, *extra):
     return _vehid("identify", str(log), "--structure", "single-track", "--inputs", "delta", "--schedule", "vx",
                   "--outputs", "yawRate,ayCG", "--quantities", "yaw_rate,lateral_acceleration",
                   "--scale", f"yawRate={DEG!r}", *extra)
+
+
+def test_the_command_prints_the_rendering_of_the_library_result(log, monkeypatch):
+    """`vehid identify --structure single-track --json` calls identify_single_track() once and prints its result's
+    rendering, every key and value; the library called from Python on the same log and settings renders the same
+    summary, its run time aside."""
+    from vehid.identification.dataio.preparation import ReadSettings
+    from vehid.scenarios import single_track_identify
+
+    library, results = library_spy(monkeypatch, single_track_identify, "identify_single_track")
+    completed = _identify(log, *GEOMETRY, "--validation", "0.3", "--json")
+    assert completed.returncode == 0, completed.stderr
+    (result,) = results
+    summary = json.loads(completed.stdout)
+    assert summary == printed_json(result.render())
+    # frozen all the way down, the model and the filter's run the summary is rendered from included
+    assert mutable_parts(result) == []
+    with pytest.raises(ValueError):
+        result.estimator.nrmse_fit_percent[0] = 99.0
+    again = library(str(log), schedule="vx", config=SingleTrackConfig(1500.0, 1.2, 1.5), validation=0.3,
+                    reading=ReadSettings(inputs=("delta",), outputs=("yawRate", "ayCG")), scale=[f"yawRate={DEG!r}"])
+    assert without_run_times(printed_json(again.render())) == without_run_times(summary)
 
 
 def test_json_contract_and_recovery(log):
@@ -224,6 +246,11 @@ def test_saved_model_gives_its_handling_and_page(log, tmp_path, capsys):
                  "--save-model", str(model_file)]) == 0
     identified = json.loads(capsys.readouterr().out)
     assert identified["model_file"] == str(model_file)
+    # a file the workbench wrote is its own to replace: a rerun with the same --save-model was refused as "not a
+    # workbench model file"
+    from vehid.identification.dataio.model_files import check_model_target
+
+    assert check_model_target(model_file) == model_file
     assert main(["handling", str(model_file), "--figure", str(figure), "--json"]) == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["scheduled"] is True and summary["wheelbase"] == pytest.approx(2.7)

@@ -5,17 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vehid.identification.classical.comparators import identify_with
+from vehid.identification.comparators import identify_with
 from vehid.identification.errors import InputError
 from vehid.identification.classical.least_squares import least_squares
 from vehid.identification.models.modal import ModalModel, ModalStructure
-from vehid.identification.assessment.uncertainty import (
-    frequency_response,
-    gauss_newton_covariance,
-    model_uncertainty,
-    sample_parameters,
-    simulation_error_covariance,
-)
+from vehid.identification.assessment.uncertainty import gauss_newton_covariance, simulation_error_covariance
+from vehid.identification.models.delta_method import frequency_response_band, model_uncertainty, sample_parameters
 from vehid.scenarios import calibration
 
 
@@ -62,7 +57,7 @@ def test_delta_method_matches_monte_carlo_sampling_of_the_covariance():
                              for f in probe])
         magnitudes.append(np.abs(response))
         phases.append(np.angle(response))
-    band = frequency_response(model, probe)
+    band = frequency_response_band(model, probe)
     checks = [
         (np.std(frequencies, axis=0), [m.frequency_hz_std for m in predicted.modes]),
         (np.std(dampings, axis=0)[:2], [m.damping_std for m in predicted.modes][:2]),
@@ -83,7 +78,7 @@ def test_eigenvalue_std_is_the_sigma_omega_std_and_values_are_the_model_s():
     np.testing.assert_allclose([m.eigenvalue_std for m in result.modes], [(std[0], std[1]), (std[2], std[3]), (std[4], 0.0)],
                                rtol=1e-12)
     np.testing.assert_allclose([m.eigenvalue for m in result.modes], model.mode_eigenvalues(), rtol=1e-12)
-    band = frequency_response(model, [0.3, 2.0])
+    band = frequency_response_band(model, [0.3, 2.0])
     exact = [model.C @ np.linalg.solve(2j * np.pi * f * np.eye(5) - model.A, model.B) + model.D for f in (0.3, 2.0)]
     np.testing.assert_allclose(band.magnitude, np.abs(exact), rtol=1e-12)
 

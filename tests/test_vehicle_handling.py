@@ -348,6 +348,32 @@ def test_handling_command_on_a_model_file(capsys, tmp_path):
     assert main(["handling", str(path), "--speeds", "20", "--wheelbase", str(WHEELBASE), "--strict"]) == 3
 
 
+def test_the_command_prints_the_rendering_of_the_library_result(capsys, tmp_path, monkeypatch):
+    """`vehid handling --json` calls handling() once and prints its result's rendering, every key and value, for a
+    model file (beside the source model) and for the source model; handling() called from
+    Python on the same inputs renders the same summaries (no run time enters them)."""
+    from conftest import library_spy, mutable_parts, printed_json
+
+    from vehid.scenarios import car_handling
+    from vehid.scenarios.car_handling import HandlingOptions, SourceHandlingOptions
+
+    A, B, C, D, _ = Bicycle(20.0).to_statespace()
+    model = dataclasses.replace(to_modal(A, B, C[:2], D[:2]), input_names=("steer",),
+                                output_names=("yaw_rate", "lateral_acceleration"))
+    path = model.save_json(tmp_path / "car.json")
+    library, results = library_spy(monkeypatch, car_handling, "handling")
+    assert main(["handling", str(path), "--speeds", "20", "--wheelbase", str(WHEELBASE), "--beside-source",
+                 "baseline", "--json"]) == 0
+    assert main(["handling", "--source", "--speeds", "10,30", "--no-simulation", "--json"]) == 0
+    printed = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert printed == [printed_json(result.render()) for result in results] and len(results) == 2
+    # frozen all the way down, the model read included
+    assert mutable_parts(results[0]) == mutable_parts(results[1]) == []
+    again = (library(str(path), speeds=[20.0], options=HandlingOptions(wheelbase=WHEELBASE, beside_source="baseline")),
+             library(source="baseline", speeds=[10.0, 30.0], options=SourceHandlingOptions(simulation=False)))
+    assert [printed_json(result.render()) for result in again] == printed
+
+
 def test_the_handling_text_gives_steer_angles_in_one_unit_and_the_json_its_units(capsys, tmp_path):
     """The JSON's gains are per radian of steer, each with its unit; the text gives every steer angle in
     degrees (as the understeer gradient's deg/g), the lateral-acceleration gain too, and says so."""

@@ -54,6 +54,7 @@ class Manoeuvre:
     Attributes
     ----------
     name : str
+        The manoeuvre's name (a key of :data:`MANOEUVRES`).
     steer : numpy.ndarray, shape (N,)
         Road-wheel steer angle (rad), positive left; ``steer[0] == 0``.
     dt : float
@@ -88,6 +89,7 @@ class Manoeuvre:
 
     @property
     def n_samples(self) -> int:
+        """Number of samples N."""
         return int(self.steer.size)
 
     def __array__(self, dtype=None, copy=None):
@@ -383,7 +385,30 @@ MANOEUVRES: dict[str, Callable[..., Manoeuvre]] = {name: globals()[name.replace(
 
 
 def make_manoeuvre(name: str, **options: Any) -> Manoeuvre:
-    """The manoeuvre called ``name`` with keyword ``options`` (amplitude, duration, dt, seed)."""
+    """Make the manoeuvre called ``name``.
+
+    Parameters
+    ----------
+    name : str
+        A key of :data:`MANOEUVRES`: ``identification``, ``validation``, ``step``, ``sweep``,
+        ``ramp``, ``speed-ramp`` or ``speed-cycle``.
+    **options
+        The manoeuvre's own keywords: amplitude (rad), duration (s), dt (s), seed, and its shape's.
+
+    Returns
+    -------
+    Manoeuvre
+        The steer series (and a speed profile for the speed manoeuvres).
+
+    Examples
+    --------
+    >>> from vehid.vehicle import make_manoeuvre
+    >>> step = make_manoeuvre("step", amplitude=0.01, duration=3.0)
+    >>> step.n_samples, step.dt, float(step.steer[0]), float(step.steer[-1])
+    (1501, 0.002, 0.0, 0.01)
+    >>> step.meta["start"], step.meta["ramp_time"]
+    (0.5, 0.1)
+    """
     try:
         factory = MANOEUVRES[name]
     except KeyError:

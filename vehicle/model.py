@@ -193,6 +193,7 @@ class VehicleModel:
         ``tracking_dynamics(x, u, p) -> xdot`` with ``p = (V_ref, dV_ref/dt)`` (2,):
         the speed hold with feed-forward and four-wheel braking (module notes).
     state_names, state_units, input_names, input_units, output_names, output_units : tuple of str
+        Names and units of the states, the input and the outputs, in their order in ``x``, ``u`` and ``y``.
     """
 
     params: VehicleParameters
@@ -214,26 +215,62 @@ class VehicleModel:
 
     @property
     def n_x(self) -> int:
+        """Number of states (23)."""
         return len(self.state_names)
 
     @property
     def n_u(self) -> int:
+        """Number of inputs (1: the steer)."""
         return len(self.input_names)
 
     @property
     def n_y(self) -> int:
+        """Number of outputs (10)."""
         return len(self.output_names)
 
     def state_index(self, name: str) -> int:
-        """Column of a named state."""
+        """Return the position of a named state in ``x``.
+
+        Parameters
+        ----------
+        name : str
+            One of ``state_names``.
+
+        Returns
+        -------
+        int
+            Its index, 0-based.
+        """
         return _index(self.state_names, name, "state")
 
     def output_index(self, name: str) -> int:
-        """Row of a named output."""
+        """Return the position of a named output in ``y``.
+
+        Parameters
+        ----------
+        name : str
+            One of ``output_names``.
+
+        Returns
+        -------
+        int
+            Its index, 0-based.
+        """
         return _index(self.output_names, name, "output")
 
     def straight_running_guess(self, speed: float) -> np.ndarray:
-        """States of straight running at ``speed`` on static suspension: trim at zero steer."""
+        """Guess the states of straight running on static suspension: the start of the trim at zero steer.
+
+        Parameters
+        ----------
+        speed : float
+            Forward speed (m/s).
+
+        Returns
+        -------
+        ndarray, shape (23,)
+            The forward speed and the wheel spins set, every other state zero.
+        """
         x = np.zeros(self.n_x)
         x[self.state_index("u")] = speed
         for corner in CORNERS:
@@ -246,7 +283,21 @@ class VehicleModel:
         All derivatives except d(psi)/dt (psi is ignorable) are driven to zero by
         Newton's method with a backtracking line search, starting from straight
         running, and polished by one more step once below ``tolerance``; where that fails (large steer), the steer is raised in eight
-        stages, each solve starting from the last. Returns the 23 states (psi = 0).
+        stages, each solve starting from the last.
+
+        Parameters
+        ----------
+        speed : float, default DEFAULT_SPEED
+            Forward speed (m/s), within the model's valid range.
+        steer : float, default 0.0
+            Road-wheel steer (rad), within +/-30 deg.
+        tolerance : float, default 1e-11
+            Norm of the derivatives at which Newton's method stops.
+
+        Returns
+        -------
+        ndarray, shape (23,)
+            The steady states (psi = 0).
 
         Raises
         ------

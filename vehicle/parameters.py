@@ -15,6 +15,7 @@ left/right symmetric). Equations: Pacejka, Tire and Vehicle Dynamics, 3rd ed.
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import json
 import math
 import tomllib
@@ -61,6 +62,23 @@ def _p(value: float, unit: str, source: str) -> Any:
     return field(default=value, metadata={"unit": unit, "source": source})
 
 
+def _fields_documented(cls: type) -> type:
+    """Class decorator: the docstring's Parameters section written from each field's unit and source.
+
+    The fields' metadata is where a value's unit and source are stated; the
+    reference shows them from there rather than from a second copy.
+    """
+    lines = ["Parameters", "----------"]
+    for item in dataclasses.fields(cls):
+        # a source's |x| is an absolute value, which reStructuredText would read as a substitution
+        unit, source = item.metadata["unit"], item.metadata["source"].rstrip(".").replace("|", "\\|")
+        lines += [f"{item.name} : float, default {item.default!r}",
+                  f"    {'Dimensionless' if unit == '-' else f'In {unit}'}: {source}."]
+    cls.__doc__ = inspect.cleandoc(cls.__doc__ or "") + "\n\n" + "\n".join(lines) + "\n"
+    return cls
+
+
+@_fields_documented
 @dataclass(frozen=True)
 class ChassisParameters:
     """Rigid body: mass, inertia and geometry (CG at the origin of the body axes)."""
@@ -82,6 +100,7 @@ class ChassisParameters:
         return self.cg_to_front_axle + self.cg_to_rear_axle
 
 
+@_fields_documented
 @dataclass(frozen=True)
 class SuspensionParameters:
     """Quarter-car struts at the four corners (rates at the wheel) and anti-roll bars."""
@@ -94,6 +113,7 @@ class SuspensionParameters:
     rear_anti_roll_bar: float = _p(9000.0, "N m/rad", "about 5 deg/g roll gradient, roll axis at the ground")
 
 
+@_fields_documented
 @dataclass(frozen=True)
 class TyreParameters:
     """Magic Formula 6.2 coefficients (camber 0, nominal pressure), relaxation lengths, wheel.
@@ -164,6 +184,7 @@ class TyreParameters:
     unloaded_radius: float = _p(0.3135, "m", f"R0, the length that scales the trail; {_TNO}")
 
 
+@_fields_documented
 @dataclass(frozen=True)
 class DriveParameters:
     """PI speed hold; the drive torque is split between the axles, equally between an axle's wheels."""
@@ -177,6 +198,7 @@ class DriveParameters:
                                      "as they are; 0: neither")
 
 
+@_fields_documented
 @dataclass(frozen=True)
 class SteeringParameters:
     """The steering system: ratio, and the compliance between steering wheel and road wheels.
@@ -196,6 +218,7 @@ class SteeringParameters:
     mechanical_trail: float = _p(0.02, "m", f"caster trail at the ground; passenger cars 10-30 mm ({_GILLESPIE})")
 
 
+@_fields_documented
 @dataclass(frozen=True)
 class AeroParameters:
     """Aerodynamic drag and downforce, from the dynamic pressure ``q = rho u^2 / 2`` of the forward speed.
@@ -214,7 +237,30 @@ class AeroParameters:
 
 @dataclass(frozen=True)
 class VehicleParameters:
-    """A whole vehicle: chassis, suspension, tyre and drive, plus a name for reports."""
+    """A whole vehicle: chassis, suspension, tyre and drive, plus a name for reports.
+
+    Parameters
+    ----------
+    chassis : ChassisParameters
+        Mass, inertia and geometry.
+    suspension : SuspensionParameters
+        Wheel rates, dampers and anti-roll bars.
+    tyre : TyreParameters
+        The Magic Formula tyre, the same at the four corners.
+    drive : DriveParameters
+        The speed hold and the drive split.
+    name : str, default "baseline"
+        The vehicle's name in reports.
+    steering : SteeringParameters
+        Ratio and compliance of the steering system.
+    aerodynamics : AeroParameters
+        Drag and downforce (none by default).
+
+    Raises
+    ------
+    InputError
+        For values out of range or a car that would roll over before its tyres slide.
+    """
 
     chassis: ChassisParameters = field(default_factory=ChassisParameters)
     suspension: SuspensionParameters = field(default_factory=SuspensionParameters)
@@ -360,7 +406,13 @@ def _check_static_stability(params: VehicleParameters) -> None:
 
 
 def baseline() -> VehicleParameters:
-    """The baseline saloon: 1450 kg, 60 % front load, near-neutral handling (< 1 deg/g)."""
+    """Make the baseline saloon: 1450 kg, 60 % front load, near-neutral handling (< 1 deg/g).
+
+    Returns
+    -------
+    VehicleParameters
+        Every field at its default, rigid steering, no aerodynamics.
+    """
     return VehicleParameters()
 
 
@@ -371,6 +423,11 @@ def understeer() -> VehicleParameters:
     only understeer source; the scale stands in for steering compliance and
     brings the understeer gradient into the 2-4 deg/g range of real saloons.
     :func:`saloon` models the compliance itself.
+
+    Returns
+    -------
+    VehicleParameters
+        Named ``"understeer"``.
     """
     base = baseline()
     return dataclasses.replace(
@@ -396,6 +453,11 @@ def saloon() -> VehicleParameters:
     near-neutral baseline's (:func:`vehid.vehicle.handling.source_handling`
     reports it). The model's input stays the steering-wheel angle over the
     ratio; the paper's studies keep the baseline, whose steering is rigid.
+
+    Returns
+    -------
+    VehicleParameters
+        Named ``"saloon"``.
     """
     base = baseline()
     return dataclasses.replace(
@@ -407,7 +469,18 @@ NAMED_VEHICLES = {"baseline": baseline, "understeer": understeer, "saloon": salo
 
 
 def named_vehicle(spec: str | Path | VehicleParameters) -> VehicleParameters:
-    """A vehicle from a name (``baseline``, ``understeer``), a TOML/JSON file path, or itself."""
+    """Return the vehicle a name, a file or a vehicle value stands for.
+
+    Parameters
+    ----------
+    spec : str, path or VehicleParameters
+        A name (``baseline``, ``understeer``, ``saloon``), a TOML or JSON file, or the vehicle itself.
+
+    Returns
+    -------
+    VehicleParameters
+        The vehicle.
+    """
     if isinstance(spec, VehicleParameters):
         return spec
     text = str(spec)
@@ -474,7 +547,18 @@ def vehicle_from_mapping(data: Mapping[str, Any], *, origin: str = "vehicle data
 
 
 def load_vehicle(path: str | Path) -> VehicleParameters:
-    """Read a vehicle from a TOML or JSON file (see :func:`vehicle_from_mapping` for the layout)."""
+    """Read a vehicle from a TOML or JSON file.
+
+    Parameters
+    ----------
+    path : str or path
+        The file; its layout is :func:`vehicle_from_mapping`'s.
+
+    Returns
+    -------
+    VehicleParameters
+        The vehicle, checked.
+    """
     path = Path(path)
     if not path.is_file():
         raise InputError(f"no such vehicle file: {path}")

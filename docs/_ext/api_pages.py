@@ -22,6 +22,7 @@ from typing import Any
 PACKAGES = {
     "vehid.identification": "Identification: models, estimators, metrics, data and archives",
     "vehid.vehicle": "The vehicle: parameters, symbolic model, simulation, manoeuvres",
+    "vehid.scenarios": "Scenarios: the commands' library functions (a car's single-track model, handling)",
 }
 _HELP_WIDTH = "78"  # what the page's code blocks show without scrolling
 

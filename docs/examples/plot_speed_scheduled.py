@@ -10,17 +10,17 @@ Here the modal coefficients are piecewise-linear splines in the measured speed
 and the IEKF estimates their ordinates at the knots, starting from an
 unscheduled model of the same samples. The last 40 % of the lap is held out.
 
-The command line does this and more (p chosen on the held-out part, the
-family returned only where it validates better than the unscheduled model,
-modes with their standard deviations in the JSON, each knot's data and the
-checks of its physics)::
+One call of :func:`~vehid.identification.identify` with ``schedule`` does what
+the command line does (p chosen on the held-out part, the family returned only
+where it validates better than the unscheduled model, modes with their
+standard deviations, each knot's data and the checks of its physics)::
 
     vehid identify tests/data/race_car_250lm/20140222_01_01_03_250lm.csv \\
         --inputs delta --outputs yawRate,ayCG --schedule vx --validation 0.4 \\
         --quantities yaw_rate,lateral_acceleration --lf 1.33 --lr 1.07
 
-A fit is not yet a car: the last section checks the family's physics at its
-knots and says which knots rest on too few samples.
+A fit is not yet a car: the last section reads the checks of the family's
+physics at its knots, which say which knots rest on too few samples.
 """
 
 import os
@@ -30,52 +30,29 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import vehid
-from vehid.identification import (
-    IEKFOptions,
-    ModalStructure,
-    identify_iekf,
-    nrmse_fit,
-    prepare,
-    prepare_validation,
-    read_record,
-)
-from vehid.identification.filtering.scheduled_iekf import ScheduledIEKFOptions, identify_scheduled
-from vehid.scenarios.plausibility_checks import model_findings
-from vehid.vehicle.plausibility import steer_band_hz
+from vehid.identification import IdentifyOptions, ReadSettings, identify
+from vehid.scenarios import CarChecks
 
-# Shortened under VEHID_DOCS_QUICK=1 (the documentation test): fewer passes.
+# Shortened under VEHID_DOCS_QUICK=1 (the documentation test): a second-order model with p given, ten passes,
+# three knots and one scheduled p, instead of the command's defaults (order 4, p and the scheduled p chosen by
+# cross-validation, five knots).
 quick = os.environ.get("VEHID_DOCS_QUICK") == "1"
-passes, scheduled_passes, refine = (8, 4, 2) if quick else (40, 40, 10)
+order, options = (2, IdentifyOptions(p=1e-5, passes=10, schedule_knots=3, schedule_p=(1e-2,))) if quick else \
+    (4, IdentifyOptions())
 
 # The log ships with the repository's tests; this path holds in a clone.
 path = Path(vehid.__file__).resolve().parent / "tests" / "data" / "race_car_250lm" / "20140222_01_01_03_250lm.csv"
 
 # %%
-# Read the speed as a further column, then set it aside as the schedule: it
-# is a measured condition of the car, not an input the model responds to.
-raw = read_record(path, inputs=("delta", "vx"), outputs=("yawRate", "ayCG"))
-speed = raw.u[:, 1]
-raw = raw.select_inputs(("delta",))
-raw_estimation, raw_validation = raw.split(0.6)
-cut = raw_estimation.n_samples
-(estimation,), preparation = prepare(raw_estimation)
-validation = prepare_validation(raw_validation, preparation)
-speed_estimation, speed_validation = speed[:cut], speed[cut:]
-print(f"speed {speed.min():.1f} to {speed.max():.1f} m/s; {estimation.n_samples} estimation and "
-      f"{validation.n_samples} held-out samples")
-
-# %%
-# The unscheduled start: a second-order modal model (one mode) by the IEKF
-# with the settings that do not depend on units or record length.
-start = identify_iekf(estimation, ModalStructure.default(2, 1, 2), options=IEKFOptions.invariant(passes=passes)).model
-
-# %%
-# The family: the start's coefficients at every knot of a grid spread over
-# the speeds the estimation part covers, then moved by the filter.
-result = identify_scheduled(estimation, speed_estimation, start, variable="vx",
-                            options=ScheduledIEKFOptions(passes=scheduled_passes, min_passes=scheduled_passes // 2,
-                                                         refine_iterations=refine))
-family = result.model
+# The speed is read beside the steer and set aside as the schedule: it is a
+# measured condition of the car, not an input the model responds to, and it is
+# never offset. The checks of a car's physics need to know what each output
+# measures and the car's wheelbase (1.33 + 1.07 m).
+result = identify(path, reading=ReadSettings(inputs=("delta",), outputs=("yawRate", "ayCG")), schedule="vx",
+                  order=order, validation=0.4, options=options, min_speed=5.0,
+                  checks=CarChecks(quantities=("yaw_rate", "lateral_acceleration"), wheelbase=1.33 + 1.07))
+family = result.scheduled.model
+print(f"model returned: {result.returned}")
 print("knots at", ", ".join(f"{v:.1f}" for v in family.grid), "m/s")
 # Each knot's samples (those nearer it than any other knot) and the steer's RMS there: where they are too
 # few to say its modes, its ordinates are extrapolated from its neighbours' data.
@@ -84,17 +61,19 @@ for knot in family.meta["knot_coverage"]:
           f"lap's" + (" (extrapolated)" if knot["extrapolated"] else ""))
 
 # %%
-# Both on the held-out 40 %, simulated from rest along the measured speed.
-fits = {
-    "unscheduled": nrmse_fit(validation.y, start.simulate_outputs(validation.u, validation.dt)),
-    "speed-scheduled": nrmse_fit(validation.y, family.simulate_outputs(validation.u, validation.dt,
-                                                                       schedule=speed_validation)),
-}
+# Both on the held-out 40 %, scored by the run's one rule (each simulated along
+# the measured speed, its initial state estimated): the decision ``schedule``
+# says which is returned and by what margin.
+scheduled = result.scheduled.summary
+fits = {"unscheduled": scheduled["unscheduled"]["validation_fit_percent"],
+        "speed-scheduled": scheduled["validation_fit_percent"]}
 for name, fit in fits.items():
     print(f"{name}: held-out NRMSE fit yaw rate {fit[0]:.1f} %, lateral acceleration {fit[1]:.1f} %")
+(decision,) = [decision for decision in result.decisions if decision.name == "schedule"]
+print(f"returned: {decision.choice} ({decision.score:.2f} against {decision.runner_up_score:.2f}; {decision.rule})")
 
 # %%
-# The mode against speed, with two standard deviations from the filter's
+# The first mode against speed, with two standard deviations from the
 # covariance of the ordinates (the delta method, knot by knot).
 speeds = np.linspace(family.grid[0], family.grid[-1], 25)
 modes = [at["modes"][0] for at in family.modes_at(speeds)]
@@ -122,7 +101,7 @@ plt.show()
 # response at the slowest knot, the middle of the lap's speeds and the
 # fastest knot, drawn onto one pair of axes per output.
 fig, axes = plt.subplots(2, 2, sharex=True, figsize=(8, 5), layout="constrained")
-for value in (family.grid[0], float(np.median(speed_estimation)), family.grid[-1]):
+for value in (family.grid[0], float(np.median(result.plan.schedule.estimation[0])), family.grid[-1]):
     family.frequency_response(np.logspace(-1, 1, 120), schedule=value).plot(ax=axes, label=f"{value:.0f} m/s")
 fig.suptitle("Steer to yaw rate and lateral acceleration, at three speeds")
 plt.show()
@@ -130,13 +109,10 @@ plt.show()
 # %%
 # Is it a car? In a steady turn the lateral acceleration is the speed times
 # the yaw rate, a car's yaw rate does not answer the steer at once, its modes
-# are damped: each knot is checked against published ranges
-# (:mod:`vehid.vehicle.plausibility`), with the car's wheelbase of 2.4 m.
-# Where the car seldom holds a steady turn, or a knot has few samples, the
-# family's steady gains are not a car's, and the checks say so.
-findings = model_findings(family, list(family.grid), roles={"yaw_rate": 0, "lateral_acceleration": 1}, wheelbase=2.4,
-                          band_hz=steer_band_hz(estimation.u[:, 0], estimation.dt),
-                          top_speed=float(speed_estimation.max()))
-for finding in findings:
+# are damped: the model returned is checked against published ranges
+# (:mod:`vehid.vehicle.plausibility`), a family at each of its knots. Where the
+# car seldom holds a steady turn, or a knot has few samples, the family's
+# steady gains are not a car's, and the checks say so, each as a warning.
+for finding in result.plausibility or ():
     print(finding.warning())
-print(f"{len(findings)} implausible results")
+print(f"{len(result.plausibility or ())} implausible results; {len(result.warnings)} warnings in all")

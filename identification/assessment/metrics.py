@@ -39,6 +39,7 @@ def percentage_explanation(y: np.ndarray, y_hat: np.ndarray) -> np.ndarray:
     Returns
     -------
     ndarray, shape (n_y,)
+        ``100 (1 - sum (y - y_hat)^2 / sum y^2)`` per output.
 
     Examples
     --------
@@ -53,7 +54,23 @@ def percentage_explanation(y: np.ndarray, y_hat: np.ndarray) -> np.ndarray:
 
 
 def nrmse_fit(y: np.ndarray, y_hat: np.ndarray) -> np.ndarray:
-    """NRMSE fit in percent per output, as MATLAB's ``compare`` reports it."""
+    """Compute the NRMSE fit in percent per output, as MATLAB's ``compare`` reports it.
+
+    Parameters
+    ----------
+    y, y_hat : array_like, shape (N, n_y) or (N,)
+        Measured and modelled outputs.
+
+    Returns
+    -------
+    ndarray, shape (n_y,)
+        ``100 (1 - ||y - y_hat|| / ||y - mean(y)||)`` per output.
+
+    Raises
+    ------
+    InputError
+        For a constant output (the fit is undefined).
+    """
     y, y_hat = _pair(y, y_hat)
     spread = np.linalg.norm(y - y.mean(axis=0), axis=0)
     if np.any(spread == 0):
@@ -86,7 +103,18 @@ def nrmse_fit_of_R(R: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 
 def r_squared(y: np.ndarray, y_hat: np.ndarray) -> np.ndarray:
-    """Coefficient of determination per output."""
+    """Compute the coefficient of determination per output.
+
+    Parameters
+    ----------
+    y, y_hat : array_like, shape (N, n_y) or (N,)
+        Measured and modelled outputs.
+
+    Returns
+    -------
+    ndarray, shape (n_y,)
+        ``1 - sum (y - y_hat)^2 / sum (y - mean(y))^2`` per output.
+    """
     y, y_hat = _pair(y, y_hat)
     spread = np.sum((y - y.mean(axis=0)) ** 2, axis=0)
     if np.any(spread == 0):
@@ -96,7 +124,17 @@ def r_squared(y: np.ndarray, y_hat: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class FitMetrics:
-    """All three metrics per output, with their means over outputs."""
+    """All three metrics per output, with their means over outputs.
+
+    Parameters
+    ----------
+    percentage_explanation : ndarray, shape (n_y,)
+        R (eq. 17), percent.
+    nrmse_fit : ndarray, shape (n_y,)
+        NRMSE fit, percent.
+    r_squared : ndarray, shape (n_y,)
+        Coefficient of determination.
+    """
 
     percentage_explanation: np.ndarray
     nrmse_fit: np.ndarray
@@ -118,7 +156,13 @@ class FitMetrics:
         return float(np.mean(self.r_squared))
 
     def as_dict(self) -> dict[str, object]:
-        """JSON-ready form."""
+        """Describe the metrics for JSON.
+
+        Returns
+        -------
+        dict
+            The three metrics per output as lists, and their means.
+        """
         return {
             "percentage_explanation": self.percentage_explanation.tolist(),
             "nrmse_fit": self.nrmse_fit.tolist(),
@@ -130,7 +174,18 @@ class FitMetrics:
 
 
 def fit_metrics(y: np.ndarray, y_hat: np.ndarray) -> FitMetrics:
-    """Compute R (eq. 17), NRMSE fit and R^2 per output."""
+    """Compute R (eq. 17), NRMSE fit and R^2 per output.
+
+    Parameters
+    ----------
+    y, y_hat : array_like, shape (N, n_y) or (N,)
+        Measured and modelled outputs.
+
+    Returns
+    -------
+    FitMetrics
+        The three metrics per output.
+    """
     return FitMetrics(
         percentage_explanation=percentage_explanation(y, y_hat),
         nrmse_fit=nrmse_fit(y, y_hat),

@@ -19,11 +19,11 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["OrderRow", "OrderAssessment", "assess_orders", "convergence_measures"]
+__all__ = ["AssessedOrder", "OrderAssessment", "assess_orders", "convergence_measures"]
 
 
 @dataclass(frozen=True)
-class OrderRow:
+class AssessedOrder:
     """One order's figures."""
 
     order: int
@@ -50,15 +50,33 @@ class OrderRow:
 
 @dataclass(frozen=True)
 class OrderAssessment:
-    """The per-order table and the chosen order."""
+    """The per-order table and the chosen order.
 
-    rows: tuple[OrderRow, ...]
+    Attributes
+    ----------
+    rows : tuple of AssessedOrder
+        One row per order: fits, trace of P, its growth and the parameters' drift.
+    chosen_order : int
+        The order chosen.
+    fit_margin : float
+        Points of mean R an order could fall below the best and still be chosen.
+    window : int
+        Passes over which growth and drift were measured.
+    """
+
+    rows: tuple[AssessedOrder, ...]
     chosen_order: int
     fit_margin: float
     window: int
 
     def text(self) -> str:
-        """A plain-text table."""
+        """Render the table as plain text.
+
+        Returns
+        -------
+        str
+            One line per order, under a header.
+        """
         lines = [f"{'n':>2} {'R filter %':>10} {'R exact %':>10} {'trace(P)':>10} {'trace growth':>13} {'drift':>9} {'converged':>9}"]
         for row in self.rows:
             lines.append(
@@ -102,6 +120,11 @@ def assess_orders(
         Largest relative change per window of trace(P) and of any parameter for a converged run.
     fit_margin : float
         Points of mean R (percent) an order may fall below the best and still be chosen.
+
+    Returns
+    -------
+    OrderAssessment
+        The table and the order chosen.
     """
     if not results:
         raise InputError("no identifications to assess")
@@ -113,7 +136,7 @@ def assess_orders(
         trace = np.array([record.trace_p for record in history])
         growth, drift = convergence_measures(parameters, trace, window)
         rows.append(
-            OrderRow(
+            AssessedOrder(
                 order=int(order),
                 mean_fit=history[-1].mean_fit_continuous,
                 mean_fit_filter=history[-1].mean_fit_filter,

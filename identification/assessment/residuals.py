@@ -23,6 +23,7 @@ import numpy as np
 # of a second of every command's start-up
 
 from ..errors import InputError
+from ..frozen import freeze
 
 __all__ = [
     "DEFAULT_LAGS",
@@ -100,13 +101,17 @@ class ResidualTests:
     Attributes
     ----------
     output_names, input_names : tuple of str
+        The channels tested.
     samples, lags : int
+        Number of residual samples N, and the largest lag.
     level : float
         Confidence level of the bands (0.99 by default).
     bound : float
         ``z / sqrt(N)``: the band of both correlations.
     autocorrelation : ndarray, shape (lags + 1, n_y)
+        ``r_ee(k)`` of each output's residual, lags 0 to ``lags``.
     cross_correlation : ndarray, shape (2 lags + 1, n_u, n_y)
+        ``r_ue(k)``, lags ``-lags`` to ``lags``.
     ljung_box : ndarray, shape (n_y,)
         The portmanteau statistic Q.
     residual_whiteness_p : ndarray, shape (n_y,)
@@ -136,6 +141,11 @@ class ResidualTests:
     input_correlation_p: np.ndarray
     exact: np.ndarray
 
+    def __post_init__(self) -> None:
+        for name in ("autocorrelation", "cross_correlation", "ljung_box", "residual_whiteness_p",
+                     "input_correlation_max", "input_correlation_p", "exact"):
+            object.__setattr__(self, name, freeze(np.asarray(getattr(self, name))))  # a test's result stays as found
+
     @property
     def white(self) -> np.ndarray:
         """Per output: the whiteness test passes (p above ``1 - level``)."""
@@ -152,7 +162,13 @@ class ResidualTests:
         return bool(np.all(self.white) and np.all(self.independent))
 
     def as_dict(self) -> dict[str, Any]:
-        """JSON form: one object per output with ``residual_whiteness_p`` and ``input_correlation_max``."""
+        """Describe the tests for JSON.
+
+        Returns
+        -------
+        dict
+            One object per output with ``residual_whiteness_p`` and ``input_correlation_max``.
+        """
         return {
             "lags": self.lags,
             "level": self.level,
@@ -196,6 +212,7 @@ def residual_tests(
     level : float
         Confidence level of the bands (default 0.99).
     input_names, output_names : sequence of str, optional
+        Channel names; ``u1, ...`` and ``y1, ...`` by default.
     output_scale : array_like, shape (n_y,), optional
         RMS of each measured output: an output whose residual RMS is below
         :data:`EXACT_FIT` of it is fitted exactly (noise-free data and the
@@ -204,6 +221,7 @@ def residual_tests(
     Returns
     -------
     ResidualTests
+        Correlations, bands and p-values per output.
 
     Examples
     --------

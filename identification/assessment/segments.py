@@ -65,6 +65,8 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 
 from ..errors import InputError
+from ..frozen import freeze
+from ..models.delta_method import normal_quantile
 
 __all__ = [
     "DEFAULT_BLOCKS",
@@ -86,7 +88,6 @@ __all__ = [
     "block_jackknife",
     "formal_method",
     "Agreement",
-    "normal_quantile",
     "pair_agreement",
     "QuantityConsistency",
     "SegmentConsistency",
@@ -451,14 +452,6 @@ class Agreement:
         return self.agreeing / self.pairs if self.pairs else 1.0
 
 
-def normal_quantile(level: float) -> float:
-    """``z`` of a two-sided interval ``+/- z sigma`` holding ``level`` of a normal distribution."""
-    if not 0 < level < 1:
-        raise InputError(f"a confidence level lies between 0 and 1; got {level!r}")
-    from scipy.special import ndtri  # scipy.stats.norm.ppf, without scipy.stats's import time
-    return float(ndtri(0.5 + level / 2))
-
-
 def pair_agreement(values: Any, stds: Any, *, level: float = 0.95) -> Agreement:
     """Pairs of estimates that agree within their ``level`` intervals (module docstring).
 
@@ -515,6 +508,10 @@ class QuantityConsistency:
     label: str | None = None
     display_unit: str | None = None
     display_factor: float = 1.0
+
+    def __post_init__(self) -> None:
+        for name in ("values", "stds"):  # the parts' estimates stay as measured
+            object.__setattr__(self, name, freeze(np.asarray(getattr(self, name), dtype=float)))
 
     def holds(self, share: float, level: float = HOMOGENEITY_LEVEL) -> bool:
         """Whether the parts agree: in at least ``share`` of their pairs, or by the joint test at ``level``."""

@@ -19,6 +19,7 @@ import numpy as np
 from ..data import IOData
 from ..choices import INITIAL_STATES
 from ..errors import InputError
+from ..frozen import freeze
 from .metrics import nrmse_fit, percentage_explanation
 from ..models.statespace import continuous_to_discrete, hold_state_shift
 
@@ -65,6 +66,10 @@ class Scores:
     initial_state: str
     horizon: int | None
     n_samples: int
+
+    def __post_init__(self) -> None:
+        for name in ("fit", "R"):  # a score stays as measured
+            object.__setattr__(self, name, freeze(np.asarray(getattr(self, name), dtype=float)))
 
     @property
     def mean_fit(self) -> float:

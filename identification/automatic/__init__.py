@@ -9,7 +9,7 @@ Modules, in the order a run meets them:
 ``steps``
     The decisions: p and Q schedule by cross-validation, the open-loop-unstable treatment,
     start or filter, order search, scores, warnings and the spline-nonlinear model.
-``checks``
+``reported_checks``
     What is reported beside the scores: modes with standard deviations, residual tests, the data's keys.
 ``scheduled``
     The speed-scheduled variant: a family started from the model identified, returned where it

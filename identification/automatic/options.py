@@ -14,6 +14,7 @@ in its help without loading the numerical stack.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from os import PathLike
 
 from vehid.identification.choices import (C_PATTERNS, COVARIANCE_FORMS, DETREND, DISCRETIZATIONS, ESTIMATORS,
                                           INITIAL_STATES,
@@ -25,7 +26,7 @@ from vehid.identification.optionspec import (BOOLEAN, POSITIVE, Number, Numbers,
                                              option)
 
 __all__ = ["DEFAULT_PASSES", "MIN_PASSES", "DEFAULT_NONLINEAR_PASSES", "DEFAULT_NODES", "IdentifyOptions",
-           "estimators"]
+           "Resume", "estimators"]
 
 DEFAULT_PASSES = 50  # the IEKF's largest number of passes
 MIN_PASSES = 1  # one pass is a complete (if unconverged) run of the filter
@@ -37,14 +38,14 @@ _PASSES = Number(low=MIN_PASSES, whole=True)
 def estimators() -> tuple[str, ...]:
     """The estimators by name: the IEKF and the classical comparators, as registered now.
 
-    A method is registered in :data:`~vehid.identification.classical.comparators.COMPARATORS`, so
+    A method is registered in :data:`~vehid.identification.comparators.COMPARATORS`, so
     one registered later has loaded that module, and its registry is read; until then the registry
     holds the built-in methods (:data:`~vehid.identification.choices.ESTIMATORS`), named without
     loading it (it loads the numerical stack: 0.4 s of a command that refuses an option).
     """
     import sys
 
-    registry = sys.modules.get("vehid.identification.classical.comparators")
+    registry = sys.modules.get("vehid.identification.comparators")
     return ESTIMATORS if registry is None else tuple(registry.COMPARATORS)
 
 
@@ -60,6 +61,17 @@ class IdentifyOptions:
     Each is checked when the object is built: a value outside those listed below
     raises :class:`~vehid.identification.errors.OptionError` naming it, as does
     ``bootstrap`` with a method other than n4sid.
+
+    Examples
+    --------
+    >>> from vehid.identification import IdentifyOptions
+    >>> options = IdentifyOptions(passes=20, p=1e-5, nonlinear=True)
+    >>> options.passes, options.method, options.nodes
+    (20, 'iekf', 5)
+    >>> IdentifyOptions(start="bogus")
+    Traceback (most recent call last):
+    ...
+    vehid.identification.errors.OptionError: 'start' must be one of data, band, default, paper; got 'bogus'
     """
 
     p: float | None = option(
@@ -129,3 +141,24 @@ class IdentifyOptions:
         if self.bootstrap is not None and self.method != "n4sid":
             raise OptionError("'bootstrap' applies to 'method' n4sid (the other methods' covariances cost no refits)",
                               "bootstrap", "method")
+
+
+@documented
+@dataclass(frozen=True)
+class Resume:
+    """A checkpointed run to go on with (`vehid identify --resume ARCHIVE`): an archive and a pass budget.
+
+    The archive is the one an identification wrote with ``out``.
+
+    The run goes on with the archive's records, preparation and filter settings, and reaches the
+    same parameters as a run that was never interrupted.
+    """
+
+    archive: str | PathLike = option(None, help="the archive of the run to go on with")
+    passes: int | None = option(None, _PASSES,
+                                help="a new budget of passes, all passes counted (default: the run's own)")
+
+    def __post_init__(self) -> None:
+        check_options(self)
+        if self.archive is None or not str(self.archive):
+            raise OptionError("'resume' names the archive of the run to go on with", "resume")

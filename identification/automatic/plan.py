@@ -17,14 +17,14 @@ import numpy as np
 from vehid.identification.data import IOData
 from vehid.identification.errors import InputError, OptionError
 
-__all__ = ["AUTO_MAX_ORDER", "AUTO_HOLDOUT", "ScheduleData", "Plan", "parse_orders", "supported_orders", "holdout_fraction",
+__all__ = ["AUTO_MAX_ORDER", "AUTO_HOLDOUT", "ScheduleData", "Plan", "parse_order_option", "supported_orders", "holdout_fraction",
            "make_plan"]
 
 AUTO_MAX_ORDER = 8
 AUTO_HOLDOUT = 0.3  # fraction held out to choose an order when no validation data are given
 
 
-def parse_orders(text: Any) -> tuple[list[int], bool]:
+def parse_order_option(text: Any) -> tuple[list[int], bool]:
     """``"4"``, ``"2-8"`` or ``"auto"``: the orders to try and whether to stop early (auto)."""
     value = str(text).strip().lower()
     if value == "auto":
@@ -119,7 +119,7 @@ def holdout_fraction(order: int | str, validation: float | None, has_validation_
     ``validation`` is the fraction asked for (None: none); without it and without validation
     records an order search holds out :data:`AUTO_HOLDOUT` to choose its order.
     """
-    orders, _ = parse_orders(order)
+    orders, _ = parse_order_option(order)
     if validation is not None:
         if isinstance(validation, bool) or not 0 < validation < 1:
             raise OptionError(f"'validation' takes a fraction between 0 and 1; got {validation}", "validation")
@@ -147,7 +147,7 @@ def make_plan(records: tuple[IOData, ...], *, order: int | str, validation: Sequ
     what ``load`` turns into a prepared record; each is refused where it does not match the
     estimation records' channels or repeats their samples.
     """
-    orders, auto = parse_orders(order)
+    orders, auto = parse_order_option(order)
     first = records[0]
     orders = supported_orders(orders, auto, records, order)
     validation_records = list(held_out)

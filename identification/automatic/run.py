@@ -10,17 +10,19 @@ on with a run it kept, :class:`Resumed`; the pipeline itself writes nothing.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Any, Mapping, Protocol
 
 import numpy as np
 
 from vehid.identification.automatic import steps
-from vehid.identification.automatic.checks import data_warnings, records_summary, returned_checks
+from vehid.identification.automatic.reported_checks import data_warnings, records_summary, returned_checks
 from vehid.identification.dataio.cleaning import cleaning_notes
 from vehid.identification.automatic.options import IdentifyOptions
 from vehid.identification.automatic.plan import Plan
-from vehid.identification.automatic.result import Decision, Identification, OrderRow, float_tuple
+from vehid.identification.automatic.result import (Decision, Identification, OrderRow, StabilityDecision, StartKept,
+                                                   float_tuple)
 from vehid.identification.filtering.iekf import identify_iekf
 from vehid.identification.models.modal import ModalModel
 
@@ -96,7 +98,7 @@ def _order_search(plan: Plan, options: IdentifyOptions, iekf: Any) -> Identifica
 
 def _comparator(plan: Plan, options: IdentifyOptions) -> Identification:
     """A classical method on the same plan, searched over orders alike where several are given."""
-    from vehid.identification.classical.comparators import identify_with
+    from vehid.identification.comparators import identify_with
 
     outcomes = {}
     extra = {"bootstrap": options.bootstrap} if options.bootstrap is not None else {}
@@ -207,8 +209,8 @@ def _finish(plan: Plan, options: IdentifyOptions, model: Any, *, estimator: Any,
         estimation_fit_percent=float_tuple(chosen.evaluation.estimation.fit),
         validation_fit_percent=float_tuple(chosen.evaluation.validation_fit), decisions=decisions, notes=tuple(notes),
         warnings=tuple(warnings), orders=orders, seconds=float(seconds), plan=plan, evaluation=chosen.evaluation,
-        estimator=estimator, tuning=tuning, open_loop_unstable=keys.get("open_loop_unstable"),
-        start_kept=keys.get("start_kept"), start_returned=start_returned, divergence=divergence,
+        estimator=estimator, tuning=tuning, open_loop_unstable=StabilityDecision.from_entry(keys.get("open_loop_unstable")),
+        start_kept=StartKept.from_entry(keys.get("start_kept")), start_returned=start_returned, divergence=divergence,
         checks=checks, residual_tests=tests, data=data_keys,
         scoring_note=scoring_note if chosen is linear else None, nonlinear=nonlinear, time_domain=time_domain,
         scheduled=scheduled, unscheduled=model if chosen is not linear else None, returned=chosen.name)
@@ -281,6 +283,6 @@ def _candidates(plan: Plan, options: IdentifyOptions, linear: _Candidate, *, spl
         notes.append(steps.nonlinear_note(margin))
         chosen, others = (spline, [chosen, *others]) if margin["choice"] == "nonlinear" else (chosen, [*others, spline])
         if scheduled is not None:
-            scheduled.summary["model_returned"] = {"scheduled": "scheduled", "nonlinear": "nonlinear"}.get(
-                chosen.name, "unscheduled")
+            scheduled = dataclasses.replace(scheduled, summary=scheduled.summary | {"model_returned": {
+                "scheduled": "scheduled", "nonlinear": "nonlinear"}.get(chosen.name, "unscheduled")})
     return chosen, others, nonlinear, scheduled, decisions, notes

@@ -16,19 +16,24 @@ data (a car's speed, never offset), held by the plan
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass, field
-from typing import Any, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 
 from vehid.identification.automatic import steps
-from vehid.identification.automatic.checks import records_summary, uncertainty_method
+from vehid.identification.automatic.reported_checks import records_summary, uncertainty_method
 from vehid.identification.automatic.options import IdentifyOptions
 from vehid.identification.automatic.plan import ScheduleData
 from vehid.identification.choices import SCHEDULED_DEFAULT_P, SCHEDULED_P_GRID
 from vehid.identification.data import IOData
 from vehid.identification.errors import DivergenceError, OptionError
+from vehid.identification.frozen import FrozenDict, freeze
 from vehid.identification.models.modal import ModalModel
+
+if TYPE_CHECKING:
+    from vehid.identification.filtering.scheduled_iekf import ScheduledIEKFResult
+    from vehid.identification.models.scheduled import ScheduledModalModel
 
 __all__ = ["NONLINEAR_NOTE", "VALIDATION_MARGIN", "OUTPUT_MAP_NODES", "ScheduledOutcome", "schedule_margin",
            "identify_scheduled_model", "with_output_map", "unscheduled_fit", "scheduled_records"]
@@ -39,23 +44,28 @@ NONLINEAR_NOTE = ("--nonlinear with --schedule: the scheduled family may gain a 
                   "validates better; the spline-nonlinear model ('nonlinear') of the unscheduled model is beside it")
 
 
-@dataclass
+@dataclass(frozen=True, eq=False)
 class ScheduledOutcome:
     """The scheduled family, its summary entry, the score keys it replaces, its warnings and the decision's note.
 
     ``warnings`` are the family's own problems (they become the run's warnings where the family is
-    returned, notes where it is not); ``note`` says why the family was not returned.
+    returned, notes where it is not); ``note`` says why the family was not returned. ``summary``
+    (JSON ``scheduled``), ``scores`` and ``margin`` are JSON entries, frozen.
     """
 
-    model: Any
-    summary: dict[str, Any]
-    scores: dict[str, Any]
-    warnings: list[str] = field(default_factory=list)
-    result: Any = None
-    returned: bool = True  # the scheduled family is the model returned (else the unscheduled start)
-    margin: dict[str, Any] | None = None  # the decision, as an entry of ``decision_margins``
-    evaluation: Any = None  # the family's scores by the run's rule
+    model: ScheduledModalModel
+    summary: FrozenDict
+    scores: FrozenDict
+    warnings: tuple[str, ...]
+    result: ScheduledIEKFResult
+    returned: bool  # the scheduled family is the model returned (else the unscheduled start)
+    margin: FrozenDict  # the decision, as an entry of ``decision_margins``
+    evaluation: steps.Evaluation  # the family's scores by the run's rule
     note: str | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("summary", "scores", "margin", "warnings"):
+            object.__setattr__(self, name, freeze(getattr(self, name)))
 
 
 #: points of mean validation fit by which the scheduled family must beat the unscheduled model to be returned:

@@ -47,7 +47,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -55,22 +55,26 @@ from vehid.identification.data import IOData
 from vehid.identification.decisions import (SCHEDULE_MARGIN, ScheduleCandidate, choose_p_and_schedule,
                                              choose_refined)
 from vehid.identification.errors import DivergenceError, InputError, OptionError, WorkbenchError
+from vehid.identification.frozen import FrozenDict, freeze
 from vehid.identification.filtering.iekf import (INVARIANT_P, INVARIANT_P_DECAY, START_CHOICES, IEKFOptions,
                                                  identify_iekf, invariant_noise_settings, normalized_data_start,
                                                  signal_scales, start_structure)
 from vehid.identification.models.modal import ModalModel, ModalStructure
 from vehid.identification.assessment.uncertainty import with_simulation_error_covariance
-from vehid.identification.automatic.checks import uncertainty_method
+from vehid.identification.automatic.reported_checks import uncertainty_method
 from vehid.identification.assessment.validation import UNSTABLE_HORIZON, Scores, default_horizon, score, split_holdout
 from vehid.identification.automatic.plan import (AUTO_HOLDOUT, AUTO_MAX_ORDER, Plan, holdout_fraction, make_plan,
-                                                 parse_orders, supported_orders)
+                                                 parse_order_option, supported_orders)
 from vehid.identification.automatic.options import IdentifyOptions
+
+if TYPE_CHECKING:
+    from vehid.identification.filtering.spline_iekf import SplineIEKFResult
 
 __all__ = [
     "START_CHOICES", "Evaluation", "search_orders", "identify_nonlinear", "start_of", "run_iekf_order",
     "last_good_on_divergence", "scores_summary", "AUTO_MAX_ORDER", "AUTO_HOLDOUT", "ORDER_TOLERANCE", "Plan",
-    "parse_orders", "supported_orders", "holdout_fraction", "make_plan", "iekf_options", "choose_order", "evaluate",
-    "run_warnings", "pooled_fit_percent", "PTuning", "tune_p", "tunes_p", "given_p", "q_schedule_of", "P_GRID", "Q_SCHEDULES", "P_TOLERANCE",
+    "parse_order_option", "supported_orders", "holdout_fraction", "make_plan", "iekf_options", "choose_order", "evaluate",
+    "run_warnings", "pooled_fit_percent", "PCandidate", "PTuning", "tune_p", "tunes_p", "given_p", "q_schedule_of", "P_GRID", "Q_SCHEDULES", "P_TOLERANCE",
     "NONLINEAR_P", "START_RETURNED", "start_model", "returned_start", "returned_model", "NONLINEAR_P_GRID",
     "NonlinearOutcome", "NonlinearScores", "nonlinear_margin", "nonlinear_note",
     "NONLINEAR_MARGIN", "UNSTABLE_MARGIN", "assume_unstable",
@@ -119,22 +123,66 @@ def q_schedule_of(options: IEKFOptions) -> str:
 
 
 @dataclass(frozen=True)
+class PCandidate:
+    """One p and Q schedule tried by the cross-validation: its two-fold fit (None where it failed) and cost.
+
+    ``q_schedule`` is None in a row archived before schedules were kept (every run's Q was constant then).
+    """
+
+    p: float
+    q_schedule: str | None
+    cv_fit_percent: float | None
+    seconds: float
+    error: str | None = None
+
+    def as_dict(self) -> dict[str, Any]:
+        """The row's keys in ``p_tried``."""
+        return {"p": self.p, **({} if self.q_schedule is None else {"q_schedule": self.q_schedule}),
+                "seconds": self.seconds, "cv_fit_percent": self.cv_fit_percent,
+                **({} if self.error is None else {"error": self.error})}
+
+    @classmethod
+    def from_dict(cls, row: Mapping[str, Any]) -> "PCandidate":
+        """A row as :meth:`as_dict` wrote it (an archived run's)."""
+        fit = row.get("cv_fit_percent")
+        return cls(p=float(row["p"]), q_schedule=row.get("q_schedule"), cv_fit_percent=None if fit is None else float(fit),
+                   seconds=float(row.get("seconds", 0.0)), error=row.get("error"))
+
+
+@dataclass(frozen=True)
 class PTuning:
     """The filter's p and Q schedule chosen by two-fold cross-validation, with each candidate's score and cost."""
 
     p: float
-    tried: tuple[dict[str, Any], ...]
+    tried: tuple[PCandidate, ...]
     seconds: float
     start_fit: float | None = None  # the data start's cross-validated fit, on the same halves
     q_schedule: str = "constant"  # a key of Q_SCHEDULES
     # the chosen candidate's and the start's cross-validated fits, as they are and refined by their simulation
     # errors (keys of CANDIDATES; refined_cross_validation), where the run is one to refine
-    candidate_fits: dict[str, float | None] | None = None
+    candidate_fits: FrozenDict | None = None
+
+    def __post_init__(self) -> None:
+        if self.candidate_fits is not None:
+            object.__setattr__(self, "candidate_fits", freeze(self.candidate_fits))
 
     def summary(self) -> dict[str, Any]:
         """The public JSON keys ``p``, ``q_schedule``, ``p_tried``, ``tuning_seconds`` and ``start_cv_fit_percent``."""
-        return {"p": self.p, "q_schedule": self.q_schedule, "p_tried": [dict(row) for row in self.tried],
+        return {"p": self.p, "q_schedule": self.q_schedule, "p_tried": [row.as_dict() for row in self.tried],
                 "tuning_seconds": self.seconds, "start_cv_fit_percent": self.start_fit}
+
+    def as_dict(self) -> dict[str, Any]:
+        """Every field, as an archive keeps the run's decisions (:meth:`from_dict` reads it back)."""
+        return {"p": self.p, "tried": [row.as_dict() for row in self.tried], "seconds": self.seconds,
+                "start_fit": self.start_fit, "q_schedule": self.q_schedule,
+                "candidate_fits": None if self.candidate_fits is None else dict(self.candidate_fits)}
+
+    @classmethod
+    def from_dict(cls, stored: Mapping[str, Any]) -> "PTuning":
+        """The tuning :meth:`as_dict` wrote; an archive written before the Q schedule was kept reads as constant Q."""
+        return cls(p=float(stored["p"]), tried=tuple(PCandidate.from_dict(row) for row in stored["tried"]),
+                   seconds=float(stored["seconds"]), start_fit=stored["start_fit"],
+                   q_schedule=stored.get("q_schedule", "constant"), candidate_fits=stored.get("candidate_fits"))
 
     def applied(self, options: IEKFOptions) -> IEKFOptions:
         """``options`` with the chosen p and Q schedule."""
@@ -146,7 +194,7 @@ class PTuning:
     @property
     def start_wins(self) -> bool:
         """Whether the data start beat every p by more than :data:`P_TOLERANCE` in cross-validation."""
-        fits = [row["cv_fit_percent"] for row in self.tried if row.get("cv_fit_percent") is not None]
+        fits = [row.cv_fit_percent for row in self.tried if row.cv_fit_percent is not None]
         return self.start_fit is not None and (not fits or self.start_fit > max(fits) + P_TOLERANCE)
 
     def margin(self) -> dict[str, Any] | None:
@@ -154,8 +202,8 @@ class PTuning:
         schedule, or the data start)."""
         if not self.tried:
             return None
-        scored = {(row["p"], row.get("q_schedule", self.q_schedule)): row["cv_fit_percent"] for row in self.tried
-                  if row.get("cv_fit_percent") is not None}
+        scored = {(row.p, row.q_schedule or self.q_schedule): row.cv_fit_percent for row in self.tried
+                  if row.cv_fit_percent is not None}
         chosen = (self.p, self.q_schedule)
         others = [(f"p {p:g}, {schedule} Q", fit) for (p, schedule), fit in scored.items() if (p, schedule) != chosen]
         if self.start_fit is not None:
@@ -268,14 +316,10 @@ def tune_p(settings: IdentifyOptions, plan: Plan, options: IEKFOptions, structur
             if fold not in start_fits and start is not None:
                 start_fits[fold] = held_out_fit(start, score_on)
             folds.setdefault((p, schedule), []).append((result.model, start, fit_on, score_on))
-        row: dict[str, Any] = {"p": p, "q_schedule": schedule, "seconds": time.perf_counter() - began}
-        if errors:
-            row.update(cv_fit_percent=None, error="; ".join(errors))
-        else:
-            row["cv_fit_percent"] = float(np.mean(fits)) if np.all(np.isfinite(fits)) else None
-        rows.append(row)
-    choice = choose_p_and_schedule([ScheduleCandidate(row["p"], row["q_schedule"], row["cv_fit_percent"])
-                                    for row in rows if row["cv_fit_percent"] is not None], P_TOLERANCE)
+        fit = None if errors or not np.all(np.isfinite(fits)) else float(np.mean(fits))
+        rows.append(PCandidate(p, schedule, fit, time.perf_counter() - began, "; ".join(errors) if errors else None))
+    choice = choose_p_and_schedule([ScheduleCandidate(row.p, row.q_schedule, row.cv_fit_percent)
+                                    for row in rows if row.cv_fit_percent is not None], P_TOLERANCE)
     # no candidate scored on the other half: the default, whose own run then says what went wrong
     chosen, schedule = choice if choice is not None else (options.p, q_schedule_of(options))
     start_fit = float(np.mean(list(start_fits.values()))) if len(start_fits) == 2 else None
@@ -751,6 +795,10 @@ class Evaluation(_RankedScores):
     validation: tuple[Scores, ...]
     horizon: int | None
 
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "estimation_R_from_rest", freeze(np.asarray(self.estimation_R_from_rest, dtype=float)))
+        object.__setattr__(self, "validation", tuple(self.validation))
+
 
 def evaluate(model: Any, plan: Plan, settings: IdentifyOptions) -> Evaluation:
     """Score ``model`` on the plan's records (k-step-ahead where asked or where simulation diverges)."""
@@ -899,13 +947,17 @@ def search_orders(plan: Plan, fit_one: Callable[[int], tuple[Any, dict[str, Any]
     return rows, kept
 
 
-@dataclass
+@dataclass(frozen=True, eq=False)
 class NonlinearOutcome:
-    """The chosen spline model's run and its summary entries."""
+    """The chosen spline model's run, its JSON entry ``nonlinear`` and its scores by the run's rule
+    (kept so that nothing simulates it again)."""
 
-    result: Any
-    summary: dict[str, Any] = field(default_factory=dict)
-    scores: Any = None  # NonlinearScores of the chosen model, so that nothing simulates it again
+    result: SplineIEKFResult
+    summary: FrozenDict
+    scores: NonlinearScores
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "summary", freeze(self.summary))
 
 
 #: points of mean validation fit by which the spline model must beat the model otherwise returned (the same
@@ -967,7 +1019,7 @@ def identify_nonlinear(linear: ModalModel, plan: Plan, settings: IdentifyOptions
         except DivergenceError as exc:
             tried.append({"p": p, "error": str(exc), "seconds": time.perf_counter() - started})
             continue
-        scores = NonlinearScores(result.model, plan, settings)
+        scores = NonlinearScores.of(result.model, plan, settings)
         row = {"p": p, "estimation_fit_percent": scores.estimation.fit, "validation_fit_percent": scores.validation_fit,
                "seconds": time.perf_counter() - started, "ranking_fit": scores.ranking_fit()}
         tried.append(row)
@@ -998,6 +1050,7 @@ def identify_nonlinear(linear: ModalModel, plan: Plan, settings: IdentifyOptions
     return NonlinearOutcome(result, summary, scores)
 
 
+@dataclass(frozen=True, eq=False)
 class NonlinearScores(_RankedScores):
     """Scores of a spline model on the plan's records, by the run's rule (``settings``), as every candidate's.
 
@@ -1005,9 +1058,15 @@ class NonlinearScores(_RankedScores):
     (in its own time base) whatever the horizon, since only a linear model predicts k steps ahead.
     """
 
-    def __init__(self, model: Any, plan: Plan, settings: IdentifyOptions | None = None):
+    estimation: Scores
+    validation: tuple[Scores, ...]
+    horizon: int | None
+
+    @classmethod
+    def of(cls, model: Any, plan: Plan, settings: IdentifyOptions | None = None) -> "NonlinearScores":
+        """The scores of ``model`` on ``plan``'s records by the rule of ``settings`` (default: the command's)."""
         scored = evaluate(model, plan, settings if settings is not None else IdentifyOptions())
-        self.estimation, self.validation, self.horizon = scored.estimation, scored.validation, scored.horizon
+        return cls(scored.estimation, scored.validation, scored.horizon)
 
 
 def start_of(result: Any, records: tuple[IOData, ...]) -> tuple[float | None, bool | None]:

@@ -30,7 +30,7 @@ from typing import Any, Sequence
 import casadi as ca
 import numpy as np
 
-from .._checks import finite_matrix, io_arrays
+from ..argument_checks import finite_matrix, io_arrays
 from ..compiled import compile_function
 from ..errors import DivergenceError, InputError
 
@@ -99,7 +99,28 @@ class NonlinearModel:
     @classmethod
     def from_continuous(cls, x: ca.SX, u: ca.SX, p: ca.SX, xdot: ca.SX, y: ca.SX, dt: float, *,
                         steps: int = 1, name: str = "model") -> "NonlinearModel":
-        """Discretise ``xdot = f(x, u, p)`` by ``steps`` classical Runge-Kutta steps over ``dt``, u held."""
+        """Discretise ``xdot = f(x, u, p)`` by ``steps`` classical Runge-Kutta steps over ``dt``, u held.
+
+        Parameters
+        ----------
+        x, u, p : casadi.SX
+            Column symbols of the states, inputs and parameters.
+        xdot : casadi.SX
+            The state derivative, an expression of them.
+        y : casadi.SX
+            The outputs, an expression of them.
+        dt : float
+            Sample interval (s).
+        steps : int, default 1
+            Runge-Kutta steps per sample.
+        name : str, default "model"
+            Prefix of the CasADi Functions' names.
+
+        Returns
+        -------
+        NonlinearModel
+            The discrete transition and output Functions.
+        """
         if not (np.isfinite(dt) and dt > 0):
             raise InputError(f"dt must be positive; got {dt}")
         if steps < 1:
@@ -129,9 +150,11 @@ class EkfResult:
     covariance : ndarray, shape (n_x + n_p, n_x + n_p)
         Final ``P(k|k)``.
     innovations : ndarray, shape (N, n_y)
+        ``y(k) - h(z(k|k-1))``.
     trace : ndarray, shape (N,)
         trace P(k|k).
     meta : dict
+        ``method`` and ``compiled``; on a divergence, ``diverged_at`` (the sample).
     """
 
     states: np.ndarray
@@ -199,6 +222,7 @@ def ekf_joint(model: NonlinearModel, data_or_arrays: Any, *, x0: Sequence[float]
     Parameters
     ----------
     model : NonlinearModel
+        The discrete model, its parameters among its inputs.
     data_or_arrays : IOData or (u, y)
         Inputs (N, n_u) and measured outputs (N, n_y); row k is sample k.
     x0, p0 : sequence of float
@@ -216,6 +240,7 @@ def ekf_joint(model: NonlinearModel, data_or_arrays: Any, *, x0: Sequence[float]
     Returns
     -------
     EkfResult
+        Filtered states and parameters at every sample, and the final covariance.
 
     Raises
     ------

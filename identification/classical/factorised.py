@@ -35,17 +35,26 @@ def sqrt_step(theta: np.ndarray, S: np.ndarray, phi: np.ndarray, y: np.ndarray, 
     Parameters
     ----------
     theta : ndarray, shape (n, n_y)
+        The estimate, one column per output.
     S : ndarray, shape (n, n)
         Lower-triangular factor, ``P = S S'``.
     phi : ndarray, shape (n,)
+        The regressor.
     y : ndarray, shape (n_y,)
+        The outputs sharing it.
     lam : float
         Forgetting factor in (0, 1].
 
     Returns
     -------
-    theta, S, K, e : the updated estimate and factor, the gain (n,) and the
-    prediction error ``y - phi' theta`` (n_y,) before the update.
+    theta : ndarray, shape (n, n_y)
+        The updated estimate.
+    S : ndarray, shape (n, n)
+        The updated factor.
+    K : ndarray, shape (n,)
+        The gain.
+    e : ndarray, shape (n_y,)
+        The prediction error ``y - phi' theta`` before the update.
     """
     n = S.shape[0]
     pre = np.zeros((n + 1, n + 1))
@@ -68,15 +77,28 @@ def ud_step(theta: np.ndarray, U: np.ndarray, d: np.ndarray, phi: np.ndarray, y:
     Parameters
     ----------
     theta : ndarray, shape (n, n_y)
+        The estimate, one column per output.
     U : ndarray, shape (n, n)
         Unit upper-triangular factor.
     d : ndarray, shape (n,)
         Diagonal factor, positive.
-    phi, y, lam : as for :func:`sqrt_step`.
+    phi : ndarray, shape (n,)
+        The regressor.
+    y : ndarray, shape (n_y,)
+        The outputs sharing it.
+    lam : float
+        Forgetting factor in (0, 1].
 
     Returns
     -------
-    theta, U, d, K, e
+    theta : ndarray, shape (n, n_y)
+        The updated estimate.
+    U, d : ndarray
+        The updated factors, ``P = U diag(d) U'``.
+    K : ndarray, shape (n,)
+        The gain.
+    e : ndarray, shape (n_y,)
+        The prediction error before the update.
     """
     n = d.size
     U = U.copy()

@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from .._checks import io_arrays, positive_int
+from ..argument_checks import io_arrays, positive_int
 from ..errors import InputError
 from .least_squares import ArxResult, estimate_arx, least_squares
 
@@ -46,6 +46,7 @@ class GlsResult:
     iterations : int
         Passes through steps 2-5.
     converged : bool
+        Whether the tolerance was met before the iteration limit.
     history : ndarray, shape (iterations + 1, n_p)
         A, B parameters after step 1 and after each pass.
     """
@@ -70,10 +71,14 @@ def estimate_gls(data_or_arrays: Any, *, na: int, nb: Any = None, nk: Any = 0, n
     ----------
     data_or_arrays : IOData or (u, y)
         One output.
-    na, nb, nk
-        ARX orders, as for :func:`~identification.classical.least_squares.estimate_arx`.
+    na : int
+        Output lags, as for :func:`~identification.classical.least_squares.estimate_arx`.
+    nb : int or sequence of int, optional
+        Coefficients per input (default ``na``).
+    nk : int or sequence of int, default 0
+        Input delays in samples.
     noise_order : int
-        p, the order of ``C(q)``.
+        The order p of ``C(q)``.
     iterations : int
         Most passes through steps 2-5.
     tolerance : float
@@ -82,6 +87,7 @@ def estimate_gls(data_or_arrays: Any, *, na: int, nb: Any = None, nk: Any = 0, n
     Returns
     -------
     GlsResult
+        The final ARX fit, the noise filter and the iterations.
 
     Raises
     ------

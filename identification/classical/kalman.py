@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from .._checks import finite_matrix
+from ..argument_checks import finite_matrix
 from ..errors import DivergenceError, InputError
 
 __all__ = ["KalmanResult", "SmootherResult", "kalman_predict", "kalman_update", "kalman_filter", "rts_smoother"]
@@ -45,10 +45,13 @@ class KalmanResult:
     x_prior, x_post : ndarray, shape (N, n)
         ``x(k|k-1)`` and ``x(k|k)``.
     P_prior, P_post : ndarray, shape (N, n, n)
+        ``P(k|k-1)`` and ``P(k|k)``.
     gain : ndarray, shape (N, n, n_y)
+        ``K(k)``.
     innovation : ndarray, shape (N, n_y)
         ``y(k) - C x(k|k-1) - D u(k)``.
     innovation_covariance : ndarray, shape (N, n_y, n_y)
+        ``C P(k|k-1) C' + R``.
     log_likelihood : float
         Gaussian log-likelihood of the innovations.
     """
@@ -65,7 +68,15 @@ class KalmanResult:
 
 @dataclass(frozen=True, eq=False)
 class SmootherResult:
-    """``x(k|N)`` and ``P(k|N)``, shapes (N, n) and (N, n, n)."""
+    """The smoothed states and their covariances.
+
+    Attributes
+    ----------
+    x : ndarray, shape (N, n)
+        ``x(k|N)``.
+    P : ndarray, shape (N, n, n)
+        ``P(k|N)``.
+    """
 
     x: np.ndarray
     P: np.ndarray
@@ -73,7 +84,30 @@ class SmootherResult:
 
 def kalman_predict(x: np.ndarray, P: np.ndarray, A: np.ndarray, Q: np.ndarray,
                    B: np.ndarray | None = None, u: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Time update: ``x(k|k-1)``, ``P(k|k-1)`` (appendix eq. A.84-A.85)."""
+    """Predict the state one step: the time update (appendix eq. A.84-A.85).
+
+    Parameters
+    ----------
+    x : ndarray, shape (n,)
+        ``x(k-1|k-1)``.
+    P : ndarray, shape (n, n)
+        ``P(k-1|k-1)``.
+    A : ndarray, shape (n, n)
+        State transition.
+    Q : ndarray, shape (n, n)
+        Process noise covariance.
+    B : ndarray, shape (n, n_u), optional
+        Input matrix.
+    u : ndarray, shape (n_u,), optional
+        ``u(k-1)``.
+
+    Returns
+    -------
+    x : ndarray, shape (n,)
+        ``x(k|k-1)``.
+    P : ndarray, shape (n, n)
+        ``P(k|k-1)``, symmetrised.
+    """
     x = A @ x if B is None or u is None else A @ x + B @ u
     P = A @ P @ A.T + Q
     return x, 0.5 * (P + P.T)
@@ -82,7 +116,45 @@ def kalman_predict(x: np.ndarray, P: np.ndarray, A: np.ndarray, Q: np.ndarray,
 def kalman_update(x: np.ndarray, P: np.ndarray, y: np.ndarray, C: np.ndarray, R: np.ndarray,
                   D: np.ndarray | None = None, u: np.ndarray | None = None, *, joseph: bool = True
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Measurement update: ``x(k|k)``, ``P(k|k)``, gain, innovation and its covariance (eq. A.86-A.88)."""
+    """Correct the state by a measurement: the measurement update (eq. A.86-A.88).
+
+    Parameters
+    ----------
+    x : ndarray, shape (n,)
+        ``x(k|k-1)``.
+    P : ndarray, shape (n, n)
+        ``P(k|k-1)``.
+    y : ndarray, shape (n_y,)
+        ``y(k)``.
+    C : ndarray, shape (n_y, n)
+        Output matrix.
+    R : ndarray, shape (n_y, n_y)
+        Measurement noise covariance.
+    D : ndarray, shape (n_y, n_u), optional
+        Feed-through.
+    u : ndarray, shape (n_u,), optional
+        ``u(k)``.
+    joseph : bool, default True
+        Joseph-form covariance update.
+
+    Returns
+    -------
+    x : ndarray, shape (n,)
+        ``x(k|k)``.
+    P : ndarray, shape (n, n)
+        ``P(k|k)``.
+    gain : ndarray, shape (n, n_y)
+        ``K(k)``.
+    innovation : ndarray, shape (n_y,)
+        ``y(k) - C x(k|k-1) - D u(k)``.
+    innovation_covariance : ndarray, shape (n_y, n_y)
+        ``C P C' + R``.
+
+    Raises
+    ------
+    DivergenceError
+        A singular innovation covariance.
+    """
     predicted = C @ x if D is None or u is None else C @ x + D @ u
     innovation = y - predicted
     pc = P @ C.T
@@ -136,6 +208,7 @@ def kalman_filter(y: Any, *, A: Any, C: Any, Q: Any, R: Any, x0: Any, P0: Any,
     Returns
     -------
     KalmanResult
+        Predicted and filtered states and covariances, gains, innovations, log-likelihood.
 
     Raises
     ------
@@ -198,8 +271,14 @@ def rts_smoother(result: KalmanResult, A: Any) -> SmootherResult:
     Parameters
     ----------
     result : KalmanResult
+        The filter's run.
     A : array_like
         The filter's A, constant or per step.
+
+    Returns
+    -------
+    SmootherResult
+        ``x(k|N)`` and ``P(k|N)``.
     """
     n_steps, n = result.x_post.shape
     A = _per_step("A", A, n_steps, (n, n))

@@ -18,7 +18,7 @@ from typing import Any, Sequence
 import numpy as np
 import scipy.linalg
 
-from .._checks import finite_matrix, io_arrays, non_negative_int, per_input
+from ..argument_checks import finite_matrix, io_arrays, non_negative_int, per_input
 from ..errors import ExcitationError, InputError
 from ..models.protocol import StateSpaceModel, sample_interval, unscheduled
 
@@ -51,6 +51,7 @@ class LeastSquaresResult:
         ``sigma_i^2 (Phi'Phi)^-1`` per output (eq. A.58), ``sigma_i^2`` the
         residual variance with ``N - n_p`` degrees of freedom.
     noise_variance : ndarray, shape (n_y,)
+        ``sigma_i^2``, the residual variance of each output with ``N - n_p`` degrees of freedom.
     residuals : ndarray, shape (N, n_y)
         ``Y - Phi Theta``.
     condition_number : float
@@ -85,6 +86,7 @@ def least_squares(phi: Any, y: Any, *, names: tuple[str, ...] | None = None,
     Returns
     -------
     LeastSquaresResult
+        Estimates, covariances, residuals and the condition number.
 
     Raises
     ------
@@ -198,7 +200,13 @@ class ArxModel(StateSpaceModel):
         return int(self.b.shape[2])
 
     def padded(self) -> tuple[np.ndarray, np.ndarray]:
-        """``a`` and ``b`` padded with zeros to one common length ``m + 1``."""
+        """Pad ``a`` and ``b`` with zeros to one common length ``m + 1``.
+
+        Returns
+        -------
+        tuple of ndarray
+            ``a`` (m + 1, n_y, n_y) and ``b`` (m + 1, n_y, n_u).
+        """
         m = max(self.a.shape[0], self.b.shape[0])
         a = np.zeros((m, self.n_y, self.n_y))
         b = np.zeros((m, self.n_y, self.n_u))
@@ -209,12 +217,36 @@ class ArxModel(StateSpaceModel):
     def to_statespace(self, *, schedule: float | None = None
 
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
-        """Discrete ``(Ad, Bd, Cd, Dd, dt)`` in block observer form; see :func:`observer_form`."""
+        """Return the discrete state-space form in block observer form (:func:`observer_form`).
+
+        Parameters
+        ----------
+        schedule : float, optional
+            Changes nothing (the model is not scheduled).
+
+        Returns
+        -------
+        tuple
+            ``(Ad, Bd, Cd, Dd, dt)``.
+        """
         unscheduled(schedule)
         return (*observer_form(*self.padded()), sample_interval(self.dt, "ARX model"))
 
     def predict(self, u: Any, y: Any) -> np.ndarray:
-        """One-step-ahead predictions ``yhat(k) = y(k) - A(q) y(k) + B(q) u(k)``; early samples use zero history."""
+        """Predict one step ahead: ``yhat(k) = y(k) - A(q) y(k) + B(q) u(k)``.
+
+        Parameters
+        ----------
+        u : array_like, shape (N, n_u)
+            Inputs.
+        y : array_like, shape (N, n_y)
+            Measured outputs; the samples before the first are taken as zero.
+
+        Returns
+        -------
+        ndarray, shape (N, n_y)
+            The predictions.
+        """
         u = finite_matrix("u", u)
         y = finite_matrix("y", y)
         yhat = np.zeros_like(y)
@@ -233,13 +265,16 @@ class ArxResult:
     Attributes
     ----------
     model : ArxModel
+        The estimated polynomials.
     na, nb, nk : int and tuples of int
         The orders used (nb, nk per input).
     fit : LeastSquaresResult
         Parameters (n_p, n_y), covariance ``sigma^2 (Phi'Phi)^-1`` per
         output, residuals (one per equation), condition number.
     regressor_names : tuple of str
+        Names of the regressors, ``-y1(k-1)``, ..., ``u2(k-3)``.
     meta : dict
+        Provenance (records, sample interval).
     """
 
     model: ArxModel
@@ -283,7 +318,9 @@ def arx_regressors(u: Any, y: Any, *, na: int, nb: Any = None, nk: Any = 0
     Parameters
     ----------
     u : array_like, shape (N, n_u)
+        Inputs.
     y : array_like, shape (N, n_y)
+        Outputs.
     na : int
         Number of output lags.
     nb : int or sequence of int, optional
@@ -294,6 +331,7 @@ def arx_regressors(u: Any, y: Any, *, na: int, nb: Any = None, nk: Any = 0
     Returns
     -------
     phi : ndarray, shape (N - k0, n_p)
+        The regressors, one row per equation.
     Y : ndarray, shape (N - k0, n_y)
         The outputs from sample ``k0`` on.
     names : tuple of str

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import scipy.linalg
 
-from .._checks import finite_matrix, io_arrays, non_negative_int, per_input
+from ..argument_checks import finite_matrix, io_arrays, non_negative_int, per_input
 from ..errors import InputError
 from .kalman import KalmanResult, kalman_filter
 from .least_squares import ArxModel, observer_form
@@ -33,8 +33,11 @@ class PencilModel(StateSpaceModel):
     Attributes
     ----------
     E, F : ndarray, shape (n + n_y, n)
+        The pencil's matrices on ``x(k+1)`` and ``x(k)``.
     G : ndarray, shape (n + n_y, n_u + n_y)
+        The matrix on the external variables ``[u(k); y(k)]``.
     n_u, n_y : int
+        Numbers of inputs and outputs.
     dt : float or None
         Sample interval (s), if known.
     """
@@ -65,7 +68,20 @@ class PencilModel(StateSpaceModel):
 
     @classmethod
     def from_state_space(cls, A: Any, B: Any, C: Any, D: Any, dt: float | None = None) -> "PencilModel":
-        """The SP form of ``x(k+1) = A x + B u``, ``y = C x + D u`` (appendix eq. A.102-A.103)."""
+        """Make the SP form of ``x(k+1) = A x + B u``, ``y = C x + D u`` (appendix eq. A.102-A.103).
+
+        Parameters
+        ----------
+        A, B, C, D : array_like
+            Discrete model, shapes (n, n), (n, n_u), (n_y, n), (n_y, n_u).
+        dt : float, optional
+            Sample interval (s).
+
+        Returns
+        -------
+        PencilModel
+            ``E = [I; 0]``, ``F = [A; C]``, ``G = [[B, 0], [D, -I]]``.
+        """
         A, B, C, D = (finite_matrix(name, m) for name, m in zip("ABCD", (A, B, C, D)))
         n, n_u, n_y = A.shape[0], B.shape[1], C.shape[0]
         E = np.vstack([np.eye(n), np.zeros((n_y, n))])
@@ -75,19 +91,40 @@ class PencilModel(StateSpaceModel):
 
     @classmethod
     def from_arx(cls, model: ArxModel) -> "PencilModel":
-        """The observer-form SP model of an ARX model (appendix eq. A.104-A.105)."""
+        """Make the observer-form SP model of an ARX model (appendix eq. A.104-A.105).
+
+        Parameters
+        ----------
+        model : ArxModel
+            The ARX polynomials.
+
+        Returns
+        -------
+        PencilModel
+            The pencil of its block observer form.
+        """
         return cls.from_state_space(*observer_form(*model.padded()), dt=model.dt)
 
     def to_statespace(self, *, schedule: float | None = None
 
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
-        """``(A, B, C, D, dt)`` of this pencil.
+        """Return the state-space form of this pencil.
 
         A row transformation ``T`` (from the QR factorisation of E) brings E
         to ``[I; 0]``; the last ``n_y`` rows then read
         ``0 = F2 x + G2u u + G2y y``, solved for y, which is substituted into
         the first n rows. Needs E of full column rank and ``G2y`` invertible
         (y determined by x and u).
+
+        Parameters
+        ----------
+        schedule : float, optional
+            Changes nothing (the model is not scheduled).
+
+        Returns
+        -------
+        tuple
+            ``(A, B, C, D, dt)``, discrete time.
         """
         unscheduled(schedule)
         dt = sample_interval(self.dt, "pencil model")
@@ -108,10 +145,15 @@ class PencilModel(StateSpaceModel):
         return F1 + G1y @ C, G1u + G1y @ D, C, D, dt
 
     def to_arx(self) -> ArxModel:
-        """An ARX model ``a(q) y = B(q) u`` with the scalar denominator ``a(q) = det(I - q^-1 A)``.
+        """Convert to an ARX model ``a(q) y = B(q) u`` with the scalar denominator ``a(q) = det(I - q^-1 A)``.
 
         Exact for any number of outputs (for several outputs the common
         scalar denominator is not the smallest MIMO ARX form).
+
+        Returns
+        -------
+        ArxModel
+            The polynomials, ``a`` a multiple of the identity at each lag.
         """
         from scipy.signal import ss2tf  # a second to import: paid on first use
 
@@ -141,11 +183,13 @@ class PencilEstimate:
         ``[a_1..a_na, b_{1,0..nb_1-1}, b_{2,...}, ...]`` (the coefficients of
         ``u_j(k - i)`` from ``i = 0``).
     gamma_history : ndarray, shape (N, n_gamma)
+        The parameters' filtered estimate after each sample.
     states : ndarray, shape (N, n)
         Filtered ``x(k|k)``.
     covariance : ndarray
         Final ``P(k|k)`` of the parameters.
     filter : KalmanResult
+        The whole Kalman filter run on ``z = [x; gamma]``.
     """
 
     model: ArxModel
@@ -181,6 +225,7 @@ def estimate_pencil(data_or_arrays: Any, *, na: int, nb: Any = None, noise: Any 
     Returns
     -------
     PencilEstimate
+        The final ARX model, the parameters' history and the filtered states.
     """
     u, y, dt = io_arrays(data_or_arrays)
     if y.shape[1] != 1:

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from .._checks import finite_matrix, forgetting_factor, io_arrays, non_negative_int
+from ..argument_checks import finite_matrix, forgetting_factor, io_arrays, non_negative_int
 from ..errors import InputError
 from .factorised import sqrt_step, ud_covariance, ud_factor, ud_step
 from .least_squares import ArxModel, arx_orders, arx_regressors, least_squares, model_from_theta
@@ -48,11 +48,15 @@ class RecursiveResult:
     trace : ndarray, shape (N,)
         trace(P) after each sample.
     form : str
+        The covariance propagation: ``"plain"``, ``"sqrt"`` or ``"ud"``.
     forgetting : float
+        The forgetting factor lambda.
     window : int or None
+        The rectangular window's length, if one was used.
     model : ArxModel or None
         For :func:`estimate_arx_recursive`, the final ARX model.
     meta : dict
+        Provenance (method, first usable sample, regressor names).
     """
 
     theta: np.ndarray
@@ -69,7 +73,32 @@ class RecursiveResult:
 
 def rls_step(theta: np.ndarray, P: np.ndarray, phi: np.ndarray, y: np.ndarray, lam: float = 1.0
              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """One plain RLS step (appendix eq. A.76-A.78); returns theta, P, K, prediction error."""
+    """Take one plain RLS step (appendix eq. A.76-A.78).
+
+    Parameters
+    ----------
+    theta : ndarray, shape (n, n_y)
+        The estimate, one column per output.
+    P : ndarray, shape (n, n)
+        Its covariance factor.
+    phi : ndarray, shape (n,)
+        The regressor.
+    y : ndarray, shape (n_y,)
+        The outputs sharing it.
+    lam : float
+        Forgetting factor in (0, 1].
+
+    Returns
+    -------
+    theta : ndarray, shape (n, n_y)
+        The updated estimate.
+    P : ndarray, shape (n, n)
+        The updated covariance, symmetrised.
+    K : ndarray, shape (n,)
+        The gain.
+    e : ndarray, shape (n_y,)
+        The prediction error before the update.
+    """
     p_phi = P @ phi
     gain = p_phi / (lam + phi @ p_phi)
     error = y - phi @ theta
@@ -95,9 +124,11 @@ def recursive_least_squares(phi: Any, y: Any, *, forgetting: float = 1.0, window
     Parameters
     ----------
     phi : array_like, shape (N, n_p)
+        The regressors, one row per sample.
     y : array_like, shape (N, n_y) or (N,)
+        The outputs, sharing the regressor.
     forgetting : float
-        lambda in (0, 1] (appendix eq. A.75); 1 gives ordinary RLS.
+        The factor lambda, in (0, 1] (appendix eq. A.75); 1 gives ordinary RLS.
     window : int, optional
         Rectangular window length L (plain form, lambda = 1 only). The first
         L samples are fitted in one batch (giving theta0 and P0), then each
@@ -114,6 +145,7 @@ def recursive_least_squares(phi: Any, y: Any, *, forgetting: float = 1.0, window
     Returns
     -------
     RecursiveResult
+        The final estimate and P, the history and the prediction errors.
 
     Raises
     ------
@@ -203,8 +235,33 @@ def estimate_arx_recursive(data_or_arrays: Any, *, na: int, nb: Any = None, nk: 
                            P0: Any = None, theta0: Any = None, keep_history: bool = True) -> RecursiveResult:
     """Estimate an ARX model (orders as :func:`~identification.classical.least_squares.estimate_arx`) by RLS.
 
-    Returns the :class:`RecursiveResult` with ``model`` set to the final ARX
-    model. See :func:`recursive_least_squares` for the options.
+    Parameters
+    ----------
+    data_or_arrays : IOData, (u, y)
+        Time-major inputs (N, n_u) and outputs (N, n_y).
+    na : int
+        Output lags.
+    nb : int or sequence of int, optional
+        Coefficients per input (default ``na``).
+    nk : int or sequence of int, default 0
+        Input delays in samples.
+    forgetting : float, default 1.0
+        The forgetting factor, as for :func:`recursive_least_squares`.
+    window : int, optional
+        A rectangular window's length.
+    form : {"plain", "sqrt", "ud"}, default "plain"
+        The covariance propagation.
+    P0 : float or array_like, optional
+        Initial covariance.
+    theta0 : array_like, optional
+        Initial estimate.
+    keep_history : bool, default True
+        Keep the estimate after every sample.
+
+    Returns
+    -------
+    RecursiveResult
+        With ``model`` set to the final ARX model.
     """
     u, y, dt = io_arrays(data_or_arrays)
     phi, target, names, k0 = arx_regressors(u, y, na=na, nb=nb, nk=nk)

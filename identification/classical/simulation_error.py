@@ -17,7 +17,7 @@ minimum of the start's basin, no worse than the start on the records it fits.
 
 Weights (:func:`simulation_error_weights`): each output's error is divided by
 the RMS of its noise-free part, the output's power less its white noise's
-variance (:func:`~vehid.identification.filtering.iekf.output_noise_variance`).
+variance (:func:`~vehid.identification.assessment.noise.output_noise_variance`).
 The sum then weighs each output's error as its NRMSE fit does, whatever its
 noise: an output made noisy keeps the weight its noise-free record gives it,
 so sensor noise does not move the optimum from one output to another.
@@ -34,6 +34,7 @@ import numpy as np
 from ..blas import on_one_blas_thread
 from ..data import IOData, as_records
 from ..errors import InputError
+from ..assessment.noise import output_noise_variance
 from ..models.modal import ModalModel
 
 __all__ = ["Refinement", "refine_simulation_error", "simulation_error_weights", "MAX_ITERATIONS",
@@ -85,8 +86,6 @@ class Refinement:
 
 def simulation_error_weights(records: IOData | Sequence[IOData]) -> np.ndarray:
     """One over the RMS of each output's noise-free part, over all records (module docstring)."""
-    from ..filtering.iekf import output_noise_variance  # the filter's module imports this package's subspace
-
     records = as_records(records)
     power = np.sum([np.sum(record.y**2, axis=0) for record in records], axis=0) / sum(
         record.n_samples for record in records)

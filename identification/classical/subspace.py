@@ -50,7 +50,7 @@ import numpy as np
 import scipy.linalg
 from numpy.lib.stride_tricks import sliding_window_view
 
-from .._checks import io_arrays, positive_int
+from ..argument_checks import io_arrays, positive_int
 from ..errors import ExcitationError, InputError
 from ..models.protocol import StateSpaceModel, sample_interval, unscheduled
 
@@ -75,7 +75,9 @@ class SubspaceResult(StateSpaceModel):
         Measured minus simulated outputs (from x0; from each segment's
         initial state where an unstable A cuts the record).
     block_rows : int
+        The block rows s of the Hankel matrices used.
     dt : float or None
+        Sample interval (s), if known.
     """
 
     A: np.ndarray
@@ -101,7 +103,18 @@ class SubspaceResult(StateSpaceModel):
     def to_statespace(self, *, schedule: float | None = None
 
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
-        """Discrete ``(A, B, C, D, dt)``."""
+        """Return the discrete state-space form.
+
+        Parameters
+        ----------
+        schedule : float, optional
+            Changes nothing (the model is not scheduled).
+
+        Returns
+        -------
+        tuple
+            ``(A, B, C, D, dt)``.
+        """
         unscheduled(schedule)
         return self.A, self.B, self.C, self.D, sample_interval(self.dt, "subspace model")
 
@@ -221,6 +234,7 @@ def estimate_subspace(data_or_arrays: Any, *, order: int, block_rows: int | None
     Returns
     -------
     SubspaceResult
+        The model, its initial state, the singular values and the residuals.
 
     Raises
     ------

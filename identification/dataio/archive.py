@@ -75,7 +75,15 @@ SCHEDULE_MEMBER = "schedule"  # root member: the schedule channel of each record
 
 @dataclass(frozen=True)
 class RunName:
-    """The name of a run of one kind of model at one order: ``<kind>-n<order>``, e.g. ``linear-n4``."""
+    """The name of a run of one kind of model at one order: ``<kind>-n<order>``, e.g. ``linear-n4``.
+
+    Parameters
+    ----------
+    kind : str
+        The kind of model (``linear``, ``spline``, ...).
+    order : int
+        The model order.
+    """
 
     kind: str
     order: int
@@ -85,7 +93,18 @@ class RunName:
 
     @classmethod
     def parse(cls, name: str) -> "RunName | None":
-        """The kind and order a run name states, or None for a name of another form."""
+        """Read the kind and order a run name states.
+
+        Parameters
+        ----------
+        name : str
+            A run's name, e.g. ``"linear-n4"``.
+
+        Returns
+        -------
+        RunName or None
+            None for a name of another form.
+        """
         kind, separator, order = str(name).rpartition("-n")
         return cls(kind, int(order)) if separator and kind and order.isdigit() else None
 
@@ -128,6 +147,7 @@ class Archive:
     kind : str
         What the archive holds, e.g. ``identification`` or ``handling-study``.
     schema_version : int
+        The layout's version (:data:`SCHEMA_VERSION` when written by this workbench).
     package_version, git_commit, casadi_version, created : str
         Provenance: the workbench version, the commit of its working tree
         (``<sha>``, ``<sha>-dirty`` or ``unknown``), CasADi's version and the
@@ -336,6 +356,7 @@ def open_archive(path: str | Path, kinds: Sequence[str] | None = None) -> h5py.F
     Parameters
     ----------
     path : str or Path
+        The archive's file.
     kinds : sequence of str, optional
         Accept only archives of these kinds.
 
@@ -409,12 +430,14 @@ def read_archive(path: str | Path, kinds: Sequence[str] | None = None) -> Archiv
     Parameters
     ----------
     path : str or Path
+        The archive's file.
     kinds : sequence of str, optional
         Accept only archives of these kinds.
 
     Returns
     -------
     Archive
+        Its provenance, records and runs.
 
     Raises
     ------
@@ -447,6 +470,20 @@ def write_record(archive: h5py.File, name: str, data: IOData) -> h5py.Group:
 
     Time-first datasets ``t``, ``u``, ``y`` (and ``x``) with ``names`` and
     ``units`` attributes, as :meth:`IOData.to_hdf5` writes them.
+
+    Parameters
+    ----------
+    archive : h5py.File
+        The archive, open for writing.
+    name : str
+        The record's name (letters, digits, ``_.-``).
+    data : IOData
+        The record.
+
+    Returns
+    -------
+    h5py.Group
+        ``data/<name>``.
     """
     member_name(name, "record")
     if not isinstance(data, IOData):
@@ -460,7 +497,18 @@ def write_record(archive: h5py.File, name: str, data: IOData) -> h5py.Group:
 
 
 def read_records(archive: h5py.File) -> dict[str, IOData]:
-    """Every ``data/<name>`` record of an archive, by name."""
+    """Read every ``data/<name>`` record of an archive.
+
+    Parameters
+    ----------
+    archive : h5py.File
+        The open archive.
+
+    Returns
+    -------
+    dict of str to IOData
+        The records by name.
+    """
     records: dict[str, IOData] = {}
     for name, group in archive.get("data", {}).items():
         try:
@@ -471,7 +519,20 @@ def read_records(archive: h5py.File) -> dict[str, IOData]:
 
 
 def run_group(archive: h5py.File, name: str) -> h5py.Group:
-    """The group ``runs/<name>``, created if missing."""
+    """Return the group ``runs/<name>``, created if missing.
+
+    Parameters
+    ----------
+    archive : h5py.File
+        The archive, open for writing.
+    name : str
+        The run's name.
+
+    Returns
+    -------
+    h5py.Group
+        ``runs/<name>``.
+    """
     return archive.require_group("runs").require_group(member_name(name, "run"))
 
 
@@ -490,6 +551,15 @@ def write_run(
     group by :func:`~identification.dataio.storage.write_group` (a dataclass, a
     ``to_dict``/``to_hdf5`` object or a dict).
 
+    Parameters
+    ----------
+    archive : h5py.File
+        The archive, open for writing.
+    name : str
+        The run's name.
+    model, metrics, state : object, optional
+        The final model, its metrics and the estimator's resume state.
+
     Returns
     -------
     h5py.Group
@@ -506,7 +576,18 @@ def write_run(
 
 
 def read_run(run: h5py.Group) -> RunRecord:
-    """Read one ``runs/<name>`` group into a :class:`RunRecord`."""
+    """Read one ``runs/<name>`` group into memory.
+
+    Parameters
+    ----------
+    run : h5py.Group
+        ``runs/<name>``.
+
+    Returns
+    -------
+    RunRecord
+        Its history, model, metrics and state.
+    """
     history = read_history(run)
     units = {key: str(run["history"][key].attrs.get("units", "-")) for key in history}
     values = {member: read_group(run[member]) for member in _RUN_MEMBERS if member in run}
@@ -576,7 +657,18 @@ def append_history(
 
 
 def read_history(run: h5py.Group) -> dict[str, np.ndarray]:
-    """The per-pass datasets of ``runs/<name>/history``, pass index first (empty if none)."""
+    """Read the per-pass datasets of ``runs/<name>/history``.
+
+    Parameters
+    ----------
+    run : h5py.Group
+        ``runs/<name>``.
+
+    Returns
+    -------
+    dict of str to ndarray
+        Each entry, pass index first; empty if no pass was recorded.
+    """
     if "history" not in run:
         return {}
     return {key: dataset[...] for key, dataset in run["history"].items()}

@@ -16,6 +16,7 @@ from __future__ import annotations
 import ctypes
 import errno
 import fcntl
+import hashlib
 import json
 import os
 import shutil
@@ -25,11 +26,12 @@ import zlib
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator
+from typing import Any, Callable, Iterable, Iterator, Mapping
 
 import h5py
 import numpy as np
 
+from ..choices import HDF5_SUFFIXES
 from ..errors import ArchiveError, InputError
 
 __all__ = [
@@ -44,6 +46,8 @@ __all__ = [
     "output_identity",
     "OutputIdentity",
     "RUN_ATTRIBUTE",
+    "settings_digest",
+    "HDF5_SUFFIXES",
     "KIND_ATTRIBUTE",
     "REPORT_MARKER",
     "is_workbench_archive",
@@ -59,6 +63,49 @@ CHECKSUM_ATTRIBUTE = "vehid_checksums"
 CHECKSUM_SCHEME = "crc32"  # against faults, not forgery: 25 times faster than a cryptographic hash here
 #: Root attribute naming the run that wrote a file: a digest of the command, its settings and its inputs.
 RUN_ATTRIBUTE = "vehid_run"
+
+def _file_digest(path: str) -> str:
+    digest = hashlib.blake2b(digest_size=16)
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def _identity(value: Any) -> Any:
+    """A setting as it enters a run's digest: a file named by its content, so a moved copy is the same run; a
+    record in memory by its samples and names."""
+    if isinstance(value, np.ndarray):
+        return {"array": hashlib.blake2b(np.ascontiguousarray(value).tobytes(), digest_size=16).hexdigest(),
+                "shape": list(value.shape)}
+    if isinstance(value, Mapping):
+        return {str(key): _identity(item) for key, item in value.items()}
+    if hasattr(value, "__dataclass_fields__") and not isinstance(value, type):
+        return {"type": type(value).__name__,
+                **{name: _identity(getattr(value, name)) for name in value.__dataclass_fields__}}
+    if isinstance(value, (list, tuple)):
+        return [_identity(item) for item in value]
+    if isinstance(value, (str, os.PathLike)) and str(value):
+        try:
+            if os.path.isfile(value):  # read each time: a timestamp may not change when a file is rewritten
+                return {"file": _file_digest(os.fspath(value))}
+        except OSError:
+            pass  # unreadable here: the command's own check names it
+    return value
+
+
+def settings_digest(command: str, settings: Mapping[str, Any]) -> str:
+    """The digest that says which run a command or a library call asks for (:data:`RUN_ATTRIBUTE`).
+
+    ``settings`` are what the run computes from: its options, and its input files by their content
+    (a moved copy is the same run) or its records by their samples. Two runs with the same digest
+    compute the same thing, so the second may replace the first's output; where and how verbosely
+    the work is done does not belong among the settings.
+    """
+    content = {name: _identity(value) for name, value in sorted(settings.items())}
+    text = json.dumps({"command": command, "settings": content}, sort_keys=True, default=str)
+    return hashlib.blake2b(text.encode(), digest_size=16).hexdigest()
+
 #: Root attribute naming what an HDF5 output that is not a results archive holds (e.g. a simulated record).
 KIND_ATTRIBUTE = "vehid_kind"
 #: The file that marks a folder as a report of the workbench; it lists the report's own files.

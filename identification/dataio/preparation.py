@@ -18,7 +18,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from ..data import IOData, as_records, check_channels, read_hdf5
-from ..choices import DETREND, DETRENDS
+from ..choices import DETREND, DETRENDS, HDF5_SUFFIXES
 from ..errors import InputError, OptionError
 from ..optionspec import check_value
 from .readers import RawRecord, expand_channels, read_raw
@@ -41,8 +41,6 @@ __all__ = [
     "parse_steering_ratio",
 ]
 
-
-_HDF5_SUFFIXES = (".h5", ".hdf5", ".hdf")
 
 #: Seconds per unit, for the units a file may give its time column (its header ``t(ms)`` or units row).
 TIME_UNITS = {"s": 1.0, "sec": 1.0, "secs": 1.0, "second": 1.0, "seconds": 1.0, "ms": 1e-3, "msec": 1e-3,
@@ -127,6 +125,7 @@ def read_record(path: str | Path, settings: ReadSettings | None = None, **option
     path : str or Path
         ``.csv``, ``.dat``, ``.txt``, ``.mat``, ``.mf4`` or a workbench ``.h5`` file.
     settings : ReadSettings, optional
+        How to read it: channels, time base, resampling, segment.
     **options
         Or the fields of :class:`ReadSettings` as keywords: ``inputs``,
         ``outputs``, ``time_column``, ``dt``, ``resample``, ``decimate``,
@@ -137,13 +136,27 @@ def read_record(path: str | Path, settings: ReadSettings | None = None, **option
     IOData
         With ``meta["source"]`` and ``meta["time_base"]`` (``sample_jitter``,
         and what resampling, decimation and segment were applied).
+
+    Examples
+    --------
+    A table logged in milliseconds, read with its time in seconds and only its second half kept:
+
+    >>> import pathlib, tempfile
+    >>> from vehid.identification import read_record
+    >>> rows = "".join(f"{10 * k},{0.1 * (k > 1):.1f},{0.02 * k:.2f}\\n" for k in range(6))
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     path = pathlib.Path(folder) / "step.csv"
+    ...     _ = path.write_text("time(ms),steer,yaw_rate\\n" + rows)
+    ...     record = read_record(path, inputs=("steer",), outputs=("yaw_rate",), segment="+0.025:+0.05")
+    >>> round(record.dt, 9), record.t, record.output("yaw_rate")
+    (0.01, array([0.03, 0.04, 0.05]), array([0.06, 0.08, 0.1 ]))
     """
     if settings is None:
         settings = ReadSettings(**options)
     elif options:
         settings = replace(settings, **options)
     path = Path(path)
-    if path.suffix.lower() in _HDF5_SUFFIXES:
+    if path.suffix.lower() in HDF5_SUFFIXES:
         data = _hdf5_record(path, settings)
         raw, n_inputs = _as_raw(data), data.n_u
     else:
@@ -199,6 +212,17 @@ class RecordOffsets:
     The offset of a channel at time ``t`` is ``offset + slope (t - t_start)``,
     ``t_start`` the record's first sample time; the slope is zero unless
     ``detrend="linear"``.
+
+    Attributes
+    ----------
+    source : str
+        The record's source (its file, or ``"record"``).
+    samples : int
+        Its number of samples (the weight of its offsets in the model's operating point).
+    input_offset, output_offset : ndarray, shapes (n_u,) and (n_y,)
+        The offsets at the record's start.
+    input_slope, output_slope : ndarray, shapes (n_u,) and (n_y,)
+        Their slopes (units per second).
     """
 
     source: str
@@ -302,9 +326,11 @@ class Preparation:
     Attributes
     ----------
     input_names, output_names : tuple of str
+        The channels, as the raw records name them.
     input_scale, output_scale : ndarray
         Factors multiplying the raw channels.
     detrend : {"mean", "linear", "none"}
+        What was removed from each record: its mean, a straight line, or nothing.
     offsets : tuple of RecordOffsets
         One per estimation record, in order.
     settings : ReadSettings or None
@@ -364,6 +390,11 @@ class Preparation:
         record : int, optional
             Use the offsets of estimation record ``record``; by default the
             model's operating point (:attr:`input_offset`, :attr:`output_offset`).
+
+        Returns
+        -------
+        IOData
+            The prepared record (``meta["preparation"]`` says which offsets).
         """
         self._check(data)
         offsets = self._offsets(record)
@@ -375,25 +406,68 @@ class Preparation:
         return data.replace(u=u, y=y, meta=meta)
 
     def restore_outputs(self, y: np.ndarray, t: np.ndarray, record: int | None = None) -> np.ndarray:
-        """Outputs of the model (prepared units) back in the raw file's units and offsets."""
+        """Restore outputs of the model (prepared units) to the raw file's units and offsets.
+
+        Parameters
+        ----------
+        y : ndarray, shape (N, n_y)
+            Outputs in prepared units.
+        t : ndarray, shape (N,)
+            Their times (s): a linear trend is restored from the first.
+        record : int, optional
+            Restore the offsets of estimation record ``record``; the model's by default.
+
+        Returns
+        -------
+        ndarray, shape (N, n_y)
+            The outputs in raw units.
+        """
         offsets = self._offsets(record)
         elapsed = (np.asarray(t) - t[0])[:, None]
         return (np.asarray(y) + offsets.output_offset + elapsed * offsets.output_slope) / self.output_scale
 
     def simulate(self, model: Any, data: IOData, record: int | None = None) -> np.ndarray:
-        """The model's outputs on a raw record, in raw units: prepare the inputs, simulate from rest, restore."""
+        """Simulate a model on a raw record, in raw units: prepare the inputs, simulate from rest, restore.
+
+        Parameters
+        ----------
+        model : IdentifiedModel
+            A model identified on records this preparation prepared.
+        data : IOData
+            A raw record with the model's channels.
+        record : int, optional
+            Use the offsets of estimation record ``record``; the model's by default.
+
+        Returns
+        -------
+        ndarray, shape (N, n_y)
+            The model's outputs in the raw file's units.
+        """
         prepared = self.apply(data, record)
         return self.restore_outputs(model.simulate_outputs(prepared.u, prepared.dt), data.t, record)
 
     def conversion_list(self) -> list[dict[str, Any]]:
-        """Each converted channel with its factor (multiplying the raw channel) and what the factor is made of."""
+        """List the converted channels.
+
+        Returns
+        -------
+        list of dict
+            Per converted channel: ``channel``, ``factor`` (multiplying the raw channel)
+            and what the factor is made of (``scale``, ``steering_ratio``).
+        """
         factors = dict(zip(self.input_names + self.output_names,
                            (*map(float, self.input_scale), *map(float, self.output_scale))))
         return [{"channel": name, "factor": factors.get(name, 1.0), **parts}
                 for name, parts in self.conversions.items()]
 
     def as_dict(self) -> dict[str, Any]:
-        """JSON-ready form (saved beside a model)."""
+        """Describe the preparation for JSON (saved beside a model).
+
+        Returns
+        -------
+        dict
+            Channels, scales, detrend, the offsets per record, the reading settings and the conversions.
+        """
         return {
             "inputs": list(self.input_names),
             "outputs": list(self.output_names),
@@ -476,7 +550,8 @@ def estimate_preparation(
     ----------
     records : IOData or sequence of IOData
         Raw records with the same channels.
-    detrend : {"mean", "linear", "none"}
+    detrend : {"mean", "linear", "none"}, default "mean"
+        What to remove from each record: its mean, a straight line fitted over time, or nothing.
     scale : mapping or sequence of "NAME=FACTOR", optional
         Factors for named channels (default 1): units, signs. A matrix
         variable's name scales each of its columns.
@@ -486,6 +561,11 @@ def estimate_preparation(
         Steering ratios dividing steering-wheel angles into road-wheel angles
         (a bare number: the only input). With a scale on the same channel
         the factor is scale / ratio.
+
+    Returns
+    -------
+    Preparation
+        The scale factors, and each record's offsets.
     """
     records = as_records(records)
     check_value("detrend", detrend, DETREND)
@@ -512,16 +592,29 @@ def prepare(
 ) -> tuple[tuple[IOData, ...], Preparation]:
     """Estimate the preparation of raw records and apply it to each with its own offsets.
 
-    ``scale`` and ``steering_ratio`` convert channels as in :func:`estimate_preparation`.
-
     The records are estimation records: before anything is removed or scaled,
     :func:`~identification.data.check_channels` refuses channels that cannot
     identify a model (constant, out of range, an output copying an input).
 
+    Parameters
+    ----------
+    records : IOData or sequence of IOData
+        Raw records with the same channels and sample interval.
+    detrend : {"mean", "linear", "none"}, default "mean"
+        What to remove from each record.
+    scale : mapping or sequence of "NAME=FACTOR", optional
+        Channel factors, as for :func:`estimate_preparation`.
+    settings : ReadSettings, optional
+        How the records were read, kept in the preparation.
+    steering_ratio : float, "NAME=RATIO" strings or mapping, optional
+        Steering ratios, as for :func:`estimate_preparation`.
+
     Returns
     -------
     prepared : tuple of IOData
+        The records scaled, each with its own offsets removed.
     preparation : Preparation
+        What was done, to apply again to validation data.
 
     Raises
     ------
@@ -549,9 +642,28 @@ def load_records(
 ) -> tuple[tuple[IOData, ...], Preparation]:
     """Read raw files (:func:`read_record`) and prepare them (:func:`prepare`): the identify command's input.
 
-    ``options`` are the fields of :class:`ReadSettings` (``inputs``, ``outputs``,
-    ``time_column``, ``dt``, ``resample``, ``decimate``, ``segment``, ``jitter_tolerance``);
-    ``scale`` and ``steering_ratio`` are the command line's ``--scale`` and ``--steering-ratio``.
+    Parameters
+    ----------
+    paths : str, path or sequence of them
+        The data files, read alike.
+    detrend : {"mean", "linear", "none"}, default "mean"
+        What to remove from each record.
+    scale : mapping or sequence of "NAME=FACTOR", optional
+        Channel factors, as for :func:`estimate_preparation` (the command line's ``--scale``).
+    settings : ReadSettings, optional
+        How to read the files; ``options`` override its fields.
+    steering_ratio : float, "NAME=RATIO" strings or mapping, optional
+        Steering ratios, as for :func:`estimate_preparation` (``--steering-ratio``).
+    **options
+        Fields of :class:`ReadSettings` (``inputs``, ``outputs``, ``time_column``, ``dt``,
+        ``resample``, ``decimate``, ``segment``, ``jitter_tolerance``).
+
+    Returns
+    -------
+    prepared : tuple of IOData
+        The prepared records, one per file.
+    preparation : Preparation
+        What was done, the reading settings included.
     """
     raw, settings = read_raw_records(paths, settings, **options)
     return prepare(raw, detrend=detrend, scale=scale, settings=settings, steering_ratio=steering_ratio)
@@ -562,10 +674,26 @@ def read_raw_records(
     settings: ReadSettings | None = None,
     **options: Any,
 ) -> tuple[tuple[IOData, ...], ReadSettings]:
-    """Raw records of several files read alike (:func:`read_record`), and the settings that read them.
+    """Read several files alike (:func:`read_record`), keeping the settings that read them.
 
     For a hold-out split, split a raw record, :func:`prepare` the estimation
     part with these settings and :func:`prepare_validation` the rest.
+
+    Parameters
+    ----------
+    paths : str, path or sequence of them
+        The data files.
+    settings : ReadSettings, optional
+        How to read them; ``options`` override its fields.
+    **options
+        Fields of :class:`ReadSettings`.
+
+    Returns
+    -------
+    records : tuple of IOData
+        The raw records, in the files' units.
+    settings : ReadSettings
+        The settings, with the channels a workbench HDF5 record chose.
     """
     if isinstance(paths, (str, Path)):
         paths = [paths]

@@ -48,6 +48,7 @@ class RawRecord:
         record has no time and ``dt`` must give it. Text and MATLAB files share
         one array among all channels; MDF channels each have their own.
     units : tuple of str
+        Each channel's unit as the file states it; ``"-"`` where it does not.
     time_name : str or None
         The column or channel the time came from.
     locate : callable
@@ -347,6 +348,7 @@ def read_table(
     Parameters
     ----------
     path : str or Path
+        The ``.csv``, ``.dat`` or ``.txt`` file.
     channels : sequence of str
         Column names (or 1-based numbers) to read, inputs then outputs.
     time_column : str, optional
@@ -359,6 +361,23 @@ def read_table(
     Returns
     -------
     RawRecord
+        The columns as floats, with the time column's values and the units the file states.
+
+    Examples
+    --------
+    A step of steer in a small table with a time column and a units row:
+
+    >>> import pathlib, tempfile
+    >>> from vehid.identification import read_table
+    >>> table = "t,steer,yaw_rate\\ns,rad,rad/s\\n0.00,0.0,0.000\\n0.01,0.1,0.020\\n0.02,0.1,0.035\\n"
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     path = pathlib.Path(folder) / "step.csv"
+    ...     _ = path.write_text(table)
+    ...     raw = read_table(path, channels=["steer", "yaw_rate"])
+    >>> raw.names, raw.units, raw.time_name
+    (('steer', 'yaw_rate'), ('rad', 'rad/s'), 't')
+    >>> raw.values[1]
+    array([0.   , 0.02 , 0.035])
     """
     path = _existing(path)
     _check_dt(dt)
@@ -570,6 +589,7 @@ def read_mat(
     Parameters
     ----------
     path : str or Path
+        The ``.mat`` file (MATLAB 5 to 7.3).
     channels : sequence of str
         ``name`` (a vector), ``struct.field`` or ``name:K`` (column K of a
         matrix whose longer side is time).
@@ -577,6 +597,11 @@ def read_mat(
         The time variable; default ``t`` when the file has one; ``"none"`` disables it.
     dt : float, optional
         Sample interval when there is no time variable.
+
+    Returns
+    -------
+    RawRecord
+        The variables as float vectors, one shared time array (or None).
     """
     path = _existing(path)
     _check_dt(dt)
@@ -608,6 +633,22 @@ def read_mdf(
     Needs the optional extra ``mdf`` (``pip install vehid[mdf]``, asammdf).
     Channels at different rates are brought onto one time base by
     :func:`vehid.identification.dataio.timebase.uniform_record`.
+
+    Parameters
+    ----------
+    path : str or Path
+        The MDF file.
+    channels : sequence of str
+        Channel names, each occurring once in the file.
+    time_column : str, optional
+        Must be None or ``"none"``: every channel carries its own time stamps.
+    dt : float, optional
+        Must be None, for the same reason.
+
+    Returns
+    -------
+    RawRecord
+        The channels with their own time stamps and units.
     """
     path = _existing(path)
     if dt is not None:
@@ -671,6 +712,35 @@ def read_raw(
     ``.csv``, ``.dat``, ``.txt``: :func:`read_table` (a ``.dat`` that is an
     MDF file by its first bytes, as MDF3 loggers write them: :func:`read_mdf`);
     ``.mat``: :func:`read_mat`; ``.mf4``, ``.mdf``: :func:`read_mdf`.
+
+    Parameters
+    ----------
+    path : str or Path
+        The measurement file.
+    channels : sequence of str
+        The channels to read, inputs then outputs, as the file names them.
+    time_column : str, optional
+        The time column or variable (not for MDF files); ``"none"`` disables it.
+    dt : float, optional
+        Sample interval (s) of a file without time.
+
+    Returns
+    -------
+    RawRecord
+        The channels before any time-base handling (:func:`read_record` does that too).
+
+    Examples
+    --------
+    A whitespace-separated table without a time column, its sample interval given:
+
+    >>> import pathlib, tempfile
+    >>> from vehid.identification import read_raw
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     path = pathlib.Path(folder) / "log.txt"
+    ...     _ = path.write_text("u y\\n1.0 0.0\\n1.0 0.5\\n1.0 0.75\\n")
+    ...     raw = read_raw(path, channels=["u", "y"], time_column="none", dt=0.1)
+    >>> raw.names, raw.times[0] is None, raw.values[1]
+    (('u', 'y'), True, array([0.  , 0.5 , 0.75]))
     """
     suffix = Path(path).suffix.lower()
     if suffix in TEXT_SUFFIXES and _is_mdf(Path(path)):  # MDF3 loggers often name their files .dat

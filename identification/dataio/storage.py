@@ -23,6 +23,7 @@ import h5py
 import numpy as np
 
 from ..errors import ArchiveError
+from ..frozen import FrozenDict
 
 __all__ = ["LEGACY_CLASS_PATHS", "register_codec", "write_value", "read_value", "write_group", "read_group"]
 
@@ -67,14 +68,22 @@ def _scalar_tag(value: Any) -> str | None:
 
 
 def _json_exact(value: Mapping) -> str | None:
-    """The JSON text of a dict when decoding it gives an equal dict, else None."""
-    if type(value) is not dict:
+    """The JSON text of a dict (or a read-only mapping, a frozen result's) when decoding it gives an equal
+    dict, else None."""
+    if type(value) is not dict and not isinstance(value, FrozenDict):
         return None
     try:
-        text = json.dumps(value, allow_nan=False)
+        text = json.dumps(value, allow_nan=False, default=_mapping_as_dict)
     except (TypeError, ValueError):
         return None
     return text if json.loads(text) == value else None
+
+
+def _mapping_as_dict(value: Any) -> dict:
+    """A read-only mapping nested in a dict, as the dict it reads as (nothing else JSON cannot hold)."""
+    if isinstance(value, FrozenDict):
+        return dict(value)
+    raise TypeError(f"{type(value).__name__} is not JSON")
 
 
 _SCHEMAS: dict[str, tuple[type, int]] = {}  # schema name: (class, version)
@@ -179,6 +188,7 @@ def write_value(group: h5py.Group, name: str, value: Any, *, units: str | None =
     Parameters
     ----------
     group : h5py.Group
+        The open group, written into.
     name : str
         Member name: no ``/``, not ``dataclass`` and not starting ``vehid_``.
     value : object
@@ -209,7 +219,7 @@ def _write_member(group: h5py.Group, name: str, value: Any, units: str | None) -
         group.attrs[name] = h5py.Empty("f8") if tag == "none" else value
         _set_type(group, name, tag)
         return
-    if isinstance(value, dict):
+    if isinstance(value, (dict, FrozenDict)):
         text = _json_exact(value)
         if text is not None and units is None:
             group.attrs[name] = text
@@ -297,7 +307,7 @@ def write_group(group: h5py.Group, value: Any) -> None:
         return
     if dataclasses.is_dataclass(value) or hasattr(value, "to_dict"):
         raise ArchiveError(f"cannot archive a {type(value).__qualname__}: it has no registered schema "
-                           "(identification.storage.register_codec)")
+                           "(vehid.identification.dataio.storage.register_codec)")
     raise ArchiveError(f"cannot archive a value of type {type(value).__module__}.{type(value).__qualname__}")
 
 
@@ -311,6 +321,13 @@ def _write_mapping(group: h5py.Group, mapping: Mapping) -> None:
 
 def read_value(group: h5py.Group, name: str) -> Any:
     """Read member ``name`` of ``group`` as :func:`write_value` stored it.
+
+    Parameters
+    ----------
+    group : h5py.Group
+        The open group.
+    name : str
+        The member: a dataset, a group or an attribute.
 
     Returns
     -------
@@ -366,7 +383,18 @@ def _tuples(value: Any) -> Any:
 
 
 def read_group(group: h5py.Group) -> Any:
-    """Read a group written by :func:`write_group` (or by :func:`write_value`) back into its value."""
+    """Read a group written by :func:`write_group` (or by :func:`write_value`) back into its value.
+
+    Parameters
+    ----------
+    group : h5py.Group
+        The open group.
+
+    Returns
+    -------
+    object
+        The value: a registered class's instance, a dict, tuple or list.
+    """
     attrs = group.attrs
     if _SCHEMA in attrs or _LEGACY_DATACLASS in attrs or _LEGACY_CLASS in attrs:
         return _read_registered(group)

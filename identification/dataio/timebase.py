@@ -159,13 +159,14 @@ def uniform_record(
     jitter_tolerance: float = JITTER_TOLERANCE,
     meta: dict[str, Any] | None = None,
 ) -> IOData:
-    """A uniformly sampled :class:`IOData` from a raw record (steps in the module docstring).
+    """Make a uniformly sampled record of a raw one (steps in the module docstring).
 
     Parameters
     ----------
     raw : RawRecord
         Inputs first (``n_inputs`` channels), then outputs.
     n_inputs : int
+        How many of its channels are inputs.
     dt : float, optional
         Sample interval where the record has no time.
     resample : float, optional
@@ -178,6 +179,11 @@ def uniform_record(
         See :data:`JITTER_TOLERANCE`.
     meta : dict, optional
         Added to the record's metadata.
+
+    Returns
+    -------
+    IOData
+        The record; ``meta["time_base"]`` says what was done to the time (jitter, resampling, segment).
 
     Raises
     ------

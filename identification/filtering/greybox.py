@@ -23,7 +23,7 @@ Choices, each stated where it is made:
 * ``R`` from the data where not given: ``"residual"`` (default) takes each output's residual variance
   of the frozen model's simulation, of the start model for the first pass and of each pass's model
   after it (the spline filter's rule); ``"data"`` takes each output's white-noise variance from its
-  differences (:func:`~identification.filtering.iekf.output_noise_variance`), as the modal filter's
+  differences (:func:`~vehid.identification.assessment.noise.output_noise_variance`), as the modal filter's
   ``measurement_noise="data"``. Both are floored at :data:`~identification.filtering.iekf.NOISE_FLOOR` of the
   output's power. On a record the model fits to its noise the two agree; where the model cannot
   follow the record (model error), the residual rule counts that error as noise, so the filter
@@ -56,7 +56,8 @@ from ..compiled import CompiledRecursion
 from ..blas import on_one_blas_thread
 from ..data import IOData, as_records, check_channels
 from ..errors import DivergenceError, InputError
-from .iekf import NOISE_FLOOR, P_DECAY_FLOOR, output_noise_variance
+from ..assessment.noise import output_noise_variance
+from .iekf import NOISE_FLOOR, P_DECAY_FLOOR
 from .iekf_pass import compiled_pass, pack_covariance, unpack_covariance
 from ..assessment.metrics import nrmse_fit, percentage_explanation
 from ..assessment.segments import integrated_correlation_time
@@ -113,6 +114,8 @@ class GreyBoxModel:
     positive : sequence of bool
         Parameters that are positive by nature (estimated as logarithms, so they stay positive).
     state_names, input_names, schedule_names, output_names : sequence of str
+        Names of the states, inputs, scheduling signals (none by default) and outputs
+        (``y1, ...`` where none are given); their numbers are the model's sizes.
     description : str
         What the model is (for reports); its text enters the cache key.
     parameter_scale : sequence of float
@@ -157,26 +160,37 @@ class GreyBoxModel:
 
     @property
     def n_x(self) -> int:
+        """Number of states."""
         return len(self.state_names)
 
     @property
     def n_u(self) -> int:
+        """Number of inputs."""
         return len(self.input_names)
 
     @property
     def n_s(self) -> int:
+        """Number of scheduling signals."""
         return len(self.schedule_names)
 
     @property
     def n_theta(self) -> int:
+        """Number of parameters."""
         return len(self.parameter_names)
 
     @property
     def n_y(self) -> int:
+        """Number of outputs."""
         return int(self.output.size1_out(0))
 
     def cache_key(self) -> str:
-        """Text naming the model exactly: its serialised functions, names and flags."""
+        """Name the model exactly, for the compiled-code cache.
+
+        Returns
+        -------
+        str
+            A SHA-256 hex digest of its serialised functions, names and flags.
+        """
         digest = hashlib.sha256()
         for part in (self.dynamics.serialize(), self.output.serialize(), repr(self.parameter_names),
                      repr(self.positive), repr(self.state_names), repr(self.input_names),
@@ -186,7 +200,23 @@ class GreyBoxModel:
         return digest.hexdigest()
 
     def check_parameters(self, theta: Any) -> np.ndarray:
-        """``theta`` as a float vector of the model's size; InputError where a positive parameter is not."""
+        """Check a parameter vector against the model.
+
+        Parameters
+        ----------
+        theta : array_like, shape (n_theta,)
+            Parameter values, in the units of ``parameter_units``.
+
+        Returns
+        -------
+        ndarray, shape (n_theta,)
+            ``theta`` as floats.
+
+        Raises
+        ------
+        InputError
+            On a wrong size, a non-finite value, or a positive parameter that is not.
+        """
         theta = np.asarray(theta, dtype=float).ravel()
         if theta.size != self.n_theta:
             raise InputError(f"the model has {self.n_theta} parameters ({', '.join(self.parameter_names)}); "
@@ -300,13 +330,17 @@ def simulate_greybox(model: GreyBoxModel, theta: Any, record: IOData, *, x0: Any
     Parameters
     ----------
     model : GreyBoxModel
+        The model.
     theta : array_like (n_theta,)
+        Its parameters.
     record : IOData
         ``u`` holds the inputs, then the scheduling signals (``n_u + n_s`` columns); ``y`` sets the size only.
     x0 : array_like, optional
         Initial state (default zero).
     discretization : {"rk4", "euler"}
+        The step over a sample: classical Runge-Kutta or Euler.
     substeps : int
+        Steps per sample.
 
     Returns
     -------
@@ -432,15 +466,13 @@ class GreyBoxOptions:
     prior_std : float
         Standard deviation of the scaled parameters at the start (``P0``): 1 allows a factor e
         on a positive parameter.
-    parameter_prior_std : sequence of float, optional
-        One such standard deviation per parameter, in place of ``prior_std`` (a prior known better for
-        some parameters than for others).
     passes, min_passes : int
         Largest number of passes; no early stop before ``min_passes``.
     parameter_tolerance : float
         Stop when no parameter changes by more than this fraction of itself (or of its scale, where
         that is larger) from one pass to the next.
     discretization : {"rk4", "euler"}
+        The step over a sample: classical Runge-Kutta or Euler.
     substeps : int
         Runge-Kutta steps per sample.
     covariance : {"joseph", "paper"}
@@ -451,6 +483,9 @@ class GreyBoxOptions:
         Where records do not start at rest: the standard deviation of each state at a record's
         start. The state rows of ``P`` are set to it at the start of every record (uncorrelated with
         the parameters), so the filter estimates the start. Default: records start at rest.
+    parameter_prior_std : sequence of float, optional
+        One such standard deviation per parameter, in place of ``prior_std`` (a prior known better for
+        some parameters than for others).
     coloured_residuals : bool
         Scale the covariance also by the innovations' integrated autocorrelation time (module
         docstring, "Standard deviations"): where the residuals are coloured (model error, a sensor's
@@ -524,11 +559,13 @@ class GreyBoxResult(PassHistory):
     Attributes
     ----------
     model : GreyBoxModel
+        The model identified.
     parameters : ndarray (n_theta,)
         The estimate, in the parameters' units.
     covariance : ndarray (n_theta, n_theta)
         Their covariance (module docstring, "Standard deviations"); NaN where it could not be had.
     start : ndarray (n_theta,)
+        The start values.
     fit_percent : ndarray (n_y,)
         R (eq. 17) per output of the model simulated from rest over the records (pooled).
     nrmse_fit_percent : ndarray (n_y,)
@@ -540,7 +577,9 @@ class GreyBoxResult(PassHistory):
     stop_reason : str
         ``"converged"``, ``"passes"`` or ``"diverged at pass k"`` (on a DivergenceError's ``last_good``).
     dt, seconds : float
+        The records' sample interval and the run time (s).
     options : GreyBoxOptions
+        The settings used.
     meta : dict
         ``covariance_source`` and the normalised innovation squared of the covariance pass.
     """
@@ -573,11 +612,22 @@ class GreyBoxResult(PassHistory):
 
     @property
     def trace_p(self) -> np.ndarray:
-        """trace(P) of the scaled filter after each pass."""
+        """The trace of P of the scaled filter after each pass."""
         return np.array([record.trace_p for record in self.history])
 
     def parameter(self, name: str) -> tuple[float, float]:
-        """``(value, std)`` of a parameter by name."""
+        """Return a parameter's estimate and standard deviation.
+
+        Parameters
+        ----------
+        name : str
+            One of the model's ``parameter_names``.
+
+        Returns
+        -------
+        tuple of float
+            ``(value, std)`` in the parameter's unit.
+        """
         try:
             index = self.model.parameter_names.index(name)
         except ValueError:
@@ -585,7 +635,18 @@ class GreyBoxResult(PassHistory):
         return float(self.parameters[index]), float(self.std[index])
 
     def simulate(self, record: IOData) -> np.ndarray:
-        """The identified model's outputs (N, n_y) on a record, simulated from rest."""
+        """Simulate the identified model from rest on a record.
+
+        Parameters
+        ----------
+        record : IOData
+            Inputs then scheduling signals in ``u``.
+
+        Returns
+        -------
+        ndarray, shape (N, n_y)
+            The outputs.
+        """
         y, _ = simulate_greybox(self.model, self.parameters, record, discretization=self.options.discretization,
                                 substeps=self.options.substeps)
         return y
@@ -614,15 +675,18 @@ def identify_greybox(
         scheduling signals, ``y`` (N, n_y) its outputs, in the model's units. Each record starts
         from rest unless ``options.initial_state_std`` says otherwise.
     model : GreyBoxModel
+        The model, with its parameters' names, units and signs.
     start : array_like (n_theta,)
         Start values of the parameters (non-zero; positive for the positive ones).
     options : GreyBoxOptions, optional
+        Settings; the defaults of :class:`GreyBoxOptions` without them.
     on_pass : callable, optional
         Called after every pass with its record and the result so far.
 
     Returns
     -------
     GreyBoxResult
+        The estimate with its covariance, fits and the passes.
 
     Raises
     ------

@@ -12,7 +12,7 @@ value its state-space form is the exact linearisation (CasADi's Jacobians) about
 deviations, and :meth:`IdentifiedGreyBox.to_casadi`, the continuous-time functions with the parameters in them.
 
 Stored (JSON, archives) as plain data: names, the functions' algorithms as tables
-(:mod:`~identification.dataio.casadi_codec`, nothing that runs code when read) and the numbers.
+(:mod:`~identification.casadi_codec`, nothing that runs code when read) and the numbers.
 """
 
 from __future__ import annotations
@@ -112,7 +112,7 @@ def _linearisation(model_key: str, model: GreyBoxModel) -> ca.Function:
 
 
 def _model_dict(model: GreyBoxModel) -> dict[str, Any]:
-    from ..dataio.casadi_codec import function_table
+    from ..casadi_codec import function_table
 
     def plain(table: dict[str, Any]) -> dict[str, Any]:
         return {key: value.tolist() if isinstance(value, np.ndarray) else value for key, value in table.items()}
@@ -125,7 +125,7 @@ def _model_dict(model: GreyBoxModel) -> dict[str, Any]:
 
 
 def _model_from(values: Mapping[str, Any]) -> GreyBoxModel:
-    from ..dataio.casadi_codec import table_function
+    from ..casadi_codec import table_function
 
     return GreyBoxModel(dynamics=table_function(values["dynamics"]), output=table_function(values["output"]),
                         parameter_names=tuple(values["parameter_names"]),
@@ -147,6 +147,7 @@ class IdentifiedGreyBox(StateSpaceModel):
     parameters : array_like (n_theta,)
         In the order (and units) of ``model.parameter_names``.
     parameter_covariance : array_like (n_theta, n_theta), optional
+        Covariance of ``parameters``; None where none was estimated.
     discretization : {"rk4", "euler"}
         How :meth:`simulate_outputs` steps the model over a sample (the estimator's).
     substeps : int
@@ -155,6 +156,7 @@ class IdentifiedGreyBox(StateSpaceModel):
         Least and greatest value of each scheduling signal the model was identified over: where given,
         ``is_stable()`` without a schedule value checks the model across it (:func:`stable_over`).
     meta : dict, optional
+        Provenance (stop reason, sample interval, covariance notes).
 
     Examples
     --------
@@ -223,6 +225,7 @@ class IdentifiedGreyBox(StateSpaceModel):
         Parameters
         ----------
         result : GreyBoxResult
+            The grey-box IEKF's result.
         schedule_range : array_like (n_s, 2), optional
             The least and greatest value of each scheduling signal over the records (where the model has any).
 
@@ -279,7 +282,18 @@ class IdentifiedGreyBox(StateSpaceModel):
         return np.sqrt(np.clip(np.diag(self.parameter_covariance), 0.0, None))
 
     def with_parameters(self, theta: Any) -> "IdentifiedGreyBox":
-        """The same model with parameters ``theta`` (and no covariance)."""
+        """Return the same model with other parameters.
+
+        Parameters
+        ----------
+        theta : array_like, shape (n_theta,)
+            The parameters.
+
+        Returns
+        -------
+        IdentifiedGreyBox
+            The model, without a covariance.
+        """
         return IdentifiedGreyBox(self.model, theta, None, self.discretization, self.substeps, self.schedule_range,
                                  self.meta)
 
@@ -299,15 +313,37 @@ class IdentifiedGreyBox(StateSpaceModel):
         return values
 
     def to_statespace(self, *, schedule: Any = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
-        """``(A, B, C, D, None)``: the linearisation about ``x = 0``, ``u = 0`` at the schedule value (module notes)."""
+        """Linearise the model about ``x = 0``, ``u = 0`` at a schedule value (module notes).
+
+        Parameters
+        ----------
+        schedule : float or array_like, shape (n_s,), optional
+            The scheduling signals' values; required where the model has any.
+
+        Returns
+        -------
+        tuple
+            ``(A, B, C, D, None)``: continuous time.
+        """
         point = self._schedule_point(schedule)
         function = _linearisation(self.model.cache_key(), self.model)
         return (*(np.asarray(m, dtype=float).reshape(function.size_out(i))
                   for i, m in enumerate(function(self.parameters, point))), None)
 
     def is_stable(self, *, schedule: Any = None) -> bool:
-        """Every eigenvalue of the linearisation in the left half-plane (within rounding); for a scheduled
-        model without a value, at :data:`STABILITY_POINTS` values across :attr:`schedule_range`."""
+        """Say whether every eigenvalue of the linearisation lies in the left half-plane, within rounding.
+
+        Parameters
+        ----------
+        schedule : float or array_like, optional
+            The operating point; a scheduled model without one is checked at
+            :data:`STABILITY_POINTS` values across :attr:`schedule_range`.
+
+        Returns
+        -------
+        bool
+            True when stable.
+        """
         if schedule is None and self.is_scheduled:
             if self.schedule_range is None:
                 raise InputError("give schedule= a value: this model has no schedule_range to check across")
@@ -316,14 +352,16 @@ class IdentifiedGreyBox(StateSpaceModel):
 
     def simulate_outputs(self, u: Any, dt: float | None = None, *, x0: Any = None, schedule: Any = None,
                          return_states: bool = False) -> Any:
-        """Outputs (N, n_y) driven by ``u`` from ``x0`` (default rest), compiled (the estimator's recursion).
+        """Simulate the outputs driven by ``u``, compiled (the estimator's recursion).
 
         Parameters
         ----------
         u : array_like (N, n_u), or (N, n_u + n_s) with the scheduling signals last
+            Inputs, time-major.
         dt : float
             Sample interval (s); required (optional only in the protocol's signature).
         x0 : array_like (n_x,), optional
+            Initial state; rest by default.
         schedule : array_like (N,) or (N, n_s), optional
             The scheduling signals; without them, ``u``'s last columns.
         return_states : bool
@@ -331,7 +369,8 @@ class IdentifiedGreyBox(StateSpaceModel):
 
         Returns
         -------
-        y : ndarray (N, n_y)  (and x, (N, n_x), if asked)
+        ndarray, shape (N, n_y), or tuple of ndarray
+            The outputs; with ``return_states``, ``(y, x)``.
         """
         if dt is None or not (np.isfinite(dt) and dt > 0):
             raise InputError(f"a continuous-time model needs the sample interval dt (> 0) of its input; got {dt}")
@@ -351,7 +390,9 @@ class IdentifiedGreyBox(StateSpaceModel):
         Parameters
         ----------
         record : IOData
+            Inputs, then the scheduling signals, in ``u``.
         x0 : array_like (n_x,), optional
+            Initial state; rest by default.
 
         Returns
         -------
@@ -364,7 +405,13 @@ class IdentifiedGreyBox(StateSpaceModel):
         return simulated_response(record, y, x=x, output_names=self.output_names, state_names=self.model.state_names)
 
     def to_casadi(self) -> ca.Function:
-        """``(x, u[, s]) -> (xdot, y)``: the continuous-time model with its parameters in it (``s`` where scheduled)."""
+        """Return the continuous-time model with its parameters in it as a CasADi Function.
+
+        Returns
+        -------
+        casadi.Function
+            ``(x, u[, s]) -> (xdot, y)``, ``s`` where the model is scheduled.
+        """
         model = self.model
         x, u, s = ca.SX.sym("x", model.n_x), ca.SX.sym("u", model.n_u), ca.SX.sym("s", model.n_s)
         theta = ca.DM(self.parameters)
@@ -373,9 +420,15 @@ class IdentifiedGreyBox(StateSpaceModel):
         return ca.Function("vehid_greybox_model", inputs, values, names, ["xdot", "y"])
 
     def mat_fields(self) -> dict[str, Any]:
-        """The parameters (and covariance) and the linearisation's ``A``, ``B``, ``C``, ``D``: unscheduled, as
-        they are; scheduled on one signal with a :attr:`schedule_range`, at ``grid``, its ends and middle (grid
-        value first)."""
+        """Return the fields of the model's MATLAB file.
+
+        Returns
+        -------
+        dict
+            The parameters (and covariance) and the linearisation's ``A``, ``B``, ``C``, ``D``: unscheduled,
+            as they are; scheduled on one signal with a :attr:`schedule_range`, at ``grid``, its ends and
+            middle (grid value first).
+        """
         fields: dict[str, Any] = {"parameters": self.parameters, "parameter_names": list(self.model.parameter_names)}
         if self.parameter_covariance is not None:
             fields["parameter_covariance"] = self.parameter_covariance
@@ -388,7 +441,13 @@ class IdentifiedGreyBox(StateSpaceModel):
         return fields
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready form: ``kind: grey-box``, the structure (functions as tables), the numbers and settings."""
+        """Describe the model for JSON.
+
+        Returns
+        -------
+        dict
+            ``kind: grey-box``, the structure (functions as tables), the numbers and settings.
+        """
         return {
             "kind": "grey-box", "time_domain": "continuous", "dt": None, "model": _model_dict(self.model),
             "parameters": self.parameters.tolist(),
@@ -399,7 +458,18 @@ class IdentifiedGreyBox(StateSpaceModel):
 
     @classmethod
     def from_dict(cls, values: Mapping[str, Any]) -> "IdentifiedGreyBox":
-        """Inverse of :meth:`to_dict`."""
+        """Read a model that :meth:`to_dict` described.
+
+        Parameters
+        ----------
+        values : mapping
+            The description.
+
+        Returns
+        -------
+        IdentifiedGreyBox
+            The model.
+        """
         if values.get("kind") != "grey-box":
             raise InputError("not a grey-box model (kind grey-box)")
         covariance, bounds = values.get("parameter_covariance"), values.get("schedule_range")
@@ -409,7 +479,18 @@ class IdentifiedGreyBox(StateSpaceModel):
                    None if bounds is None else np.asarray(bounds, dtype=float), dict(values.get("meta") or {}))
 
     def save_json(self, path: str | Path) -> Path:
-        """Write :meth:`to_dict` as JSON; returns the path."""
+        """Write :meth:`to_dict` as JSON.
+
+        Parameters
+        ----------
+        path : str or pathlib.Path
+            The file written.
+
+        Returns
+        -------
+        pathlib.Path
+            The path.
+        """
         from ..jsonable import to_jsonable
 
         path = Path(path)

@@ -21,7 +21,7 @@ sets, and on a noisy record they follow its noise. The invariant settings
 therefore shrink ``Q`` from pass to pass (``p_decay``, down to
 :data:`P_DECAY_FLOOR` of ``p``): the early passes move the parameters from the
 start, the late ones average over the whole record. ``R`` is taken per output
-from the record's white noise (:func:`output_noise_variance`), so that a noisy
+from the record's white noise (:func:`~vehid.identification.assessment.noise.output_noise_variance`), so that a noisy
 output weighs less than a clean one (the noisiest keeping R = I's weight, on
 which p is tuned), and a pass that diverges runs again from
 the last good pass with a tenth of ``p`` (``back_off`` times at most), noted
@@ -46,6 +46,7 @@ from .filter_models import LinearModalFilterModel
 from .iekf_pass import compiled_pass, pack_covariance, unpack_covariance
 from ..models.modal import ModalModel, ModalStructure
 from ..assessment.multirecord import pooled_simulation_fit
+from ..assessment.noise import output_noise_variance
 from .rinse import (Assessment, PassHistory, PassRecord, RinseHooks, check_filter_options, check_records,
                     parameters_settled, rinse)
 from .start import DATA_STARTS, data_start
@@ -63,7 +64,6 @@ __all__ = [
     "start_structure",
     "normalized_data_start",
     "signal_scales",
-    "output_noise_variance",
     "data_measurement_noise",
     "invariant_noise_settings",
 ]
@@ -123,7 +123,7 @@ class IEKFOptions:
         ``R = measurement_noise * I`` in (normalised) output units; default 1
         (the paper's R = I); ``"data"``: ``R`` diagonal, in units of each
         output's power the ratio of its white noise's variance
-        (:func:`output_noise_variance`) to the noisiest output's, at least
+        (:func:`~vehid.identification.assessment.noise.output_noise_variance`) to the noisiest output's, at least
         :data:`NOISE_WEIGHT_FLOOR`: the noisiest output keeps R = I's weight.
     start : {"default", "paper", "data", "band"}
         Start values: fixed sigma/omega (:data:`START_VALUES`) or taken from
@@ -168,12 +168,22 @@ class IEKFOptions:
 
     @classmethod
     def invariant(cls, **changes: Any) -> "IEKFOptions":
-        """Settings independent of units, scale, sample interval and record length (module docstring).
+        """Make settings independent of units, scale, sample interval and record length (module docstring).
 
         Normalised signals, the start from the data, time in samples,
         ``p = INVARIANT_P`` per dominant time constant, shrinking by ``INVARIANT_P_DECAY``
         per pass, R from the data's noise and :data:`INVARIANT_BACK_OFF` restarts after a
-        divergence; ``changes`` override any field.
+        divergence.
+
+        Parameters
+        ----------
+        **changes
+            Fields of :class:`IEKFOptions` that override these settings.
+
+        Returns
+        -------
+        IEKFOptions
+            The settings.
         """
         settings: dict[str, Any] = {"normalize": True, "start": "data", "timescale": "auto", "p": INVARIANT_P,
                                     **invariant_noise_settings()}
@@ -203,9 +213,18 @@ class IEKFOptions:
 class FilterState:
     """The filter's state between passes, in normalised units: parameters and P (what a resume needs).
 
-    ``time_unit`` (s) is the filter's time unit (1 s, or the sample interval
-    with ``timescale="auto"``); ``time_constant`` (s) the unit of time in
-    which p is stated (module docstring, "Units").
+    Attributes
+    ----------
+    theta : ndarray, shape (n_theta,)
+        The parameters, normalised.
+    P : ndarray, shape (n_theta, n_theta)
+        Their covariance in the filter.
+    input_scale, output_scale : ndarray, shapes (n_u,) and (n_y,)
+        The normalisation of the signals.
+    time_unit : float, default 1.0
+        The filter's time unit (s): 1 s, or the sample interval with ``timescale="auto"``.
+    time_constant : float, default 1.0
+        The unit of time in which p is stated (s; module docstring, "Units").
     """
 
     theta: np.ndarray
@@ -220,8 +239,27 @@ class FilterState:
 class IEKFResult(PassHistory):
     """An IEKF identification: the final model, one record per pass, and the filter state.
 
-    ``stop_reason`` is ``"converged"``, ``"passes"`` (the pass limit) or
-    ``"diverged: ..."`` (only on the result carried by a DivergenceError).
+    Attributes
+    ----------
+    model : ModalModel
+        The final model, in original units.
+    structure : ModalStructure
+        Its structure.
+    options : IEKFOptions
+        The settings used.
+    history : tuple of PassRecord
+        One record per pass.
+    state : FilterState
+        The filter's state after the last pass (what a resume needs).
+    dt : float
+        The records' sample interval (s).
+    stop_reason : str
+        ``"converged"``, ``"passes"`` (the pass limit) or ``"diverged: ..."`` (only
+        on the result carried by a DivergenceError).
+    seconds : float
+        Run time (s).
+    meta : dict
+        Provenance and the run's notes (scales, start, tuning).
     """
 
     model: ModalModel
@@ -245,32 +283,13 @@ def invariant_noise_settings() -> dict[str, Any]:
     return {"measurement_noise": "data", "p_decay": INVARIANT_P_DECAY, "back_off": INVARIANT_BACK_OFF}
 
 
-def output_noise_variance(records: IOData | tuple[IOData, ...]) -> np.ndarray:
-    """The variance of each output's white noise, estimated from the records' k-th differences, k = 1, 2, 3.
-
-    Of white noise of variance s^2 the k-th difference has the mean square
-    ``binom(2k, k) s^2``; a smooth signal adds little to it where the record
-    is sampled fast against its dynamics, and never subtracts. Each k gives
-    an upper bound, pooled over the records; the smallest is returned (in
-    the outputs' units squared). Its relative standard error on N samples of
-    pure white noise is below ``sqrt(4.7 / N)`` (about 5 % at N = 2000).
-    """
-    records = as_records(records)
-    bounds = []
-    for k in (1, 2, 3):
-        squares = sum(np.sum(np.diff(record.y, k, axis=0) ** 2, axis=0) for record in records)
-        count = sum(max(record.n_samples - k, 0) for record in records)
-        bounds.append(squares / max(count, 1) / math.comb(2 * k, k))
-    return np.min(bounds, axis=0)
-
-
 def data_measurement_noise(records: IOData | tuple[IOData, ...]) -> np.ndarray:
     """The diagonal of R of ``measurement_noise="data"``, in the outputs' units squared.
 
     In units of each output's power (its mean square over all records): the
     noisiest output's 1, R = I's on normalised signals, so that p keeps the
     meaning the tuning grid gives it; every other output the ratio of its
-    relative noise variance (:func:`output_noise_variance`) to the noisiest
+    relative noise variance (:func:`~vehid.identification.assessment.noise.output_noise_variance`) to the noisiest
     one's, at least :data:`NOISE_WEIGHT_FLOOR`. Noise below :data:`NOISE_FLOOR`
     counts as that floor, so that outputs all free of noise keep R = I.
     """
@@ -374,6 +393,7 @@ def identify_iekf(
     structure : ModalStructure
         Order, modes and fixed C entries.
     options : IEKFOptions, optional
+        Settings; :class:`IEKFOptions`' defaults without them.
     initial_model : ModalModel, optional
         Start from these parameters instead of the named start values.
     resume : IEKFResult, optional
@@ -405,6 +425,7 @@ def identify_iekf(
     Returns
     -------
     IEKFResult
+        The final model, one record per pass and the filter's state.
 
     Raises
     ------

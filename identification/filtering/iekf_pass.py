@@ -28,12 +28,15 @@ import numpy as np
 from ..compiled import NoCompilerWarning, compile_driver, find_c_compiler
 from ..choices import COVARIANCE_FORMS
 from ..errors import DivergenceError
-from .filter_models import FilterModel, check_discretization
+from ..models.transition import check_discretization
+from .filter_models import FilterModel
 from .iekf_kernel import structured_pass_source
 
 __all__ = [
     "COVARIANCE_FORMS",
     "KERNELS",
+    "PASS_DRIVER",
+    "CompiledPass",
     "FilterStep",
     "build_filter_step",
     "compiled_pass",
@@ -221,7 +224,8 @@ def build_filter_step(filter_model: FilterModel, dt: float, discretization: str,
     )
 
 
-_DRIVER = r"""
+#: The C source of the pass driver around the generated step (the compile-level benchmark builds it with other flags).
+PASS_DRIVER = r"""
 /* The pass driver: calls the generated step once per sample with the filter
    state in two alternating buffers (generated code must not alias inputs and
    outputs). u, y and innovations are time-major. */
@@ -272,7 +276,7 @@ def _constants(filter_step: FilterStep, c: np.ndarray | None) -> np.ndarray:
     return c
 
 
-class _CompiledPass:
+class CompiledPass:
     """A loaded pass library: ``run(state, u, y, q, r, c=None) -> (state, innovations)``."""
 
     def __init__(self, function: Callable[..., int], filter_step: FilterStep):
@@ -337,7 +341,7 @@ def _compiled_library(filter_model: FilterModel, discretization: str, covariance
     else:
         flags = LARGE_STEP_COMPILE_FLAGS if large else PASS_COMPILE_FLAGS
     return compile_driver(
-        timed_step, _DRIVER, library_name=f"iekf_pass_{tag}", entry="vehid_iekf_pass",
+        timed_step, PASS_DRIVER, library_name=f"iekf_pass_{tag}", entry="vehid_iekf_pass",
         n_integers=4, n_arrays=8, optimisation=flags,
     )
 
@@ -353,7 +357,7 @@ def _pass_for(filter_model: FilterModel, dt: float, discretization: str, covaria
             stacklevel=3,
         )
         return _VirtualMachinePass(filter_step)
-    return _CompiledPass(_compiled_library(filter_model, discretization, covariance, kernel, quick), filter_step)
+    return CompiledPass(_compiled_library(filter_model, discretization, covariance, kernel, quick), filter_step)
 
 
 def compiled_pass(filter_model: FilterModel, dt: float, discretization: str, covariance: str, kernel: str = "auto",

@@ -46,12 +46,25 @@ def check_filter_options(p: float, passes: int, discretization: str, covariance:
 class PassRecord:
     """What one pass left: parameters, fits, the covariance's state and the innovations' size.
 
-    ``parameters``: the linear filter's in original units, the spline filter's
-    node ordinates (normalised, on the ranges after the pass). ``fit_filter``:
-    R per output of the frozen model simulated with the filter's discretisation;
-    ``fit_continuous``: of the continuous model simulated exactly (the spline
-    model is its discretisation: the same). ``nis``: mean ``e' R^-1 e`` over
-    the pass (n_y where innovations are as large as assumed; NaN if unknown).
+    Attributes
+    ----------
+    index : int
+        The pass, 1-based.
+    parameters : ndarray
+        The linear filter's in original units, the spline filter's node ordinates
+        (normalised, on the ranges after the pass).
+    fit_filter : ndarray, shape (n_y,)
+        R per output (percent) of the frozen model simulated with the filter's discretisation.
+    fit_continuous : ndarray, shape (n_y,)
+        R per output of the continuous model simulated exactly (the spline model is
+        its discretisation: the same).
+    trace_p, min_eig_p : float
+        Trace and least eigenvalue of the filter's P after the pass.
+    seconds : float
+        Run time of the pass (s).
+    nis : float
+        Mean ``e' R^-1 e`` over the pass (n_y where innovations are as large as
+        assumed; NaN if unknown).
     """
 
     index: int
@@ -65,10 +78,12 @@ class PassRecord:
 
     @property
     def mean_fit_filter(self) -> float:
+        """The mean over outputs of :attr:`fit_filter`."""
         return float(np.mean(self.fit_filter))
 
     @property
     def mean_fit_continuous(self) -> float:
+        """The mean over outputs of :attr:`fit_continuous`."""
         return float(np.mean(self.fit_continuous))
 
 

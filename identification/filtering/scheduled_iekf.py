@@ -49,7 +49,8 @@ from ..data import IOData, as_records
 from ..choices import SCHEDULE_GRID, SCHEDULE_KNOT_COUNT
 from ..errors import DivergenceError, InputError, WorkbenchError
 from ..optionspec import check_value
-from .filter_models import FilterModel, check_discretization
+from ..models.transition import check_discretization
+from .filter_models import FilterModel
 from .iekf import P_DECAY_FLOOR, data_measurement_noise, signal_scales
 from .iekf_pass import compiled_pass
 from ..assessment.metrics import percentage_explanation
@@ -259,7 +260,29 @@ class ScheduledIEKFOptions:
 
 @dataclass(frozen=True, eq=False)
 class ScheduledIEKFResult(PassHistory):
-    """The identified family, its start, one record per pass and the filter's final P (filter units)."""
+    """The identified family, its start, one record per pass and the filter's final P (filter units).
+
+    Attributes
+    ----------
+    model : ScheduledModalModel
+        The identified family.
+    start : ScheduledModalModel
+        The family the filter started from.
+    options : ScheduledIEKFOptions
+        The settings used.
+    history : tuple of PassRecord
+        One record per pass.
+    P : ndarray
+        The filter's final covariance of the family's parameters (filter units).
+    start_fit : ndarray, shape (n_y,)
+        R (eq. 17) per output of the start family, percent.
+    stop_reason : str
+        ``"converged"``, ``"passes"`` or ``"diverged: ..."``.
+    seconds : float
+        Run time (s).
+    meta : dict
+        Provenance; ``fit_percent`` where the fits were refined after the passes.
+    """
 
     model: ScheduledModalModel
     start: ScheduledModalModel
@@ -714,6 +737,7 @@ def identify_scheduled(
     variable : str
         The schedule's name (the channel), kept with the family.
     options : ScheduledIEKFOptions, optional
+        Settings; :class:`ScheduledIEKFOptions`' defaults without them.
     on_pass : callable, optional
         Called after every pass with its record and the result so far.
     on_refine : callable, optional
@@ -723,6 +747,7 @@ def identify_scheduled(
     Returns
     -------
     ScheduledIEKFResult
+        The identified family, its start and one record per pass.
 
     Raises
     ------

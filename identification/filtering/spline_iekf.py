@@ -94,7 +94,31 @@ class SplineIEKFOptions:
 
 @dataclass(frozen=True, eq=False)
 class SplineIEKFResult(PassHistory):
-    """The identified nonlinear model, one record per pass, the filter state and the start."""
+    """The identified nonlinear model, one record per pass, the filter state and the start.
+
+    Attributes
+    ----------
+    model : SplineModalModel
+        The identified model.
+    start : SplineModalModel
+        The model the filter started from (equal to the linear start).
+    options : SplineIEKFOptions
+        The settings used.
+    history : tuple of PassRecord
+        One record per pass.
+    P : ndarray, shape (n_parameters, n_parameters)
+        The filter's final covariance of the ordinates (normalised units).
+    R : ndarray, shape (n_y, n_y)
+        The measurement noise covariance of the residuals (normalised outputs).
+    start_fit : ndarray, shape (n_y,)
+        R (eq. 17) per output of the start model, percent.
+    stop_reason : str
+        ``"converged"``, ``"passes"`` or ``"diverged: ..."``.
+    seconds : float
+        Run time (s).
+    meta : dict
+        Provenance, ``uncertainty_method`` among it.
+    """
 
     model: SplineModalModel
     start: SplineModalModel
@@ -154,12 +178,14 @@ def identify_spline_iekf(
     linear : ModalModel
         The linear model to start from (its structure fixes the modes and C pattern).
     options : SplineIEKFOptions, optional
+        Settings; :class:`SplineIEKFOptions`' defaults without them.
     on_pass : callable, optional
         Called after every pass with the new record and the result so far.
 
     Returns
     -------
     SplineIEKFResult
+        The identified model, one record per pass and the filter's final P.
 
     Raises
     ------
@@ -195,7 +221,7 @@ def identify_spline_iekf(
     def result(stop_reason: str, history: tuple[PassRecord, ...], theta: np.ndarray, P: np.ndarray) -> SplineIEKFResult:
         finished = model
         if history:
-            # R is the measured residual covariance, so P needs no rescaling (see identification.uncertainty)
+            # R is the measured residual covariance, so P needs no rescaling (see vehid.identification.assessment.uncertainty)
             covariance, method = P[n:, n:], formal_method("the filter's P of a running filter")
             found = None if stop_reason == "running" else difference_fit_covariance(
                 lambda values: model.with_parameters(values).simulate_normalised(u_n)[0], model.theta, y_n,

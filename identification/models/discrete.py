@@ -51,7 +51,21 @@ def _freeze_matrices(model: Any, what: str) -> None:
 
 @dataclass(frozen=True, eq=False)
 class DiscreteModel(StateSpaceModel):
-    """A discrete-time state-space model with its sample interval: a frozen value."""
+    """A discrete-time state-space model with its sample interval: a frozen value.
+
+    ``x[k+1] = A x[k] + B u[k]``, ``y[k] = C x[k] + D u[k]``.
+
+    Parameters
+    ----------
+    A, B, C, D : array_like
+        Shapes (n, n), (n, n_u), (n_y, n), (n_y, n_u).
+    dt : float
+        Sample interval (s), positive.
+    input_names, output_names : tuple of str, optional
+        Channel names.
+    meta : dict, optional
+        Provenance; ``time_domain`` is set to ``"discrete"``.
+    """
 
     A: np.ndarray
     B: np.ndarray
@@ -71,32 +85,62 @@ class DiscreteModel(StateSpaceModel):
 
     @property
     def n_states(self) -> int:
+        """Number of states."""
         return int(self.A.shape[0])
 
     @property
     def n_u(self) -> int:
+        """Number of inputs."""
         return int(self.B.shape[1])
 
     @property
     def n_y(self) -> int:
+        """Number of outputs."""
         return int(self.C.shape[0])
 
     def to_statespace(self, *, schedule: float | None = None
 
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
-        """``(A, B, C, D, dt)``."""
+        """Return the state-space form with the sample interval.
+
+        Parameters
+        ----------
+        schedule : float, optional
+            Changes nothing (the model is not scheduled).
+
+        Returns
+        -------
+        tuple
+            ``(A, B, C, D, dt)``.
+        """
         unscheduled(schedule)
         return self.A, self.B, self.C, self.D, self.dt
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready form: the state-space form with names and meta."""
+        """Describe the model for JSON.
+
+        Returns
+        -------
+        dict
+            The state-space form (matrices as lists, ``dt``) with names and meta.
+        """
         return {**super().to_dict(), "input_names": list(self.input_names or ()),
                 "output_names": list(self.output_names or ()), "meta": self.meta}
 
 
 @dataclass(frozen=True, eq=False)
 class ContinuousModel(StateSpaceModel):
-    """A continuous-time state-space model ``xdot = A x + B u``, ``y = C x + D u``: a frozen value."""
+    """A continuous-time state-space model ``xdot = A x + B u``, ``y = C x + D u``: a frozen value.
+
+    Parameters
+    ----------
+    A, B, C, D : array_like
+        Shapes (n, n), (n, n_u), (n_y, n), (n_y, n_u); time in seconds.
+    input_names, output_names : tuple of str, optional
+        Channel names.
+    meta : dict, optional
+        Provenance.
+    """
 
     A: np.ndarray
     B: np.ndarray
@@ -112,25 +156,54 @@ class ContinuousModel(StateSpaceModel):
 
     @property
     def n_u(self) -> int:
+        """Number of inputs."""
         return int(self.B.shape[1])
 
     @property
     def n_y(self) -> int:
+        """Number of outputs."""
         return int(self.C.shape[0])
 
     def to_statespace(self, *, schedule: float | None = None
 
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
-        """``(A, B, C, D, None)``: continuous time."""
+        """Return the state-space form.
+
+        Parameters
+        ----------
+        schedule : float, optional
+            Changes nothing (the model is not scheduled).
+
+        Returns
+        -------
+        tuple
+            ``(A, B, C, D, None)``: continuous time.
+        """
         unscheduled(schedule)
         return self.A, self.B, self.C, self.D, None
 
     def simulate_outputs(self, u: Any, dt: float | None = None, *, x0: Any = None,
                          schedule: Any = None) -> np.ndarray:
-        """Outputs (N, n_y) for inputs (N, n_u) linear between samples ``dt`` apart, from ``x0`` (default rest).
+        """Simulate the outputs for inputs linear between samples, exactly.
 
-        Exact: the first-order-hold equivalent (:func:`~identification.models.statespace.continuous_to_discrete`),
+        The first-order-hold equivalent (:func:`~identification.models.statespace.continuous_to_discrete`),
         whose state is ``x - G2 u``, started from ``x0 - G2 u(0)``.
+
+        Parameters
+        ----------
+        u : array_like, shape (N, n_u)
+            Inputs, time-major.
+        dt : float
+            Sample interval (s); required.
+        x0 : array_like, shape (n,), optional
+            Initial state; rest by default.
+        schedule : array_like, optional
+            Changes nothing (the model is not scheduled).
+
+        Returns
+        -------
+        ndarray, shape (N, n_y)
+            The outputs.
         """
         if dt is None:
             raise InputError("a continuous-time model needs the sample interval dt of its input")
@@ -142,6 +215,12 @@ class ContinuousModel(StateSpaceModel):
         return equivalent.simulate_outputs(u, x0=x - hold_state_shift(self.A, self.B, dt) @ u[0])
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready form: the state-space form with names and meta."""
+        """Describe the model for JSON.
+
+        Returns
+        -------
+        dict
+            The state-space form (matrices as lists) with names and meta.
+        """
         return {**super().to_dict(), "input_names": list(self.input_names or ()),
                 "output_names": list(self.output_names or ()), "meta": self.meta}

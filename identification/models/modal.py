@@ -68,6 +68,8 @@ def _positive_int(value: Any, name: str, minimum: int = 1) -> int:
 class ModalStructure:
     """The shape of a modal model: its modes and which C entries are fixed to 1.
 
+    Use :meth:`default` or :meth:`from_pattern` rather than listing ``fixed_c``.
+
     Parameters
     ----------
     n_complex_pairs, n_real : int
@@ -76,8 +78,6 @@ class ModalStructure:
         Numbers of inputs and outputs.
     fixed_c : tuple of (output, state) pairs
         The C entries fixed to 1, exactly one per state column.
-
-    Use :meth:`default` or :meth:`from_pattern` rather than listing ``fixed_c``.
     """
 
     n_complex_pairs: int
@@ -112,24 +112,71 @@ class ModalStructure:
 
     @classmethod
     def default(cls, n: int, n_u: int, n_y: int) -> "ModalStructure":
-        """Pairs first as far as possible, each mode tied to the next output in turn.
+        """Make the structure of order ``n`` with pairs first, each mode tied to the next output in turn.
 
         This generalises eq. 18/19: a complex pair is tied to one output by two
         fixed 1s, a real pole by one, outputs assigned round-robin.
         With one output every C entry is fixed (``C = [1 1 ... 1]``).
+
+        Parameters
+        ----------
+        n : int
+            Model order: ``n // 2`` complex pairs and, for odd ``n``, one real pole.
+        n_u, n_y : int
+            Numbers of inputs and outputs.
+
+        Returns
+        -------
+        ModalStructure
+            The structure.
         """
         pairs, real = divmod(_positive_int(n, "order n"), 2)
         return cls.with_modes(pairs, real, n_u, n_y)
 
     @classmethod
     def with_modes(cls, n_complex_pairs: int, n_real: int, n_u: int, n_y: int) -> "ModalStructure":
-        """These numbers of complex pairs and real poles, each mode tied to the next output in turn (as :meth:`default`)."""
+        """Make a structure of given modes, each tied to the next output in turn (as :meth:`default`).
+
+        Parameters
+        ----------
+        n_complex_pairs, n_real : int
+            Number of complex pairs (2 states each) and of real poles.
+        n_u, n_y : int
+            Numbers of inputs and outputs.
+
+        Returns
+        -------
+        ModalStructure
+            The structure, pairs first.
+        """
         modes = range(n_complex_pairs + n_real)
         return cls._tied(n_complex_pairs, n_real, n_u, n_y, [mode % n_y for mode in modes])
 
     @classmethod
     def from_pattern(cls, pattern: str, n: int, n_u: int, n_y: int) -> "ModalStructure":
-        """A structure with one of the named C patterns of :data:`C_PATTERNS`."""
+        """Make a structure with one of the named C patterns of :data:`C_PATTERNS`.
+
+        Parameters
+        ----------
+        pattern : str
+            ``"default"`` (as :meth:`default`), ``"all-ones"`` (every mode tied to
+            the first output), ``"eq18"`` (n = 5) or ``"eq19"`` (n = 3..7), the
+            paper's patterns for three outputs.
+        n : int
+            Model order.
+        n_u, n_y : int
+            Numbers of inputs and outputs.
+
+        Returns
+        -------
+        ModalStructure
+            The structure.
+
+        Raises
+        ------
+        InputError
+            For an unknown pattern, or one not defined for this order or number of outputs.
+        """
         n = _positive_int(n, "order n")
         pairs, real = divmod(n, 2)
         if pattern == "default":
@@ -175,7 +222,18 @@ class ModalStructure:
         return self.n_modal + self.n * self.n_u + self.n_free_c + self.n_y * self.n_u
 
     def output_of_state(self, state: int) -> int:
-        """The output a state is tied to by its fixed C entry."""
+        """Return the output a state is tied to by its fixed C entry.
+
+        Parameters
+        ----------
+        state : int
+            State index, 0-based.
+
+        Returns
+        -------
+        int
+            Output index, 0-based.
+        """
         for i, j in self.fixed_c:
             if j == state:
                 return i
@@ -188,7 +246,13 @@ class ModalStructure:
         return tuple((i, j) for i in range(self.n_y) for j in range(self.n) if (i, j) not in fixed)
 
     def parameter_names(self) -> tuple[str, ...]:
-        """Names of theta's entries: ``sigma1, omega1, ..., b11, ..., c21, ..., d11, ...`` (1-based)."""
+        """Name theta's entries: ``sigma1, omega1, ..., b11, ..., c21, ..., d11, ...`` (1-based).
+
+        Returns
+        -------
+        tuple of str
+            One name per entry of theta, ``n_parameters`` of them.
+        """
         names = []
         for pair in range(self.n_complex_pairs):
             names += [f"sigma{pair + 1}", f"omega{pair + 1}"]
@@ -200,23 +264,47 @@ class ModalStructure:
         return tuple(names)
 
     def slices(self) -> dict[str, slice]:
-        """Where each group lies in theta: ``modal``, ``B``, ``C``, ``D``."""
+        """Locate each group of parameters in theta.
+
+        Returns
+        -------
+        dict of str to slice
+            The slices of ``modal`` (sigma, omega), ``B``, ``C`` (free entries) and ``D``.
+        """
         a = self.n_modal
         b = a + self.n * self.n_u
         c = b + self.n_free_c
         return {"modal": slice(0, a), "B": slice(a, b), "C": slice(b, c), "D": slice(c, c + self.n_y * self.n_u)}
 
     def mode_states(self) -> list[tuple[int, ...]]:
-        """The states of each mode: ``(2i, 2i+1)`` for pairs, ``(j,)`` for real poles."""
+        """List the states of each mode.
+
+        Returns
+        -------
+        list of tuple of int
+            ``(2i, 2i+1)`` for each pair, then ``(j,)`` for each real pole.
+        """
         modes: list[tuple[int, ...]] = [(2 * p, 2 * p + 1) for p in range(self.n_complex_pairs)]
         modes += [(2 * self.n_complex_pairs + r,) for r in range(self.n_real)]
         return modes
 
     def matrices(self, theta: Any, backend: Any = np) -> tuple[Any, Any, Any, Any]:
-        """A, B, C, D from theta, as NumPy arrays or (``backend=casadi.SX``) symbolic matrices.
+        """Build A, B, C, D from theta, as NumPy arrays or (``backend=casadi.SX``) symbolic matrices.
 
         With CasADi, ``theta`` is an SX column and the result is built from its
         elements, so that Jacobians with respect to theta are exact.
+
+        Parameters
+        ----------
+        theta : array_like or casadi.SX
+            Parameter vector, ``n_parameters`` entries laid out as :meth:`slices` says.
+        backend : module or class, default numpy
+            ``numpy`` for arrays, or a CasADi matrix class (``casadi.SX``, ``casadi.MX``).
+
+        Returns
+        -------
+        tuple of ndarray or of casadi matrices
+            ``(A, B, C, D)``, shapes (n, n), (n, n_u), (n_y, n), (n_y, n_u).
         """
         n, n_u, n_y = self.n, self.n_u, self.n_y
         s = self.slices()
@@ -257,7 +345,18 @@ class ModalStructure:
         return A, B, C, D
 
     def pack(self, A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray) -> np.ndarray:
-        """theta from matrices of this structure (checked: A modal, fixed C entries equal to 1)."""
+        """Pack matrices of this structure into theta, checking that A is modal and C's fixed entries are 1.
+
+        Parameters
+        ----------
+        A, B, C, D : array_like
+            Shapes (n, n), (n, n_u), (n_y, n), (n_y, n_u).
+
+        Returns
+        -------
+        ndarray, shape (n_parameters,)
+            The parameter vector.
+        """
         A, B, C, D = (np.asarray(m, dtype=float) for m in (A, B, C, D))
         _check_shape("A", A, (self.n, self.n))
         _check_shape("B", B, (self.n, self.n_u))
@@ -283,10 +382,24 @@ class ModalStructure:
         return np.concatenate([modal, B.ravel(), [C[i, j] for i, j in self.free_c], D.ravel()])
 
     def initial_parameters(self, *, sigma: float = -1.0, omega: float = 1.0, omega_spread: float = 0.0) -> np.ndarray:
-        """The filter's start: every sigma given, omegas ``omega * (1 + omega_spread * i)``, B, free C, D zero.
+        """Return the filter's start: every sigma given, omegas ``omega * (1 + omega_spread * i)``, B, free C, D zero.
 
         A spread of the omegas keeps the pairs apart, so that the filter does
         not start symmetric in them (identical pairs get identical updates).
+
+        Parameters
+        ----------
+        sigma : float, default -1.0
+            Real part of every eigenvalue (1/s in the model's time unit).
+        omega : float, default 1.0
+            Imaginary part of the first pair (rad/s in the model's time unit).
+        omega_spread : float, default 0.0
+            Relative step between the omegas of successive pairs.
+
+        Returns
+        -------
+        ndarray, shape (n_parameters,)
+            The parameter vector.
         """
         theta = np.zeros(self.n_parameters)
         for pair in range(self.n_complex_pairs):
@@ -297,11 +410,25 @@ class ModalStructure:
         return theta
 
     def denormalize(self, theta: np.ndarray, input_scale: np.ndarray, output_scale: np.ndarray) -> np.ndarray:
-        """Parameters in original units from those identified on scaled data.
+        """Convert parameters identified on scaled data to the original units.
 
         With ``u = Su u_n`` and ``y = Sy y_n`` and the state basis rescaled by the
         scale of the output each state is tied to, ``A`` is unchanged, the fixed
         C entries stay 1, ``B -> S B Su^-1``, ``C -> Sy C S^-1``, ``D -> Sy D Su^-1``.
+
+        Parameters
+        ----------
+        theta : array_like, shape (n_parameters,)
+            Parameters of the model of the scaled data.
+        input_scale : ndarray, shape (n_u,)
+            ``Su``, the input scales (the original input is ``Su u_n``).
+        output_scale : ndarray, shape (n_y,)
+            ``Sy``, the output scales.
+
+        Returns
+        -------
+        ndarray, shape (n_parameters,)
+            Parameters of the model in the original units.
         """
         _, B, C, D = self.matrices(theta)
         state_scale = np.array([output_scale[self.output_of_state(j)] for j in range(self.n)])
@@ -313,19 +440,55 @@ class ModalStructure:
         return self._theta_of(np.asarray(theta, dtype=float).ravel()[self.slices()["modal"]], B, C, D)
 
     def normalize_parameters(self, theta: np.ndarray, input_scale: np.ndarray, output_scale: np.ndarray) -> np.ndarray:
-        """Inverse of :meth:`denormalize`."""
+        """Convert parameters in the original units to those of scaled data: the inverse of :meth:`denormalize`.
+
+        Parameters
+        ----------
+        theta : array_like, shape (n_parameters,)
+            Parameters in the original units.
+        input_scale, output_scale : ndarray, shapes (n_u,) and (n_y,)
+            The scales, as for :meth:`denormalize`.
+
+        Returns
+        -------
+        ndarray, shape (n_parameters,)
+            Parameters of the model of the scaled data.
+        """
         return self.denormalize(theta, 1.0 / input_scale, 1.0 / output_scale)
 
     def rescale_time(self, theta: np.ndarray, factor: float) -> np.ndarray:
-        """Parameters in a time unit ``factor`` times the present one: sigma, omega and B times ``factor``.
+        """Express the parameters in a time unit ``factor`` times the present one.
 
-        ``xdot = A x + B u`` in time ``t' = t / factor`` reads ``dx/dt' = factor A x + factor B u``;
-        C and D are unchanged.
+        ``xdot = A x + B u`` in time ``t' = t / factor`` reads ``dx/dt' = factor A x + factor B u``:
+        sigma, omega and B are multiplied by ``factor``, C and D are unchanged.
+
+        Parameters
+        ----------
+        theta : array_like, shape (n_parameters,)
+            Parameters in the present time unit.
+        factor : float
+            The new time unit in present ones.
+
+        Returns
+        -------
+        ndarray, shape (n_parameters,)
+            Parameters in the new time unit.
         """
         return np.array(theta, dtype=float) * self.time_weights(factor)
 
     def time_weights(self, ratio: float) -> np.ndarray:
-        """Per parameter: ``ratio`` for sigma, omega and B, 1 for C and D (the change of time unit)."""
+        """Weigh each parameter by its change under a change of time unit.
+
+        Parameters
+        ----------
+        ratio : float
+            The new time unit in present ones.
+
+        Returns
+        -------
+        ndarray, shape (n_parameters,)
+            ``ratio`` for sigma, omega and B; 1 for C and D.
+        """
         weights = np.ones(self.n_parameters)
         slices = self.slices()
         weights[slices["modal"]] = ratio
@@ -333,7 +496,13 @@ class ModalStructure:
         return weights
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready description."""
+        """Describe the structure for JSON.
+
+        Returns
+        -------
+        dict
+            ``n``, ``n_complex_pairs``, ``n_real``, ``n_u``, ``n_y`` and ``fixed_c`` (a list of [output, state]).
+        """
         return {
             "n": self.n,
             "n_complex_pairs": self.n_complex_pairs,
@@ -345,7 +514,18 @@ class ModalStructure:
 
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> "ModalStructure":
-        """Inverse of :meth:`to_dict`."""
+        """Read the structure :meth:`to_dict` described.
+
+        Parameters
+        ----------
+        values : dict
+            The description.
+
+        Returns
+        -------
+        ModalStructure
+            The structure.
+        """
         return cls(
             int(values["n_complex_pairs"]),
             int(values["n_real"]),
@@ -398,9 +578,11 @@ class ModalModel(StateSpaceModel):
     Parameters
     ----------
     structure : ModalStructure
+        The modes and the fixed C entries.
     A, B, C, D : ndarray
         Continuous-time matrices, shapes (n, n), (n, n_u), (n_y, n), (n_y, n_u).
     input_names, output_names : tuple of str, optional
+        Channel names; ``u1, u2, ...`` and ``y1, y2, ...`` by default.
     meta : dict, optional
         Provenance (estimator, discretisation, passes, ...).
     parameter_covariance : ndarray, optional
@@ -433,49 +615,108 @@ class ModalModel(StateSpaceModel):
         object.__setattr__(self, "output_names", tuple(self.output_names) if self.output_names else tuple(f"y{i + 1}" for i in range(s.n_y)))
         object.__setattr__(self, "meta", dict(self.meta))
         if self.parameter_covariance is not None:
-            from ..assessment.uncertainty import checked_covariance
+            from .delta_method import checked_covariance
 
             object.__setattr__(self, "parameter_covariance", checked_covariance(self.parameter_covariance, s.n_parameters))
 
     @classmethod
     def from_parameters(cls, structure: ModalStructure, theta: Any, **kwargs: Any) -> "ModalModel":
-        """The model of ``structure`` with parameter vector ``theta``."""
+        """Make the model of ``structure`` with parameter vector ``theta``.
+
+        Parameters
+        ----------
+        structure : ModalStructure
+            The model's structure.
+        theta : array_like, shape (n_parameters,)
+            Its parameters, laid out as :meth:`ModalStructure.slices` says.
+        **kwargs
+            The other fields of the model (names, ``meta``, ``parameter_covariance``).
+
+        Returns
+        -------
+        ModalModel
+            The model.
+        """
         return cls(structure, *structure.matrices(theta), **kwargs)
 
     @property
     def parameters(self) -> np.ndarray:
-        """theta, laid out as :class:`ModalStructure` describes."""
+        """The parameter vector theta, laid out as :class:`ModalStructure` describes."""
         return self.structure.pack(self.A, self.B, self.C, self.D)
 
     def parameter_std(self) -> np.ndarray | None:
-        """Standard deviations of :attr:`parameters` (``None`` without a covariance)."""
+        """Return the standard deviations of :attr:`parameters`.
+
+        Returns
+        -------
+        ndarray, shape (n_parameters,), or None
+            Square roots of the covariance's diagonal; ``None`` without a covariance.
+        """
         if self.parameter_covariance is None:
             return None
         return np.sqrt(np.diag(self.parameter_covariance))
 
     def with_parameter_covariance(self, covariance: Any) -> "ModalModel":
-        """The same model carrying ``covariance`` (n_theta, n_theta) of its parameters."""
+        """Return the same model carrying a covariance of its parameters.
+
+        Parameters
+        ----------
+        covariance : array_like, shape (n_theta, n_theta)
+            Covariance of :attr:`parameters`, in the model's units.
+
+        Returns
+        -------
+        ModalModel
+            A copy with ``parameter_covariance`` set.
+        """
         return dataclasses.replace(self, parameter_covariance=covariance)
 
     def uncertainty(self, *, level: float = 0.95) -> Any:
-        """Modes, steady-state gains and their confidence intervals by the delta method.
+        """Estimate the modes, steady-state gains and their confidence intervals by the delta method.
 
-        Returns an :class:`vehid.identification.assessment.uncertainty.ModelUncertainty`;
-        without a parameter covariance every standard deviation is NaN.
+        Parameters
+        ----------
+        level : float, default 0.95
+            Confidence level of the intervals.
+
+        Returns
+        -------
+        ModelUncertainty
+            Each mode's and gain's value, standard deviation and interval; without a
+            parameter covariance every standard deviation is NaN.
         """
-        from ..assessment.uncertainty import model_uncertainty
+        from .delta_method import model_uncertainty
 
         return model_uncertainty(self, level=level)
 
     def frequency_response_band(self, frequencies_hz: Any, *, level: float = 0.95) -> Any:
-        """Magnitude and phase at ``frequencies_hz`` with delta-method bands
-        (:func:`vehid.identification.assessment.uncertainty.frequency_response`)."""
-        from ..assessment.uncertainty import frequency_response
+        """Compute magnitude and phase at ``frequencies_hz`` with delta-method bands.
 
-        return frequency_response(self, frequencies_hz, level=level)
+        Parameters
+        ----------
+        frequencies_hz : array_like, shape (F,)
+            Frequencies (Hz).
+        level : float, default 0.95
+            Confidence level of the bands.
+
+        Returns
+        -------
+        FrequencyResponseBand
+            The response and its bands per output and input
+            (:func:`vehid.identification.models.delta_method.frequency_response_band`).
+        """
+        from .delta_method import frequency_response_band
+
+        return frequency_response_band(self, frequencies_hz, level=level)
 
     def mode_eigenvalues(self) -> np.ndarray:
-        """One eigenvalue per mode, ``sigma + j|omega|`` for pairs, real for poles (pairs first)."""
+        """Return one eigenvalue per mode.
+
+        Returns
+        -------
+        ndarray of complex, shape (n_modes,)
+            ``sigma + j|omega|`` for each pair, then the real poles (1/s).
+        """
         theta = self.parameters
         values = []
         for pair in range(self.structure.n_complex_pairs):
@@ -485,7 +726,18 @@ class ModalModel(StateSpaceModel):
         return np.array(values)
 
     def eigenvalues(self, *, schedule: float | None = None) -> np.ndarray:
-        """All n eigenvalues: each pair as ``sigma + j|omega|, sigma - j|omega|``, then the real poles."""
+        """Return all n eigenvalues.
+
+        Parameters
+        ----------
+        schedule : None
+            Must be ``None``: the model is not scheduled (the argument is the protocol's).
+
+        Returns
+        -------
+        ndarray of complex, shape (n,)
+            Each pair as ``sigma + j|omega|, sigma - j|omega|``, then the real poles (1/s).
+        """
         unscheduled(schedule)
         values: list[complex] = []
         for value in self.mode_eigenvalues()[: self.structure.n_complex_pairs]:
@@ -494,12 +746,34 @@ class ModalModel(StateSpaceModel):
         return np.array(values)
 
     def modes(self, *, schedule: float | None = None) -> tuple[Mode, ...]:
-        """One :class:`Mode` per mode, in the structure's order (pairs first)."""
+        """Return the modes: frequency, damping, time constant.
+
+        Parameters
+        ----------
+        schedule : None
+            Must be ``None`` (the protocol's argument; the model is not scheduled).
+
+        Returns
+        -------
+        tuple of Mode
+            One per mode, in the structure's order (pairs first).
+        """
         unscheduled(schedule)
         return tuple(Mode.of(value) for value in self.mode_eigenvalues())
 
     def is_stable(self, *, schedule: float | None = None) -> bool:
-        """Every eigenvalue in the left half-plane, within rounding (:func:`~.protocol.eigenvalues_stable`)."""
+        """Say whether every eigenvalue lies in the left half-plane, within rounding.
+
+        Parameters
+        ----------
+        schedule : None
+            Must be ``None`` (the model is not scheduled).
+
+        Returns
+        -------
+        bool
+            True when stable (:func:`~vehid.identification.models.protocol.eigenvalues_stable`).
+        """
         unscheduled(schedule)
         return eigenvalues_stable(self.mode_eigenvalues())
 
@@ -525,9 +799,11 @@ class ModalModel(StateSpaceModel):
         Parameters
         ----------
         u : array_like, shape (N, n_u)
+            Input samples, time-major.
         dt : float
             Sample interval (s); required (the argument is optional only in the protocol's signature).
         x0 : array_like, shape (n,), optional
+            Initial state; zero by default.
         schedule : array_like, shape (N,), optional
             Changes nothing: the model is the same at every value of a scheduling variable.
         method : {"foh", "zoh", "euler"}
@@ -540,7 +816,8 @@ class ModalModel(StateSpaceModel):
 
         Returns
         -------
-        y : ndarray, shape (N, n_y)  (and x, shape (N, n), if asked)
+        ndarray, shape (N, n_y), or tuple of ndarray
+            The output ``y``; with ``return_states``, ``(y, x)`` with the states ``x`` of shape (N, n).
 
         Notes
         -----
@@ -598,6 +875,7 @@ class ModalModel(StateSpaceModel):
         Parameters
         ----------
         u : array_like, shape (N, n_u)
+            Input samples, time-major.
         dt : float
             Sample interval (s).
         method : {"foh", "zoh", "euler"}
@@ -606,6 +884,7 @@ class ModalModel(StateSpaceModel):
         Returns
         -------
         y : ndarray, shape (N, n_y)
+            The output from rest.
         sensitivity : ndarray, shape (N, n_y, n_theta)
             ``d y[k, i] / d theta[p]``.
 
@@ -685,8 +964,10 @@ class ModalModel(StateSpaceModel):
             The initial state.
         n_samples : int
             The response's length N.
-        dt, method
-            As for :meth:`output_sensitivity`.
+        dt : float
+            Sample interval (s).
+        method : {"foh", "zoh", "euler"}
+            The discretisation, as for :meth:`output_sensitivity`.
 
         Returns
         -------
@@ -752,12 +1033,30 @@ class ModalModel(StateSpaceModel):
 
     def to_statespace(self, *, schedule: float | None = None
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
-        """``(A, B, C, D, None)``: continuous time."""
+        """Return the state-space matrices.
+
+        Parameters
+        ----------
+        schedule : None
+            Must be ``None`` (the model is not scheduled).
+
+        Returns
+        -------
+        tuple
+            ``(A, B, C, D, None)``: continuous time (no sample interval).
+        """
         unscheduled(schedule)
         return self.A, self.B, self.C, self.D, None
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready form: structure, matrices, names, eigenvalues as [re, im], meta."""
+        """Describe the model for JSON.
+
+        Returns
+        -------
+        dict
+            Structure, matrices, names, eigenvalues as [re, im], ``meta`` and, if
+            estimated, ``parameter_covariance``.
+        """
         return {
             "structure": self.structure.to_dict(),
             "A": self.A.tolist(),
@@ -773,7 +1072,18 @@ class ModalModel(StateSpaceModel):
 
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> "ModalModel":
-        """Inverse of :meth:`to_dict` (a dict without ``parameter_covariance`` gives none)."""
+        """Read a model that :meth:`to_dict` described.
+
+        Parameters
+        ----------
+        values : dict
+            The description; without ``parameter_covariance`` the model has none.
+
+        Returns
+        -------
+        ModalModel
+            The model.
+        """
         covariance = values.get("parameter_covariance")
         return cls(
             ModalStructure.from_dict(values["structure"]),
@@ -788,7 +1098,13 @@ class ModalModel(StateSpaceModel):
         )
 
     def mat_fields(self) -> dict[str, Any]:
-        """A, B, C, D and ``C_fixed``, the mask of output-matrix entries the structure fixes."""
+        """Return the fields of the model's MATLAB file.
+
+        Returns
+        -------
+        dict
+            A, B, C, D and ``C_fixed``, the mask of output-matrix entries the structure fixes.
+        """
         mask = np.zeros((self.structure.n_y, self.structure.n))
         for i, j in self.structure.fixed_c:
             mask[i, j] = 1

@@ -58,6 +58,7 @@ import numpy as np
 
 from ..data import IOData
 from ..errors import InputError
+from ..jsonable import json_default
 from .responses import FrequencyResponse, TimeResponse, simulated_response
 
 __all__ = ["Mode", "IdentifiedModel", "StateSpaceModel", "sample_interval", "MARGINAL_TOLERANCE", "eigenvalues_stable",
@@ -106,7 +107,18 @@ class Mode:
 
     @classmethod
     def of(cls, eigenvalue: complex) -> "Mode":
-        """The mode of one continuous-time eigenvalue (its conjugate gives the same mode)."""
+        """Make the mode of one continuous-time eigenvalue.
+
+        Parameters
+        ----------
+        eigenvalue : complex
+            The eigenvalue (1/s); its conjugate gives the same mode.
+
+        Returns
+        -------
+        Mode
+            Its frequency and damping.
+        """
         value = complex(eigenvalue.real, abs(eigenvalue.imag))
         natural = abs(value)
         damping = -value.real / natural if natural > 0 else 1.0
@@ -115,43 +127,194 @@ class Mode:
 
 @runtime_checkable
 class IdentifiedModel(Protocol):
-    """The protocol every identified model meets (see the module docstring)."""
+    """The protocol every identified model meets (see the module docstring).
+
+    A protocol is not constructed: a model class meets it by having its
+    attributes and methods, which :func:`signature_mismatches` checks.
+
+    Attributes
+    ----------
+    is_linear : bool
+        False where the model is not linear time-invariant.
+    is_scheduled : bool
+        True where the model varies with a measured scheduling variable.
+    """
 
     is_linear: bool
     is_scheduled: bool
 
     @property
-    def n_states(self) -> int: ...
+    def n_states(self) -> int:
+        """Number of states."""
 
     @property
-    def n_u(self) -> int: ...
+    def n_u(self) -> int:
+        """Number of inputs (a scheduled model's schedule not among them)."""
 
     @property
-    def n_y(self) -> int: ...
+    def n_y(self) -> int:
+        """Number of outputs."""
 
-    def simulate(self, record: IOData, *, x0: Any = None) -> TimeResponse: ...
+    def simulate(self, record: IOData, *, x0: Any = None) -> TimeResponse:
+        """Simulate the model driven by a record's inputs.
+
+        Parameters
+        ----------
+        record : IOData
+            The inputs (a scheduled model's schedule last) and their time.
+        x0 : array_like, shape (n_states,), optional
+            Initial state in :meth:`to_statespace`'s basis; rest by default.
+
+        Returns
+        -------
+        TimeResponse
+            The outputs, with the record's own as ``measured``.
+        """
 
     def simulate_outputs(self, u: Any, dt: float | None = None, *, x0: Any = None,
-                         schedule: Any = None) -> np.ndarray: ...
+                         schedule: Any = None) -> np.ndarray:
+        """Simulate the outputs for bare input samples.
 
-    def is_stable(self, *, schedule: float | None = None) -> bool: ...
+        Parameters
+        ----------
+        u : array_like, shape (N, n_u)
+            Inputs, time-major.
+        dt : float, optional
+            Sample interval (s); a continuous-time model needs it.
+        x0 : array_like, shape (n_states,), optional
+            Initial state; rest by default.
+        schedule : array_like, shape (N,), optional
+            The scheduling variable at each sample (a scheduled model needs it).
 
-    def eigenvalues(self, *, schedule: float | None = None) -> np.ndarray: ...
+        Returns
+        -------
+        ndarray, shape (N, n_y)
+            The outputs.
+        """
 
-    def modes(self, *, schedule: float | None = None) -> tuple[Mode, ...]: ...
+    def is_stable(self, *, schedule: float | None = None) -> bool:
+        """Say whether the model is stable.
 
-    def frequency_response(self, f_hz: Any, *, schedule: float | None = None) -> FrequencyResponse: ...
+        Parameters
+        ----------
+        schedule : float, optional
+            The operating point; a scheduled model without one is checked at every value.
+
+        Returns
+        -------
+        bool
+            True when every eigenvalue is in the stable region.
+        """
+
+    def eigenvalues(self, *, schedule: float | None = None) -> np.ndarray:
+        """Return the eigenvalues.
+
+        Parameters
+        ----------
+        schedule : float, optional
+            The operating point (required of a scheduled model).
+
+        Returns
+        -------
+        ndarray of complex, shape (n_states,)
+            In the s-plane (1/s) if continuous, the z-plane if discrete.
+        """
+
+    def modes(self, *, schedule: float | None = None) -> tuple[Mode, ...]:
+        """Return the modes in continuous time.
+
+        Parameters
+        ----------
+        schedule : float, optional
+            The operating point (required of a scheduled model).
+
+        Returns
+        -------
+        tuple of Mode
+            Frequency (Hz) and damping ratio of each pair and real pole.
+        """
+
+    def frequency_response(self, f_hz: Any, *, schedule: float | None = None) -> FrequencyResponse:
+        """Compute ``C (p I - A)^-1 B + D`` on the imaginary axis (or the unit circle).
+
+        Parameters
+        ----------
+        f_hz : array_like, shape (F,)
+            Frequencies (Hz).
+        schedule : float, optional
+            The operating point (required of a scheduled model).
+
+        Returns
+        -------
+        FrequencyResponse
+            Complex response, shape (F, n_y, n_u).
+        """
 
     def to_statespace(self, *, schedule: float | None = None
-                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float | None]: ...
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float | None]:
+        """Return the state-space form.
 
-    def to_control(self, *, schedule: float | None = None) -> Any: ...
+        Parameters
+        ----------
+        schedule : float, optional
+            The operating point (required of a scheduled model).
 
-    def to_casadi(self) -> Any: ...
+        Returns
+        -------
+        tuple
+            ``(A, B, C, D, dt)``, ``dt`` None if continuous.
+        """
 
-    def save_mat(self, path: str | Path) -> Path: ...
+    def to_control(self, *, schedule: float | None = None) -> Any:
+        """Return the model as python-control's system.
 
-    def save_json(self, path: str | Path) -> Path: ...
+        Parameters
+        ----------
+        schedule : float, optional
+            The operating point (required of a scheduled model).
+
+        Returns
+        -------
+        control.StateSpace
+            The system (python-control must be installed).
+        """
+
+    def to_casadi(self) -> Any:
+        """Return the model as a CasADi Function.
+
+        Returns
+        -------
+        casadi.Function
+            The model's dynamics and outputs.
+        """
+
+    def save_mat(self, path: str | Path) -> Path:
+        """Write the model to a MATLAB file.
+
+        Parameters
+        ----------
+        path : str or pathlib.Path
+            The ``.mat`` file.
+
+        Returns
+        -------
+        pathlib.Path
+            The path written.
+        """
+
+    def save_json(self, path: str | Path) -> Path:
+        """Write the model as JSON.
+
+        Parameters
+        ----------
+        path : str or pathlib.Path
+            The ``.json`` file.
+
+        Returns
+        -------
+        pathlib.Path
+            The path written.
+        """
 
 
 #: The protocol's methods, whose signatures :func:`signature_mismatches` compares.
@@ -446,7 +609,7 @@ class StateSpaceModel:
         path = Path(path)
         dt = self.to_statespace()[4]
         values = {"time_domain": "continuous" if dt is None else "discrete", "dt": dt, **self.to_dict()}
-        path.write_text(json.dumps(values, indent=2, default=str) + "\n")
+        path.write_text(json.dumps(values, indent=2, default=json_default) + "\n")
         return path
 
 

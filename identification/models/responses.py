@@ -62,9 +62,20 @@ class TimeResponse(IOData):
 
     Parameters
     ----------
-    t, u, y, x, input_names, output_names, state_names, input_units, output_units, state_units, meta
-        As :class:`~identification.data.IOData`: ``y`` (N, n_y) holds the model's outputs, ``x`` (N, n_x)
-        its states where it gave them.
+    t : array_like, shape (N,)
+        Sample times (s), as the record's.
+    u : array_like, shape (N, n_u)
+        The inputs the model was driven by.
+    y : array_like, shape (N, n_y)
+        The model's outputs.
+    x : array_like, shape (N, n_x), optional
+        Its states, where it gave them.
+    input_names, output_names, state_names : sequence of str, optional
+        Column names, as :class:`~identification.data.IOData`'s.
+    input_units, output_units, state_units : sequence of str, optional
+        Units of each column, as :class:`~identification.data.IOData`'s.
+    meta : mapping, optional
+        Free-form metadata.
     measured : array_like (N, n_y), optional
         The outputs of the record the model was driven by, for comparison; None where there were none
         to compare with (a record of another size, a simulation from bare arrays).
@@ -110,7 +121,18 @@ class TimeResponse(IOData):
                             measured=None if self.measured is None else self.measured[index])
 
     def select_outputs(self, names: Sequence[str]) -> "TimeResponse":
-        """The response with only the named outputs (and their measurement), in the order given."""
+        """Keep only the named outputs and their measurement.
+
+        Parameters
+        ----------
+        names : sequence of str
+            Output names, in the order wanted.
+
+        Returns
+        -------
+        TimeResponse
+            The response with those outputs.
+        """
         index = [self._column(self.output_names, name, "output") for name in names]
         return self.replace(y=self.y[:, index], output_names=tuple(self.output_names[i] for i in index),
                             output_units=tuple(self.output_units[i] for i in index),
@@ -158,14 +180,31 @@ class TimeResponse(IOData):
         return fig
 
     def to_hdf5(self, group: Any) -> None:
-        """Write into an open ``h5py.Group``: the record as :class:`IOData` writes it, and ``measured``."""
+        """Write into an open HDF5 group: the record as :class:`IOData` writes it, and ``measured``.
+
+        Parameters
+        ----------
+        group : h5py.Group
+            The open group, written into.
+        """
         super().to_hdf5(group)
         if self.measured is not None:
             group.create_dataset("measured", data=self.measured).attrs["units"] = list(self.output_units)
 
     @classmethod
     def from_hdf5(cls, group: Any) -> "TimeResponse":
-        """Read what :meth:`to_hdf5` wrote."""
+        """Read what :meth:`to_hdf5` wrote.
+
+        Parameters
+        ----------
+        group : h5py.Group
+            The open group.
+
+        Returns
+        -------
+        TimeResponse
+            The response.
+        """
         record = IOData.from_hdf5(group)
         measured = group["measured"][()] if "measured" in group else None
         return cls(record.t, record.u, record.y, record.x, record.input_names, record.output_names,
@@ -308,7 +347,13 @@ class FrequencyResponse:
         return self.response.imag
 
     def conj(self) -> np.ndarray:
-        """The complex conjugate of the response, as the array's."""
+        """Return the complex conjugate of the response, as the array's.
+
+        Returns
+        -------
+        ndarray of complex, shape (F, n_y, n_u)
+            The conjugate response.
+        """
         return self.response.conj()
 
     def plot(self, *, ax: Any = None, label: str | None = None, title: str | None = None) -> Any:
@@ -327,6 +372,7 @@ class FrequencyResponse:
         Returns
         -------
         matplotlib.figure.Figure
+            The Figure drawn into.
         """
         n_f, n_y, n_u = self.shape
         positive = self.frequencies_hz > 0

@@ -204,7 +204,7 @@ def scheduled_step(structure: ModalStructure, x: Any, u0: Any, u1: Any, theta: A
     ends; states are the input gauge's (module notes). The family's parameters
     ``theta`` (K m) and ``grid`` (K) may be symbols.
     """
-    from ..filtering.filter_models import modal_transition
+    from .transition import modal_transition
 
     n_u = structure.n_u
     count = grid.numel() if isinstance(grid, (ca.SX, ca.MX, ca.DM)) else len(grid)
@@ -271,8 +271,14 @@ def canonical_modal_model(model: ModalModel, order: list[int] | None = None) -> 
 class ModeMatch:
     """How the modes of the model at one grid point were assigned to the slots of the family.
 
-    ``order[slot]`` is the index of the model's own mode placed in ``slot``;
-    ``cost`` the sum over slots of ``|lambda - lambda_neighbour| / |lambda_neighbour|``.
+    Parameters
+    ----------
+    value : float
+        The grid value of the scheduling variable.
+    order : tuple of int
+        ``order[slot]`` is the index of the model's own mode placed in ``slot``.
+    cost : float
+        The sum over slots of ``|lambda - lambda_neighbour| / |lambda_neighbour|``.
     """
 
     value: float
@@ -401,10 +407,11 @@ class ScheduledModalModel:
     Parameters
     ----------
     structure : ModalStructure
+        The modes and fixed C entries shared by every grid value.
     grid : ndarray (n_grid,)
         The scheduling variable's grid values, increasing.
     modal : ndarray (n_grid, n)
-        sigma/omega of every mode at each grid value (theta's modal order, omega > 0).
+        The sigma/omega of every mode at each grid value (theta's modal order, omega > 0).
     B, C, D : ndarray (n_grid, n, n_u), (n_grid, n_y, n), (n_grid, n_y, n_u)
         The matched models in the input gauge (module notes): these are interpolated.
     matching : tuple of ModeMatch
@@ -412,7 +419,9 @@ class ScheduledModalModel:
     variable : str
         Name of the scheduling variable (``speed``, or the record's channel), for exports and messages.
     input_names, output_names : tuple of str, optional
+        Channel names (the schedule not among the inputs).
     meta : dict, optional
+        Provenance (estimator, grid choice, ...).
     parameter_covariance : ndarray, optional
         Covariance of :attr:`parameters` (module notes), where an estimator gave one.
     offset : ndarray (n_grid, n_y), optional
@@ -468,7 +477,7 @@ class ScheduledModalModel:
         object.__setattr__(self, "offset", offset)
         object.__setattr__(self, "meta", dict(self.meta))
         if self.parameter_covariance is not None:
-            from ..assessment.uncertainty import checked_covariance
+            from .delta_method import checked_covariance
 
             object.__setattr__(self, "parameter_covariance",
                                checked_covariance(self.parameter_covariance, self.n_parameters))
@@ -479,7 +488,34 @@ class ScheduledModalModel:
                         meta: dict[str, Any] | None = None, parameter_covariance: Any = None,
                         matching: tuple[ModeMatch, ...] | None = None,
                         output_map: OutputMap | None = None) -> "ScheduledModalModel":
-        """The family of ``structure`` on ``grid`` with parameters ``theta`` laid out as :attr:`parameters`."""
+        """Make the family of ``structure`` on ``grid`` with parameters ``theta`` laid out as :attr:`parameters`.
+
+        Parameters
+        ----------
+        structure : ModalStructure
+            The structure at every grid value.
+        grid : array_like, shape (n_grid,)
+            The scheduling variable's grid values, increasing.
+        theta : array_like, shape (n_grid * knot_size,)
+            The parameters, grid value by grid value (module notes).
+        variable : str, default "speed"
+            Name of the scheduling variable.
+        input_names, output_names : tuple of str, optional
+            Channel names.
+        meta : dict, optional
+            Provenance.
+        parameter_covariance : array_like, optional
+            Covariance of ``theta``.
+        matching : tuple of ModeMatch, optional
+            The mode assignment at each grid value; the identity by default.
+        output_map : OutputMap, optional
+            A static map applied to the simulated outputs.
+
+        Returns
+        -------
+        ScheduledModalModel
+            The family.
+        """
         grid = np.asarray(grid, dtype=float).ravel()
         m, size = structure.n_parameters, knot_size(structure)
         theta = np.asarray(theta, dtype=float).ravel()
@@ -505,7 +541,22 @@ class ScheduledModalModel:
                                                self.offset[k]]) for k in range(self.grid.size)])
 
     def with_parameters(self, theta: Any, parameter_covariance: Any = None, **meta: Any) -> "ScheduledModalModel":
-        """The same family with other parameters (and covariance)."""
+        """Return the same family with other parameters.
+
+        Parameters
+        ----------
+        theta : array_like
+            The parameters, laid out as :attr:`parameters`.
+        parameter_covariance : array_like, optional
+            Their covariance; none by default.
+        **meta
+            Entries added to ``meta``.
+
+        Returns
+        -------
+        ScheduledModalModel
+            The family.
+        """
         return ScheduledModalModel.from_parameters(
             self.structure, self.grid, theta, variable=self.variable, input_names=self.input_names,
             output_names=self.output_names, meta={**self.meta, **meta}, parameter_covariance=parameter_covariance,
@@ -519,12 +570,22 @@ class ScheduledModalModel:
         return interpolation_weights([value], self.grid)[0]
 
     def model_at(self, value: float) -> ModalModel:
-        """The modal model at ``value`` of the scheduling variable (within the grid's range), canonical form.
+        """Return the modal model at one value of the scheduling variable, in canonical form.
 
         Where the family has a parameter covariance, the model carries the
         covariance of its own parameters (delta method through the
         interpolation and the change to the canonical form, exact CasADi
         derivatives), so that its modes and gains have standard deviations.
+
+        Parameters
+        ----------
+        value : float
+            The scheduling variable, within the grid's range.
+
+        Returns
+        -------
+        ModalModel
+            The frozen model there (the output offset and map aside).
         """
         w = self._weights(value)
         modal, B, C, D = (np.tensordot(w, array, axes=1)
@@ -545,8 +606,21 @@ class ScheduledModalModel:
                           parameter_covariance=None if covariance is None else 0.5 * (covariance + covariance.T))
 
     def modes_at(self, values: Any, *, level: float = 0.95) -> list[dict[str, Any]]:
-        """Per value of the scheduling variable: ``{value, modes}``, each mode's ``frequency_hz``,
-        ``frequency_hz_std``, ``damping``, ``damping_std`` and eigenvalue (std NaN without a covariance)."""
+        """Tabulate the modes and their standard deviations at values of the scheduling variable.
+
+        Parameters
+        ----------
+        values : array_like
+            Values of the scheduling variable, within the grid's range.
+        level : float, default 0.95
+            Confidence level of the intervals.
+
+        Returns
+        -------
+        list of dict
+            Per value, ``{value, modes}``: each mode's ``frequency_hz``, ``frequency_hz_std``,
+            ``damping``, ``damping_std`` and eigenvalue (std NaN without a covariance).
+        """
         rows = []
         for value in np.atleast_1d(np.asarray(values, dtype=float)):
             modes = self.model_at(float(value)).uncertainty(level=level).modes
@@ -554,8 +628,20 @@ class ScheduledModalModel:
         return rows
 
     def is_stable(self, *, schedule: float | None = None) -> bool:
-        """Every mode in the open left half-plane at ``schedule``, or without one at every grid value (the
-        frozen models between are interpolated, so their real parts lie between)."""
+        """Say whether every mode lies in the open left half-plane.
+
+        Parameters
+        ----------
+        schedule : float, optional
+            A value of the scheduling variable; without one, every grid value is
+            checked (the frozen models between are interpolated, so their real
+            parts lie between).
+
+        Returns
+        -------
+        bool
+            True when stable.
+        """
         if schedule is not None:
             return self.linear_at(schedule).is_stable()
         real = np.array([[self.modal[k, s[0]] for s in self.structure.mode_states()] for k in range(self.grid.size)])
@@ -580,19 +666,22 @@ class ScheduledModalModel:
 
     @property
     def n_y(self) -> int:
+        """Number of outputs."""
         return self.structure.n_y
 
     @property
     def n_states(self) -> int:
+        """Number of states (the order n)."""
         return self.structure.n
 
     def simulate_outputs(self, u: Any, dt: float | None = None, *, x0: Any = None, schedule: Any = None,
                          method: str = "foh", return_states: bool = False) -> Any:
-        """Outputs (N, n_y) of the family driven by ``u`` along a measured schedule, compiled.
+        """Simulate the family driven by ``u`` along a measured schedule, compiled.
 
         Parameters
         ----------
         u : array_like (N, n_u), or (N, n_u + 1) with the schedule last
+            Input samples, time-major.
         dt : float
             Sample interval (s); required (optional only in the protocol's signature).
         x0 : array_like (n,), optional
@@ -605,6 +694,11 @@ class ScheduledModalModel:
             the sample's start.
         return_states : bool
             Also return the input-gauge states (N, n).
+
+        Returns
+        -------
+        ndarray, shape (N, n_y), or tuple of ndarray
+            The outputs; with ``return_states``, ``(y, x)``.
         """
         s = self.structure
         u = np.asarray(u, dtype=float)
@@ -665,8 +759,9 @@ class ScheduledModalModel:
         return float(self.grid[0]), float(self.grid[-1])
 
     def linear_at(self, schedule: float) -> Any:
-        """The linear model the family is at one schedule value, in the input gauge (the states of
-        :meth:`simulate_outputs`), without the output offset and output map.
+        """Return the linear model the family is at one schedule value, in the input gauge.
+
+        The states are those of :meth:`simulate_outputs`; the output offset and output map are left out.
 
         Parameters
         ----------
@@ -691,20 +786,52 @@ class ScheduledModalModel:
     def to_statespace(self, *, schedule: float | None = None
 
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
-        """``(A, B, C, D, None)`` at a schedule value (required), in the input gauge (:meth:`linear_at`)."""
+        """Return the state-space matrices at a schedule value, in the input gauge (:meth:`linear_at`).
+
+        Parameters
+        ----------
+        schedule : float
+            Required: the scheduling variable, within :attr:`schedule_range`.
+
+        Returns
+        -------
+        tuple
+            ``(A, B, C, D, None)``: continuous time.
+        """
         return self.linear_at(schedule).to_statespace()
 
     def eigenvalues(self, *, schedule: float | None = None) -> np.ndarray:
-        """The eigenvalues (s-plane) at a schedule value (required)."""
+        """Return the eigenvalues at a schedule value.
+
+        Parameters
+        ----------
+        schedule : float
+            Required: the scheduling variable, within :attr:`schedule_range`.
+
+        Returns
+        -------
+        ndarray of complex, shape (n,)
+            The eigenvalues (1/s).
+        """
         return self.linear_at(schedule).eigenvalues()
 
     def modes(self, *, schedule: float | None = None) -> tuple[Any, ...]:
-        """One :class:`~identification.models.protocol.Mode` per pair and real pole at a schedule value (required)."""
+        """Return the modes at a schedule value.
+
+        Parameters
+        ----------
+        schedule : float
+            Required: the scheduling variable, within :attr:`schedule_range`.
+
+        Returns
+        -------
+        tuple of Mode
+            One per pair and real pole.
+        """
         return self.linear_at(schedule).modes()
 
     def frequency_response(self, f_hz: Any, *, schedule: float | None = None) -> Any:
-        """The linear part's :class:`~identification.models.responses.FrequencyResponse` at a schedule value
-        (required), the output map aside.
+        """Compute the linear part's frequency response at a schedule value, the output map aside.
 
         Parameters
         ----------
@@ -716,6 +843,7 @@ class ScheduledModalModel:
         Returns
         -------
         FrequencyResponse
+            The response per output and input at each frequency.
         """
         from .protocol import statespace_response
 
@@ -723,7 +851,18 @@ class ScheduledModalModel:
                                    float(schedule))
 
     def to_control(self, *, schedule: float | None = None) -> Any:
-        """A ``control.StateSpace`` (python-control) of the linear model at a schedule value (required)."""
+        """Return the linear model at a schedule value as python-control's state-space system.
+
+        Parameters
+        ----------
+        schedule : float
+            Required: the scheduling variable, within :attr:`schedule_range`.
+
+        Returns
+        -------
+        control.StateSpace
+            The continuous-time system of :meth:`linear_at`.
+        """
         return self.linear_at(schedule).to_control()
 
     def to_casadi(self, *, name: str = "scheduled_modal_model", gauge: str = "canonical") -> ca.Function:
@@ -736,6 +875,18 @@ class ScheduledModalModel:
         functions of the scheduling variable, held at the end values beyond
         the grid, so the Function differentiates and generates C like any
         other (for MPC).
+
+        Parameters
+        ----------
+        name : str, default "scheduled_modal_model"
+            The Function's name.
+        gauge : {"canonical", "input"}, default "canonical"
+            The states' basis.
+
+        Returns
+        -------
+        casadi.Function
+            ``(x, u, <variable>) -> (xdot, y)``.
         """
         if gauge not in ("canonical", "input"):
             raise InputError(f"gauge is 'canonical' or 'input'; got {gauge!r}")
@@ -755,7 +906,13 @@ class ScheduledModalModel:
                            ["x", "u", self.variable], ["xdot", "y"])
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready form (lists), with ``parameter_covariance`` where there is one."""
+        """Describe the family for JSON.
+
+        Returns
+        -------
+        dict
+            Every field, arrays as lists, with ``parameter_covariance`` where there is one.
+        """
         return {
             "structure": self.structure.to_dict(), "grid": self.grid.tolist(), "modal": self.modal.tolist(),
             "B": self.B.tolist(), "C": self.C.tolist(), "D": self.D.tolist(), "variable": self.variable,
@@ -770,6 +927,18 @@ class ScheduledModalModel:
 
     @classmethod
     def from_dict(cls, values: Mapping[str, Any]) -> "ScheduledModalModel":
+        """Read a family that :meth:`to_dict` described.
+
+        Parameters
+        ----------
+        values : mapping
+            The description.
+
+        Returns
+        -------
+        ScheduledModalModel
+            The family.
+        """
         matching = tuple(ModeMatch(float(m["value"]), tuple(int(o) for o in m["order"]), float(m["cost"]))
                          for m in values["matching"])
         names = {key: tuple(values[key]) if values.get(key) is not None else None
@@ -782,7 +951,18 @@ class ScheduledModalModel:
                    output_map=None if values.get("output_map") is None else OutputMap.from_dict(values["output_map"]))
 
     def save_json(self, path: Any) -> Any:
-        """Write :meth:`to_dict` as JSON; returns the path."""
+        """Write :meth:`to_dict` as JSON.
+
+        Parameters
+        ----------
+        path : str or path-like
+            The file written.
+
+        Returns
+        -------
+        pathlib.Path
+            The path.
+        """
         import json
         from pathlib import Path
 
@@ -794,8 +974,20 @@ class ScheduledModalModel:
         return path
 
     def save_mat(self, path: Any) -> Any:
-        """Write the grid and the input-gauge arrays (grid value first; ``A``, ``B``, ``C``, ``D`` each grid value's
-        :meth:`to_statespace`) to a MATLAB file; returns the path."""
+        """Write the grid and the input-gauge arrays to a MATLAB file.
+
+        The arrays have the grid value first; ``A``, ``B``, ``C``, ``D`` are each grid value's :meth:`to_statespace`.
+
+        Parameters
+        ----------
+        path : str or path-like
+            The ``.mat`` file written.
+
+        Returns
+        -------
+        pathlib.Path
+            The path.
+        """
         from pathlib import Path
 
         from scipy.io import savemat
@@ -818,7 +1010,8 @@ def schedule_models(models: Mapping[float, ModalModel], *, variable: str = "spee
     ----------
     models : mapping of float to ModalModel
         At least two models of one structure, keyed by the scheduling value.
-    variable : str
+    variable : str, default "speed"
+        Name of the scheduling variable.
 
     Returns
     -------

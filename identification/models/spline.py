@@ -82,7 +82,19 @@ class SplineBasis:
 
     @classmethod
     def uniform(cls, lower: float, upper: float, count: int = 5) -> "SplineBasis":
-        """Basis with ``count`` evenly spaced nodes from ``lower`` to ``upper``.
+        """Make a basis with ``count`` evenly spaced nodes from ``lower`` to ``upper``.
+
+        Parameters
+        ----------
+        lower, upper : float
+            The end nodes, ``lower < upper``.
+        count : int, default 5
+            Number of nodes.
+
+        Returns
+        -------
+        SplineBasis
+            The basis.
 
         Raises
         ------
@@ -103,7 +115,7 @@ class SplineBasis:
         return int(self.nodes.size)
 
     def evaluate(self, x: Any) -> np.ndarray:
-        """Basis values ``phi_i(x)`` at many points.
+        """Evaluate the basis functions ``phi_i(x)`` at many points.
 
         Parameters
         ----------
@@ -140,7 +152,7 @@ class SplineBasis:
         return phi
 
     def symbolic(self, x: Any) -> Any:
-        """Basis values as CasADi expressions of a scalar symbol.
+        """Express the basis functions in CasADi, of a scalar symbol.
 
         Build this once per variable and reuse it for every spline of that
         variable (``casadi.dot(phi, gamma)``): the interval selection is then
@@ -217,6 +229,7 @@ class SplineBasis:
         Returns
         -------
         casadi.SX or casadi.MX, scalar
+            The spline's value at ``x``.
 
         Raises
         ------
@@ -323,6 +336,7 @@ def covering_basis(
     Returns
     -------
     SplineBasis
+        The basis of ``count`` nodes over the covered range.
 
     Raises
     ------

@@ -28,10 +28,10 @@ from ..choices import SPLINE_NODE_COUNT
 from ..compiled import CompiledRecursion
 from ..errors import InputError
 from ..optionspec import check_value
-from ..filtering.filter_models import FilterModel, check_discretization, modal_transition
 from .modal import ModalModel, ModalStructure
 from .protocol import Mode, StateSpaceModel, unscheduled
 from .spline import SplineBasis, resample
+from .transition import check_discretization, modal_transition
 
 __all__ = [
     "AMPLITUDE_FLOOR",
@@ -53,6 +53,13 @@ class SplineModalStructure:
 
     Variables (the things splines are functions of) are numbered: one
     amplitude per complex pair, then each state, then each input.
+
+    Parameters
+    ----------
+    linear : ModalStructure
+        The structure of the linear model whose every parameter becomes a spline.
+    nodes : int, default 5
+        Number of nodes (ordinates) per spline, p.
     """
 
     linear: ModalStructure
@@ -63,10 +70,18 @@ class SplineModalStructure:
 
     @property
     def n_variables(self) -> int:
+        """Number of variables: one amplitude per complex pair, then the states, then the inputs."""
         s = self.linear
         return s.n_complex_pairs + s.n + s.n_u
 
     def variable_names(self) -> tuple[str, ...]:
+        """Name the variables.
+
+        Returns
+        -------
+        tuple of str
+            ``amplitude1, ..., x1, ..., u1, ...`` (1-based), in the variables' order.
+        """
         s = self.linear
         return (
             tuple(f"amplitude{k + 1}" for k in range(s.n_complex_pairs))
@@ -75,16 +90,60 @@ class SplineModalStructure:
         )
 
     def amplitude_variable(self, pair: int) -> int:
+        """Return the variable of a complex pair's amplitude.
+
+        Parameters
+        ----------
+        pair : int
+            Pair index, 0-based.
+
+        Returns
+        -------
+        int
+            Its variable's index.
+        """
         return pair
 
     def state_variable(self, state: int) -> int:
+        """Return the variable of a state.
+
+        Parameters
+        ----------
+        state : int
+            State index, 0-based.
+
+        Returns
+        -------
+        int
+            Its variable's index.
+        """
         return self.linear.n_complex_pairs + state
 
     def input_variable(self, index: int) -> int:
+        """Return the variable of an input.
+
+        Parameters
+        ----------
+        index : int
+            Input index, 0-based.
+
+        Returns
+        -------
+        int
+            Its variable's index.
+        """
         return self.linear.n_complex_pairs + self.linear.n + index
 
     def coefficient_variables(self) -> tuple[int, ...]:
-        """The variable each linear parameter's spline follows, in the linear theta order."""
+        """Return the variable each linear parameter's spline follows.
+
+        Returns
+        -------
+        tuple of int
+            One variable index per linear parameter, in the linear theta order: a pair's
+            sigma and omega follow its amplitude, a real pole and a free C entry their
+            state, B and D entries their input.
+        """
         s = self.linear
         follows: list[int] = []
         for pair in range(s.n_complex_pairs):
@@ -98,30 +157,77 @@ class SplineModalStructure:
 
     @property
     def n_parameters(self) -> int:
+        """Length of theta: p ordinates per linear parameter."""
         return self.nodes * self.linear.n_parameters
 
     def coefficient_names(self) -> tuple[str, ...]:
+        """Name the coefficients, as the linear structure names its parameters.
+
+        Returns
+        -------
+        tuple of str
+            ``sigma1, omega1, ..., b11, ..., c21, ..., d11, ...``.
+        """
         return self.linear.parameter_names()
 
     def from_linear(self, theta_linear: np.ndarray) -> np.ndarray:
-        """Every node of each spline at the linear value: the nonlinear model equals the linear one."""
+        """Return theta with every node of each spline at the linear value: the nonlinear model equals the linear one.
+
+        Parameters
+        ----------
+        theta_linear : array_like, shape (n_linear_parameters,)
+            Parameters of the linear model (normalised units).
+
+        Returns
+        -------
+        ndarray, shape (n_parameters,)
+            Each linear parameter repeated p times.
+        """
         theta_linear = np.asarray(theta_linear, dtype=float).ravel()
         if theta_linear.size != self.linear.n_parameters:
             raise InputError(f"expected {self.linear.n_parameters} linear parameters; got {theta_linear.size}")
         return np.repeat(theta_linear, self.nodes)
 
     def gammas(self, theta: np.ndarray) -> np.ndarray:
-        """theta as (n_coefficients, p): the node ordinates of each coefficient's spline."""
+        """Arrange theta as the node ordinates of each coefficient's spline.
+
+        Parameters
+        ----------
+        theta : array_like, shape (n_parameters,)
+            The spline model's parameters.
+
+        Returns
+        -------
+        ndarray, shape (n_coefficients, p)
+            One row of ordinates per coefficient.
+        """
         return np.asarray(theta, dtype=float).reshape(self.linear.n_parameters, self.nodes)
 
     def default_ranges(self) -> np.ndarray:
-        """(n_variables, 2) of (lower, upper): amplitudes 0..1, states and inputs -1..1."""
+        """Return the default node ranges.
+
+        Returns
+        -------
+        ndarray, shape (n_variables, 2)
+            (lower, upper) per variable: amplitudes 0..1, states and inputs -1..1 (normalised units).
+        """
         ranges = np.tile([-1.0, 1.0], (self.n_variables, 1))
         ranges[: self.linear.n_complex_pairs] = [0.0, 1.0]
         return ranges
 
     def constants(self, ranges: np.ndarray) -> np.ndarray:
-        """The filter's constants from node ranges: (lower, step) per variable."""
+        """Return the filter's constants for given node ranges.
+
+        Parameters
+        ----------
+        ranges : array_like, shape (n_variables, 2)
+            (lower, upper) of each variable's nodes, upper > lower.
+
+        Returns
+        -------
+        ndarray, shape (2 n_variables,)
+            (lower, step) per variable, interleaved.
+        """
         ranges = np.asarray(ranges, dtype=float)
         if ranges.shape != (self.n_variables, 2) or not np.all(ranges[:, 1] > ranges[:, 0]):
             raise InputError(f"node ranges must be (lower, upper) with upper > lower for {self.n_variables} variables")
@@ -129,16 +235,39 @@ class SplineModalStructure:
         return np.column_stack([ranges[:, 0], step]).ravel()
 
     def to_dict(self) -> dict[str, Any]:
+        """Describe the structure for JSON.
+
+        Returns
+        -------
+        dict
+            ``linear`` (:meth:`ModalStructure.to_dict`) and ``nodes``.
+        """
         return {"linear": self.linear.to_dict(), "nodes": self.nodes}
 
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> "SplineModalStructure":
+        """Read the structure :meth:`to_dict` described.
+
+        Parameters
+        ----------
+        values : dict
+            The description.
+
+        Returns
+        -------
+        SplineModalStructure
+            The structure.
+        """
         return cls(ModalStructure.from_dict(values["linear"]), int(values["nodes"]))
 
 
 @dataclass(frozen=True)
-class SplineModalFilterModel(FilterModel):
-    """The spline-modal model as a filter model (normalised units); constants are the node ranges."""
+class SplineModalFilterModel:
+    """The spline-modal model as a filter model (normalised units); constants are the node ranges.
+
+    Its simulation and the IEKF both run it: it meets the filter's
+    :class:`~vehid.identification.filtering.filter_models.FilterModel` protocol by its members.
+    """
 
     structure: SplineModalStructure
 
@@ -254,6 +383,7 @@ class SplineModalModel(StateSpaceModel):
     Parameters
     ----------
     structure : SplineModalStructure
+        The linear structure and the number of nodes per spline.
     theta : ndarray (n_coefficients * p,)
         Node ordinates, coefficient by coefficient (normalised units).
     ranges : ndarray (n_variables, 2)
@@ -261,8 +391,13 @@ class SplineModalModel(StateSpaceModel):
     input_scale, output_scale : ndarray
         The normalisation: ``u_normalised = u / input_scale``, ``y = output_scale * y_normalised``.
     dt : float
-        The sample interval it was identified at.
-    discretization : str
+        The sample interval it was identified at (s).
+    discretization : {"exact", "exact-zoh", "euler"}, default "exact"
+        The filter's discretisation of the continuous model, which its simulation repeats.
+    input_names, output_names : tuple of str, optional
+        Channel names.
+    meta : dict, optional
+        Provenance (estimator, passes, ...).
     parameter_covariance : ndarray, optional
         Covariance of ``theta`` (normalised units), as the spline IEKF left it
         in its P; ``None`` where none was estimated.
@@ -297,7 +432,7 @@ class SplineModalModel(StateSpaceModel):
         check_discretization(self.discretization)
         object.__setattr__(self, "meta", dict(self.meta))
         if self.parameter_covariance is not None:
-            from ..assessment.uncertainty import checked_covariance
+            from .delta_method import checked_covariance
 
             object.__setattr__(self, "parameter_covariance",
                                checked_covariance(self.parameter_covariance, st.n_parameters))
@@ -307,7 +442,28 @@ class SplineModalModel(StateSpaceModel):
         cls, linear: ModalModel, nodes: int, input_scale: np.ndarray, output_scale: np.ndarray, dt: float,
         discretization: str = "exact", ranges: np.ndarray | None = None,
     ) -> "SplineModalModel":
-        """The nonlinear model equal to ``linear``: every node at its (normalised) value."""
+        """Make the nonlinear model equal to ``linear``: every node at its (normalised) value.
+
+        Parameters
+        ----------
+        linear : ModalModel
+            The linear model, in original units.
+        nodes : int
+            Number of nodes per spline.
+        input_scale, output_scale : ndarray, shapes (n_u,) and (n_y,)
+            The normalisation: ``u_normalised = u / input_scale``, ``y = output_scale * y_normalised``.
+        dt : float
+            Sample interval (s).
+        discretization : {"exact", "exact-zoh", "euler"}, default "exact"
+            The discretisation of the continuous model.
+        ranges : ndarray, shape (n_variables, 2), optional
+            Node ranges; :meth:`SplineModalStructure.default_ranges` by default.
+
+        Returns
+        -------
+        SplineModalModel
+            The model.
+        """
         structure = SplineModalStructure(linear.structure, nodes)
         theta_linear = linear.structure.normalize_parameters(linear.parameters, np.asarray(input_scale, float), np.asarray(output_scale, float))
         return cls(
@@ -319,15 +475,35 @@ class SplineModalModel(StateSpaceModel):
 
     @property
     def constants(self) -> np.ndarray:
+        """The filter's constants of the node ranges, (lower, step) per variable."""
         return self.structure.constants(self.ranges)
 
     def state_scale(self) -> np.ndarray:
-        """Original units of each state (those of its tied output) per normalised unit."""
+        """Return the scale of each state.
+
+        Returns
+        -------
+        ndarray, shape (n,)
+            Original units of each state (those of its tied output) per normalised unit.
+        """
         s = self.structure.linear
         return np.array([self.output_scale[s.output_of_state(j)] for j in range(s.n)])
 
     def simulate_normalised(self, u_normalised: np.ndarray, x0: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """(y, x) in normalised units from normalised inputs, compiled."""
+        """Simulate in normalised units, compiled.
+
+        Parameters
+        ----------
+        u_normalised : ndarray, shape (N, n_u)
+            Inputs divided by ``input_scale``.
+        x0 : ndarray, shape (n,), optional
+            Initial state in normalised units; zero by default.
+
+        Returns
+        -------
+        tuple of ndarray
+            ``(y, x)``, shapes (N, n_y) and (N, n), normalised units.
+        """
         sim = _simulator(self.structure, self.discretization)
         x0 = np.zeros(self.structure.linear.n) if x0 is None else x0
         return sim(x0, u_normalised, np.concatenate([self.theta, self.constants, [float(self.dt)]]))
@@ -353,10 +529,26 @@ class SplineModalModel(StateSpaceModel):
 
     def simulate_outputs(self, u: Any, dt: float | None = None, *, x0: Any = None, schedule: Any = None,
                          return_states: bool = False) -> Any:
-        """Outputs (N, n_y) in original units from ``x0`` (original units; default rest), for inputs (N, n_u).
+        """Simulate the outputs in original units.
 
-        ``dt`` must equal the sample interval the model was identified at
-        (its discrete-time behaviour is tied to it); ``schedule`` changes nothing.
+        Parameters
+        ----------
+        u : array_like, shape (N, n_u)
+            Inputs in original units, time-major.
+        dt : float, optional
+            Must equal the sample interval the model was identified at (its
+            discrete-time behaviour is tied to it), if given.
+        x0 : array_like, shape (n,), optional
+            Initial state in original units; rest by default.
+        schedule : array_like, optional
+            Changes nothing (the model is not scheduled).
+        return_states : bool, default False
+            Also return the states.
+
+        Returns
+        -------
+        ndarray, shape (N, n_y), or tuple of ndarray
+            The outputs; with ``return_states``, ``(y, x)`` with ``x`` of shape (N, n) in original units.
         """
         u = self.checked_input(u)
         unscheduled(schedule, u.shape[0])
@@ -368,7 +560,19 @@ class SplineModalModel(StateSpaceModel):
         return (y, x * self.state_scale()) if return_states else y
 
     def spline(self, coefficient: int | str) -> tuple[SplineBasis, np.ndarray]:
-        """(basis, ordinates) of one coefficient, by index or name (e.g. ``"sigma1"``, ``"b21"``)."""
+        """Return one coefficient's spline.
+
+        Parameters
+        ----------
+        coefficient : int or str
+            Its index or name (e.g. ``"sigma1"``, ``"b21"``).
+
+        Returns
+        -------
+        tuple
+            ``(basis, ordinates)``: the :class:`SplineBasis` on the variable's node range
+            and the p ordinates (normalised units).
+        """
         names = self.structure.coefficient_names()
         index = names.index(coefficient) if isinstance(coefficient, str) else int(coefficient)
         variable = self.structure.coefficient_variables()[index]
@@ -377,12 +581,32 @@ class SplineModalModel(StateSpaceModel):
         return basis, self.structure.gammas(self.theta)[index]
 
     def coefficient(self, name: str, values: Any) -> np.ndarray:
-        """A coefficient's value (normalised units) at values of the variable it follows."""
+        """Evaluate a coefficient at values of the variable it follows.
+
+        Parameters
+        ----------
+        name : str
+            The coefficient's name (e.g. ``"sigma1"``).
+        values : array_like
+            Values of its variable (normalised units).
+
+        Returns
+        -------
+        ndarray
+            The coefficient at each value (normalised units), flattened.
+        """
         basis, gamma = self.spline(name)
         return basis.evaluate(np.asarray(values, dtype=float).ravel()) @ gamma
 
     def spline_tables(self) -> dict[str, dict[str, Any]]:
-        """Every coefficient's spline: the variable it follows, node positions and ordinates (normalised units)."""
+        """Tabulate every coefficient's spline.
+
+        Returns
+        -------
+        dict of str to dict
+            Per coefficient: ``variable`` (the name of the variable it follows), ``nodes``
+            (positions) and ``values`` (ordinates), normalised units.
+        """
         variables = self.structure.variable_names()
         follows = self.structure.coefficient_variables()
         tables = {}
@@ -394,19 +618,61 @@ class SplineModalModel(StateSpaceModel):
     def to_statespace(self, *, schedule: float | None = None
 
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
-        """The continuous state-space form of :meth:`linear_model` at zero amplitude."""
+        """Return the continuous state-space form of :meth:`linear_model` at zero amplitude.
+
+        Parameters
+        ----------
+        schedule : None
+            Must be ``None`` (the model is not scheduled).
+
+        Returns
+        -------
+        tuple
+            ``(A, B, C, D, None)`` in original units.
+        """
         return self.linear_model().to_statespace(schedule=schedule)
 
     def eigenvalues(self, *, schedule: float | None = None) -> np.ndarray:
-        """Eigenvalues of :meth:`linear_model` at zero amplitude."""
+        """Return the eigenvalues of :meth:`linear_model` at zero amplitude.
+
+        Parameters
+        ----------
+        schedule : None
+            Must be ``None`` (the model is not scheduled).
+
+        Returns
+        -------
+        ndarray of complex, shape (n,)
+            The eigenvalues (1/s).
+        """
         return self.linear_model().eigenvalues(schedule=schedule)
 
     def modes(self, *, schedule: float | None = None, amplitude: float = 0.0) -> tuple[Mode, ...]:
-        """The modes of :meth:`linear_model` at ``amplitude`` (normalised): each pair where its own amplitude is that."""
+        """Return the modes of :meth:`linear_model` at an amplitude.
+
+        Parameters
+        ----------
+        schedule : None
+            Must be ``None`` (the model is not scheduled).
+        amplitude : float, default 0.0
+            Amplitude (normalised) at which each pair is taken.
+
+        Returns
+        -------
+        tuple of Mode
+            One per mode, pairs first.
+        """
         return self.linear_model(amplitude).modes(schedule=schedule)
 
     def mat_fields(self) -> dict[str, Any]:
-        """The linearisation's A, B, C, D with the splines' ordinates, node ranges, scales and Ts."""
+        """Return the fields of the model's MATLAB file.
+
+        Returns
+        -------
+        dict
+            The linearisation's A, B, C, D with ``theta`` (the ordinates), ``ranges``,
+            ``input_scale``, ``output_scale`` and ``Ts``.
+        """
         return {**super().mat_fields(), "theta": self.theta, "ranges": self.ranges, "input_scale": self.input_scale,
                 "output_scale": self.output_scale, "Ts": self.dt}
 
@@ -418,10 +684,22 @@ class SplineModalModel(StateSpaceModel):
         return self.parameter_covariance[index * p:(index + 1) * p, index * p:(index + 1) * p]
 
     def coefficient_std(self, name: str, values: Any) -> np.ndarray:
-        """Standard deviation of a coefficient at values of its variable (normalised units; NaN without a covariance).
+        """Return the standard deviation of a coefficient at values of its variable.
 
         The spline is linear in its ordinates, ``c(v) = phi(v)' gamma``, so
         ``var c(v) = phi(v)' cov(gamma) phi(v)`` exactly.
+
+        Parameters
+        ----------
+        name : str
+            The coefficient's name.
+        values : array_like
+            Values of its variable (normalised units).
+
+        Returns
+        -------
+        ndarray
+            Standard deviation at each value (normalised units); NaN without a covariance.
         """
         index = self.structure.coefficient_names().index(name)
         basis, _ = self.spline(index)
@@ -432,12 +710,24 @@ class SplineModalModel(StateSpaceModel):
         return np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", rows, block, rows), 0.0))
 
     def mode_frequency_damping_std(self, mode: int, amplitudes: Any) -> tuple[np.ndarray, np.ndarray]:
-        """Standard deviations of a pair's frequency (Hz) and damping at ``amplitudes`` by the delta method
-        (NaN without a covariance); the values are those of :meth:`modes`.
+        """Return the standard deviations of a pair's frequency and damping by the delta method.
 
-        With ``sigma = phi' g_s``, ``omega = phi' g_w`` and ``r = |sigma + j omega|``:
+        The values are those of :meth:`modes`. With ``sigma = phi' g_s``, ``omega = phi' g_w`` and ``r = |sigma + j omega|``:
         ``df = (sigma ds + omega dw) / (2 pi r)``, ``dzeta = (-omega^2 ds + sigma omega dw) / r^3``;
         the ordinates of sigma and omega and their cross-covariance enter.
+
+        Parameters
+        ----------
+        mode : int
+            The complex pair, 0-based.
+        amplitudes : array_like, shape (K,)
+            Amplitudes (normalised) of the pair.
+
+        Returns
+        -------
+        tuple of ndarray
+            Standard deviations of the frequency (Hz) and of the damping ratio, each
+            shape (K,); NaN without a covariance.
         """
         if not 0 <= mode < self.structure.linear.n_complex_pairs:
             raise InputError(f"mode {mode} is not a complex pair of this model")
@@ -461,7 +751,18 @@ class SplineModalModel(StateSpaceModel):
         return results[0], results[1]
 
     def linear_model(self, at: float = 0.0) -> ModalModel:
-        """The linear model of the splines' values at zero input, states and amplitude ``at``."""
+        """Return the linear model of the splines' values at zero input and states.
+
+        Parameters
+        ----------
+        at : float, default 0.0
+            The pairs' amplitude (normalised).
+
+        Returns
+        -------
+        ModalModel
+            The linear model in original units.
+        """
         st = self.structure
         values = []
         follows = st.coefficient_variables()
@@ -479,7 +780,19 @@ class SplineModalModel(StateSpaceModel):
         return ModalModel.from_parameters(st.linear, theta, input_names=self.input_names, output_names=self.output_names)
 
     def resampled(self, ranges: np.ndarray) -> tuple["SplineModalModel", np.ndarray]:
-        """The same functions on new node ranges, and the linear map of theta (for carrying P over)."""
+        """Return the same functions on new node ranges.
+
+        Parameters
+        ----------
+        ranges : array_like, shape (n_variables, 2)
+            The new node ranges.
+
+        Returns
+        -------
+        tuple
+            The resampled model, and the linear map of theta, shape (n_parameters,
+            n_parameters), that carries a covariance over.
+        """
         st = self.structure
         ranges = np.asarray(ranges, dtype=float)
         follows = st.coefficient_variables()
@@ -500,6 +813,20 @@ class SplineModalModel(StateSpaceModel):
         return model, transform
 
     def with_parameters(self, theta: np.ndarray, **meta: Any) -> "SplineModalModel":
+        """Return the model with other ordinates.
+
+        Parameters
+        ----------
+        theta : ndarray, shape (n_parameters,)
+            The new ordinates (normalised units).
+        **meta
+            Entries added to ``meta``.
+
+        Returns
+        -------
+        SplineModalModel
+            The model (without a parameter covariance).
+        """
         return SplineModalModel(
             self.structure, theta, self.ranges, self.input_scale, self.output_scale, self.dt, self.discretization,
             self.input_names, self.output_names, {**self.meta, **meta},
@@ -513,6 +840,16 @@ class SplineModalModel(StateSpaceModel):
         with it: ``vehid_spline_model(u (n_u, N)) -> y (n_y, N)``, the
         simulation from rest. Save it with ``Function.save(path)`` and load it
         with ``casadi.Function.load`` where the workbench is not installed.
+
+        Parameters
+        ----------
+        n_samples : int, optional
+            Length N of the simulation the Function computes; one step without it.
+
+        Returns
+        -------
+        casadi.Function
+            The step or the simulation.
         """
         model = SplineModalFilterModel(self.structure)
         x = ca.SX.sym("x", model.n_x)
@@ -539,6 +876,13 @@ class SplineModalModel(StateSpaceModel):
         return ca.Function("vehid_spline_model", [u], [y], ["u"], ["y"])
 
     def to_dict(self) -> dict[str, Any]:
+        """Describe the model for JSON.
+
+        Returns
+        -------
+        dict
+            Every field, arrays as lists; ``parameter_covariance`` only where estimated.
+        """
         return {
             "structure": self.structure.to_dict(),
             "theta": self.theta.tolist(),
@@ -555,6 +899,18 @@ class SplineModalModel(StateSpaceModel):
 
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> "SplineModalModel":
+        """Read a model that :meth:`to_dict` described.
+
+        Parameters
+        ----------
+        values : dict
+            The description.
+
+        Returns
+        -------
+        SplineModalModel
+            The model.
+        """
         covariance = values.get("parameter_covariance")
         return cls(
             SplineModalStructure.from_dict(values["structure"]), np.array(values["theta"]),

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from .._checks import finite_matrix
+from ..argument_checks import finite_matrix
 from ..errors import InputError
 from .modal import ModalModel, ModalStructure
 
@@ -73,12 +73,13 @@ def continuous_to_discrete(A: Any, B: Any, C: Any, D: Any, dt: float, *, hold: s
         Continuous model, shapes (n, n), (n, n_u), (n_y, n), (n_y, n_u).
     dt : float
         Sample interval (s).
-    hold : {"foh", "zoh"}
+    hold : {"foh", "zoh"}, default "foh"
+        Inputs linear between samples (first-order hold) or held (zero-order hold).
 
     Returns
     -------
-    Ad, Bd, Cd, Dd : ndarray
-        For ``foh`` the state is ``xi = x - G2 u`` (module docstring).
+    tuple of ndarray
+        ``(Ad, Bd, Cd, Dd)``; for ``foh`` the state is ``xi = x - G2 u`` (module docstring).
     """
     A, B, C, D = _system(A, B, C, D)
     _check_hold(hold, dt)
@@ -91,10 +92,22 @@ def continuous_to_discrete(A: Any, B: Any, C: Any, D: Any, dt: float, *, hold: s
 
 
 def hold_state_shift(A: Any, B: Any, dt: float) -> np.ndarray:
-    """``G2 = T phi2(AT) B`` (n, n_u): the first-order-hold equivalent's state is ``xi = x - G2 u``.
+    """Return ``G2 = T phi2(AT) B``: the first-order-hold equivalent's state is ``xi = x - G2 u``.
 
     A continuous state ``x0`` at the first sample is ``xi0 = x0 - G2 u(0)``
     in the discrete model :func:`continuous_to_discrete` returns for ``foh``.
+
+    Parameters
+    ----------
+    A, B : array_like
+        Continuous model, shapes (n, n) and (n, n_u).
+    dt : float
+        Sample interval T (s).
+
+    Returns
+    -------
+    ndarray, shape (n, n_u)
+        ``G2``.
     """
     A, B = finite_matrix("A", A), finite_matrix("B", B)
     if A.shape != (A.shape[0], A.shape[0]) or B.shape[0] != A.shape[0]:
@@ -112,7 +125,9 @@ def _diagonalise(A: np.ndarray, what: str) -> tuple[np.ndarray, np.ndarray]:
 
 def discrete_to_continuous(Ad: Any, Bd: Any, Cd: Any, Dd: Any, dt: float, *, hold: str = "foh"
                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The continuous model whose hold equivalent is ``(Ad, Bd, Cd, Dd)``: the inverse of :func:`continuous_to_discrete`.
+    """Return the continuous model whose hold equivalent is ``(Ad, Bd, Cd, Dd)``.
+
+    The inverse of :func:`continuous_to_discrete`.
 
     ``Ad`` (diagonalisable) is first brought to real block-diagonal form by
     its eigenvectors; each block is then mapped by the principal logarithm
@@ -123,6 +138,20 @@ def discrete_to_continuous(Ad: Any, Bd: Any, Cd: Any, Dd: Any, dt: float, *, hol
     are as accurate as those of ``Ad``: a companion-form ``Ad`` (an ARX
     realisation) has badly conditioned eigenvectors, and a round trip
     through them would square that conditioning.
+
+    Parameters
+    ----------
+    Ad, Bd, Cd, Dd : array_like
+        Discrete model, shapes (n, n), (n, n_u), (n_y, n), (n_y, n_u).
+    dt : float
+        Sample interval (s).
+    hold : {"foh", "zoh"}, default "foh"
+        The hold the discrete model is the equivalent of.
+
+    Returns
+    -------
+    tuple of ndarray
+        ``(A, B, C, D)``, continuous time, A in real block-diagonal form.
 
     Raises
     ------
@@ -185,11 +214,23 @@ def _real_block_form(values: np.ndarray, vectors: np.ndarray) -> tuple[np.ndarra
 
 
 def modal_structure_for(A: Any, n_u: int, n_y: int) -> ModalStructure:
-    """The default modal structure (pairs first, modes tied to outputs in turn) that fits ``A``'s eigenvalues.
+    """Return the default modal structure that fits ``A``'s eigenvalues.
 
     Equals ``ModalStructure.default(n, n_u, n_y)`` when ``A`` has as many
     complex pairs as that structure (``n // 2``); otherwise it has the pairs
     and real poles ``A`` has, tied to the outputs in the same round-robin way.
+
+    Parameters
+    ----------
+    A : array_like, shape (n, n)
+        A system matrix.
+    n_u, n_y : int
+        Numbers of inputs and outputs.
+
+    Returns
+    -------
+    ModalStructure
+        Pairs first, modes tied to the outputs in turn.
     """
     A = finite_matrix("A", A)
     values = np.linalg.eigvals(A)
@@ -288,7 +329,17 @@ def balanced_truncation(Ad: Any, Bd: Any, Cd: Any, Dd: Any, order: int
                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Reduce a stable discrete model to ``order`` states by balanced truncation.
 
-    Returns the reduced ``(Ad, Bd, Cd, Dd)`` and all Hankel singular values.
+    Parameters
+    ----------
+    Ad, Bd, Cd, Dd : array_like
+        Stable discrete model, shapes (n, n), (n, n_u), (n_y, n), (n_y, n_u).
+    order : int
+        Number of states kept, 1 to n.
+
+    Returns
+    -------
+    tuple of ndarray
+        The reduced ``(Ad, Bd, Cd, Dd)`` and all n Hankel singular values, decreasing.
 
     Raises
     ------

@@ -1,1 +1,2 @@
-"""One module per ``vehid`` subcommand, discovered by :mod:`vehid.scenarios.cli`."""
+"""One module per ``vehid`` subcommand, discovered by :mod:`~vehid.scenarios.commands.parser`; the entry point is
+:func:`~vehid.scenarios.commands.main.main`."""

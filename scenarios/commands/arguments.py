@@ -8,12 +8,15 @@ nothing a command computes with.
 from __future__ import annotations
 
 import argparse
+import math
+from typing import Any
 
 from vehid.identification.automatic.options import IdentifyOptions
 from vehid.identification.choices import JITTER_TOLERANCE, SPLINE_NODES, SPLINE_P, SPLINE_PASSES
 from vehid.scenarios.commands.flags import add_option
 
-__all__ = ["common_options", "register_data_options", "add_filter_options"]
+__all__ = ["common_options", "register_data_options", "add_filter_options", "channel_names", "reading_settings",
+           "min_speed_of", "run_digest", "NOT_THE_RUN"]
 
 
 def common_options() -> argparse.ArgumentParser:
@@ -29,8 +32,9 @@ def common_options() -> argparse.ArgumentParser:
 def register_data_options(parser: argparse.ArgumentParser) -> None:
     """Add the reading, time-base and preparation options (their names are the Python API's).
 
-    :mod:`vehid.scenarios.data_options` reads them back (``settings_from_args``,
-    ``preparation_options``).
+    :func:`reading_settings` reads the reading options back as the library's
+    :class:`~vehid.identification.dataio.preparation.ReadSettings`; the others are
+    keywords of :func:`vehid.identification.identify` of the same names.
     """
     group = parser.add_argument_group("data files")
     group.add_argument("--time-column", metavar="NAME",
@@ -75,3 +79,65 @@ def add_filter_options(parser: argparse.ArgumentParser, *, passes: int, p: float
                         help=f"passes of each nonlinear identification (default {SPLINE_PASSES})")
     parser.add_argument("--nonlinear-p", type=float, default=None,
                         help=f"tuning parameter p of the nonlinear identifications (default {SPLINE_P:g})")
+
+
+def channel_names(text: str | None) -> tuple[str, ...]:
+    """Channel names from a comma-separated option (empty for None); an empty list is an error."""
+    from vehid.identification.errors import InputError
+
+    if text is None:
+        return ()
+    names = tuple(name.strip() for name in text.split(",") if name.strip())
+    if not names:
+        raise InputError("an empty column list was given")
+    return names
+
+
+def reading_settings(args: argparse.Namespace, *, inputs: str | None = None, outputs: str | None = None) -> Any:
+    """The :class:`~vehid.identification.dataio.preparation.ReadSettings` the data options describe (``inputs``
+    and ``outputs``: comma-separated channels in place of ``--inputs`` and ``--outputs``)."""
+    from vehid.identification.dataio.preparation import ReadSettings
+
+    return ReadSettings(
+        inputs=channel_names(args.inputs if inputs is None else inputs),
+        outputs=channel_names(args.outputs if outputs is None else outputs), time_column=args.time_column,
+        dt=args.dt, resample=args.resample, decimate=args.decimate, segment=args.segment,
+        jitter_tolerance=args.jitter_tolerance, time_scale=args.time_scale)
+
+
+def min_speed_of(text: str | None, *, moving_model: bool) -> float | None:
+    """The least speed (m/s) the records are cut at: ``--min-speed`` (a speed, or ``none`` to keep every
+    sample), else :data:`~vehid.scenarios.log_cleaning.MIN_SPEED` for a model that needs a moving car;
+    None where no speed cuts them."""
+    from vehid.identification.errors import InputError
+    from vehid.scenarios.log_cleaning import MIN_SPEED
+
+    if text is None:
+        return MIN_SPEED if moving_model else None
+    if text.strip().lower() == "none":
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        raise InputError(f"--min-speed takes a speed (m/s) or none; got {text!r}") from None
+    if not math.isfinite(value):
+        raise InputError(f"--min-speed takes a finite speed (m/s) or none; got {text!r}")
+    return value
+
+
+#: Options that choose where or how the output is shown or written, or how the work is spread over
+#: processes: they change no result, so rerunning with other values is the same run.
+NOT_THE_RUN = frozenset({
+    "handler", "out", "force", "resume", "save_model", "json", "quiet", "verbose", "strict", "no_report",
+    "workers", "executor", "scheduler",
+})
+
+
+def run_digest(args: argparse.Namespace) -> str:
+    """The digest that says which run a command line asks for: the command, its settings and its input files'
+    content (:func:`~vehid.identification.dataio.archive_safety.settings_digest`), without :data:`NOT_THE_RUN`."""
+    from vehid.identification.dataio.archive_safety import settings_digest
+
+    handler = getattr(args, "handler", None)
+    command = f"{getattr(handler, '__module__', '')}.{getattr(handler, '__name__', '')}"
+    return settings_digest(command, {name: value for name, value in vars(args).items() if name not in NOT_THE_RUN})

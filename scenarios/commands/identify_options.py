@@ -78,7 +78,7 @@ def register_schedule_options(parser: argparse.ArgumentParser) -> None:
                         help="with --schedule (a speed) or --structure single-track: use only the samples at or above "
                              "this speed (m/s, after --scale), each run of them its own record (default 5; none keeps "
                              "every sample)")
-    # comma-separated on the command line (scenarios.schedule_channel.parse_schedule_grid)
+    # comma-separated on the command line (commands.identify.parse_schedule_grid)
     add_option(parser, IdentifyOptions, "schedule_grid", metavar="V1,V2,...")
     add_option(parser, IdentifyOptions, "schedule_knots")
     add_option(parser, IdentifyOptions, "schedule_p", type=float, action="append", metavar="P")

@@ -22,7 +22,8 @@ import math
 from pathlib import Path
 
 from vehid.identification.errors import InputError, SimulationError
-from vehid.scenarios.paths import HDF5_SUFFIXES, OUT_RULE, run_digest
+from vehid.scenarios.commands.arguments import run_digest
+from vehid.scenarios.paths import HDF5_SUFFIXES, OUT_RULE
 from vehid.vehicle.choices import MANOEUVRE_NAMES, STEER_KINDS
 
 # NumPy, CasADi, h5py and the vehicle model are imported by the functions that use them: --help needs none.

@@ -21,7 +21,8 @@ from typing import TYPE_CHECKING, Any
 
 from vehid.identification.errors import InputError
 from vehid.scenarios.commands.arguments import add_filter_options
-from vehid.scenarios.paths import HDF5_SUFFIXES, OUT_RULE, run_digest
+from vehid.scenarios.commands.arguments import run_digest
+from vehid.scenarios.paths import HDF5_SUFFIXES, OUT_RULE
 from vehid.scenarios.progress import Progress
 from vehid.scenarios.study_settings import (HANDLING_AMPLITUDE_SCALE, HANDLING_DURATION, HANDLING_SEED, HANDLING_SPEED,
                                             HANDLING_VEHICLE, STUDY_LINEAR_P, STUDY_LINEAR_PASSES)

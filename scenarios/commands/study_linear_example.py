@@ -11,7 +11,8 @@ from __future__ import annotations
 import argparse
 
 from vehid.identification.choices import COVARIANCE_FORMS, DISCRETIZATIONS
-from vehid.scenarios.paths import HDF5_SUFFIXES, OUT_RULE, results_path, run_digest
+from vehid.scenarios.commands.arguments import run_digest
+from vehid.scenarios.paths import HDF5_SUFFIXES, OUT_RULE, results_path
 from vehid.scenarios.progress import Progress
 from vehid.scenarios.study_settings import LINEAR_EXAMPLE_CASES
 

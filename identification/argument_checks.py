@@ -1,4 +1,4 @@
-"""Argument checks shared by the classical estimators (private)."""
+"""Checks of the arguments the classical estimators, the model conversions and the comparators take."""
 
 from __future__ import annotations
 

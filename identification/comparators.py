@@ -45,19 +45,19 @@ import scipy.linalg
 import scipy.optimize
 from scipy.special import comb
 
-from .._checks import non_negative_int, positive_int
-from ..blas import on_one_blas_thread
-from ..data import IOData, as_records
-from ..models.discrete import DiscreteModel, has_no_continuous_equivalent
-from ..errors import ConversionError, ExcitationError, InputError, WorkbenchError
-from .least_squares import estimate_arx, least_squares, model_from_theta, stacked_arx_regressors
-from ..assessment.metrics import FitMetrics, fit_metrics
-from ..models.modal import ModalModel, ModalStructure
-from .recursive import recursive_least_squares
-from ..models.statespace import balanced_truncation, discrete_to_continuous, modal_structure_for, to_modal
-from .subspace import estimate_subspace
-from ..assessment.segments import UncertaintyMethod, formal_method
-from ..assessment.uncertainty import (
+from .argument_checks import non_negative_int, positive_int
+from .blas import on_one_blas_thread
+from .data import IOData, as_records
+from .models.discrete import DiscreteModel, has_no_continuous_equivalent
+from .errors import ConversionError, ExcitationError, InputError, WorkbenchError
+from .classical.least_squares import estimate_arx, least_squares, model_from_theta, stacked_arx_regressors
+from .assessment.metrics import FitMetrics, fit_metrics
+from .models.modal import ModalModel, ModalStructure
+from .classical.recursive import recursive_least_squares
+from .models.statespace import balanced_truncation, discrete_to_continuous, modal_structure_for, to_modal
+from .classical.subspace import estimate_subspace
+from .assessment.segments import UncertaintyMethod, formal_method
+from .assessment.uncertainty import (
     bootstrap_covariance,
     fit_covariance,
     propagate_by_differences,
@@ -87,12 +87,15 @@ class ComparatorResult:
     Attributes
     ----------
     method : str
+        The method's name in :data:`COMPARATORS`.
     model : ModalModel
+        The identified model, in modal form.
     metrics : FitMetrics
         Of the model simulated exactly (first-order hold) against the record.
     seconds : float
         Wall time of the identification (the scoring simulation excluded).
     meta : dict
+        The method's own notes (orders, options).
     """
 
     method: str
@@ -102,7 +105,13 @@ class ComparatorResult:
     meta: dict[str, Any] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
-        """JSON-ready summary."""
+        """Summarise the result for JSON.
+
+        Returns
+        -------
+        dict
+            Method, fits, run time, eigenvalues and the method's notes.
+        """
         return {
             "method": self.method,
             "seconds": self.seconds,
@@ -386,7 +395,7 @@ def iekf_comparator(data: IOData, *, order: int, **options: Any) -> ModalModel:
 
     Options are those of :class:`vehid.identification.filtering.iekf.IEKFOptions` (``p``, ``passes``, ...).
     """
-    from ..filtering.iekf import IEKFOptions, identify_iekf
+    from .filtering.iekf import IEKFOptions, identify_iekf
 
     try:
         settings = IEKFOptions(**options)
@@ -408,7 +417,17 @@ COMPARATORS: dict[str, Comparator] = {
 
 
 def register_comparator(name: str, function: Comparator, *, replace: bool = False) -> None:
-    """Add a method to :data:`COMPARATORS`: ``function(data, *, order, **options) -> ModalModel``."""
+    """Add a method to :data:`COMPARATORS`.
+
+    Parameters
+    ----------
+    name : str
+        The method's name, as ``method=`` takes it.
+    function : callable
+        ``function(data, *, order, **options) -> ModalModel``.
+    replace : bool, default False
+        Replace a method already registered under ``name`` (else that is an error).
+    """
     if not callable(function):
         raise InputError(f"the comparator {name!r} must be callable")
     if name in COMPARATORS and not replace:

@@ -15,12 +15,12 @@ from typing import Any
 import h5py
 import numpy as np
 
-from ..dataio.archive import append_history, read_run, run_group, update_archive, write_run
+from .archive import append_history, read_run, run_group, update_archive, write_run
 from ..errors import ArchiveError
-from .iekf import FilterState, IEKFOptions, IEKFResult, PassRecord
+from ..filtering.iekf import FilterState, IEKFOptions, IEKFResult, PassRecord
 from ..jsonable import to_jsonable
 from ..models.modal import ModalModel
-from ..dataio.storage import read_value, write_value
+from .storage import read_value, write_value
 
 __all__ = ["HISTORY_UNITS", "write_iekf_run", "write_pass_history", "append_iekf_pass", "read_iekf_run",
            "Checkpointer"]

@@ -17,7 +17,7 @@ from typing import Any, Mapping
 import casadi as ca
 import numpy as np
 
-from ..errors import ArchiveError, InputError
+from .errors import ArchiveError, InputError
 
 __all__ = ["SCALAR_OPERATIONS", "function_table", "table_function"]
 
