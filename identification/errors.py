@@ -18,6 +18,7 @@ __all__ = [
     "ConversionError",
     "StrictWarningsError",
     "SimulationError",
+    "PartialResultError",
 ]
 
 
@@ -177,3 +178,25 @@ class SimulationError(WorkbenchError):
         self.quantity = quantity
         self.value = value
         self.time = time
+
+
+class PartialResultError(WorkbenchError):
+    """A run failed part of the way, after work worth keeping: the failure, and what was finished.
+
+    Exit status 1. The command line prints ``text`` (the finished part's summary) before the error,
+    and with ``--json`` reports ``summary`` with the error beside it.
+
+    Attributes
+    ----------
+    summary : dict
+        What the run produced before it failed.
+    text : str or None
+        The run's text summary.
+    """
+
+    exit_status = 1
+
+    def __init__(self, message: str, summary: dict, text: str | None = None):
+        super().__init__(message)
+        self.summary = summary
+        self.text = text

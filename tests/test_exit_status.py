@@ -179,7 +179,7 @@ def test_a_failed_computation_exits_1(command, tmp_path, capsys, monkeypatch):
         monkeypatch.setattr("vehid.scenarios.envelope.run_campaign", diverge)
         argv += ["--speeds", "15", "--orders", "2", "--linear-only"]
     elif command == ("calibrate",):
-        monkeypatch.setattr("vehid.vehicle.calibration.calibrate_vehicle", diverge)
+        monkeypatch.setattr("vehid.vehicle.drive_calibration.calibrate_drive", diverge)
         log = tmp_path / "log.csv"
         log.write_text("t,delta,vx,yawRate,ayCG\n" + "".join(
             f"{k * 0.01},{0.01 * (-1) ** k},20,{0.1 * (-1) ** k},{(-1) ** k}\n" for k in range(200)))

@@ -183,3 +183,83 @@ def test_the_walk_finds_nested_keys_with_their_list_indices():
     found = {(path, indices) for path, indices, _ in fit_keys(summary)}
     assert found == {("fit_percent", ()), ("a.b_fit_percent", ()), ("a.rows[].c_fit_percent", (0,))}
     assert all(re.search(r"fit_percent$", path) for path, _ in found)
+
+
+# ``vehid calibrate`` keeps no archive: its report is the figure (--figure), which draws each car's outputs over
+# the whole log (NaN where the model does not drive it) against the measured channels, the dashed line at
+# ``estimation_samples``. Each key is ``(car, part)``: the NRMSE fit of that car's drawn curve on the part's
+# driven samples, per --outputs channel; a ``{channel: fit}`` key scores the --check channels the same way.
+CALIBRATE = {
+    "estimation_fit_percent": ("calibrated", "estimation"),
+    "validation_fit_percent": ("calibrated", "validation"),
+    "check_fit_percent": ("calibrated", "validation"),
+    "prior_validation_fit_percent": ("prior", "validation"),
+    "prior_check_fit_percent": ("prior", "validation"),
+    "start_validation_fit_percent": ("start", "validation"),
+    "start_check_fit_percent": ("start", "validation"),
+}
+
+
+def check_calibrate_fit_keys(summary: Mapping[str, Any], drawn: Mapping[str, Any]) -> set[str]:
+    """Compare every ``*fit_percent`` key of a calibrate summary with the NRMSE fit of the curves its figure draws
+    (``drawn``: ``t``, ``measured``, ``predictions`` and ``names`` as given to the figure); the paths checked."""
+    from vehid.identification.assessment.metrics import nrmse_fit
+
+    checked = set()
+    split = summary["estimation_samples"]
+    measured = np.asarray(drawn["measured"])
+    names = list(drawn["names"])
+    for path, _, value in fit_keys(summary):
+        assert path in CALIBRATE, f"{path}: no table accounts for this key"
+        car, part = CALIBRATE[path]
+        curve = np.asarray(drawn["predictions"][car])
+        rows = np.arange(split) if part == "estimation" else np.arange(split, measured.shape[0])
+        rows = rows[np.all(np.isfinite(curve[rows]), axis=1)]
+        fits = dict(zip(names, nrmse_fit(measured[rows], curve[rows])))
+        if isinstance(value, Mapping):
+            stated, expected = [value[name] for name in value], [fits[name] for name in value]
+        else:
+            stated, expected = value, [fits[name] for name in names[:len(value)]]
+        np.testing.assert_allclose(np.asarray(stated, dtype=float), expected, rtol=0, atol=TOLERANCE, err_msg=path)
+        checked.add(path)
+    return checked
+
+
+def test_calibrate_states_the_fits_of_the_curves_its_figure_draws(tmp_path, monkeypatch, capsys):
+    """A drive calibration (known cars over the committed race-car log, the filter left out: tests/
+    test_drive_calibration.py) rendered by the command: every fit key is the NRMSE fit of a curve its figure
+    draws, on the held-out samples the model drove (a gap left out of the held-out part is not scored)."""
+    from test_drive_calibration import CHANNELS, RACE_LOG, _fake_calibration, _race_log
+
+    from vehid.identification.errors import InputError
+    from vehid.scenarios import plots
+    from vehid.scenarios.cli import main
+
+    log, _ = _race_log()
+    fake = _fake_calibration(log)
+    drawn: dict[str, Any] = {}
+    plot_time_fits = plots.plot_time_fits
+
+    def recording(t, measured, predictions, names, *args, **kwargs):
+        drawn.update(t=t, measured=measured, predictions=predictions, names=names)
+        return plot_time_fits(t, measured, predictions, names, *args, **kwargs)
+
+    monkeypatch.setattr(plots, "plot_time_fits", recording)
+    monkeypatch.setattr("vehid.vehicle.drive_calibration.calibrate_drive", lambda *args, **kwargs: fake)
+    monkeypatch.setattr("vehid.vehicle.handling.source_handling",
+                        lambda *args, **kwargs: (_ for _ in ()).throw(InputError("not needed here")))
+    figure = tmp_path / "fits.png"
+    status = main(["calibrate", str(RACE_LOG), *CHANNELS, "--check", "beta_true=sideslip", "--figure", str(figure),
+                   "--json"])
+    captured = capsys.readouterr()
+    assert status == 0, captured.err
+    checked = check_calibrate_fit_keys(json.loads(captured.out), drawn)
+    assert checked == set(CALIBRATE)
+    # the left-out gap is drawn as no curve (NaN) and so cannot enter a score
+    assert np.all(np.isnan(drawn["predictions"]["calibrated"][fake.runs[0][1]:fake.runs[1][0]]))
+
+
+def test_calibrate_check_refuses_an_unaccounted_key():
+    with pytest.raises(AssertionError, match="no table accounts"):
+        check_calibrate_fit_keys({"estimation_samples": 1, "novel_fit_percent": [1.0]},
+                                 {"measured": np.zeros((2, 1)), "names": ["y"], "predictions": {}})

@@ -23,6 +23,9 @@ Choices, each stated where it is made:
   one less certain relative to its size), is not determined by the log. It is held at its prior and
   the others are estimated again without it, until every remaining one is determined. Each
   parameter may have its own prior std (``prior_std``); the limit is then half of that one.
+  An estimate that makes no valid vehicle (the filter's model runs past the vehicle's checks: a grip
+  the centre of gravity would tip over at) is held the same way, the free parameter that moved
+  furthest from its start, counted in its prior std, first.
 * Standard deviations widen by the residuals' correlation time (the grey-box filter's
   ``coloured_residuals``): a model's error on a measured log is coloured, and the filter's own
   covariance, which counts every sample as independent, would be too small by that factor.
@@ -43,7 +46,8 @@ from vehid.identification.errors import InputError
 from vehid.identification.filtering.greybox import GreyBoxModel, GreyBoxOptions, GreyBoxResult, identify_greybox
 
 from .model import CORNERS, OUTPUT_NAMES, OUTPUT_UNITS, STATE_NAMES, vehicle_expressions
-from .parameters import VehicleParameters
+from .parameters import VehicleParameters, static_axle_loads
+from .tyre import cornering_stiffness
 from .simulation import simulate
 
 __all__ = [
@@ -53,6 +57,9 @@ __all__ = [
     "ROLL_PARAMETERS",
     "Calibration",
     "calibration_model",
+    "check_parameter",
+    "held_stiffness_scales",
+    "STIFFNESS_SCALES",
     "calibration_record",
     "calibrate_vehicle",
     "simulated_log",
@@ -77,7 +84,7 @@ PRIOR_SHARE_LIMIT = 0.5
 
 # Fields that steer a decision in the model's construction (a branch, not arithmetic): a symbol there
 # has no single model to stand for.
-_DECISION_FIELDS = ("steering.compliance", "drive.front_drive_share", "aerodynamics.drag_area",
+_DECISION_FIELDS = ("steering.compliance", "drive.front_drive_share", "drive.slip_limit", "aerodynamics.drag_area",
                     "aerodynamics.front_downforce_area", "aerodynamics.rear_downforce_area")
 
 # Half-width (s) of the moving average under the measured speed's rate: a 0.1 s window passes the
@@ -98,6 +105,12 @@ def _field(params: VehicleParameters, name: str) -> tuple[Any, str, str]:
     if name in _DECISION_FIELDS:
         raise InputError(f"vehicle parameter {name!r} selects the model's structure and cannot be calibrated")
     return holder, field_name, str(fields[field_name].metadata.get("unit", "-"))
+
+
+def check_parameter(params: VehicleParameters, name: str) -> str:
+    """The unit of the vehicle field ``name`` (``section.field``), or InputError where it is unknown or
+    selects the model's structure (it cannot be calibrated)."""
+    return _field(params, name)[2]
 
 
 def vehicle_with(params: VehicleParameters, names: Sequence[str], values: Sequence[Any]) -> VehicleParameters:
@@ -126,6 +139,36 @@ def _symbolic_vehicle(params: VehicleParameters, names: Sequence[str], theta: ca
     return copy
 
 
+#: The cornering scales that follow the tyres' load sensitivity where it is calibrated with the axles'
+#: static stiffness held (:func:`held_stiffness_scales`).
+STIFFNESS_SCALES = ("tyre.front_cornering_scale", "tyre.rear_cornering_scale")
+
+
+def held_stiffness_scales(params: VehicleParameters, load_sensitivity: Any,
+                          scales: tuple[Any, Any] | None = None) -> tuple[Any, Any]:
+    """The front and rear cornering scales of ``params`` (or ``scales``) as they are where ``tyre.PKY2`` is
+    ``load_sensitivity`` (a number or a CasADi symbol) and each axle's cornering stiffness at its static
+    load stays what the scale gives at the PKY2 of ``params``.
+
+    ``PKY2`` sets the load at which a tyre's cornering stiffness stops growing (Pacejka 2012, eq. 4.E25):
+    it changes how an axle's stiffness moves with the load, and the stiffness at the static load with
+    it. With the static stiffness held, PKY2 is the shape alone and each cornering scale the axle's
+    level at the prior's PKY2: the two are then told apart by a drive (the level by the balance, the
+    shape by how the balance moves as the load moves across and along the car), which they were not
+    otherwise (on simulated drives to 0.8 g the front scale and PKY2 correlated by 0.98-0.99, and -0.64
+    with the stiffness held; benchmarks/calibration.py).
+    """
+    tyre = params.tyre
+    scales = (tyre.front_cornering_scale, tyre.rear_cornering_scale) if scales is None else scales
+    if isinstance(load_sensitivity, (int, float)):
+        shaped = dataclasses.replace(tyre, PKY2=float(load_sensitivity))
+    else:
+        shaped = dataclasses.replace(tyre)
+        object.__setattr__(shaped, "PKY2", load_sensitivity)
+    return tuple(scale * cornering_stiffness(load / 2, tyre) / cornering_stiffness(load / 2, shaped)
+                 for scale, load in zip(scales, static_axle_loads(params)))
+
+
 def _straight_direction(params: VehicleParameters) -> np.ndarray:
     """States of straight running per unit speed (forward speed and wheel spins): linear in the speed."""
     direction = np.zeros(len(STATE_NAMES))
@@ -135,8 +178,13 @@ def _straight_direction(params: VehicleParameters) -> np.ndarray:
     return direction
 
 
-def calibration_model(params: VehicleParameters, parameters: Sequence[str], quantities: Sequence[str]) -> GreyBoxModel:
+def calibration_model(params: VehicleParameters, parameters: Sequence[str], quantities: Sequence[str], *,
+                      hold_static_stiffness: bool = False) -> GreyBoxModel:
     """The 23-state model of ``params`` with ``parameters`` symbolic, measuring ``quantities``.
+
+    With ``hold_static_stiffness`` (``tyre.PKY2`` calibrated) the cornering scales, calibrated or not,
+    are the axles' levels at the PKY2 of ``params``, and PKY2 moves only how the stiffness changes
+    with the load (:func:`held_stiffness_scales`).
 
     Parameters
     ----------
@@ -173,9 +221,16 @@ def calibration_model(params: VehicleParameters, parameters: Sequence[str], quan
         positive.append(value > 0)
         starts.append(value)
     theta = ca.SX.sym("theta", len(parameters))
+    symbolic = _symbolic_vehicle(params, parameters, theta)
+    if hold_static_stiffness:
+        if "tyre.PKY2" not in parameters:
+            raise InputError("holding the axles' static cornering stiffness needs tyre.PKY2 calibrated")
+        levels = tuple(getattr(symbolic.tyre, name.partition(".")[2]) for name in STIFFNESS_SCALES)
+        front, rear = held_stiffness_scales(params, theta[parameters.index("tyre.PKY2")], levels)
+        object.__setattr__(symbolic.tyre, "front_cornering_scale", front)
+        object.__setattr__(symbolic.tyre, "rear_cornering_scale", rear)
     try:
-        x, steer, reference_speed, reference_acceleration, xdot, y = vehicle_expressions(
-            _symbolic_vehicle(params, parameters, theta))
+        x, steer, reference_speed, reference_acceleration, xdot, y = vehicle_expressions(symbolic)
     except (RuntimeError, NotImplementedError, TypeError) as exc:  # a symbol met a branch
         raise InputError(f"one of {', '.join(parameters)} cannot be a calibration parameter: {exc}") from None
     deviation = ca.SX.sym("deviation", len(STATE_NAMES))
@@ -191,19 +246,27 @@ def calibration_model(params: VehicleParameters, parameters: Sequence[str], quan
         dynamics=dynamics, output=output, parameter_names=parameters, parameter_units=tuple(units),
         positive=tuple(positive), state_names=tuple(f"d_{name}" for name in STATE_NAMES), input_names=("steer",),
         schedule_names=("reference_speed", "reference_acceleration"), output_names=quantities,
-        description=f"23-state vehicle {params.name!r}: {', '.join(parameters)} calibrated",
+        description=f"23-state vehicle {params.name!r}: {', '.join(parameters)} calibrated"
+                    + (", the axles' static cornering stiffness held" if hold_static_stiffness else ""),
     )
 
 
-def speed_schedule(speed: Any, dt: float) -> np.ndarray:
+def speed_schedule(speed: Any, dt: float, acceleration: Any = None) -> np.ndarray:
     """The scheduling signals of a measured speed: itself and its smoothed rate, (N, 2).
 
     The rate is the difference quotient of the speed averaged over ``2 * 0.05 s`` (see
-    ``_RATE_SMOOTHING``), so that a speed sensor's white noise does not reach the feed-forward.
+    ``_RATE_SMOOTHING``), so that a speed sensor's white noise does not reach the feed-forward;
+    or, where the log measures it, the longitudinal acceleration ``acceleration`` (m/s^2, one per
+    sample), which needs no differentiating and holds what the speed hold must supply.
     """
     speed = np.asarray(speed, dtype=float).ravel()
     if speed.size < 3 or not np.all(np.isfinite(speed)):
         raise InputError("the speed channel needs at least three finite samples")
+    if acceleration is not None:
+        acceleration = np.asarray(acceleration, dtype=float).ravel()
+        if acceleration.shape != speed.shape or not np.all(np.isfinite(acceleration)):
+            raise InputError(f"the acceleration channel needs one finite value per speed sample ({speed.size})")
+        return np.column_stack([speed, acceleration])
     half = max(1, int(round(_RATE_SMOOTHING / dt)))
     kernel = np.ones(2 * half + 1) / (2 * half + 1)
     padded = np.concatenate([2 * speed[0] - speed[half:0:-1], speed, 2 * speed[-1] - speed[-2:-half - 2:-1]])
@@ -212,8 +275,12 @@ def speed_schedule(speed: Any, dt: float) -> np.ndarray:
 
 
 def calibration_record(steer: Any, speed: Any, outputs: Any, dt: float, quantities: Sequence[str],
-                       t0: float = 0.0) -> IOData:
-    """A log as the calibration model takes it: road-wheel steer, the speed schedule, the measured quantities."""
+                       t0: float = 0.0, acceleration: Any = None) -> IOData:
+    """A log as the calibration model takes it: road-wheel steer, the speed schedule, the measured quantities.
+
+    ``acceleration``, where the log measures it, is fed forward in place of the speed's rate
+    (:func:`speed_schedule`).
+    """
     steer = np.asarray(steer, dtype=float).ravel()
     outputs = np.asarray(outputs, dtype=float)
     outputs = outputs.reshape(-1, 1) if outputs.ndim == 1 else outputs
@@ -224,7 +291,8 @@ def calibration_record(steer: Any, speed: Any, outputs: Any, dt: float, quantiti
                          f"do not match {len(quantities)} quantities")
     units = dict(zip(OUTPUT_NAMES, OUTPUT_UNITS))
     return IOData(
-        t=t0 + dt * np.arange(steer.size), u=np.column_stack([steer, speed_schedule(speed, dt)]), y=outputs,
+        t=t0 + dt * np.arange(steer.size), u=np.column_stack([steer, speed_schedule(speed, dt, acceleration)]),
+        y=outputs,
         input_names=("steer", "reference_speed", "reference_acceleration"), input_units=("rad", "m/s", "m/s^2"),
         output_names=tuple(quantities), output_units=tuple(units[q] for q in quantities),
     )
@@ -296,6 +364,9 @@ class Calibration:
         Name -> reason, for the parameters the log did not determine (held at the prior).
     result : GreyBoxResult
         The last grey-box fit (of the determined parameters).
+    vehicle_values : dict
+        Fields whose value in :attr:`vehicle` is not their estimate: the cornering scales where the
+        axles' static stiffness is held (``hold_static_stiffness`` of :func:`calibrate_vehicle`).
     """
 
     vehicle: VehicleParameters
@@ -307,10 +378,13 @@ class Calibration:
     held: dict[str, str]
     result: GreyBoxResult | None
     warnings: tuple[str, ...] = field(default_factory=tuple)
+    vehicle_values: dict[str, float] = field(default_factory=dict)
 
     def parameters_dict(self) -> dict[str, dict[str, Any]]:
-        """``name -> {value, std, unit}`` (std None where held at the prior)."""
-        return {name: {"value": float(v), "std": None if not math.isfinite(s) else float(s), "unit": unit}
+        """``name -> {value, std, unit}`` (std None where held at the prior), with ``in_vehicle`` where the
+        vehicle carries another value (:attr:`vehicle_values`)."""
+        return {name: {"value": float(v), "std": None if not math.isfinite(s) else float(s), "unit": unit,
+                       **({"in_vehicle": self.vehicle_values[name]} if name in self.vehicle_values else {})}
                 for name, v, s, unit in zip(self.parameter_names, self.values, self.std, self.units)}
 
 
@@ -339,10 +413,30 @@ def _undetermined(names: Sequence[str], values: np.ndarray, std: np.ndarray, cor
     return None
 
 
+def _invalid_estimate(prior_vehicle: VehicleParameters, parameters: Sequence[str], free: Sequence[str],
+                      start: np.ndarray, estimate: np.ndarray, relative_prior: np.ndarray) -> tuple[str, str] | None:
+    """Where the free parameters' estimate makes no valid vehicle (a grip the centre of gravity would tip
+    over at, say): the free parameter that moved furthest from its start, counted in its prior std, and
+    why; else None. The model itself runs beyond those limits, so the filter may end there."""
+    values = start.copy()
+    index = [parameters.index(name) for name in free]
+    values[index] = estimate[index]
+    try:
+        vehicle_with(prior_vehicle, parameters, values)
+    except InputError as exc:
+        moved = np.abs(values[index] - start[index]) / (relative_prior[index] * np.abs(start[index]))
+        worst = int(np.argmax(moved))
+        return free[worst], (f"its estimate {values[index[worst]]:.4g} makes no valid vehicle with the others: "
+                             f"{exc}")
+    return None
+
+
 def calibrate_vehicle(params: VehicleParameters, data: IOData | Sequence[IOData], quantities: Sequence[str], *,
                       parameters: Sequence[str] | None = None, priors: Mapping[str, float] | None = None,
                       prior_std: Mapping[str, float] | None = None, correlation_limit: float = CORRELATION_LIMIT,
-                      options: GreyBoxOptions | None = None) -> Calibration:
+                      options: GreyBoxOptions | None = None, fixed: Sequence[str] = (),
+                      starts: Mapping[str, float] | None = None, hold_static_stiffness: bool = False
+                      ) -> Calibration:
     """Calibrate chosen parameters of ``params`` to logs (:func:`calibration_record`).
 
     Parameters
@@ -365,10 +459,27 @@ def calibrate_vehicle(params: VehicleParameters, data: IOData | Sequence[IOData]
     options : GreyBoxOptions, optional
         Default: :class:`GreyBoxOptions` with ``coloured_residuals`` (a measured log's residuals are
         rarely white; the std then widens by their correlation time).
+    fixed : sequence of str
+        Parameters kept at their start in this calibration, not estimated (a stage of a staged
+        calibration); they are neither reported as undetermined nor given a std.
+    starts : mapping, optional
+        ``name -> value``: where the filter starts, in place of the prior value (an earlier stage's
+        estimate). The prior std still applies around it.
+    hold_static_stiffness : bool
+        The cornering scales are the axles' levels at the prior's ``tyre.PKY2``, which moves only how
+        the stiffness changes with the load (:func:`calibration_model`): the estimates of the scales
+        are those levels, and the calibrated vehicle carries the scales that give them at the
+        estimated PKY2 (:attr:`Calibration.vehicle_values`).
 
     Returns
     -------
     Calibration
+
+    Notes
+    -----
+    The model is built and compiled once, with every parameter a symbol: a parameter held (fixed,
+    or found undetermined) is kept at its value by the filter's ``held`` mask, so dropping one
+    costs a run of the filter but no compilation.
     """
     quantities = tuple(quantities)
     if parameters is None:
@@ -378,7 +489,8 @@ def calibrate_vehicle(params: VehicleParameters, data: IOData | Sequence[IOData]
         raise InputError(f"the correlation limit must be in (0, 1); got {correlation_limit!r}")
     priors = dict(priors or {})
     prior_std = dict(prior_std or {})
-    extra = (set(priors) | set(prior_std)) - set(parameters)
+    starts = dict(starts or {})
+    extra = (set(priors) | set(prior_std) | set(starts) | set(fixed)) - set(parameters)
     if extra:
         raise InputError(f"a prior is given for {sorted(extra)[0]!r}, which is not calibrated")
     for name, value in prior_std.items():
@@ -388,41 +500,62 @@ def calibrate_vehicle(params: VehicleParameters, data: IOData | Sequence[IOData]
         _field(params, name)
     try:
         prior_vehicle = vehicle_with(params, list(priors), list(priors.values())) if priors else params
+        start_vehicle = vehicle_with(prior_vehicle, list(starts), list(starts.values())) if starts else prior_vehicle
     except (ValueError, TypeError) as exc:
         raise InputError(f"a prior makes an invalid vehicle: {exc}") from None
     units = tuple(_field(prior_vehicle, name)[2] for name in parameters)
     prior_values = np.array([float(getattr(*_field(prior_vehicle, name)[:2])) for name in parameters])
+    start_values = np.array([float(getattr(*_field(start_vehicle, name)[:2])) for name in parameters])
     options = options or GreyBoxOptions(coloured_residuals=True)
     relative_prior = np.array([prior_std[name] / abs(value) if name in prior_std else options.prior_std
                                for name, value in zip(parameters, prior_values)])
-    free = list(parameters)
+    # built on the prior vehicle whatever the starts: one model (and compilation) for every stage, and the
+    # rear axle's stiffness, where held, held at the prior's
+    model = calibration_model(prior_vehicle, parameters, quantities, hold_static_stiffness=hold_static_stiffness)
+    free = [name for name in parameters if name not in fixed]
+    if not free:
+        raise InputError("every calibration parameter is fixed: leave at least one to estimate")
     held: dict[str, str] = {}
     result = None
+    start = start_values.copy()
     while free:
-        model = calibration_model(prior_vehicle, free, quantities)
-        start = np.array([prior_values[parameters.index(name)] for name in free])
-        free_prior = np.array([relative_prior[parameters.index(name)] for name in free])
-        result = identify_greybox(data, model, start,
-                                  options=dataclasses.replace(options, parameter_prior_std=tuple(free_prior)))
-        reason = _undetermined(free, result.parameters, result.std, result.correlation, correlation_limit,
-                               free_prior)
+        mask = tuple(name not in free for name in parameters)
+        result = identify_greybox(data, model, start, options=dataclasses.replace(
+            options, parameter_prior_std=tuple(relative_prior), held=mask))
+        index = [parameters.index(name) for name in free]
+        reason = _undetermined(free, result.parameters[index], result.std[index],
+                               result.correlation[np.ix_(index, index)], correlation_limit, relative_prior[index])
+        if reason is None:
+            reason = _invalid_estimate(prior_vehicle, parameters, free, start, result.parameters, relative_prior)
         if reason is None:
             break
         held[reason[0]] = reason[1]
         free.remove(reason[0])
+        # the others start again where they started: a parameter running away may have dragged them
         result = None
-    values, std = prior_values.copy(), np.full(len(parameters), np.nan)
+    values, std = start_values.copy(), np.full(len(parameters), np.nan)
     correlation = np.full((len(parameters), len(parameters)), np.nan)
     if result is not None:
         index = [parameters.index(name) for name in free]
-        values[index] = result.parameters
-        std[index] = result.std
-        correlation[np.ix_(index, index)] = result.correlation
-    warnings = tuple(f"{name} not identifiable from this log ({why}): held at its prior "
-                     f"{prior_values[parameters.index(name)]:.6g}" for name, why in held.items())
+        values[index] = result.parameters[index]
+        std[index] = result.std[index]
+        correlation[np.ix_(index, index)] = result.correlation[np.ix_(index, index)]
+    # a held parameter keeps its start, the value the others were estimated with: the prior, or an
+    # earlier stage's estimate
+    warnings = tuple(f"{name} not identifiable from this log ({why}): held at its "
+                     f"{'prior' if name not in starts else 'start'} {start_values[parameters.index(name)]:.6g}"
+                     for name, why in held.items())
+    vehicle = vehicle_with(prior_vehicle, parameters, values)
+    vehicle_values: dict[str, float] = {}
+    if hold_static_stiffness:
+        scales = held_stiffness_scales(prior_vehicle, float(values[parameters.index("tyre.PKY2")]),
+                                       tuple(float(getattr(vehicle.tyre, n.partition(".")[2])) for n in STIFFNESS_SCALES))
+        vehicle_values = dict(zip(STIFFNESS_SCALES, map(float, scales)))
+        vehicle = vehicle_with(vehicle, STIFFNESS_SCALES, scales)
     return Calibration(
-        vehicle=vehicle_with(prior_vehicle, parameters, values), parameter_names=parameters, units=units,
+        vehicle=vehicle, parameter_names=parameters, units=units,
         values=values, std=std, correlation=correlation, held=held, result=result, warnings=warnings,
+        vehicle_values=vehicle_values,
     )
 
 

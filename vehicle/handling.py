@@ -799,7 +799,7 @@ def source_handling(
     from .model import check_speed
 
     params = named_vehicle(params)
-    speeds = [check_speed(v) for v in np.atleast_1d(np.asarray(speeds, dtype=float))]
+    speeds = [check_speed(v, params) for v in np.atleast_1d(np.asarray(speeds, dtype=float))]
     if not (math.isfinite(step_lateral_acceleration) and step_lateral_acceleration > 0):
         raise InputError(f"the step's lateral acceleration must be positive (m/s^2); got {step_lateral_acceleration}")
     linear = [_source_linearisation(params, v) for v in speeds]

@@ -41,6 +41,7 @@ __all__ = [
     "MANOEUVRES",
     "make_manoeuvre",
     "band_limited_noise",
+    "speed_from_accelerations",
 ]
 
 _DEG = math.pi / 180.0
@@ -288,7 +289,7 @@ def _speed_scaled_steer(t: np.ndarray, speed: np.ndarray, amplitude: float, dt: 
     return amplitude * (_SCHEDULE_SPEED / speed) ** 2 * _fade(t, 1.0) * noise
 
 
-def _speed_from_accelerations(t: np.ndarray, start_speed: float,
+def speed_from_accelerations(t: np.ndarray, start_speed: float,
                               segments: list[tuple[float, float, float]], edge: float) -> np.ndarray:
     """Speed (N,) from ``start_speed`` under acceleration pulses ``(start s, length s, m/s^2)``.
 
@@ -334,7 +335,7 @@ def speed_ramp(
     edge = min(2.0, 0.1 * duration)
     rise_start, rise_length = 0.1 * duration, 0.8 * duration - edge
     rate = (high - low) / rise_length  # the pulse's integral: rate * (rise_length) exactly
-    speed = _speed_from_accelerations(t, low, [(rise_start, rise_length, rate)], edge)
+    speed = speed_from_accelerations(t, low, [(rise_start, rise_length, rate)], edge)
     rng = np.random.default_rng(seed)
     steer = _speed_scaled_steer(t, speed, amplitude, dt, rng)
     return Manoeuvre(
@@ -367,7 +368,7 @@ def speed_cycle(
     changes = [(0.10, 30.0 - 20.0, 1.5), (0.45, 12.0 - 30.0, -3.0), (0.75, 20.0 - 12.0, 1.5)]
     # a pulse of level a and length T changes the speed by a T: T = change / a
     segments = [(fraction * duration, change / level, level) for fraction, change, level in changes]
-    speed = _speed_from_accelerations(t, 20.0, segments, edge)
+    speed = speed_from_accelerations(t, 20.0, segments, edge)
     rng = np.random.default_rng(seed)
     steer = _speed_scaled_steer(t, speed, amplitude, dt, rng)
     return Manoeuvre(

@@ -65,6 +65,14 @@ static axle loads, blended in over the first 0.5 m/s^2 of deceleration so that
 the torques stay continuous in the reference. At a constant reference the rate
 is zero, the feed-forward and the rear torque vanish identically and
 :attr:`VehicleModel.dynamics` is the plain PI hold on the front wheels.
+
+Slip limiter (``drive.slip_limit`` above zero; none on the named vehicles). A car replayed along a
+measured drive is asked for the log's accelerations whatever its torque split: an unloaded inner wheel
+spins up under drive torque, a lightly loaded rear wheel locks under braking, and the replay stops
+there. With the limiter, as traction control and anti-lock brakes do, each wheel's torque fades once
+its lagged slip passes the limit in the torque's direction and a restoring torque brings the wheel
+back (:func:`_slip_limited`), and the brakes are shared between the axles in proportion to their loads
+as they are (electronic brake-force distribution) rather than the static ones.
 """
 
 from __future__ import annotations
@@ -130,11 +138,29 @@ OUTPUT_UNITS = ("m/s^2", "rad/s", "rad", "rad", "m/s", *("N",) * 4, "m/s^2")
 _EPS_SPEED = 0.1  # [m/s] smoothing of |V_cx|: 2.5e-4 relative error at 20 m/s
 _EPS_LOAD = 1.0  # [N] smoothing of max(F_z, 0): 6e-5 N bias at a static corner load of ~3-4 kN
 _EPS_DEMAND = 0.01  # [m/s^2] smoothing of min(demand, 0): brake torque at zero demand 0.5 % of a 1 m/s^2 stop
+_EPS_TORQUE = 1.0  # [N m] a torque's direction, smoothed: the slip limiter's sense at zero torque
+_EPS_SLIP = 0.005  # smoothing of the slip limiter's onset: a twentieth of a typical limit of 0.1
+_SLIP_RETURN_RATE = 400.0  # [m/s^2] the limiter's pull on a wheel's surface speed per unit of excess slip
 _BRAKE_BLEND = 0.5  # [m/s^2] falling reference rate over which the rear brakes take their full share
 
 
 def _smooth_abs(x, eps):
     return ca.sqrt(x * x + eps * eps)
+
+
+def _slip_limited(torque, slip, limit, restoring):
+    """A wheel's torque as traction control and anti-lock brakes leave it (module notes, "Slip limiter").
+
+    Beyond ``limit`` in the torque's direction (a driven wheel spinning up, a braked one locking)
+    the torque fades by ``1 / (1 + (excess / (limit / 2))^2)`` (one up to the limit, a half at 1.5
+    times it) and ``restoring`` (N m per unit of excess slip) turns the wheel back towards the
+    limit, as a traction control brakes a spinning wheel: a wheel lifted off the road, which no
+    tyre force slows, then settles near the limit too. Smooth throughout.
+    """
+    direction = ca.tanh(torque / _EPS_TORQUE)
+    beyond = direction * slip - limit
+    excess = (beyond + _smooth_abs(beyond, _EPS_SLIP)) / 2
+    return torque / (1 + (2 * excess / limit) ** 2) - direction * restoring * excess
 
 
 def _rotation_pitch_roll(phi, theta):
@@ -452,7 +478,7 @@ def vehicle_expressions(params: VehicleParameters) -> tuple[ca.SX, ca.SX, ca.SX,
     steered = (True, True, False, False)
     lateral_relaxation = (tyre.front_lateral_relaxation,) * 2 + (tyre.rear_lateral_relaxation,) * 2
     longitudinal_relaxation = (tyre.front_longitudinal_relaxation,) * 2 + (tyre.rear_longitudinal_relaxation,) * 2
-    cornering_scale = (tyre.front_cornering_scale,) * 2 + (1.0,) * 2
+    cornering_scale = (tyre.front_cornering_scale,) * 2 + (tyre.rear_cornering_scale,) * 2
 
     # Corner compression (positive in bump) and its rate, from the body pose and velocity.
     compression, compression_rate = [], []
@@ -489,9 +515,12 @@ def vehicle_expressions(params: VehicleParameters) -> tuple[ca.SX, ca.SX, ca.SX,
     braking_demand = (demand - _smooth_abs(demand, _EPS_DEMAND)) / 2  # smooth min(demand, 0)
     # Brakes balanced to the static axle loads, blended in as the reference starts to fall:
     # exactly zero rear torque at a constant or rising reference.
-    rear_brake_share = rear_static / (front_static + rear_static) * ca.fmin(
-        ca.fmax(-reference_acceleration / _BRAKE_BLEND, 0), 1
-    )
+    rear_load_share = rear_static / (front_static + rear_static)
+    if drive.slip_limit > 0:
+        # with the slip limiter comes electronic brake-force distribution: the brakes shared in
+        # proportion to the axles' loads as they are, which braking shifts forwards
+        rear_load_share = (load[2] + load[3]) / (load[0] + load[1] + load[2] + load[3] + _EPS_LOAD)
+    rear_brake_share = rear_load_share * ca.fmin(ca.fmax(-reference_acceleration / _BRAKE_BLEND, 0), 1)
     rear_axle_torque = m * tyre.rolling_radius * rear_brake_share * braking_demand
     if drive.front_drive_share == 1:  # front-wheel drive: the paper's car, its expressions as they were
         drive_torque_front = 0.5 * m * tyre.rolling_radius * demand - 0.5 * rear_axle_torque
@@ -501,6 +530,11 @@ def vehicle_expressions(params: VehicleParameters) -> tuple[ca.SX, ca.SX, ca.SX,
         drive_torque_front = 0.5 * m * tyre.rolling_radius * demand - 0.5 * rear_axle_torque - 0.5 * rear_drive
         rear_axle_torque = rear_axle_torque + rear_drive
     drive_torque = (drive_torque_front, drive_torque_front, 0.5 * rear_axle_torque, 0.5 * rear_axle_torque)
+    if drive.slip_limit > 0:
+        # the wheel's spin returns to the limit in about V / 400 s (0.05 s at 20 m/s): I_w V / (restoring R_e)
+        restoring = _SLIP_RETURN_RATE * tyre.wheel_inertia / tyre.rolling_radius
+        drive_torque = tuple(_slip_limited(torque, s[f"kappa_{corner}"], drive.slip_limit, restoring)
+                             for torque, corner in zip(drive_torque, CORNERS))
 
     # Tyre forces from the lagged slips and the loads: they do not depend on the steer.
     tyre_forces = [

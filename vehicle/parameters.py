@@ -166,6 +166,8 @@ class TyreParameters:
     rear_longitudinal_relaxation: float = _p(0.157, "m", "K_xk / longitudinal stiffness at static rear load (PCFX1)")
     # Scale of the front cornering stiffness: a stand-in for steering compliance.
     front_cornering_scale: float = _p(1.0, "-", "LKY on the front tyres; 0.75 in the 'understeer' variant")
+    # Its rear counterpart: with both, a calibration sets the front/rear balance and the level apart.
+    rear_cornering_scale: float = _p(1.0, "-", "LKY on the rear tyres (wider or stiffer rear tyres: above 1)")
     # Friction scaling: raise it for sticky (track) tyres, lower it for a wet road.
     friction_scale: float = _p(1.0, "-", "LMUX = LMUY on all four tyres: peak forces scale, slip stiffnesses do not")
     # Aligning moment (eq. 4.E31-4.E49 and 4.E71-4.E78 at gamma = 0, no shifts): the pneumatic trail
@@ -191,6 +193,9 @@ class DriveParameters:
     speed_integral_gain: float = _p(1.0, "1/s^2", "k_i of the PI speed hold")
     front_drive_share: float = _p(1.0, "-", "share of the drive torque on the front axle: 1 front-wheel drive, "
                                             "0 rear-wheel drive, between: a fixed all-wheel-drive split")
+    slip_limit: float = _p(0.0, "-", "slip ratio beyond which a wheel's drive or brake torque fades (traction "
+                                     "control and anti-lock brakes), the brakes then shared by the axles' loads "
+                                     "as they are; 0: neither")
 
 
 @_fields_documented
@@ -281,8 +286,9 @@ _SECTIONS = {
 # friction scaling, the aligning moment of the published tyre) keep files written before them valid.
 _OPTIONAL_SECTIONS = ("steering", "aerodynamics")
 _OPTIONAL_FIELDS = {
-    "drive": ("front_drive_share",),
-    "tyre": ("friction_scale", "QBZ1", "QBZ2", "QBZ3", "QCZ1", "QDZ1", "QDZ2", "QEZ1", "QEZ2", "QEZ3", "QEZ4",
+    "drive": ("front_drive_share", "slip_limit"),
+    "tyre": ("friction_scale", "rear_cornering_scale", "QBZ1", "QBZ2", "QBZ3", "QCZ1", "QDZ1", "QDZ2", "QEZ1",
+             "QEZ2", "QEZ3", "QEZ4",
              "unloaded_radius"),
 }
 
@@ -293,7 +299,7 @@ _POSITIVE = {
     "suspension": ("front_wheel_rate", "rear_wheel_rate"),
     "tyre": ("nominal_load", "rolling_radius", "wheel_inertia", "front_lateral_relaxation",
              "rear_lateral_relaxation", "front_longitudinal_relaxation",
-             "rear_longitudinal_relaxation", "front_cornering_scale", "PCX1", "PDX1", "PKX1",
+             "rear_longitudinal_relaxation", "front_cornering_scale", "rear_cornering_scale", "PCX1", "PDX1", "PKX1",
              "PCY1", "PDY1", "PKY2", "PKY4", "friction_scale", "unloaded_radius"),
     "drive": (),
     "steering": ("ratio",),
@@ -302,7 +308,7 @@ _POSITIVE = {
 # ... and those that may be zero (a car without a rear bar, a frictionless damper, no speed hold).
 _NON_NEGATIVE = {
     "suspension": ("front_damping", "rear_damping", "front_anti_roll_bar", "rear_anti_roll_bar"),
-    "drive": ("speed_gain", "speed_integral_gain", "front_drive_share"),
+    "drive": ("speed_gain", "speed_integral_gain", "front_drive_share", "slip_limit"),
     "steering": ("compliance", "mechanical_trail"),
     "aerodynamics": ("drag_area",),
 }
@@ -331,6 +337,9 @@ def _validate(params: VehicleParameters) -> None:
     if params.drive.front_drive_share > 1:
         raise InputError(f"vehicle parameter drive.front_drive_share is a share of the drive torque, at most 1; "
                          f"got {params.drive.front_drive_share}")
+    if params.drive.slip_limit >= 0.5:
+        raise InputError(f"vehicle parameter drive.slip_limit is a slip ratio below the envelope's 0.5 (a wheel "
+                         f"spinning up or locking); got {params.drive.slip_limit}")
     if params.tyre.PKY1 >= 0:
         raise InputError("vehicle parameter tyre.PKY1 must be negative (ISO sign: F_y opposes slip)")
     chassis = params.chassis

@@ -60,18 +60,20 @@ def _vehicle_for(params: VehicleParameters, steer_is: str) -> VehicleParameters:
     return params
 
 
-def replay_substeps(params: VehicleParameters, dt: float, top_speed: float) -> int:
+def replay_substeps(params: VehicleParameters, dt: float, top_speed: float, margin: float = _STEP_MARGIN) -> int:
     """The fewest RK4 steps per sample of ``dt`` (s) that keep every mode of ``params`` stable up to ``top_speed``.
 
     The fastest modes (the slip lags, ``-V / sigma``) grow with speed, so the
-    step is sized at the top speed; ``_STEP_MARGIN`` keeps it clear of the
-    edge of RK4's stability region.
+    step is sized at the top speed; each step is at most ``margin`` of the
+    largest stable one (default ``_STEP_MARGIN``), clear of the edge of RK4's
+    stability region.
     """
     model = build_vehicle_model(params)
     x = model.trim(top_speed)
     eigenvalues = np.linalg.eigvals(np.asarray(linearization_function(model)(x, 0.0, top_speed)[0]))
-    stable = largest_stable_step(eigenvalues, dt)
-    substeps = max(1, math.ceil(dt / (_STEP_MARGIN * stable) - 1e-12)) if stable < dt else 1
+    # the margin applies to a log's own step too: a step stable only at the edge is stable, not accurate
+    stable = largest_stable_step(eigenvalues, dt / margin)
+    substeps = max(1, math.ceil(dt / (margin * stable) - 1e-12))
     if substeps > _MAX_SUBSTEPS:
         raise InputError(f"the log's sample interval {dt:g} s needs {substeps} RK4 steps per sample at "
                          f"{top_speed:g} m/s; resample it to at least {substeps / _MAX_SUBSTEPS / dt:.3g} Hz first")
@@ -88,6 +90,8 @@ def replay(
     t0: float = 0.0,
     method: str = "rk4",
     meta: Mapping[str, Any] | None = None,
+    acceleration: Any = None,
+    slip_limit: float | None = None,
 ) -> IOData:
     """Simulate the source model under a measured steer while it follows a measured speed trace.
 
@@ -110,6 +114,13 @@ def replay(
         cross-check, takes the same substeps.
     meta : mapping, optional
         Extra metadata for the record.
+    acceleration : array_like (N,), optional
+        The measured longitudinal acceleration (m/s^2): fed forward to the speed hold in place of the
+        speed's rate, so that the drive and brake torques need not wait for a speed error.
+    slip_limit : float, optional
+        The car's slip limiter (:class:`~vehid.vehicle.parameters.DriveParameters`): traction control,
+        anti-lock brakes and brakes shared by the axles' loads, which keep a replay's wheels from
+        spinning up or locking where the vehicle's own torque split would. Default: the vehicle's.
 
     Returns
     -------
@@ -128,6 +139,8 @@ def replay(
         When the car leaves the model's valid envelope (the partial record is kept).
     """
     params = _vehicle_for(named_vehicle(params), steer_is)
+    if slip_limit is not None and slip_limit != params.drive.slip_limit:
+        params = replace(params, drive=replace(params.drive, slip_limit=float(slip_limit)))
     steer = np.asarray(steer, dtype=float).ravel()
     if steer.size < 2:
         raise InputError("a replay needs at least two samples")
@@ -154,11 +167,19 @@ def replay(
     fine = np.maximum(np.arange((steer.size - 1) * substeps + 1) - 0.5, 0.0) / substeps
     fine_steer = np.interp(fine, samples, steer)
     fine_speed = np.interp(fine, samples, profile)
+    fine_acceleration = None
+    if acceleration is not None:
+        acceleration = np.asarray(acceleration, dtype=float).ravel()
+        if acceleration.shape != steer.shape or not np.all(np.isfinite(acceleration)):
+            raise InputError(f"the longitudinal acceleration needs one finite value per steer sample ({steer.size})")
+        fine_acceleration = np.interp(fine, samples, acceleration)
     try:
         record = simulate(params, fine_steer, dt / substeps, speed=fine_speed, t0=t0, method=method,
+                          acceleration=fine_acceleration,
                           meta={**(meta or {}), "replay_substeps": substeps, "steer_is": steer_is})
     except SimulationError as exc:
-        # the partial record on the log's samples, when it reaches two of them
+        # the partial record on the log's samples, when it reaches two of them (the message names the
+        # time, the quantity and, for a tyre's slip, the wheel)
         partial = exc.partial
         partial = _on_log_grid(partial, substeps, t0, dt) if partial is not None and partial.n_samples > substeps else None
         raise SimulationError(str(exc), partial, quantity=exc.quantity, value=exc.value, time=exc.time) from None

@@ -294,6 +294,7 @@ def simulate(
     method: str = "rk4",
     meta: dict | None = None,
     t0: float | None = None,
+    acceleration: Any = None,
 ) -> IOData:
     """Simulate the 23-state vehicle from its trim under a road-wheel steer series.
 
@@ -321,6 +322,10 @@ def simulate(
         Extra metadata to store with the record (manoeuvre, seed, ...).
     t0 : float, optional
         Time of the first sample (s), default 0 (an IOData's own first time).
+    acceleration : array_like (N,), optional
+        With a speed profile: the longitudinal acceleration the speed hold feeds forward (m/s^2),
+        one per sample, in place of the profile's central difference (a measured acceleration,
+        which needs no differentiating of a noisy speed).
 
     Returns
     -------
@@ -397,9 +402,17 @@ def simulate(
     reference = None
     if speed is None:
         speed = DEFAULT_SPEED
+    if acceleration is not None and not np.ndim(speed):
+        raise InputError("an acceleration goes with a speed profile (one speed per sample)")
     if np.ndim(speed):
         profile = check_speed_profile(speed, values.size, params)
-        rate = np.gradient(profile, dt, edge_order=2) if profile.size > 2 else np.gradient(profile, dt)
+        if acceleration is None:
+            rate = np.gradient(profile, dt, edge_order=2) if profile.size > 2 else np.gradient(profile, dt)
+        else:
+            rate = np.asarray(acceleration, dtype=float).ravel()
+            if rate.shape != profile.shape or not np.all(np.isfinite(rate)):
+                raise InputError(f"the acceleration needs one finite value per sample ({profile.size}); "
+                                 f"got {rate.size}" + ("" if rate.shape != profile.shape else " with a non-finite one"))
         reference = np.column_stack([profile, rate])
         speed = float(profile[0])
     speed = check_speed(speed, params)

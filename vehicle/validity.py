@@ -121,8 +121,13 @@ class Violation:
                     f"at t = {time:.3f} s")
         unit = f" {self.limit.unit}" if self.limit.unit else ""
         shown, bound = self.value * self.limit.scale, self.limit.limit * self.limit.scale
+        corner = _WHEELS.get(self.column.rpartition("_")[2], "") if "_" in self.column else ""
+        where = f"{self.column}, the {corner} wheel" if corner else self.column
         return (f"the vehicle left its valid envelope at t = {time:.3f} s: {self.quantity} "
-                f"{shown:.4g}{unit} ({self.column}) beyond +/-{bound:.4g}{unit} ({self.limit.reason})")
+                f"{shown:.4g}{unit} ({where}) beyond +/-{bound:.4g}{unit} ({self.limit.reason})")
+
+
+_WHEELS = {"fl": "front-left", "fr": "front-right", "rl": "rear-left", "rr": "rear-right"}
 
 
 def _columns(names: Sequence[str], wanted: Sequence[str]) -> list[int]:

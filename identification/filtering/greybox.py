@@ -491,6 +491,10 @@ class GreyBoxOptions:
         docstring, "Standard deviations"): where the residuals are coloured (model error, a sensor's
         filter) the samples are fewer independent ones than they count, and the std widens by the
         root of the ratio. Off by default: a white residual leaves it near one anyway.
+    held : sequence of bool, optional
+        One per parameter: True holds it at its start (no prior variance, no drift; its std is
+        NaN). The compiled filter is the same whichever are held, so a staged estimation or one
+        that drops a parameter the data do not determine needs no new compilation.
     """
 
     p: float = 1e-4
@@ -506,6 +510,7 @@ class GreyBoxOptions:
     initial_state_std: tuple[float, ...] | None = None
     parameter_prior_std: tuple[float, ...] | None = None
     coloured_residuals: bool = False
+    held: tuple[bool, ...] | None = None
 
     def __post_init__(self) -> None:
         for name in ("p", "prior_std", "parameter_tolerance"):
@@ -541,6 +546,10 @@ class GreyBoxOptions:
             if values.size == 0 or not np.all(np.isfinite(values)) or np.any(values <= 0):
                 raise InputError("parameter_prior_std must be positive numbers, one per parameter")
             object.__setattr__(self, "parameter_prior_std", tuple(float(v) for v in values))
+        if self.held is not None:
+            object.__setattr__(self, "held", tuple(bool(v) for v in self.held))
+            if all(self.held):
+                raise InputError("every parameter is held: leave at least one free")
 
 
 @dataclass(frozen=True, eq=False)
@@ -713,6 +722,10 @@ def identify_greybox(
                          f"got {len(options.parameter_prior_std)}")
     prior_variance = np.square(options.parameter_prior_std if options.parameter_prior_std is not None
                                else np.full(n_theta, options.prior_std))
+    if options.held is not None and len(options.held) != n_theta:
+        raise InputError(f"held needs {n_theta} values (one per parameter); got {len(options.held)}")
+    free = np.ones(n_theta, dtype=bool) if options.held is None else ~np.array(options.held, dtype=bool)
+    prior_variance = np.where(free, prior_variance, 0.0)  # a held parameter neither starts uncertain nor drifts
     if options.initial_state_std is not None and len(options.initial_state_std) != n:
         raise InputError(f"initial_state_std needs {n} values (one per state); got {len(options.initial_state_std)}")
 
@@ -765,7 +778,7 @@ def identify_greybox(
         noise = residual_variance(start_fit)
     R = np.diag(noise / output_scale**2)
 
-    q_first = np.concatenate([np.zeros(n), np.full(n_theta, options.p / duration)])
+    q_first = np.concatenate([np.zeros(n), np.where(free, options.p / duration, 0.0)])
     q = q_first.copy()
 
     def shrink(index: int) -> float:
@@ -861,8 +874,11 @@ def identify_greybox(
             meta.update(covariance_source="the filter's carried P (too small: the record counted once per pass)")
         fit = last_fit.get("R", np.full(model.n_y, np.nan))
         nrmse = last_fit.get("nrmse", np.full(model.n_y, np.nan))
+        covariance = 0.5 * (covariance + covariance.T)
+        covariance[~free, :] = np.nan  # a held parameter was not estimated: it has no std
+        covariance[:, ~free] = np.nan
         return GreyBoxResult(
-            model=model, parameters=theta, covariance=0.5 * (covariance + covariance.T), start=start.copy(),
+            model=model, parameters=theta, covariance=covariance, start=start.copy(),
             fit_percent=fit, nrmse_fit_percent=nrmse, measurement_noise=np.diag(R) * output_scale**2,
             history=history, stop_reason=stop_reason, dt=dt, seconds=time.perf_counter() - started,
             options=options, meta=meta,

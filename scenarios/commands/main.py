@@ -19,7 +19,7 @@ import sys
 import warnings
 from typing import Any, Callable, Sequence
 
-from vehid.identification.errors import DivergenceError, StrictWarningsError, WorkbenchError
+from vehid.identification.errors import DivergenceError, PartialResultError, StrictWarningsError, WorkbenchError
 from vehid.identification.jsonable import to_jsonable
 from vehid.scenarios.commands.flags import command_line_message
 from vehid.scenarios.commands.parser import GROUPS, MESSAGE_LIMIT, UsageError, build_parser, one_line
@@ -93,6 +93,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         for line in exc.warnings:
             print(f"vehid: warning: {one_line(line)}", file=sys.stderr)
         print("vehid: error: warnings under --strict", file=sys.stderr)
+        return _failed(args, exc, exc.exit_status, exc.summary)
+    except PartialResultError as exc:  # the finished part is still reported, then the failure
+        if not args.json and exc.text:
+            sys.stdout.write(exc.text.rstrip("\n") + "\n")
+            sys.stdout.flush()
+        print(f"vehid: error: {one_line(str(exc))}", file=sys.stderr)
         return _failed(args, exc, exc.exit_status, exc.summary)
     except DivergenceError as exc:
         text = command_line_message(exc)  # the options it names, as flags

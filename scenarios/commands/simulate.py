@@ -62,6 +62,13 @@ def register(parser: argparse.ArgumentParser) -> None:
                               help="road: a road-wheel angle (the steering's compliance is already in it); "
                                    "wheel: a steering-wheel angle, divided by the vehicle's steering ratio "
                                    "(default: road)")
+    replay_group.add_argument("--acceleration-channel", metavar="NAME",
+                              help="the log's longitudinal acceleration (m/s^2), fed forward to the speed hold "
+                                   "(default: the speed's rate)")
+    replay_group.add_argument("--slip-limit", type=float, default=None,
+                              help="slip ratio at which the replayed car's drive and brake torques fade (traction "
+                                   "control, anti-lock brakes, brakes shared by the axles' loads; default: the "
+                                   "vehicle's, else 0.1; 0: none)")
     replay_group.add_argument("--compare", metavar="OUTPUT=CHANNEL,...", default=None,
                               help="model outputs and the log channels that measured them, e.g. "
                                    "yaw_rate=yawRate,lateral_acceleration=ayCG,sideslip=beta_true")
@@ -127,7 +134,9 @@ def _write_record(data, args: argparse.Namespace, run: str) -> Path:
 _STEER_WORDS = {"road": "road-wheel angle", "wheel": "steering-wheel angle"}
 _MANOEUVRE_OPTIONS = ("manoeuvre", "amplitude_deg", "duration", "speed")
 _REPLAY_OPTIONS = ("steer_channel", "speed_channel", "compare", "time_column", "time_scale", "segment", "resample",
-                   "scale")
+                   "scale", "acceleration_channel", "slip_limit")
+# a replay's car gets traction control and anti-lock brakes where its vehicle has none (DriveParameters.slip_limit)
+_REPLAY_SLIP_LIMIT = 0.1
 
 
 def run(args: argparse.Namespace) -> tuple[dict, str]:
@@ -238,7 +247,7 @@ def run_replay(args: argparse.Namespace) -> tuple[dict, str]:
     import numpy as np
 
     from vehid.identification.dataio.archive_safety import check_output_target
-    from vehid.identification.dataio.preparation import ReadSettings, parse_scale, read_record
+    from vehid.scenarios.drive_log import read_drive, scaled_channels
     from vehid.vehicle import named_vehicle
     from vehid.vehicle.replay import channel_fits, replay
 
@@ -251,23 +260,20 @@ def run_replay(args: argparse.Namespace) -> tuple[dict, str]:
     if not log.is_file():
         raise InputError(f"no such log: {log}")
     compare = _compare_pairs(args.compare)
-    channels = [args.speed_channel, *compare.values()]
+    channels = [args.speed_channel, *compare.values(),
+                *([args.acceleration_channel] if args.acceleration_channel else [])]
     if args.steer_channel in channels or len(set(channels)) != len(channels):
-        raise InputError("a log channel is named twice among --steer-channel, --speed-channel and --compare")
+        raise InputError("a log channel is named twice among --steer-channel, --speed-channel, --compare and "
+                         "--acceleration-channel")
+    if args.slip_limit is not None and not (math.isfinite(args.slip_limit) and 0 <= args.slip_limit < 0.5):
+        raise InputError(f"--slip-limit is a slip ratio in [0, 0.5); got {args.slip_limit}")
     if args.vehicle is None:
         args.vehicle = "saloon"
     params = named_vehicle(args.vehicle)
-    data = read_record(log, ReadSettings(inputs=(args.steer_channel,), outputs=tuple(channels),
-                                         time_column=args.time_column, resample=args.resample, segment=args.segment,
-                                         time_scale=args.time_scale))
-    scale = parse_scale(args.scale)
-    unknown = sorted(set(scale) - {args.steer_channel, *channels})
-    if unknown:
-        raise InputError(f"--scale names {unknown[0]!r}, which is not a replayed channel")
-
-    def channel(name: str) -> np.ndarray:
-        values = data.u[:, 0] if name == args.steer_channel else data.y[:, data.output_names.index(name)]
-        return values * scale.get(name, 1.0)
+    data, scale = read_drive(log, args.steer_channel, channels, args.scale, what="a replayed channel",
+                             time_column=args.time_column, resample=args.resample, segment=args.segment,
+                             time_scale=args.time_scale)
+    channel = scaled_channels(data, args.steer_channel, scale)
 
     run = run_digest(args)
     if args.out:
@@ -275,9 +281,12 @@ def run_replay(args: argparse.Namespace) -> tuple[dict, str]:
                             kind=RECORD_KIND, run=run, suffixes=HDF5_SUFFIXES)
     meta = {"replay_log": log.name, "steer_channel": args.steer_channel, "speed_channel": args.speed_channel}
     measured = {output: (name, channel(name)) for output, name in compare.items()}
+    slip_limit = args.slip_limit if args.slip_limit is not None else (params.drive.slip_limit or _REPLAY_SLIP_LIMIT)
+    acceleration = channel(args.acceleration_channel) if args.acceleration_channel else None
     try:
         record = replay(params, channel(args.steer_channel), channel(args.speed_channel), data.dt,
-                        steer_is=args.steer_is, t0=float(data.t[0]), method=args.method, meta=meta)
+                        steer_is=args.steer_is, t0=float(data.t[0]), method=args.method, meta=meta,
+                        acceleration=acceleration, slip_limit=slip_limit)
     except SimulationError as exc:
         if exc.partial is None:
             raise
@@ -293,6 +302,7 @@ def run_replay(args: argparse.Namespace) -> tuple[dict, str]:
     summary = {
         "replay": {"log": str(log), "steer_channel": args.steer_channel, "speed_channel": args.speed_channel,
                    "steer_is": args.steer_is, "substeps": int(record.meta["replay_substeps"]),
+                   "slip_limit": slip_limit, "acceleration_channel": args.acceleration_channel,
                    "t_start": float(record.t[0]), "t_end": float(record.t[-1])},
         "vehicle": params.name,
         "samples": record.n_samples,
