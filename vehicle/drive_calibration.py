@@ -244,7 +244,7 @@ class DriveLog:
             raise InputError(f"the steer reaches {math.degrees(self.steer[beyond[0]]):.4g} deg at t = "
                              f"{t[beyond[0]]:.6g} s, beyond the model's +/-{math.degrees(MAX_STEER):g} deg at the road "
                              "wheel: is it a road-wheel angle in rad? (a steering-wheel angle: divide by the ratio "
-                             "with --scale)")
+                             "with 'scale')", options=("scale",))
 
     @property
     def dt(self) -> float:
