@@ -186,17 +186,34 @@ class PartialResultError(WorkbenchError):
     Exit status 1. The command line prints ``text`` (the finished part's summary) before the error,
     and with ``--json`` reports ``summary`` with the error beside it.
 
+    Parameters
+    ----------
+    message : str
+        What failed, naming any option it advises by its keyword in single quotes.
+    summary : dict
+        What the run produced before it failed.
+    text : str, optional
+        The run's text summary.
+    result : object, optional
+        The run's typed result, which renders ``summary`` and ``text``.
+    options : tuple of str, optional
+        The options the message names, by keyword.
+
     Attributes
     ----------
     summary : dict
         What the run produced before it failed.
     text : str or None
         The run's text summary.
+    result : object or None
+        The run's typed result, holding everything that was finished (None where the run gave none).
     """
 
     exit_status = 1
 
-    def __init__(self, message: str, summary: dict, text: str | None = None):
-        super().__init__(message)
+    def __init__(self, message: str, summary: dict, text: str | None = None, *, result: object | None = None,
+                 options: tuple[str, ...] = ()):
+        super().__init__(message, options=options)
         self.summary = summary
         self.text = text
+        self.result = result

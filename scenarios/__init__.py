@@ -2,8 +2,8 @@
 
 What the commands do is a library function first, each returning a frozen result that renders the
 command's JSON (``render()``) and text (``text()``): :func:`vehid.identification.identify` (`vehid
-identify`), :func:`identify_single_track` (`vehid identify --structure single-track`) and
-:func:`handling` (`vehid handling`); the command line in :mod:`vehid.scenarios.commands` maps its
+identify`), :func:`identify_single_track` (`vehid identify --structure single-track`),
+:func:`handling` (`vehid handling`) and :func:`calibrate` (`vehid calibrate`); the command line in :mod:`vehid.scenarios.commands` maps its
 arguments to their options and prints the result.
 """
 
@@ -18,9 +18,11 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
     "single_track_identify": ("identify_single_track", "SingleTrackOptions", "SingleTrackIdentification", "Estimate"),
     "car_handling": ("handling", "HandlingOptions", "SourceHandlingOptions", "ModelHandling",
                          "SourceModelHandling"),
+    "car_calibration": ("calibrate", "CalibrateOptions", "CalibrationResult"),
     "plausibility_checks": ("CarChecks",),
 }
 export_lazily(__name__, _EXPORTS)
 
 __all__ = ["identify_single_track", "SingleTrackOptions", "SingleTrackIdentification", "Estimate", "handling",
-           "HandlingOptions", "SourceHandlingOptions", "ModelHandling", "SourceModelHandling", "CarChecks"]
+           "HandlingOptions", "SourceHandlingOptions", "ModelHandling", "SourceModelHandling", "calibrate",
+           "CalibrateOptions", "CalibrationResult", "CarChecks"]

@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 from vehid.identification.errors import InputError, OptionError, StrictWarningsError
 from vehid.identification.frozen import FrozenDict, freeze_fields, thaw
 from vehid.identification.optionspec import BOOLEAN, POSITIVE, Numbers, check_options, documented, option
+from vehid.scenarios.paths import check_figure_target
 
 if TYPE_CHECKING:
     from vehid.identification.automatic.result import Finding
@@ -39,7 +40,6 @@ ROLES = ("steer", "yaw_rate", "lateral_acceleration", "sideslip")
 _REACHED = 0.8
 #: Speeds (m/s) of the source model's handling unless others are asked.
 SOURCE_SPEEDS = (10.0, 20.0, 30.0)
-_FIGURE_SUFFIXES = (".png", ".pdf", ".svg")
 _SPEEDS = Numbers(POSITIVE)
 
 
@@ -242,22 +242,6 @@ JSON_UNITS = {"speed": "m/s", "wheelbase": "m", "steer": "rad (road-wheel angle)
               "lateral_acceleration": "m/s^2", "reached_lateral_acceleration": "m/s^2", "yaw_rate_gain": "1/s",
               "lateral_acceleration_gain": "m/s^2/rad", "understeer_gradient_deg_per_g": "deg/g",
               "characteristic_speed_m_s": "m/s", "critical_speed_m_s": "m/s"}
-
-
-
-
-def _check_figure_target(figure: str | os.PathLike | None, force: bool) -> Path | None:
-    """The figure's path, checked before any work: a figure suffix, an existing folder, no file unless ``force``."""
-    if figure is None:
-        return None
-    path = Path(figure)
-    if path.suffix.lower() not in _FIGURE_SUFFIXES:
-        raise OptionError(f"'figure' takes a {', '.join(_FIGURE_SUFFIXES)} file; got {str(figure)!r}", "figure")
-    if not path.parent.is_dir():
-        raise OptionError(f"'figure': no folder {str(path.parent)!r}", "figure")
-    if path.is_dir() or (path.exists() and not force):
-        raise OptionError(f"'figure' {str(figure)!r} exists: choose another name or give 'force'", "figure", "force")
-    return path
 
 
 def _write_figure(path: Path | None, curves: Mapping[str, Any], title: str) -> Path | None:
@@ -509,7 +493,7 @@ def handling(model: Any = None, *, source: str | VehicleParameters | None = None
     if not isinstance(options, kind):
         raise InputError(f"the {'source model' if source is not None else 'model'}'s handling takes {kind.__name__}")
     speeds = None if speeds is None else _speeds(speeds)
-    figure_path = _check_figure_target(figure, force)
+    figure_path = check_figure_target(figure, force)
     result = (_source_handling(source, speeds, options, figure_path) if source is not None
               else _model_handling(model, speeds, options, figure_path))
     if options.strict and result.warnings:

@@ -136,12 +136,18 @@ def without_run_times(value):
 
 
 def library_spy(monkeypatch: pytest.MonkeyPatch, module: object, name: str) -> tuple[object, list]:
-    """Replace ``module.name`` (a library function a command calls) by a spy that keeps each result it returns;
+    """Replace ``module.name`` (a library function a command calls) by a spy that keeps each result it returns, or
+    the result a failure carries (a late failure's finished part, a result with warnings under ``strict``);
     the original function and the list of results."""
     library, results = getattr(module, name), []
 
     def spy(*args, **kwargs):
-        results.append(library(*args, **kwargs))
+        try:
+            results.append(library(*args, **kwargs))
+        except Exception as exc:
+            if getattr(exc, "result", None) is not None:
+                results.append(exc.result)
+            raise
         return results[-1]
 
     monkeypatch.setattr(module, name, spy)

@@ -133,7 +133,7 @@ def test_cli_never_replaces_an_existing_vehicle_file(tmp_path, capsys):
     (["--prior", "tyre.PKY1"], "NAME=VALUE"),
     (["--prior", "tyre.PKY1=-15:0"], "positive std"),
     (["--prior", "chassis.mass=1500:100"], "not calibrated"),
-    (["--validation", "1.5"], "held-out fraction"),
+    (["--validation", "1.5"], "--validation must be a number in [0, 1)"),
     (["--parameters", "aerodynamics.drag_area"], "structure"),
     (["--figure", "fits.txt"], "--figure takes a .png"),
 ])

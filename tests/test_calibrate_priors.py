@@ -102,8 +102,7 @@ def test_undetermined_uses_each_parameter_prior():
 def test_prior_option_takes_a_value_and_an_optional_std():
     from vehid.scenarios.commands.calibrate import _priors
 
-    values, stds = _priors(["tyre.PKY1=-15", "chassis.yaw_inertia=2500:250"])
-    assert values == {"tyre.PKY1": -15.0, "chassis.yaw_inertia": 2500.0}
-    assert stds == {"chassis.yaw_inertia": 250.0}
+    assert _priors(["tyre.PKY1=-15", "chassis.yaw_inertia=2500:250"]) == {"tyre.PKY1": -15.0,
+                                                                          "chassis.yaw_inertia": (2500.0, 250.0)}
     with pytest.raises(InputError, match="NAME=VALUE"):
         _priors(["tyre.PKY1=-15:x"])

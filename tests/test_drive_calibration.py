@@ -287,7 +287,7 @@ def test_the_calibrate_figure_is_legible_its_title_whole(rendered):
     import matplotlib.pyplot as plt
 
     from test_figure_legibility import legibility_problems
-    from vehid.scenarios.commands.calibrate import _figure_page
+    from vehid.scenarios.car_calibration import _figure_page
 
     status, body, err, fake, out, figure = rendered()
     assert status == 0 and figure.stat().st_size > 0
@@ -484,3 +484,88 @@ def test_the_halves_split_where_the_car_runs_straight(monkeypatch):
     rows = np.concatenate([np.arange(a, min(b, split)) for a, b in runs if a < split])
     share = np.count_nonzero(rows < middle) / rows.size
     assert 0.3 <= share <= 0.7, share
+
+
+def test_the_command_prints_the_rendering_of_the_library_result(tmp_path, monkeypatch, capsys):
+    """`vehid calibrate` calls calibrate() once and prints its result's rendering: with --json every key and value
+    of render(), without it text(); for a calibration that finished (exit 0) and one whose last stage failed (exit 1:
+    the rendering of the finished part, the error beside it, the result carried by the library's
+    PartialResultError). calibrate() called from Python on the same inputs renders the same summaries, and its
+    result is frozen all the way down (the drive, the cars, the scores and predictions, the handling). The filter is
+    stood in for by known scores (:func:`_fake_calibration`); the calibrated car's handling is computed, once (every
+    run here calibrates the same car)."""
+    from conftest import library_spy, mutable_parts, printed_json
+
+    from vehid.identification.dataio.preparation import ReadSettings
+    from vehid.identification.errors import PartialResultError
+    from vehid.scenarios import car_calibration
+    from vehid.scenarios.car_calibration import CalibrateOptions
+    from vehid.vehicle import handling
+
+    log, _ = _race_log()
+    library, results = library_spy(monkeypatch, car_calibration, "calibrate")
+    computed, source_handling = [], handling.source_handling
+    monkeypatch.setattr(handling, "source_handling", lambda *args, **kwargs: computed[0] if computed else
+                        computed.append(source_handling(*args, **kwargs)) or computed[0])
+    out = tmp_path / "car.toml"
+    argv = ["calibrate", str(RACE_LOG), *CHANNELS, "--check", "beta_true=sideslip", "--prior",
+            "chassis.yaw_inertia=1300:200", "--no-halves", "--out", str(out), "--force"]
+    options = CalibrateOptions(prior={"chassis.yaw_inertia": (1300.0, 200.0)}, halves=False)
+    for failure in (None, "stage 'yaw dynamics' diverged: non-finite"):
+        fake = _fake_calibration(log, failure=failure)
+        monkeypatch.setattr("vehid.vehicle.drive_calibration.calibrate_drive", lambda *args, **kwargs: fake)
+        status = main([*argv, "--json"])
+        printed = json.loads(capsys.readouterr().out)
+        result = results[-1]
+        assert status == (1 if failure else 0) and result.failure == failure
+        if failure:  # the command line adds the error and the exit status beside the rendering
+            assert printed.pop("exit_status") == 1 and failure in printed.pop("error")
+        assert printed == printed_json(result.render()) and printed["vehicle_file"] == str(out)
+        assert mutable_parts(result) == []
+        assert main(argv) == status
+        assert capsys.readouterr().out == result.text() + "\n"
+        assert len(results) == 2 and results[0] is not results[1]
+        try:
+            again = library(RACE_LOG, speed="vx", quantities=("yaw_rate", "lateral_acceleration"),
+                            reading=ReadSettings(inputs=("delta",), outputs=("yawRate", "ayCG")),
+                            checks={"beta_true": "sideslip"}, options=options, out=out, force=True)
+            assert failure is None
+        except PartialResultError as exc:
+            assert failure is not None and exc.summary == exc.result.render()
+            again = exc.result
+        assert printed_json(again.render()) == printed and again.text() == result.text()
+        results.clear()
+    assert len(computed) == 1 and computed[0].linearisation  # the handling rendered is the calibrated car's own
+
+
+@pytest.mark.parametrize("name, bad", [
+    ("validation", 1.0), ("validation", -0.1), ("prior_std", 0.0), ("p", float("nan")), ("passes", 0),
+    ("substeps", 1.5), ("slip_limit", 0.5), ("halves", "no"), ("despike", 1), ("parameters", "PKY2"),
+    ("parameters", ("tyre.PKY2", "tyre.PKY2")), ("parameters", ()), ("prior", {"tyre.PKY2": (1.0, 0.0)}),
+    ("prior", {"tyre.PKY2": math.inf}), ("prior", ["tyre.PKY2=1"]),
+])
+def test_calibrate_options_refuse_a_bad_value_when_built_naming_it(name, bad):
+    from vehid.identification.errors import OptionError
+    from vehid.scenarios import CalibrateOptions
+
+    with pytest.raises(OptionError) as caught:
+        CalibrateOptions(**{name: bad})
+    assert caught.value.options == (name,) and str(caught.value).startswith(f"'{name}' must be "), str(caught.value)
+
+
+def test_the_calibrate_flags_defaults_are_the_options_table():
+    """Parsed without a flag, the command's arguments give the library's defaults; a prior given with a std and one
+    without reach the options as the library takes them."""
+    import argparse
+
+    from vehid.scenarios import CalibrateOptions
+    from vehid.scenarios.commands import calibrate
+
+    parser = argparse.ArgumentParser()
+    calibrate.register(parser)
+    required = ["log.csv", "--inputs", "delta", "--speed", "vx", "--outputs", "r", "--quantities", "yaw_rate"]
+    assert calibrate.options_from_args(parser.parse_args(required)) == CalibrateOptions()
+    given = calibrate.options_from_args(parser.parse_args([*required, "--prior", "tyre.PKY2=1.5", "--prior",
+                                                           "chassis.yaw_inertia=1300:200", "--no-halves"]))
+    assert given == CalibrateOptions(prior={"tyre.PKY2": 1.5, "chassis.yaw_inertia": (1300.0, 200.0)}, halves=False)
+    assert dict(given.prior) == {"tyre.PKY2": (1.5, None), "chassis.yaw_inertia": (1300.0, 200.0)}

@@ -2,9 +2,10 @@
 
 The commands (``scenarios/commands``) map their arguments to the library's options and call the
 library's functions (:func:`vehid.identification.identify`, :func:`~vehid.scenarios.identify_single_track`,
-:func:`~vehid.scenarios.handling`); nothing below them reads a parsed command line. The tests that each
-command prints the rendering of the library's result live beside their fixtures
-(``test_library_identify``, ``test_single_track_cli``, ``test_vehicle_handling``).
+:func:`~vehid.scenarios.handling`, :func:`~vehid.scenarios.calibrate`); nothing below them reads a parsed
+command line. The tests that each command prints the rendering of the library's result live beside their
+fixtures (``test_library_identify``, ``test_single_track_cli``, ``test_vehicle_handling``,
+``test_drive_calibration``).
 """
 
 from __future__ import annotations

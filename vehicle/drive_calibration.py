@@ -243,8 +243,8 @@ class DriveLog:
         if beyond.size:
             raise InputError(f"the steer reaches {math.degrees(self.steer[beyond[0]]):.4g} deg at t = "
                              f"{t[beyond[0]]:.6g} s, beyond the model's +/-{math.degrees(MAX_STEER):g} deg at the road "
-                             "wheel: is it a road-wheel angle in rad? (a steering-wheel angle: scale the channel by one over the "
-                             "steering ratio)")
+                             "wheel: is it a road-wheel angle in rad? (a steering-wheel angle: divide by the ratio "
+                             "with 'scale')", options=("scale",))
 
     @property
     def dt(self) -> float:

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import argparse
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any, Iterator
 
 from vehid.identification.optionspec import Boolean, Number, OneOf, OptionSpec, option_specs
@@ -36,8 +36,9 @@ def flag_of(name: str) -> str:
 
 
 def _default_text(spec: OptionSpec) -> str | None:
-    if spec.default is None or spec.default is False:
-        return None  # no default to state: the help says what happens without the flag
+    if spec.default is None or spec.default is False or (isinstance(spec.default, (Mapping, tuple)) and
+                                                          not spec.default):
+        return None  # no default to state (none, off or empty): the help says what happens without the flag
     if spec.default is True:
         return "on"
     return f"{spec.default:g}" if isinstance(spec.default, float) else str(spec.default)

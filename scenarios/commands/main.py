@@ -98,8 +98,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not args.json and exc.text:
             sys.stdout.write(exc.text.rstrip("\n") + "\n")
             sys.stdout.flush()
-        print(f"vehid: error: {one_line(str(exc))}", file=sys.stderr)
-        return _failed(args, exc, exc.exit_status, exc.summary)
+        text = command_line_message(exc)  # the options its advice names, as flags
+        print(f"vehid: error: {one_line(text)}", file=sys.stderr)
+        return _failed(args, exc, exc.exit_status, exc.summary, message=text)
     except DivergenceError as exc:
         text = command_line_message(exc)  # the options it names, as flags
         print(f"vehid: diverged: {one_line(text)}", file=sys.stderr)
