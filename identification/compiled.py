@@ -240,7 +240,7 @@ _RECURSION_DRIVER = r"""
    step's output and the state before it. u, outputs and states are time-major. */
 #include <stdlib.h>
 #include <string.h>
-int vehid_recursion(long long int n_samples, long long int n_x, long long int n_u, long long int n_out,
+int vehid_recursion(long long int n_samples, long long int n_states, long long int n_u, long long int n_out,
                     const double* u, const double* params, double* x, double* outputs, double* states) {
   casadi_int sz_arg, sz_res, sz_iw, sz_w;
   STEP_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
@@ -248,12 +248,12 @@ int vehid_recursion(long long int n_samples, long long int n_x, long long int n_
   casadi_real** res = malloc(sizeof(casadi_real*) * (sz_res > 2 ? sz_res : 2));
   casadi_int* iw = malloc(sizeof(casadi_int) * (sz_iw > 0 ? sz_iw : 1));
   casadi_real* w = malloc(sizeof(casadi_real) * (sz_w > 0 ? sz_w : 1));
-  double* next = malloc(sizeof(double) * (n_x > 0 ? n_x : 1));
+  double* next = malloc(sizeof(double) * (n_states > 0 ? n_states : 1));
   if (!arg || !res || !iw || !w || !next) return -1;
   int status = 0;
   long long int k;
   for (k = 0; k < n_samples; ++k) {
-    memcpy(states + k * n_x, x, sizeof(double) * n_x);
+    memcpy(states + k * n_states, x, sizeof(double) * n_states);
     arg[0] = x;
     arg[1] = u + k * n_u;
     arg[2] = u + (k + 1 < n_samples ? k + 1 : k) * n_u;
@@ -261,7 +261,7 @@ int vehid_recursion(long long int n_samples, long long int n_x, long long int n_
     res[0] = next;
     res[1] = outputs + k * n_out;
     if (STEP(arg, res, iw, w, 0)) { status = 1; break; }
-    memcpy(x, next, sizeof(double) * n_x);
+    memcpy(x, next, sizeof(double) * n_states);
   }
   free(arg); free(res); free(iw); free(w); free(next);
   return status;
@@ -303,8 +303,8 @@ def compile_driver(
 class CompiledRecursion:
     """Run ``x_next, out = step(x, u_k, u_next, params)`` over a record in compiled code.
 
-    Call with ``(x0 (n_x,), u (N, n_u), params (n_p,))``; returns
-    ``(outputs (N, n_out), states (N, n_x))`` where ``states[k]`` is the
+    Call with ``(x0 (n_states,), u (N, n_u), params (n_p,))``; returns
+    ``(outputs (N, n_out), states (N, n_states))`` where ``states[k]`` is the
     state before step k and ``outputs[k]`` the step's second output.
     Without a C compiler the step is lifted with ``mapaccum`` in CasADi's
     virtual machine instead (with a :class:`NoCompilerWarning`).
@@ -312,7 +312,7 @@ class CompiledRecursion:
 
     def __init__(self, step: ca.Function, *, optimisation: str = "-O2"):
         self.step = step
-        self.n_x = step.size1_in(0)
+        self.n_states = step.size1_in(0)
         self.n_u = step.size1_in(1)
         self.n_p = step.size1_in(3)
         self.n_out = step.size1_out(1)
@@ -344,10 +344,10 @@ class CompiledRecursion:
             states = np.hstack([x[:, None], np.asarray(xs)[:, :-1]]).T
             return np.asarray(outs).T, states
         outputs = np.empty((n, self.n_out))
-        states = np.empty((n, self.n_x))
+        states = np.empty((n, self.n_states))
         as_p = lambda a: a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))  # noqa: E731
         status = self._function(
-            n, self.n_x, self.n_u, self.n_out, as_p(u), as_p(params if params.size else np.zeros(1)),
+            n, self.n_states, self.n_u, self.n_out, as_p(u), as_p(params if params.size else np.zeros(1)),
             as_p(x), as_p(outputs), as_p(states),
         )
         if status:

@@ -1,7 +1,7 @@
 """The workbench's one data container for sampled input/output records.
 
 Arrays are time-major: ``u`` is ``(N, n_u)``, ``y`` is ``(N, n_y)``, optional
-states ``x`` are ``(N, n_x)``; ``t`` is ``(N,)`` and uniformly sampled.
+states ``x`` are ``(N, n_states)``; ``t`` is ``(N,)`` and uniformly sampled.
 """
 
 from __future__ import annotations
@@ -75,7 +75,7 @@ class IOData:
         Inputs.
     y : array_like, shape (N, n_y)
         Outputs.
-    x : array_like, shape (N, n_x), optional
+    x : array_like, shape (N, n_states), optional
         States, where the record comes from a simulation.
     input_names, output_names, state_names : sequence of str, optional
         Column names; default ``u1, u2, ...``, ``y1, ...``, ``x1, ...``.

@@ -19,7 +19,7 @@ def model():
 
 
 def test_named_states_inputs_outputs(model):
-    assert model.n_x == 23 and len(set(model.state_names)) == 23
+    assert model.n_states == 23 and len(set(model.state_names)) == 23
     assert model.input_names == ("steer",)
     for name in ("lateral_acceleration", "yaw_rate", "roll_angle", "sideslip", "speed",
                  "tyre_load_fl", "tyre_load_fr", "tyre_load_rl", "tyre_load_rr"):

@@ -100,7 +100,7 @@ def test_friction_scale_raises_the_peak_not_the_cornering_stiffness():
 
 def test_the_steered_car_keeps_23_states():
     model = build_vehicle_model(saloon())
-    assert model.n_x == 23 and model.state_names == build_vehicle_model(baseline()).state_names
+    assert model.n_states == 23 and model.state_names == build_vehicle_model(baseline()).state_names
     assert np.asarray(model.xdot.shape).tolist() == [23, 1]
 
 

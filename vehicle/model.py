@@ -214,7 +214,7 @@ class VehicleModel:
     output_units: tuple[str, ...] = OUTPUT_UNITS
 
     @property
-    def n_x(self) -> int:
+    def n_states(self) -> int:
         """Number of states (23)."""
         return len(self.state_names)
 
@@ -271,7 +271,7 @@ class VehicleModel:
         ndarray, shape (23,)
             The forward speed and the wheel spins set, every other state zero.
         """
-        x = np.zeros(self.n_x)
+        x = np.zeros(self.n_states)
         x[self.state_index("u")] = speed
         for corner in CORNERS:
             x[self.state_index(f"omega_{corner}")] = speed / self.params.tyre.rolling_radius
@@ -398,7 +398,7 @@ def speed_limit(params: VehicleParameters | None) -> float:
 def _trim_functions(model: VehicleModel) -> tuple[ca.Function, ca.Function]:
     keep = [i for i, name in enumerate(model.state_names) if name != "psi"]
     reduced = ca.SX.sym("x_trim", len(keep))
-    full = ca.SX.zeros(model.n_x)
+    full = ca.SX.zeros(model.n_states)
     for j, i in enumerate(keep):
         full[i] = reduced[j]
     derivative = model.dynamics(full, model.u, model.p)[keep]

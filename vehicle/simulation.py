@@ -132,7 +132,7 @@ def _rk4_step(model: VehicleModel, dt: float, tracking: bool = False) -> ca.Func
     With ``tracking``, ``p`` is ``(V_ref, dV_ref/dt)`` of the interval and the
     speed hold follows it (:attr:`VehicleModel.tracking_dynamics`).
     """
-    x = ca.SX.sym("x", model.n_x)
+    x = ca.SX.sym("x", model.n_states)
     u_now = ca.SX.sym("u_now", model.n_u)
     u_next = ca.SX.sym("u_next", model.n_u)
     p = ca.SX.sym("p", 2 if tracking else 1)
@@ -176,7 +176,7 @@ def reference_outputs(params: VehicleParameters, steer: np.ndarray, dt: float = 
     model = build_vehicle_model(params)
     steer = check_steer(steer)
     substep = _rk4_step(model, dt / substeps)
-    x, u, p = ca.SX.sym("x", model.n_x), ca.SX.sym("u", model.n_u), ca.SX.sym("p")
+    x, u, p = ca.SX.sym("x", model.n_states), ca.SX.sym("u", model.n_u), ca.SX.sym("p")
     x_next = x
     for _ in range(substeps):
         x_next = substep(x_next, u, u, p)[0]

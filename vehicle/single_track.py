@@ -335,13 +335,13 @@ def single_track_handling(config: SingleTrackConfig, parameters: Any, covariance
 def _linearisation(config: SingleTrackConfig) -> ca.Function:
     """``(theta, speed) -> (A, B, C, D)`` at straight running, B and D per road-wheel angle."""
     model = single_track_model(config)
-    x, u = ca.SX.sym("x", model.n_x), ca.SX.sym("u", 1)
+    x, u = ca.SX.sym("x", model.n_states), ca.SX.sym("u", 1)
     theta, speed = ca.SX.sym("theta", model.n_theta), ca.SX.sym("speed", 1)
     rates, outputs = model.dynamics(x, u, theta, speed), model.output(x, u, theta, speed)
     # straight running: no states excited and the steer channel at its offset (zero slip angles), where
     # the saturating axle's slope is its cornering stiffness
     rest = theta[config.n_physical] if config.offsets else 0.0
-    at_rest = [ca.substitute(ca.substitute(jacobian, x, ca.DM.zeros(model.n_x)), u, rest)
+    at_rest = [ca.substitute(ca.substitute(jacobian, x, ca.DM.zeros(model.n_states)), u, rest)
                for jacobian in (ca.jacobian(rates, x), ca.jacobian(rates, u), ca.jacobian(outputs, x),
                                 ca.jacobian(outputs, u))]
     ratio = config.steering_ratio  # the channel is the road-wheel angle times the ratio

@@ -46,9 +46,9 @@ class NonlinearModel:
     Attributes
     ----------
     x, u, p : casadi.SX
-        Column symbols of the states (n_x), inputs (n_u) and parameters (n_p).
+        Column symbols of the states (n_states), inputs (n_u) and parameters (n_p).
     x_next, y : casadi.SX
-        ``f(x, u, p)`` (n_x) and ``h(x, u, p)`` (n_y).
+        ``f(x, u, p)`` (n_states) and ``h(x, u, p)`` (n_y).
     name : str
         Names the generated functions.
     """
@@ -77,7 +77,7 @@ class NonlinearModel:
             raise InputError(f"the model uses symbols that are not states, inputs or parameters: {', '.join(unknown)}")
 
     @property
-    def n_x(self) -> int:
+    def n_states(self) -> int:
         """Number of states."""
         return int(self.x.size1())
 
@@ -143,11 +143,11 @@ class EkfResult:
 
     Attributes
     ----------
-    states : ndarray, shape (N, n_x)
+    states : ndarray, shape (N, n_states)
         ``x(k|k)``.
     parameters : ndarray, shape (N, n_p)
         ``p(k|k)``.
-    covariance : ndarray, shape (n_x + n_p, n_x + n_p)
+    covariance : ndarray, shape (n_states + n_p, n_states + n_p)
         Final ``P(k|k)``.
     innovations : ndarray, shape (N, n_y)
         ``y(k) - h(z(k|k-1))``.
@@ -230,7 +230,7 @@ def ekf_joint(model: NonlinearModel, data_or_arrays: Any, *, x0: Sequence[float]
         uses ``y`` at row 0 after one prediction from row -1 with ``u(-1) = u(0)``.
     P0, Q : array_like
         Initial covariance and process noise of z, ``(m, m)`` or a diagonal of
-        m = n_x + n_p entries. A zero parameter block in Q keeps the
+        m = n_states + n_p entries. A zero parameter block in Q keeps the
         parameters constant; a small one lets them drift.
     R : array_like
         Measurement noise, ``(n_y, n_y)`` or a diagonal.
@@ -253,10 +253,10 @@ def ekf_joint(model: NonlinearModel, data_or_arrays: Any, *, x0: Sequence[float]
     if u.shape[1] != model.n_u or y.shape[1] != model.n_y:
         raise InputError(f"the model has {model.n_u} inputs and {model.n_y} outputs; the data "
                          f"{u.shape[1]} and {y.shape[1]}")
-    m = model.n_x + model.n_p
+    m = model.n_states + model.n_p
     z = np.concatenate([finite_matrix("x0", np.ravel(x0), ndim=1), finite_matrix("p0", np.ravel(p0), ndim=1)])
     if z.size != m:
-        raise InputError(f"x0 and p0 must hold {model.n_x} and {model.n_p} values")
+        raise InputError(f"x0 and p0 must hold {model.n_states} and {model.n_p} values")
     P = _square("P0", P0, m)
     Qm = _square("Q", Q, m)
     Rm = _square("R", R, model.n_y)
@@ -288,9 +288,9 @@ def ekf_joint(model: NonlinearModel, data_or_arrays: Any, *, x0: Sequence[float]
                 z, P = np.array(z_k).ravel(), np.array(P_k)
                 states[k], innovations[k], trace[k] = z, np.array(innov).ravel(), np.trace(P)
         if not (np.all(np.isfinite(states[start:stop])) and np.all(np.isfinite(P))):
-            partial = EkfResult(states[:start, : model.n_x], states[:start, model.n_x:], P, innovations[:start],
+            partial = EkfResult(states[:start, : model.n_states], states[:start, model.n_states:], P, innovations[:start],
                                 trace[:start], {"diverged_at": start})
             raise DivergenceError(f"the EKF diverged between samples {start} and {stop}", last_good=partial)
         start = stop
-    return EkfResult(states[:, : model.n_x], states[:, model.n_x:], P, innovations, trace,
+    return EkfResult(states[:, : model.n_states], states[:, model.n_states:], P, innovations, trace,
                      {"method": "extended Kalman filter", "compiled": compiled})

@@ -24,7 +24,7 @@ class FilterModel(Protocol):
     """What the IEKF needs of a model (module docstring); ``n_constants`` is explicit, 0 where there are none."""
 
     @property
-    def n_x(self) -> int: ...
+    def n_states(self) -> int: ...
     @property
     def n_theta(self) -> int: ...
     @property
@@ -46,7 +46,7 @@ class LinearModalFilterModel(FilterModel):
     structure: ModalStructure
 
     @property
-    def n_x(self) -> int:
+    def n_states(self) -> int:
         return self.structure.n
 
     @property
@@ -65,7 +65,7 @@ class LinearModalFilterModel(FilterModel):
 
     def transition(self, x: ca.SX, theta: ca.SX, u0: ca.SX, u1: ca.SX, dt: float, discretization: str,
                    constants: ca.SX | None = None) -> ca.SX:
-        """``x_next`` (SX, n_x) under the given discretisation."""
+        """``x_next`` (SX, n_states) under the given discretisation."""
         check_discretization(discretization)
         s = self.structure
         _, B, _, _ = s.matrices(theta, backend=ca.SX)

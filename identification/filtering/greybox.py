@@ -106,7 +106,7 @@ class GreyBoxModel:
     Parameters
     ----------
     dynamics : casadi.Function
-        ``(x, u, theta, s) -> dx/dt``, column vectors of sizes ``n_x, n_u, n_theta, n_s``.
+        ``(x, u, theta, s) -> dx/dt``, column vectors of sizes ``n_states, n_u, n_theta, n_s``.
     output : casadi.Function
         ``(x, u, theta, s) -> y`` (``n_y``).
     parameter_names, parameter_units : sequence of str
@@ -141,8 +141,8 @@ class GreyBoxModel:
             object.__setattr__(self, name, tuple(getattr(self, name)))
         object.__setattr__(self, "dynamics", _as_sx_function(self.dynamics, "dynamics", 4))
         object.__setattr__(self, "output", _as_sx_function(self.output, "output", 4))
-        sizes = (self.n_x, self.n_u, self.n_theta, self.n_s)
-        for function, label, n_out in ((self.dynamics, "dynamics", self.n_x), (self.output, "output", None)):
+        sizes = (self.n_states, self.n_u, self.n_theta, self.n_s)
+        for function, label, n_out in ((self.dynamics, "dynamics", self.n_states), (self.output, "output", None)):
             for i, (size, what) in enumerate(zip(sizes, ("states", "inputs", "parameters", "scheduling signals"))):
                 if function.size1_in(i) != size or function.size2_in(i) not in (1, 0 if size == 0 else 1):
                     raise InputError(f"the model's {label} takes {function.size1_in(i)} {what}; "
@@ -159,7 +159,7 @@ class GreyBoxModel:
             raise InputError("parameter_scale needs one positive size per parameter")
 
     @property
-    def n_x(self) -> int:
+    def n_states(self) -> int:
         """Number of states."""
         return len(self.state_names)
 
@@ -268,7 +268,7 @@ class _GreyBoxFilterModel:
     model_bound_step = True
 
     n_constants = property(lambda self: self.model.n_theta + self.model.n_y)
-    n_x = property(lambda self: self.model.n_x)
+    n_states = property(lambda self: self.model.n_states)
     n_theta = property(lambda self: self.model.n_theta)
     n_u = property(lambda self: self.model.n_u + self.model.n_s)
     n_y = property(lambda self: self.model.n_y)
@@ -302,7 +302,7 @@ class _GreyBoxFilterModel:
 def _simulator(model_key: str, model: GreyBoxModel, dt: float, discretization: str, substeps: int
                ) -> CompiledRecursion:
     """The compiled recursion ``(x, u_k, u_k+1, theta) -> (x_next, y_k)`` of a model (inputs then schedule)."""
-    x = ca.SX.sym("x", model.n_x)
+    x = ca.SX.sym("x", model.n_states)
     u0 = ca.SX.sym("u0", model.n_u + model.n_s)
     u1 = ca.SX.sym("u1", model.n_u + model.n_s)
     theta = ca.SX.sym("theta", model.n_theta)
@@ -346,7 +346,7 @@ def simulate_greybox(model: GreyBoxModel, theta: Any, record: IOData, *, x0: Any
     -------
     y : ndarray (N, n_y)
         Outputs at the sample times.
-    x : ndarray (N, n_x)
+    x : ndarray (N, n_states)
         States at the sample times.
     """
     return greybox_outputs(model, theta, _driving(model, record), float(record.dt), x0=x0,
@@ -368,15 +368,15 @@ def greybox_outputs(model: GreyBoxModel, theta: Any, u: np.ndarray, dt: float, *
 
     Returns
     -------
-    y, x : ndarray (N, n_y), (N, n_x)
+    y, x : ndarray (N, n_y), (N, n_states)
         Outputs and states at the sample times.
     """
     _check_discretization(discretization, substeps)
     theta = model.check_parameters(theta)
     simulator = _simulator(model.cache_key(), model, float(dt), discretization, int(substeps))
-    x0 = np.zeros(model.n_x) if x0 is None else np.asarray(x0, dtype=float).ravel()
-    if x0.shape != (model.n_x,) or not np.all(np.isfinite(x0)):
-        raise InputError(f"x0 must hold {model.n_x} finite entries; got shape {x0.shape}")
+    x0 = np.zeros(model.n_states) if x0 is None else np.asarray(x0, dtype=float).ravel()
+    if x0.shape != (model.n_states,) or not np.all(np.isfinite(x0)):
+        raise InputError(f"x0 must hold {model.n_states} finite entries; got shape {x0.shape}")
     with np.errstate(all="ignore"):
         return simulator(x0, np.asarray(u, dtype=float), theta)
 
@@ -715,7 +715,7 @@ def identify_greybox(
     if np.any(scale == 0):
         raise InputError(f"parameter {model.parameter_names[int(np.flatnonzero(scale == 0)[0])]!r} starts at zero: "
                          "give a start of its expected size (it sets the parameter's scale)")
-    n, n_theta = model.n_x, model.n_theta
+    n, n_theta = model.n_states, model.n_theta
     m = n + n_theta
     if options.parameter_prior_std is not None and len(options.parameter_prior_std) != n_theta:
         raise InputError(f"parameter_prior_std needs {n_theta} values (one per parameter); "

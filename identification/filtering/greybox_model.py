@@ -101,10 +101,10 @@ def schedule_columns(u: Any, schedule: Any, n_u: int, n_s: int, variable: str) -
 @functools.lru_cache(maxsize=16)
 def _linearisation(model_key: str, model: GreyBoxModel) -> ca.Function:
     """``(theta, s) -> (A, B, C, D)``: the Jacobians at ``x = 0``, ``u = 0`` (exact, CasADi)."""
-    x, u = ca.SX.sym("x", model.n_x), ca.SX.sym("u", model.n_u)
+    x, u = ca.SX.sym("x", model.n_states), ca.SX.sym("u", model.n_u)
     theta, s = ca.SX.sym("theta", model.n_theta), ca.SX.sym("s", model.n_s)
     rates, outputs = model.dynamics(x, u, theta, s), model.output(x, u, theta, s)
-    at_rest = [ca.substitute(ca.substitute(jacobian, x, ca.DM.zeros(model.n_x)), u, ca.DM.zeros(model.n_u))
+    at_rest = [ca.substitute(ca.substitute(jacobian, x, ca.DM.zeros(model.n_states)), u, ca.DM.zeros(model.n_u))
                for jacobian in (ca.jacobian(rates, x), ca.jacobian(rates, u), ca.jacobian(outputs, x),
                                 ca.jacobian(outputs, u))]
     return ca.Function(f"greybox_linearisation_{model_key[:12]}", [theta, s], at_rest, ["theta", "s"],
@@ -246,8 +246,8 @@ class IdentifiedGreyBox(StateSpaceModel):
 
     @property
     def n_states(self) -> int:
-        """Number of states ``n_x``."""
-        return self.model.n_x
+        """Number of states of the model definition."""
+        return self.model.n_states
 
     @property
     def n_u(self) -> int:
@@ -360,12 +360,12 @@ class IdentifiedGreyBox(StateSpaceModel):
             Inputs, time-major.
         dt : float
             Sample interval (s); required (optional only in the protocol's signature).
-        x0 : array_like (n_x,), optional
+        x0 : array_like (n_states,), optional
             Initial state; rest by default.
         schedule : array_like (N,) or (N, n_s), optional
             The scheduling signals; without them, ``u``'s last columns.
         return_states : bool
-            Also return the states (N, n_x).
+            Also return the states (N, n_states).
 
         Returns
         -------
@@ -391,7 +391,7 @@ class IdentifiedGreyBox(StateSpaceModel):
         ----------
         record : IOData
             Inputs, then the scheduling signals, in ``u``.
-        x0 : array_like (n_x,), optional
+        x0 : array_like (n_states,), optional
             Initial state; rest by default.
 
         Returns
@@ -413,7 +413,7 @@ class IdentifiedGreyBox(StateSpaceModel):
             ``(x, u[, s]) -> (xdot, y)``, ``s`` where the model is scheduled.
         """
         model = self.model
-        x, u, s = ca.SX.sym("x", model.n_x), ca.SX.sym("u", model.n_u), ca.SX.sym("s", model.n_s)
+        x, u, s = ca.SX.sym("x", model.n_states), ca.SX.sym("u", model.n_u), ca.SX.sym("s", model.n_s)
         theta = ca.DM(self.parameters)
         values = [model.dynamics(x, u, theta, s), model.output(x, u, theta, s)]
         inputs, names = ([x, u, s], ["x", "u", "s"]) if model.n_s else ([x, u], ["x", "u"])

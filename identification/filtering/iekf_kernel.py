@@ -2,8 +2,8 @@
 
 Unrolled, the ``m^2`` covariance terms dominate a large filter step. Here CasADi generates only the
 model-specific ``measure(z, u0, c) -> (h, H)`` and ``predict(z, u0, u1, c) -> (x_next, E)``,
-``E = Phi[:n_x, :] - [I 0]``, both as nonzeros row by row. The parameters have no dynamics, so the
-congruence is the low-rank update ``Phi P Phi' = P + G + G' + E G'``, ``G = E P``: ``O(n_x m nnz(E))``
+``E = Phi[:n_states, :] - [I 0]``, both as nonzeros row by row. The parameters have no dynamics, so the
+congruence is the low-rank update ``Phi P Phi' = P + G + G' + E G'``, ``G = E P``: ``O(n_states m nnz(E))``
 work instead of ``O(m^3)``. The update is the Joseph identity of :mod:`vehid.identification.filtering.iekf_pass` on the
 packed upper triangle, column by column (contiguous, so vectorised); ``S`` is inverted by Gauss-Jordan
 elimination with partial pivoting. The sparsity patterns are constant tables in the C source, so the
@@ -55,11 +55,11 @@ def model_functions(filter_step: Any) -> tuple[ca.Function, ca.Function, dict[st
     dt = ca.SX.sym("dt")
     z_next, Phi, h, H = fs.timed_model(z, u0, u1, c, dt)
     h_values, h_pointers, h_columns = _row_major_nonzeros(H)
-    e_values, e_pointers, e_columns = _row_major_nonzeros(Phi[: fs.n_x, :], minus_identity_rows=fs.n_x)
+    e_values, e_pointers, e_columns = _row_major_nonzeros(Phi[: fs.n_states, :], minus_identity_rows=fs.n_states)
     measure = ca.Function("iekf_measure", [z, u0, c], [h, ca.vertcat(*h_values)], ["z", "u0", "c"], ["h", "H_nz"],
                           {"cse": True})
     # The sample time is an input, so that one library serves every sample time.
-    predict = ca.Function("iekf_predict", [z, u0, u1, c, dt], [z_next[: fs.n_x], ca.vertcat(*e_values)],
+    predict = ca.Function("iekf_predict", [z, u0, u1, c, dt], [z_next[: fs.n_states], ca.vertcat(*e_values)],
                           ["z", "u0", "u1", "c", "dt"], ["x_next", "E_nz"], {"cse": True})
     tables = {"h_pointers": h_pointers, "h_columns": h_columns, "e_pointers": e_pointers, "e_columns": e_columns}
     return measure, predict, tables
@@ -307,7 +307,7 @@ def structured_pass_source(filter_step: Any) -> tuple[str, list[ca.Function]]:
     measure, predict, tables = model_functions(fs)
     header = (
         "#include <math.h>\n"
-        f"#define N_Z {fs.n_z}LL\n#define N_X {fs.n_x}LL\n#define N_Y {fs.n_y}LL\n"
+        f"#define N_Z {fs.n_z}LL\n#define N_X {fs.n_states}LL\n#define N_Y {fs.n_y}LL\n"
         f"#define NNZ_H {len(tables['h_columns'])}\n#define NNZ_E {len(tables['e_columns'])}\n"
         f"#define PAPER_FORM {1 if fs.covariance == 'paper' else 0}\n"
         + _table("H_POINTERS", tables["h_pointers"]) + _table("H_COLUMNS", tables["h_columns"])

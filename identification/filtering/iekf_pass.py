@@ -113,7 +113,7 @@ class FilterStep:
     """
 
     n_z: int
-    n_x: int
+    n_states: int
     n_u: int
     n_y: int
     n_c: int
@@ -144,9 +144,9 @@ class FilterStep:
 @functools.lru_cache(maxsize=32)
 def _timed_functions(filter_model: FilterModel, discretization: str, covariance: str) -> tuple[ca.Function, ca.Function]:
     """The model and the filter step with the sample time a symbolic input ``dt`` (their last)."""
-    n_x, n_theta, n_u, n_y = filter_model.n_x, filter_model.n_theta, filter_model.n_u, filter_model.n_y
+    n_states, n_theta, n_u, n_y = filter_model.n_states, filter_model.n_theta, filter_model.n_u, filter_model.n_y
     n_c = filter_model.n_constants
-    m = n_x + n_theta
+    m = n_states + n_theta
 
     # The model and its Jacobians, as a function of a free augmented state.
     z = ca.SX.sym("z", m)
@@ -154,7 +154,7 @@ def _timed_functions(filter_model: FilterModel, discretization: str, covariance:
     u1 = ca.SX.sym("u1", n_u)
     c = ca.SX.sym("c", n_c)
     dt = ca.SX.sym("dt")
-    x, theta = z[:n_x], z[n_x:]
+    x, theta = z[:n_states], z[n_states:]
     x_next = filter_model.transition(x, theta, u0, u1, dt, discretization, c)
     z_next = ca.vertcat(x_next, theta)
     h = filter_model.output(x, theta, u0, c)
@@ -216,9 +216,9 @@ def build_filter_step(filter_model: FilterModel, dt: float, discretization: str,
     if covariance not in COVARIANCE_FORMS:
         raise ValueError(f"unknown covariance form {covariance!r}; use one of {', '.join(COVARIANCE_FORMS)}")
     timed_step, timed_model = _timed_functions(filter_model, discretization, covariance)
-    m = filter_model.n_x + filter_model.n_theta
+    m = filter_model.n_states + filter_model.n_theta
     return FilterStep(
-        m, filter_model.n_x,
+        m, filter_model.n_states,
         filter_model.n_u, filter_model.n_y, filter_model.n_constants, float(dt), discretization, covariance,
         timed_step, timed_model,
     )

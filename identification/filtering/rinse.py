@@ -119,7 +119,7 @@ class RinseHooks(Generic[ResultT]):
     assess: Callable[[np.ndarray, np.ndarray], Assessment]  # may refuse the model: DivergenceError
     settled: Callable[[PassRecord, PassRecord], bool]  # the stop rule on the last two passes
     result: Callable[[str, tuple[PassRecord, ...], np.ndarray, np.ndarray], ResultT]  # (stop reason, history, theta, P)
-    n_x: int  # true states, reset to zero at the start of each record
+    n_states: int  # true states, reset to zero at the start of each record
     label: str = "pass"
     hint: str = "try a lower p"
     # called with a pass's index before it runs: a filter whose Q changes from pass to pass sets it here
@@ -164,7 +164,7 @@ def rinse(hooks: RinseHooks[ResultT], theta: np.ndarray, P: np.ndarray, history:
     the result up to the last good pass (None before the first).
     """
     history = list(history)
-    n = hooks.n_x
+    n = hooks.n_states
     m = n + theta.size
 
     def one_pass(index: int) -> tuple[PassRecord, np.ndarray, np.ndarray]:

@@ -158,7 +158,7 @@ class ScheduledFilterModel(FilterModel):
     knots: int
 
     @property
-    def n_x(self) -> int:
+    def n_states(self) -> int:
         return self.structure.n
 
     @property

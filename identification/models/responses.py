@@ -68,7 +68,7 @@ class TimeResponse(IOData):
         The inputs the model was driven by.
     y : array_like, shape (N, n_y)
         The model's outputs.
-    x : array_like, shape (N, n_x), optional
+    x : array_like, shape (N, n_states), optional
         Its states, where it gave them.
     input_names, output_names, state_names : sequence of str, optional
         Column names, as :class:`~identification.data.IOData`'s.
@@ -223,7 +223,7 @@ def simulated_response(record: IOData, y: np.ndarray, *, x: np.ndarray | None = 
         The record that drove the model.
     y : ndarray (N, n_y)
         The model's outputs.
-    x : ndarray (N, n_x), optional
+    x : ndarray (N, n_states), optional
         The model's states.
     output_names, state_names : sequence of str, optional
         The model's names; the outputs default to the record's where it has ``n_y`` outputs.

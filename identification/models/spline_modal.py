@@ -272,7 +272,7 @@ class SplineModalFilterModel:
     structure: SplineModalStructure
 
     @property
-    def n_x(self) -> int:
+    def n_states(self) -> int:
         return self.structure.linear.n
 
     @property
@@ -353,7 +353,7 @@ def _simulator(structure: SplineModalStructure, discretization: str) -> Compiled
     The sample time is a parameter rather than a constant of the code, so that one library serves
     every record of the structure."""
     model = SplineModalFilterModel(structure)
-    x = ca.SX.sym("x", model.n_x)
+    x = ca.SX.sym("x", model.n_states)
     u0 = ca.SX.sym("u0", model.n_u)
     u1 = ca.SX.sym("u1", model.n_u)
     params = ca.SX.sym("params", model.n_theta + model.n_constants + 1)
@@ -852,7 +852,7 @@ class SplineModalModel(StateSpaceModel):
             The step or the simulation.
         """
         model = SplineModalFilterModel(self.structure)
-        x = ca.SX.sym("x", model.n_x)
+        x = ca.SX.sym("x", model.n_states)
         u0 = ca.SX.sym("u0", model.n_u)
         u1 = ca.SX.sym("u1", model.n_u)
         theta = ca.DM(self.theta)
@@ -872,7 +872,7 @@ class SplineModalModel(StateSpaceModel):
         lifted = step.mapaccum("vehid_spline_steps", n_samples)
         u = ca.MX.sym("u", model.n_u, n_samples)
         u_next = ca.horzcat(u[:, 1:], u[:, n_samples - 1])
-        _, y = lifted(ca.MX.zeros(model.n_x), u, u_next)
+        _, y = lifted(ca.MX.zeros(model.n_states), u, u_next)
         return ca.Function("vehid_spline_model", [u], [y], ["u"], ["y"])
 
     def to_dict(self) -> dict[str, Any]:
