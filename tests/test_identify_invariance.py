@@ -306,15 +306,19 @@ def test_the_spline_model_is_returned_only_where_it_beats_the_other_model_by_the
     assert nonlinear_margin(scored(90.0 + WHOLE_RECORD_MARGIN + 0.1, None), alone, "filter")["choice"] == "nonlinear"
 
 
-def test_the_start_is_returned_only_where_it_beats_every_p_in_cross_validation():
-    from vehid.identification.automatic.steps import P_TOLERANCE, PCandidate, PTuning
+def test_the_filter_is_returned_in_its_start_s_place_only_where_its_p_beats_the_start_clearly():
+    """The chosen candidate must beat the start by more than the margin that ranks cross-validated fits."""
+    from vehid.identification.automatic.steps import PCandidate, PTuning
+    from vehid.identification.decisions import SCHEDULE_MARGIN
 
-    rows = (PCandidate(1e-4, None, 70.0, 1.0), PCandidate(1e-5, None, 72.0, 1.0),
+    rows = (PCandidate(1e-4, None, 75.0, 1.0), PCandidate(1e-5, None, 72.0, 1.0),
             PCandidate(1e-6, None, None, 1.0, error="diverged"))
-    assert not PTuning(1e-5, rows, 3.0, 72.0 + P_TOLERANCE / 2).start_wins  # within the tolerance: the filter's
-    assert PTuning(1e-5, rows, 3.0, 72.0 + 2 * P_TOLERANCE).start_wins
+    assert not PTuning(1e-5, rows, 3.0, 72.0 - 2 * SCHEDULE_MARGIN).start_wins  # a clear lead: the filter's
+    assert PTuning(1e-5, rows, 3.0, 72.0 - SCHEDULE_MARGIN / 2).start_wins  # within the margin: the start
+    # the chosen p is weighed, not another p's better fit (p 1e-4 leads the start by 3.6 here)
+    assert PTuning(1e-5, rows, 3.0, 71.4).start_wins
     assert not PTuning(1e-5, rows, 3.0, None).start_wins  # the start could not be scored
-    assert PTuning(1e-4, (rows[2],), 1.0, 10.0).start_wins  # every p failed on the halves
+    assert PTuning(1e-6, rows, 1.0, 10.0).start_wins  # the chosen p failed on the halves
 
 
 def test_a_returned_start_is_what_the_summary_and_the_archive_describe(tmp_path, capsys, monkeypatch):

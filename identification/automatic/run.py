@@ -167,7 +167,7 @@ def _finish(plan: Plan, options: IdentifyOptions, model: Any, *, estimator: Any,
     notes = steps.decision_notes({
         **{key: keys[key] for key in ("open_loop_unstable", "start_kept", "refinement") if key in keys},
         **({"model_returned": "start"} if start_returned else {}),
-        **({"start_cv_fit_percent": tuning.start_fit} if iekf else {})})
+        **({"start_cv_fit_percent": tuning.start_fit, "filter_cv_fit_percent": tuning.chosen_fit} if iekf else {})})
     stop_reason = None
     if result is not None and not start_returned:
         stop_reason = f"{result.stop_reason}: {divergence}" if divergence else result.stop_reason

@@ -21,8 +21,9 @@ seconds for the absolute behaviour), p chosen by cross-validation on the
 estimation data unless --p is given. Where the data start, left unstable,
 predicts the record clearly better than a stable one, the plant is treated
 as open-loop unstable (as --allow-unstable; JSON `open_loop_unstable`), and
-the data start is returned where it beats every p in cross-validation or
-the filter's model on the estimation data (`start_kept`), at every order.
+the data start is returned where the filter's model does not beat it
+clearly in cross-validation (by 1.25 points), or where it beats the
+filter's model on the estimation data (`start_kept`), at every order.
 These choices are said once as notes (JSON `notes`), each with its margin
 (JSON `decision_margins`: choice, score, runner-up and its score). The
 summary first names the model returned (`model_returned`), then gives its
