@@ -450,7 +450,8 @@ def identify_single_track(data: IOData | str | os.PathLike, *, schedule: str, co
     from vehid.identification.dataio.cleaning import cleaning_notes, cleaning_summary, cleaning_warnings
     from vehid.identification.dataio.model_files import check_model_target
     from vehid.identification.dataio.model_files import save_model as write_model
-    from vehid.identification.filtering.greybox import GreyBoxOptions, simulate_greybox
+    from vehid.identification.filtering.greybox import GreyBoxOptions
+    from vehid.identification.filtering.greybox_structure import simulate_greybox
     from vehid.scenarios import plausibility_checks as plausibility
     from vehid.vehicle.single_track import GRAVITY, IdentifiedSingleTrack, single_track_handling, single_track_model
 

@@ -20,7 +20,8 @@ from conftest import run_vehid
 
 from vehid.identification.data import IOData
 from vehid.identification.decisions import SCHEDULE_MARGIN, ScheduleCandidate, choose_p_and_schedule, choose_refined
-from vehid.identification.models.modal import ModalModel, ModalStructure
+from vehid.identification.models.modal import ModalModel
+from vehid.identification.models.modal_structure import ModalStructure
 from vehid.identification.automatic.refinement import REFINED_MEASURE
 from vehid.identification.automatic.tuning import PTuning, P_TOLERANCE
 from vehid.identification.automatic.returned import (RefinedCandidates, UNSTABLE_MARGIN, WHOLE_RECORD_MARGIN,

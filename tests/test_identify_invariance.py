@@ -15,7 +15,8 @@ from conftest import run_vehid
 
 from vehid.identification.data import IOData
 from vehid.identification.filtering.iekf import IEKFOptions, identify_iekf
-from vehid.identification.models.modal import ModalModel, ModalStructure
+from vehid.identification.models.modal import ModalModel
+from vehid.identification.models.modal_structure import ModalStructure
 from vehid.identification.assessment.validation import score
 
 DT = 0.05  # s

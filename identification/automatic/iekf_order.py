@@ -12,7 +12,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from vehid.identification.filtering.iekf import IEKFOptions, identify_iekf, start_structure
-from vehid.identification.models.modal import ModalModel, ModalStructure
+from vehid.identification.models.modal import ModalModel
+from vehid.identification.models.modal_structure import ModalStructure
 from vehid.identification.automatic.plan import Plan
 from vehid.identification.automatic.options import IdentifyOptions
 from vehid.identification.automatic.scoring import last_good_on_divergence

@@ -37,7 +37,8 @@ from vehid.identification.data import IOData
 from vehid.identification.decisions import SCHEDULE_MARGIN, choose_refined
 from vehid.identification.errors import InputError, WorkbenchError
 from vehid.identification.filtering.iekf import IEKFOptions, normalized_data_start, signal_scales
-from vehid.identification.models.modal import ModalModel, ModalStructure
+from vehid.identification.models.modal import ModalModel
+from vehid.identification.models.modal_structure import ModalStructure
 from vehid.identification.assessment.uncertainty import with_simulation_error_covariance
 from vehid.identification.assessment.validation import UNSTABLE_HORIZON, score
 from vehid.identification.automatic.plan import Plan

@@ -22,7 +22,8 @@ from vehid.identification.errors import InputError, WorkbenchError
 from vehid.identification.frozen import FrozenDict, freeze
 from vehid.identification.filtering.iekf import (INVARIANT_P, INVARIANT_P_DECAY, IEKFOptions, identify_iekf,
                                                  invariant_noise_settings)
-from vehid.identification.models.modal import ModalModel, ModalStructure
+from vehid.identification.models.modal import ModalModel
+from vehid.identification.models.modal_structure import ModalStructure
 from vehid.identification.assessment.validation import default_horizon, split_holdout
 from vehid.identification.automatic.plan import Plan
 from vehid.identification.automatic.options import IdentifyOptions

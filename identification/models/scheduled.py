@@ -1,6 +1,6 @@
 """Scheduled (linear-parameter-varying) modal models: one family from models identified at grid points.
 
-Models of one :class:`~identification.models.modal.ModalStructure` identified at several values of a
+Models of one :class:`~identification.models.modal_structure.ModalStructure` identified at several values of a
 scheduling variable (for a car: its speed) become one family whose modal parameters (sigma, omega,
 B, C, D) are interpolated piecewise linearly in that variable; outside the grid the family is not
 defined. Entry-by-entry interpolation needs every grid model in the same coordinates, so first
@@ -41,7 +41,8 @@ import casadi as ca
 import numpy as np
 
 from ..errors import InputError
-from .modal import ModalModel, ModalStructure
+from .modal import ModalModel
+from .modal_structure import ModalStructure
 
 __all__ = ["ModeMatch", "OutputMap", "ScheduledModalModel", "canonical_modal_model", "schedule_models", "gauge_parameters",
            "gauge_matrices", "interpolation_weights", "scheduled_matrices", "knot_size"]
