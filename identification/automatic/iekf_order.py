@@ -47,8 +47,10 @@ class RunDecisions:
 
 def decide_run(settings: IdentifyOptions, plan: Plan, options: IEKFOptions, order: int) -> RunDecisions:
     """The decisions before an IEKF run of ``order``, in their order: the open-loop-unstable treatment
-    (:func:`assume_unstable`), the structure (:func:`structure_for`), p and Q schedule (:func:`tune_p`,
-    or the p given) and the compiled build's planned steps (:func:`planned_filter_steps`)."""
+    (:func:`~vehid.identification.automatic.returned.assume_unstable`), the structure (:func:`structure_for`), p and Q
+    schedule (:func:`~vehid.identification.automatic.tuning.tune_p`,
+    or the p given) and the compiled build's planned steps
+    (:func:`~vehid.identification.automatic.tuning.planned_filter_steps`)."""
     options, unstable = assume_unstable(settings, plan, options, order)
     structure = structure_for(settings, order, plan, options)
     tuning = tune_p(settings, plan, options, structure) if tunes_p(settings) else given_p(options)

@@ -53,7 +53,7 @@ class NonlinearOutcome:
 
 #: points of mean validation fit by which the spline model must beat the model otherwise returned (the same
 #: margin as a scheduled family's: it has several times the parameters); without validation data
-#: :data:`WHOLE_RECORD_MARGIN` on the estimation fit
+#: :data:`~vehid.identification.automatic.returned.WHOLE_RECORD_MARGIN` on the estimation fit
 NONLINEAR_MARGIN = 0.5
 
 
@@ -61,7 +61,8 @@ def nonlinear_margin(spline: Any, other: Any, other_name: str) -> dict[str, Any]
     """The decision ``nonlinear``: the spline model or the model otherwise returned, both scored by the run's rule.
 
     The spline model is returned where its ranking fit (mean validation fit, else mean estimation fit)
-    beats the other's by :data:`NONLINEAR_MARGIN` points (:data:`WHOLE_RECORD_MARGIN` without
+    beats the other's by :data:`NONLINEAR_MARGIN` points
+    (:data:`~vehid.identification.automatic.returned.WHOLE_RECORD_MARGIN` without
     validation data, where both fitted the record they are scored on).
     """
     held_out = bool(spline.validation) and other.validation_fit is not None
@@ -145,8 +146,8 @@ def identify_nonlinear(linear: ModalModel, plan: Plan, settings: IdentifyOptions
 class NonlinearScores(RankedScores):
     """Scores of a spline model on the plan's records, by the run's rule (``settings``), as every candidate's.
 
-    The initial state and the records are those of :func:`evaluate`; a spline model is simulated
-    (in its own time base) whatever the horizon, since only a linear model predicts k steps ahead.
+    The initial state and the records are those of :func:`~vehid.identification.automatic.scoring.evaluate`; a spline
+    model is simulated (in its own time base) whatever the horizon, since only a linear model predicts k steps ahead.
     """
 
     estimation: Scores

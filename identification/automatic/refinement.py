@@ -87,7 +87,8 @@ REFINED_MEASURE = "estimation NRMSE fit % of each model refined by its simulatio
 
 
 def refinement_note(entry: dict[str, Any]) -> str:
-    """The note of a model refined by its simulation error, or of a refinement left out (:func:`returned_model`'s
+    """The note of a model refined by its simulation error, or of a refinement left out
+    (:func:`~vehid.identification.automatic.returned.returned_model`'s
     ``refinement``)."""
     fits = entry.get("fits") or {}
 

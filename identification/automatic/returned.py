@@ -169,8 +169,8 @@ def returned_model(result: Any, plan: Plan, settings: IdentifyOptions, tuning: P
                    unstable: dict[str, Any] | None) -> tuple[ModalModel, dict[str, Any]]:
     """The model an IEKF run returns (the filter's or its start's, refined or not) and the summary keys.
 
-    A run scored by simulation (:func:`refines`) with a stable model returns a
-    model refined by its simulation error on the estimation records: the
+    A run scored by simulation (:func:`~vehid.identification.automatic.refinement.refines`) with a stable model
+    returns a model refined by its simulation error on the estimation records: the
     filter's, unless the start's refined model cross-validates better by more
     than :data:`~vehid.identification.decisions.SCHEDULE_MARGIN` points
     (:func:`~vehid.identification.decisions.choose_refined` on
@@ -191,7 +191,7 @@ def returned_model(result: Any, plan: Plan, settings: IdentifyOptions, tuning: P
     an in-sample gap is what fitting alone gives the start, and the
     cross-validation decides. A run that diverged on the whole record
     returns an interrupted pass, which no cross-validation scored: there the
-    start needs to win by :data:`P_TOLERANCE` only.
+    start needs to win by :data:`~vehid.identification.automatic.tuning.P_TOLERANCE` only.
     ``open_loop_unstable`` is :func:`assume_unstable`'s entry, where it weighed
     the plant; ``decision_margins`` holds each decision's margin,
     ``model_returned`` says which model it is ("filter" or "start") and
@@ -279,7 +279,8 @@ class RefinedCandidates:
 
 
 def refined_candidates(result: Any, plan: Plan, settings: IdentifyOptions) -> RefinedCandidates | None:
-    """The filter's model and its start refined by their simulation errors on the estimation records (:func:`refine`);
+    """The filter's model and its start refined by their simulation errors on the estimation records
+    (:func:`~vehid.identification.automatic.refinement.refine`);
     None where the filter's model cannot be simulated there. A start that is unknown (a resumed run), unstable or
     not simulable is left out."""
     try:
@@ -305,7 +306,7 @@ def refined_choice(refined: RefinedCandidates, plan: Plan, settings: IdentifyOpt
     Without cross-validation (p given) both minimise the same criterion on
     the same records from two starts, and the lower minimum is the better
     estimate: the start's is returned where it fits better by more than
-    :data:`P_TOLERANCE` points (key ``start_kept`` then holds both fits). The
+    :data:`~vehid.identification.automatic.tuning.P_TOLERANCE` points (key ``start_kept`` then holds both fits). The
     model returned carries the covariance of a simulation-error estimate
     (:func:`~vehid.identification.assessment.uncertainty.simulation_error_covariance`).
     """
@@ -363,7 +364,7 @@ def decision_margins(tuning: PTuning, unstable: dict[str, Any] | None, compariso
     """Each choice one IEKF run made by itself, with its score and the runner-up's (JSON ``decision_margins``).
 
     Keys: ``p`` (where cross-validated), ``open_loop_unstable`` (where weighed),
-    ``model_returned`` (where the start is known); :func:`order_margin` adds
+    ``model_returned`` (where the start is known); :func:`~vehid.identification.automatic.orders.order_margin` adds
     ``order`` to an order search's. Each entry: ``choice``, ``score``,
     ``runner_up``, ``runner_up_score`` (percent, None where not finite),
     ``measure`` and ``rule``.

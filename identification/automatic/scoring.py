@@ -112,7 +112,7 @@ def run_warnings(*, model: Any, evaluation: Evaluation, stop_reason: str | None,
     """One line per problem of the model returned, each naming one cause and one remedy (module docstring).
 
     A model worse than its start is not among them: the start is then
-    returned (:func:`returned_model`). A run stopped by the pass limit warns
+    returned (:func:`~vehid.identification.automatic.returned.returned_model`). A run stopped by the pass limit warns
     only where its fit was still moving (``fit_history``, the mean R per pass:
     more than :data:`SETTLED_FIT` points over the last :data:`SETTLED_PASSES`
     passes); modes left at their start values warn only where p was given

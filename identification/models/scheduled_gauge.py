@@ -204,7 +204,8 @@ def scheduled_step(structure: ModalStructure, x: Any, u0: Any, u1: Any, theta: A
 
 @functools.lru_cache(maxsize=16)
 def canonical_function(structure: ModalStructure) -> ca.Function:
-    """One grid value's input-gauge parameters -> the canonical parameters of :meth:`ModalStructure.pack`, and the Jacobian."""
+    """One grid value's input-gauge parameters -> the canonical parameters of
+    :meth:`~vehid.identification.models.modal_structure.ModalStructure.pack`, and the Jacobian."""
     q = ca.SX.sym("q", structure.n_parameters)
     modal, B, C, D = gauge_matrices(structure, q, ca.SX)
     A = structure.matrices(ca.vertcat(modal, ca.SX.zeros(structure.n_parameters - structure.n)), backend=ca.SX)[0]
