@@ -127,7 +127,7 @@ def perturbed_copy(entry: RecordSet, directory: Path, relative: float, seed: int
     return target
 
 
-ORDER_TOLERANCE = 0.5  # points; identify's own (vehid.identification.automatic.steps), passed in by real_data.py
+ORDER_TOLERANCE = 0.5  # points; identify's own (vehid.identification.automatic.orders), passed in by real_data.py
 
 
 def choose_order(mean_fits: dict[int, float | None], tolerance: float = ORDER_TOLERANCE) -> int | None:

@@ -20,7 +20,8 @@ import time
 import numpy as np
 
 from vehid.identification.data import IOData
-from vehid.identification.filtering.greybox import identify_greybox, simulate_greybox
+from vehid.identification.filtering.greybox import identify_greybox
+from vehid.identification.filtering.greybox_structure import simulate_greybox
 from vehid.scenarios.benchmarking import median_seconds, record_figures
 from vehid.vehicle.manoeuvres import band_limited_noise
 from vehid.vehicle.single_track import SingleTrackConfig, single_track_model

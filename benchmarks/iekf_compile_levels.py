@@ -33,7 +33,7 @@ from vehid.identification.compiled import compile_driver
 from vehid.identification.filtering.filter_models import LinearModalFilterModel
 from vehid.identification.filtering.iekf_kernel import structured_pass_source
 from vehid.identification.filtering.iekf_pass import PASS_DRIVER, CompiledPass, build_filter_step, pack_covariance
-from vehid.identification.models.modal import ModalStructure
+from vehid.identification.models.modal_structure import ModalStructure
 from vehid.scenarios.benchmarking import record_figures
 
 LEVELS = ("-O0", "-O1", "-O2", "-O3 -march=native")

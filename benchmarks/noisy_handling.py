@@ -6,7 +6,7 @@ noise of ``handling_study.SENSOR_NOISE`` (0.05 m/s^2 lateral acceleration,
 0.003 rad/s yaw rate, 0.1 deg roll angle; noise seeds 100 and 101, not the 11
 and 12 the invariant settings were tuned on: docs/iekf_tuning.md). Every
 order 2-8 and every p of the command line's tuning grid
-(``vehid.identification.automatic.steps.P_GRID``) is identified as ``vehid identify --order N
+(``vehid.identification.automatic.tuning.P_GRID``) is identified as ``vehid identify --order N
 --p P`` identifies it (:func:`vehid.identification.pipeline.identify`, the
 model it returns), on the noise-free identification record and on the noisy
 one.
@@ -45,7 +45,7 @@ import numpy as np
 import _baselines as baselines  # beside this script, so on sys.path when it runs
 from vehid.identification.assessment.validation import score
 from vehid.identification.automatic.options import IdentifyOptions
-from vehid.identification.automatic.steps import P_GRID
+from vehid.identification.automatic.tuning import P_GRID
 from vehid.identification.errors import DivergenceError
 from vehid.identification.pipeline import identify
 from vehid.scenarios.benchmarking import record_figures

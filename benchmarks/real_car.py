@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from vehid.identification.data import IOData
-from vehid.identification.filtering.greybox import simulate_greybox
+from vehid.identification.filtering.greybox_structure import simulate_greybox
 from vehid.identification.assessment.metrics import nrmse_fit
 from vehid.scenarios.benchmarking import record_figures
 from vehid.vehicle.single_track import SingleTrackConfig, single_track_model

@@ -204,7 +204,7 @@ def peers_python() -> Path:
 def run_peers(names: list[str], fractions: list[float], rule: str) -> dict:
     """The peers' order searches on the named records at each held-out fraction, by identify's own order rule."""
     from vehid.identification.automatic.plan import AUTO_HOLDOUT
-    from vehid.identification.automatic.steps import ORDER_TOLERANCE
+    from vehid.identification.automatic.orders import ORDER_TOLERANCE
 
     done = subprocess.run([str(peers_python()), str(HERE / "_peers_runner.py"), *names,
                            "--fractions", ",".join(repr(f) for f in fractions), "--rule", rule,
@@ -217,7 +217,7 @@ def run_peers(names: list[str], fractions: list[float], rule: str) -> dict:
 
 def saved_peers(paths: list[Path], names: list[str], fractions: list[float], rule: str) -> dict:
     """Earlier outputs of the peers' runner, merged and checked to cover these records and fractions by this rule."""
-    from vehid.identification.automatic.steps import ORDER_TOLERANCE
+    from vehid.identification.automatic.orders import ORDER_TOLERANCE
 
     merged: dict = {"sets": {}}
     for path in paths:
@@ -259,7 +259,7 @@ def score_as_identify(peers: dict, rule: str) -> None:
     from vehid.identification.data import IOData
     from vehid.identification.errors import WorkbenchError
     from vehid.identification.models.discrete import DiscreteModel
-    from vehid.identification.automatic.steps import ORDER_TOLERANCE
+    from vehid.identification.automatic.orders import ORDER_TOLERANCE
 
     for name, splits in (peers.get("sets") or {}).items():
         entry = records.record_set(name)

@@ -35,7 +35,7 @@ from vehid.identification.comparators import identify_with
 from vehid.identification.errors import DivergenceError
 from vehid.identification.filtering.iekf import IEKFOptions, identify_iekf
 from vehid.identification.dataio.iekf_archive import read_iekf_run
-from vehid.identification.models.modal import ModalStructure
+from vehid.identification.models.modal_structure import ModalStructure
 from vehid.identification.dataio.storage import read_group
 from vehid.scenarios.handling_study import HandlingConfig, make_records, with_sensor_noise
 from vehid.scenarios.linear_example import make_data, true_model

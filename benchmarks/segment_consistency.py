@@ -44,7 +44,8 @@ import numpy as np
 
 from vehid.identification.assessment.segments import pair_agreement
 from vehid.identification.data import IOData
-from vehid.identification.filtering.greybox import GreyBoxOptions, simulation_fit_covariance
+from vehid.identification.filtering.greybox import GreyBoxOptions
+from vehid.identification.filtering.greybox_structure import simulation_fit_covariance
 from vehid.scenarios.benchmarking import record_figures
 from vehid.scenarios.single_track_identify import _substeps, fit_log
 from vehid.scenarios.single_track_segments import JACKKNIFE_FORM

@@ -48,7 +48,7 @@ from vehid.identification.data import IOData
 from vehid.identification.filtering.greybox import identify_greybox
 from vehid.identification.filtering.iekf import IEKFOptions, identify_iekf
 from vehid.identification.filtering.scheduled_iekf import ScheduledIEKFOptions, identify_scheduled
-from vehid.identification.models.modal import ModalStructure
+from vehid.identification.models.modal_structure import ModalStructure
 from vehid.vehicle import baseline, simulate
 from vehid.vehicle.handling import source_steady_state
 from vehid.vehicle.linearize import linearize

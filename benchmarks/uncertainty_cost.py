@@ -40,7 +40,7 @@ import vehid.identification.comparators as comparators
 import vehid.identification.filtering.iekf as iekf
 from vehid.identification.comparators import identify_with
 from vehid.identification.filtering.iekf import IEKFOptions, identify_iekf
-from vehid.identification.models.modal import ModalStructure
+from vehid.identification.models.modal_structure import ModalStructure
 from vehid.identification.assessment.segments import formal_method
 from vehid.identification.models.delta_method import frequency_response_band
 from vehid.scenarios.benchmarking import median_seconds, record_figures

@@ -52,7 +52,8 @@ from .models.discrete import DiscreteModel, has_no_continuous_equivalent
 from .errors import ConversionError, ExcitationError, InputError, WorkbenchError
 from .classical.least_squares import estimate_arx, least_squares, model_from_theta, stacked_arx_regressors
 from .assessment.metrics import FitMetrics, fit_metrics
-from .models.modal import ModalModel, ModalStructure
+from .models.modal import ModalModel
+from .models.modal_structure import ModalStructure
 from .classical.recursive import recursive_least_squares
 from .models.statespace import balanced_truncation, discrete_to_continuous, modal_structure_for, to_modal
 from .classical.subspace import estimate_subspace

@@ -11,9 +11,12 @@ a run; ``save_model`` writes the model returned.
 
 The pipeline's parts live in :mod:`vehid.identification.automatic`:
 ``options`` (the settings, checked once), ``intake`` (records and files to a
-plan), ``plan`` (records and orders), ``steps`` (tuning, decisions, scores,
-warnings), ``checks`` (model and data checks), ``scheduled`` (the
-speed-scheduled variant), ``run`` (the run on a plan, with checkpoints),
+plan), ``plan`` (records and orders), ``scoring`` (scores and warnings),
+``refinement``, ``tuning`` (p and Q schedule), ``returned`` (the filter's
+model or its start), ``orders`` (the order search), ``nonlinear`` (the
+spline model), ``iekf_order`` (one order's run), ``reported_checks`` (model
+and data checks), ``scheduled`` (the speed-scheduled variant), ``run`` (the
+run on a plan, with checkpoints),
 ``archiving`` (the run kept on disk), ``result`` (the typed result and its
 JSON summary) and ``text`` (its text).
 """

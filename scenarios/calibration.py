@@ -29,7 +29,8 @@ from vehid.identification.data import IOData
 from vehid.identification.models.discrete import DiscreteModel
 from vehid.identification.errors import ConversionError, ExcitationError, InputError
 from vehid.identification.filtering.iekf import IEKFOptions, identify_iekf
-from vehid.identification.models.modal import ModalModel, ModalStructure
+from vehid.identification.models.modal import ModalModel
+from vehid.identification.models.modal_structure import ModalStructure
 
 __all__ = ["DT", "IEKF_SETTINGS", "COMMAND_LINE_SETTINGS", "N4SID_BLOCK_ROWS", "true_model", "make_record", "Realisation",
            "command_line_iekf", "identify_realisation", "coverage"]

@@ -43,7 +43,7 @@ from vehid.identification.jsonable import to_jsonable
 from vehid.identification.optionspec import renamed_options
 from vehid.identification.filtering.spline_iekf import SplineIEKFOptions, identify_spline_iekf
 from vehid.identification.assessment.metrics import percentage_explanation
-from vehid.identification.models.modal import ModalStructure
+from vehid.identification.models.modal_structure import ModalStructure
 from vehid.identification.models.protocol import Mode as ModelMode
 from vehid.identification.assessment.order import AssessedOrder, OrderAssessment, assess_orders
 from vehid.identification.dataio.storage import write_value

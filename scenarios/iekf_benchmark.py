@@ -13,7 +13,7 @@ import numpy as np
 
 from vehid.identification.filtering.filter_models import LinearModalFilterModel
 from vehid.identification.filtering.iekf_pass import compiled_pass, numpy_reference_pass, pack_covariance
-from vehid.identification.models.modal import ModalStructure
+from vehid.identification.models.modal_structure import ModalStructure
 
 from .benchmarking import median_seconds
 from .linear_example import make_data

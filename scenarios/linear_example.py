@@ -41,7 +41,8 @@ from vehid.identification.filtering.iekf import IEKFOptions, IEKFResult, identif
 from vehid.identification.dataio.iekf_archive import write_iekf_run
 from vehid.identification.jsonable import to_jsonable
 from vehid.identification.assessment.metrics import nrmse_fit_of_R, percentage_explanation
-from vehid.identification.models.modal import ModalModel, ModalStructure
+from vehid.identification.models.modal import ModalModel
+from vehid.identification.models.modal_structure import ModalStructure
 from vehid.identification.assessment.order import OrderAssessment, assess_orders
 
 from .paths import results_path

@@ -238,7 +238,7 @@ def single_track_sideslip(config: Any, parameters: np.ndarray, estimation: Seque
     (read as the outputs are, times its ``--scale``, cleaned with them); None otherwise."""
     import dataclasses
 
-    from vehid.identification.filtering.greybox import simulate_greybox
+    from vehid.identification.filtering.greybox_structure import simulate_greybox
     from vehid.vehicle.single_track import single_track_model
 
     if "sideslip" in config.quantities:

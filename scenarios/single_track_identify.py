@@ -446,11 +446,12 @@ def identify_single_track(data: IOData | str | os.PathLike, *, schedule: str, co
     >>> round(result.handling.understeer_gradient.value, 2)  # m/L (l_r/C_f - l_f/C_r) g, in deg/g
     2.11
     """
-    from vehid.identification.automatic import steps as workflow
+    from vehid.identification.automatic.scoring import Evaluation, last_good_on_divergence, run_warnings
     from vehid.identification.dataio.cleaning import cleaning_notes, cleaning_summary, cleaning_warnings
     from vehid.identification.dataio.model_files import check_model_target
     from vehid.identification.dataio.model_files import save_model as write_model
-    from vehid.identification.filtering.greybox import GreyBoxOptions, simulate_greybox
+    from vehid.identification.filtering.greybox import GreyBoxOptions
+    from vehid.identification.filtering.greybox_structure import simulate_greybox
     from vehid.scenarios import plausibility_checks as plausibility
     from vehid.vehicle.single_track import GRAVITY, IdentifiedSingleTrack, single_track_handling, single_track_model
 
@@ -479,7 +480,7 @@ def identify_single_track(data: IOData | str | os.PathLike, *, schedule: str, co
                                     **({"passes": options.passes} if options.passes is not None else {}))
 
     fit = functools.partial(fit_log, config, options=filter_options)
-    result, divergence = workflow.last_good_on_divergence(lambda: fit(estimation))
+    result, divergence = last_good_on_divergence(lambda: fit(estimation))
     # the filter's covariance pass takes the innovations as white; the fit's block jackknife measures the spread
     covariance, uncertainty = single_track_segments.honest_covariance(model, result, estimation)
     consistency = single_track_segments.part_consistency(config, model, estimation, fit)
@@ -503,8 +504,8 @@ def identify_single_track(data: IOData | str | os.PathLike, *, schedule: str, co
     validation_fit = fit_on(held) if held else None
     notes = ["signals taken as recorded (no offsets removed): a physical model has no operating point",
              *cleaning_notes(estimation)]
-    warnings = workflow.run_warnings(
-        model=None, evaluation=workflow.Evaluation(
+    warnings = run_warnings(
+        model=None, evaluation=Evaluation(
             _Scores(estimation_fit), estimation_fit, tuple(_Scores(f) for f in [validation_fit] if f is not None),
             None),
         stop_reason=result.stop_reason if divergence is None else f"{result.stop_reason}: {divergence}",

@@ -6,7 +6,7 @@ Two things `vehid identify --structure single-track` adds to the grey-box fit
 * **The covariance** of the physical parameters is that of the estimate as a
   fit of its simulation errors, by the delete-one-block jackknife over
   contiguous blocks of the log (:func:`honest_covariance`;
-  :func:`vehid.identification.filtering.greybox.simulation_fit_covariance`),
+  :func:`vehid.identification.filtering.greybox_structure.simulation_fit_covariance`),
   not the filter's covariance pass, which takes the innovations as white: on
   real logs that pass made the standard deviations 6-40 times narrower than
   the parameters move between parts of one drive. The handling numbers
@@ -67,7 +67,7 @@ def honest_covariance(model: Any, result: Any, records: Any) -> tuple[np.ndarray
     The delete-one-block jackknife in the form :data:`JACKKNIFE_FORM`. Where the model cannot be
     simulated to finite values, the filter's own covariance stands and the method says so.
     """
-    from vehid.identification.filtering.greybox import simulation_fit_covariance
+    from vehid.identification.filtering.greybox_structure import simulation_fit_covariance
 
     found = simulation_fit_covariance(model, result.parameters, records, discretization=result.options.discretization,
                                       substeps=result.options.substeps, form=JACKKNIFE_FORM)

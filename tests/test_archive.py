@@ -27,7 +27,8 @@ from vehid.identification import (
     write_value,
 )
 from vehid.identification.dataio import archive as archive_module
-from vehid.identification.models.modal import ModalModel, ModalStructure
+from vehid.identification.models.modal import ModalModel
+from vehid.identification.models.modal_structure import ModalStructure
 from vehid.vehicle import baseline
 from vehid.vehicle.linearize import Linearization, VehicleMode
 

@@ -27,7 +27,8 @@ from vehid.identification.dataio.archive_safety import (
     writing_report_folder,
 )
 from vehid.identification.errors import ArchiveError
-from vehid.identification.models.modal import ModalModel, ModalStructure
+from vehid.identification.models.modal import ModalModel
+from vehid.identification.models.modal_structure import ModalStructure
 from vehid.scenarios.cli import main
 
 CORRUPT_VALUE = 1.6e40  # the value the issue found overwritten on disk, unnoticed

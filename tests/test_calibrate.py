@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from vehid.identification.errors import InputError
-from vehid.identification.filtering.greybox import simulate_greybox
+from vehid.identification.filtering.greybox_structure import simulate_greybox
 from vehid.identification.assessment.metrics import percentage_explanation
 from vehid.vehicle.calibration import (
     DEFAULT_PARAMETERS,

@@ -9,7 +9,8 @@ import pytest
 
 from vehid.identification import ExcitationError, InputError, IOData, fit_metrics
 from vehid.identification.comparators import COMPARATORS, _continuous_start, identify_with, register_comparator
-from vehid.identification.models.modal import ModalModel, ModalStructure
+from vehid.identification.models.modal import ModalModel
+from vehid.identification.models.modal_structure import ModalStructure
 from vehid.scenarios.linear_example import make_data, true_model
 
 REQUIRED_FIT = 99.9  # percent, R of eq. 17

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from vehid.identification import ExcitationError, InputError
-from vehid.identification.models.modal import ModalStructure
+from vehid.identification.models.modal_structure import ModalStructure
 from vehid.identification.models.statespace import (balanced_truncation, continuous_to_discrete, discrete_to_continuous,
                                              modal_structure_for, to_modal)
 from vehid.identification.classical.subspace import estimate_subspace, estimate_subspace_states

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from vehid.identification.models.modal import ModalStructure
+from vehid.identification.models.modal_structure import ModalStructure
 from vehid.identification.filtering.start import (data_start, input_band_edge, lightly_damped_beyond,
                                                    reals_made_into_pairs)
 

@@ -20,8 +20,13 @@ from conftest import run_vehid
 
 from vehid.identification.data import IOData
 from vehid.identification.decisions import SCHEDULE_MARGIN, ScheduleCandidate, choose_p_and_schedule, choose_refined
-from vehid.identification.models.modal import ModalModel, ModalStructure
-from vehid.identification.automatic import steps as workflow
+from vehid.identification.models.modal import ModalModel
+from vehid.identification.models.modal_structure import ModalStructure
+from vehid.identification.automatic.refinement import REFINED_MEASURE
+from vehid.identification.automatic.tuning import PTuning, P_TOLERANCE
+from vehid.identification.automatic.returned import (RefinedCandidates, UNSTABLE_MARGIN, WHOLE_RECORD_MARGIN,
+                                                     refined_choice, returned_model)
+from vehid.identification.automatic.orders import ORDER_TOLERANCE
 
 ROOT = Path(__file__).resolve().parent.parent
 BALLBEAM = ROOT / "tests" / "data" / "ballbeam" / "ballbeam.dat"
@@ -44,7 +49,7 @@ def _truth(order: int) -> ModalModel:
 
 
 def _run(start: ModalModel, final: ModalModel, *, refined: bool = True) -> SimpleNamespace:
-    """What :func:`workflow.returned_model` reads of an IEKF result: its structure, start and final model.
+    """What :func:`returned_model` reads of an IEKF result: its structure, start and final model.
 
     ``refined=False`` makes it a run that allows unstable modes, where no simulation-error refinement runs
     and the start is weighed against the filter's model as they are (both models here are stable, so both
@@ -75,10 +80,10 @@ def test_both_models_refined_the_filters_is_returned_and_fits_at_least_as_well_a
     plan = SimpleNamespace(records=(record,))
     args = SimpleNamespace(horizon=None, initial_state="estimate", timescale="auto")
     start, final = _spoiled(truth, 1.2), _spoiled(truth, 0.8)
-    model, keys = workflow.returned_model(_run(start, final), plan, args, workflow.PTuning(1e-5, (), 0.0), None)
+    model, keys = returned_model(_run(start, final), plan, args, PTuning(1e-5, (), 0.0), None)
     margin = keys["decision_margins"]["model_returned"]
     assert keys["model_returned"] == margin["choice"] == "filter" and "start_kept" not in keys
-    assert margin["measure"] == workflow.REFINED_MEASURE and abs(margin["score"] - margin["runner_up_score"]) <= 0.1
+    assert margin["measure"] == REFINED_MEASURE and abs(margin["score"] - margin["runner_up_score"]) <= 0.1
     assert _fit(model, record) > max(_fit(start, record), _fit(final, record))
     np.testing.assert_allclose(model.parameters, truth.parameters, rtol=1e-4, atol=1e-6)
     assert model.parameter_covariance is not None  # a simulation-error estimate's
@@ -98,15 +103,15 @@ def test_the_refined_start_is_returned_only_where_it_fits_clearly_better():
         return Refinement(model, 1.0, 0.5, 3, "converged", (np.zeros(3),), np.ones(1), 0.0)
 
     def choose(filter_model, start_model):
-        candidates = workflow.RefinedCandidates(refinement(filter_model), refinement(start_model),
-                                                {"filter": filter_model, "start": start_model})
-        return workflow.refined_choice(candidates, plan, args, workflow.PTuning(1e-5, (), 0.0), None, {})
+        candidates = RefinedCandidates(refinement(filter_model), refinement(start_model),
+                                       {"filter": filter_model, "start": start_model})
+        return refined_choice(candidates, plan, args, PTuning(1e-5, (), 0.0), None, {})
 
     model, keys = choose(_spoiled(truth), truth)
     margin = keys["decision_margins"]["model_returned"]
     assert keys["model_returned"] == margin["choice"] == "start" and "start_kept" in keys
     np.testing.assert_allclose(model.parameters, truth.parameters, rtol=1e-12)  # algebra: the start's model itself
-    assert margin["score"] > margin["runner_up_score"] + workflow.P_TOLERANCE
+    assert margin["score"] > margin["runner_up_score"] + P_TOLERANCE
     _, keys = choose(truth, _spoiled(truth))
     assert keys["model_returned"] == "filter" and "start_kept" not in keys
     _, keys = choose(truth, truth)  # a tie keeps the filter's
@@ -119,16 +124,16 @@ def test_without_refinement_the_better_of_filter_and_start_is_returned_at_every_
     truth = _truth(order)
     plan = SimpleNamespace(records=(_record(truth),))
     args = SimpleNamespace(horizon=None, initial_state="estimate", timescale="auto")
-    no_tuning = workflow.PTuning(1e-5, (), 0.0)
+    no_tuning = PTuning(1e-5, (), 0.0)
 
-    model, keys = workflow.returned_model(_run(truth, _spoiled(truth), refined=False), plan, args, no_tuning, None)
+    model, keys = returned_model(_run(truth, _spoiled(truth), refined=False), plan, args, no_tuning, None)
     margin = keys["decision_margins"]["model_returned"]
     assert margin["choice"] == "start" and "start_kept" in keys
     np.testing.assert_allclose(model.parameters, truth.parameters, rtol=1e-12)  # algebra: the start itself
     # the truth explains its own noise-free record (algebra and simulation rounding: above 99.9 %)
-    assert margin["score"] > 99.9 and margin["score"] > margin["runner_up_score"] + workflow.WHOLE_RECORD_MARGIN
+    assert margin["score"] > 99.9 and margin["score"] > margin["runner_up_score"] + WHOLE_RECORD_MARGIN
 
-    model, keys = workflow.returned_model(_run(_spoiled(truth), truth, refined=False), plan, args, no_tuning, None)
+    model, keys = returned_model(_run(_spoiled(truth), truth, refined=False), plan, args, no_tuning, None)
     assert keys["decision_margins"]["model_returned"]["choice"] == "filter" and "start_kept" not in keys
     assert model is not None and np.allclose(model.parameters, truth.parameters, rtol=1e-12)
 
@@ -141,12 +146,12 @@ def test_a_run_that_diverged_gives_way_to_a_slightly_better_start():
     slightly = ModalModel.from_parameters(truth.structure, truth.parameters * 1.01)
     finished, interrupted = _run(truth, slightly, refined=False), _run(truth, slightly, refined=False)
     interrupted.stop_reason = "diverged at pass 2"
-    _, kept = workflow.returned_model(finished, plan, args, workflow.PTuning(1e-5, (), 0.0), None)
+    _, kept = returned_model(finished, plan, args, PTuning(1e-5, (), 0.0), None)
     margin = kept["decision_margins"]["model_returned"]
     gap = margin["runner_up_score"] - margin["score"]
     # 1 % off every parameter: the truth fits its noise-free record better, by less than the finished run's margin
-    assert margin["choice"] == "filter" and workflow.P_TOLERANCE < gap < workflow.WHOLE_RECORD_MARGIN, gap
-    _, kept = workflow.returned_model(interrupted, plan, args, workflow.PTuning(1e-5, (), 0.0), None)
+    assert margin["choice"] == "filter" and P_TOLERANCE < gap < WHOLE_RECORD_MARGIN, gap
+    _, kept = returned_model(interrupted, plan, args, PTuning(1e-5, (), 0.0), None)
     assert kept["decision_margins"]["model_returned"]["choice"] == "start"
 
 
@@ -155,8 +160,7 @@ def test_a_decision_within_its_margin_keeps_the_filter():
     truth = _truth(3)
     plan = SimpleNamespace(records=(_record(truth),))
     args = SimpleNamespace(horizon=None, initial_state="estimate", timescale="auto")
-    _, keys = workflow.returned_model(_run(truth, truth, refined=False), plan, args, workflow.PTuning(1e-5, (), 0.0),
-                                      None)
+    _, keys = returned_model(_run(truth, truth, refined=False), plan, args, PTuning(1e-5, (), 0.0), None)
     margin = keys["decision_margins"]["model_returned"]
     assert margin["choice"] == "filter" and margin["score"] == margin["runner_up_score"]
 
@@ -204,23 +208,23 @@ def _check_margins(summary: dict) -> None:
             # a candidate of the same schedule may beat the choice by the p tolerance, the other schedule's
             # by the schedule margin where the choice is the shrinking Q (by the tolerance where it is constant)
             same = margins["p"]["runner_up"].endswith(f"{margins['p']['q_schedule']} Q")
-            allowed = (workflow.P_TOLERANCE if same or margins["p"]["q_schedule"] == "constant"
-                       else SCHEDULE_MARGIN + workflow.P_TOLERANCE)
+            allowed = (P_TOLERANCE if same or margins["p"]["q_schedule"] == "constant"
+                       else SCHEDULE_MARGIN + P_TOLERANCE)
             assert margins["p"]["score"] >= margins["p"]["runner_up_score"] - allowed
     returned = margins.get("model_returned")
     if returned is not None:
         assert returned["choice"] == summary.get("model_returned", "filter")
         if returned["choice"] == "filter":  # else the cross-validation may have decided
-            assert not returned["runner_up_score"] > returned["score"] + workflow.WHOLE_RECORD_MARGIN
+            assert not returned["runner_up_score"] > returned["score"] + WHOLE_RECORD_MARGIN
     unstable = margins.get("open_loop_unstable")
     if unstable is not None:
         assert (unstable["choice"] == "unstable") == summary["open_loop_unstable"]["assumed"]
         gap = unstable["score"] - unstable["runner_up_score"]
-        assert gap > workflow.UNSTABLE_MARGIN if unstable["choice"] == "unstable" else gap >= -workflow.UNSTABLE_MARGIN
+        assert gap > UNSTABLE_MARGIN if unstable["choice"] == "unstable" else gap >= -UNSTABLE_MARGIN
     if "order" in margins:
         assert margins["order"]["choice"] == summary["order"]
         if margins["order"]["runner_up_score"] is not None:
-            assert margins["order"]["score"] >= margins["order"]["runner_up_score"] - workflow.ORDER_TOLERANCE
+            assert margins["order"]["score"] >= margins["order"]["runner_up_score"] - ORDER_TOLERANCE
 
 
 @pytest.mark.slow

@@ -204,7 +204,7 @@ def test_the_subspace_estimator_works_at_the_bound_and_refuses_above_it():
 
 
 def test_auto_orders_are_cut_to_the_supported_ones():
-    from vehid.identification.automatic.steps import supported_orders
+    from vehid.identification.automatic.plan import supported_orders
 
     t, u, y = _record(n=60)  # (60 + 1) // 12 = 5
     record = IOData(t=t, u=u, y=y)

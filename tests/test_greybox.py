@@ -13,7 +13,8 @@ import scipy.linalg
 
 from vehid.identification.data import IOData
 from vehid.identification.errors import DivergenceError, InputError
-from vehid.identification.filtering.greybox import GreyBoxModel, GreyBoxOptions, identify_greybox, simulate_greybox
+from vehid.identification.filtering.greybox import GreyBoxOptions, identify_greybox
+from vehid.identification.filtering.greybox_structure import GreyBoxModel, simulate_greybox
 from vehid.identification.filtering.greybox_model import IdentifiedGreyBox
 
 

@@ -15,7 +15,8 @@ from conftest import run_vehid
 
 from vehid.identification.data import IOData
 from vehid.identification.filtering.iekf import IEKFOptions, identify_iekf
-from vehid.identification.models.modal import ModalModel, ModalStructure
+from vehid.identification.models.modal import ModalModel
+from vehid.identification.models.modal_structure import ModalStructure
 from vehid.identification.assessment.validation import score
 
 DT = 0.05  # s
@@ -221,7 +222,8 @@ def test_cli_nonlinear_scores_and_archives_both_models(tmp_path):
 
 def test_order_parsing_and_the_parsimony_rule():
     from vehid.identification.errors import DivergenceError, InputError
-    from vehid.identification.automatic.steps import AUTO_MAX_ORDER, ORDER_TOLERANCE, choose_order, parse_order_option
+    from vehid.identification.automatic.orders import ORDER_TOLERANCE, choose_order
+    from vehid.identification.automatic.plan import AUTO_MAX_ORDER, parse_order_option
 
     assert parse_order_option("4") == ([4], False)
     assert parse_order_option("2-5") == ([2, 3, 4, 5], False)
@@ -258,7 +260,7 @@ def test_cli_validation_file_is_scored_and_a_mismatched_one_refused(tmp_path):
 
 def test_a_divergence_after_good_passes_reports_the_last_good_one_with_a_warning():
     from vehid.identification.errors import DivergenceError
-    from vehid.identification.automatic.steps import Evaluation, last_good_on_divergence, run_warnings
+    from vehid.identification.automatic.scoring import Evaluation, last_good_on_divergence, run_warnings
 
     good = identify_iekf(_record(20.0, seed=3), STRUCTURE, options=IEKFOptions.invariant(passes=2))
 
@@ -279,8 +281,9 @@ def test_the_spline_model_is_returned_only_where_it_beats_the_other_model_by_the
     """Both scored by one rule; the spline model must win by NONLINEAR_MARGIN on validation data, by the
     whole-record margin on the estimation data without them, and its loss is a note, not a warning."""
     from vehid.identification.assessment.validation import Scores
-    from vehid.identification.automatic.steps import (NONLINEAR_MARGIN, WHOLE_RECORD_MARGIN, Evaluation,
-                                                   nonlinear_margin, nonlinear_note)
+    from vehid.identification.automatic.scoring import Evaluation
+    from vehid.identification.automatic.returned import WHOLE_RECORD_MARGIN
+    from vehid.identification.automatic.nonlinear import NONLINEAR_MARGIN, nonlinear_margin, nonlinear_note
 
     def scored(estimation: float, validation: float | None) -> Evaluation:
         def scores(fit: float) -> Scores:
@@ -308,7 +311,7 @@ def test_the_spline_model_is_returned_only_where_it_beats_the_other_model_by_the
 
 def test_the_filter_is_returned_in_its_start_s_place_only_where_its_p_beats_the_start_clearly():
     """The chosen candidate must beat the start by more than the margin that ranks cross-validated fits."""
-    from vehid.identification.automatic.steps import PCandidate, PTuning
+    from vehid.identification.automatic.tuning import PCandidate, PTuning
     from vehid.identification.decisions import SCHEDULE_MARGIN
 
     rows = (PCandidate(1e-4, None, 75.0, 1.0), PCandidate(1e-5, None, 72.0, 1.0),
@@ -324,18 +327,19 @@ def test_the_filter_is_returned_in_its_start_s_place_only_where_its_p_beats_the_
 def test_a_returned_start_is_what_the_summary_and_the_archive_describe(tmp_path, capsys, monkeypatch):
     """Where cross-validation prefers the start, the command returns it, says so once, and archives it."""
     from vehid.identification.dataio.archive import read_archive
-    from vehid.identification.automatic import steps
+    from vehid.identification.automatic import iekf_order
+    from vehid.identification.automatic.tuning import PTuning, tune_p
     from vehid.scenarios.cli import main
 
-    real_tune = steps.tune_p
+    real_tune = tune_p
 
     def start_preferred(*args, **kwargs):
         tuning = real_tune(*args, **kwargs)
         # beyond any fit: the start as it is, and refined by its simulation error
         fits = {**(tuning.candidate_fits or {}), "start refined": 200.0}
-        return steps.PTuning(tuning.p, tuning.tried, tuning.seconds, 200.0, tuning.q_schedule, fits)
+        return PTuning(tuning.p, tuning.tried, tuning.seconds, 200.0, tuning.q_schedule, fits)
 
-    monkeypatch.setattr(steps, "tune_p", start_preferred)
+    monkeypatch.setattr(iekf_order, "tune_p", start_preferred)  # as the run of one order looks it up
     record = _write_csv(tmp_path / "r.csv", _record(30.0, seed=21, noise=0.05))
     out = tmp_path / "run.h5"
     assert main(["identify", str(record), "--inputs", "u1", "--outputs", "y1", "--order", "3", "--passes", "5",

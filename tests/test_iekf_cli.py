@@ -14,7 +14,7 @@ from conftest import run_vehid
 from vehid.identification.dataio.archive import open_archive
 from vehid.identification.dataio.iekf_archive import read_iekf_run
 from vehid.identification.decisions import SCHEDULE_MARGIN
-from vehid.identification.automatic.steps import P_GRID, P_TOLERANCE, Q_SCHEDULES
+from vehid.identification.automatic.tuning import P_GRID, P_TOLERANCE, Q_SCHEDULES
 from vehid.scenarios.linear_example import make_data
 
 VEHID = [sys.executable, "-m", "vehid.scenarios.cli"]
@@ -177,7 +177,7 @@ def test_the_archived_decisions_keep_the_Q_schedule(schedule, tmp_path):
     reads as the constant Q every run had then."""
     from vehid.identification.dataio.archive import update_archive, write_archive
     from vehid.identification.automatic.archiving import DECISIONS, archive_decisions, read_decisions
-    from vehid.identification.automatic.steps import PCandidate, PTuning
+    from vehid.identification.automatic.tuning import PCandidate, PTuning
 
     tried = tuple(PCandidate(p, q, 90.0, 1.0) for p in P_GRID for q in Q_SCHEDULES)
     tuning = PTuning(P_GRID[1], tried, 6.0, start_fit=80.0, q_schedule=schedule)

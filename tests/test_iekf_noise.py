@@ -12,7 +12,7 @@ from vehid.identification import DivergenceError, IEKFOptions, IOData, ModalStru
 from vehid.identification.assessment.noise import output_noise_variance
 from vehid.identification.filtering.iekf import (BACK_OFF_FACTOR, NOISE_WEIGHT_FLOOR, data_measurement_noise,
                                                  start_structure)
-from vehid.identification.automatic import steps as workflow
+from vehid.identification.automatic.tuning import P_GRID, Q_SCHEDULES, tune_p
 from vehid.scenarios.linear_example import make_data
 
 N = 2000
@@ -112,8 +112,8 @@ def _cross_validated(noise_ratio: float):
     data, _ = make_data(0, outputs=(0,), duration=20.0, noise_ratio=noise_ratio)
     options = IEKFOptions.invariant(passes=20)
     structure = start_structure(data, ModalStructure.from_pattern("default", 5, 2, 1), options)
-    tuning = workflow.tune_p(argparse.Namespace(horizon=None, initial_state="estimate"),
-                             SimpleNamespace(records=(data,), settle_start=None), options, structure)
+    tuning = tune_p(argparse.Namespace(horizon=None, initial_state="estimate"),
+                    SimpleNamespace(records=(data,), settle_start=None), options, structure)
     return tuning, {(row.p, row.q_schedule): row.cv_fit_percent for row in tuning.tried}
 
 
@@ -121,10 +121,10 @@ def test_cross_validation_shrinks_Q_on_a_tie_of_clean_data():
     """Without noise both schedules find eq. 15 (every fit near 100 %): the tie goes to the shrinking Q, whose
     outcome does not follow the record's last part, at the largest p."""
     tuning, fits = _cross_validated(0.0)
-    assert set(fits) == {(p, q) for p in workflow.P_GRID for q in workflow.Q_SCHEDULES}
+    assert set(fits) == {(p, q) for p in P_GRID for q in Q_SCHEDULES}
     # measured 100.00 for every candidate; 99 leaves room for any rounding and still says the model was found
     assert min(fits.values()) > 99.0
-    assert tuning.q_schedule == "shrinking" and tuning.p == max(workflow.P_GRID)
+    assert tuning.q_schedule == "shrinking" and tuning.p == max(P_GRID)
     assert tuning.applied(IEKFOptions.invariant()).p_decay < 1.0
 
 
@@ -134,7 +134,7 @@ def test_cross_validation_shrinks_Q_on_noisy_data():
     and the shrinking Q beats the constant one at that p by far more than the tolerance (5 points: a
     third of the measured gap)."""
     tuning, fits = _cross_validated(1.0)
-    largest = max(workflow.P_GRID)
+    largest = max(P_GRID)
     assert fits[(largest, "shrinking")] > fits[(largest, "constant")] + 5.0
     assert tuning.q_schedule == "shrinking"
     assert tuning.applied(IEKFOptions.invariant()).p_decay < 1.0

@@ -13,7 +13,7 @@ from scipy.linalg import expm
 from vehid.identification.filtering.filter_models import LinearModalFilterModel
 from vehid.identification.filtering.iekf_pass import (QUICK_COMPILE_STEPS, compiled_pass, numpy_reference_pass, pack_covariance,
                                                     unpack_covariance)
-from vehid.identification.models.modal import ModalStructure
+from vehid.identification.models.modal_structure import ModalStructure
 from vehid.scenarios.linear_example import make_data, true_model
 
 DT = 0.002

@@ -311,7 +311,8 @@ def test_a_scheduled_family_is_fitted_over_runs_each_from_rest():
     """The scheduled model's simulation-error refinement over two runs of a drive, each simulated from rest:
     on runs a known family made (from rest, noise-free), it returns that family from a start 5 % off."""
     from vehid.identification.filtering.scheduled_iekf import Runs, _knot_parameters, refine_by_simulation
-    from vehid.identification.models.modal import ModalModel, ModalStructure
+    from vehid.identification.models.modal import ModalModel
+    from vehid.identification.models.modal_structure import ModalStructure
     from vehid.identification.models.scheduled import ScheduledModalModel
 
     structure = ModalStructure.default(2, 1, 2)

@@ -8,7 +8,8 @@ from scipy.io import loadmat
 from scipy.signal import lsim
 
 from vehid.identification.errors import InputError
-from vehid.identification.models.modal import ModalModel, ModalStructure, phi_functions
+from vehid.identification.models.modal import ModalModel, phi_functions
+from vehid.identification.models.modal_structure import ModalStructure
 from vehid.scenarios.linear_example import true_model
 
 

@@ -21,7 +21,8 @@ from vehid.identification.data import IOData
 from vehid.identification.filtering.iekf import IEKFOptions, identify_iekf
 from vehid.identification.dataio.iekf_archive import read_iekf_run, write_iekf_run
 from vehid.identification.assessment.metrics import nrmse_fit
-from vehid.identification.models.modal import ModalModel, ModalStructure
+from vehid.identification.models.modal import ModalModel
+from vehid.identification.models.modal_structure import ModalStructure
 from vehid.scenarios.report import archive_figures, archive_table
 from conftest import run_vehid
 

@@ -20,7 +20,7 @@ import pytest
 from scipy.io import loadmat
 
 from vehid.identification import IOData
-from vehid.identification.automatic.steps import ORDER_TOLERANCE, choose_order
+from vehid.identification.automatic.orders import ORDER_TOLERANCE, choose_order
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -17,7 +17,7 @@ import pytest
 from conftest import run_vehid
 
 from vehid.identification.data import IOData
-from vehid.identification.filtering.greybox import simulate_greybox
+from vehid.identification.filtering.greybox_structure import simulate_greybox
 from vehid.identification.filtering.scheduled_iekf import default_grid, knot_cells, knot_coverage
 from vehid.identification.models.modal import ModalModel
 from vehid.identification.models.scheduled import schedule_models

@@ -14,7 +14,8 @@ from scipy import signal
 
 from vehid.identification.errors import InputError
 from vehid.identification.assessment.metrics import percentage_explanation
-from vehid.identification.models.modal import ModalModel, ModalStructure
+from vehid.identification.models.modal import ModalModel
+from vehid.identification.models.modal_structure import ModalStructure
 from vehid.scenarios import plots
 from vehid.scenarios.report import format_eigenvalues, markdown_table, write_report
 

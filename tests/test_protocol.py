@@ -58,7 +58,8 @@ from vehid.identification.models.discrete import ContinuousModel
 from vehid.identification.errors import InputError
 from vehid.identification.classical.pencil import PencilModel
 from vehid.identification.models.protocol import statespace_response
-from vehid.identification.models.scheduled import ScheduledModalModel, gauge_parameters, input_gauge
+from vehid.identification.models.scheduled import ScheduledModalModel
+from vehid.identification.models.scheduled_gauge import gauge_parameters, input_gauge
 from vehid.identification.models.statespace import continuous_to_discrete, hold_state_shift
 from vehid.vehicle.single_track import MIN_SPEED, IdentifiedSingleTrack, SingleTrackAtSpeed, SingleTrackConfig
 

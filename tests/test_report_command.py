@@ -11,7 +11,8 @@ import pytest
 
 from vehid.identification import IOData, append_history, read_archive, run_group, write_archive, write_record, write_run
 from vehid.identification.assessment.metrics import fit_metrics
-from vehid.identification.models.modal import ModalModel, ModalStructure
+from vehid.identification.models.modal import ModalModel
+from vehid.identification.models.modal_structure import ModalStructure
 from vehid.scenarios.cli import main
 from vehid.scenarios.report import archive_figures, archive_table
 

@@ -14,7 +14,7 @@ from vehid.identification.comparators import identify_with
 from vehid.identification.errors import InputError
 from vehid.identification.filtering.iekf import IEKFOptions, identify_iekf
 from vehid.identification.dataio.iekf_archive import append_iekf_pass, read_iekf_run
-from vehid.identification.models.modal import ModalStructure
+from vehid.identification.models.modal_structure import ModalStructure
 from vehid.identification.assessment.residuals import nis_band, residual_tests
 from vehid.identification.dataio.storage import read_value
 from vehid.scenarios import calibration

@@ -10,8 +10,10 @@ import numpy as np
 import pytest
 
 from vehid.identification.errors import InputError
-from vehid.identification.models.modal import ModalModel, ModalStructure
-from vehid.identification.models.scheduled import ScheduledModalModel, canonical_modal_model, schedule_models
+from vehid.identification.models.modal import ModalModel
+from vehid.identification.models.modal_structure import ModalStructure
+from vehid.identification.models.scheduled import ScheduledModalModel, schedule_models
+from vehid.identification.models.scheduled_gauge import canonical_modal_model
 
 STRUCTURE = ModalStructure.default(5, 1, 3)  # two pairs (outputs 1, 2) and a real pole (output 3)
 

@@ -24,7 +24,7 @@ from vehid.identification.data import IOData
 from vehid.identification.errors import InputError
 from vehid.identification.filtering.iekf import IEKFOptions, identify_iekf
 from vehid.identification.assessment.metrics import nrmse_fit
-from vehid.identification.models.modal import ModalStructure
+from vehid.identification.models.modal_structure import ModalStructure
 from vehid.identification.models.scheduled import OutputMap, ScheduledModalModel
 from vehid.identification.filtering.scheduled_iekf import (ScheduledIEKFOptions, default_grid, identify_scheduled,
                                                              knot_cells)

@@ -16,7 +16,8 @@ from vehid.identification.classical.simulation_error import (ERROR_CEILING, ERRO
 from vehid.identification.assessment.validation import score
 from vehid.identification.data import IOData
 from vehid.identification.errors import InputError
-from vehid.identification.models.modal import ModalModel, ModalStructure
+from vehid.identification.models.modal import ModalModel
+from vehid.identification.models.modal_structure import ModalStructure
 
 
 def _truth() -> ModalModel:

@@ -18,7 +18,8 @@ import scipy.linalg
 
 from vehid.identification.data import IOData
 from vehid.identification.errors import InputError
-from vehid.identification.filtering.greybox import GreyBoxOptions, identify_greybox, simulate_greybox
+from vehid.identification.filtering.greybox import GreyBoxOptions, identify_greybox
+from vehid.identification.filtering.greybox_structure import simulate_greybox
 from vehid.vehicle import baseline, simulate
 from vehid.vehicle.manoeuvres import band_limited_noise, ramp
 from vehid.vehicle.single_track import (GRAVITY, SingleTrackConfig, config_from_vehicle, single_track_handling,

@@ -7,7 +7,7 @@ import pytest
 from conftest import library_spy, mutable_parts, printed_json, run_vehid, without_run_times
 
 from vehid.identification.data import IOData
-from vehid.identification.filtering.greybox import simulate_greybox
+from vehid.identification.filtering.greybox_structure import simulate_greybox
 from vehid.scenarios.cli import main
 from vehid.vehicle.manoeuvres import band_limited_noise
 from vehid.vehicle.single_track import SingleTrackConfig, single_track_model

@@ -8,7 +8,8 @@ import pytest
 from vehid.identification.comparators import identify_with
 from vehid.identification.errors import InputError
 from vehid.identification.classical.least_squares import least_squares
-from vehid.identification.models.modal import ModalModel, ModalStructure
+from vehid.identification.models.modal import ModalModel
+from vehid.identification.models.modal_structure import ModalStructure
 from vehid.identification.assessment.uncertainty import gauss_newton_covariance, simulation_error_covariance
 from vehid.identification.models.delta_method import frequency_response_band, model_uncertainty, sample_parameters
 from vehid.scenarios import calibration

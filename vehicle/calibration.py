@@ -2,7 +2,7 @@
 
 Chosen numeric fields of a vehicle (``section.field`` as in its TOML file, for instance ``tyre.PKY1``)
 become symbols of the full model (:func:`vehid.vehicle.model.vehicle_expressions`), which is then a
-:class:`~vehid.identification.filtering.greybox.GreyBoxModel`; :func:`calibrate_vehicle` estimates them from a log
+:class:`~vehid.identification.filtering.greybox_structure.GreyBoxModel`; :func:`calibrate_vehicle` estimates them from a log
 of the steer, the forward speed and measured quantities (yaw rate, lateral acceleration, ...).
 
 Choices, each stated where it is made:
@@ -43,7 +43,8 @@ import numpy as np
 
 from vehid.identification.data import IOData
 from vehid.identification.errors import InputError
-from vehid.identification.filtering.greybox import GreyBoxModel, GreyBoxOptions, GreyBoxResult, identify_greybox
+from vehid.identification.filtering.greybox import GreyBoxOptions, GreyBoxResult, identify_greybox
+from vehid.identification.filtering.greybox_structure import GreyBoxModel
 
 from .model import CORNERS, OUTPUT_NAMES, OUTPUT_UNITS, STATE_NAMES, vehicle_expressions
 from .parameters import VehicleParameters, static_axle_loads

@@ -68,7 +68,8 @@ import numpy as np
 from vehid.identification.assessment.metrics import nrmse_fit, percentage_explanation
 from vehid.identification.data import IOData
 from vehid.identification.errors import DivergenceError, InputError
-from vehid.identification.filtering.greybox import GreyBoxOptions, simulate_greybox
+from vehid.identification.filtering.greybox import GreyBoxOptions
+from vehid.identification.filtering.greybox_structure import simulate_greybox
 
 from . import calibration as _calibration
 from .calibration import Calibration, calibration_record, vehicle_with

@@ -39,7 +39,7 @@ import numpy as np
 
 from vehid.identification.dataio.storage import register_codec
 from vehid.identification.errors import InputError
-from vehid.identification.filtering.greybox import GreyBoxModel, greybox_outputs
+from vehid.identification.filtering.greybox_structure import GreyBoxModel, greybox_outputs
 from vehid.identification.filtering.greybox_model import IdentifiedGreyBox, schedule_columns, stable_over
 from vehid.identification.models.discrete import ContinuousModel
 from vehid.identification.models.protocol import StateSpaceModel, schedule_value, unscheduled
@@ -177,7 +177,7 @@ def _axle_forces(config: SingleTrackConfig, alpha_f: Any, alpha_r: Any, theta: A
 
 
 def single_track_model(config: SingleTrackConfig) -> GreyBoxModel:
-    """The single-track model of ``config`` as a :class:`~identification.filtering.greybox.GreyBoxModel`.
+    """The single-track model of ``config`` as a :class:`~identification.filtering.greybox_structure.GreyBoxModel`.
 
     Input: the steer channel (road-wheel angle times the steering ratio, rad); scheduling signal:
     the speed ``v_x`` (m/s); parameters ``C_f``, ``C_r`` (N/rad), ``I_z`` (kg m^2) and, with

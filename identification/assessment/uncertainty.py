@@ -128,8 +128,8 @@ def iekf_parameter_covariance(
     (measured on the calibration system: README, "How sure is the model?").
 
     The map to original units is the Jacobian of
-    :meth:`~identification.models.modal.ModalStructure.rescale_time` and
-    :meth:`~identification.models.modal.ModalStructure.denormalize`, a diagonal matrix since both
+    :meth:`~identification.models.modal_structure.ModalStructure.rescale_time` and
+    :meth:`~identification.models.modal_structure.ModalStructure.denormalize`, a diagonal matrix since both
     scale each parameter alone: ``cov = J P J'``.
     """
     if not (np.isfinite(noise_ratio) and noise_ratio > 0):

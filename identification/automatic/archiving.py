@@ -110,7 +110,7 @@ def archive_decisions(archive: h5py.File, tuning: Any, unstable: Any) -> None:
 
 def read_decisions(archive: h5py.File) -> tuple[Any, dict[str, Any] | None]:
     """The archived ``(tuning, unstable)`` of a run; ``(None, None)`` for an archive written before they were kept."""
-    from vehid.identification.automatic.steps import PTuning
+    from vehid.identification.automatic.tuning import PTuning
 
     if DECISIONS not in archive.attrs:
         return None, None
@@ -214,7 +214,7 @@ def resumed_plan(path: str | Path, *, order: int | str, validation: Sequence[Any
     ``passes`` a new pass budget (None: the run's own); ``reading`` reads the validation files of an
     archive written before preparations were kept.
     """
-    from vehid.identification.automatic import steps
+    from vehid.identification.automatic.tuning import given_p, q_schedule_of
     from vehid.identification.automatic.plan import make_plan
     from vehid.identification.automatic.run import Resumed
     from vehid.identification.dataio.archive import open_archive, read_records, update_archive
@@ -243,16 +243,16 @@ def resumed_plan(path: str | Path, *, order: int | str, validation: Sequence[Any
         with update_archive(path) as archive:
             del archive.attrs[VERDICT]
     if tuning is None:  # an archive written before the tuning was kept: the run's own p, as archived
-        tuning = steps.given_p(options)
+        tuning = given_p(options)
     # the archived options run the passes; an archive written before the schedule was kept names it by them
-    tuning = dataclasses.replace(tuning, q_schedule=steps.q_schedule_of(options))
+    tuning = dataclasses.replace(tuning, q_schedule=q_schedule_of(options))
     return plan, Resumed(previous.structure, options, previous, tuning, unstable)
 
 
 def archive_search(path: Path, run: str, plan: Plan, options: IdentifyOptions, result: Identification) -> None:
     """The archive of a run whose estimator was not checkpointed: an order search's chosen IEKF run, or a
     classical method's model and fit as ``runs/<method>``."""
-    from vehid.identification.automatic.steps import iekf_options
+    from vehid.identification.automatic.tuning import iekf_options
     from vehid.identification.dataio.archive import write_archive, write_run
     from vehid.identification.dataio.archive_safety import RUN_ATTRIBUTE
     from vehid.identification.dataio.iekf_archive import write_iekf_run

@@ -48,7 +48,7 @@ def supported_orders(orders: list[int], auto: bool, records: tuple[IOData, ...],
     a Hankel matrix of 2n block rows with as many columns as rows, N >= 4 n (1 + n_u + n_y) - 1
     samples for one record) and the filter's (fewer parameters than samples): docs/measured_data.md, "Orders".
     """
-    from vehid.identification.models.modal import ModalStructure
+    from vehid.identification.models.modal_structure import ModalStructure
     from vehid.identification.classical.subspace import largest_subspace_order
 
     first = records[0]

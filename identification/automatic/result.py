@@ -23,7 +23,9 @@ if TYPE_CHECKING:
     from vehid.identification.assessment.residuals import ResidualTests
     from vehid.identification.automatic.plan import Plan
     from vehid.identification.automatic.scheduled import ScheduledOutcome
-    from vehid.identification.automatic.steps import Evaluation, NonlinearOutcome, PTuning
+    from vehid.identification.automatic.scoring import Evaluation
+    from vehid.identification.automatic.tuning import PTuning
+    from vehid.identification.automatic.nonlinear import NonlinearOutcome
     from vehid.identification.comparators import ComparatorResult
     from vehid.identification.filtering.iekf import IEKFResult
     from vehid.identification.models.protocol import IdentifiedModel
@@ -310,7 +312,7 @@ class Identification:
             The summary `vehid identify --json` prints, as a fresh dict the caller may change
             (arrays not yet made lists).
         """
-        from .steps import scores_summary  # the public score keys are defined once, beside the scoring
+        from .scoring import scores_summary  # the public score keys are defined once, beside the scoring
 
         model = self.linear_model
         searched = any(row.searched for row in self.orders)
@@ -349,7 +351,7 @@ class Identification:
 
     def _estimator_keys(self) -> dict[str, Any]:
         """The estimator's run: the IEKF's filter fit, passes and stop reason, or a direct method's."""
-        from .steps import pooled_fit_percent
+        from .scoring import pooled_fit_percent
 
         if not self.is_iekf:
             return {"passes_run": 0, "discretization": "exact", "time_domain": self.time_domain}

@@ -16,7 +16,14 @@ from typing import Any, Mapping, Protocol
 
 import numpy as np
 
-from vehid.identification.automatic import steps
+from vehid.identification.automatic.scoring import (Evaluation, evaluate, last_good_on_divergence, pooled_fit_percent,
+                                                    run_warnings, start_of)
+from vehid.identification.automatic.refinement import SPLINE_START
+from vehid.identification.automatic.tuning import iekf_options, planned_filter_steps
+from vehid.identification.automatic.returned import decision_notes, returned_model
+from vehid.identification.automatic.orders import choose_order, order_margin, search_orders
+from vehid.identification.automatic.nonlinear import identify_nonlinear, nonlinear_margin, nonlinear_note
+from vehid.identification.automatic.iekf_order import decide_run, run_iekf_order
 from vehid.identification.automatic.reported_checks import data_warnings, records_summary, returned_checks
 from vehid.identification.dataio.cleaning import cleaning_notes
 from vehid.identification.automatic.options import IdentifyOptions
@@ -60,38 +67,38 @@ def identify_plan(plan: Plan, options: IdentifyOptions, *, resumed: Resumed | No
         structure, iekf, previous = resumed.structure, resumed.options, resumed.previous
         tuning, unstable = resumed.tuning, resumed.open_loop_unstable
         # the build the interrupted run used
-        planned = steps.planned_filter_steps(plan, iekf, tuned=tuning is not None and bool(tuning.tried))
+        planned = planned_filter_steps(plan, iekf, tuned=tuning is not None and bool(tuning.tried))
     else:
         if options.method != "iekf":
             return _comparator(plan, options)
-        iekf = steps.iekf_options(options)
+        iekf = iekf_options(options)
         if len(plan.orders) > 1:
             return _order_search(plan, options, iekf)
         previous = None
-        decided = steps.decide_run(options, plan, iekf, plan.orders[0])
+        decided = decide_run(options, plan, iekf, plan.orders[0])
         iekf, structure, tuning = decided.options, decided.structure, decided.tuning
         unstable, planned = decided.unstable, decided.planned_steps
     if checkpoints is not None:
         checkpoints.decided(iekf, tuning, unstable, previous)
     on_pass = checkpoints.passed if checkpoints is not None else None
-    result, divergence = steps.last_good_on_divergence(
+    result, divergence = last_good_on_divergence(
         lambda: identify_iekf(plan.estimation, structure, options=iekf, resume=previous, on_pass=on_pass,
                               settle_start=plan.settle_start, planned_steps=planned))
     if checkpoints is not None:
         checkpoints.finished(result)
-    model, keys = steps.returned_model(result, plan, options, tuning, unstable)
+    model, keys = returned_model(result, plan, options, tuning, unstable)
     return _finish(plan, options, model, estimator=result, tuning=tuning, keys=keys, divergence=divergence,
                    seconds=result.seconds)
 
 
 def _order_search(plan: Plan, options: IdentifyOptions, iekf: Any) -> Identification:
     """Each order of a range identified on the estimation data; one chosen on validation data."""
-    rows, kept = steps.search_orders(plan, lambda order: steps.run_iekf_order(options, plan, iekf, order), options)
-    chosen = steps.choose_order(rows)
+    rows, kept = search_orders(plan, lambda order: run_iekf_order(options, plan, iekf, order), options)
+    chosen = choose_order(rows)
     model, extra, _ = kept[chosen]
     keys = {key: extra[key] for key in ("open_loop_unstable", "start_kept", "decision_margins", "model_returned",
-                                        "refinement", steps.SPLINE_START) if key in extra}
-    keys["decision_margins"] = {**keys.get("decision_margins", {}), "order": steps.order_margin(rows, chosen)}
+                                        "refinement", SPLINE_START) if key in extra}
+    keys["decision_margins"] = {**keys.get("decision_margins", {}), "order": order_margin(rows, chosen)}
     return _finish(plan, options, model, estimator=extra["result"], tuning=extra["tuning"], keys=keys,
                    seconds=sum(row["seconds"] for row in rows), rows=rows)
 
@@ -114,9 +121,9 @@ def _comparator(plan: Plan, options: IdentifyOptions) -> Identification:
         chosen = plan.orders[0]
         fit_one(chosen)  # errors carry their own exit status
     else:
-        rows, _ = steps.search_orders(plan, fit_one, options)
-        chosen = steps.choose_order(rows)
-        keys["decision_margins"] = {"order": steps.order_margin(rows, chosen)}
+        rows, _ = search_orders(plan, fit_one, options)
+        chosen = choose_order(rows)
+        keys["decision_margins"] = {"order": order_margin(rows, chosen)}
     outcome = outcomes[chosen]
     return _finish(plan, options, outcome.model, estimator=outcome, keys=keys, seconds=outcome.seconds, rows=rows,
                    order=chosen, fit=outcome.metrics.percentage_explanation,
@@ -126,7 +133,7 @@ def _comparator(plan: Plan, options: IdentifyOptions) -> Identification:
 def _row(row: Mapping[str, Any], records: Any) -> OrderRow:
     """An order search's row as a typed row (its R from rest also as an NRMSE fit over ``records``)."""
     R = row.get("fit_percent")  # the order search keeps each run's R from rest
-    return OrderRow(order=int(row["order"]), fit_percent=None if R is None else steps.pooled_fit_percent(R, records),
+    return OrderRow(order=int(row["order"]), fit_percent=None if R is None else pooled_fit_percent(R, records),
                     R=R,
                     estimation_fit_percent=row.get("estimation_fit_percent"),
                     validation_fit_percent=row.get("validation_fit_percent"), seconds=float(row["seconds"]),
@@ -154,24 +161,24 @@ def _finish(plan: Plan, options: IdentifyOptions, model: Any, *, estimator: Any,
         order = result.structure.n
         # the filter's R unless another model (its start, or either refined) is returned
         fit = pooled_simulation_fit(model, plan.records) if model is not result.model else result.fit_percent
-    evaluation = steps.evaluate(model, plan, options)
+    evaluation = evaluate(model, plan, options)
     if rows is not None:
         orders = tuple(_row(row, plan.records) for row in rows)
     else:
-        orders = (OrderRow(order=order, fit_percent=steps.pooled_fit_percent(fit, plan.records), R=fit,
+        orders = (OrderRow(order=order, fit_percent=pooled_fit_percent(fit, plan.records), R=fit,
                            estimation_fit_percent=evaluation.estimation.fit,
                            validation_fit_percent=evaluation.validation_fit, seconds=seconds),)
     allow_unstable = options.allow_unstable or (result is not None and result.options.allow_unstable)
     # modes that never left their start are a problem of the run, whichever of the two models is returned
-    start_fit, start_moved = steps.start_of(result, plan.records) if result is not None else (None, None)
-    notes = steps.decision_notes({
+    start_fit, start_moved = start_of(result, plan.records) if result is not None else (None, None)
+    notes = decision_notes({
         **{key: keys[key] for key in ("open_loop_unstable", "start_kept", "refinement") if key in keys},
         **({"model_returned": "start"} if start_returned else {}),
         **({"start_cv_fit_percent": tuning.start_fit, "filter_cv_fit_percent": tuning.chosen_fit} if iekf else {})})
     stop_reason = None
     if result is not None and not start_returned:
         stop_reason = f"{result.stop_reason}: {divergence}" if divergence else result.stop_reason
-    warnings = steps.run_warnings(
+    warnings = run_warnings(
         model=model, evaluation=evaluation, start_fit=start_fit, stop_reason=stop_reason,
         final_fit=float(np.mean(fit)) if result is not None else None,
         allow_unstable=allow_unstable, start_moved=start_moved, p_tuned=bool(iekf and tuning.tried),
@@ -187,9 +194,9 @@ def _finish(plan: Plan, options: IdentifyOptions, model: Any, *, estimator: Any,
     decisions = tuple(Decision.from_entry(name, entry) for name, entry in keys.get("decision_margins", {}).items())
     linear = _Candidate("start" if start_returned else ("filter" if iekf else options.method), model, evaluation,
                         warnings, fit, plan.records)
-    # the spline model starts from the linear model before any refinement (steps.SPLINE_START): the filter's own
+    # the spline model starts from the linear model before any refinement (SPLINE_START): the filter's own
     chosen, others, nonlinear, scheduled, more, said = _candidates(plan, options, linear,
-                                                                   spline_start=keys.get(steps.SPLINE_START, model))
+                                                                   spline_start=keys.get(SPLINE_START, model))
     decisions += more
     notes += said
     for other in others:  # what went wrong with a model not returned is no warning about the one returned
@@ -234,7 +241,7 @@ class _Candidate:
 
     @property
     def fit_percent(self) -> np.ndarray:
-        return steps.pooled_fit_percent(self.R, self.estimation_records)
+        return pooled_fit_percent(self.R, self.estimation_records)
 
     def records(self, plan: Plan) -> tuple:
         """The estimation records as this model reads them (a scheduled family's with its schedule last)."""
@@ -261,10 +268,10 @@ def _candidates(plan: Plan, options: IdentifyOptions, linear: _Candidate, *, spl
     chosen, others, decisions, notes = linear, [], (), []
     nonlinear = scheduled = spline = family = None
     if options.nonlinear:
-        nonlinear = steps.identify_nonlinear(linear.model if spline_start is None else spline_start, plan, options)
+        nonlinear = identify_nonlinear(linear.model if spline_start is None else spline_start, plan, options)
         scores = nonlinear.scores
-        scored = steps.Evaluation(scores.estimation, scores.estimation.R, scores.validation, scores.horizon)
-        spline = _Candidate("nonlinear", nonlinear.result.model, scored, steps.run_warnings(
+        scored = Evaluation(scores.estimation, scores.estimation.R, scores.validation, scores.horizon)
+        spline = _Candidate("nonlinear", nonlinear.result.model, scored, run_warnings(
             model=nonlinear.result.model, evaluation=scored, stop_reason=nonlinear.result.stop_reason,
             start_fit=float(np.mean(nonlinear.result.start_fit)), final_fit=float(np.mean(nonlinear.result.fit_percent)),
             allow_unstable=True, label="nonlinear"), nonlinear.summary["R"], plan.records)
@@ -278,9 +285,9 @@ def _candidates(plan: Plan, options: IdentifyOptions, linear: _Candidate, *, spl
         notes += ([NONLINEAR_NOTE] if nonlinear is not None else []) + ([scheduled.note] if scheduled.note else [])
         chosen, others = (family, [linear]) if scheduled.returned else (linear, [family])
     if spline is not None:
-        margin = steps.nonlinear_margin(spline.evaluation, chosen.evaluation, chosen.name)
+        margin = nonlinear_margin(spline.evaluation, chosen.evaluation, chosen.name)
         decisions += (Decision.from_entry("nonlinear", margin),)
-        notes.append(steps.nonlinear_note(margin))
+        notes.append(nonlinear_note(margin))
         chosen, others = (spline, [chosen, *others]) if margin["choice"] == "nonlinear" else (chosen, [*others, spline])
         if scheduled is not None:
             scheduled = dataclasses.replace(scheduled, summary=scheduled.summary | {"model_returned": {

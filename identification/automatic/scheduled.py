@@ -4,7 +4,7 @@ Started from the unscheduled model the pipeline returns, the scheduled IEKF
 (:mod:`vehid.identification.filtering.scheduled_iekf`) fits the family on the
 estimation record with the schedule channel beside its inputs; p is chosen on
 validation data from a small grid, the family is scored by the run's one rule
-(initial state, horizon, records: :func:`~vehid.identification.automatic.steps.evaluate`),
+(initial state, horizon, records: :func:`~vehid.identification.automatic.scoring.evaluate`),
 as the unscheduled model is, and it is returned in the unscheduled model's
 place only where it validates better by :data:`VALIDATION_MARGIN` (the
 decision ``schedule``). What became of the model not returned is said in
@@ -21,7 +21,10 @@ from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 
-from vehid.identification.automatic import steps
+from vehid.identification.automatic.scoring import (Evaluation, evaluate, last_good_on_divergence, margin_entry,
+                                                    pooled_fit_percent, run_warnings, scores_summary)
+from vehid.identification.automatic.tuning import P_TOLERANCE
+from vehid.identification.automatic.returned import WHOLE_RECORD_MARGIN
 from vehid.identification.automatic.reported_checks import records_summary, uncertainty_method
 from vehid.identification.automatic.options import IdentifyOptions
 from vehid.identification.automatic.plan import ScheduleData
@@ -60,7 +63,7 @@ class ScheduledOutcome:
     result: ScheduledIEKFResult
     returned: bool  # the scheduled family is the model returned (else the unscheduled start)
     margin: FrozenDict  # the decision, as an entry of ``decision_margins``
-    evaluation: steps.Evaluation  # the family's scores by the run's rule
+    evaluation: Evaluation  # the family's scores by the run's rule
     note: str | None = None
 
     def __post_init__(self) -> None:
@@ -76,18 +79,18 @@ VALIDATION_MARGIN = 0.5
 def schedule_margin(evaluation: Any, unscheduled: Any) -> dict[str, Any]:
     """The scheduled family's and the unscheduled model's ranking fits, the measure and the margin to beat.
 
-    Both evaluations are by the run's one rule (:func:`~vehid.identification.automatic.steps.evaluate`).
+    Both evaluations are by the run's one rule (:func:`~vehid.identification.automatic.scoring.evaluate`).
 
     On validation data the mean validation fit with :data:`VALIDATION_MARGIN`; without, the estimation
     fit, where the family fitted its own record with many more parameters, so it must win by the
-    start-or-filter rule's :data:`~vehid.identification.automatic.steps.WHOLE_RECORD_MARGIN`.
+    start-or-filter rule's :data:`~vehid.identification.automatic.returned.WHOLE_RECORD_MARGIN`.
     """
 
     def number(value: Any) -> float | None:
         return float(value) if value is not None and np.isfinite(value) else None
 
     held_out = bool(evaluation.validation) and unscheduled.validation_fit is not None
-    margin = VALIDATION_MARGIN if held_out else steps.WHOLE_RECORD_MARGIN
+    margin = VALIDATION_MARGIN if held_out else WHOLE_RECORD_MARGIN
     return {"score": number(evaluation.ranking_fit()), "runner_up_score": number(unscheduled.ranking_fit()),
             "margin": margin,
             "measure": ("mean validation" if held_out else "mean estimation") + f" NRMSE fit % ({rule_text(evaluation)})",
@@ -104,7 +107,7 @@ def rule_text(evaluation: Any) -> str:
 def identify_scheduled_model(start: Any, plan: Any, options: IdentifyOptions, unscheduled: Any) -> ScheduledOutcome:
     """The scheduled family started from ``start`` (the unscheduled model returned), scored on the plan's records.
 
-    ``unscheduled`` is the start's :class:`~vehid.identification.automatic.steps.Evaluation`.
+    ``unscheduled`` is the start's :class:`~vehid.identification.automatic.scoring.Evaluation`.
     """
     from vehid.identification.filtering.scheduled_iekf import ScheduledIEKFOptions, identify_scheduled
 
@@ -126,18 +129,18 @@ def identify_scheduled_model(start: Any, plan: Any, options: IdentifyOptions, un
 
         def on_refine(candidate: Any, refine_steps: int) -> None:
             if plan.validation:
-                stops.append((steps.evaluate(candidate, scheduled_plan, options).ranking_fit(), refine_steps,
+                stops.append((evaluate(candidate, scheduled_plan, options).ranking_fit(), refine_steps,
                               candidate))
 
         try:
-            result, divergence = steps.last_good_on_divergence(
+            result, divergence = last_good_on_divergence(
                 lambda: identify_scheduled(plan.records, schedule.estimation, start, variable=schedule.channel,
                                            options=filter_options, on_refine=on_refine))
         except DivergenceError as exc:
             tried.append({"p": p, "error": str(exc)})
             continue
         result = _stopped_early(result, stops, plan, schedule)
-        evaluation = steps.evaluate(result.model, scheduled_plan, options)
+        evaluation = evaluate(result.model, scheduled_plan, options)
         row = {"p": p, "estimation_fit_percent": evaluation.estimation.fit,
                "validation_fit_percent": evaluation.validation_fit, "ranking_fit": evaluation.ranking_fit(),
                "seconds": result.seconds}
@@ -151,14 +154,14 @@ def identify_scheduled_model(start: Any, plan: Any, options: IdentifyOptions, un
     # as for the IEKF's p: the largest within the tolerance of the best
     top = max(c[3]["ranking_fit"] for c in candidates)
     result, divergence, evaluation, chosen = max(
-        (c for c in candidates if c[3]["ranking_fit"] >= top - steps.P_TOLERANCE), key=lambda c: c[3]["p"])
+        (c for c in candidates if c[3]["ranking_fit"] >= top - P_TOLERANCE), key=lambda c: c[3]["p"])
     family = result.model
     output_map = None
     if options.nonlinear:
         family, evaluation, output_map = with_output_map(family, evaluation, plan, scheduled_plan, options)
     fit_percent = result.fit_percent if output_map is None or output_map["nodes"] is None else \
         output_map["R"]
-    scores = {**steps.scores_summary(evaluation, fit_percent, plan.records[:1]),
+    scores = {**scores_summary(evaluation, fit_percent, plan.records[:1]),
               **records_summary(family, scheduled_plan.records, plan.preparation)}
     scores.pop("preparation", None)  # the unscheduled preparation stands: the schedule is never offset
     coverage = list(family.meta.get("knot_coverage") or [])
@@ -183,7 +186,7 @@ def identify_scheduled_model(start: Any, plan: Any, options: IdentifyOptions, un
     }
     # where the refinement started from the unscheduled start, how far the filter's passes got does not matter
     filtered = result.meta.get("refined_from") != "start"
-    warnings = steps.run_warnings(
+    warnings = run_warnings(
         model=family, evaluation=evaluation, stop_reason=entry["stop_reason"] if filtered else None, start_fit=None,
         final_fit=float(np.mean(result.fit_percent)), allow_unstable=True, label="scheduled",
         fit_history=[record.mean_fit_continuous for record in result.history] if filtered else None)
@@ -193,13 +196,13 @@ def identify_scheduled_model(start: Any, plan: Any, options: IdentifyOptions, un
                         "grows wherever the schedule dwells there")
     # both models are scored by the run's one rule (their initial states estimated alike, by default); the
     # start's fits from rest stay in the summary for callers that read them
-    from_rest = steps.evaluate(start, plan, dataclasses.replace(options, initial_state="zero"))
+    from_rest = evaluate(start, plan, dataclasses.replace(options, initial_state="zero"))
     entry["unscheduled"].update(estimation_fit_percent_from_rest=from_rest.estimation.fit,
                                 validation_fit_percent_from_rest=from_rest.validation_fit)
     margin = schedule_margin(evaluation, unscheduled)
     returned = stable and margin["score"] is not None and (
         margin["runner_up_score"] is None or margin["score"] > margin["runner_up_score"] + margin["margin"])
-    margin = steps.margin_entry(*(("scheduled", margin["score"], "unscheduled", margin["runner_up_score"]) if returned
+    margin = margin_entry(*(("scheduled", margin["score"], "unscheduled", margin["runner_up_score"]) if returned
                                 else ("unscheduled", margin["runner_up_score"], "scheduled", margin["score"])),
                               measure=margin["measure"], rule=margin["rule"])
     entry.update(model_returned="scheduled" if returned else "unscheduled",
@@ -229,8 +232,8 @@ def _percent_and_R(prefix: str, R: Any, y: np.ndarray) -> dict[str, Any]:
 
 
 def _pooled_percent_and_R(R: Any, records: Sequence[IOData]) -> dict[str, Any]:
-    """``fit_percent`` (NRMSE) and ``R`` of a fit pooled over records (:func:`steps.pooled_fit_percent`)."""
-    return {"fit_percent": steps.pooled_fit_percent(R, records), "R": np.asarray(R, dtype=float)}
+    """``fit_percent`` (NRMSE) and ``R`` of a fit pooled over records (:func:`pooled_fit_percent`)."""
+    return {"fit_percent": pooled_fit_percent(R, records), "R": np.asarray(R, dtype=float)}
 
 
 def _stopped_early(result: Any, stops: list[tuple[float, Any, Any]], plan: Any, schedule: ScheduleData) -> Any:
@@ -294,7 +297,7 @@ def with_output_map(family: Any, evaluation: Any, plan: Any, scheduled_plan: Any
     if np.all(np.isfinite(linear_outputs)):
         for count in OUTPUT_MAP_NODES:
             mapped = dataclasses.replace(family, output_map=OutputMap.fit(linear_outputs, runs.y, count))
-            scored = steps.evaluate(mapped, scheduled_plan, options)
+            scored = evaluate(mapped, scheduled_plan, options)
             rows.append({"nodes": count, "estimation_fit_percent": scored.estimation.fit,
                          "validation_fit_percent": scored.validation_fit, "ranking_fit": scored.ranking_fit()})
             if np.isfinite(rows[-1]["ranking_fit"]) and (best is None or rows[-1]["ranking_fit"] > best[2]["ranking_fit"]):

@@ -41,7 +41,9 @@ RETURNED_TEXT = {"filter": "the IEKF's linear model", "start": "the IEKF's start
 def identification_text(summary: dict[str, Any], plan: Any) -> str:
     """The text face: the model returned, its NRMSE fits (R beside) on estimation and validation data, the run,
     then how sure the model is and a scheduled family's run."""
-    from vehid.identification.automatic.steps import ORDER_TOLERANCE, P_TOLERANCE, decision_notes
+    from vehid.identification.automatic.tuning import P_TOLERANCE
+    from vehid.identification.automatic.returned import decision_notes
+    from vehid.identification.automatic.orders import ORDER_TOLERANCE
     from vehid.identification.decisions import SCHEDULE_MARGIN
 
     data = plan.records[0]

@@ -117,7 +117,7 @@ def _register_identification_types() -> None:
     from .. import data
     from ..filtering import iekf, spline_iekf
     from ..assessment import metrics, residuals
-    from ..models import modal, scheduled, spline_modal
+    from ..models import modal, modal_structure, scheduled, spline_modal
     from . import preparation
     from ..models.discrete import ContinuousModel, DiscreteModel
     from ..classical.least_squares import ArxModel  # by name: the package's ``least_squares`` is the function
@@ -132,7 +132,7 @@ def _register_identification_types() -> None:
         (iekf.FilterState, "iekf_filter_state", "identification.iekf:FilterState"),
         (iekf.IEKFOptions, "iekf_options", "identification.iekf:IEKFOptions"),
         (modal.ModalModel, "modal_model", "identification.modal:ModalModel"),
-        (modal.ModalStructure, "modal_structure", "identification.modal:ModalStructure"),
+        (modal_structure.ModalStructure, "modal_structure", "identification.modal:ModalStructure"),
         (preparation.Preparation, "preparation", "identification.preparation:Preparation"),
         (preparation.ReadSettings, "read_settings", "identification.preparation:ReadSettings"),
         (preparation.RecordOffsets, "record_offsets", "identification.preparation:RecordOffsets"),

@@ -14,7 +14,7 @@ from typing import Protocol
 
 import casadi as ca
 
-from ..models.modal import ModalStructure
+from ..models.modal_structure import ModalStructure
 from ..models.transition import check_discretization, modal_transition
 
 __all__ = ["FilterModel", "LinearModalFilterModel"]

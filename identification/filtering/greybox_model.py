@@ -1,9 +1,9 @@
 """An identified grey-box model as a value that meets the model protocol: its functions with their parameters.
 
-:class:`~identification.filtering.greybox.GreyBoxModel` is a structure (``dx/dt = f(x, u, theta, s)``,
+:class:`~identification.filtering.greybox_structure.GreyBoxModel` is a structure (``dx/dt = f(x, u, theta, s)``,
 ``y = h(x, u, theta, s)`` with named constants ``theta``); :class:`IdentifiedGreyBox` is that structure with
 the values (and covariance) an estimator found, simulated by the compiled recursion the estimator used
-(:func:`~identification.filtering.greybox.greybox_outputs`). It meets
+(:func:`~identification.filtering.greybox_structure.greybox_outputs`). It meets
 :class:`~identification.models.protocol.IdentifiedModel` as a nonlinear model (``is_linear`` False:
 scores simulate it from rest), scheduled where the structure has scheduling signals ``s``: at a schedule
 value its state-space form is the exact linearisation (CasADi's Jacobians) about rest, ``x = 0`` and
@@ -29,7 +29,7 @@ import numpy as np
 from ..data import IOData
 from ..errors import InputError
 from ..models.protocol import StateSpaceModel, unscheduled
-from .greybox import GREYBOX_DISCRETIZATIONS, GreyBoxModel, greybox_outputs
+from .greybox_structure import GREYBOX_DISCRETIZATIONS, GreyBoxModel, greybox_outputs
 
 __all__ = ["IdentifiedGreyBox", "stable_over", "schedule_columns"]
 

@@ -44,7 +44,8 @@ from ..errors import DivergenceError, InputError
 from ..optionspec import OneOf, check_value
 from .filter_models import LinearModalFilterModel
 from .iekf_pass import compiled_pass, pack_covariance, unpack_covariance
-from ..models.modal import ModalModel, ModalStructure
+from ..models.modal import ModalModel
+from ..models.modal_structure import ModalStructure
 from ..assessment.multirecord import pooled_simulation_fit
 from ..assessment.noise import output_noise_variance
 from .rinse import (Assessment, PassHistory, PassRecord, RinseHooks, check_filter_options, check_records,

@@ -54,10 +54,12 @@ from .filter_models import FilterModel
 from .iekf import P_DECAY_FLOOR, data_measurement_noise, signal_scales
 from .iekf_pass import compiled_pass
 from ..assessment.metrics import percentage_explanation
-from ..models.modal import ModalModel, ModalStructure
+from ..models.modal import ModalModel
+from ..models.modal_structure import ModalStructure
 from .rinse import Assessment, PassHistory, PassRecord, RinseHooks, check_filter_options, check_records, rinse
-from ..models.scheduled import (ScheduledModalModel, gauge_parameters, input_gauge, interpolation_weights, knot_size,
-                        scheduled_matrices, scheduled_step)
+from ..models.scheduled import ScheduledModalModel
+from ..models.scheduled_gauge import (gauge_parameters, input_gauge, interpolation_weights, knot_size,
+                                      scheduled_matrices, scheduled_step)
 from ..assessment.uncertainty import fit_covariance
 
 __all__ = ["ScheduledFilterModel", "ScheduledIEKFOptions", "ScheduledIEKFResult", "Runs", "default_grid",

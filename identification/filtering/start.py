@@ -38,7 +38,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError, WorkbenchError
-from ..models.modal import ModalModel, ModalStructure
+from ..models.modal import ModalModel
+from ..models.modal_structure import ModalStructure
 
 __all__ = ["DataStart", "data_start", "band_eigenvalues", "place_eigenvalues", "fit_input_gains", "input_band_edge",
            "lightly_damped_beyond", "reals_made_into_pairs", "DATA_STARTS"]

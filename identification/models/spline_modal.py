@@ -28,7 +28,8 @@ from ..choices import SPLINE_NODE_COUNT
 from ..compiled import CompiledRecursion
 from ..errors import InputError
 from ..optionspec import check_value
-from .modal import ModalModel, ModalStructure
+from .modal import ModalModel
+from .modal_structure import ModalStructure
 from .protocol import Mode, StateSpaceModel, unscheduled
 from .spline import SplineBasis, resample
 from .transition import check_discretization, modal_transition

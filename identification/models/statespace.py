@@ -5,7 +5,7 @@ discrete model ``x(k+1) = Phi x(k) + G1 u(k) + G2 u(k+1)`` is brought to standar
 ``xi = x - G2 u``: ``Bd = G1 + Phi G2``, ``Cd = C``, ``Dd = D + C G2``, with ``G1 = T (phi1 - phi2)(AT) B``
 and ``G2 = T phi2(AT) B`` (Franklin, Powell & Workman, *Digital Control of Dynamic Systems*, 3rd ed.,
 sec. 6.3.2). :func:`to_modal` brings a diagonalisable model to the form of
-:class:`~identification.models.modal.ModalStructure`; :func:`balanced_truncation` reduces a stable discrete
+:class:`~identification.models.modal_structure.ModalStructure`; :func:`balanced_truncation` reduces a stable discrete
 model (Moore 1981; square-root form of Laub et al. 1987).
 """
 
@@ -17,7 +17,8 @@ import numpy as np
 
 from ..argument_checks import finite_matrix
 from ..errors import InputError
-from .modal import ModalModel, ModalStructure
+from .modal import ModalModel
+from .modal_structure import ModalStructure
 
 __all__ = [
     "HOLDS",

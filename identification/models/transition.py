@@ -17,7 +17,7 @@ import casadi as ca
 
 from ..choices import DISCRETIZATIONS
 from ..errors import InputError
-from .modal import ModalStructure
+from .modal_structure import ModalStructure
 
 __all__ = ["DISCRETIZATIONS", "check_discretization", "mode_transition", "modal_transition"]
 
