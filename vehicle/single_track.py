@@ -390,7 +390,6 @@ class SingleTrackAtSpeed(StateSpaceModel):
         return len(self.config.quantities)
 
     def to_statespace(self, *, schedule: float | None = None
-
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
         """``(A, B, C, D, None)`` at straight running: states as :func:`single_track_model` names them."""
         unscheduled(schedule)
@@ -596,7 +595,6 @@ class IdentifiedSingleTrack(StateSpaceModel):
         return max(needed, 1)
 
     def to_statespace(self, *, schedule: float | None = None
-
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
         """``(A, B, C, D, None)`` at straight running at speed ``schedule`` (m/s, required), per steer channel.
 

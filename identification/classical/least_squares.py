@@ -215,7 +215,6 @@ class ArxModel(StateSpaceModel):
         return a, b
 
     def to_statespace(self, *, schedule: float | None = None
-
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
         """Return the discrete state-space form in block observer form (:func:`observer_form`).
 

@@ -106,7 +106,6 @@ class PencilModel(StateSpaceModel):
         return cls.from_state_space(*observer_form(*model.padded()), dt=model.dt)
 
     def to_statespace(self, *, schedule: float | None = None
-
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
         """Return the state-space form of this pencil.
 

@@ -101,7 +101,6 @@ class SubspaceResult(StateSpaceModel):
         return int(self.C.shape[0])
 
     def to_statespace(self, *, schedule: float | None = None
-
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
         """Return the discrete state-space form.
 

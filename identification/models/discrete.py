@@ -99,7 +99,6 @@ class DiscreteModel(StateSpaceModel):
         return int(self.C.shape[0])
 
     def to_statespace(self, *, schedule: float | None = None
-
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
         """Return the state-space form with the sample interval.
 
@@ -165,7 +164,6 @@ class ContinuousModel(StateSpaceModel):
         return int(self.C.shape[0])
 
     def to_statespace(self, *, schedule: float | None = None
-
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
         """Return the state-space form.
 

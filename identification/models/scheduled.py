@@ -591,7 +591,6 @@ class ScheduledModalModel:
                                {**self.meta, self.variable: float(schedule), "scheduled": True})
 
     def to_statespace(self, *, schedule: float | None = None
-
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
         """Return the state-space matrices at a schedule value, in the input gauge (:meth:`linear_at`).
 

@@ -617,7 +617,6 @@ class SplineModalModel(StateSpaceModel):
         return tables
 
     def to_statespace(self, *, schedule: float | None = None
-
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, None]:
         """Return the continuous state-space form of :meth:`linear_model` at zero amplitude.
 
