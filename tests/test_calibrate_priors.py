@@ -12,7 +12,8 @@ import pytest
 
 from vehid.identification.data import IOData
 from vehid.identification.errors import InputError
-from vehid.identification.filtering.greybox import GreyBoxOptions, identify_greybox, integrated_correlation_time
+from vehid.identification.assessment.segments import integrated_correlation_time
+from vehid.identification.filtering.greybox import GreyBoxOptions, identify_greybox
 from vehid.identification.filtering.greybox_structure import GreyBoxModel
 from vehid.vehicle.calibration import _undetermined
 

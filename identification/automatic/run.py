@@ -31,7 +31,6 @@ from vehid.identification.automatic.plan import Plan
 from vehid.identification.automatic.result import (Decision, Identification, OrderRow, StabilityDecision, StartKept,
                                                    float_tuple)
 from vehid.identification.filtering.iekf import identify_iekf
-from vehid.identification.models.modal import ModalModel
 
 __all__ = ["Checkpoints", "Resumed", "identify_plan"]
 

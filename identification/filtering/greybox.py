@@ -61,7 +61,7 @@ from ..assessment.segments import integrated_correlation_time
 from .rinse import Assessment, PassHistory, PassRecord, RinseHooks, rinse
 from .greybox_structure import GreyBoxModel, check_discretization, driving, simulate_greybox, transition
 
-__all__ = ["GreyBoxOptions", "GreyBoxResult", "identify_greybox", "integrated_correlation_time"]
+__all__ = ["GreyBoxOptions", "GreyBoxResult", "identify_greybox"]
 
 
 MEASUREMENT_NOISE_RULES = ("data", "residual")
