@@ -342,6 +342,11 @@ def _channel_units(model: Any, records: Mapping[str, Any]) -> dict[str, Any]:
 _FROZEN_KNOTS = 3
 
 
+def _drawn_knots(count: int) -> list[int]:
+    """The knots a scheduled family is drawn at, by index: its lowest, middle and highest."""
+    return sorted({0, count // 2, count - 1})[:_FROZEN_KNOTS]
+
+
 def _linear_views(name: str, model: Any, schedule_unit: str | None) -> dict[str, Any]:
     """The linear models that show ``model`` in a Bode plot and an eigenvalue map, by label.
 
@@ -352,7 +357,7 @@ def _linear_views(name: str, model: Any, schedule_unit: str | None) -> dict[str,
         return {name: model}
     if _is_scheduled(model):
         grid = np.asarray(model.grid, dtype=float)
-        picked = sorted({0, grid.size // 2, grid.size - 1})[:_FROZEN_KNOTS]
+        picked = _drawn_knots(grid.size)
         unit = known_unit(schedule_unit)
         return {f"{name} at {model.variable} = {grid[k]:.3g}" + (f" {unit}" if unit else ""): model.model_at(grid[k])
                 for k in picked}
@@ -551,7 +556,8 @@ def _table_eigenvalues(model: Any) -> list[complex] | None:
         return None
     if _is_scheduled(model):
         grid = np.asarray(model.grid, dtype=float)
-        return list(model.eigenvalues(schedule=float(grid[grid.size // 2])))
+        drawn = _drawn_knots(grid.size)
+        return list(model.eigenvalues(schedule=float(grid[drawn[len(drawn) // 2]])))
     return list(model.eigenvalues())
 
 
