@@ -30,7 +30,8 @@ Choices, each stated where it is made:
   estimation part (``delta - L r / V = K a_y + offset``: a slowly changing yaw rate, a lateral
   acceleration within the tyres' linear range) and the front axle's cornering scale set to give it,
   the rear's kept (the front scale stands for what the tyre data leave out at the front, the
-  steering's compliance above all). (2) From that start the filter estimates the steady-state part
+  steering's compliance above all). The regression's offset is the steer sensor's zero error; where it
+  stands more than 3 of its std from zero it is taken out of the steer that every car drives. (2) From that start the filter estimates the steady-state part
   (:data:`STEADY_PARAMETERS`: the balance and the tyres' load sensitivity) with the yaw dynamics and
   the grip held at the start, then (3) the yaw dynamics and the grip (the yaw inertia, the friction,
   any relaxation length asked for) with everything else from stage 2's estimates; (4) roll, where it
@@ -163,6 +164,11 @@ _STEADY_MIN_SECONDS = 2.0  # of quasi-steady samples needed for the balance
 # the halves' split is sought among this share of the calibrating samples about their middle (each half then
 # holds 30-70 % of them): the committed race-car log's middle 20 % lies in one long corner
 _HALVES_WINDOW = 0.4
+# The balance's steer at zero lateral acceleration is a steer sensor's zero error, removed from the steer
+# before the car drives the log where it stands this many std from zero: at speed the model's lateral
+# response to a steady steer is large (a_y = delta / (L / V^2 + K)), and an offset of 0.07 deg turns a
+# straight at 30 m/s into a 0.03 g corner that no cornering stiffness can take out.
+_OFFSET_SIGMA = 3.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -317,6 +323,8 @@ class Balance:
         correlation time.
     offset : float
         The steer at zero lateral acceleration (rad): a steer sensor's zero error.
+    offset_std : float
+        Its standard deviation (rad), counted as the gradient's.
     samples : int
         Quasi-steady samples used.
     front_scale, rear_scale : float
@@ -329,6 +337,12 @@ class Balance:
     samples: int
     front_scale: float
     rear_scale: float
+    offset_std: float = math.nan
+
+    @property
+    def offset_determined(self) -> bool:
+        """The zero error stands out of its std by :data:`_OFFSET_SIGMA` (the calibration then removes it)."""
+        return math.isfinite(self.offset_std) and abs(self.offset) > _OFFSET_SIGMA * self.offset_std
 
     @property
     def gradient_deg_per_g(self) -> float:
@@ -337,7 +351,9 @@ class Balance:
     def as_dict(self) -> dict[str, Any]:
         return {"understeer_gradient_deg_per_g": self.gradient_deg_per_g,
                 "understeer_gradient_std_deg_per_g": math.degrees(self.std) * GRAVITY,
-                "steer_offset_deg": math.degrees(self.offset), "samples": self.samples,
+                "steer_offset_deg": math.degrees(self.offset),
+                "steer_offset_std_deg": math.degrees(self.offset_std) if math.isfinite(self.offset_std) else None,
+                "steer_offset_removed": self.offset_determined, "samples": self.samples,
                 "front_cornering_scale": self.front_scale, "rear_cornering_scale": self.rear_scale}
 
 
@@ -383,6 +399,7 @@ def steady_balance(params: VehicleParameters, log: DriveLog, rows: np.ndarray) -
     if slack <= 0:
         return None
     return Balance(gradient=float(gradient), std=float(math.sqrt(max(covariance[0, 0], 0.0))), offset=float(offset),
+                   offset_std=float(math.sqrt(max(covariance[1, 1], 0.0))),
                    samples=int(np.count_nonzero(steady)), front_scale=b / slack / front_base,
                    rear_scale=params.tyre.rear_cornering_scale)
 
@@ -712,6 +729,12 @@ def calibrate_drive(
     start, balance, start_notes = start_vehicle(prior, log, estimation_rows, runs, keep=tuple(priors),
                                                  slip_limit=slip_limit)
     notes.extend(start_notes)
+    if balance is not None and balance.offset_determined:
+        # every car drives the corrected steer: the prior, the start and the calibrated car alike
+        log = dataclasses.replace(log, steer=log.steer - balance.offset)
+        notes.append(f"the steer reads {math.degrees(balance.offset):+.3g} +/- {math.degrees(balance.offset_std):.2g} "
+                     "deg when the car runs straight (the quasi-steady corners' steer at zero lateral acceleration): "
+                     "a steer sensor's zero error, removed from the steer every car drives")
     speeds = log.speed[np.concatenate([np.arange(a, b) for a, b in runs])]
     substeps = replay_substeps(start, dt, float(speeds.max()), margin=_STEP_MARGIN)
     options = options or GreyBoxOptions(coloured_residuals=True, parameter_tolerance=DRIVE_PARAMETER_TOLERANCE)
