@@ -31,7 +31,8 @@ Choices, each stated where it is made:
   acceleration within the tyres' linear range) and the front axle's cornering scale set to give it,
   the rear's kept (the front scale stands for what the tyre data leave out at the front, the
   steering's compliance above all). The regression's offset is the steer sensor's zero error; where it
-  stands more than 3 of its std from zero it is taken out of the steer that every car drives. (2) From that start the filter estimates the steady-state part
+  stands more than 3 of its std from zero it is taken out of the steer that every car drives. (2) From
+  that start the filter estimates the steady-state part
   (:data:`STEADY_PARAMETERS`: the balance and the tyres' load sensitivity) with the yaw dynamics and
   the grip held at the start, then (3) the yaw dynamics and the grip (the yaw inertia, the friction,
   any relaxation length asked for) with everything else from stage 2's estimates; (4) roll, where it
