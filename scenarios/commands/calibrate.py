@@ -12,9 +12,9 @@ The car starts from the prior vehicle (--vehicle) made able to drive the log: th
 largest accelerations need, a centre of gravity low enough not to tip, a slip limiter (--slip-limit)
 and the front/rear cornering balance of the log's quasi-steady corners, whose steer at zero
 lateral acceleration, where it stands out of its std, is a steer sensor's zero error removed from the
-steer; each change is a note. The
-first part of the log calibrates the chosen parameters (--parameters section.field,..., default the
-front cornering scale, the tyres' load sensitivity PKY2, the friction scale and the yaw inertia,
+steer; each change is a note. The first part of the log calibrates the chosen parameters
+(--parameters section.field,..., default the front cornering scale, the tyres' load sensitivity
+PKY2, the friction scale and the yaw inertia,
 with the rear cornering scale when the sideslip is fitted and the roll inertia and front anti-roll
 bar when the roll angle is measured), in stages (balance, then everything, then roll); the last
 --validation fraction is held out and predicted, the prior, start and calibrated cars each driven
