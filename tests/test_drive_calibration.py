@@ -57,7 +57,7 @@ def test_speed_runs_keep_the_stretches_the_model_can_drive():
     assert speed_runs(np.zeros(5), 3.0, 50.0, 1) == ()
 
 
-def _steady_log(gradient: float, wheelbase: float, seed: int = 0) -> DriveLog:
+def _steady_log(gradient: float, wheelbase: float, seed: int = 0, offset_deg: float = 0.05) -> DriveLog:
     """Quasi-steady corners of a single-track car: delta = L r / V + K a_y (+ a steer offset, + noise)."""
     rng = np.random.default_rng(seed)
     dt = 0.01
@@ -69,7 +69,7 @@ def _steady_log(gradient: float, wheelbase: float, seed: int = 0) -> DriveLog:
         rise = np.clip((t - start) / 1.0, 0, 1) - np.clip((t - start - 5.0) / 1.0, 0, 1)
         lateral += (1.0 + 5.0 * k / 6.0) * (-1) ** k * rise
     yaw = lateral / speed
-    steer = wheelbase * yaw / speed + gradient * lateral + math.radians(0.05)
+    steer = wheelbase * yaw / speed + gradient * lateral + math.radians(offset_deg)
     outputs = np.column_stack([yaw + 0.004 * rng.standard_normal(t.size),
                                lateral + 0.3 * rng.standard_normal(t.size)])
     return DriveLog(t=t, steer=steer + 0.0005 * rng.standard_normal(t.size), speed=speed, outputs=outputs,
@@ -98,11 +98,6 @@ def test_steady_balance_finds_the_understeer_gradient_and_the_front_scale_that_g
     assert balance.rear_scale == vehicle.tyre.rear_cornering_scale
 
 
-def _steady_log_without_offset(gradient: float, wheelbase: float, seed: int) -> DriveLog:
-    log = _steady_log(gradient, wheelbase, seed)
-    return dataclasses.replace(log, steer=log.steer - math.radians(0.05))
-
-
 def test_a_steer_zero_error_is_found_within_its_std_and_removed_from_the_steer_every_car_drives(monkeypatch):
     """The balance's steer at zero lateral acceleration is the steer sensor's zero error: on the closed-form log
     made with 0.05 deg it lies within 3 of its std of the truth and stands out (more than 3 std from zero); on
@@ -121,7 +116,7 @@ def test_a_steer_zero_error_is_found_within_its_std_and_removed_from_the_steer_e
     assert abs(balance.offset - math.radians(0.05)) < 3 * balance.offset_std and balance.offset_determined
     assert balance.as_dict()["steer_offset_removed"] is True
     for seed in range(5):
-        clean = steady_balance(vehicle, _steady_log_without_offset(wanted, vehicle.chassis.wheelbase, seed),
+        clean = steady_balance(vehicle, _steady_log(wanted, vehicle.chassis.wheelbase, seed, offset_deg=0.0),
                                np.arange(6000))
         assert not clean.offset_determined, (seed, clean.offset, clean.offset_std)
     records = []
