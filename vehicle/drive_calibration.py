@@ -68,6 +68,8 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from vehid.identification.assessment.metrics import nrmse_fit, percentage_explanation
+from vehid.identification.assessment.segments import (block_jackknife, block_plan, integrated_correlation_time,
+                                                      refit_replicates)
 from vehid.identification.data import IOData
 from vehid.identification.errors import DivergenceError, InputError
 from vehid.identification.filtering.greybox import GreyBoxOptions
@@ -320,12 +322,12 @@ class Balance:
     gradient : float
         ``K`` (rad per m/s^2) of ``delta - L r / V = K a_y + offset``; ``gradient_deg_per_g`` in deg/g.
     std : float
-        Its standard deviation (rad per m/s^2), from the regression's residuals counted by their
-        correlation time.
+        Its standard deviation (rad per m/s^2): a delete-one-block jackknife over the quasi-steady
+        samples (:func:`~vehid.identification.assessment.segments.block_jackknife`).
     offset : float
         The steer at zero lateral acceleration (rad): a steer sensor's zero error.
     offset_std : float
-        Its standard deviation (rad), counted as the gradient's.
+        Its standard deviation (rad), by the same jackknife.
     samples : int
         Quasi-steady samples used.
     front_scale, rear_scale : float
@@ -386,10 +388,19 @@ def steady_balance(params: VehicleParameters, log: DriveLog, rows: np.ndarray) -
     target = steer[steady] - wheelbase * yaw[steady] / speed[steady]
     design = np.column_stack([lateral[steady], np.ones(np.count_nonzero(steady))])
     (gradient, offset), *_ = np.linalg.lstsq(design, target, rcond=None)
+    # the error bars are the workbench's delete-one-block jackknife over the quasi-steady samples in time
+    # order, each block longer than the residuals' correlation time and than one 0.5 s window: a drive's
+    # corners differ by more than the residuals' scatter says (camber, wind, a tyre warming), and counting
+    # one independent value per window understated the spread of a 550 s drive's parts 1.5-2.6 times
     residual = target - design @ np.array([gradient, offset])
-    # the samples are 0.5 s means: about one independent value per window
-    independent = max(np.count_nonzero(steady) * log.dt / _STEADY_WINDOW, 3.0)
-    covariance = np.linalg.inv(design.T @ design) * float(np.mean(residual**2)) * design.shape[0] / independent
+    correlation = float(integrated_correlation_time(residual[:, None])[0])
+    edges = block_plan(design.shape[0], min_length=math.ceil(max(correlation, _STEADY_WINDOW / log.dt)))
+    if edges is None:
+        return None
+    replicates, _ = refit_replicates(
+        lambda kept: np.linalg.lstsq(np.concatenate([design[part] for part in kept]),
+                                     np.concatenate([target[part] for part in kept]), rcond=None)[0], edges)
+    std = block_jackknife(replicates, edges, form="refit", dt=log.dt, correlation_time=correlation).std
     front_base, rear_base = _axle_stiffness(params)
     rear = params.tyre.rear_cornering_scale * rear_base
     a, b, m = chassis.cg_to_front_axle, chassis.cg_to_rear_axle, chassis.mass
@@ -399,8 +410,7 @@ def steady_balance(params: VehicleParameters, log: DriveLog, rows: np.ndarray) -
     slack = gradient * wheelbase / m + a / rear
     if slack <= 0:
         return None
-    return Balance(gradient=float(gradient), std=float(math.sqrt(max(covariance[0, 0], 0.0))), offset=float(offset),
-                   offset_std=float(math.sqrt(max(covariance[1, 1], 0.0))),
+    return Balance(gradient=float(gradient), std=float(std[0]), offset=float(offset), offset_std=float(std[1]),
                    samples=int(np.count_nonzero(steady)), front_scale=b / slack / front_base,
                    rear_scale=params.tyre.rear_cornering_scale)
 
