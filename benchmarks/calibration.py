@@ -49,11 +49,12 @@ PLAIN_PRIOR = {"base": "baseline", "name": "race car prior",
                "chassis": {"mass": 982.0, "cg_to_front_axle": 1.33, "cg_to_rear_axle": 1.07}}
 AERODYNAMICS = {"drag_area": 0.7, "front_downforce_area": 0.2, "rear_downforce_area": 0.3}
 # The simulated car: what the calibration estimates set away from where it starts (the baseline's tyres,
-# the yaw inertia m a b of the start) by 10-40 %: an understeering car (this rear-heavy car with equal
+# the yaw inertia m a b of the start) by 10-40 %, the tyres' curvature from the base tyre's -0.82 to -2.0
+# (a tyre that stays nearly linear up to its grip): an understeering car (this rear-heavy car with equal
 # tyres, near neutral, spins in the drive's hardest corners), the cornering scales the axles' levels at
 # the start's PKY2 as the calibration has them, and the slip limiter the start gives a car.
 TRUTH = {"tyre.front_cornering_scale": 0.6, "tyre.PKY2": 1.3, "tyre.friction_scale": 1.3,
-         "chassis.yaw_inertia": 1250.0}
+         "chassis.yaw_inertia": 1250.0, "tyre.PEY1": -2.0}
 QUANTITIES = ("yaw_rate", "lateral_acceleration")
 NOISE = {"yaw_rate": 0.005, "lateral_acceleration": 0.3, "sideslip": 0.0005}
 DT = 0.01
@@ -97,6 +98,9 @@ def _figures(result, seconds: float, cpu_seconds: float, truth=None) -> dict:
         figures["parameters"] = calibration.parameters_dict()
         figures["correlation"] = calibration.correlation.tolist()
         figures["held"] = dict(calibration.held)
+        meta = getattr(calibration.result, "meta", None) or {}
+        figures["covariance"] = {key: meta.get(key) for key in
+                                 ("covariance_inflation", "nis_per_output", "innovation_correlation_time")}
         if truth is not None:
             true = np.array([truth[name] for name in calibration.parameter_names])
             figures["truth"] = dict(zip(calibration.parameter_names, true.tolist()))

@@ -112,8 +112,8 @@ class CalibrateOptions:
     parameters: tuple[str, ...] | None = option(
         None, _ParameterNames(),
         help="vehicle fields to calibrate, section.field as in a vehicle file (default "
-             "tyre.front_cornering_scale, tyre.PKY2, tyre.friction_scale, chassis.yaw_inertia; with the sideslip "
-             "fitted also tyre.rear_cornering_scale, with the roll angle chassis.roll_inertia and "
+             "tyre.front_cornering_scale, tyre.PKY2, tyre.friction_scale, chassis.yaw_inertia, tyre.PEY1; with the "
+             "sideslip fitted also tyre.rear_cornering_scale, with the roll angle chassis.roll_inertia and "
              "suspension.front_anti_roll_bar)")
     prior: Mapping[str, tuple[float, float | None]] = option(
         FrozenDict(), _Priors(),

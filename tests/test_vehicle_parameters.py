@@ -3,12 +3,13 @@
 import dataclasses
 import json
 
+import numpy as np
 import pytest
 
 from vehid.identification.errors import InputError
 from vehid.vehicle import baseline, load_vehicle, named_vehicle, understeer
 from vehid.vehicle.parameters import describe, static_axle_loads
-from vehid.vehicle.tyre import cornering_stiffness, longitudinal_slip_stiffness
+from vehid.vehicle.tyre import cornering_stiffness, lateral_force_pure, longitudinal_slip_stiffness
 
 
 def _as_toml(params, skip=()):
@@ -100,6 +101,23 @@ def test_non_positive_mass_inertia_stiffness_rejected(section, field, value):
     params = baseline()
     with pytest.raises(InputError, match=f"{section}.{field}"):
         dataclasses.replace(params, **{section: dataclasses.replace(getattr(params, section), **{field: value})})
+
+
+@pytest.mark.parametrize("curvature, refused", [(1.05, True), (1.3, True), (0.95, False), (-4.6, False)])
+def test_a_curvature_above_one_is_refused_where_the_tyre_force_turns_round(curvature, refused):
+    # The law behind E <= 1: above it, (1 - E) B x + E atan(B x) goes negative at large slip and the
+    # force pushes the way the tyre slides. Checked here on the tyre function itself, not on the rule.
+    params = baseline()
+    tyre = dataclasses.replace(params.tyre, PEY2=0.0, PEY3=0.0)
+    slips = np.tan(np.radians(np.linspace(1.0, 85.0, 85)))
+    forces = np.array([float(lateral_force_pure(s, tyre.nominal_load, dataclasses.replace(tyre, PEY1=curvature)))
+                       for s in slips])
+    assert bool(np.any(forces > 0)) == refused  # ISO signs: a positive slip gives a negative force
+    if refused:
+        with pytest.raises(InputError, match="curvature factor"):
+            dataclasses.replace(params, tyre=dataclasses.replace(tyre, PEY1=curvature))
+    else:
+        dataclasses.replace(params, tyre=dataclasses.replace(tyre, PEY1=curvature))
 
 
 @pytest.mark.parametrize(

@@ -342,11 +342,27 @@ def _validate(params: VehicleParameters) -> None:
                          f"spinning up or locking); got {params.drive.slip_limit}")
     if params.tyre.PKY1 >= 0:
         raise InputError("vehicle parameter tyre.PKY1 must be negative (ISO sign: F_y opposes slip)")
+    _check_curvature(params.tyre)
     chassis = params.chassis
     inertia_det = chassis.roll_inertia * chassis.yaw_inertia - chassis.roll_yaw_product**2
     if inertia_det <= 0:
         raise InputError("vehicle inertia is not positive definite: I_xx I_zz must exceed I_xz^2")
     _check_static_stability(params)
+
+
+def _check_curvature(tyre: TyreParameters) -> None:
+    """Reject curvature factors above 1 at loads from none to twice the nominal (Pacejka 2012, eq. 4.E14 and
+    4.E24: ``E <= 1``): beyond it the force turns round at large slip and pushes the way the tyre slides."""
+    loads = [k / 10 - 1 for k in range(21)]  # dfz from -1 to 1
+    sides = (-1, 1)
+    lateral = [(tyre.PEY1 + tyre.PEY2 * dfz) * (1 - tyre.PEY3 * side) for dfz in loads for side in sides]
+    longitudinal = [(tyre.PEX1 + tyre.PEX2 * dfz + tyre.PEX3 * dfz**2) * (1 - tyre.PEX4 * side)
+                    for dfz in loads for side in sides]
+    for names, values in (("PEY1, PEY2, PEY3", lateral), ("PEX1, PEX2, PEX3, PEX4", longitudinal)):
+        if max(values) > 1:
+            raise InputError(f"vehicle parameters tyre.{names} give a curvature factor of {max(values):.3g}, above 1 "
+                             "at a load between none and twice the nominal: the force would turn round at large "
+                             "slip (E <= 1)")
 
 
 def roll_stiffness(params: VehicleParameters) -> float:

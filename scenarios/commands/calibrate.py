@@ -14,7 +14,7 @@ and the front/rear cornering balance of the log's quasi-steady corners, whose st
 lateral acceleration, where it stands out of its std, is a steer sensor's zero error removed from the
 steer; each change is a note. The first part of the log calibrates the chosen parameters
 (--parameters section.field,..., default the front cornering scale, the tyres' load sensitivity
-PKY2, the friction scale and the yaw inertia,
+PKY2, the friction scale, the yaw inertia and the curvature PEY1 of the tyres' lateral force,
 with the rear cornering scale when the sideslip is fitted and the roll inertia and front anti-roll
 bar when the roll angle is measured), in stages (balance, then everything, then roll); the last
 --validation fraction is held out and predicted, the prior, start and calibrated cars each driven
