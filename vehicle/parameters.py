@@ -45,6 +45,8 @@ __all__ = [
     "static_axle_loads",
     "roll_stiffness",
     "peak_lateral_friction",
+    "lateral_curvature",
+    "longitudinal_curvature",
     "static_stability_factor",
     "has_aerodynamics",
     "NAMED_VEHICLES",
@@ -354,15 +356,25 @@ def _check_curvature(tyre: TyreParameters) -> None:
     """Reject curvature factors above 1 at loads from none to twice the nominal (Pacejka 2012, eq. 4.E14 and
     4.E24: ``E <= 1``): beyond it the force turns round at large slip and pushes the way the tyre slides."""
     loads = [k / 10 - 1 for k in range(21)]  # dfz from -1 to 1
-    sides = (-1, 1)
-    lateral = [(tyre.PEY1 + tyre.PEY2 * dfz) * (1 - tyre.PEY3 * side) for dfz in loads for side in sides]
-    longitudinal = [(tyre.PEX1 + tyre.PEX2 * dfz + tyre.PEX3 * dfz**2) * (1 - tyre.PEX4 * side)
-                    for dfz in loads for side in sides]
+    lateral = [lateral_curvature(dfz, side, tyre) for dfz in loads for side in (-1, 1)]
+    longitudinal = [longitudinal_curvature(dfz, side, tyre) for dfz in loads for side in (-1, 1)]
     for names, values in (("PEY1, PEY2, PEY3", lateral), ("PEX1, PEX2, PEX3, PEX4", longitudinal)):
         if max(values) > 1:
             raise InputError(f"vehicle parameters tyre.{names} give a curvature factor of {max(values):.3g}, above 1 "
                              "at a load between none and twice the nominal: the force would turn round at large "
                              "slip (E <= 1)")
+
+
+def longitudinal_curvature(dfz, sign, tyre: TyreParameters):
+    """The tyre's curvature factor ``E_x`` at load increment ``dfz`` and slip sign ``sign`` (eq. 4.E14);
+    floats or CasADi SX, as :mod:`vehid.vehicle.tyre` builds its forces from it."""
+    return (tyre.PEX1 + tyre.PEX2 * dfz + tyre.PEX3 * dfz**2) * (1 - tyre.PEX4 * sign)
+
+
+def lateral_curvature(dfz, sign, tyre: TyreParameters):
+    """The tyre's curvature factor ``E_y`` at load increment ``dfz`` and slip sign ``sign`` (eq. 4.E24 at
+    gamma = 0); floats or CasADi SX, as :mod:`vehid.vehicle.tyre` builds its forces from it."""
+    return (tyre.PEY1 + tyre.PEY2 * dfz) * (1 - tyre.PEY3 * sign)
 
 
 def roll_stiffness(params: VehicleParameters) -> float:

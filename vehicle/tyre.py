@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import casadi as ca
 
-from .parameters import TyreParameters
+from .parameters import TyreParameters, lateral_curvature, longitudinal_curvature
 
 __all__ = [
     "SIGN_SMOOTHING_SLIP",
@@ -92,7 +92,7 @@ def longitudinal_force_pure(kappa, fz, tyre: TyreParameters):
     dfz = load_increment(fz, tyre)
     c = tyre.PCX1
     d = (tyre.PDX1 + tyre.PDX2 * dfz) * tyre.friction_scale * fz
-    e = (tyre.PEX1 + tyre.PEX2 * dfz + tyre.PEX3 * dfz**2) * (1 - tyre.PEX4 * _smooth_sign(kappa))
+    e = longitudinal_curvature(dfz, _smooth_sign(kappa), tyre)
     b = longitudinal_slip_stiffness(fz, tyre) / (c * d + _EPS_FORCE)
     return _magic(b, c, d, e, kappa)
 
@@ -107,7 +107,7 @@ def lateral_force_pure(alpha, fz, tyre: TyreParameters, *, scale: float = 1.0, m
     c = tyre.PCY1
     d = (tyre.PDY1 + tyre.PDY2 * dfz) * tyre.friction_scale * fz
     side = -1.0 if mirrored else 1.0
-    e = (tyre.PEY1 + tyre.PEY2 * dfz) * (1 - tyre.PEY3 * _smooth_sign(side * alpha))
+    e = lateral_curvature(dfz, _smooth_sign(side * alpha), tyre)
     b = cornering_stiffness(fz, tyre, scale) / (c * d + _EPS_FORCE)
     return _magic(b, c, d, e, alpha)
 
