@@ -624,3 +624,21 @@ def test_the_calibrate_flags_defaults_are_the_options_table():
                                                            "chassis.yaw_inertia=1300:200", "--no-halves"]))
     assert given == CalibrateOptions(prior={"tyre.PKY2": 1.5, "chassis.yaw_inertia": (1300.0, 200.0)}, halves=False)
     assert dict(given.prior) == {"tyre.PKY2": (1.5, None), "chassis.yaw_inertia": (1300.0, 200.0)}
+
+
+def test_the_options_help_names_exactly_the_parameters_calibrated_by_default():
+    """The help text lists the default parameters as a literal (the options module does not import the vehicle
+    package, to keep the command's start short); it must name the tuples the calibration uses, each in its group."""
+    from vehid.identification.optionspec import option_specs
+    from vehid.scenarios.car_calibration import CalibrateOptions
+    from vehid.vehicle.drive_calibration import DRIVE_PARAMETERS, DRIVE_ROLL_PARAMETERS, SIDESLIP_PARAMETERS
+
+    text = " ".join(option_specs(CalibrateOptions)["parameters"].help.split())
+    default, sideslip, roll = text.split("(default ", 1)[1].split(";", 1)[0], *text.split(";", 1)[1].split(", with")
+
+    def named(part: str) -> set[str]:
+        return {word.strip(",)") for word in part.split() if "." in word.strip(",)")}
+
+    assert named(default) == set(DRIVE_PARAMETERS)
+    assert named(sideslip) == set(SIDESLIP_PARAMETERS) and "sideslip" in sideslip
+    assert named(roll) == set(DRIVE_ROLL_PARAMETERS) and "roll" in roll
