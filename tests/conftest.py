@@ -215,3 +215,24 @@ def returned_run(archive_path: str | os.PathLike) -> str:
 
     verdict = archive_verdict(read_archive(archive_path)) or {}
     return (verdict.get("scoring_rule") or {})["returned_run"]
+
+
+def load_benchmark_module(name: str):
+    """A script or helper module of ``benchmarks/`` (not a package), loaded once per process under its own name.
+
+    The benchmarks import their helpers by bare name (``_real_records``, ``_baselines``), as a script beside
+    them does, and dataclasses look their module up by name: each is registered in ``sys.modules`` and a
+    module already loaded there is returned as it is.
+    """
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    if name in sys.modules:
+        return sys.modules[name]
+    path = Path(__file__).resolve().parent.parent / "benchmarks" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module

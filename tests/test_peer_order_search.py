@@ -10,34 +10,20 @@ known exactly.
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from conftest import load_benchmark_module
 from scipy.io import loadmat
 
 from vehid.identification import IOData
 from vehid.identification.automatic.orders import ORDER_TOLERANCE, choose_order
 
-ROOT = Path(__file__).resolve().parent.parent
 
-
-def _load_benchmark_module(name: str):
-    if name in sys.modules:
-        return sys.modules[name]
-    spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # the runner imports _real_records by this name
-    spec.loader.exec_module(module)
-    return module
-
-
-_load_benchmark_module("_baselines")  # real_data imports it by this name, as the runner does _real_records
-records = _load_benchmark_module("_real_records")
-runner = _load_benchmark_module("_peers_runner")
+load_benchmark_module("_baselines")  # real_data imports it by this name, as the runner does _real_records
+records = load_benchmark_module("_real_records")
+runner = load_benchmark_module("_peers_runner")
 
 
 @pytest.mark.parametrize("seed", range(20))
@@ -157,7 +143,7 @@ def test_peers_are_scored_as_identify_scores_and_their_order_chosen_on_those_sco
     from vehid.identification.classical.subspace import estimate_subspace
     from vehid.identification.models.discrete import DiscreteModel
 
-    real_data = _load_benchmark_module("real_data")
+    real_data = load_benchmark_module("real_data")
     entry = records.record_set("dryer")
     estimation, validation = records.load(entry, 0.3)
     u_offset, y_offset = records.validation_offsets(entry, estimation, validation)

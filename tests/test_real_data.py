@@ -12,15 +12,13 @@ state. Floors are measured hold-out fits minus a margin stated below.
 from __future__ import annotations
 
 import hashlib
-import importlib.util
 import json
 import re
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import run_vehid
+from conftest import load_benchmark_module, run_vehid
 
 from vehid.identification import IOData
 from vehid.identification.assessment.metrics import nrmse_fit
@@ -28,17 +26,9 @@ from vehid.identification.assessment.metrics import nrmse_fit
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def _load_benchmark_module(name: str):
-    spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up by name; real_data imports _real_records
-    spec.loader.exec_module(module)
-    return module
-
-
-records = _load_benchmark_module("_real_records")
-baselines = _load_benchmark_module("_baselines")
-benchmark = _load_benchmark_module("real_data")
+records = load_benchmark_module("_real_records")
+baselines = load_benchmark_module("_baselines")
+benchmark = load_benchmark_module("real_data")
 
 # Sizes stated by the publishers (DaISy descriptions; the cascaded tanks' 2 x 1024 samples).
 PUBLISHED_SHAPES = {"ballbeam": (1000, 1, 1), "dryer": (1000, 1, 1), "robot_arm": (1024, 1, 1),

@@ -3,26 +3,13 @@
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
-
-ROOT = Path(__file__).resolve().parent.parent
-
-
-def _load_benchmark_module(name: str):
-    spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # the benchmark imports _real_records by name
-    spec.loader.exec_module(module)
-    return module
+from conftest import load_benchmark_module
 
 
-_load_benchmark_module("_real_records")
-benchmark = _load_benchmark_module("returned_against_start")
+load_benchmark_module("_real_records")
+benchmark = load_benchmark_module("returned_against_start")
 
 
 @pytest.mark.parametrize("whole, parts, expected", [

@@ -14,31 +14,19 @@ measures the same figures over steer seeds 0-2; the tolerances below sit above t
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import load_benchmark_module
 
 from vehid.identification.errors import InputError
 from vehid.vehicle import baseline
 from vehid.vehicle.handling import source_handling, source_steady_state
 
-ROOT = Path(__file__).resolve().parent.parent
 
-
-def _load_benchmark_module(name: str):
-    spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
-
-
-acceptance = _load_benchmark_module("source_acceptance")
+acceptance = load_benchmark_module("source_acceptance")
 SPEEDS = (10.0, 30.0)
 
 
